@@ -1,0 +1,30 @@
+"""Exceptions shared by the whole package; each message says how to fix the problem."""
+
+from __future__ import annotations
+
+
+class LocbenchError(Exception):
+    """Base of every error locbench raises on purpose."""
+
+
+class DependencyNotInstalled(LocbenchError):
+    """An optional dependency of a filter or dataset is missing; the message names the install command."""
+
+
+class UnknownIdError(LocbenchError, KeyError):
+    """An unknown filter, dataset, suite or parameter name; the message lists the valid ones."""
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return str(self.args[0]) if self.args else ""
+
+
+class ConfigError(LocbenchError, ValueError):
+    """A malformed spec, config value or input file; the message names the field and what was expected."""
+
+
+class IncompatibleRun(LocbenchError):
+    """A filter needs an event stream or map kind that a dataset does not provide (a recorded skip)."""
+
+
+class FilterDiverged(LocbenchError):
+    """Raised by a filter (or detected by the runner) when its estimate is no longer meaningful."""

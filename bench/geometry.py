@@ -1,0 +1,91 @@
+"""Planar pose algebra on (x, y, theta) triples.
+
+Conventions: SI units, angles in radians, headings wrapped to (-pi, pi], world frame x-y,
+robot frame x forward and y to the left. Names follow ``<to>_from_<from>`` where it helps.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+
+TWO_PI = 2.0 * np.pi
+
+
+def wrap_angle(a: npt.ArrayLike) -> FloatArray:
+    """Wrap angles to the half-open interval (-pi, pi].
+
+    Parameters
+    ----------
+    a : array-like
+        Angles in rad, any shape.
+
+    Returns
+    -------
+    ndarray
+        The same angles in (-pi, pi], float64, same shape (0-d for a scalar input).
+    """
+    x = np.asarray(a, dtype=np.float64)
+    w = np.pi - np.mod(np.pi - x, TWO_PI)  # maps onto (-pi, pi]
+    return w
+
+
+def wrap_scalar(a: float) -> float:
+    """Wrap one angle to (-pi, pi] without numpy overhead (hot paths in filters)."""
+    w = np.pi - ((np.pi - a) % TWO_PI)
+    return float(w)
+
+
+def compose(a: npt.ArrayLike, b: npt.ArrayLike) -> FloatArray:
+    """Pose composition a (+) b: the pose ``b``, given in the frame of ``a``, expressed in a's parent frame.
+
+    Parameters
+    ----------
+    a, b : array-like, shape (3,) or (N, 3)
+        Poses (x m, y m, theta rad). Broadcasts over leading dimensions.
+
+    Returns
+    -------
+    ndarray, shape broadcast of (3,)
+    """
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
+    y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
+    th = wrap_angle(a[..., 2] + b[..., 2])
+    return np.stack([x, y, th], axis=-1)
+
+
+def inverse(a: npt.ArrayLike) -> FloatArray:
+    """Inverse pose: ``compose(a, inverse(a))`` is the identity."""
+    a = np.asarray(a, dtype=np.float64)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    x = -c * a[..., 0] - s * a[..., 1]
+    y = s * a[..., 0] - c * a[..., 1]
+    return np.stack([x, y, wrap_angle(-a[..., 2])], axis=-1)
+
+
+def between(a: npt.ArrayLike, b: npt.ArrayLike) -> FloatArray:
+    """Relative pose of ``b`` seen from ``a``: inverse(a) (+) b, i.e. the odometry increment a -> b."""
+    return compose(inverse(a), b)
+
+
+def is_symmetric_psd(cov: npt.ArrayLike, atol: float = 1e-9) -> bool:
+    """True when ``cov`` is symmetric and positive semi-definite up to ``atol`` (relative to its scale)."""
+    m = np.asarray(cov, dtype=np.float64)
+    if m.ndim != 2 or m.shape[0] != m.shape[1] or not np.all(np.isfinite(m)):
+        return False
+    scale = max(1.0, float(np.max(np.abs(m))))
+    if not np.allclose(m, m.T, atol=atol * scale, rtol=0.0):
+        return False
+    return bool(np.min(np.linalg.eigvalsh(0.5 * (m + m.T))) >= -atol * scale)
+
+
+def pose_error(estimate: npt.ArrayLike, truth: npt.ArrayLike) -> FloatArray:
+    """Error estimate - truth with the heading difference wrapped, shape (..., 3)."""
+    e = np.asarray(estimate, dtype=np.float64) - np.asarray(truth, dtype=np.float64)
+    e[..., 2] = wrap_angle(e[..., 2])
+    return e

@@ -1,0 +1,207 @@
+"""Lazy registries of filters and datasets.
+
+Entries are import paths (``"locbench.filters.ekf_landmarks:LandmarkEKF"``), imported only when a
+filter or dataset is made, so a missing optional dependency shows as "unavailable: install ..."
+instead of an ImportError at start-up. Third-party packages can add entries through the
+``locbench.filters`` and ``locbench.datasets`` entry-point groups.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import importlib.metadata
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import Any, Generic, TypeVar
+
+import numpy as np
+
+from locbench.seeding import dataset_rng
+from locbench.errors import DependencyNotInstalled, UnknownIdError
+from locbench.spec import build_params, format_spec, non_default_params, params_to_dict, parse_spec
+
+T = TypeVar("T")
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One registered filter or dataset."""
+
+    id: str
+    entry_point: str
+    summary: str = ""
+    #: Top-level modules that must import for the entry to work, and the command that installs them.
+    requires_modules: tuple[str, ...] = ()
+    install_hint: str = ""
+
+
+class Registry(Generic[T]):
+    """An id -> lazily imported class mapping."""
+
+    def __init__(self, kind: str, group: str) -> None:
+        self.kind = kind
+        self.group = group
+        self._entries: dict[str, Entry] = {}
+        self._plugins_loaded = False
+
+    def register(
+        self,
+        id: str,  # noqa: A002 - the registry's own vocabulary
+        entry_point: str,
+        summary: str = "",
+        requires_modules: tuple[str, ...] = (),
+        install_hint: str = "",
+    ) -> None:
+        """Add an entry; re-registering an id replaces it."""
+        if ":" not in entry_point:
+            raise ValueError(f"entry point {entry_point!r} must be 'module:attribute'")
+        self._entries[id] = Entry(id, entry_point, summary, requires_modules, install_hint)
+
+    def unregister(self, id: str) -> None:  # noqa: A002
+        self._entries.pop(id, None)
+
+    def snapshot(self) -> dict[str, Entry]:
+        """A copy of the entries (tests restore it so that test-only registrations don't leak)."""
+        self._load_plugins()
+        return dict(self._entries)
+
+    def restore(self, snap: dict[str, Entry]) -> None:
+        self._entries = dict(snap)
+
+    def _load_plugins(self) -> None:
+        if self._plugins_loaded:
+            return
+        self._plugins_loaded = True
+        for ep in importlib.metadata.entry_points(group=self.group):
+            if ep.name not in self._entries:
+                self.register(ep.name, ep.value, summary=f"plugin from {ep.value}")
+
+    def ids(self) -> list[str]:
+        """Every registered id, sorted."""
+        self._load_plugins()
+        return sorted(self._entries)
+
+    def entry(self, id: str) -> Entry:  # noqa: A002
+        self._load_plugins()
+        try:
+            return self._entries[id]
+        except KeyError:
+            raise UnknownIdError(f"unknown {self.kind} {id!r}; valid: {', '.join(self.ids())}") from None
+
+    def unavailable_reason(self, id: str) -> str | None:  # noqa: A002
+        """None when the entry's optional dependencies import, else 'unavailable: install ...'."""
+        e = self.entry(id)
+        for mod in e.requires_modules:
+            try:
+                importlib.import_module(mod)
+            except ImportError:
+                return f"unavailable: {mod} is not installed; install it with: {e.install_hint or 'pip install ' + mod}"
+        return None
+
+    def load(self, id: str) -> type[T]:  # noqa: A002
+        """Import and return the registered class; ``DependencyNotInstalled`` when an optional dependency is missing."""
+        e = self.entry(id)
+        reason = self.unavailable_reason(id)
+        if reason is not None:
+            raise DependencyNotInstalled(f"{self.kind} {id!r} is {reason}")
+        module_name, attr = e.entry_point.split(":", 1)
+        try:
+            module = importlib.import_module(module_name)
+        except ImportError as exc:
+            hint = e.install_hint or "pip install 'locbench[all]'"
+            raise DependencyNotInstalled(f"{self.kind} {id!r} is unavailable: {exc}; install with: {hint}") from exc
+        cls: type[T] = getattr(module, attr)
+        return cls
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.ids())
+
+    def __contains__(self, id: object) -> bool:
+        return isinstance(id, str) and id in self.ids()
+
+
+FILTERS: Registry[Any] = Registry("filter", "locbench.filters")
+DATASETS: Registry[Any] = Registry("dataset", "locbench.datasets")
+
+FILTERS.register(
+    "odometry",
+    "locbench.filters.odometry:OdometryFilter",
+    "dead reckoning from odometry increments; the baseline row of every table",
+)
+FILTERS.register(
+    "ekf_landmarks",
+    "locbench.filters.ekf_landmarks:LandmarkEKF",
+    "EKF, wheel-encoder motion model and range-bearing landmarks, optional GPS fixes (reports 003, 001)",
+)
+
+DATASETS.register(
+    "room",
+    "locbench.datasets.synthetic.scenarios:RoomScenario",
+    "report 003's 7 m x 2 m room: 4 landmarks, start + 5 waypoints, Kinect-like sensor",
+)
+DATASETS.register(
+    "office",
+    "locbench.datasets.synthetic.scenarios:OfficeScenario",
+    "one office floor with walls, doors, landmarks and a waypoint tour; every sensor",
+)
+DATASETS.register(
+    "tiny_line",
+    "locbench.datasets.synthetic.scenarios:TinyLineScenario",
+    "a 10 s straight drive past 3 landmarks (conformance checks)",
+)
+DATASETS.register(
+    "tiny_circle",
+    "locbench.datasets.synthetic.scenarios:TinyCircleScenario",
+    "a circle whose heading crosses +-pi, 4 landmarks (conformance checks)",
+)
+
+
+# --- making things from specs -------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Resolved:
+    """A spec resolved against the registry: id, the typed params and the canonical name."""
+
+    id: str
+    params: Any
+    name: str
+
+    def params_dict(self) -> dict[str, Any]:
+        return params_to_dict(self.params)
+
+
+def resolve_filter(spec: str) -> Resolved:
+    """Parse ``"ekf_landmarks[association=nearest]"`` into its class's typed config."""
+    ident, raw = parse_spec(spec)
+    cls = FILTERS.load(ident)
+    cfg = build_params(cls.Config, raw, ident)
+    return Resolved(ident, cfg, format_spec(ident, non_default_params(cfg)))
+
+
+def resolve_dataset(spec: str) -> Resolved:
+    """Parse ``"room[kidnap_m=2]"`` into its builder's typed parameters."""
+    ident, raw = parse_spec(spec)
+    cls = DATASETS.load(ident)
+    params = build_params(cls.Params, raw, ident)
+    return Resolved(ident, params, format_spec(ident, non_default_params(params)))
+
+
+def make_filter(spec: str | Resolved) -> Any:
+    """A fresh, un-reset filter for ``spec``."""
+    r = resolve_filter(spec) if isinstance(spec, str) else spec
+    return FILTERS.load(r.id)(r.params)
+
+
+def make_dataset(spec: str | Resolved, seed: int | np.random.Generator = 0) -> Any:
+    """Build the dataset for ``spec``.
+
+    With an integer ``seed`` the randomness comes from :func:`locbench.seeding.dataset_rng`, exactly as in
+    the runner, so ``make_dataset("room", 3)`` is the data every filter saw for seed 3.
+    """
+    r = resolve_dataset(spec) if isinstance(spec, str) else spec
+    gen = seed if isinstance(seed, np.random.Generator) else dataset_rng(r.name, seed)
+    builder = DATASETS.load(r.id)()
+    ds = builder.build(r.params, gen)
+    return dataclasses.replace(ds, id=r.id, name=r.name, params=r.params_dict())

@@ -1,0 +1,179 @@
+"""Names users type: ``id[key=value,...]`` specs, and typed parameter dataclasses built from them.
+
+A filter config or dataset parameter set is a frozen, keyword-only dataclass whose field names carry
+units (``sigma_range_m``). :func:`parse_spec` splits a spec; :func:`build_params` turns its string
+values into the dataclass, with an error that lists the valid keys or says what type was expected.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import re
+import types
+import typing
+from typing import Any, Literal, TypeVar, Union, get_args, get_origin
+
+from locbench.errors import ConfigError, UnknownIdError
+
+P = TypeVar("P")
+
+_SPEC_RE = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_\-]*)\s*(?:\[(.*)\])?\s*$")
+
+
+def parse_spec(text: str) -> tuple[str, dict[str, str]]:
+    """Split ``"pf[particles=5000,laser_beams=60]"`` into ``("pf", {"particles": "5000", ...})``.
+
+    Raises
+    ------
+    ConfigError
+        When the text is not ``id`` or ``id[key=value,...]``.
+    """
+    m = _SPEC_RE.match(text)
+    if m is None:
+        raise ConfigError(f"malformed spec {text!r}: expected 'id' or 'id[key=value,...]'")
+    ident, body = m.group(1), m.group(2)
+    params: dict[str, str] = {}
+    if body is not None and body.strip():
+        for item in body.split(","):
+            if "=" not in item:
+                raise ConfigError(f"malformed parameter {item.strip()!r} in spec {text!r}: expected key=value")
+            key, value = (s.strip() for s in item.split("=", 1))
+            if not key or key in params:
+                raise ConfigError(f"empty or repeated key {key!r} in spec {text!r}")
+            params[key] = value
+    return ident, params
+
+
+def format_spec(ident: str, params: dict[str, Any]) -> str:
+    """The canonical spelling ``id[k1=v1,k2=v2]`` with keys sorted; ``id`` alone without parameters."""
+    if not params:
+        return ident
+    body = ",".join(f"{k}={_format_value(params[k])}" for k in sorted(params))
+    return f"{ident}[{body}]"
+
+
+def _format_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float) and v.is_integer():
+        return repr(v)
+    return str(v)
+
+
+def _convert(raw: Any, tp: Any, where: str) -> Any:
+    """Convert a string (or already typed value) to the annotated type ``tp``."""
+    origin = get_origin(tp)
+    if origin is Literal:
+        allowed = get_args(tp)
+        for a in allowed:
+            if str(a) == str(raw) or a == raw:
+                return a
+        raise ConfigError(f"{where}: {raw!r} is not one of {', '.join(map(str, allowed))}")
+    if origin in (Union, types.UnionType):
+        args = [a for a in get_args(tp) if a is not type(None)]
+        if type(None) in get_args(tp) and str(raw).lower() in ("none", "null", ""):
+            return None
+        errors = []
+        for a in args:
+            try:
+                return _convert(raw, a, where)
+            except ConfigError as exc:
+                errors.append(str(exc))
+        raise ConfigError(f"{where}: {raw!r} does not fit {tp}")
+    if tp is bool:
+        if isinstance(raw, bool):
+            return raw
+        s = str(raw).strip().lower()
+        if s in ("1", "true", "yes", "on"):
+            return True
+        if s in ("0", "false", "no", "off"):
+            return False
+        raise ConfigError(f"{where}: expected a boolean (true/false), got {raw!r}")
+    if tp is int:
+        if isinstance(raw, bool):
+            raise ConfigError(f"{where}: expected an integer, got {raw!r}")
+        try:
+            if isinstance(raw, float) and raw.is_integer():
+                return int(raw)
+            return int(str(raw).strip())
+        except ValueError:
+            raise ConfigError(f"{where}: expected an integer, got {raw!r}") from None
+    if tp is float:
+        try:
+            val = float(str(raw).strip()) if not isinstance(raw, (int, float)) else float(raw)
+        except ValueError:
+            raise ConfigError(f"{where}: expected a number, got {raw!r}") from None
+        return val
+    if tp is str:
+        return str(raw)
+    if origin is tuple:
+        parts = raw if isinstance(raw, (tuple, list)) else [p for p in str(raw).split(";") if p.strip()]
+        sub = get_args(tp)
+        if len(sub) == 2 and sub[1] is Ellipsis:
+            return tuple(_convert(p, sub[0], where) for p in parts)
+        if len(parts) != len(sub):
+            raise ConfigError(f"{where}: expected {len(sub)} values separated by ';', got {raw!r}")
+        return tuple(_convert(p, s, where) for p, s in zip(parts, sub, strict=True))
+    raise ConfigError(f"{where}: unsupported parameter type {tp}")
+
+
+def param_fields(cls: type) -> dict[str, Any]:
+    """Field name -> resolved type annotation of a parameter dataclass."""
+    hints = typing.get_type_hints(cls)
+    return {f.name: hints[f.name] for f in dataclasses.fields(cls) if f.init}
+
+
+def build_params(cls: type[P], values: dict[str, Any], owner: str) -> P:
+    """Build the parameter dataclass ``cls`` from ``values`` (strings from a spec, or typed values).
+
+    Parameters
+    ----------
+    cls : dataclass type
+        The frozen keyword-only parameter class.
+    values : dict
+        Key -> value; unknown keys are an error that lists the valid ones.
+    owner : str
+        The filter or dataset id, for error messages.
+    """
+    fields = param_fields(cls)
+    unknown = sorted(set(values) - set(fields))
+    if unknown:
+        raise UnknownIdError(
+            f"unknown parameter {', '.join(map(repr, unknown))} for {owner!r}; valid: {', '.join(sorted(fields)) or '(none)'}"
+        )
+    kwargs = {k: _convert(v, fields[k], f"{owner}: parameter {k!r}") for k, v in values.items()}
+    try:
+        obj = cls(**kwargs)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"{owner}: {exc}") from None
+    return obj
+
+
+def params_to_dict(obj: Any) -> dict[str, Any]:
+    """A parameter dataclass as a JSON-friendly dict (tuples become lists)."""
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(obj):
+        v = getattr(obj, f.name)
+        out[f.name] = list(v) if isinstance(v, tuple) else v
+    return out
+
+
+def non_default_params(obj: Any) -> dict[str, Any]:
+    """Only the fields whose value differs from the class default (for display names)."""
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(obj):
+        v = getattr(obj, f.name)
+        default = f.default if f.default is not dataclasses.MISSING else (
+            f.default_factory() if f.default_factory is not dataclasses.MISSING else dataclasses.MISSING
+        )
+        if default is dataclasses.MISSING or v != default:
+            out[f.name] = v
+    return out
+
+
+def stable_hash(obj: Any) -> str:
+    """sha256 hex digest of the canonical JSON of ``obj`` (never Python's salted ``hash()``)."""
+    text = json.dumps(obj, sort_keys=True, separators=(",", ":"), default=str)
+    return hashlib.sha256(text.encode()).hexdigest()

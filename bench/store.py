@@ -1,0 +1,238 @@
+"""Reading and writing stored runs under ``<results>/runs/``.
+
+Layout (one folder per dataset name, then per filter name, then per seed)::
+
+    runs/<dataset name>/_truth/seed-<seed>.npz        ground truth, waypoints, kidnaps of that realisation
+    runs/<dataset name>/_truth/seed-<seed>.json       its provenance (dataset params, seed, versions)
+    runs/<dataset name>/<filter name>/seed-<seed>/meta.json       spec, run key, status, versions, commit
+    runs/<dataset name>/<filter name>/seed-<seed>/estimates.npz   per-event estimates and timings
+
+Every folder is written to a temporary sibling and renamed into place, so a crash never leaves a
+half-written run behind. Names are the canonical specs (``room[kidnap_m=2]``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from locbench.datasets.base import Dataset, Kidnap, Trajectory2D, Waypoints
+from locbench.errors import ConfigError
+
+FloatArray = npt.NDArray[np.float64]
+
+TRUTH_DIR = "_truth"
+#: Event kinds stored in ``RunRecord.kind``: the index into this tuple.
+KIND_NAMES = ("Odometry", "LaserScan", "LandmarkObservations", "PoseFix", "reset")
+STATUSES = ("ok", "skipped", "diverged", "error")
+
+
+def _safe(name: str) -> str:
+    """A file-system-safe folder name for a spec (only '/' and NUL can't appear in a POSIX name)."""
+    return name.replace("/", "_").replace("\\", "_").replace("\x00", "")
+
+
+@dataclass(eq=False)
+class TruthRecord:
+    """The ground truth of one dataset realisation, as metrics need it."""
+
+    dataset: str
+    seed: int
+    ground_truth: Trajectory2D
+    waypoints: Waypoints | None
+    kidnaps: tuple[Kidnap, ...]
+    duration_s: float
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def from_dataset(cls, ds: Dataset, seed: int, meta: dict[str, Any]) -> TruthRecord:
+        return cls(ds.name or ds.id, seed, ds.ground_truth, ds.waypoints, ds.kidnaps, ds.duration, meta)
+
+
+@dataclass(eq=False)
+class RunRecord:
+    """One (filter, dataset, seed) run.
+
+    Attributes
+    ----------
+    meta : dict
+        ``filter``, ``filter_id``, ``filter_config``, ``dataset``, ``dataset_id``, ``dataset_params``,
+        ``seed``, ``run_key``, ``status`` (one of ok, skipped, diverged, error), ``message``,
+        ``diverged_t``, ``versions``, ``git_commit``, ``git_dirty``, ``wall_s``, ``started``.
+    t : ndarray, shape (n,)
+        Time of each recorded estimate, s (the event it followed; the first row is the reset belief).
+    mean : ndarray, shape (n, 3)
+        Estimated pose after each event.
+    cov : ndarray, shape (n, 3, 3)
+        Its covariance.
+    kind : ndarray of int8, shape (n,)
+        Index into :data:`KIND_NAMES` of the event that produced the row.
+    step_ns : ndarray of int64, shape (n,)
+        Time of the ``predict``/``update`` call for that row, ns (0 for the reset row).
+    diagnostics : dict of str to ndarray (n,)
+        Per-row filter diagnostics, NaN where absent.
+    extra : dict of str to ndarray
+        Filter-specific arrays (e.g. ``smoothed_t``, ``smoothed_mean`` of a smoother).
+    """
+
+    meta: dict[str, Any]
+    t: FloatArray
+    mean: FloatArray
+    cov: FloatArray
+    kind: npt.NDArray[np.int8]
+    step_ns: npt.NDArray[np.int64]
+    diagnostics: dict[str, FloatArray] = field(default_factory=dict)
+    extra: dict[str, np.ndarray] = field(default_factory=dict)
+
+    @property
+    def status(self) -> str:
+        return str(self.meta.get("status", "error"))
+
+    def step_times_us(self, kind_name: str) -> FloatArray:
+        """Per-call times in microseconds of the rows of one kind ('predict' = Odometry, 'update' = the rest)."""
+        if kind_name == "predict":
+            sel = self.kind == KIND_NAMES.index("Odometry")
+        elif kind_name == "update":
+            sel = (self.kind != KIND_NAMES.index("Odometry")) & (self.kind != KIND_NAMES.index("reset"))
+        else:
+            sel = self.kind == KIND_NAMES.index(kind_name)
+        return self.step_ns[sel].astype(np.float64) / 1e3
+
+
+class Store:
+    """The results folder: ``root/runs`` for raw runs and ``root/summary`` for tables and figures."""
+
+    def __init__(self, root: str | os.PathLike[str]) -> None:
+        self.root = Path(root)
+        self.runs = self.root / "runs"
+        self.summary = self.root / "summary"
+
+    # --- paths ---------------------------------------------------------------------------------
+    def run_dir(self, dataset: str, filter_name: str, seed: int) -> Path:
+        return self.runs / _safe(dataset) / _safe(filter_name) / f"seed-{seed:04d}"
+
+    def truth_path(self, dataset: str, seed: int) -> Path:
+        return self.runs / _safe(dataset) / TRUTH_DIR / f"seed-{seed:04d}.npz"
+
+    # --- queries -------------------------------------------------------------------------------
+    def existing_key(self, dataset: str, filter_name: str, seed: int) -> str | None:
+        """The run key of a finished stored run, or None."""
+        meta = self.run_dir(dataset, filter_name, seed) / "meta.json"
+        if not meta.is_file():
+            return None
+        try:
+            return str(json.loads(meta.read_text())["run_key"])
+        except (json.JSONDecodeError, KeyError):
+            return None
+
+    def has_truth(self, dataset: str, seed: int) -> bool:
+        return self.truth_path(dataset, seed).is_file()
+
+    def iter_runs(self) -> Iterator[Path]:
+        """Every stored run folder, sorted."""
+        if not self.runs.is_dir():
+            return
+        for meta in sorted(self.runs.glob("*/*/seed-*/meta.json")):
+            if meta.parent.parent.name != TRUTH_DIR:
+                yield meta.parent
+
+    # --- writing -------------------------------------------------------------------------------
+    def write_truth(self, rec: TruthRecord) -> None:
+        path = self.truth_path(rec.dataset, rec.seed)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        wp_t = rec.waypoints.t if rec.waypoints is not None else np.zeros(0)
+        wp_xy = rec.waypoints.xy if rec.waypoints is not None else np.zeros((0, 2))
+        arrays = {
+            "gt_t": rec.ground_truth.t,
+            "gt_xy": rec.ground_truth.xy,
+            "gt_theta": rec.ground_truth.theta,
+            "wp_t": wp_t,
+            "wp_xy": wp_xy,
+            "has_waypoints": np.array(rec.waypoints is not None),
+            "kidnap_t": np.array([k.t for k in rec.kidnaps], dtype=np.float64),
+            "kidnap_delta": np.array([k.delta for k in rec.kidnaps], dtype=np.float64).reshape(-1, 3),
+            "duration_s": np.array(rec.duration_s),
+        }
+        meta = {"dataset": rec.dataset, "seed": rec.seed, **rec.meta}
+        _atomic_write(path, lambda p: np.savez_compressed(p, **arrays), binary=True)
+        _atomic_write(path.with_suffix(".json"), lambda p: p.write_text(json.dumps(meta, indent=2, default=str)))
+
+    def write_run(self, rec: RunRecord) -> Path:
+        """Write a run folder atomically (temporary folder, then rename over any old one)."""
+        final = self.run_dir(rec.meta["dataset"], rec.meta["filter"], int(rec.meta["seed"]))
+        final.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=".tmp-", dir=final.parent))
+        try:
+            arrays: dict[str, np.ndarray] = {
+                "t": rec.t,
+                "mean": rec.mean,
+                "cov": rec.cov,
+                "kind": rec.kind,
+                "step_ns": rec.step_ns,
+            }
+            arrays.update({f"diag_{k}": v for k, v in rec.diagnostics.items()})
+            arrays.update({f"extra_{k}": v for k, v in rec.extra.items()})
+            np.savez_compressed(tmp / "estimates.npz", **arrays)  # type: ignore[arg-type]
+            (tmp / "meta.json").write_text(json.dumps(rec.meta, indent=2, default=str))
+            if final.exists():
+                old = final.with_name(final.name + ".old")
+                shutil.rmtree(old, ignore_errors=True)
+                final.rename(old)
+                tmp.rename(final)
+                shutil.rmtree(old, ignore_errors=True)
+            else:
+                tmp.rename(final)
+        finally:
+            if tmp.exists():
+                shutil.rmtree(tmp, ignore_errors=True)
+        return final
+
+    # --- reading -------------------------------------------------------------------------------
+    def read_truth(self, dataset: str, seed: int) -> TruthRecord:
+        path = self.truth_path(dataset, seed)
+        if not path.is_file():
+            raise ConfigError(f"{path}: missing ground truth for dataset {dataset!r} seed {seed}; re-run 'locbench run'")
+        with np.load(path) as z:
+            gt = Trajectory2D(z["gt_t"], z["gt_xy"], z["gt_theta"])
+            wp = Waypoints(z["wp_t"], z["wp_xy"]) if bool(z["has_waypoints"]) else None
+            kid = tuple(Kidnap(float(t), (float(d[0]), float(d[1]), float(d[2]))) for t, d in zip(z["kidnap_t"], z["kidnap_delta"], strict=True))
+            duration = float(z["duration_s"])
+        meta_path = path.with_suffix(".json")
+        meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
+        return TruthRecord(dataset, seed, gt, wp, kid, duration, meta)
+
+    def read_run(self, run_dir: str | os.PathLike[str]) -> RunRecord:
+        d = Path(run_dir)
+        try:
+            meta = json.loads((d / "meta.json").read_text())
+        except (OSError, json.JSONDecodeError) as exc:
+            raise ConfigError(f"{d / 'meta.json'}: unreadable run record ({exc})") from None
+        est = d / "estimates.npz"
+        if not est.is_file():
+            raise ConfigError(f"{est}: missing estimates for a stored run; re-run with --force")
+        with np.load(est) as z:
+            diag = {k[5:]: z[k] for k in z.files if k.startswith("diag_")}
+            extra = {k[6:]: z[k] for k in z.files if k.startswith("extra_")}
+            return RunRecord(meta, z["t"], z["mean"], z["cov"], z["kind"], z["step_ns"], diag, extra)
+
+
+def _atomic_write(path: Path, writer: Any, binary: bool = False) -> None:
+    """Write via a temporary file in the same folder, then rename (no half-written files)."""
+    fd, tmp_name = tempfile.mkstemp(prefix=".tmp-", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        writer(tmp)
+        tmp.replace(path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()

@@ -1,0 +1,1 @@
+"""Synthetic worlds, robot and sensor simulators, and the named scenarios (folder ``datasets/synthetic/``)."""

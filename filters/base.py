@@ -1,0 +1,112 @@
+"""The common filter interface every estimator implements.
+
+A filter is built from a frozen config and does no work in ``__init__``; ``reset`` hands it the
+initial belief, the world map, the nominal sensor noise and its random generator; the runner then
+calls ``predict`` for each odometry event and ``update`` for each observation it consumes, and reads
+``estimate()`` after every call.
+"""
+
+from __future__ import annotations
+
+import abc
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+import numpy.typing as npt
+
+from locbench.datasets.base import Gaussian2, MapKind, SensorSpec, WorldMap
+from locbench.events import Event, Observation, Odometry
+
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True, kw_only=True)
+class FilterConfig:
+    """Base of every filter config: a frozen keyword-only dataclass whose field names carry units."""
+
+
+@dataclass(frozen=True, eq=False)
+class Estimate:
+    """A filter's belief at time ``t``.
+
+    Attributes
+    ----------
+    t : float
+        Time of the last event processed, s.
+    mean : ndarray, shape (3,)
+        Pose (x m, y m, theta rad in (-pi, pi]), world frame.
+    cov : ndarray, shape (3, 3)
+        Covariance of the pose, same units.
+    diagnostics : dict of str to float
+        Per-step numbers: ``nis`` (normalised innovation squared of the last update), ``accepted`` and
+        ``rejected`` measurement counts, ``n_eff`` (particles), ``iterations`` ...; NaN when not defined.
+    """
+
+    t: float
+    mean: FloatArray
+    cov: FloatArray
+    diagnostics: dict[str, float] = field(default_factory=dict)
+
+
+class Filter(abc.ABC):
+    """Base class of every estimator.
+
+    Class attributes
+    ----------------
+    consumes : frozenset of event types
+        Every event type the filter can use: :class:`Odometry` (through ``predict``) and the
+        observation types it takes through ``update``; any other observation raises ``TypeError``.
+    requires : frozenset of MapKind
+        Map kinds that must be present; a dataset lacking one is a recorded skip with the reason.
+    Config : type
+        The filter's frozen config dataclass.
+    version : int
+        Bump on any change of behaviour; it is part of the run key, so stored runs are redone.
+    source : str
+        The report or reference the filter follows (for the README and report).
+    """
+
+    consumes: ClassVar[frozenset[type]] = frozenset()
+    requires: ClassVar[frozenset[MapKind]] = frozenset()
+    Config: ClassVar[type[FilterConfig]] = FilterConfig
+    version: ClassVar[int] = 1
+    source: ClassVar[str] = ""
+
+    def __init__(self, config: FilterConfig | None = None) -> None:
+        # Store only: no RNG, no I/O, no work (scikit-learn's rule), so a filter is cheap to make.
+        self.config = config if config is not None else self.Config()
+
+    def routed_events(self) -> frozenset[type]:
+        """The observation types the runner should send to ``update`` under this config.
+
+        Defaults to ``consumes`` (odometry included); a filter narrows it when its config switches a sensor off, so that
+        unused events neither cost time nor appear in update timings.
+        """
+        return self.consumes
+
+    def check_consumes(self, z: Event) -> None:
+        """Raise ``TypeError`` when ``z`` is not an observation type this filter consumes."""
+        if type(z) not in self.consumes or isinstance(z, Odometry):
+            names = ", ".join(sorted(t.__name__ for t in self.consumes)) or "none"
+            raise TypeError(f"{type(self).__name__} does not consume {type(z).__name__} (consumes: {names})")
+
+    @abc.abstractmethod
+    def reset(self, initial: Gaussian2, world: WorldMap, sensors: SensorSpec, rng: np.random.Generator) -> None:
+        """Start from ``initial`` in ``world``; all randomness comes from ``rng``."""
+
+    @abc.abstractmethod
+    def predict(self, u: Odometry) -> None:
+        """Propagate the belief with one odometry event."""
+
+    @abc.abstractmethod
+    def update(self, z: Observation) -> None:
+        """Correct the belief with one observation (``TypeError`` for a type not in ``consumes``)."""
+
+    @abc.abstractmethod
+    def estimate(self) -> Estimate:
+        """The current belief; cheap to call after every event."""
+
+    def extra_results(self) -> dict[str, Any]:
+        """Optional arrays stored with the run at the end (e.g. a smoother's smoothed trajectory)."""
+        return {}
