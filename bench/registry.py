@@ -109,6 +109,9 @@ class Registry(Generic[T]):
         try:
             module = importlib.import_module(module_name)
         except ImportError as exc:
+            missing = getattr(exc, "name", None) or ""
+            if missing.split(".")[0] == "locbench":
+                raise  # a broken entry point of our own is a bug, not a missing dependency
             hint = e.install_hint or "pip install 'locbench[all]'"
             raise DependencyNotInstalled(f"{self.kind} {id!r} is unavailable: {exc}; install with: {hint}") from exc
         cls: type[T] = getattr(module, attr)

@@ -57,8 +57,10 @@ def format_spec(ident: str, params: dict[str, Any]) -> str:
 def _format_value(v: Any) -> str:
     if isinstance(v, bool):
         return "true" if v else "false"
-    if isinstance(v, float) and v.is_integer():
-        return repr(v)
+    if isinstance(v, float):
+        return str(int(v)) if v.is_integer() and abs(v) < 1e15 else repr(v)
+    if isinstance(v, (tuple, list)):
+        return ";".join(_format_value(x) for x in v)
     return str(v)
 
 

@@ -1,0 +1,144 @@
+"""The ``locbench`` command line: a thin layer over the library API.
+
+    locbench list
+    locbench run [--suite NAME|FILE.toml | --filter SPEC ... --dataset SPEC ...] [--seeds N] [--results DIR] [--jobs N] [--force]
+    locbench report [--results DIR]
+    locbench check [ID ...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import sys
+from collections import Counter
+from collections.abc import Sequence
+
+from locbench import __version__
+from locbench.errors import ConfigError, LocbenchError
+
+log = logging.getLogger("locbench")
+
+DEFAULT_RESULTS = "results"
+
+
+def _results_default() -> str:
+    return os.environ.get("LOCBENCH_RESULTS", DEFAULT_RESULTS)
+
+
+def _cmd_list(args: argparse.Namespace) -> int:
+    from locbench.registry import DATASETS, FILTERS
+    from locbench.suites import SUITES
+
+    for title, reg in (("filters", FILTERS), ("datasets", DATASETS)):
+        print(f"{title}:")
+        for ident in reg.ids():
+            reason = reg.unavailable_reason(ident)
+            state = f"  [{reason}]" if reason else ""
+            print(f"  {ident:<16} {reg.entry(ident).summary}{state}")
+    print("suites:")
+    for s in SUITES.values():
+        print(f"  {s.name:<16} {len(s.filters)} filters x {len(s.datasets)} datasets x {s.seeds} seeds: {s.description}")
+    return 0
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from locbench.runner import run_many
+    from locbench.suites import get_suite
+
+    if args.suite and (args.filter or args.dataset):
+        raise ConfigError("give either --suite or --filter/--dataset, not both")
+    if args.filter or args.dataset:
+        if not (args.filter and args.dataset):
+            raise ConfigError("--filter and --dataset go together: name at least one of each (see 'locbench list')")
+        filters, datasets, seeds = list(args.filter), list(args.dataset), args.seeds or 1
+    else:
+        suite = get_suite(args.suite or "default")
+        filters, datasets, seeds = list(suite.filters), list(suite.datasets), args.seeds or suite.seeds
+    if seeds < 1:
+        raise ConfigError(f"--seeds must be >= 1, got {seeds}")
+    if args.jobs < 1:
+        raise ConfigError(f"--jobs must be >= 1, got {args.jobs}")
+    total = len(filters) * len(datasets) * seeds
+    with tqdm(total=total, unit="run", desc="locbench run", disable=None if not args.no_progress else True) as bar:
+        outcomes = run_many(
+            filters, datasets, list(range(seeds)), args.results, jobs=args.jobs, force=args.force, progress=bar.update
+        )
+    counts = Counter(o.status for o in outcomes)
+    print(f"{len(outcomes)} runs in {args.results}/runs: " + ", ".join(f"{n} {s}" for s, n in sorted(counts.items())))
+    for o in outcomes:
+        if o.status in ("error", "diverged", "skipped"):
+            print(f"  {o.status}: {o.filter} on {o.dataset} seed {o.seed}: {o.message}")
+    return 0
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    from locbench.report import write_report
+    from locbench.store import Store
+
+    store = Store(args.results)
+    if not store.runs.is_dir():
+        raise ConfigError(f"{store.runs}: no stored runs; run 'locbench run' first")
+    path = write_report(store)
+    print(f"report written to {path}")
+    return 0
+
+
+def _cmd_check(args: argparse.Namespace) -> int:
+    from locbench.checks import run_checks
+
+    failed = 0
+    for r in run_checks(list(args.ids) or None):
+        mark = {"passed": "ok", "failed": "FAIL", "xfailed": "xfail", "xpassed": "XPASS", "skipped": "skip"}[r.outcome]
+        print(f"{mark:<5} {r.target:<32} {r.check}" + (f": {r.message}" if r.message else ""))
+        failed += r.outcome in ("failed", "xpassed")
+    print(f"{failed} check(s) failed" if failed else "all checks passed")
+    return 1 if failed else 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="locbench", description="Comparative benchmark of 2-D localization filters.")
+    p.add_argument("--version", action="version", version=f"locbench {__version__}")
+    p.add_argument("-v", "--verbose", action="store_true", help="log progress details")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    sub.add_parser("list", help="registered filters, datasets and suites").set_defaults(func=_cmd_list)
+
+    r = sub.add_parser("run", help="run filters over datasets and store the runs")
+    r.add_argument("--suite", help="a named suite (see 'locbench list') or a .toml suite file; default: default")
+    r.add_argument("--filter", nargs="+", action="extend", default=[], metavar="SPEC", help="e.g. ekf_landmarks[association=nearest]")
+    r.add_argument("--dataset", nargs="+", action="extend", default=[], metavar="SPEC", help="e.g. room[kidnap_m=2]")
+    r.add_argument("--seeds", type=int, default=None, help="number of seeds, 0..N-1 (default: the suite's, or 1)")
+    r.add_argument("--results", default=_results_default(), help="results folder (default: results/ or $LOCBENCH_RESULTS)")
+    r.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
+    r.add_argument("--force", action="store_true", help="re-run runs that are already stored")
+    r.add_argument("--no-progress", action="store_true", help="no progress bar")
+    r.set_defaults(func=_cmd_run)
+
+    rep = sub.add_parser("report", help="write summary/metrics.csv, REPORT.md and figures from stored runs")
+    rep.add_argument("--results", default=_results_default(), help="results folder (default: results/)")
+    rep.set_defaults(func=_cmd_report)
+
+    c = sub.add_parser("check", help="conformance checks for filters and datasets")
+    c.add_argument("ids", nargs="*", help="filter or dataset ids/specs (default: all registered)")
+    c.set_defaults(func=_cmd_check)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``locbench`` console script."""
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    try:
+        return int(args.func(args))
+    except LocbenchError as exc:
+        # one line that says what is valid; the traceback would hide it
+        print(f"locbench: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

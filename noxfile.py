@@ -1,0 +1,74 @@
+"""nox sessions for locbench.
+
+    nox                 the tests (the default session)
+    nox -s lint         ruff and mypy
+    nox -s bench        run the default suite and write results/summary (posargs go to 'locbench run')
+    nox -s report       regenerate results/summary from the stored runs, no re-run
+    nox -s perf         pytest-benchmark micro-benchmarks of each filter's predict and update
+"""
+
+from __future__ import annotations
+
+import os
+
+import nox
+
+nox.needs_version = ">=2024.3.2"
+nox.options.default_venv_backend = "venv"
+nox.options.sessions = ["tests"]
+nox.options.reuse_existing_virtualenvs = True
+
+PYTHON = "3.11"
+CONSTRAINTS = ("-c", "constraints.txt")
+
+
+def _install(session: nox.Session, extras: str) -> None:
+    # A regular (non-editable) install: the tests import the installed package, as users do.
+    session.install(*CONSTRAINTS, f".[{extras}]")
+
+
+@nox.session(python=PYTHON)
+def tests(session: nox.Session) -> None:
+    """Run the test suite (recorded-data tests read $LOCBENCH_DATA and skip without it)."""
+    _install(session, "all,test")
+    env = {"LOCBENCH_DATA": os.environ.get("LOCBENCH_DATA", "")}
+    session.run("pytest", "--benchmark-disable", *session.posargs, env=env)
+
+
+@nox.session(python=PYTHON, default=False)
+def lint(session: nox.Session) -> None:
+    """ruff (lint and format check) and mypy over the package."""
+    _install(session, "all,lint")
+    session.run("ruff", "check", ".")
+    session.run("ruff", "format", "--check", ".")
+    session.run("mypy", "-p", "locbench")
+
+
+@nox.session(python=PYTHON, default=False)
+def bench(session: nox.Session) -> None:
+    """Run the default suite (or 'locbench run' arguments given after --) and write the report."""
+    _install(session, "all")
+    args = session.posargs or ["--suite", "default", "--jobs", "2"]
+    session.run("locbench", "run", "--results", "results", *args)
+    session.run("locbench", "report", "--results", "results")
+
+
+@nox.session(python=PYTHON, default=False)
+def report(session: nox.Session) -> None:
+    """Regenerate results/summary (tables, figures, metrics.csv) from the stored runs."""
+    _install(session, "all")
+    session.run("locbench", "report", "--results", "results")
+
+
+@nox.session(python=PYTHON, default=False)
+def perf(session: nox.Session) -> None:
+    """pytest-benchmark micro-benchmarks (per-call predict and update of each filter)."""
+    _install(session, "all,test")
+    session.run(
+        "pytest",
+        "tests/perf",
+        "--benchmark-only",
+        "--benchmark-columns=min,median,mean,iqr,ops,rounds",
+        "--benchmark-sort=name",
+        *session.posargs,
+    )

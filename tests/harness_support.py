@@ -1,0 +1,96 @@
+"""Hand-made datasets and filters for the harness tests (importable as ``harness_support``)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from locbench.datasets.base import (
+    Dataset,
+    DatasetBuilder,
+    Gaussian2,
+    Landmarks,
+    SensorSpec,
+    Trajectory2D,
+    Waypoints,
+    WorldMap,
+    sort_events,
+)
+from locbench.errors import FilterDiverged
+from locbench.events import LandmarkObservations, Odometry
+from locbench.filters.base import Estimate, Filter, FilterConfig
+
+
+# --- a hand-made dataset: straight line at 1 m/s, one landmark, 10 Hz ------------------------------
+
+
+@dataclass(frozen=True, kw_only=True)
+class LineParams:
+    steps: int = 50
+    noise_m: float = 0.0
+
+
+class LineBuilder(DatasetBuilder):
+    Params = LineParams
+    description = "test-only straight line"
+
+    def build(self, params: Any, rng: np.random.Generator) -> Dataset:
+        dt = 0.1
+        t = np.arange(params.steps + 1) * dt
+        xy = np.column_stack([t * 1.0, np.zeros_like(t)])
+        events: list[Any] = []
+        for k in range(1, params.steps + 1):
+            events.append(Odometry(float(t[k]), 0.1 + float(rng.normal(0.0, params.noise_m)) if params.noise_m else 0.1, 0.0, 0.0))
+            if k % 5 == 0:
+                d = np.hypot(10.0 - xy[k, 0], 2.0)
+                b = np.arctan2(2.0, 10.0 - xy[k, 0])
+                events.append(LandmarkObservations(float(t[k]), np.array([0]), np.array([d]), np.array([b])))
+        return Dataset(
+            id="line",
+            params={},
+            events=sort_events(events),
+            ground_truth=Trajectory2D(t, xy, np.zeros_like(t)),
+            initial=Gaussian2(np.zeros(3), np.diag([1e-4, 1e-4, 1e-4])),
+            world=WorldMap(landmarks=Landmarks(np.array([0]), np.array([[10.0, 2.0]]))),
+            sensors=SensorSpec(odometry_sigma_xy_per_m=0.01, odometry_sigma_theta_per_m=0.01),
+            waypoints=Waypoints(np.array([2.0, 4.0]), np.array([[2.0, 0.0], [4.0, 0.0]])),
+        )
+
+
+# --- hand-made filters that misbehave on purpose -----------------------------------------------------
+
+
+@dataclass(frozen=True, kw_only=True)
+class BadConfig(FilterConfig):
+    fail_at_s: float = 1.0
+    mode: str = "raise"  # raise, nan, diverge
+
+
+class BadFilter(Filter):
+    """Dead reckoning that breaks at ``fail_at_s`` in the configured way."""
+
+    consumes = frozenset({Odometry})
+    Config = BadConfig
+
+    def reset(self, initial: Gaussian2, world: WorldMap, sensors: SensorSpec, rng: np.random.Generator) -> None:
+        self._x = initial.mean.copy()
+        self._t = 0.0
+
+    def predict(self, u: Odometry) -> None:
+        self._t = u.t
+        self._x = self._x + u.delta
+        if u.t >= self.config.fail_at_s:  # type: ignore[attr-defined]
+            mode = self.config.mode  # type: ignore[attr-defined]
+            if mode == "raise":
+                raise RuntimeError("boom")
+            if mode == "diverge":
+                raise FilterDiverged("covariance exploded")
+            self._x[:] = np.nan
+
+    def update(self, z: Any) -> None:
+        self.check_consumes(z)
+
+    def estimate(self) -> Estimate:
+        return Estimate(self._t, self._x.copy(), np.eye(3) * 0.01)
