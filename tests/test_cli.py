@@ -1,0 +1,72 @@
+"""The command line: one-line errors that say what is valid, and a run -> report round trip."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from locbench.cli import main
+
+
+@pytest.mark.parametrize(
+    ("argv", "expected"),
+    [
+        (["run", "--filter", "nope", "--dataset", "room"], "unknown filter 'nope'; valid: "),
+        (["run", "--filter", "odometry", "--dataset", "nowhere"], "unknown dataset 'nowhere'; valid: "),
+        (["run", "--filter", "ekf_landmarks[gate_probability=high]", "--dataset", "room"], "expected a number"),
+        (["run", "--filter", "ekf_landmarks[no_such_key=1]", "--dataset", "room"], "valid: "),
+        (["run", "--filter", "odometry[", "--dataset", "room"], "malformed spec"),
+        (["run", "--suite", "nosuch"], "unknown suite 'nosuch'; valid: default"),
+        (["run", "--filter", "odometry"], "--filter and --dataset go together"),
+        (["check", "nope"], "unknown filter or dataset 'nope'; valid: "),
+    ],
+)
+def test_bad_input_is_one_line_error(argv: list[str], expected: str, capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    code = main([*argv, "--results", str(tmp_path)] if argv[0] == "run" else argv)
+    err = capsys.readouterr().err
+    assert code == 2
+    assert expected in err
+    assert err.count("\n") == 1, err
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ("filters = [\n", "not valid TOML"),
+        ('filters = ["odometry"]\ndatasets = []\n', "field 'datasets' must be a non-empty list"),
+        ('filters = ["odometry"]\ndatasets = ["room"]\nseeds = "ten"\n', "field 'seeds' must be a positive integer"),
+        ('filters = ["odometry"]\ndatasets = ["room"]\ncolour = 1\n', "unknown field(s) colour"),
+    ],
+)
+def test_malformed_suite_file_names_file_and_field(
+    text: str, expected: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    f = tmp_path / "bad.toml"
+    f.write_text(text)
+    assert main(["run", "--suite", str(f), "--results", str(tmp_path / "r")]) == 2
+    err = capsys.readouterr().err
+    assert str(f) in err and expected in err
+
+
+def test_report_without_runs_is_an_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["report", "--results", str(tmp_path)]) == 2
+    assert "no stored runs" in capsys.readouterr().err
+
+
+def test_list_shows_filters_datasets_suites(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["list"]) == 0
+    out = capsys.readouterr().out
+    for word in ("odometry", "ekf_landmarks", "room", "office", "default"):
+        assert word in out
+
+
+def test_run_then_report(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    res = str(tmp_path / "res")
+    assert main(["run", "--suite", "smoke", "--seeds", "1", "--results", res, "--no-progress"]) == 0
+    assert "4 ok" in capsys.readouterr().out
+    assert main(["report", "--results", res]) == 0
+    summary = Path(res) / "summary"
+    assert (summary / "metrics.csv").is_file() and (summary / "REPORT.md").is_file()
+    header = (summary / "metrics.csv").read_text().splitlines()[0]
+    assert header == "dataset,filter,seed,metric,value"
