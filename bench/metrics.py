@@ -24,9 +24,8 @@ from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
-from scipy import stats
-
 from locbench.geometry import between, pose_error, wrap_angle
+from scipy import stats
 
 if TYPE_CHECKING:
     from locbench.store import RunRecord, TruthRecord

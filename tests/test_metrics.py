@@ -1,0 +1,245 @@
+"""Hand-computed cases for every metric of locbench.metrics and its aggregations over seeds."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from locbench import metrics as lm
+from locbench.datasets.base import Trajectory2D, Waypoints
+from locbench.geometry import compose
+from locbench.store import KIND_NAMES, RunRecord, TruthRecord
+from scipy import stats
+
+ODO = KIND_NAMES.index("Odometry")
+LMK = KIND_NAMES.index("LandmarkObservations")
+RESET = KIND_NAMES.index("reset")
+
+
+# --- zero-order hold ----------------------------------------------------------------------------
+
+
+def test_estimate_at_is_a_zero_order_hold_with_later_rows_winning_ties() -> None:
+    t_est = np.array([0.0, 1.0, 1.0, 2.0])
+    values = np.array([10.0, 20.0, 30.0, 40.0])
+    got = lm.estimate_at(t_est, values, [-1.0, 0.0, 0.5, 0.999, 1.0, 1.5, 2.0, 5.0])
+    np.testing.assert_array_equal(got, [10, 10, 10, 10, 30, 30, 40, 40])
+
+
+def test_estimate_at_keeps_trailing_shape() -> None:
+    cov = np.stack([np.eye(3) * k for k in (1.0, 2.0)])
+    got = lm.estimate_at([0.0, 1.0], cov, [0.5, 3.0])
+    assert got.shape == (2, 3, 3)
+    np.testing.assert_array_equal(got[1], 2.0 * np.eye(3))
+
+
+def test_estimate_at_rejects_empty_run() -> None:
+    with pytest.raises(ValueError, match="non-empty"):
+        lm.estimate_at([], np.zeros((0, 3)), [0.0])
+
+
+# --- errors -------------------------------------------------------------------------------------
+
+
+def test_waypoint_errors_against_marked_points_with_hold() -> None:
+    t_est = np.array([0.0, 1.0, 2.0])
+    mean = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]])
+    # waypoint 1 at t=1.5 (estimate (1, 0) in force), waypoint 2 at t=2 (estimate (2, 0))
+    err, est = lm.waypoint_errors(t_est, mean, [1.5, 2.0], [[1.0, 1.0], [5.0, 4.0]])
+    np.testing.assert_allclose(err, [1.0, 5.0])
+    np.testing.assert_allclose(est, [[1.0, 0.0], [2.0, 0.0]])
+
+
+def test_ate_uses_every_ground_truth_time_and_no_alignment() -> None:
+    t_est = np.array([0.0, 1.0])
+    mean = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    gt_t = np.array([0.0, 0.5, 1.0])
+    gt_xy = np.array([[0.0, 0.0], [0.5, 0.0], [1.0, 0.0]])
+    # errors 0, 0.5 (held estimate at x=0), 0
+    assert lm.ate(t_est, mean, gt_t, gt_xy) == pytest.approx(np.sqrt(0.25 / 3))
+    # a constant offset (3, 4) is not aligned away
+    assert lm.ate(t_est, mean + np.array([3.0, 4.0, 0.0]), [0.0, 1.0], gt_xy[[0, 2]]) == pytest.approx(5.0)
+
+
+def test_heading_rmse_wraps_across_pi() -> None:
+    t_est = np.array([0.0])
+    mean = np.array([[0.0, 0.0, np.pi - 0.1]])
+    assert lm.heading_rmse(t_est, mean, [0.0, 1.0], [-np.pi + 0.1, np.pi - 0.1]) == pytest.approx(np.sqrt(0.04 / 2))
+
+
+def test_final_error_at_last_ground_truth_time() -> None:
+    t_est = np.array([0.0, 5.0])
+    mean = np.array([[0.0, 0.0, 0.0], [3.0, 4.0, 0.0]])
+    assert lm.final_error(t_est, mean, [0.0, 4.0, 9.0], np.zeros((3, 2))) == pytest.approx(5.0)
+
+
+def test_distance_pairs_on_a_unit_speed_line() -> None:
+    xy = np.column_stack([np.arange(0.0, 3.01, 0.5), np.zeros(7)])
+    pairs, dist = lm.distance_pairs(xy, 1.0)
+    np.testing.assert_array_equal(pairs, [[0, 2], [1, 3], [2, 4], [3, 5], [4, 6]])
+    np.testing.assert_allclose(dist, 1.0)
+    assert lm.distance_pairs(xy, 10.0)[0].shape == (0, 2)
+
+
+def _line_truth(n: int = 101) -> tuple[np.ndarray, np.ndarray]:
+    t = np.linspace(0.0, 10.0, n)
+    return t, np.column_stack([t, np.zeros(n), np.zeros(n)])
+
+
+def test_rpe_on_a_known_scale_drift() -> None:
+    t, gt = _line_truth()
+    est = gt.copy()
+    est[:, 0] *= 1.1  # odometry 10 % long: 0.1 m of error per metre travelled
+    assert lm.rpe_per_metre(t, est, t, gt) == pytest.approx(0.1)
+
+
+def test_rpe_ignores_a_global_rigid_offset_but_ate_does_not() -> None:
+    t, gt = _line_truth()
+    est = compose([2.0, -1.0, 0.7], gt)
+    assert lm.rpe_per_metre(t, est, t, gt) == pytest.approx(0.0, abs=1e-12)
+    assert lm.ate(t, est, t, gt[:, :2]) > 1.0
+
+
+def test_rpe_is_nan_for_a_path_shorter_than_delta() -> None:
+    t, gt = _line_truth()
+    assert np.isnan(lm.rpe_per_metre(t, gt, t, gt, delta_m=50.0))
+
+
+# --- consistency --------------------------------------------------------------------------------
+
+
+def test_nees_hand_value_and_wrapped_heading() -> None:
+    assert lm.nees(np.array([[1.0, 0.0, 0.0]]), np.diag([4.0, 1.0, 1.0])[None])[0] == pytest.approx(0.25)
+    mean = np.array([[0.0, 0.0, np.pi - 0.05]])
+    cov = np.diag([1.0, 1.0, 0.01])[None]
+    ne = lm.nees_at_truth([0.0], mean, cov, [0.0], [[0.0, 0.0, -np.pi + 0.05]])
+    assert ne[0] == pytest.approx(1.0)  # wrapped error -0.1 rad, sigma 0.1 rad
+
+
+def test_nees_of_a_known_gaussian_averages_three() -> None:
+    rng = np.random.default_rng(7)
+    A = np.array([[0.3, 0.0, 0.0], [0.1, 0.2, 0.0], [0.02, -0.01, 0.05]])
+    P = A @ A.T
+    e = rng.standard_normal((20000, 3)) @ A.T
+    ne = lm.nees(e, np.broadcast_to(P, (e.shape[0], 3, 3)))
+    assert lm.anees(ne) == pytest.approx(3.0, abs=0.1)
+    assert lm.fraction_in_band(ne, lm.chi2_band(3, 1)) == pytest.approx(0.95, abs=0.01)
+
+
+def test_nees_singular_covariance_is_infinite_unless_error_is_zero() -> None:
+    cov = np.stack([np.zeros((3, 3)), np.zeros((3, 3)), np.eye(3)])
+    e = np.array([[0.1, 0.0, 0.0], [0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
+    np.testing.assert_array_equal(lm.nees(e, cov), [np.inf, 0.0, 3.0])
+
+
+def test_chi2_band_single_and_mean_over_runs() -> None:
+    lo, hi = lm.chi2_band(3, 1)
+    assert (lo, hi) == pytest.approx((0.2158, 9.3484), abs=1e-4)
+    lo20, hi20 = lm.chi2_band(3, 20)
+    assert lo20 == pytest.approx(stats.chi2.ppf(0.025, 60) / 20)
+    assert hi20 == pytest.approx(stats.chi2.ppf(0.975, 60) / 20)
+    assert lo < lo20 < 3.0 < hi20 < hi
+    with pytest.raises(ValueError):
+        lm.chi2_band(3, 0)
+
+
+def test_fraction_in_band() -> None:
+    assert lm.fraction_in_band([0.1, 1.0, 3.0, 20.0], (0.2, 9.0)) == pytest.approx(0.5)
+    assert np.isnan(lm.fraction_in_band([], (0.2, 9.0)))
+
+
+# --- runtime ------------------------------------------------------------------------------------
+
+
+def test_runtime_stats_and_realtime_factor() -> None:
+    s = lm.runtime_stats([1.0, 2.0, 3.0, 4.0, 100.0])
+    assert s == pytest.approx({"mean": 22.0, "median": 3.0, "p95": 80.8})
+    assert lm.runtime_stats([]) == {}
+    assert lm.realtime_factor(10.0, [0, 1_000_000_000, 1_000_000_000]) == pytest.approx(5.0)
+    assert lm.realtime_factor(10.0, [0]) == np.inf
+
+
+# --- one run ------------------------------------------------------------------------------------
+
+
+def _truth() -> TruthRecord:
+    t = np.array([0.0, 1.0, 2.0])
+    gt = Trajectory2D(t, np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]]), np.zeros(3))
+    wp = Waypoints(np.array([1.0, 2.0]), np.array([[1.0, 0.0], [2.0, 0.1]]))
+    return TruthRecord("line", 3, gt, wp, (), 2.0)
+
+
+def _run(status: str = "ok") -> RunRecord:
+    meta = {"filter": "ekf_landmarks", "dataset": "line", "seed": 3, "status": status, "message": ""}
+    t = np.array([0.0, 1.0, 1.0, 2.0])
+    mean = np.array([[0.0, 0.0, 0.0], [1.2, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.3, 0.0]])
+    cov = np.broadcast_to(np.eye(3) * 0.01, (4, 3, 3)).copy()
+    kind = np.array([RESET, ODO, LMK, ODO], dtype=np.int8)
+    step_ns = np.array([0, 1000, 3000, 2000], dtype=np.int64)
+    return RunRecord(meta, t, mean, cov, kind, step_ns)
+
+
+def test_run_metrics_of_an_ok_run() -> None:
+    m = lm.run_metrics(_run(), _truth())
+    assert m["failed"] == 0.0
+    assert m["waypoint_1_error_m"] == pytest.approx(0.0)
+    assert m["waypoint_2_error_m"] == pytest.approx(0.2)
+    assert (m["waypoint_2_est_x_m"], m["waypoint_2_est_y_m"]) == pytest.approx((2.0, 0.3))
+    assert (m["waypoint_2_marked_x_m"], m["waypoint_2_marked_y_m"]) == pytest.approx((2.0, 0.1))
+    assert m["ate_m"] == pytest.approx(np.sqrt(0.09 / 3))
+    assert m["final_error_m"] == pytest.approx(0.3)
+    assert m["heading_rmse_rad"] == 0.0
+    assert m["anees"] == pytest.approx((0.0 + 0.0 + 9.0) / 3)
+    assert m["nees_in_band_fraction"] == pytest.approx(1 / 3)  # NEES 0 is below the lower bound
+    assert m["predict_us_mean"] == pytest.approx(1.5)
+    assert m["predict_us_median"] == pytest.approx(1.5)
+    assert m["update_us_p95"] == pytest.approx(3.0)
+    assert m["realtime_factor"] == pytest.approx(2.0 / 6e-6)
+    assert "rpe_m_per_m" in m
+    assert all(np.isfinite(v) for v in m.values())
+
+
+def test_run_metrics_failed_and_skipped() -> None:
+    assert lm.run_metrics(_run("error"), _truth()) == {"failed": 1.0}
+    assert lm.run_metrics(_run("diverged"), _truth()) == {"failed": 1.0}
+    assert lm.run_metrics(_run("skipped"), _truth()) == {}
+
+
+def test_run_metrics_leaves_out_undefined_values() -> None:
+    run = _run()
+    run.kind[:] = np.array([RESET, ODO, ODO, ODO], dtype=np.int8)  # an odometry-only filter
+    m = lm.run_metrics(run, _truth())
+    assert not any(k.startswith("update_us") for k in m)
+    assert "rpe_m_per_m" in m
+
+
+# --- aggregations -------------------------------------------------------------------------------
+
+
+def test_mean_ci_t_interval() -> None:
+    ci = lm.mean_ci([1.0, 2.0, 3.0, np.nan])
+    h = 4.302652729911275 / np.sqrt(3)  # t_{0.975, 2} * s / sqrt(n) with s = 1
+    assert (ci.mean, ci.low, ci.high, ci.n) == pytest.approx((2.0, 2.0 - h, 2.0 + h, 3))
+    assert ci.half_width == pytest.approx(h)
+    one = lm.mean_ci([5.0])
+    assert one.mean == 5.0 and np.isnan(one.low) and one.n == 1
+    assert np.isnan(lm.mean_ci([]).mean)
+
+
+def test_waypoint_rmse_and_distance_of_the_mean() -> None:
+    e = np.array([[3.0, 0.0], [4.0, 0.0]])
+    np.testing.assert_allclose(lm.waypoint_rmse(e), [np.sqrt(12.5), 0.0])
+    # two runs symmetric about waypoint 1: large RMSE, zero distance of the mean (003 table 1)
+    est = np.array([[[1.0, 0.0], [5.0, 5.0]], [[-1.0, 0.0], [5.0, 7.0]]])
+    marked = np.array([[0.0, 0.0], [2.0, 2.0]])
+    np.testing.assert_allclose(lm.mean_estimate_distance(est, marked), [0.0, 5.0])
+    np.testing.assert_allclose(lm.mean_estimate_distance(est, np.stack([marked, marked])), [0.0, 5.0])
+
+
+def test_mean_over_runs_on_a_common_grid() -> None:
+    grid = np.array([0.0, 1.0, 2.0])
+    runs = [(np.array([0.0, 1.0, 2.0]), np.array([1.0, 2.0, 3.0])), (np.array([0.0, 2.0]), np.array([3.0, np.nan]))]
+    mean, count = lm.mean_over_runs(grid, runs)
+    np.testing.assert_allclose(mean, [2.0, 2.5, 3.0])
+    np.testing.assert_array_equal(count, [2, 2, 1])
+    empty, n0 = lm.mean_over_runs(grid, [])
+    assert np.all(np.isnan(empty)) and not n0.any()
