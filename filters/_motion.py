@@ -1,0 +1,487 @@
+"""Wheel-encoder motion model of report 003 and the odometry-increment fallback, shared by the filters.
+
+Two ways to move a pose with one :class:`~locbench.events.Odometry` event:
+
+* **encoder** (report 003 eq. 1-5, 10): the wheel travel (delta_l, delta_r) gives the travel of the
+  mid-axis point delta_d and the heading change delta_theta; the pose moves along the chord at the midpoint
+  heading (eq. 5). The inputs u = (delta_l, delta_r) are noisy with covariance U (eq. 10).
+* **increment** (fallback when an event carries no wheel travel, or by choice): the robot's own
+  (dx, dy, dtheta) in the previous robot frame is composed onto the pose, with a per-step noise whose
+  variance is proportional to the distance travelled and the angle turned (``SensorSpec.odometry_sigma_*``).
+
+Reading of report 003 eq. 10
+----------------------------
+Eq. 10 writes sigma_L^2 = k_L^2 sum_{i=0}^{k} |delta l_i|: taken literally, the *per-step* input variance
+contains the whole distance driven so far, so the covariance added at step k grows with k and the
+accumulated covariance grows quadratically with distance. Its reference [2] (Chong & Kleeman 1997)
+models each unit of wheel travel as an independent error, i.e. the variance of one step is
+k^2 |delta l_k|, and it is the *accumulated* variance (after propagation) that grows with the total
+distance. ``input_noise="per_step"`` (the default) is that reading; ``"cumulative"`` is the literal one,
+kept to reproduce the report. Both are available through :func:`wheel_variances` and
+:class:`MotionModel`.
+
+Frames and units: poses (x m, y m, theta rad) in the world frame, headings wrapped to (-pi, pi];
+wheel travel in m (positive forward); increments in the previous robot frame.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+from locbench.datasets.base import SensorSpec
+from locbench.events import Odometry
+from locbench.geometry import wrap_angle, wrap_scalar
+
+FloatArray = npt.NDArray[np.float64]
+InputNoise = Literal["per_step", "cumulative"]
+MotionKind = Literal["auto", "encoder", "increment"]
+
+logger = logging.getLogger(__name__)
+
+#: Fallback encoder constant k (sqrt(m)) when neither the config nor the dataset gives one:
+#: 1 cm standard deviation after 1 m of wheel travel.
+DEFAULT_ENCODER_K = 0.01
+#: Fallback increment noise when the dataset gives none: m/sqrt(m), rad/sqrt(m), rad/sqrt(rad).
+DEFAULT_SIGMA_XY_PER_M = 0.02
+DEFAULT_SIGMA_THETA_PER_M = 0.02
+DEFAULT_SIGMA_THETA_PER_RAD = 0.02
+
+# Below this |delta_theta| (rad) the exact arc (eq. 3-4) uses its series limit to avoid 0/0.
+_ARC_EPS = 1e-9
+
+
+# --- the encoder model (report 003 eq. 1-5, 10) -----------------------------------------------------------
+
+
+def wheel_to_motion(d_left: npt.ArrayLike, d_right: npt.ArrayLike, wheelbase_m: float) -> tuple[FloatArray, FloatArray]:
+    """Mid-axis travel and heading change from wheel travel (report 003 eq. 1-2).
+
+    Parameters
+    ----------
+    d_left, d_right : array-like
+        Travel of the left and right wheel in one step, m (broadcast together).
+    wheelbase_m : float
+        Distance between the drive wheels W, m.
+
+    Returns
+    -------
+    delta_d : ndarray
+        Travel of the mid-axis point, m: (delta_l + delta_r) / 2 (eq. 2).
+    delta_theta : ndarray
+        Heading change, rad, counter-clockwise: (delta_r - delta_l) / W (eq. 1).
+    """
+    dl = np.asarray(d_left, dtype=np.float64)
+    dr = np.asarray(d_right, dtype=np.float64)
+    return 0.5 * (dl + dr), (dr - dl) / wheelbase_m
+
+
+def predict_midpoint(pose: npt.ArrayLike, delta_d: npt.ArrayLike, delta_theta: npt.ArrayLike) -> FloatArray:
+    """Move poses along the chord at the midpoint heading (report 003 eq. 5).
+
+    Parameters
+    ----------
+    pose : array-like, shape (..., 3)
+        Poses (x m, y m, theta rad) before the step, world frame.
+    delta_d, delta_theta : array-like
+        Mid-axis travel (m) and heading change (rad), broadcast against ``pose[..., 0]``.
+
+    Returns
+    -------
+    ndarray, shape broadcast of (..., 3)
+        Poses after the step, heading wrapped to (-pi, pi].
+    """
+    p = np.asarray(pose, dtype=np.float64)
+    dd = np.asarray(delta_d, dtype=np.float64)
+    dth = np.asarray(delta_theta, dtype=np.float64)
+    heading = p[..., 2] + 0.5 * dth
+    x = p[..., 0] + dd * np.cos(heading)
+    y = p[..., 1] + dd * np.sin(heading)
+    th = wrap_angle(p[..., 2] + dth)
+    return np.stack(np.broadcast_arrays(x, y, th), axis=-1)
+
+
+def predict_arc(pose: npt.ArrayLike, delta_d: npt.ArrayLike, delta_theta: npt.ArrayLike) -> FloatArray:
+    """Move poses along the exact circular arc (report 003 eq. 3-4); the reference eq. 5 approximates.
+
+    Parameters and returns as :func:`predict_midpoint`. For |delta_theta| below 1e-9 rad the straight-line
+    limit is used.
+    """
+    p = np.asarray(pose, dtype=np.float64)
+    dd = np.asarray(delta_d, dtype=np.float64)
+    dth = np.asarray(delta_theta, dtype=np.float64)
+    th0 = p[..., 2]
+    small = np.abs(dth) < _ARC_EPS
+    safe = np.where(small, 1.0, dth)
+    radius = dd / safe
+    dx_arc = radius * (np.sin(th0 + dth) - np.sin(th0))  # eq. 3
+    dy_arc = radius * (np.cos(th0) - np.cos(th0 + dth))  # eq. 4
+    dx = np.where(small, dd * np.cos(th0), dx_arc)
+    dy = np.where(small, dd * np.sin(th0), dy_arc)
+    th = wrap_angle(th0 + dth)
+    return np.stack(np.broadcast_arrays(p[..., 0] + dx, p[..., 1] + dy, th), axis=-1)
+
+
+def jacobian_state(theta: float, delta_d: float, delta_theta: float) -> FloatArray:
+    """F = d(eq. 5)/d(x, y, theta) at the previous heading ``theta`` (rad), shape (3, 3)."""
+    h = theta + 0.5 * delta_theta
+    return np.array(
+        [
+            [1.0, 0.0, -delta_d * math.sin(h)],
+            [0.0, 1.0, delta_d * math.cos(h)],
+            [0.0, 0.0, 1.0],
+        ]
+    )
+
+
+def jacobian_wheels(theta: float, delta_d: float, delta_theta: float, wheelbase_m: float) -> FloatArray:
+    """G = d(eq. 5)/d(delta_l, delta_r), shape (3, 2), through eq. 1-2.
+
+    With h = theta + delta_theta / 2, d(delta_d)/d(delta_l) = d(delta_d)/d(delta_r) = 1/2 and
+    d(delta_theta)/d(delta_l) = -1/W, d(delta_theta)/d(delta_r) = +1/W, so e.g.
+    dx/d(delta_l) = cos(h)/2 + delta_d sin(h) / (2W).
+    """
+    c, s = math.cos(theta + 0.5 * delta_theta), math.sin(theta + 0.5 * delta_theta)
+    half_w = 0.5 / wheelbase_m
+    return np.array(
+        [
+            [0.5 * c + delta_d * s * half_w, 0.5 * c - delta_d * s * half_w],
+            [0.5 * s - delta_d * c * half_w, 0.5 * s + delta_d * c * half_w],
+            [-1.0 / wheelbase_m, 1.0 / wheelbase_m],
+        ]
+    )
+
+
+def wheel_variances(
+    d_left: float,
+    d_right: float,
+    k_left: float,
+    k_right: float,
+    input_noise: InputNoise = "per_step",
+    travelled_left: float = 0.0,
+    travelled_right: float = 0.0,
+) -> tuple[float, float]:
+    """Variances (sigma_L^2, sigma_R^2) of one step's wheel travel, m^2 (report 003 eq. 10).
+
+    Parameters
+    ----------
+    d_left, d_right : float
+        This step's wheel travel, m.
+    k_left, k_right : float
+        Encoder constants k_L, k_R, sqrt(m).
+    input_noise : {"per_step", "cumulative"}
+        ``"per_step"``: k^2 |delta l_k| (Chong & Kleeman, report 003's ref. [2]); ``"cumulative"``: the
+        literal eq. 10, k^2 sum_{i<=k} |delta l_i|. See the module docstring.
+    travelled_left, travelled_right : float
+        sum_{i<k} |delta l_i| and |delta r_i| before this step, m (used by ``"cumulative"`` only).
+    """
+    al, ar = abs(d_left), abs(d_right)
+    if input_noise == "cumulative":
+        al += travelled_left
+        ar += travelled_right
+    return k_left * k_left * al, k_right * k_right * ar
+
+
+def input_covariance(
+    d_left: float,
+    d_right: float,
+    k_left: float,
+    k_right: float,
+    input_noise: InputNoise = "per_step",
+    travelled_left: float = 0.0,
+    travelled_right: float = 0.0,
+) -> FloatArray:
+    """U = diag(sigma_L^2, sigma_R^2), shape (2, 2), m^2 (report 003 eq. 10); see :func:`wheel_variances`."""
+    vl, vr = wheel_variances(d_left, d_right, k_left, k_right, input_noise, travelled_left, travelled_right)
+    return np.diag([vl, vr])
+
+
+# --- the increment fallback ------------------------------------------------------------------------------
+
+
+def increment_jacobians(theta: float, dx: float, dy: float) -> tuple[FloatArray, FloatArray]:
+    """Jacobians of pose (+) (dx, dy, dtheta) w.r.t. the pose (F) and the increment (G), both (3, 3).
+
+    ``theta`` is the heading before the step (rad); (dx, dy) the increment in the previous robot frame (m).
+    """
+    c, s = math.cos(theta), math.sin(theta)
+    F = np.array([[1.0, 0.0, -s * dx - c * dy], [0.0, 1.0, c * dx - s * dy], [0.0, 0.0, 1.0]])
+    G = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return F, G
+
+
+def increment_variances(
+    dx: float, dy: float, dtheta: float, sigma_xy_per_m: float, sigma_theta_per_m: float, sigma_theta_per_rad: float
+) -> tuple[float, float]:
+    """Variances of one increment: (per axis of dx and dy, m^2; of dtheta, rad^2).
+
+    var_xy = sigma_xy^2 * d and var_theta = sigma_theta_m^2 * d + sigma_theta_rad^2 * |dtheta|, with
+    d = hypot(dx, dy) the step's distance: independent errors per unit of travel and of rotation, so
+    the accumulated variance grows linearly with distance and angle (the per-step reading of eq. 10).
+    """
+    dist = math.hypot(dx, dy)
+    var_xy = sigma_xy_per_m * sigma_xy_per_m * dist
+    var_th = sigma_theta_per_m * sigma_theta_per_m * dist + sigma_theta_per_rad * sigma_theta_per_rad * abs(dtheta)
+    return var_xy, var_th
+
+
+def increment_covariance(
+    dx: float, dy: float, dtheta: float, sigma_xy_per_m: float, sigma_theta_per_m: float, sigma_theta_per_rad: float
+) -> FloatArray:
+    """Covariance of one increment (dx, dy, dtheta) in the previous robot frame, shape (3, 3).
+
+    See :func:`increment_variances`. Its world-frame contribution is G Sigma G^T with G from
+    :func:`increment_jacobians`; as the (x, y) block is isotropic, that rotation leaves it unchanged.
+    """
+    vxy, vth = increment_variances(dx, dy, dtheta, sigma_xy_per_m, sigma_theta_per_m, sigma_theta_per_rad)
+    return np.diag([vxy, vxy, vth])
+
+
+# --- sampling (particle filters) -------------------------------------------------------------------------
+
+
+def sample_wheel_motion(
+    poses: npt.ArrayLike,
+    d_left: float,
+    d_right: float,
+    wheelbase_m: float,
+    var_left: float,
+    var_right: float,
+    rng: np.random.Generator,
+) -> FloatArray:
+    """Draw one noisy successor per pose from the encoder model (report 003 eq. 1-2, 5, 10).
+
+    Each row gets its own wheel travel delta_l ~ N(d_left, var_left), delta_r ~ N(d_right, var_right)
+    (variances from :func:`wheel_variances`), moved with eq. 5.
+
+    Parameters
+    ----------
+    poses : array-like, shape (N, 3)
+        Particles (x m, y m, theta rad), world frame.
+    d_left, d_right : float
+        Measured wheel travel, m.
+    wheelbase_m : float
+        W, m.
+    var_left, var_right : float
+        Input variances, m^2.
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+    """
+    p = np.asarray(poses, dtype=np.float64)
+    n = p.shape[0]
+    noise = rng.standard_normal((2, n))
+    dl = d_left + math.sqrt(var_left) * noise[0]
+    dr = d_right + math.sqrt(var_right) * noise[1]
+    dd, dth = wheel_to_motion(dl, dr, wheelbase_m)
+    return predict_midpoint(p, dd, dth)
+
+
+def sample_increment_motion(
+    poses: npt.ArrayLike,
+    dx: float,
+    dy: float,
+    dtheta: float,
+    var_xy: float,
+    var_theta: float,
+    rng: np.random.Generator,
+) -> FloatArray:
+    """Draw one noisy successor per pose: pose (+) (increment + noise), noise from :func:`increment_variances`.
+
+    ``poses`` (N, 3) world frame; the increment in the previous robot frame; returns (N, 3).
+    """
+    p = np.asarray(poses, dtype=np.float64)
+    n = p.shape[0]
+    noise = rng.standard_normal((3, n))
+    sxy, sth = math.sqrt(var_xy), math.sqrt(var_theta)
+    ix, iy, ith = dx + sxy * noise[0], dy + sxy * noise[1], dtheta + sth * noise[2]
+    c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
+    return np.stack([p[:, 0] + c * ix - s * iy, p[:, 1] + s * ix + c * iy, wrap_angle(p[:, 2] + ith)], axis=-1)
+
+
+# --- the resolved noise and the per-step propagation used by the filters ---------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class MotionNoise:
+    """The motion noise a filter uses, resolved from its config overrides, the dataset and the defaults.
+
+    Attributes
+    ----------
+    wheelbase_m : float or None
+        W, m; None when unknown (the encoder model is then unavailable).
+    k_left, k_right : float
+        Encoder constants, sqrt(m) (report 003 eq. 10).
+    encoder_given : bool
+        Whether k_left and k_right came from the config or the dataset (not the fallback default).
+    sigma_xy_per_m, sigma_theta_per_m, sigma_theta_per_rad : float
+        Increment noise, m/sqrt(m), rad/sqrt(m), rad/sqrt(rad).
+    input_noise : {"per_step", "cumulative"}
+        Reading of eq. 10.
+    """
+
+    wheelbase_m: float | None
+    k_left: float
+    k_right: float
+    encoder_given: bool
+    sigma_xy_per_m: float
+    sigma_theta_per_m: float
+    sigma_theta_per_rad: float
+    input_noise: InputNoise = "per_step"
+
+
+def _first(*values: float | None) -> float | None:
+    for v in values:
+        if v is not None:
+            return float(v)
+    return None
+
+
+def resolve_motion_noise(
+    sensors: SensorSpec,
+    *,
+    input_noise: InputNoise = "per_step",
+    wheelbase_m: float | None = None,
+    encoder_k_left: float | None = None,
+    encoder_k_right: float | None = None,
+    odometry_sigma_xy_per_m: float | None = None,
+    odometry_sigma_theta_per_m: float | None = None,
+    odometry_sigma_theta_per_rad: float | None = None,
+) -> MotionNoise:
+    """Take each value from the keyword override, else from ``sensors``, else the module default (logged)."""
+    kl = _first(encoder_k_left, sensors.encoder_k_left)
+    kr = _first(encoder_k_right, sensors.encoder_k_right)
+    sxy = _first(odometry_sigma_xy_per_m, sensors.odometry_sigma_xy_per_m)
+    stm = _first(odometry_sigma_theta_per_m, sensors.odometry_sigma_theta_per_m)
+    str_ = _first(odometry_sigma_theta_per_rad, sensors.odometry_sigma_theta_per_rad)
+    # A dataset that gives per-metre noise but no per-radian term means "none"; default it only when all are absent.
+    default_per_rad = DEFAULT_SIGMA_THETA_PER_RAD if sxy is None and stm is None else 0.0
+    if sxy is None or stm is None:
+        logger.info("no nominal odometry increment noise given; using the defaults of %s", __name__)
+    return MotionNoise(
+        wheelbase_m=_first(wheelbase_m, sensors.wheelbase_m),
+        k_left=DEFAULT_ENCODER_K if kl is None else kl,
+        k_right=DEFAULT_ENCODER_K if kr is None else kr,
+        encoder_given=kl is not None and kr is not None,
+        sigma_xy_per_m=DEFAULT_SIGMA_XY_PER_M if sxy is None else sxy,
+        sigma_theta_per_m=DEFAULT_SIGMA_THETA_PER_M if stm is None else stm,
+        sigma_theta_per_rad=str_ if str_ is not None else default_per_rad,
+        input_noise=input_noise,
+    )
+
+
+@dataclass(slots=True)
+class Step:
+    """One propagated step, in plain floats for the filters' scalar hot paths.
+
+    ``pose`` is the new mean (x, y, theta wrapped); ``f02`` and ``f12`` the only non-trivial entries of F
+    (d x'/d theta and d y'/d theta; F is otherwise the identity); ``noise`` the upper triangle
+    (n00, n01, n02, n11, n12, n22) of the world-frame motion noise G U G^T or G Sigma G^T; ``encoder``
+    whether the wheel-encoder model was used.
+    """
+
+    pose: tuple[float, float, float]
+    f02: float
+    f12: float
+    noise: tuple[float, float, float, float, float, float]
+    encoder: bool
+
+
+class MotionModel:
+    """Stateful per-step propagation for a Gaussian filter (keeps the wheel travel for ``"cumulative"``).
+
+    Parameters
+    ----------
+    noise : MotionNoise
+    kind : {"auto", "encoder", "increment"}
+        ``"auto"``: the encoder model (report 003) when the event has wheel travel, the wheelbase is known
+        and the encoder constants were given; ``"encoder"``: whenever the event has wheel travel and the
+        wheelbase is known (default constants otherwise); ``"increment"``: always the increment fallback.
+    mean : {"model", "compose"}
+        ``"model"``: the mean follows the chosen model (eq. 5 for the encoder); ``"compose"``: the mean is
+        always pose (+) (dx, dy, dtheta), the robot's own report (dead reckoning), and only the covariance
+        uses the model.
+    """
+
+    __slots__ = ("_compose", "_use_encoder", "kind", "noise", "travelled_left", "travelled_right")
+
+    def __init__(
+        self, noise: MotionNoise, kind: MotionKind = "auto", mean: Literal["model", "compose"] = "model"
+    ) -> None:
+        self.noise = noise
+        self.kind = kind
+        self._compose = mean == "compose"
+        self._use_encoder = noise.wheelbase_m is not None and (
+            kind == "encoder" or (kind == "auto" and noise.encoder_given)
+        )
+        self.travelled_left = 0.0
+        self.travelled_right = 0.0
+
+    def step(self, pose: tuple[float, float, float] | list[float], u: Odometry) -> Step:
+        """Propagate ``pose`` (x m, y m, theta rad) with ``u``; returns the new mean, F and the noise."""
+        x, y, th = pose[0], pose[1], pose[2]
+        nz = self.noise
+        encoder = self._use_encoder and u.d_left is not None and u.d_right is not None
+        if encoder:
+            W = nz.wheelbase_m
+            dl, dr = u.d_left, u.d_right
+            assert W is not None and dl is not None and dr is not None  # guaranteed by ``encoder``
+            dd, dth = 0.5 * (dl + dr), (dr - dl) / W  # eq. 1-2
+            vl, vr = wheel_variances(
+                dl, dr, nz.k_left, nz.k_right, nz.input_noise, self.travelled_left, self.travelled_right
+            )
+            self.travelled_left += abs(dl)
+            self.travelled_right += abs(dr)
+            c, s = math.cos(th + 0.5 * dth), math.sin(th + 0.5 * dth)
+            # G = d(eq. 5)/d(delta_l, delta_r); see jacobian_wheels.
+            hw = 0.5 / W
+            g00, g01 = 0.5 * c + dd * s * hw, 0.5 * c - dd * s * hw
+            g10, g11 = 0.5 * s - dd * c * hw, 0.5 * s + dd * c * hw
+            g20, g21 = -1.0 / W, 1.0 / W
+            noise = (
+                g00 * g00 * vl + g01 * g01 * vr,
+                g00 * g10 * vl + g01 * g11 * vr,
+                g00 * g20 * vl + g01 * g21 * vr,
+                g10 * g10 * vl + g11 * g11 * vr,
+                g10 * g20 * vl + g11 * g21 * vr,
+                g20 * g20 * vl + g21 * g21 * vr,
+            )
+            if not self._compose:
+                return Step((x + dd * c, y + dd * s, wrap_scalar(th + dth)), -dd * s, dd * c, noise, True)
+        else:
+            vxy, vth = increment_variances(
+                u.dx, u.dy, u.dtheta, nz.sigma_xy_per_m, nz.sigma_theta_per_m, nz.sigma_theta_per_rad
+            )
+            # G Sigma G^T with G a rotation and an isotropic (x, y) block is Sigma itself.
+            noise = (vxy, 0.0, 0.0, vxy, 0.0, vth)
+        c0, s0 = math.cos(th), math.sin(th)
+        dx, dy = u.dx, u.dy
+        ex, ey = c0 * dx - s0 * dy, s0 * dx + c0 * dy
+        return Step((x + ex, y + ey, wrap_scalar(th + u.dtheta)), -ey, ex, noise, encoder)
+
+
+def propagate_covariance(
+    P: list[list[float]], f02: float, f12: float, noise: tuple[float, float, float, float, float, float]
+) -> list[list[float]]:
+    """F P F^T + N for F = [[1, 0, f02], [0, 1, f12], [0, 0, 1]], in plain floats; symmetric by construction.
+
+    ``P`` is a 3x3 nested list; ``noise`` the upper triangle of N (as in :class:`Step`).
+    """
+    p00, p01, p02 = P[0]
+    p11, p12 = P[1][1], P[1][2]
+    p22 = P[2][2]
+    a, b = f02, f12
+    n00, n01, n02, n11, n12, n22 = noise
+    q00 = p00 + 2.0 * a * p02 + a * a * p22 + n00
+    q01 = p01 + a * p12 + b * p02 + a * b * p22 + n01
+    q02 = p02 + a * p22 + n02
+    q11 = p11 + 2.0 * b * p12 + b * b * p22 + n11
+    q12 = p12 + b * p22 + n12
+    q22 = p22 + n22
+    return [[q00, q01, q02], [q01, q11, q12], [q02, q12, q22]]
