@@ -51,10 +51,6 @@ DEFAULT_SIGMA_XY_PER_M = 0.02
 DEFAULT_SIGMA_THETA_PER_M = 0.02
 DEFAULT_SIGMA_THETA_PER_RAD = 0.02
 
-# Below this |delta_theta| (rad) the exact arc (eq. 3-4) uses its series limit to avoid 0/0.
-_ARC_EPS = 1e-9
-
-
 # --- the encoder model (report 003 eq. 1-5, 10) -----------------------------------------------------------
 
 
@@ -106,24 +102,22 @@ def predict_midpoint(pose: npt.ArrayLike, delta_d: npt.ArrayLike, delta_theta: n
 
 
 def predict_arc(pose: npt.ArrayLike, delta_d: npt.ArrayLike, delta_theta: npt.ArrayLike) -> FloatArray:
-    """Move poses along the exact circular arc (report 003 eq. 3-4); the reference eq. 5 approximates.
+    """Move poses along the exact circular arc (report 003 eq. 3-4), which eq. 5 approximates.
 
-    Parameters and returns as :func:`predict_midpoint`. For |delta_theta| below 1e-9 rad the straight-line
-    limit is used.
+    Evaluated in the equivalent form without the 0/0 at delta_theta = 0: since
+    sin(a + d) - sin(a) = 2 cos(a + d/2) sin(d/2) and cos(a) - cos(a + d) = 2 sin(a + d/2) sin(d/2),
+    the arc is the chord at the midpoint heading with length delta_d * sin(d/2) / (d/2); eq. 5 takes
+    that length as delta_d, an error of delta_d * d^2 / 24. Parameters and returns as :func:`predict_midpoint`.
     """
     p = np.asarray(pose, dtype=np.float64)
     dd = np.asarray(delta_d, dtype=np.float64)
     dth = np.asarray(delta_theta, dtype=np.float64)
-    th0 = p[..., 2]
-    small = np.abs(dth) < _ARC_EPS
-    safe = np.where(small, 1.0, dth)
-    radius = dd / safe
-    dx_arc = radius * (np.sin(th0 + dth) - np.sin(th0))  # eq. 3
-    dy_arc = radius * (np.cos(th0) - np.cos(th0 + dth))  # eq. 4
-    dx = np.where(small, dd * np.cos(th0), dx_arc)
-    dy = np.where(small, dd * np.sin(th0), dy_arc)
-    th = wrap_angle(th0 + dth)
-    return np.stack(np.broadcast_arrays(p[..., 0] + dx, p[..., 1] + dy, th), axis=-1)
+    chord = dd * np.sinc(dth / (2.0 * np.pi))  # np.sinc(x) = sin(pi x) / (pi x)
+    heading = p[..., 2] + 0.5 * dth
+    x = p[..., 0] + chord * np.cos(heading)
+    y = p[..., 1] + chord * np.sin(heading)
+    th = wrap_angle(p[..., 2] + dth)
+    return np.stack(np.broadcast_arrays(x, y, th), axis=-1)
 
 
 def jacobian_state(theta: float, delta_d: float, delta_theta: float) -> FloatArray:
