@@ -1,0 +1,567 @@
+"""From stored runs to ``<results>/summary/``: the tidy ``metrics.csv``, ``REPORT.md`` and figures.
+
+Everything written here is deterministic: rows are sorted, floats are formatted the same way every
+time, the report carries no wall-clock date and the PNG figures are drawn with the Agg backend, a fixed
+style, size and dpi and no software metadata, so regenerating from the same runs gives identical bytes.
+
+Tables are drawn from the metrics frame only (mean and 95 % Student-t interval over seeds, see
+:func:`locbench.metrics.mean_ci`); the trajectory and NEES figures also read the per-step estimates of
+the stored runs.
+"""
+
+from __future__ import annotations
+
+import io
+import logging
+import re
+from collections import defaultdict
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import locbench
+import matplotlib.style
+import numpy as np
+import pandas as pd
+from locbench.claims import ROOM_TABLE1_CM, claims_for, spec_id, waypoint_stats
+from locbench.metrics import (
+    CONFIDENCE,
+    POSE_DOF,
+    chi2_band,
+    estimate_at,
+    mean_ci,
+    mean_over_runs,
+    nees_at_truth,
+    run_metrics,
+)
+from locbench.store import RunRecord, Store, TruthRecord
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.patches import Ellipse
+from scipy import stats
+
+log = logging.getLogger(__name__)
+
+FloatArray = np.ndarray
+
+COLUMNS = ("dataset", "filter", "seed", "metric", "value")
+#: ``value`` is written with 10 significant digits: stable, and far below any metric's noise.
+FLOAT_FORMAT = "%.10g"
+
+#: Comparison-table columns: (metric id, header, significant digits).
+COMPARISON: tuple[tuple[str, str], ...] = (
+    ("ate_m", "ATE (m)"),
+    ("heading_rmse_rad", "heading RMSE (rad)"),
+    ("rpe_m_per_m", "RPE (m/m)"),
+    ("final_error_m", "final error (m)"),
+    ("anees", "ANEES"),
+    ("nees_in_band_fraction", "NEES in 95 % band"),
+    ("predict_us_median", "predict median (us)"),
+    ("update_us_median", "update median (us)"),
+    ("realtime_factor", "real-time factor"),
+)
+
+FIG_SIZE = (7.0, 4.2)
+FIG_DPI = 110
+#: A fixed style on top of matplotlib's defaults (a user's matplotlibrc must not change the bytes).
+_STYLE: dict[str, Any] = {
+    "font.size": 8.0,
+    "axes.grid": True,
+    "grid.alpha": 0.3,
+    "legend.fontsize": 7.0,
+    "lines.linewidth": 1.2,
+    "path.simplify": False,
+    "svg.hashsalt": "locbench",
+}
+_PNG_META = {"Software": None}
+#: Number of covariance ellipses drawn along each trajectory (at a round interval).
+_ELLIPSES_PER_TRACK = 12
+_CHI2_2D_95 = float(stats.chi2.ppf(0.95, 2))
+
+
+@dataclass
+class RunInfo:
+    """Status of one stored run, for the failure list."""
+
+    dataset: str
+    filter: str
+    seed: int
+    status: str
+    message: str
+
+
+@dataclass
+class _Collected:
+    """Everything :func:`write_report` needs from one pass over the store."""
+
+    metrics: pd.DataFrame
+    runs: list[RunInfo] = field(default_factory=list)
+    broken: list[tuple[str, str]] = field(default_factory=list)
+    metas: list[dict[str, Any]] = field(default_factory=list)
+    # (dataset, filter) -> one (t, nees) series per ok run
+    nees: dict[tuple[str, str], list[tuple[FloatArray, FloatArray]]] = field(default_factory=dict)
+    # (dataset, filter, seed) -> run folder of ok runs
+    ok_dirs: dict[tuple[str, str, int], Path] = field(default_factory=dict)
+    truths: dict[tuple[str, int], TruthRecord] = field(default_factory=dict)
+
+
+# --- collecting ---------------------------------------------------------------------------------
+
+
+def _collect(store: Store) -> _Collected:
+    rows: list[tuple[str, str, int, str, float]] = []
+    out = _Collected(metrics=pd.DataFrame())
+    nees: dict[tuple[str, str], list[tuple[FloatArray, FloatArray]]] = defaultdict(list)
+    for run_dir in store.iter_runs():
+        rel = _relative(run_dir, store.root)
+        try:
+            run = store.read_run(run_dir)
+            meta = run.meta
+            dataset, filt, seed = str(meta["dataset"]), str(meta["filter"]), int(meta["seed"])
+            truth: TruthRecord | None = None
+            if run.status == "ok":
+                key = (dataset, seed)
+                if key not in out.truths:
+                    out.truths[key] = store.read_truth(dataset, seed)
+                truth = out.truths[key]
+                values = run_metrics(run, truth)
+                ne = nees_at_truth(run.t, run.mean, run.cov, truth.ground_truth.t, truth.ground_truth.poses)
+            else:
+                values, ne = run_metrics(run, _NO_TRUTH), None
+        except Exception as exc:
+            log.warning("skipping unreadable run %s: %s", rel, exc)
+            # Paths relative to the results folder keep the report independent of where it lives.
+            msg = str(exc).replace(f"{store.root.as_posix()}/", "")
+            out.broken.append((rel, f"{type(exc).__name__}: {msg}"))
+            continue
+        out.metas.append(meta)
+        out.runs.append(RunInfo(dataset, filt, seed, run.status, str(meta.get("message", "") or "")))
+        rows.extend((dataset, filt, seed, k, float(v)) for k, v in values.items())
+        if truth is not None and ne is not None:
+            nees[(dataset, filt)].append((truth.ground_truth.t, ne))
+            out.ok_dirs[(dataset, filt, seed)] = run_dir
+    out.nees = dict(nees)
+    out.metrics = _frame(rows)
+    return out
+
+
+class _NoTruth:
+    """Stands in for the truth of a run that is not ok (its metrics never look at it)."""
+
+
+_NO_TRUTH: Any = _NoTruth()
+
+
+def _frame(rows: Sequence[tuple[str, str, int, str, float]]) -> pd.DataFrame:
+    df = pd.DataFrame(list(rows), columns=list(COLUMNS))
+    df = df.astype({"dataset": "str", "filter": "str", "seed": "int64", "metric": "str", "value": "float64"})
+    return df.sort_values(list(COLUMNS[:4]), kind="stable").reset_index(drop=True)
+
+
+def _relative(path: Path, root: Path) -> str:
+    try:
+        return path.relative_to(root).as_posix()
+    except ValueError:
+        return path.as_posix()
+
+
+def collect_metrics(store: Store) -> pd.DataFrame:
+    """The tidy metrics of every stored run.
+
+    Parameters
+    ----------
+    store : Store
+        The results folder.
+
+    Returns
+    -------
+    DataFrame
+        Columns ``dataset, filter, seed, metric, value`` (names with their parameters), sorted by
+        dataset, filter, seed and metric. An ok run gives :func:`locbench.metrics.run_metrics`; a failed
+        or diverged run ``failed`` = 1; a skipped run nothing. A run folder that cannot be read (or whose
+        ground truth is missing) is logged and left out.
+    """
+    return _collect(store).metrics
+
+
+def write_metrics_csv(df: pd.DataFrame, path: str | Path) -> Path:
+    """Write the tidy metrics as CSV, sorted and with stable float formatting (identical bytes on rerun).
+
+    Values use ``%.10g``; infinities are written ``inf``, NaN ``nan``; line ends are ``\\n``.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    frame = _frame(list(df[list(COLUMNS)].itertuples(index=False, name=None)))
+    buf = io.StringIO()
+    frame.to_csv(buf, index=False, float_format=FLOAT_FORMAT, na_rep="nan", lineterminator="\n")
+    _write_if_changed(path, buf.getvalue().encode())
+    return path
+
+
+def _write_if_changed(path: Path, data: bytes) -> None:
+    """Leave an identical file untouched (its modification time too)."""
+    if path.is_file() and path.read_bytes() == data:
+        return
+    path.write_bytes(data)
+
+
+# --- formatting helpers -------------------------------------------------------------------------
+
+
+def _num(x: float, digits: int = 3) -> str:
+    if np.isnan(x):
+        return "n/a"
+    if np.isinf(x):
+        return "inf" if x > 0 else "-inf"
+    if 1e3 <= abs(x) < 1e9:
+        return f"{x:.0f}"  # runtimes and real-time factors read better without an exponent
+    return f"{x:.{digits}g}"
+
+
+def _mean_pm(values: Iterable[float]) -> str:
+    ci = mean_ci(np.fromiter(values, dtype=np.float64))
+    if ci.n == 0:
+        return "n/a"
+    if np.isnan(ci.low):
+        return _num(ci.mean)
+    return f"{_num(ci.mean)} ± {_num(ci.half_width, 2)}"
+
+
+def _md_escape(text: str) -> str:
+    return text.replace("|", "\\|").replace("\n", " ").strip()
+
+
+def _md_table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> list[str]:
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    lines += ["| " + " | ".join(_md_escape(c) for c in r) + " |" for r in rows]
+    return lines
+
+
+def _seed_ranges(seeds: Iterable[int]) -> str:
+    """``0-4, 7, 9-10`` for the seeds 0 1 2 3 4 7 9 10."""
+    s = sorted(set(seeds))
+    parts: list[str] = []
+    i = 0
+    while i < len(s):
+        j = i
+        while j + 1 < len(s) and s[j + 1] == s[j] + 1:
+            j += 1
+        parts.append(str(s[i]) if i == j else f"{s[i]}-{s[j]}")
+        i = j + 1
+    return ", ".join(parts) if parts else "none"
+
+
+def _filter_order(names: Iterable[str]) -> list[str]:
+    """Odometry first (the baseline every table starts with), then by name."""
+    return sorted(set(names), key=lambda n: (spec_id(n) != "odometry", n))
+
+
+def _slug(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("_") or "dataset"
+
+
+# --- report -------------------------------------------------------------------------------------
+
+
+def write_report(store: Store) -> Path:
+    """Write ``metrics.csv``, ``REPORT.md`` and ``figures/*.png`` under ``store.summary``.
+
+    Parameters
+    ----------
+    store : Store
+        The results folder; its ``summary`` folder is created or refreshed (stale figures removed).
+
+    Returns
+    -------
+    Path
+        The written ``REPORT.md``.
+    """
+    col = _collect(store)
+    summary = store.summary
+    figdir = summary / "figures"
+    figdir.mkdir(parents=True, exist_ok=True)
+    write_metrics_csv(col.metrics, summary / "metrics.csv")
+
+    df = col.metrics
+    datasets = sorted({r.dataset for r in col.runs})
+    figures: dict[str, list[str]] = {}
+    for ds in datasets:
+        figures[ds] = _dataset_figures(store, col, ds, figdir)
+    written = {f for fs in figures.values() for f in fs}
+    for stale in sorted(figdir.glob("*.png")):
+        if stale.name not in written:
+            log.info("removing stale figure %s", stale.name)
+            stale.unlink()
+
+    lines = _provenance(col)
+    for ds in datasets:
+        lines += _dataset_section(df[df["dataset"] == ds], col, ds, figures[ds])
+    lines += _failures(col)
+    path = summary / "REPORT.md"
+    _write_if_changed(path, ("\n".join(lines).rstrip() + "\n").encode())
+    log.info("wrote %s (%d metric rows, %d figures)", path, len(df), len(written))
+    return path
+
+
+def _provenance(col: _Collected) -> list[str]:
+    commits: dict[str, bool] = {}
+    versions: dict[str, set[str]] = defaultdict(set)
+    for m in col.metas:
+        if m.get("git_commit"):
+            c = str(m["git_commit"])
+            commits[c] = commits.get(c, False) or bool(m.get("git_dirty", False))
+        for lib, ver in (m.get("versions") or {}).items():
+            versions[str(lib)].add(str(ver))
+    seeds: dict[str, set[int]] = defaultdict(set)
+    for r in col.runs:
+        seeds[r.dataset].add(r.seed)
+    counts = defaultdict(int)
+    for r in col.runs:
+        counts[r.status] += 1
+    lines = [
+        "# locbench results",
+        "",
+        "Generated by `locbench report` from the stored runs (regenerate with `nox -s report`); every table is "
+        "drawn from `metrics.csv` (columns `dataset, filter, seed, metric, value`). Intervals are two-sided "
+        f"{100 * CONFIDENCE:.0f} % Student-t intervals of the mean over seeds.",
+        "",
+        "## Provenance",
+        "",
+        f"- locbench {locbench.__version__}",
+        "- git commit of the runs: "
+        + (", ".join(f"`{c}`" + (" (dirty)" if d else "") for c, d in sorted(commits.items())) or "unknown"),
+        "- libraries: "
+        + (", ".join(f"{lib} {' / '.join(sorted(v))}" for lib, v in sorted(versions.items())) or "unknown"),
+        "- seeds: " + ("; ".join(f"`{ds}` {_seed_ranges(s)}" for ds, s in sorted(seeds.items())) or "none"),
+        "- runs: "
+        + ", ".join(f"{counts[s]} {s}" for s in ("ok", "diverged", "error", "skipped") if counts[s])
+        + (f", {len(col.broken)} unreadable" if col.broken else ""),
+        "",
+    ]
+    return lines
+
+
+def _dataset_section(df: pd.DataFrame, col: _Collected, ds: str, figs: list[str]) -> list[str]:
+    lines = [f"## {ds}", ""]
+    filters = _filter_order(df["filter"].unique()) if len(df) else []
+    if not filters:
+        return [*lines, "No runs with metrics (all skipped).", ""]
+    lines += [f"### Comparison (mean ± {100 * CONFIDENCE:.0f} % interval over seeds)", ""]
+    rows = []
+    for f in filters:
+        sub = df[df["filter"] == f]
+        failed = sub[sub["metric"] == "failed"]["value"]
+        row = [f"`{f}`", str(len(failed)), str(int(failed.sum()))]
+        for metric, _ in COMPARISON:
+            row.append(_mean_pm(sub[sub["metric"] == metric]["value"]))
+        rows.append(row)
+    lines += _md_table(["filter", "runs", "failed", *(h for _, h in COMPARISON)], rows)
+    lines.append("")
+
+    ws = waypoint_stats(df)
+    if len(ws):
+        lines += _waypoint_tables(ws, filters, spec_id(ds) == "room")
+
+    claims = claims_for(spec_id(ds))
+    if claims:
+        lines += [f"### Claims of {claims[0].source}" if len({c.source for c in claims}) == 1 else "### Claims", ""]
+        crow = []
+        for c in claims:
+            res = c.evaluate(df)
+            crow.append([c.text, f"**{res.verdict}**", res.measured, c.reported])
+        lines += _md_table(["claim", "verdict", "measured", "report"], crow)
+        lines.append("")
+
+    if figs:
+        lines += ["### Figures", ""]
+        lines += [f"![{Path(f).stem}](figures/{f})" for f in figs]
+        lines.append("")
+    return lines
+
+
+def _waypoint_tables(ws: pd.DataFrame, filters: list[str], room: bool) -> list[str]:
+    n_wp = int(ws["waypoint"].max())
+    head = ["filter", "runs", *(str(j) for j in range(1, n_wp + 1))]
+
+    def table(column: str) -> list[list[str]]:
+        out = []
+        for f in filters:
+            sub = ws[ws["filter"] == f].set_index("waypoint")
+            if sub.empty:
+                continue
+            vals = [_cm(sub[column].get(j, np.nan)) for j in range(1, n_wp + 1)]
+            out.append([f"`{f}`", str(int(sub["runs"].max())), *vals])
+        return out
+
+    lines = [
+        "### Waypoints (cm)",
+        "",
+        "RMSE_j = sqrt(mean_i e_ij^2) over runs, e_ij = |p_hat_i(t_j) - p_j| against the marked point "
+        "(report 003 fig. 5):",
+        "",
+        *_md_table(head, table("rmse_m")),
+        "",
+        "Distance between waypoint j and the mean estimated position over runs (report 003 table 1):",
+        "",
+    ]
+    rows = table("mean_distance_m")
+    if room:
+        rows += [
+            [f"003 table 1: `{fid}`", "20", *(f"{v:.1f}" for v in ref)] + [""] * max(0, n_wp - len(ref))
+            for fid, ref in ROOM_TABLE1_CM.items()
+        ]
+    lines += [*_md_table(head, rows), ""]
+    return lines
+
+
+def _cm(x: float) -> str:
+    return "n/a" if np.isnan(x) else f"{100.0 * x:.1f}"
+
+
+def _failures(col: _Collected) -> list[str]:
+    bad = sorted((r for r in col.runs if r.status != "ok"), key=lambda r: (r.dataset, r.filter, r.seed))
+    lines = ["## Failed and skipped runs", ""]
+    if not bad and not col.broken:
+        return [*lines, "None.", ""]
+    if bad:
+        rows = [[r.dataset, r.filter, str(r.seed), r.status, r.message] for r in bad]
+        lines += [*_md_table(["dataset", "filter", "seed", "status", "message"], rows), ""]
+    if col.broken:
+        lines += ["Unreadable run folders (left out of every table):", ""]
+        lines += _md_table(["folder", "error"], [[f"`{p}`", e] for p, e in sorted(col.broken)])
+        lines.append("")
+    return lines
+
+
+# --- figures ------------------------------------------------------------------------------------
+
+
+def _new_figure() -> Figure:
+    fig = Figure(figsize=FIG_SIZE, dpi=FIG_DPI, layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _save(fig: Figure, path: Path) -> None:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=FIG_DPI, metadata=_PNG_META)
+    _write_if_changed(path, buf.getvalue())
+
+
+def _dataset_figures(store: Store, col: _Collected, ds: str, figdir: Path) -> list[str]:
+    """Draw the figures of one dataset; returns their file names."""
+    names: list[str] = []
+    slug = _slug(ds)
+    with matplotlib.style.context(["default", _STYLE]):
+        fig = _trajectory_figure(store, col, ds)
+        if fig is not None:
+            _save(fig, figdir / f"{slug}_trajectories.png")
+            names.append(f"{slug}_trajectories.png")
+        ws = waypoint_stats(col.metrics[col.metrics["dataset"] == ds])
+        if len(ws):
+            fig = _waypoint_figure(ws, ds)
+            _save(fig, figdir / f"{slug}_waypoint_rmse.png")
+            names.append(f"{slug}_waypoint_rmse.png")
+        fig = _nees_figure(col, ds)
+        if fig is not None:
+            _save(fig, figdir / f"{slug}_nees.png")
+            names.append(f"{slug}_nees.png")
+    return names
+
+
+def _nice_step(span: float, count: int) -> float:
+    """A round interval (1, 2 or 5 x 10^k) giving about ``count`` steps over ``span``."""
+    raw = max(span, 1e-9) / max(count, 1)
+    mag = 10.0 ** np.floor(np.log10(raw))
+    for m in (1.0, 2.0, 5.0, 10.0):
+        if raw <= m * mag:
+            return float(m * mag)
+    return float(10.0 * mag)
+
+
+def _trajectory_figure(store: Store, col: _Collected, ds: str) -> Figure | None:
+    """One seed's estimated trajectories with 95 % position ellipses, ground truth and waypoints (000 fig. 5)."""
+    keys = [k for k in col.ok_dirs if k[0] == ds]
+    if not keys:
+        return None
+    seed = min(k[2] for k in keys)
+    truth = col.truths[(ds, seed)]
+    gt = truth.ground_truth
+    fig = _new_figure()
+    ax = fig.add_subplot()
+    ax.plot(gt.xy[:, 0], gt.xy[:, 1], color="black", lw=1.0, label="ground truth")
+    step = _nice_step(truth.duration_s, _ELLIPSES_PER_TRACK)
+    t_marks = np.arange(gt.t[0], gt.t[-1] + 1e-9, step)[1:]
+    for i, f in enumerate(_filter_order(k[1] for k in keys if k[2] == seed)):
+        run: RunRecord = store.read_run(col.ok_dirs[(ds, f, seed)])
+        color = f"C{i % 10}"
+        ax.plot(run.mean[:, 0], run.mean[:, 1], color=color, lw=0.9, label=f)
+        means = estimate_at(run.t, run.mean, t_marks)
+        covs = estimate_at(run.t, run.cov, t_marks)
+        for m, cov in zip(means, covs, strict=True):
+            w, v = np.linalg.eigh(0.5 * (cov[:2, :2] + cov[:2, :2].T))
+            w = np.clip(w, 0.0, None)
+            if not np.all(np.isfinite(w)):
+                continue
+            angle = float(np.degrees(np.arctan2(v[1, 1], v[0, 1])))
+            width, height = 2.0 * np.sqrt(_CHI2_2D_95 * w[1]), 2.0 * np.sqrt(_CHI2_2D_95 * w[0])
+            ax.add_patch(Ellipse((m[0], m[1]), width, height, angle=angle, fill=False, color=color, lw=0.7))
+    if truth.waypoints is not None and len(truth.waypoints):
+        wp = truth.waypoints.xy
+        ax.plot(wp[:, 0], wp[:, 1], ls="none", marker="x", ms=7, color="black", label="waypoints")
+        for j, (x, y) in enumerate(wp, start=1):
+            ax.annotate(str(j), (x, y), textcoords="offset points", xytext=(4, 4), fontsize=7)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title(f"{ds}, seed {seed}: estimates with 95 % position ellipses every {step:g} s")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+    return fig
+
+
+def _waypoint_figure(ws: pd.DataFrame, ds: str) -> Figure:
+    """RMSE per waypoint and filter, grouped bars (report 003 fig. 5)."""
+    fig = _new_figure()
+    ax = fig.add_subplot()
+    filters = _filter_order(ws["filter"].unique())
+    n_wp = int(ws["waypoint"].max())
+    width = 0.8 / max(len(filters), 1)
+    x = np.arange(1, n_wp + 1, dtype=np.float64)
+    for i, f in enumerate(filters):
+        sub = ws[ws["filter"] == f].set_index("waypoint")["rmse_m"].reindex(range(1, n_wp + 1))
+        ax.bar(x - 0.4 + width * (i + 0.5), 100.0 * sub.to_numpy(dtype=np.float64), width, label=f, color=f"C{i % 10}")
+    ax.set_xticks(x, [str(j) for j in range(1, n_wp + 1)])
+    ax.set_xlabel("waypoint")
+    ax.set_ylabel("RMSE (cm)")
+    ax.set_title(f"{ds}: position RMSE at each waypoint over runs")
+    ax.legend(loc="upper left")
+    return fig
+
+
+def _nees_figure(col: _Collected, ds: str) -> Figure | None:
+    """Mean NEES over runs against time with the chi-square(3N)/N band, log y."""
+    entries = sorted((f, s) for (d, f), s in col.nees.items() if d == ds)
+    if not entries:
+        return None
+    seed = min(k[2] for k in col.ok_dirs if k[0] == ds)
+    grid = col.truths[(ds, seed)].ground_truth.t
+    fig = _new_figure()
+    ax = fig.add_subplot()
+    order = _filter_order(f for f, _ in entries)
+    series = dict(entries)
+    bands = sorted({len(series[f]) for f in order})
+    for n in bands:
+        lo, hi = chi2_band(POSE_DOF, n, CONFIDENCE)
+        ax.axhspan(lo, hi, color="0.5", alpha=0.15, lw=0, label=f"{100 * CONFIDENCE:.0f} % band, {n} runs")
+    for i, f in enumerate(order):
+        mean, _ = mean_over_runs(grid, series[f])
+        y = np.where(np.isfinite(mean) & (mean > 0), mean, np.nan)
+        ax.plot(grid, y, color=f"C{i % 10}", lw=0.9, label=f"{f} ({len(series[f])} runs)")
+    ax.axhline(POSE_DOF, color="black", lw=0.6, ls="--")
+    ax.set_yscale("log")
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("mean NEES")
+    ax.set_title(f"{ds}: mean NEES over runs (pose, heading wrapped)")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+    return fig

@@ -1,0 +1,280 @@
+"""Claims verdicts on small tidy frames, and an end-to-end report on a temporary store of fake runs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from locbench import claims
+from locbench.datasets.base import Trajectory2D, Waypoints
+from locbench.report import collect_metrics, write_metrics_csv, write_report
+from locbench.store import KIND_NAMES, RunRecord, Store, TruthRecord
+
+ODO = KIND_NAMES.index("Odometry")
+LMK = KIND_NAMES.index("LandmarkObservations")
+RESET = KIND_NAMES.index("reset")
+
+
+# --- claims on hand-made tidy frames ------------------------------------------------------------
+
+
+def _tidy(per_filter: dict[str, list[float]], seeds: int = 2, marked: bool = True) -> pd.DataFrame:
+    """Rows of dataset 'room' whose waypoint errors (m) are the given values for every seed.
+
+    The estimate sits +e in x of a marked point at the origin, so RMSE_j and the distance of the
+    mean estimate are both e_j.
+    """
+    rows = []
+    for f, errs in per_filter.items():
+        for s in range(seeds):
+            rows.append(("room", f, s, "failed", 0.0))
+            for j, e in enumerate(errs, start=1):
+                rows.append(("room", f, s, f"waypoint_{j}_error_m", e))
+                rows.append(("room", f, s, f"waypoint_{j}_est_x_m", e))
+                rows.append(("room", f, s, f"waypoint_{j}_est_y_m", 0.0))
+                if marked:
+                    rows.append(("room", f, s, f"waypoint_{j}_marked_x_m", 0.0))
+                    rows.append(("room", f, s, f"waypoint_{j}_marked_y_m", 0.0))
+    return pd.DataFrame(rows, columns=["dataset", "filter", "seed", "metric", "value"])
+
+
+def _claim(claim_id: str) -> claims.Claim:
+    return next(c for c in claims.CLAIMS if c.id == claim_id)
+
+
+TABLE1_M = {k: [v / 100 for v in vals] for k, vals in claims.ROOM_TABLE1_CM.items()}
+
+
+def test_room_claims_reproduced_on_the_reports_own_numbers() -> None:
+    df = _tidy(TABLE1_M)
+    for c in claims.claims_for("room"):
+        res = c.evaluate(df)
+        assert res.verdict == "reproduced", (c.id, res.measured)
+    assert "60.7" in _claim("room_odometry_grows").evaluate(df).measured
+
+
+def test_odometry_growth_not_reproduced_when_flat() -> None:
+    res = _claim("room_odometry_grows").evaluate(_tidy({"odometry": [0.1, 0.1, 0.09, 0.1, 0.1]}))
+    assert res.verdict == "not reproduced"
+
+
+def test_calibration_both_ways() -> None:
+    c = _claim("room_odometry_calibrated")
+    assert c.evaluate(_tidy({"odometry": [1.4 * v for v in TABLE1_M["odometry"]]})).verdict == "reproduced"
+    off = [*TABLE1_M["odometry"][:4], 2.0 * TABLE1_M["odometry"][4]]
+    res = c.evaluate(_tidy({"odometry": off}))
+    assert res.verdict == "not reproduced" and "2.00" in res.measured
+    assert c.evaluate(_tidy({"odometry": TABLE1_M["odometry"]}, marked=False)).verdict == "not evaluated"
+
+
+def test_ekf_far_below_both_ways_and_matched_by_id() -> None:
+    c = _claim("room_ekf_far_below_odometry")
+    odo = [0.1, 0.2, 0.3, 0.4, 0.5]
+    good = _tidy({"odometry": odo, "ekf_landmarks[known=true]": [0.05, 0.05, 0.1, 0.1, 0.1]})
+    res = c.evaluate(good)
+    assert res.verdict == "reproduced" and "ekf_landmarks[known=true]" in res.measured
+    bad = _tidy({"odometry": odo, "ekf_landmarks": [0.05, 0.05, 0.25, 0.3, 0.1]})  # mean ratio 0.59
+    assert c.evaluate(bad).verdict == "not reproduced"
+    assert c.evaluate(_tidy({"odometry": odo})).verdict == "not evaluated"
+
+
+def test_pf_claim_not_evaluated_without_pf_runs() -> None:
+    c = _claim("room_pf_le_ekf")
+    res = c.evaluate(_tidy({"odometry": TABLE1_M["odometry"], "ekf_landmarks": TABLE1_M["ekf_landmarks"]}))
+    assert res.verdict == "not evaluated" and "pf" in res.measured
+    worse = _tidy({"ekf_landmarks": [0.01] * 5, "pf": [0.02] * 5})
+    assert c.evaluate(worse).verdict == "not reproduced"
+
+
+def test_waypoint_stats_rmse_and_distance_of_mean() -> None:
+    rows = [
+        ("room", "pf", 0, "waypoint_1_error_m", 0.3),
+        ("room", "pf", 0, "waypoint_1_est_x_m", 0.3),
+        ("room", "pf", 0, "waypoint_1_est_y_m", 0.0),
+        ("room", "pf", 0, "waypoint_1_marked_x_m", 0.0),
+        ("room", "pf", 0, "waypoint_1_marked_y_m", 0.0),
+        ("room", "pf", 1, "waypoint_1_error_m", 0.4),
+        ("room", "pf", 1, "waypoint_1_est_x_m", -0.4),
+        ("room", "pf", 1, "waypoint_1_est_y_m", 0.0),
+        ("room", "pf", 1, "waypoint_1_marked_x_m", 0.0),
+        ("room", "pf", 1, "waypoint_1_marked_y_m", 0.0),
+    ]
+    ws = claims.waypoint_stats(pd.DataFrame(rows, columns=["dataset", "filter", "seed", "metric", "value"]))
+    assert ws.loc[0, "rmse_m"] == pytest.approx(np.sqrt(0.125))
+    assert ws.loc[0, "mean_distance_m"] == pytest.approx(0.05)
+    assert ws.loc[0, "runs"] == 2
+
+
+# --- end to end ---------------------------------------------------------------------------------
+
+DATASET = "room"
+N_SEEDS = 3
+WP_T = np.array([10.0, 20.0, 30.0, 40.0, 50.0])
+
+
+def _fake_truth(seed: int) -> TruthRecord:
+    t = np.arange(0.0, 50.01, 0.5)
+    xy = np.column_stack([0.1 * t, 0.2 * np.sin(0.1 * t)])
+    theta = np.arctan2(0.02 * np.cos(0.1 * t), 0.1)
+    gt = Trajectory2D(t, xy, theta)
+    wp = Waypoints(WP_T.copy(), np.column_stack([0.1 * WP_T, 0.2 * np.sin(0.1 * WP_T)]))
+    return TruthRecord(DATASET, seed, gt, wp, (), 50.0, {"seed": seed})
+
+
+def _meta(filt: str, seed: int, status: str = "ok", message: str = "") -> dict[str, object]:
+    return {
+        "filter": filt,
+        "filter_id": filt.split("[")[0],
+        "dataset": DATASET,
+        "dataset_id": DATASET,
+        "seed": seed,
+        "run_key": f"{filt}-{seed}",
+        "status": status,
+        "message": message,
+        "versions": {"locbench": "0.1.0", "numpy": "2.0.0"},
+        "git_commit": "0123abcd",
+        "git_dirty": False,
+    }
+
+
+def _fake_run(truth: TruthRecord, filt: str, drift: float, sigma: float) -> RunRecord:
+    """Estimates at the ground-truth times (odometry) plus landmark updates every 5 s."""
+    rng = np.random.default_rng(truth.seed * 100 + len(filt))
+    gt = truth.ground_truth
+    base_t = gt.t
+    mean = gt.poses.copy()
+    mean[:, 1] += drift * gt.t + rng.normal(0.0, sigma, gt.t.shape)
+    mean[:, 2] += rng.normal(0.0, sigma, gt.t.shape)
+    var = (sigma + drift * gt.t) ** 2 + 1e-6
+    cov = np.einsum("n,ij->nij", var, np.eye(3))
+    kind = np.full(base_t.shape, ODO, dtype=np.int8)
+    kind[0] = RESET
+    step_ns = np.full(base_t.shape, 20_000, dtype=np.int64)
+    step_ns[0] = 0
+    upd = np.nonzero(np.isclose(np.mod(base_t, 5.0), 0.0) & (base_t > 0))[0]
+    t = np.concatenate([base_t, base_t[upd]])
+    order = np.argsort(t, kind="stable")
+    return RunRecord(
+        _meta(filt, truth.seed),
+        t[order],
+        np.concatenate([mean, mean[upd]])[order],
+        np.concatenate([cov, cov[upd]])[order],
+        np.concatenate([kind, np.full(upd.shape, LMK, dtype=np.int8)])[order],
+        np.concatenate([step_ns, np.full(upd.shape, 50_000, dtype=np.int64)])[order],
+    )
+
+
+def _empty(meta: dict[str, object]) -> RunRecord:
+    return RunRecord(
+        meta, np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros(0, np.int8), np.zeros(0, np.int64)
+    )
+
+
+@pytest.fixture
+def store(tmp_path: Path) -> Store:
+    st = Store(tmp_path / "results")
+    for seed in range(N_SEEDS):
+        truth = _fake_truth(seed)
+        st.write_truth(truth)
+        st.write_run(_fake_run(truth, "odometry", drift=0.004, sigma=0.01))
+        st.write_run(_fake_run(truth, "ekf_landmarks", drift=0.0, sigma=0.01))
+    st.write_run(_empty(_meta("ekf_landmarks[gate=0.1]", 0, "error", "ValueError: boom | bad gate")))
+    st.write_run(_empty(_meta("ekf_icp", 0, "skipped", "needs an occupancy grid")))
+    broken = st.run_dir(DATASET, "pf", 0)
+    broken.mkdir(parents=True)
+    (broken / "meta.json").write_text("{not json")
+    return st
+
+
+def test_collect_metrics_is_tidy_and_sorted(store: Store) -> None:
+    df = collect_metrics(store)
+    assert list(df.columns) == ["dataset", "filter", "seed", "metric", "value"]
+    assert df.equals(df.sort_values(["dataset", "filter", "seed", "metric"]).reset_index(drop=True))
+    ok = df[(df["filter"] == "odometry") & (df["seed"] == 0)]
+    ids = set(ok["metric"])
+    expected = {
+        "failed",
+        "ate_m",
+        "heading_rmse_rad",
+        "rpe_m_per_m",
+        "final_error_m",
+        "anees",
+        "nees_in_band_fraction",
+        "predict_us_mean",
+        "predict_us_median",
+        "predict_us_p95",
+        "update_us_mean",
+        "update_us_median",
+        "update_us_p95",
+        "realtime_factor",
+    }
+    expected |= {f"waypoint_{j}_{q}" for j in range(1, 6) for q in ("error_m", "est_x_m", "est_y_m")}
+    expected |= {f"waypoint_{j}_{q}" for j in range(1, 6) for q in ("marked_x_m", "marked_y_m")}
+    assert ids == expected
+    failed = df[df["filter"] == "ekf_landmarks[gate=0.1]"]
+    assert failed[["metric", "value"]].values.tolist() == [["failed", 1.0]]
+    assert "ekf_icp" not in set(df["filter"])  # skipped: no metrics
+    assert "pf" not in set(df["filter"])  # unreadable: left out
+
+
+def test_write_report_end_to_end(store: Store) -> None:
+    path = write_report(store)
+    assert path == store.summary / "REPORT.md"
+    text = path.read_text()
+    for needle in (
+        "# locbench results",
+        "locbench 0.1.0",
+        "`0123abcd`",
+        "numpy 2.0.0",
+        "`room` 0-2",
+        "## room",
+        "### Comparison",
+        "ATE (m)",
+        "| `odometry` | 3 | 0 |",
+        "| `ekf_landmarks[gate=0.1]` | 1 | 1 |",
+        "### Waypoints (cm)",
+        "003 table 1: `odometry` | 20 | 7.4 | 5.7 | 18.7 | 34.9 | 60.7",
+        "Claims of 003_e5c93f9be776ee5e.txt",
+        "**not evaluated**",
+        "## Failed and skipped runs",
+        "| room | ekf_landmarks[gate=0.1] | 0 | error | ValueError: boom \\| bad gate |",
+        "| room | ekf_icp | 0 | skipped | needs an occupancy grid |",
+        "runs/room/pf/seed-0000",
+        "figures/room_trajectories.png",
+    ):
+        assert needle in text, needle
+    # odometry comes first in the comparison table
+    assert text.index("| `odometry` |") < text.index("| `ekf_landmarks` |")
+    figs = sorted(p.name for p in (store.summary / "figures").glob("*.png"))
+    assert figs == ["room_nees.png", "room_trajectories.png", "room_waypoint_rmse.png"]
+    csv = pd.read_csv(store.summary / "metrics.csv")
+    assert list(csv.columns) == ["dataset", "filter", "seed", "metric", "value"]
+    assert len(csv) == len(collect_metrics(store))
+
+
+def test_report_regenerates_identical_bytes(store: Store) -> None:
+    write_report(store)
+    files = sorted(p for p in store.summary.rglob("*") if p.is_file())
+    before = {p: p.read_bytes() for p in files}
+    # a stale figure from a dataset no longer stored is removed
+    (store.summary / "figures" / "old_nees.png").write_bytes(b"stale")
+    for p in files:
+        p.unlink()
+    write_report(store)
+    after = {p: p.read_bytes() for p in sorted(p for p in store.summary.rglob("*") if p.is_file())}
+    assert after.keys() == before.keys()
+    for p, data in before.items():
+        assert after[p] == data, p
+
+
+def test_write_metrics_csv_is_stable(tmp_path: Path) -> None:
+    df = pd.DataFrame(
+        [("b", "f", 1, "ate_m", 0.1 + 0.2), ("a", "f", 2, "realtime_factor", np.inf), ("a", "f", 2, "anees", 3.0)],
+        columns=["dataset", "filter", "seed", "metric", "value"],
+    )
+    p = write_metrics_csv(df, tmp_path / "m.csv")
+    assert p.read_text() == (
+        "dataset,filter,seed,metric,value\na,f,2,anees,3\na,f,2,realtime_factor,inf\nb,f,1,ate_m,0.3\n"
+    )
