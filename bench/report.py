@@ -214,7 +214,7 @@ def _num(x: float, digits: int = 3) -> str:
         return "n/a"
     if np.isinf(x):
         return "inf" if x > 0 else "-inf"
-    if 1e3 <= abs(x) < 1e9:
+    if 100.0 <= abs(x) < 1e9:
         return f"{x:.0f}"  # runtimes and real-time factors read better without an exponent
     return f"{x:.{digits}g}"
 
