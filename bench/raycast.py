@@ -71,8 +71,8 @@ def _cast_one(
         return math.inf
     ex = gx + t0 * dx
     ey = gy + t0 * dy
-    j = min(max(int(math.floor(ex)), 0), cols - 1)
-    i = min(max(int(math.floor(ey)), 0), rows - 1)
+    j = min(max(math.floor(ex), 0), cols - 1)
+    i = min(max(math.floor(ey), 0), rows - 1)
     if dx > 0.0:
         step_j = 1
         t_next_x = t0 + (j + 1.0 - ex) / dx
