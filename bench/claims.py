@@ -143,7 +143,7 @@ def waypoint_stats(df: pd.DataFrame) -> pd.DataFrame:
             est = q[["est_x_m", "est_y_m"]].to_numpy()[:, None, :]
             marked = q[["marked_x_m", "marked_y_m"]].to_numpy()[:, None, :]
             dist = float(mean_estimate_distance(est, marked)[0])
-        rows.append((str(fname), int(j), rmse, dist, int(q["error_m"].notna().sum())))
+        rows.append((str(fname), int(str(j)), rmse, dist, int(q["error_m"].notna().sum())))
     return pd.DataFrame(rows, columns=cols)
 
 

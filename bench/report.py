@@ -316,7 +316,7 @@ def _provenance(col: _Collected) -> list[str]:
     seeds: dict[str, set[int]] = defaultdict(set)
     for r in col.runs:
         seeds[r.dataset].add(r.seed)
-    counts = defaultdict(int)
+    counts: dict[str, int] = defaultdict(int)
     for r in col.runs:
         counts[r.status] += 1
     lines = [
