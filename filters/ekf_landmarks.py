@@ -105,6 +105,21 @@ def joseph_update(
     return x + K @ nu, 0.5 * (P_new + P_new.T), float(nu @ Sinv @ nu)
 
 
+def _inverse_small(S: list[list[float]]) -> list[list[float]] | None:
+    """Inverse of a symmetric 2x2 or 3x3 matrix in plain floats (adjugate / determinant); None if singular."""
+    if len(S) == 2:
+        (a, b), (_, d) = S
+        det = a * d - b * b
+        return [[d / det, -b / det], [-b / det, a / det]] if det > 0.0 else None
+    (a, b, c), (_, d, e), (_, _, f) = S
+    c00, c01, c02 = d * f - e * e, c * e - b * f, b * e - c * d
+    det = a * c00 + b * c01 + c * c02
+    if not det > 0.0:
+        return None
+    c11, c12, c22 = a * f - c * c, b * c - a * e, a * d - b * b
+    return [[c00 / det, c01 / det, c02 / det], [c01 / det, c11 / det, c12 / det], [c02 / det, c12 / det, c22 / det]]
+
+
 @dataclass(frozen=True, kw_only=True)
 class LandmarkEKFConfig(FilterConfig):
     """Configuration of :class:`LandmarkEKF`.
@@ -476,20 +491,38 @@ class LandmarkEKF(Filter):
         return d2
 
     def _update_pose_fix(self, z: PoseFix) -> None:
-        """GPS-like fix (report 001): H = [I_2 0] or I_3; the fix's own covariance; heading innovation wrapped."""
-        zz = np.asarray(z.z, dtype=np.float64)
-        m = int(zz.shape[0])
+        """GPS-like fix (report 001): H = [I_2 0] or I_3; the fix's own covariance; heading innovation wrapped.
+
+        H selects the first m state components, so S = P[:m, :m] + R, K = P[:, :m] S^-1 and A = I - K H
+        differs from I only in its first m columns; plain floats, Joseph form as for landmarks.
+        """
+        zz = z.z.tolist()
+        m = len(zz)
         if m not in (2, 3) or z.cov.shape != (m, m):
             raise ValueError(f"PoseFix at t={z.t} must have z (2,) or (3,) and a matching cov, got {z.cov.shape}")
-        x = np.array(self._x)
-        H = np.eye(3)[:m]
-        nu = zz - x[:m]
+        c = z.cov.tolist()
+        R = [[0.5 * (c[i][j] + c[j][i]) for j in range(m)] for i in range(m)]
+        x, P = self._x, self._P
+        nu = [zz[i] - x[i] for i in range(m)]
         if m == 3:
-            nu[2] = wrap_scalar(float(nu[2]))
-        R = 0.5 * (np.asarray(z.cov, dtype=np.float64) + np.asarray(z.cov, dtype=np.float64).T)
-        x_new, P_new, nis = joseph_update(x, np.array(self._P), H, R, nu)
-        self._x = [float(x_new[0]), float(x_new[1]), wrap_scalar(float(x_new[2]))]
-        self._P = P_new.tolist()
+            nu[2] = wrap_scalar(nu[2])
+        Si = _inverse_small([[P[i][j] + R[i][j] for j in range(m)] for i in range(m)])
+        if Si is None:
+            raise ValueError(f"PoseFix at t={z.t}: innovation covariance is singular; check the fix covariance")
+        K = [[sum(P[i][k] * Si[k][j] for k in range(m)) for j in range(m)] for i in range(3)]
+        self._x = [x[i] + sum(K[i][j] * nu[j] for j in range(m)) for i in range(3)]
+        self._x[2] = wrap_scalar(self._x[2])
+        A = [[(1.0 if i == j else 0.0) - (K[i][j] if j < m else 0.0) for j in range(3)] for i in range(3)]
+        AP = [[A[i][0] * P[0][j] + A[i][1] * P[1][j] + A[i][2] * P[2][j] for j in range(3)] for i in range(3)]
+        KR = [[sum(K[i][k] * R[k][j] for k in range(m)) for j in range(m)] for i in range(3)]
+        out = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
+        for i in range(3):
+            for j in range(i, 3):
+                v = AP[i][0] * A[j][0] + AP[i][1] * A[j][1] + AP[i][2] * A[j][2]
+                v += sum(KR[i][k] * K[j][k] for k in range(m))
+                out[i][j] = out[j][i] = v
+        self._P = out
+        nis = sum(nu[i] * Si[i][j] * nu[j] for i in range(m) for j in range(m))
         self._nis, self._nis_dof, self._accepted, self._rejected = nis, m, 1, 0
 
     # --- output --------------------------------------------------------------------------------------------
