@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+
 from locbench.datasets.base import Kidnap
 from locbench.errors import ConfigError
 from locbench.geometry import wrap_scalar

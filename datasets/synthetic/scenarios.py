@@ -20,6 +20,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
+
 from locbench.datasets.base import (
     Dataset,
     DatasetBuilder,
@@ -29,7 +30,7 @@ from locbench.datasets.base import (
     Waypoints,
     sort_events,
 )
-from locbench.datasets.synthetic.robot import DriveLimits, GoTo, KidnapChooser, Leg, Motion, simulate_route
+from locbench.datasets.synthetic.robot import Arc, DriveLimits, GoTo, KidnapChooser, Leg, Motion, simulate_route
 from locbench.datasets.synthetic.sensors import (
     EncoderModel,
     LandmarkSensor,
@@ -43,7 +44,7 @@ from locbench.datasets.synthetic.sensors import (
     pose_fixes,
     wheel_odometry,
 )
-from locbench.datasets.synthetic.world import World
+from locbench.datasets.synthetic.world import World, wall_with_doors
 from locbench.errors import ConfigError
 from locbench.events import Event
 from locbench.spec import params_to_dict
@@ -407,8 +408,9 @@ def calibrate_room_odometry(seeds: Sequence[int] = tuple(range(20))) -> dict[str
     the noise draws of ``make_dataset("room", seed)`` for ``seeds``. Returns the fitted constants, the
     achieved errors (cm) and the ratios; freeze them as the module constants.
     """
-    from locbench.seeding import dataset_rng
     from scipy.optimize import least_squares
+
+    from locbench.seeding import dataset_rng
 
     target = np.asarray(ROOM_TABLE1_ODOMETRY_CM) / 100.0
     n = room_motion().n_steps
@@ -433,3 +435,283 @@ def calibrate_room_odometry(seeds: Sequence[int] = tuple(range(20))) -> dict[str
         "achieved_cm": [float(v) for v in achieved],
         "ratio": [float(v) for v in achieved / (target * 100)],
     }
+
+
+# --- office ---------------------------------------------------------------------------------------------
+
+OFFICE_START = (1.0, 7.25, 0.0)
+#: Corridor centre line, m.
+_CY = 7.25
+
+
+def office_world() -> World:
+    """One 20 m x 15 m office floor: an east-west corridor (y 6-8.5 m) between three rooms to the south and
+    three to the north, 1 m doors, a door between two south rooms, a few cabinets and 22 wall landmarks
+    (5 cm in front of their wall, so a wall hides them from its other side)."""
+    walls: list[tuple[float, float, float, float]] = []
+    walls += wall_with_doors((0.0, 0.0), (20.0, 0.0))
+    walls += wall_with_doors((20.0, 0.0), (20.0, 15.0))
+    walls += wall_with_doors((20.0, 15.0), (0.0, 15.0))
+    walls += wall_with_doors((0.0, 15.0), (0.0, 0.0))
+    # corridor walls with one door per room (offsets from x = 0)
+    walls += wall_with_doors((0.0, 6.0), (20.0, 6.0), [(3.5, 1.0), (10.5, 1.0), (17.0, 1.0)])
+    walls += wall_with_doors((0.0, 8.5), (20.0, 8.5), [(3.0, 1.0), (9.5, 1.0), (17.0, 1.0)])
+    # partitions; the one between the middle and east south rooms has a door
+    walls += wall_with_doors((7.0, 0.0), (7.0, 6.0))
+    walls += wall_with_doors((14.0, 0.0), (14.0, 6.0), [(1.5, 1.0)])
+    walls += wall_with_doors((6.0, 8.5), (6.0, 15.0))
+    walls += wall_with_doors((13.0, 8.5), (13.0, 15.0))
+
+    def box(x0: float, y0: float, x1: float, y1: float) -> list[tuple[float, float, float, float]]:
+        return [(x0, y0, x1, y0), (x1, y0, x1, y1), (x1, y1, x0, y1), (x0, y1, x0, y0)]
+
+    walls += box(0.0, 4.0, 0.6, 5.0)  # cabinet, south-west room
+    walls += box(18.0, 14.4, 19.5, 15.0)  # cabinet, north-east room
+    walls += box(11.5, 3.0, 12.5, 3.6)  # table, south middle room
+    walls += box(2.5, 12.5, 3.5, 13.3)  # table, north-west room
+    landmarks = [
+        # corridor
+        (5.5, 6.05), (12.5, 8.45), (15.0, 6.05), (0.05, 7.25), (19.95, 7.25),
+        # south rooms
+        (0.05, 2.5), (3.5, 0.05), (6.95, 2.0),
+        (7.05, 4.0), (10.5, 0.05), (13.95, 4.0),
+        (14.05, 3.0), (17.0, 0.05), (19.95, 4.0),
+        # north rooms
+        (0.05, 11.0), (3.0, 14.95), (5.95, 10.5),
+        (6.05, 12.0), (9.5, 14.95), (12.95, 11.0),
+        (13.05, 13.0), (19.95, 11.0),
+    ]  # fmt: skip
+    return World(walls=np.array(walls), landmarks=np.array(landmarks), bounds=(0.0, 0.0, 20.0, 15.0), name="office")
+
+
+def office_route() -> list[Leg]:
+    """The tour: 9 marked waypoints in five rooms and the corridor, through the doors (unmarked via points)."""
+
+    def via(x: float, y: float) -> GoTo:
+        return GoTo((x, y), marked=False)
+
+    return [
+        via(3.5, _CY), via(3.5, 4.8),
+        GoTo((1.8, 1.8)), GoTo((5.5, 1.5)),  # south-west room
+        via(3.5, 4.8), via(3.5, _CY), via(9.5, _CY), via(9.5, 9.8),
+        GoTo((8.0, 13.0)), GoTo((11.5, 12.0)),  # north-middle room
+        via(9.5, 9.8), via(9.5, _CY),
+        GoTo((13.5, _CY)),  # corridor
+        via(17.0, _CY), via(17.0, 4.8),
+        GoTo((18.5, 1.5)),  # south-east room
+        via(15.0, 1.5), via(12.8, 1.5),
+        GoTo((9.0, 1.2)),  # south-middle room, through the side door
+        via(10.5, 4.8), via(10.5, _CY), via(17.0, _CY), via(17.0, 9.8),
+        GoTo((16.0, 12.5)),  # north-east room
+        via(17.0, 9.8), via(17.0, _CY),
+        GoTo((6.5, _CY)),  # back along the corridor
+    ]  # fmt: skip
+
+
+OFFICE_LIMITS = DriveLimits(
+    dt_s=0.05, v_max_mps=0.7, accel_mps2=0.5, omega_max_radps=1.2, alpha_radps2=2.0, dwell_s=2.0, start_dwell_s=1.0
+)
+
+
+@dataclass(frozen=True, kw_only=True)
+class OfficeParams:
+    """Parameters of ``office``.
+
+    Attributes
+    ----------
+    known_ids : bool
+        Landmark identities reported (True) or withheld.
+    kidnap_m : float
+        Kidnap distance at 50 % of the run, m (0 = no kidnap).
+    kidnap_rad : float
+        Kidnap rotation magnitude, rad (sign drawn at random).
+    laser_beams : int
+        Beams of the 240 deg, 5.6 m laser.
+    pose_fix_sigma_m : float
+        Standard deviation of the 1 Hz GPS-like fixes per axis, m.
+    """
+
+    known_ids: bool = True
+    kidnap_m: float = 0.0
+    kidnap_rad: float = 0.5
+    laser_beams: int = 181
+    pose_fix_sigma_m: float = 0.7
+
+
+class OfficeScenario(DatasetBuilder):
+    """One office floor with walls, doors, 22 landmarks and a 9-waypoint tour; every sensor."""
+
+    Params: ClassVar[type] = OfficeParams
+    version: ClassVar[int] = 1
+    description: ClassVar[str] = "one office floor with walls, doors, landmarks and a waypoint tour; every sensor"
+
+    def build(self, params: OfficeParams, rng: np.random.Generator) -> Dataset:
+        _check_kidnap(params.kidnap_m, params.kidnap_rad)
+        _check_beams("laser_beams", params.laser_beams, allow_zero=False)
+        if not params.pose_fix_sigma_m > 0:
+            raise ConfigError(f"parameter 'pose_fix_sigma_m' must be > 0 m, got {params.pose_fix_sigma_m}")
+        streams = split_streams(rng)
+        world = office_world()
+        limits = dataclasses.replace(OFFICE_LIMITS, wheelbase_m=true_wheelbase())
+        motion = drive(
+            world, OFFICE_START, office_route(), limits, params.kidnap_m, params.kidnap_rad, 0.5, streams["kidnap"]
+        )
+        lm = LandmarkSensor(
+            rate_hz=5.0,
+            min_range_m=0.3,
+            max_range_m=6.0,
+            fov_rad=math.pi,
+            sigma_range_m=0.03,
+            sigma_bearing_rad=math.radians(1.0),
+            known_ids=params.known_ids,
+            occlusion=True,
+        )
+        laser = LaserSensor(
+            rate_hz=10.0, beams=params.laser_beams, fov_rad=math.radians(240.0), max_range_m=5.6, sigma_m=0.01
+        )
+        fixes = PoseFixSensor(
+            rate_hz=1.0, sigma_xy_m=params.pose_fix_sigma_m, reported_sigma_xy_m=params.pose_fix_sigma_m
+        )
+        suite = SensorSuite(encoder=robot_encoder_model(), landmarks=lm, laser=laser, fixes=fixes)
+        spec = SensorSpec(
+            **nominal_odometry_spec(),
+            landmark_sigma_range_m=lm.sigma_range_m,
+            landmark_sigma_bearing_rad=lm.sigma_bearing_rad,
+            landmark_min_range_m=lm.min_range_m,
+            landmark_max_range_m=lm.max_range_m,
+            landmark_fov_rad=lm.fov_rad,
+            laser_sigma_m=laser.sigma_m,
+            pose_fix_sigma_xy_m=fixes.reported_sigma_xy_m,
+        )
+        return assemble(
+            dataset_id="office",
+            params=params,
+            world=world,
+            motion=motion,
+            suite=suite,
+            streams=streams,
+            spec=spec,
+            initial_sigma=(0.02, 0.02, math.radians(1.0)),
+        )
+
+
+# --- tiny conformance scenarios -------------------------------------------------------------------------
+
+TINY_LIMITS = DriveLimits(
+    dt_s=0.05, v_max_mps=0.6, accel_mps2=0.4, omega_max_radps=0.8, alpha_radps2=1.5, dwell_s=2.0, start_dwell_s=1.0
+)
+
+
+@dataclass(frozen=True, kw_only=True)
+class TinyParams:
+    """Parameters of ``tiny_line`` and ``tiny_circle``.
+
+    Attributes
+    ----------
+    noise_free : bool
+        No odometry error of any kind, exact landmark, laser and fix measurements (the nominal noise
+        handed to filters stays positive).
+    known_ids : bool
+        Landmark identities reported (True) or withheld.
+    """
+
+    noise_free: bool = False
+    known_ids: bool = True
+
+
+def _box_world(name: str, width: float, height: float, landmarks: list[tuple[float, float]]) -> World:
+    c = [(0.0, 0.0), (width, 0.0), (width, height), (0.0, height)]
+    walls = [(*c[k], *c[(k + 1) % 4]) for k in range(4)]
+    return World(walls=np.array(walls), landmarks=np.array(landmarks), bounds=(0.0, 0.0, width, height), name=name)
+
+
+class _TinyScenario(DatasetBuilder):
+    """Shared build of the tiny scenarios: a box world, every sensor type, optionally noise-free."""
+
+    Params: ClassVar[type] = TinyParams
+    version: ClassVar[int] = 1
+    dataset_id: ClassVar[str] = ""
+
+    def world(self) -> World:
+        raise NotImplementedError
+
+    def route(self) -> tuple[tuple[float, float, float], list[Leg]]:
+        raise NotImplementedError
+
+    def build(self, params: TinyParams, rng: np.random.Generator) -> Dataset:
+        streams = split_streams(rng)
+        world = self.world()
+        start, legs = self.route()
+        nf = params.noise_free
+        limits = dataclasses.replace(TINY_LIMITS, wheelbase_m=true_wheelbase(nf))
+        motion = simulate_route(start, legs, limits)
+        lm = LandmarkSensor(
+            rate_hz=5.0,
+            min_range_m=0.3,
+            max_range_m=6.0,
+            fov_rad=math.pi,
+            sigma_range_m=0.0 if nf else 0.02,
+            sigma_bearing_rad=0.0 if nf else math.radians(1.0),
+            known_ids=params.known_ids,
+            occlusion=True,
+        )
+        laser = LaserSensor(
+            rate_hz=5.0,
+            beams=31,
+            fov_rad=math.radians(240.0),
+            max_range_m=5.6,
+            sigma_m=0.0 if nf else 0.01,
+            dropout_prob=0.0 if nf else 0.01,
+        )
+        fixes = PoseFixSensor(rate_hz=1.0, sigma_xy_m=0.0 if nf else 0.5, reported_sigma_xy_m=0.5)
+        suite = SensorSuite(encoder=robot_encoder_model(nf), landmarks=lm, laser=laser, fixes=fixes)
+        # Nominal noise stays positive even when the data are exact, so filters remain well-posed.
+        spec = SensorSpec(
+            **nominal_odometry_spec(),
+            landmark_sigma_range_m=0.02,
+            landmark_sigma_bearing_rad=math.radians(1.0),
+            landmark_min_range_m=lm.min_range_m,
+            landmark_max_range_m=lm.max_range_m,
+            landmark_fov_rad=lm.fov_rad,
+            laser_sigma_m=0.01,
+            pose_fix_sigma_xy_m=fixes.reported_sigma_xy_m,
+        )
+        return assemble(
+            dataset_id=self.dataset_id,
+            params=params,
+            world=world,
+            motion=motion,
+            suite=suite,
+            streams=streams,
+            spec=spec,
+            initial_sigma=(0.01, 0.01, math.radians(1.0)),
+        )
+
+
+class TinyLineScenario(_TinyScenario):
+    """A short straight drive (two stops) past 3 landmarks in a 6 m x 4 m box; every sensor type."""
+
+    dataset_id: ClassVar[str] = "tiny_line"
+    description: ClassVar[str] = "a 10 s straight drive past 3 landmarks (conformance checks)"
+
+    def world(self) -> World:
+        return _box_world("tiny_line", 6.0, 4.0, [(2.0, 3.95), (4.0, 0.05), (5.95, 2.5)])
+
+    def route(self) -> tuple[tuple[float, float, float], list[Leg]]:
+        return (0.8, 2.0, 0.0), [GoTo((2.9, 2.0)), GoTo((5.0, 2.0))]
+
+
+class TinyCircleScenario(_TinyScenario):
+    """One counter-clockwise circle of radius 1.2 m in a 6 m x 6 m box with 4 landmarks; the heading
+    crosses +-pi half way round."""
+
+    dataset_id: ClassVar[str] = "tiny_circle"
+    description: ClassVar[str] = "a circle whose heading crosses +-pi, 4 landmarks (conformance checks)"
+    radius_m: ClassVar[float] = 1.2
+
+    def world(self) -> World:
+        return _box_world("tiny_circle", 6.0, 6.0, [(0.05, 3.0), (5.95, 3.0), (3.0, 0.05), (3.0, 5.95)])
+
+    def route(self) -> tuple[tuple[float, float, float], list[Leg]]:
+        r = self.radius_m
+        return (3.0, 3.0 - r, 0.0), [Arc(length_m=2.0 * math.pi * r, curvature_1pm=1.0 / r)]

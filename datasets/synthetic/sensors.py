@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+
 from locbench.datasets.base import OccupancyGrid
 from locbench.datasets.synthetic.robot import Motion
 from locbench.datasets.synthetic.world import World

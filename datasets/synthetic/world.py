@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+
 from locbench.datasets.base import Landmarks, LineMap, OccupancyGrid, WorldMap
 from locbench.errors import ConfigError
 
