@@ -1,10 +1,10 @@
 """nox sessions for locbench.
 
-    nox                 the tests (the default session)
-    nox -s lint         ruff and mypy
-    nox -s bench        run the default suite and write results/summary (posargs go to 'locbench run')
-    nox -s report       regenerate results/summary from the stored runs, no re-run
-    nox -s perf         pytest-benchmark micro-benchmarks of each filter's predict and update
+nox                 the tests (the default session)
+nox -s lint         ruff and mypy
+nox -s bench        run the default suite and write results/summary (posargs go to 'locbench run')
+nox -s report       regenerate results/summary from the stored runs, no re-run
+nox -s perf         pytest-benchmark micro-benchmarks of each filter's predict and update
 """
 
 from __future__ import annotations

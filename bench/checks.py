@@ -157,7 +157,9 @@ def check_heading_wrap(filter_spec: str) -> None:
     err = pose_error(tr.mean, _truth_at(ds, tr.t))
     worst = float(np.max(np.hypot(err[:, 0], err[:, 1])))
     if worst > WRAP_ERROR_BOUND_M or float(np.max(np.abs(err[:, 2]))) > 0.5:
-        raise CheckFailed(f"error while crossing +-pi: position {worst:.3f} m, heading {np.max(np.abs(err[:, 2])):.3f} rad")
+        raise CheckFailed(
+            f"error while crossing +-pi: position {worst:.3f} m, heading {np.max(np.abs(err[:, 2])):.3f} rad"
+        )
 
 
 def check_noise_free(filter_spec: str) -> None:

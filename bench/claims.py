@@ -21,8 +21,9 @@ from typing import Literal, NamedTuple
 
 import numpy as np
 import pandas as pd
-from locbench.metrics import mean_estimate_distance, waypoint_rmse
 from scipy import stats
+
+from locbench.metrics import mean_estimate_distance, waypoint_rmse
 
 log = logging.getLogger(__name__)
 

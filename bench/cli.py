@@ -1,9 +1,10 @@
 """The ``locbench`` command line: a thin layer over the library API.
 
-    locbench list
-    locbench run [--suite NAME|FILE.toml | --filter SPEC ... --dataset SPEC ...] [--seeds N] [--results DIR] [--jobs N] [--force]
-    locbench report [--results DIR]
-    locbench check [ID ...]
+locbench list
+locbench run [--suite NAME|FILE.toml | --filter SPEC ... --dataset SPEC ...]
+             [--seeds N] [--results DIR] [--jobs N] [--force]
+locbench report [--results DIR]
+locbench check [ID ...]
 """
 
 from __future__ import annotations
@@ -39,7 +40,9 @@ def _cmd_list(args: argparse.Namespace) -> int:
             print(f"  {ident:<16} {reg.entry(ident).summary}{state}")
     print("suites:")
     for s in SUITES.values():
-        print(f"  {s.name:<16} {len(s.filters)} filters x {len(s.datasets)} datasets x {s.seeds} seeds: {s.description}")
+        print(
+            f"  {s.name:<16} {len(s.filters)} filters x {len(s.datasets)} datasets x {s.seeds} seeds: {s.description}"
+        )
     return 0
 
 
@@ -109,10 +112,19 @@ def build_parser() -> argparse.ArgumentParser:
 
     r = sub.add_parser("run", help="run filters over datasets and store the runs")
     r.add_argument("--suite", help="a named suite (see 'locbench list') or a .toml suite file; default: default")
-    r.add_argument("--filter", nargs="+", action="extend", default=[], metavar="SPEC", help="e.g. ekf_landmarks[association=nearest]")
+    r.add_argument(
+        "--filter",
+        nargs="+",
+        action="extend",
+        default=[],
+        metavar="SPEC",
+        help="e.g. ekf_landmarks[association=nearest]",
+    )
     r.add_argument("--dataset", nargs="+", action="extend", default=[], metavar="SPEC", help="e.g. room[kidnap_m=2]")
     r.add_argument("--seeds", type=int, default=None, help="number of seeds, 0..N-1 (default: the suite's, or 1)")
-    r.add_argument("--results", default=_results_default(), help="results folder (default: results/ or $LOCBENCH_RESULTS)")
+    r.add_argument(
+        "--results", default=_results_default(), help="results folder (default: results/ or $LOCBENCH_RESULTS)"
+    )
     r.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
     r.add_argument("--force", action="store_true", help="re-run runs that are already stored")
     r.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -131,7 +143,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``locbench`` console script."""
     args = build_parser().parse_args(argv)
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    logging.basicConfig(
+        level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s"
+    )
     try:
         return int(args.func(args))
     except LocbenchError as exc:

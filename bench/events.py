@@ -82,7 +82,7 @@ class LaserScan:
     @property
     def angles(self) -> FloatArray:
         """Beam bearings in the sensor frame, rad, shape (n,)."""
-        return self.angle_min + self.angle_increment * np.arange(self.ranges.shape[0])
+        return self.angle_min + self.angle_increment * np.arange(self.ranges.shape[0], dtype=np.float64)
 
 
 @dataclass(frozen=True, slots=True, eq=False)

@@ -24,8 +24,9 @@ from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
-from locbench.geometry import between, pose_error, wrap_angle
 from scipy import stats
+
+from locbench.geometry import between, pose_error, wrap_angle
 
 if TYPE_CHECKING:
     from locbench.store import RunRecord, TruthRecord

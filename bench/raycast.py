@@ -208,7 +208,7 @@ def cast_rays(
     if parallel is None:
         parallel = n_rays >= PARALLEL_MIN_RAYS and numba.get_num_threads() > 1
     kernel = _cast_parallel if parallel else _cast_serial
-    return kernel(occ, float(resolution), float(origin_xy[0]), float(origin_xy[1]), p, a, float(max_range))  # type: ignore[no-any-return]
+    return kernel(occ, float(resolution), float(origin_xy[0]), float(origin_xy[1]), p, a, float(max_range))
 
 
 def cast_scan(

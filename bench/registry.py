@@ -17,8 +17,8 @@ from typing import Any, Generic, TypeVar
 
 import numpy as np
 
-from locbench.seeding import dataset_rng
 from locbench.errors import DependencyNotInstalled, UnknownIdError
+from locbench.seeding import dataset_rng
 from locbench.spec import build_params, format_spec, non_default_params, params_to_dict, parse_spec
 
 T = TypeVar("T")
@@ -47,7 +47,7 @@ class Registry(Generic[T]):
 
     def register(
         self,
-        id: str,  # noqa: A002 - the registry's own vocabulary
+        id: str,
         entry_point: str,
         summary: str = "",
         requires_modules: tuple[str, ...] = (),
@@ -58,7 +58,7 @@ class Registry(Generic[T]):
             raise ValueError(f"entry point {entry_point!r} must be 'module:attribute'")
         self._entries[id] = Entry(id, entry_point, summary, requires_modules, install_hint)
 
-    def unregister(self, id: str) -> None:  # noqa: A002
+    def unregister(self, id: str) -> None:
         self._entries.pop(id, None)
 
     def snapshot(self) -> dict[str, Entry]:
@@ -82,14 +82,14 @@ class Registry(Generic[T]):
         self._load_plugins()
         return sorted(self._entries)
 
-    def entry(self, id: str) -> Entry:  # noqa: A002
+    def entry(self, id: str) -> Entry:
         self._load_plugins()
         try:
             return self._entries[id]
         except KeyError:
             raise UnknownIdError(f"unknown {self.kind} {id!r}; valid: {', '.join(self.ids())}") from None
 
-    def unavailable_reason(self, id: str) -> str | None:  # noqa: A002
+    def unavailable_reason(self, id: str) -> str | None:
         """None when the entry's optional dependencies import, else 'unavailable: install ...'."""
         e = self.entry(id)
         for mod in e.requires_modules:
@@ -99,7 +99,7 @@ class Registry(Generic[T]):
                 return f"unavailable: {mod} is not installed; install it with: {e.install_hint or 'pip install ' + mod}"
         return None
 
-    def load(self, id: str) -> type[T]:  # noqa: A002
+    def load(self, id: str) -> type[T]:
         """Import and return the registered class; ``DependencyNotInstalled`` when an optional dependency is missing."""
         e = self.entry(id)
         reason = self.unavailable_reason(id)

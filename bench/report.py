@@ -20,10 +20,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import locbench
 import matplotlib.style
 import numpy as np
 import pandas as pd
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.patches import Ellipse
+from scipy import stats
+
+import locbench
 from locbench.claims import ROOM_TABLE1_CM, claims_for, spec_id, waypoint_stats
 from locbench.metrics import (
     CONFIDENCE,
@@ -36,10 +41,6 @@ from locbench.metrics import (
     run_metrics,
 )
 from locbench.store import RunRecord, Store, TruthRecord
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
-from matplotlib.patches import Ellipse
-from scipy import stats
 
 log = logging.getLogger(__name__)
 

@@ -116,7 +116,7 @@ def run_filter(flt: Filter, ds: Dataset, rng: np.random.Generator) -> FilterTrac
     except FilterDiverged as exc:
         status, message = "diverged", str(exc)
         diverged_t = float(t[row - 1]) if row else float(t0)
-    except Exception as exc:  # noqa: BLE001 - a filter's failure is a result, not a crash of the sweep
+    except Exception as exc:
         status = "error"
         tb = traceback.extract_tb(exc.__traceback__)
         where = f" ({tb[-1].filename.rsplit('/', 1)[-1]}:{tb[-1].lineno})" if tb else ""
@@ -125,11 +125,19 @@ def run_filter(flt: Filter, ds: Dataset, rng: np.random.Generator) -> FilterTrac
     if status == "ok":
         try:
             extra = {k: np.asarray(v) for k, v in flt.extra_results().items()}
-        except Exception as exc:  # noqa: BLE001
+        except Exception as exc:
             status, message = "error", f"extra_results failed: {type(exc).__name__}: {exc}"
     return FilterTrace(
-        t[:row], mean[:row], cov[:row], kind[:row], step_ns[:row],
-        {k: v[:row] for k, v in diags.items()}, status, message, diverged_t, extra,
+        t[:row],
+        mean[:row],
+        cov[:row],
+        kind[:row],
+        step_ns[:row],
+        {k: v[:row] for k, v in diags.items()},
+        status,
+        message,
+        diverged_t,
+        extra,
     )
 
 
@@ -200,7 +208,7 @@ def run_group(
     t_build = time.perf_counter()
     try:
         ds: Dataset = make_dataset(dr, seed)
-    except Exception as exc:  # noqa: BLE001 - a dataset that cannot be built fails its runs, not the sweep
+    except Exception as exc:
         msg = f"dataset build failed: {type(exc).__name__}: {exc}"
         log.error("%s seed %d: %s", dr.name, seed, msg)
         for fr, key in todo:
@@ -286,11 +294,15 @@ def run_many(
             dname, seed = futures[fut]
             try:
                 res = fut.result()
-            except Exception as exc:  # noqa: BLE001 - a crashed worker is recorded, the sweep goes on
-                res = [RunOutcome(f, dname, seed, "error", f"worker failed: {type(exc).__name__}: {exc}") for f in fnames]
+            except Exception as exc:
+                res = [
+                    RunOutcome(f, dname, seed, "error", f"worker failed: {type(exc).__name__}: {exc}") for f in fnames
+                ]
             outcomes.extend(res)
             if progress:
                 progress(len(res))
     order = {(d, s): i for i, (d, s) in enumerate(groups)}
-    outcomes.sort(key=lambda o: (order.get((o.dataset, o.seed), math.inf), fnames.index(o.filter) if o.filter in fnames else 0))
+    outcomes.sort(
+        key=lambda o: (order.get((o.dataset, o.seed), math.inf), fnames.index(o.filter) if o.filter in fnames else 0)
+    )
     return outcomes

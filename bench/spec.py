@@ -143,7 +143,8 @@ def build_params(cls: type[P], values: dict[str, Any], owner: str) -> P:
     unknown = sorted(set(values) - set(fields))
     if unknown:
         raise UnknownIdError(
-            f"unknown parameter {', '.join(map(repr, unknown))} for {owner!r}; valid: {', '.join(sorted(fields)) or '(none)'}"
+            f"unknown parameter {', '.join(map(repr, unknown))} for {owner!r}; "
+            f"valid: {', '.join(sorted(fields)) or '(none)'}"
         )
     kwargs = {k: _convert(v, fields[k], f"{owner}: parameter {k!r}") for k, v in values.items()}
     try:
@@ -167,8 +168,10 @@ def non_default_params(obj: Any) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for f in dataclasses.fields(obj):
         v = getattr(obj, f.name)
-        default = f.default if f.default is not dataclasses.MISSING else (
-            f.default_factory() if f.default_factory is not dataclasses.MISSING else dataclasses.MISSING
+        default = (
+            f.default
+            if f.default is not dataclasses.MISSING
+            else (f.default_factory() if f.default_factory is not dataclasses.MISSING else dataclasses.MISSING)
         )
         if default is dataclasses.MISSING or v != default:
             out[f.name] = v

@@ -163,7 +163,7 @@ class Store:
             "duration_s": np.array(rec.duration_s),
         }
         meta = {"dataset": rec.dataset, "seed": rec.seed, **rec.meta}
-        _atomic_write(path, lambda p: np.savez_compressed(p, **arrays), binary=True)
+        _atomic_write(path, lambda p: np.savez_compressed(p, **arrays))  # type: ignore[arg-type]
         _atomic_write(path.with_suffix(".json"), lambda p: p.write_text(json.dumps(meta, indent=2, default=str)))
 
     def write_run(self, rec: RunRecord) -> Path:
@@ -200,11 +200,16 @@ class Store:
     def read_truth(self, dataset: str, seed: int) -> TruthRecord:
         path = self.truth_path(dataset, seed)
         if not path.is_file():
-            raise ConfigError(f"{path}: missing ground truth for dataset {dataset!r} seed {seed}; re-run 'locbench run'")
+            raise ConfigError(
+                f"{path}: missing ground truth for dataset {dataset!r} seed {seed}; re-run 'locbench run'"
+            )
         with np.load(path) as z:
             gt = Trajectory2D(z["gt_t"], z["gt_xy"], z["gt_theta"])
             wp = Waypoints(z["wp_t"], z["wp_xy"]) if bool(z["has_waypoints"]) else None
-            kid = tuple(Kidnap(float(t), (float(d[0]), float(d[1]), float(d[2]))) for t, d in zip(z["kidnap_t"], z["kidnap_delta"], strict=True))
+            kid = tuple(
+                Kidnap(float(t), (float(d[0]), float(d[1]), float(d[2])))
+                for t, d in zip(z["kidnap_t"], z["kidnap_delta"], strict=True)
+            )
             duration = float(z["duration_s"])
         meta_path = path.with_suffix(".json")
         meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
@@ -225,7 +230,7 @@ class Store:
             return RunRecord(meta, z["t"], z["mean"], z["cov"], z["kind"], z["step_ns"], diag, extra)
 
 
-def _atomic_write(path: Path, writer: Any, binary: bool = False) -> None:
+def _atomic_write(path: Path, writer: Any) -> None:
     """Write via a temporary file in the same folder, then rename (no half-written files)."""
     fd, tmp_name = tempfile.mkstemp(prefix=".tmp-", suffix=path.suffix, dir=path.parent)
     os.close(fd)

@@ -60,7 +60,9 @@ def get_suite(name: str) -> Suite:
     try:
         return SUITES[name]
     except KeyError:
-        raise UnknownIdError(f"unknown suite {name!r}; valid: {', '.join(sorted(SUITES))} or a path to a .toml file") from None
+        raise UnknownIdError(
+            f"unknown suite {name!r}; valid: {', '.join(sorted(SUITES))} or a path to a .toml file"
+        ) from None
 
 
 def load_suite_file(path: Path) -> Suite:
@@ -73,11 +75,15 @@ def load_suite_file(path: Path) -> Suite:
         raise ConfigError(f"{path}: not valid TOML ({exc})") from None
     unknown = sorted(set(data) - {"filters", "datasets", "seeds", "description"})
     if unknown:
-        raise ConfigError(f"{path}: unknown field(s) {', '.join(unknown)}; valid: filters, datasets, seeds, description")
+        raise ConfigError(
+            f"{path}: unknown field(s) {', '.join(unknown)}; valid: filters, datasets, seeds, description"
+        )
     for key in ("filters", "datasets"):
         val = data.get(key)
         if not isinstance(val, list) or not val or not all(isinstance(v, str) for v in val):
-            raise ConfigError(f"{path}: field '{key}' must be a non-empty list of spec strings like \"room[kidnap_m=2]\"")
+            raise ConfigError(
+                f"{path}: field '{key}' must be a non-empty list of spec strings like \"room[kidnap_m=2]\""
+            )
     seeds = data.get("seeds", 1)
     if not isinstance(seeds, int) or isinstance(seeds, bool) or seeds < 1:
         raise ConfigError(f"{path}: field 'seeds' must be a positive integer, got {seeds!r}")

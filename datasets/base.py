@@ -7,14 +7,15 @@ from __future__ import annotations
 
 import abc
 import enum
+import itertools
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
 
-from locbench.events import EVENT_TYPES, Event, LaserScan, LandmarkObservations, Odometry, PoseFix, event_order
 from locbench.errors import ConfigError
+from locbench.events import EVENT_TYPES, Event, LandmarkObservations, LaserScan, Odometry, PoseFix, event_order
 from locbench.geometry import is_symmetric_psd, wrap_angle
 
 FloatArray = npt.NDArray[np.float64]
@@ -190,7 +191,10 @@ class Waypoints:
 
 @dataclass(frozen=True)
 class Kidnap:
-    """At time ``t`` (s) the true pose jumps by ``delta`` (dx m, dy m, dtheta rad, world frame); filters are told nothing."""
+    """At time ``t`` (s) the true pose jumps by ``delta`` (dx m, dy m, dtheta rad, world frame).
+
+    Filters are told nothing.
+    """
 
     t: float
     delta: tuple[float, float, float]
@@ -300,7 +304,7 @@ def check_dataset_contract(ds: Dataset) -> None:
     if not ds.events:
         raise ConfigError(f"{where}: no events")
     keys = [event_order(e) for e in ds.events]
-    for k, (a, b) in enumerate(zip(keys[:-1], keys[1:], strict=True)):
+    for k, (a, b) in enumerate(itertools.pairwise(keys)):
         if b < a:
             raise ConfigError(f"{where}: events[{k + 1}] at t={ds.events[k + 1].t} is out of order")
     for k, e in enumerate(ds.events):

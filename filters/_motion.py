@@ -33,6 +33,7 @@ from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
+
 from locbench.datasets.base import SensorSpec
 from locbench.events import Odometry
 from locbench.geometry import wrap_angle, wrap_scalar

@@ -44,6 +44,7 @@ from typing import ClassVar, Literal
 
 import numpy as np
 import numpy.typing as npt
+
 from locbench.datasets.base import Gaussian2, MapKind, SensorSpec, WorldMap
 from locbench.errors import ConfigError, FilterDiverged
 from locbench.events import UNKNOWN_ID, LandmarkObservations, Observation, Odometry, PoseFix

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
+
 from locbench.datasets.base import Gaussian2, SensorSpec, WorldMap
 from locbench.errors import FilterDiverged
 from locbench.events import Observation, Odometry

@@ -22,7 +22,6 @@ from locbench.errors import FilterDiverged
 from locbench.events import LandmarkObservations, Odometry
 from locbench.filters.base import Estimate, Filter, FilterConfig
 
-
 # --- a hand-made dataset: straight line at 1 m/s, one landmark, 10 Hz ------------------------------
 
 
@@ -42,7 +41,9 @@ class LineBuilder(DatasetBuilder):
         xy = np.column_stack([t * 1.0, np.zeros_like(t)])
         events: list[Any] = []
         for k in range(1, params.steps + 1):
-            events.append(Odometry(float(t[k]), 0.1 + float(rng.normal(0.0, params.noise_m)) if params.noise_m else 0.1, 0.0, 0.0))
+            events.append(
+                Odometry(float(t[k]), 0.1 + float(rng.normal(0.0, params.noise_m)) if params.noise_m else 0.1, 0.0, 0.0)
+            )
             if k % 5 == 0:
                 d = np.hypot(10.0 - xy[k, 0], 2.0)
                 b = np.arctan2(2.0, 10.0 - xy[k, 0])

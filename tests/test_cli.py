@@ -22,7 +22,9 @@ from locbench.cli import main
         (["check", "nope"], "unknown filter or dataset 'nope'; valid: "),
     ],
 )
-def test_bad_input_is_one_line_error(argv: list[str], expected: str, capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+def test_bad_input_is_one_line_error(
+    argv: list[str], expected: str, capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
     code = main([*argv, "--results", str(tmp_path)] if argv[0] == "run" else argv)
     err = capsys.readouterr().err
     assert code == 2

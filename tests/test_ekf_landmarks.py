@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 import pytest
+from numpy.testing import assert_allclose
+
 from locbench.datasets.base import Gaussian2, Landmarks, MapKind, SensorSpec, WorldMap
 from locbench.errors import ConfigError, FilterDiverged
 from locbench.events import UNKNOWN_ID, LandmarkObservations, LaserScan, Odometry, PoseFix
@@ -20,7 +22,6 @@ from locbench.filters.ekf_landmarks import (
 )
 from locbench.geometry import between, is_symmetric_psd, pose_error, wrap_angle
 from locbench.registry import make_filter
-from numpy.testing import assert_allclose
 
 W = 0.4
 SENSORS = SensorSpec(

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy import stats
+
 from locbench import metrics as lm
 from locbench.datasets.base import Trajectory2D, Waypoints
 from locbench.geometry import compose
 from locbench.store import KIND_NAMES, RunRecord, TruthRecord
-from scipy import stats
 
 ODO = KIND_NAMES.index("Odometry")
 LMK = KIND_NAMES.index("LandmarkObservations")

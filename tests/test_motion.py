@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 import pytest
+from numpy.testing import assert_allclose
+
 from locbench.datasets.base import SensorSpec
 from locbench.events import Odometry
 from locbench.filters._motion import (
@@ -26,7 +28,6 @@ from locbench.filters._motion import (
     wheel_variances,
 )
 from locbench.geometry import compose
-from numpy.testing import assert_allclose
 
 W = 0.4
 

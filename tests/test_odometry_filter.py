@@ -7,12 +7,13 @@ import math
 
 import numpy as np
 import pytest
+from numpy.testing import assert_allclose
+
 from locbench.datasets.base import Gaussian2, Landmarks, SensorSpec, WorldMap
 from locbench.events import LandmarkObservations, Odometry, PoseFix
 from locbench.filters.odometry import OdometryConfig, OdometryFilter
 from locbench.geometry import compose, is_symmetric_psd
 from locbench.registry import make_filter
-from numpy.testing import assert_allclose
 
 W = 0.4
 SENSORS = SensorSpec(

@@ -37,6 +37,8 @@ def test_root_package_imports_no_filters_or_datasets() -> None:
     import subprocess
     import sys
 
-    code = "import sys, locbench; print(any(m.startswith(('locbench.filters', 'locbench.datasets')) for m in sys.modules))"
+    code = (
+        "import sys, locbench; print(any(m.startswith(('locbench.filters', 'locbench.datasets')) for m in sys.modules))"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
     assert out == "False"

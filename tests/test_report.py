@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+
 from locbench import claims
 from locbench.datasets.base import Trajectory2D, Waypoints
 from locbench.report import collect_metrics, write_metrics_csv, write_report

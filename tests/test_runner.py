@@ -39,7 +39,10 @@ def test_finished_runs_are_not_rerun_unless_forced(tmp_path: Path) -> None:
 
 
 @pytest.mark.usefixtures("harness_registry")
-@pytest.mark.parametrize(("mode", "status", "text"), [("raise", "error", "RuntimeError: boom"), ("nan", "diverged", "non-finite"), ("diverge", "diverged", "exploded")])
+@pytest.mark.parametrize(
+    ("mode", "status", "text"),
+    [("raise", "error", "RuntimeError: boom"), ("nan", "diverged", "non-finite"), ("diverge", "diverged", "exploded")],
+)
 def test_failures_are_results_and_the_sweep_goes_on(tmp_path: Path, mode: str, status: str, text: str) -> None:
     out = run_many([f"bad[mode={mode}]", "bad[fail_at_s=100]"], ["line"], [0], str(tmp_path))
     assert [o.status for o in out] == [status, "ok"]
@@ -58,10 +61,16 @@ def test_parallel_jobs_give_the_same_results(tmp_path: Path) -> None:
     run_many(["bad[fail_at_s=100]"], ["line[noise_m=0.01]"], [0, 1, 2], str(tmp_path / "a"), jobs=1)
     run_many(["bad[fail_at_s=100]"], ["line[noise_m=0.01]"], [0, 1, 2], str(tmp_path / "b"), jobs=2)
     for seed in (0, 1, 2):
-        a = Store(tmp_path / "a").read_run(Store(tmp_path / "a").run_dir("line[noise_m=0.01]", "bad[fail_at_s=100]", seed))
-        b = Store(tmp_path / "b").read_run(Store(tmp_path / "b").run_dir("line[noise_m=0.01]", "bad[fail_at_s=100]", seed))
+        a = Store(tmp_path / "a").read_run(
+            Store(tmp_path / "a").run_dir("line[noise_m=0.01]", "bad[fail_at_s=100]", seed)
+        )
+        b = Store(tmp_path / "b").read_run(
+            Store(tmp_path / "b").run_dir("line[noise_m=0.01]", "bad[fail_at_s=100]", seed)
+        )
         assert np.array_equal(a.mean, b.mean)
-    seeds_differ = Store(tmp_path / "a").read_run(Store(tmp_path / "a").run_dir("line[noise_m=0.01]", "bad[fail_at_s=100]", 1))
+    seeds_differ = Store(tmp_path / "a").read_run(
+        Store(tmp_path / "a").run_dir("line[noise_m=0.01]", "bad[fail_at_s=100]", 1)
+    )
     assert not np.array_equal(a.mean, seeds_differ.mean)
 
 

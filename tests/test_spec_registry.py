@@ -75,14 +75,16 @@ def test_seeds_depend_only_on_names() -> None:
 
 
 def test_unknown_ids_list_valid_ones() -> None:
-    with pytest.raises(UnknownIdError, match="valid: .*ekf_landmarks.*odometry"):
+    with pytest.raises(UnknownIdError, match=r"valid: .*ekf_landmarks.*odometry"):
         resolve_filter("nope")
-    with pytest.raises(UnknownIdError, match="valid: .*office.*room"):
+    with pytest.raises(UnknownIdError, match=r"valid: .*office.*room"):
         resolve_dataset("nope[x=1]")
 
 
 def test_missing_optional_dependency_is_unavailable(isolated_registries: None) -> None:
-    FILTERS.register("needs_x", "locbench.filters.base:Filter", requires_modules=("no_such_module_x",), install_hint="pip install x")
+    FILTERS.register(
+        "needs_x", "locbench.filters.base:Filter", requires_modules=("no_such_module_x",), install_hint="pip install x"
+    )
     reason = FILTERS.unavailable_reason("needs_x")
     assert reason is not None and "pip install x" in reason
     with pytest.raises(DependencyNotInstalled, match="pip install x"):

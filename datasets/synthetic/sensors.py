@@ -282,7 +282,7 @@ class LaserSensor:
 
     def angles(self) -> FloatArray:
         """Beam angles in the sensor frame, rad, shape (beams,)."""
-        return self.angle_min + self.angle_increment * np.arange(self.beams)
+        return self.angle_min + self.angle_increment * np.arange(self.beams, dtype=np.float64)
 
 
 def laser_scans(

@@ -57,10 +57,10 @@ def wall_with_doors(
         if a < s - 1e-12 or b > length + 1e-12 or b <= a:
             raise ConfigError(f"door (offset {0.5 * (a + b)} m, width {b - a} m) does not fit wall {p}->{q}")
         if a > s:
-            pieces.append((*(p_ + s * u), *(p_ + a * u)))  # type: ignore[arg-type]
+            pieces.append((*(p_ + s * u), *(p_ + a * u)))
         s = b
     if s < length:
-        pieces.append((*(p_ + s * u), *q_))  # type: ignore[arg-type]
+        pieces.append((*(p_ + s * u), *q_))
     return [tuple(float(v) for v in piece) for piece in pieces]  # type: ignore[misc]
 
 
