@@ -491,6 +491,12 @@ def _trajectory_figure(store: Store, col: _Collected, ds: str) -> Figure | None:
     gt = truth.ground_truth
     fig = _new_figure()
     ax = fig.add_subplot()
+    # the map first, in grey, so the tracks read against the walls and landmarks (000 fig. 5)
+    for k, (x1, y1, x2, y2) in enumerate(truth.map_segments):
+        ax.plot([x1, x2], [y1, y2], color="0.6", lw=1.2, solid_capstyle="butt", label="walls" if k == 0 else None)
+    if len(truth.map_landmarks):
+        lm = truth.map_landmarks
+        ax.plot(lm[:, 0], lm[:, 1], ls="none", marker="^", ms=5, color="0.45", label="landmarks")
     ax.plot(gt.xy[:, 0], gt.xy[:, 1], color="black", lw=1.0, label="ground truth")
     step = _nice_step(truth.duration_s, _ELLIPSES_PER_TRACK)
     t_marks = np.arange(gt.t[0], gt.t[-1] + 1e-9, step)[1:]

@@ -52,10 +52,16 @@ class TruthRecord:
     kidnaps: tuple[Kidnap, ...]
     duration_s: float
     meta: dict[str, Any] = field(default_factory=dict)
+    #: The world's line segments (n, 4) and landmark positions (m, 2), m, for figures; empty when absent.
+    map_segments: FloatArray = field(default_factory=lambda: np.zeros((0, 4)))
+    map_landmarks: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
 
     @classmethod
     def from_dataset(cls, ds: Dataset, seed: int, meta: dict[str, Any]) -> TruthRecord:
-        return cls(ds.name or ds.id, seed, ds.ground_truth, ds.waypoints, ds.kidnaps, ds.duration, meta)
+        w = ds.world
+        segs = w.lines.segments if w.lines is not None else np.zeros((0, 4))
+        lms = w.landmarks.xy if w.landmarks is not None else np.zeros((0, 2))
+        return cls(ds.name or ds.id, seed, ds.ground_truth, ds.waypoints, ds.kidnaps, ds.duration, meta, segs, lms)
 
 
 @dataclass(eq=False)
@@ -161,6 +167,8 @@ class Store:
             "kidnap_t": np.array([k.t for k in rec.kidnaps], dtype=np.float64),
             "kidnap_delta": np.array([k.delta for k in rec.kidnaps], dtype=np.float64).reshape(-1, 3),
             "duration_s": np.array(rec.duration_s),
+            "map_segments": np.asarray(rec.map_segments, dtype=np.float64).reshape(-1, 4),
+            "map_landmarks": np.asarray(rec.map_landmarks, dtype=np.float64).reshape(-1, 2),
         }
         meta = {"dataset": rec.dataset, "seed": rec.seed, **rec.meta}
         _atomic_write(path, lambda p: np.savez_compressed(p, **arrays))  # type: ignore[arg-type]
@@ -211,9 +219,11 @@ class Store:
                 for t, d in zip(z["kidnap_t"], z["kidnap_delta"], strict=True)
             )
             duration = float(z["duration_s"])
+            segs = z["map_segments"] if "map_segments" in z.files else np.zeros((0, 4))
+            lms = z["map_landmarks"] if "map_landmarks" in z.files else np.zeros((0, 2))
         meta_path = path.with_suffix(".json")
         meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
-        return TruthRecord(dataset, seed, gt, wp, kid, duration, meta)
+        return TruthRecord(dataset, seed, gt, wp, kid, duration, meta, segs, lms)
 
     def read_run(self, run_dir: str | os.PathLike[str]) -> RunRecord:
         d = Path(run_dir)

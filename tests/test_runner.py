@@ -27,6 +27,7 @@ def test_runs_are_stored_with_provenance(tmp_path: Path) -> None:
     assert np.allclose(rec.mean[-1], [5.0, 0.0, 0.0])
     truth = store.read_truth(rec.meta["dataset"], rec.meta["seed"])
     assert len(truth.waypoints) == 2  # type: ignore[arg-type]
+    assert np.array_equal(truth.map_landmarks, [[10.0, 2.0]])  # the map travels with the truth, for figures
 
 
 @pytest.mark.usefixtures("harness_registry")
