@@ -36,6 +36,14 @@ def tests(session: nox.Session) -> None:
 
 
 @nox.session(python=PYTHON, default=False)
+def tests_lowest(session: nox.Session) -> None:
+    """The tests against the lower bounds of every dependency (gtsam-free: its extra has one release)."""
+    session.install("-c", "constraints-lowest.txt", ".[filterpy,test]")
+    env = {"LOCBENCH_DATA": os.environ.get("LOCBENCH_DATA", "")}
+    session.run("pytest", "--benchmark-disable", *session.posargs, env=env)
+
+
+@nox.session(python=PYTHON, default=False)
 def lint(session: nox.Session) -> None:
     """ruff (lint and format check) and mypy over the package."""
     _install(session, "all,lint")
