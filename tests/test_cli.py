@@ -66,7 +66,7 @@ def test_list_shows_filters_datasets_suites(capsys: pytest.CaptureFixture[str]) 
 def test_run_then_report(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     res = str(tmp_path / "res")
     assert main(["run", "--suite", "smoke", "--seeds", "1", "--results", res, "--no-progress"]) == 0
-    assert "4 ok" in capsys.readouterr().out
+    assert "6 ok" in capsys.readouterr().out
     assert main(["report", "--results", res]) == 0
     summary = Path(res) / "summary"
     assert (summary / "metrics.csv").is_file() and (summary / "REPORT.md").is_file()
