@@ -29,7 +29,8 @@ from matplotlib.patches import Ellipse
 from scipy import stats
 
 import locbench
-from locbench.claims import ROOM_TABLE1_CM, claims_for, spec_id, waypoint_stats
+from locbench.claims import claims_for, sections_for, spec_id, waypoint_stats
+from locbench.claims.report_003 import ROOM_TABLE1_CM
 from locbench.metrics import (
     CONFIDENCE,
     POSE_DOF,
@@ -287,9 +288,18 @@ def write_report(store: Store) -> Path:
     df = col.metrics
     datasets = sorted({r.dataset for r in col.runs})
     figures: dict[str, list[str]] = {}
+    extra: dict[str, list[str]] = {}
+    extra_figures: set[str] = set()
     for ds in datasets:
         figures[ds] = _dataset_figures(store, col, ds, figdir)
-    written = {f for fs in figures.values() for f in fs}
+        extra[ds] = []
+        # sections registered by the report modules of locbench.claims (a sweep table, a figure ...)
+        for fn in sections_for(spec_id(ds)):
+            with matplotlib.style.context(["default", _STYLE]):
+                sec_lines, sec_figs = fn(df[df["dataset"] == ds], figdir, _slug(ds))
+            extra[ds] += sec_lines
+            extra_figures.update(sec_figs)
+    written = {f for fs in figures.values() for f in fs} | extra_figures
     for stale in sorted(figdir.glob("*.png")):
         if stale.name not in written:
             log.info("removing stale figure %s", stale.name)
@@ -297,7 +307,7 @@ def write_report(store: Store) -> Path:
 
     lines = _provenance(col)
     for ds in datasets:
-        lines += _dataset_section(df[df["dataset"] == ds], col, ds, figures[ds])
+        lines += _dataset_section(df[df["dataset"] == ds], col, ds, figures[ds], extra[ds])
     lines += _failures(col)
     path = summary / "REPORT.md"
     _write_if_changed(path, ("\n".join(lines).rstrip() + "\n").encode())
@@ -343,7 +353,9 @@ def _provenance(col: _Collected) -> list[str]:
     return lines
 
 
-def _dataset_section(df: pd.DataFrame, col: _Collected, ds: str, figs: list[str]) -> list[str]:
+def _dataset_section(
+    df: pd.DataFrame, col: _Collected, ds: str, figs: list[str], extra: list[str] | None = None
+) -> list[str]:
     lines = [f"## {ds}", ""]
     filters = _filter_order(df["filter"].unique()) if len(df) else []
     if not filters:
@@ -374,6 +386,7 @@ def _dataset_section(df: pd.DataFrame, col: _Collected, ds: str, figs: list[str]
         lines += _md_table(["claim", "verdict", "measured", "report"], crow)
         lines.append("")
 
+    lines += extra or []
     if figs:
         lines += ["### Figures", ""]
         lines += [f"![{Path(f).stem}](figures/{f})" for f in figs]

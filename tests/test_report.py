@@ -9,6 +9,7 @@ import pandas as pd
 import pytest
 
 from locbench import claims
+from locbench.claims import report_003
 from locbench.datasets.base import Trajectory2D, Waypoints
 from locbench.report import collect_metrics, write_metrics_csv, write_report
 from locbench.store import KIND_NAMES, RunRecord, Store, TruthRecord
@@ -42,10 +43,10 @@ def _tidy(per_filter: dict[str, list[float]], seeds: int = 2, marked: bool = Tru
 
 
 def _claim(claim_id: str) -> claims.Claim:
-    return next(c for c in claims.CLAIMS if c.id == claim_id)
+    return next(c for c in claims.all_claims() if c.id == claim_id)
 
 
-TABLE1_M = {k: [v / 100 for v in vals] for k, vals in claims.ROOM_TABLE1_CM.items()}
+TABLE1_M = {k: [v / 100 for v in vals] for k, vals in report_003.ROOM_TABLE1_CM.items()}
 
 
 def test_room_claims_reproduced_on_the_reports_own_numbers() -> None:
