@@ -299,6 +299,7 @@ def write_report(store: Store) -> Path:
                 sec_lines, sec_figs = fn(df[df["dataset"] == ds], figdir, _slug(ds))
             extra[ds] += sec_lines
             extra_figures.update(sec_figs)
+    across_lines = _across_variants(df, figdir, sorted({spec_id(d) for d in datasets}), extra_figures)
     written = {f for fs in figures.values() for f in fs} | extra_figures
     for stale in sorted(figdir.glob("*.png")):
         if stale.name not in written:
@@ -308,11 +309,39 @@ def write_report(store: Store) -> Path:
     lines = _provenance(col)
     for ds in datasets:
         lines += _dataset_section(df[df["dataset"] == ds], col, ds, figures[ds], extra[ds])
+    lines += across_lines
     lines += _failures(col)
     path = summary / "REPORT.md"
     _write_if_changed(path, ("\n".join(lines).rstrip() + "\n").encode())
     log.info("wrote %s (%d metric rows, %d figures)", path, len(df), len(written))
     return path
+
+
+def _across_variants(df: pd.DataFrame, figdir: Path, ids: list[str], figures_out: set[str]) -> list[str]:
+    """Claims and sections evaluated over every stored variant of a dataset id (sweeps, kidnap distances)."""
+    lines: list[str] = []
+    ids_of = df["dataset"].map(spec_id) if len(df) else pd.Series(dtype=str)
+    for ident in ids:
+        rows = df[ids_of == ident]
+        claims = claims_for(ident, across_variants=True)
+        sections = sections_for(ident, across_variants=True)
+        if not (claims or sections):
+            continue
+        lines += [f"## {ident}: across its variants", ""]
+        for fn in sections:
+            with matplotlib.style.context(["default", _STYLE]):
+                sec_lines, sec_figs = fn(rows, figdir, _slug(ident))
+            lines += sec_lines
+            figures_out.update(sec_figs)
+        if claims:
+            lines += ["### Claims", ""]
+            crow = []
+            for c in claims:
+                res = c.evaluate(rows)
+                crow.append([c.text, f"**{res.verdict}**", res.measured, c.reported])
+            lines += _md_table(["claim", "verdict", "measured", "report"], crow)
+            lines.append("")
+    return lines
 
 
 def _provenance(col: _Collected) -> list[str]:

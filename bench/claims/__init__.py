@@ -59,7 +59,11 @@ class Claim:
     reported : str
         The report's own numbers behind the claim.
     check : callable
-        Tidy metrics rows of one dataset name -> :class:`ClaimResult`.
+        Tidy metrics rows of one dataset name -> :class:`ClaimResult`; with ``across_variants`` the rows
+        of every stored variant of the dataset id (``scan_grid`` and ``scan_grid[mixed_commands=true]``).
+    across_variants : bool
+        Evaluated once over all variants of the dataset id (a sweep over a dataset parameter, recovery
+        against kidnap distance) instead of once per dataset name.
     """
 
     id: str
@@ -68,6 +72,7 @@ class Claim:
     text: str
     reported: str
     check: Callable[[pd.DataFrame], ClaimResult]
+    across_variants: bool = False
 
     def evaluate(self, df: pd.DataFrame) -> ClaimResult:
         """Run the check; a check that cannot run (missing data) is "not evaluated", never an exception."""
@@ -147,7 +152,7 @@ def fmt_cm(values: np.ndarray | tuple[float, ...]) -> str:
 SectionFn = Callable[[pd.DataFrame, Path, str], tuple[list[str], list[str]]]
 
 _CLAIMS: list[Claim] = []
-_SECTIONS: list[tuple[str, SectionFn]] = []
+_SECTIONS: list[tuple[str, SectionFn, bool]] = []
 _loaded = False
 
 
@@ -161,14 +166,15 @@ def register(*claims: Claim) -> None:
         known.add(c.id)
 
 
-def register_section(dataset_id: str, fn: SectionFn) -> None:
+def register_section(dataset_id: str, fn: SectionFn, across_variants: bool = False) -> None:
     """Add an extra report section for a dataset id.
 
-    ``fn(rows, figdir, slug)`` gets the tidy metrics rows of one dataset name, the figures folder and a
-    file-name slug of the dataset name; it writes its figures (named ``<slug>_*.png``) and returns the
-    Markdown lines of its section and the names of the figures it wrote.
+    ``fn(rows, figdir, slug)`` gets the tidy metrics rows of one dataset name (with ``across_variants``:
+    of every stored variant of the dataset id), the figures folder and a file-name slug; it writes its
+    figures (named ``<slug>_*.png``) and returns the Markdown lines of its section (starting with a
+    ``###`` heading) and the names of the figures it wrote.
     """
-    _SECTIONS.append((dataset_id, fn))
+    _SECTIONS.append((dataset_id, fn, across_variants))
 
 
 def _load() -> None:
@@ -187,12 +193,12 @@ def all_claims() -> tuple[Claim, ...]:
     return tuple(_CLAIMS)
 
 
-def claims_for(dataset_id: str) -> tuple[Claim, ...]:
-    """The registered claims about a dataset id, in registry order."""
-    return tuple(c for c in all_claims() if c.dataset == dataset_id)
+def claims_for(dataset_id: str, across_variants: bool = False) -> tuple[Claim, ...]:
+    """The registered claims about a dataset id (per dataset name, or across its variants), in order."""
+    return tuple(c for c in all_claims() if c.dataset == dataset_id and c.across_variants == across_variants)
 
 
-def sections_for(dataset_id: str) -> tuple[SectionFn, ...]:
+def sections_for(dataset_id: str, across_variants: bool = False) -> tuple[SectionFn, ...]:
     """The extra report sections registered for a dataset id."""
     _load()
-    return tuple(fn for ds, fn in _SECTIONS if ds == dataset_id)
+    return tuple(fn for ds, fn, av in _SECTIONS if ds == dataset_id and av == across_variants)
