@@ -14,12 +14,41 @@ Conventions shared by every function here:
 Metric ids returned by :func:`run_metrics` are the DESIGN names (``results/summary/metrics.csv``); an id
 never changes meaning. Undefined values (no update calls, a path shorter than the RPE distance) are
 left out of the returned dict rather than stored as NaN.
+
+**Recovery criterion** (DESIGN "Kidnap recovery"): at a ground-truth time the filter is *within* when
+its position error is <= :data:`RECOVERY_POSITION_M` (0.25 m) and its wrapped heading error is
+<= :data:`RECOVERY_HEADING_RAD` (0.25 rad). It *recovers* at the first ground-truth time t_s from which
+it is within at every ground-truth sample of [t_s, t_s + :data:`RECOVERY_HOLD_S`] (2 s); the hold must
+end inside the ground truth, so a run that ends during the hold has not recovered. Errors are taken by
+the zero-order hold like every other metric.
+
+Metric ids added on top of the DESIGN list (each documented here, none changes an existing id):
+
+- ``kidnap_distance_m``, ``kidnap_recovered``, ``kidnap_time_to_recover_s``,
+  ``kidnap_false_confidence_fraction``: only when the truth has kidnap events, and always about the
+  **first** kidnap (a later kidnap only cuts its window short). ``kidnap_distance_m`` is |(dx, dy)|
+  of the jump, m, from the truth record. ``kidnap_recovered`` is 1 when the recovery t_s lies in
+  [t_k, t_k + :data:`KIDNAP_WINDOW_S`] (30 s; the 2 s hold may run past the window) and before the
+  next kidnap, else 0; ``kidnap_time_to_recover_s`` = t_s - t_k, s, present only when recovered.
+  ``kidnap_false_confidence_fraction`` is the fraction of the time from t_k to the recovery (not
+  recovered: to the end of the 30 s window, the next kidnap or the end of the truth, whichever is
+  first) during which the NEES exceeds the one-sided :data:`FALSE_CONFIDENCE_PROBABILITY` (99.9 %)
+  chi-square(3) quantile, 16.27: the filter is wrong and does not know it. Each ground-truth sample's
+  NEES holds until the next sample; an empty window (recovered at t_k itself) gives 0.
+- ``converged`` (1/0) and ``time_to_converge_s``, for every ok run (global localization): the
+  recovery criterion searched from the first ground-truth time over the whole run;
+  ``time_to_converge_s`` = t_s - t_0, s, present only when converged. A filter started at the true
+  pose typically has ``converged`` = 1 and ``time_to_converge_s`` = 0.
+- ``smoothed_ate_m``, ``smoothed_heading_rmse_rad``: when the run's ``extra`` holds a smoothed
+  trajectory (``smoothed_t`` (n,), s, and ``smoothed_mean`` (n, 3), world frame), its ATE and wrapped
+  heading RMSE, defined exactly as ``ate_m`` and ``heading_rmse_rad`` (zero-order hold of the
+  smoothed poses at the ground-truth times).
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
@@ -29,6 +58,7 @@ from scipy import stats
 from locbench.geometry import between, pose_error, wrap_angle
 
 if TYPE_CHECKING:
+    from locbench.datasets.base import Kidnap
     from locbench.store import RunRecord, TruthRecord
 
 log = logging.getLogger(__name__)
@@ -41,6 +71,18 @@ CONFIDENCE = 0.95
 RPE_DELTA_M = 1.0
 #: Degrees of freedom of the pose error (x, y, theta).
 POSE_DOF = 3
+#: Recovery criterion (DESIGN "Kidnap recovery"): largest position error, m ...
+RECOVERY_POSITION_M = 0.25
+#: ... largest wrapped heading error, rad ...
+RECOVERY_HEADING_RAD = 0.25
+#: ... held without a break for this long, s.
+RECOVERY_HOLD_S = 2.0
+#: A kidnap counts as recovered only when the hold starts within this time after the kidnap, s.
+KIDNAP_WINDOW_S = 30.0
+#: One-sided chi-square(3) probability whose quantile marks false confidence after a kidnap.
+FALSE_CONFIDENCE_PROBABILITY = 0.999
+#: Tolerance on time comparisons, s (ground-truth times are sums of float steps).
+_T_EPS = 1e-6
 
 
 # --- zero-order hold ----------------------------------------------------------------------------
@@ -290,6 +332,208 @@ def fraction_in_band(values: npt.ArrayLike, band: tuple[float, float]) -> float:
     return float(np.mean((v >= band[0]) & (v <= band[1])))
 
 
+# --- recovery: kidnap and global localization ----------------------------------------------------
+
+
+def within_recovery(
+    t_est: npt.ArrayLike, mean: npt.ArrayLike, gt_t: npt.ArrayLike, gt_poses: npt.ArrayLike
+) -> npt.NDArray[np.bool_]:
+    """Whether the estimate meets the recovery criterion at each ground-truth time.
+
+    Parameters
+    ----------
+    t_est : array-like, shape (n,)
+        Estimate times, s.
+    mean : array-like, shape (n, 3)
+        Estimated poses (x m, y m, theta rad), world frame.
+    gt_t : array-like, shape (k,)
+        Ground-truth times, s.
+    gt_poses : array-like, shape (k, 3)
+        Ground-truth poses, world frame.
+
+    Returns
+    -------
+    ndarray of bool, shape (k,)
+        Position error <= :data:`RECOVERY_POSITION_M` and |wrapped heading error| <=
+        :data:`RECOVERY_HEADING_RAD` (zero-order hold of the estimate).
+    """
+    est = estimate_at(t_est, np.asarray(mean, dtype=np.float64), gt_t)
+    e = pose_error(est, np.asarray(gt_poses, dtype=np.float64))
+    with np.errstate(invalid="ignore"):
+        return (np.hypot(e[:, 0], e[:, 1]) <= RECOVERY_POSITION_M) & (np.abs(e[:, 2]) <= RECOVERY_HEADING_RAD)
+
+
+def first_hold(
+    t: npt.ArrayLike,
+    ok: npt.ArrayLike,
+    t_from: float,
+    latest_start: float = np.inf,
+    hold_s: float = RECOVERY_HOLD_S,
+) -> float | None:
+    """The first time from which a condition holds at every sample for ``hold_s`` seconds.
+
+    Parameters
+    ----------
+    t : array-like, shape (k,)
+        Sample times, s, increasing.
+    ok : array-like of bool, shape (k,)
+        The condition at each sample.
+    t_from : float
+        Only samples at or after this time count, s.
+    latest_start : float
+        The hold must start at or before this time, s (it may end later).
+    hold_s : float
+        Required duration, s: every sample in [t_s, t_s + hold_s] is ok and a sample at or after
+        t_s + hold_s exists.
+
+    Returns
+    -------
+    float or None
+        t_s, a sample time, or None when the condition never holds long enough in time.
+    """
+    tt = np.asarray(t, dtype=np.float64)
+    good = np.asarray(ok, dtype=bool) & (tt >= t_from - _T_EPS)
+    if not good.any():
+        return None
+    # Runs of consecutive ok samples: the earliest start of a long-enough run is the answer, since a
+    # later start inside the same run only shortens it.
+    edges = np.diff(np.concatenate([[0], good.astype(np.int8), [0]]))
+    starts = np.flatnonzero(edges == 1)
+    ends = np.flatnonzero(edges == -1) - 1
+    long_enough = (tt[ends] - tt[starts] >= hold_s - _T_EPS) & (tt[starts] <= latest_start + _T_EPS)
+    if not long_enough.any():
+        return None
+    return float(tt[starts[np.argmax(long_enough)]])
+
+
+def time_fraction(t: npt.ArrayLike, flag: npt.ArrayLike, t0: float, t1: float) -> float:
+    """Fraction of [t0, t1] during which a per-sample flag, held until the next sample, is set.
+
+    The flag in force at a time is that of the last sample at or before it (the first sample before
+    the first). Returns 0 for an empty interval (t1 <= t0).
+    """
+    if t1 - t0 <= _T_EPS:
+        return 0.0
+    tt = np.asarray(t, dtype=np.float64)
+    inner = tt[(tt > t0) & (tt < t1)]
+    edges = np.concatenate([[t0], inner, [t1]])
+    on = np.asarray(estimate_at(tt, np.asarray(flag, dtype=bool), edges[:-1]), dtype=bool)
+    return float(np.sum(np.diff(edges)[on]) / (t1 - t0))
+
+
+def false_confidence_bound(probability: float = FALSE_CONFIDENCE_PROBABILITY, dof: int = POSE_DOF) -> float:
+    """One-sided chi-square quantile above which the NEES counts as false confidence (16.27 for 99.9 %, 3)."""
+    return float(stats.chi2.ppf(probability, dof))
+
+
+def kidnap_metrics(
+    t_est: npt.ArrayLike,
+    mean: npt.ArrayLike,
+    cov: npt.ArrayLike,
+    gt_t: npt.ArrayLike,
+    gt_poses: npt.ArrayLike,
+    kidnaps: Sequence[Kidnap],
+) -> dict[str, float]:
+    """Recovery from the first kidnap of a run (definitions in the module docstring).
+
+    Parameters
+    ----------
+    t_est, mean, cov : array-like, shapes (n,), (n, 3), (n, 3, 3)
+        The stored estimates.
+    gt_t, gt_poses : array-like, shapes (k,), (k, 3)
+        The ground truth (after a kidnap: the pose after the jump).
+    kidnaps : sequence of Kidnap
+        The truth's kidnap events (time s, world-frame jump (dx m, dy m, dtheta rad)); only the first
+        (earliest) is scored.
+
+    Returns
+    -------
+    dict of str to float
+        ``kidnap_distance_m``, ``kidnap_recovered``, ``kidnap_time_to_recover_s`` (only when recovered)
+        and ``kidnap_false_confidence_fraction``; empty without kidnaps.
+    """
+    if not kidnaps:
+        return {}
+    ordered = sorted(kidnaps, key=lambda k: k.t)
+    first = ordered[0]
+    tt = np.asarray(gt_t, dtype=np.float64)
+    t_k = float(first.t)
+    # the window ends at 30 s, at the next kidnap (which would score a different jump) or with the truth
+    t_next = float(ordered[1].t) if len(ordered) > 1 else np.inf
+    window_end = min(t_k + KIDNAP_WINDOW_S, t_next, float(tt[-1]))
+    ok = within_recovery(t_est, mean, tt, gt_poses)
+    if np.isfinite(t_next):
+        ok = ok & (tt < t_next - _T_EPS)  # a hold must not straddle the next jump
+    t_s = first_hold(tt, ok, t_k, latest_start=min(t_k + KIDNAP_WINDOW_S, t_next))
+    out = {"kidnap_distance_m": float(np.hypot(first.delta[0], first.delta[1]))}
+    out["kidnap_recovered"] = 1.0 if t_s is not None else 0.0
+    if t_s is not None:
+        out["kidnap_time_to_recover_s"] = t_s - t_k
+    ne = nees_at_truth(t_est, mean, cov, tt, gt_poses)
+    confident = ne > false_confidence_bound()
+    out["kidnap_false_confidence_fraction"] = time_fraction(tt, confident, t_k, window_end if t_s is None else t_s)
+    return out
+
+
+def convergence_metrics(
+    t_est: npt.ArrayLike, mean: npt.ArrayLike, gt_t: npt.ArrayLike, gt_poses: npt.ArrayLike
+) -> dict[str, float]:
+    """Global localization: ``converged`` (1/0) and ``time_to_converge_s`` (only when converged).
+
+    The recovery criterion (module docstring) searched from the first ground-truth time t_0 over the
+    whole run; ``time_to_converge_s`` = t_s - t_0, s.
+    """
+    tt = np.asarray(gt_t, dtype=np.float64)
+    t_s = first_hold(tt, within_recovery(t_est, mean, tt, gt_poses), float(tt[0]))
+    if t_s is None:
+        return {"converged": 0.0}
+    return {"converged": 1.0, "time_to_converge_s": t_s - float(tt[0])}
+
+
+def smoothed_metrics(extra: Mapping[str, np.ndarray], gt_t: npt.ArrayLike, gt_poses: npt.ArrayLike) -> dict[str, float]:
+    """ATE and heading RMSE of a smoothed trajectory stored in a run's ``extra``, if there is one.
+
+    Parameters
+    ----------
+    extra : mapping
+        The run's filter-specific arrays; uses ``smoothed_t`` (n,), s, and ``smoothed_mean`` (n, 3),
+        world frame.
+    gt_t, gt_poses : array-like, shapes (k,), (k, 3)
+        The ground truth.
+
+    Returns
+    -------
+    dict of str to float
+        ``smoothed_ate_m`` and ``smoothed_heading_rmse_rad``; empty when the run has no smoothed
+        trajectory or an empty one.
+
+    Raises
+    ------
+    ValueError
+        When only one of the two arrays is present or their shapes do not match.
+    """
+    has_t, has_m = "smoothed_t" in extra, "smoothed_mean" in extra
+    if not (has_t or has_m):
+        return {}
+    if not (has_t and has_m):
+        raise ValueError("a run's extra must hold both 'smoothed_t' (n,) and 'smoothed_mean' (n, 3), or neither")
+    st = np.asarray(extra["smoothed_t"], dtype=np.float64)
+    sm = np.asarray(extra["smoothed_mean"], dtype=np.float64)
+    if st.ndim != 1 or sm.shape != (st.shape[0], 3):
+        raise ValueError(
+            f"smoothed trajectory: expected 'smoothed_t' (n,) and 'smoothed_mean' (n, 3), got {st.shape} and {sm.shape}"
+        )
+    if st.shape[0] == 0:
+        return {}
+    if np.any(np.diff(st) < 0):
+        raise ValueError("smoothed trajectory: 'smoothed_t' must be non-decreasing")
+    gp = np.asarray(gt_poses, dtype=np.float64)
+    return {
+        "smoothed_ate_m": ate(st, sm, gt_t, gp[:, :2]),
+        "smoothed_heading_rmse_rad": heading_rmse(st, sm, gt_t, gp[:, 2]),
+    }
+
+
 # --- runtime ------------------------------------------------------------------------------------
 
 
@@ -347,7 +591,10 @@ def run_metrics(run: RunRecord, truth: TruthRecord, rpe_delta_m: float = RPE_DEL
         when the dataset has waypoints), ``ate_m``, ``heading_rmse_rad``, ``rpe_m_per_m``,
         ``final_error_m``, ``anees``, ``nees_in_band_fraction`` (single-run two-sided 95 %
         chi-square(3) band), ``predict_us_{mean,median,p95}``, ``update_us_{mean,median,p95}``,
-        ``realtime_factor``. Undefined values are left out.
+        ``realtime_factor``, ``converged`` and ``time_to_converge_s``; with kidnaps in the truth
+        ``kidnap_distance_m``, ``kidnap_recovered``, ``kidnap_time_to_recover_s`` and
+        ``kidnap_false_confidence_fraction`` (first kidnap); with a smoothed trajectory in
+        ``run.extra`` ``smoothed_ate_m`` and ``smoothed_heading_rmse_rad``. Undefined values are left out.
     """
     status = run.status
     if status == "skipped":
@@ -379,7 +626,9 @@ def run_metrics(run: RunRecord, truth: TruthRecord, rpe_delta_m: float = RPE_DEL
         for stat, value in runtime_stats(run.step_times_us(call)).items():
             out[f"{call}_us_{stat}"] = value
     out["realtime_factor"] = realtime_factor(truth.duration_s, run.step_ns)
-    # Kidnap recovery (kidnap_recovered, kidnap_time_to_recover_s) joins here when truth.kidnaps is set.
+    out.update(convergence_metrics(run.t, run.mean, gt.t, gt_poses))
+    out.update(kidnap_metrics(run.t, run.mean, run.cov, gt.t, gt_poses, truth.kidnaps))
+    out.update(smoothed_metrics(run.extra, gt.t, gt_poses))
     return {k: v for k, v in out.items() if not np.isnan(v)}
 
 
