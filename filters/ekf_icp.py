@@ -1,0 +1,390 @@
+"""EKF localization whose observation is an ICP match against a scan ray-cast in the map (report 000).
+
+Report 000 (Castilho, Gomes, Sousa, Kuehlen, "EKF-based localization with LRF", IST 2016/17) estimates
+X = (x, y, theta) (eq. 1) with a Pioneer 3DX's odometry and a Hokuyo laser on a 0.05 m occupancy grid.
+
+Prediction (eq. 11-13). The report predicts with backward differences of the odometry pose,
+X^- = X + (dx_odom, dy_odom, dtheta_odom) with F = [[1, 0, -dy_odom], [0, 1, dx_odom], [0, 0, 1]]
+(eq. 11-12). Here an odometry event gives the increment (dx, dy, dtheta) in the previous robot frame,
+so the world-frame increment is (dx_w, dy_w) = R(theta) (dx, dy): exactly eq. 11-12 written in the
+map frame (the report's odometry frame only differs from it by a rotation). Q is diagonal (eq. 13):
+
+    Q = diag(q_x,stat + q_x,dyn |dx_w|,  q_y,stat + q_y,dyn |dy_w|,  q_theta,stat + q_theta,dyn |dtheta|).
+
+The dynamic terms grow with the motion, so their sum over a path does not depend on the odometry rate.
+The static terms are per time step of the report's odometry (rosaria publishes the Pioneer's pose once
+per 100 ms SIP cycle, 10 Hz); here they are scaled by dt / ``static_noise_period_s`` so that they mean
+the same variance per second at any odometry rate (the synthetic robots report at 20 Hz).
+
+Observation (sec. III-A.2, eq. 2-3, 14). At each LaserScan a scan is ray-cast from the occupancy grid
+(:func:`locbench.raycast.cast_rays`) at the predicted sensor pose with the real scan's geometry
+(angle_min, angle_increment, beam count, range_max, sensor_pose). Both scans become points in the robot
+frame, and point-to-point ICP (:mod:`locbench.filters._icp`) aligns the real points (source) onto the
+ray-cast points (target). If the world point w is seen at p_real = T^-1 w from the true pose T and at
+p_pred = X^-1 w from the predicted pose X, the ICP transform is M = X^-1 T: the true pose in the
+predicted robot frame. The observation is Z = X (+) M (eq. 2), the predicted observation is Z^ = X
+(h(X) = X, H = I, eq. 14), and V = Z - Z^ = (R(theta) t_M, theta_M) (eq. 3, heading wrapped).
+
+Update (eq. 15-18). K = P (P + R)^-1, X = X + K V, with R = diag(r_x, r_y, r_theta) (eq. 16); the
+covariance uses the Joseph form (I - K) P (I - K)^T + K R K^T, equal to eq. 18 for the optimal gain but
+symmetric PSD under rounding.
+
+Matching (sec. III-B): a scan is a mismatch, and the belief stays the prediction, when ICP did not
+converge or when fewer points matched than the threshold (``min_matched_fraction`` of the smaller of the
+two clouds, at least ``min_matched_points``; the report gives no value).
+
+Kidnap rule (sec. IV-B): after ``kidnap_mismatches`` (100) consecutive mismatches P is multiplied by
+``kidnap_cov_factor`` (10) and the ICP threshold is tightened (the correspondence distances below times
+``kidnap_threshold_factor``). The counter then restarts, so the rule fires again after another 100
+mismatches (P grows by 10 each time; the threshold is tightened once, not compounded). The report does
+not say when the threshold is restored; here it returns to normal at the first accepted match, when the
+filter has found its position again.
+
+PCL's maximum correspondence distance (appendix: 0.002 m) cannot mean the same here. In PCL it rejects
+every nearest-neighbour pair farther apart than 2 mm. The real and the ray-cast scan sample the walls at
+different points, the simulated laser has 1 cm range noise and the map 5 cm cells, so a correct pair is
+typically 1-3 cm apart even at the true pose: a 2 mm rejection would leave almost no pairs and every scan
+would be a mismatch. The rejection distance is derived instead from what a correct pair's distance
+should be (a principled choice, not fitted): with sigma_l the laser's range noise (the dataset's nominal
+``laser_sigma_m``), c the grid cell and the predicted covariance P,
+
+    floor     D_min = k sqrt(2 sigma_l^2 + c^2 / 6)                  (noise of both points, cell quantisation)
+    initial   D_0   = k sqrt(2 sigma_l^2 + c^2 / 6 + lambda_max(P_xy) + r_mean^2 P_thth)
+
+with k = ``correspondence_sigmas`` (3), r_mean the mean range of the real scan, and D_0 capped at
+``max_correspondence_cap_m``. ICP starts with D_0 (pairs as far apart as the pose uncertainty allows)
+and shrinks it each iteration by Zhang's rule down to D_min (see :mod:`locbench.filters._icp`). The
+report's other ICP parameters (700 iterations, transformation epsilon 5e-7) keep their PCL meaning.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+import numpy.typing as npt
+from scipy.spatial import cKDTree
+
+from locbench.datasets.base import Gaussian2, MapKind, SensorSpec, WorldMap
+from locbench.errors import ConfigError, FilterDiverged
+from locbench.events import LaserScan, Observation, Odometry
+from locbench.filters._icp import MIN_PAIRS, IcpResult, icp_2d
+from locbench.filters.base import Estimate, Filter, FilterConfig
+from locbench.geometry import wrap_scalar
+from locbench.raycast import cast_rays
+
+FloatArray = npt.NDArray[np.float64]
+logger = logging.getLogger(__name__)
+
+#: Laser range noise used when neither the config nor the dataset gives one, m (a Hokuyo URG-04LX is +-3 cm).
+DEFAULT_LASER_SIGMA_M = 0.01
+
+
+@dataclass(frozen=True, kw_only=True)
+class IcpEKFConfig(FilterConfig):
+    """Configuration of :class:`IcpEKF`; defaults are report 000's appendix A where it gives a value.
+
+    Attributes
+    ----------
+    q_x_stat_m2, q_y_stat_m2 : float
+        Static process noise per ``static_noise_period_s`` (eq. 13), m^2 (appendix: 0.0005).
+    q_theta_stat_rad2 : float
+        Static heading process noise, rad^2 (appendix: 0.0005).
+    q_x_dyn_m2_per_m, q_y_dyn_m2_per_m : float
+        Dynamic process noise per metre of world-frame increment |dx_w|, |dy_w| (eq. 13), m^2/m (appendix: 0.001).
+    q_theta_dyn_rad2_per_rad : float
+        Dynamic heading noise per radian turned, rad^2/rad (appendix: 0.0011).
+    r_x_m2, r_y_m2 : float
+        Observation noise of the ICP pose (eq. 16), m^2 (appendix: 0.008).
+    r_theta_rad2 : float
+        Observation noise of the ICP heading, rad^2 (appendix: 0.01).
+    static_noise_period_s : float
+        The odometry period the static terms refer to, s: rosaria's 10 Hz pose rate (0.1 s); each step's
+        static term is scaled by dt / this period.
+    max_iterations : int
+        ICP iteration cap (appendix: 700).
+    transformation_epsilon : float
+        ICP convergence, PCL's meaning (appendix: 5e-7): squared translation change m^2, 1 - cos(rotation change).
+    correspondence_sigmas : float
+        k of the rejection distances D_min and D_0 (module docstring), in standard deviations of a correct
+        pair's distance; replaces PCL's 0.002 m maximum correspondence distance. Default 3.
+    max_correspondence_cap_m : float
+        Upper bound of the initial rejection distance D_0, m (keeps pairs local when P is large). Default 1.
+    min_matched_fraction : float
+        Mismatch rule 2: at least this fraction of the smaller cloud must be matched. Default 0.5 (most of
+        the scan agrees with the map); the report gives no value.
+    min_matched_points : int
+        And at least this many points. Default 10.
+    kidnap_mismatches : int
+        Consecutive mismatches that trigger the kidnap rule (sec. IV-B: 100).
+    kidnap_cov_factor : float
+        P is multiplied by this when the rule fires (sec. IV-B: 10).
+    kidnap_threshold_factor : float
+        The rejection distances are multiplied by this (< 1: tighter) from the rule firing to the next
+        accepted match. Default 0.5; the report says "decreasing its threshold" without a value.
+    laser_sigma_m : float or None
+        Laser range noise for D_min/D_0, m; None takes the dataset's nominal ``laser_sigma_m``.
+    """
+
+    q_x_stat_m2: float = 0.0005
+    q_y_stat_m2: float = 0.0005
+    q_theta_stat_rad2: float = 0.0005
+    q_x_dyn_m2_per_m: float = 0.001
+    q_y_dyn_m2_per_m: float = 0.001
+    q_theta_dyn_rad2_per_rad: float = 0.0011
+    r_x_m2: float = 0.008
+    r_y_m2: float = 0.008
+    r_theta_rad2: float = 0.01
+    static_noise_period_s: float = 0.1
+    max_iterations: int = 700
+    transformation_epsilon: float = 5e-7
+    correspondence_sigmas: float = 3.0
+    max_correspondence_cap_m: float = 1.0
+    min_matched_fraction: float = 0.5
+    min_matched_points: int = 10
+    kidnap_mismatches: int = 100
+    kidnap_cov_factor: float = 10.0
+    kidnap_threshold_factor: float = 0.5
+    laser_sigma_m: float | None = None
+
+    def __post_init__(self) -> None:
+        for name in (
+            "q_x_stat_m2",
+            "q_y_stat_m2",
+            "q_theta_stat_rad2",
+            "q_x_dyn_m2_per_m",
+            "q_y_dyn_m2_per_m",
+            "q_theta_dyn_rad2_per_rad",
+        ):
+            if not getattr(self, name) >= 0.0:
+                raise ConfigError(f"{name} must be a variance >= 0, got {getattr(self, name)}")
+        for name in (
+            "r_x_m2",
+            "r_y_m2",
+            "r_theta_rad2",
+            "static_noise_period_s",
+            "transformation_epsilon",
+            "correspondence_sigmas",
+            "max_correspondence_cap_m",
+        ):
+            if not getattr(self, name) > 0.0:
+                raise ConfigError(f"{name} must be > 0, got {getattr(self, name)}")
+        if self.max_iterations < 1:
+            raise ConfigError(f"max_iterations must be >= 1, got {self.max_iterations}")
+        if not 0.0 <= self.min_matched_fraction <= 1.0:
+            raise ConfigError(f"min_matched_fraction must be in [0, 1], got {self.min_matched_fraction}")
+        if self.min_matched_points < MIN_PAIRS:
+            raise ConfigError(f"min_matched_points must be >= {MIN_PAIRS}, got {self.min_matched_points}")
+        if self.kidnap_mismatches < 1:
+            raise ConfigError(f"kidnap_mismatches must be >= 1, got {self.kidnap_mismatches}")
+        if not self.kidnap_cov_factor >= 1.0:
+            raise ConfigError(f"kidnap_cov_factor must be >= 1, got {self.kidnap_cov_factor}")
+        if not 0.0 < self.kidnap_threshold_factor <= 1.0:
+            raise ConfigError(f"kidnap_threshold_factor must be in (0, 1], got {self.kidnap_threshold_factor}")
+        if self.laser_sigma_m is not None and not self.laser_sigma_m > 0.0:
+            raise ConfigError(f"laser_sigma_m must be > 0 (or None for the dataset's value), got {self.laser_sigma_m}")
+
+
+def scan_points(ranges: FloatArray, angles: FloatArray, sensor_pose: tuple[float, float, float]) -> FloatArray:
+    """Beam end points in the robot frame, m, shape (n, 2), for the given (finite) ranges and sensor-frame angles."""
+    sx, sy, sth = sensor_pose
+    a = angles + sth
+    return np.column_stack([sx + ranges * np.cos(a), sy + ranges * np.sin(a)])
+
+
+class IcpEKF(Filter):
+    """EKF on (x, y, theta): odometry prediction, ICP-against-the-map pose update (report 000).
+
+    See the module docstring for the equations and the choices made. Diagnostics of :meth:`estimate`
+    (after a scan; zeros and NaN after a predict): ``accepted`` and ``rejected`` (1 if the last scan was
+    used / was a mismatch), ``iterations`` (ICP iterations), ``matched_points``, ``consecutive_mismatches``,
+    ``kidnap_resets`` (times the kidnap rule fired so far), ``nis`` (V^T (P + R)^-1 V of an accepted scan).
+    """
+
+    consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LaserScan})
+    requires: ClassVar[frozenset[MapKind]] = frozenset({MapKind.OCCUPANCY})
+    Config: ClassVar[type[FilterConfig]] = IcpEKFConfig
+    version: ClassVar[int] = 1
+    source: ClassVar[str] = "000_2af74c528ee7b17b (EKF with LRF: eq. 11-18, sec. III-B, IV-B, appendix A)"
+
+    config: IcpEKFConfig
+
+    def reset(self, initial: Gaussian2, world: WorldMap, sensors: SensorSpec, rng: np.random.Generator) -> None:
+        """Start from ``initial`` on ``world.occupancy``; ``rng`` is unused (the filter is deterministic)."""
+        cfg = self.config
+        grid = world.occupancy
+        if grid is None:
+            raise ConfigError("IcpEKF needs world.occupancy; the dataset provides no occupancy grid")
+        if grid.origin[2] != 0.0:
+            raise ConfigError(f"IcpEKF: the occupancy grid origin theta must be 0, got {grid.origin[2]}")
+        self._occ = np.ascontiguousarray(grid.occupied())
+        self._res = float(grid.resolution)
+        self._origin = (float(grid.origin[0]), float(grid.origin[1]))
+        sigma_l = cfg.laser_sigma_m if cfg.laser_sigma_m is not None else sensors.laser_sigma_m
+        if sigma_l is None:
+            logger.warning("no nominal laser noise in the config or dataset; using %g m", DEFAULT_LASER_SIGMA_M)
+            sigma_l = DEFAULT_LASER_SIGMA_M
+        # Variance of a correct pair's distance: laser noise on both clouds' ranges plus cell quantisation.
+        self._pair_var = 2.0 * sigma_l**2 + self._res**2 / 6.0
+        m = np.asarray(initial.mean, dtype=np.float64)
+        self._x = np.array([m[0], m[1], wrap_scalar(float(m[2]))])
+        c = np.asarray(initial.cov, dtype=np.float64)
+        self._P = 0.5 * (c + c.T)
+        self._R = np.diag([cfg.r_x_m2, cfg.r_y_m2, cfg.r_theta_rad2])
+        self._t = math.nan
+        self._last_odo_t: float | None = None
+        self._consecutive = 0
+        self._tightened = False
+        self._kidnap_resets = 0
+        self._diag = self._empty_diag()
+
+    def _empty_diag(self) -> dict[str, float]:
+        return {
+            "accepted": 0.0,
+            "rejected": 0.0,
+            "iterations": 0.0,
+            "matched_points": 0.0,
+            "consecutive_mismatches": float(self._consecutive),
+            "kidnap_resets": float(self._kidnap_resets),
+            "nis": math.nan,
+        }
+
+    # --- prediction (eq. 11-13) ------------------------------------------------------------------------
+
+    def predict(self, u: Odometry) -> None:
+        """Add the world-frame odometry increment (eq. 11); P = F P F^T + Q (eq. 5, 12, 13)."""
+        cfg = self.config
+        th = float(self._x[2])
+        c, s = math.cos(th), math.sin(th)
+        dxw = c * u.dx - s * u.dy
+        dyw = s * u.dx + c * u.dy
+        if u.dt is not None and u.dt > 0.0:
+            dt = float(u.dt)
+        elif self._last_odo_t is not None:
+            dt = max(u.t - self._last_odo_t, 0.0)
+        else:
+            dt = cfg.static_noise_period_s
+        self._last_odo_t = u.t
+        self._x = np.array([self._x[0] + dxw, self._x[1] + dyw, wrap_scalar(th + u.dtheta)])
+        F = np.array([[1.0, 0.0, -dyw], [0.0, 1.0, dxw], [0.0, 0.0, 1.0]])
+        k = dt / cfg.static_noise_period_s
+        Q = np.diag(
+            [
+                cfg.q_x_stat_m2 * k + cfg.q_x_dyn_m2_per_m * abs(dxw),
+                cfg.q_y_stat_m2 * k + cfg.q_y_dyn_m2_per_m * abs(dyw),
+                cfg.q_theta_stat_rad2 * k + cfg.q_theta_dyn_rad2_per_rad * abs(u.dtheta),
+            ]
+        )
+        P = F @ self._P @ F.T + Q
+        self._P = 0.5 * (P + P.T)
+        self._t = u.t
+        self._diag = self._empty_diag()
+        if not np.all(np.isfinite(self._x)):
+            raise FilterDiverged(f"non-finite state after odometry at t={u.t:.3f}")
+
+    # --- observation (sec. III-A.2, III-B) and update (eq. 14-18) ----------------------------------------
+
+    def match(self, z: LaserScan) -> tuple[IcpResult | None, int, int]:
+        """Ray-cast a scan at the predicted pose and ICP-align the real scan onto it.
+
+        Returns
+        -------
+        (IcpResult or None, n_real, n_pred)
+            None when either cloud has fewer than 3 points; the transform maps real-scan points (robot
+            frame at the true pose) onto ray-cast points (robot frame at the predicted pose).
+        """
+        cfg = self.config
+        angles = z.angles
+        sx, sy, sth = z.sensor_pose
+        x, y, th = (float(v) for v in self._x)
+        c, s = math.cos(th), math.sin(th)
+        sensor_world = np.array([[x + c * sx - s * sy, y + s * sx + c * sy, th + sth]])
+        pred = cast_rays(self._occ, self._res, self._origin, sensor_world, angles, z.range_max, parallel=False)[0]
+        real = np.asarray(z.ranges, dtype=np.float64)
+        ok_real = np.isfinite(real) & (real >= z.range_min) & (real <= z.range_max)
+        ok_pred = np.isfinite(pred) & (pred >= z.range_min)
+        n_real, n_pred = int(np.count_nonzero(ok_real)), int(np.count_nonzero(ok_pred))
+        if n_real < MIN_PAIRS or n_pred < MIN_PAIRS:
+            return None, n_real, n_pred
+        src = scan_points(real[ok_real], angles[ok_real], z.sensor_pose)
+        dst = scan_points(pred[ok_pred], angles[ok_pred], z.sensor_pose)
+        r_mean = float(np.mean(real[ok_real]))
+        lam_xy = float(np.linalg.eigvalsh(self._P[0:2, 0:2])[-1])
+        k = cfg.correspondence_sigmas * (cfg.kidnap_threshold_factor if self._tightened else 1.0)
+        d_min = k * math.sqrt(self._pair_var)
+        d_0 = min(
+            k * math.sqrt(self._pair_var + lam_xy + r_mean**2 * float(self._P[2, 2])), cfg.max_correspondence_cap_m
+        )
+        d_0 = max(d_0, d_min)
+        res = icp_2d(
+            src,
+            dst,
+            max_correspondence_m=d_0,
+            min_correspondence_m=d_min,
+            max_iterations=cfg.max_iterations,
+            transformation_epsilon=cfg.transformation_epsilon,
+            tree=cKDTree(dst),
+        )
+        return res, n_real, n_pred
+
+    def update(self, z: Observation) -> None:
+        """Correct with one LaserScan: ICP match, mismatch rules, H = I update (eq. 14-18) or kidnap rule."""
+        self.check_consumes(z)
+        assert isinstance(z, LaserScan)
+        cfg = self.config
+        res, n_real, n_pred = self.match(z)
+        self._t = z.t
+        needed = max(cfg.min_matched_points, math.ceil(cfg.min_matched_fraction * min(n_real, n_pred)))
+        if res is None or not res.converged or res.matched < needed:
+            self._mismatch(z.t, res)
+            return
+        tx, ty, tth = res.transform
+        th = float(self._x[2])
+        c, s = math.cos(th), math.sin(th)
+        # V = Z - Z^ with Z = X (+) M (eq. 2-3): the ICP translation rotated into the world frame.
+        V = np.array([c * tx - s * ty, s * tx + c * ty, wrap_scalar(tth)])
+        P = self._P
+        S = P + self._R
+        Sinv = np.linalg.inv(S)
+        K = P @ Sinv  # eq. 15
+        x = self._x + K @ V  # eq. 17
+        A = np.eye(3) - K
+        P_new = A @ P @ A.T + K @ self._R @ K.T  # eq. 18 in Joseph form
+        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P_new))):
+            raise FilterDiverged(f"non-finite state after the scan update at t={z.t:.3f}")
+        x[2] = wrap_scalar(float(x[2]))
+        self._x = x
+        self._P = 0.5 * (P_new + P_new.T)
+        self._consecutive = 0
+        self._tightened = False  # the report's tighter threshold holds until the filter matches again
+        self._diag = {
+            **self._empty_diag(),
+            "accepted": 1.0,
+            "iterations": float(res.iterations),
+            "matched_points": float(res.matched),
+            "nis": float(V @ Sinv @ V),
+        }
+
+    def _mismatch(self, t: float, res: IcpResult | None) -> None:
+        """No update (sec. III-B); after ``kidnap_mismatches`` in a row, P x factor and a tighter threshold."""
+        cfg = self.config
+        self._consecutive += 1
+        if self._consecutive >= cfg.kidnap_mismatches:
+            self._P = self._P * cfg.kidnap_cov_factor
+            self._tightened = True
+            self._kidnap_resets += 1
+            self._consecutive = 0
+            logger.debug("t=%.2f s: %d consecutive mismatches, P x %g", t, cfg.kidnap_mismatches, cfg.kidnap_cov_factor)
+        self._diag = {
+            **self._empty_diag(),
+            "rejected": 1.0,
+            "iterations": float(res.iterations) if res is not None else 0.0,
+            "matched_points": float(res.matched) if res is not None else 0.0,
+        }
+
+    def estimate(self) -> Estimate:
+        """The current pose and covariance with the diagnostics of the last call."""
+        return Estimate(t=self._t, mean=self._x.copy(), cov=self._P.copy(), diagnostics=dict(self._diag))
