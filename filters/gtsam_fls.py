@@ -1,0 +1,612 @@
+"""Fixed-lag smoothing localization with gtsam: odometry between-factors and range-bearing to known landmarks.
+
+The belief over the recent trajectory is a factor graph over poses X_i (gtsam ``Pose2``) that gtsam's
+fixed-lag smoother (``IncrementalFixedLagSmoother``, iSAM2, by default, or ``BatchFixedLagSmoother``,
+Levenberg-Marquardt) keeps to the last ``lag_s`` seconds, marginalising older variables into a prior on
+the ones that remain (Dellaert & Kaess, "Factor Graphs for Robot Perception", 2017, sec. 5; the gtsam
+4.3 API is described in ``shared/docs/PACKAGES.md`` sec. 3).
+
+Factors
+-------
+* **Prior** on X_0 from the dataset's initial belief.
+* **Odometry** (``BetweenFactorPose2``): the wheel-encoder model of report 003 (eq. 1-5, input noise
+  eq. 10, read per step) or the increment fallback, through :class:`locbench.filters._motion.MotionModel`,
+  plus a small additive noise per step (report 003 eq. 8, the same defaults as ``ekf_landmarks``). The
+  steps between two graph poses are composed into one increment Delta = (dx, dy, dtheta) in the frame of
+  the older pose, its covariance Sigma propagated with the model's Jacobians, Sigma <- F Sigma F^T + N;
+  gtsam's between error is expressed in the frame of the newer pose, so the factor gets the full 3x3
+  Gaussian blockdiag(R(dtheta)^T, 1) Sigma blockdiag(R(dtheta), 1).
+* **Landmarks** (``BearingRangeFactor2D``): range and bearing (report 003 eq. 7, 9) to a landmark
+  variable L held at its map position by a tight ``PriorFactorPoint2`` (``landmark_sigma_m``, or the
+  map's ``std_xy`` when given). gtsam has no native range-bearing factor to a constant point, so the
+  known map enters as these nearly fixed variables. A landmark variable is stamped with the time of every
+  sighting; one not seen for ``lag_s`` leaves the window with the poses, and its next sighting makes a
+  fresh variable with a fresh prior (so the map prior is counted once more, harmless at 1 mm).
+* **Pose fixes** (``PriorFactorPose2``, when ``use_pose_fixes``): a 2-D fix is a pose prior whose
+  heading standard deviation is ``pose_fix_heading_sigma_rad`` (1000 rad: no heading information); a 3-D
+  fix uses its full covariance. Both are rotated into the prior's frame, as gtsam measures the error there.
+
+Graph size (``new_pose``)
+-------------------------
+``"observation"`` (default): a new pose variable is made only when an observation is fused; ``predict``
+composes the odometry step onto the running increment in plain floats and reports the newest graph pose
+composed with it (mean X_k (+) Delta, covariance F P_k F^T + G Sigma G^T, the EKF prediction from the
+smoother's marginal P_k). The graph holds a pose per sighting (5 Hz on ``room``) instead of per odometry
+event (20 Hz), the smoother runs only at observations, and the estimate differs from ``"odometry"`` only
+through the linearisation of the composed increment (tests check they agree). ``"odometry"`` makes a
+variable for every odometry event and updates the smoother each time (4x the variables and updates).
+
+Association
+-----------
+With ``association="known"`` an observation's landmark id is used. An id of ``UNKNOWN_ID`` (or every
+observation with ``association="nearest"``) is matched to the map landmark whose predicted (range,
+bearing) from the current filtered estimate is nearest in Mahalanobis distance, S = H P H^T + R, among
+landmarks predicted inside the sensor's range and field of view (widened by the margins) and not used
+by the same event; a match beyond the chi-square gate (2 dof, ``gate_probability``) is rejected and
+counted in ``rejected``. This is the same rule as ``ekf_landmarks`` so the two are compared on equal terms.
+
+Frames and units: poses (x m, y m, theta rad) in the world frame, headings wrapped to (-pi, pi]. gtsam's
+marginal covariance of a ``Pose2`` is in its body-frame tangent space; :meth:`estimate` rotates it to
+world (x, y, theta) coordinates, as the other filters report.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from typing import Any, ClassVar, Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from locbench.datasets.base import Gaussian2, MapKind, SensorSpec, WorldMap
+from locbench.errors import ConfigError, DependencyNotInstalled, FilterDiverged
+from locbench.events import UNKNOWN_ID, LandmarkObservations, Observation, Odometry, PoseFix
+from locbench.filters._motion import InputNoise, MotionKind, MotionModel, propagate_covariance, resolve_motion_noise
+from locbench.filters.base import Estimate, Filter, FilterConfig
+from locbench.filters.ekf_landmarks import DEFAULT_SIGMA_BEARING_RAD, DEFAULT_SIGMA_RANGE_M, chi2_2dof_quantile
+from locbench.geometry import wrap_angle, wrap_scalar
+
+try:
+    import gtsam
+except ImportError as exc:  # pragma: no cover - the registry reports the missing module before import
+    raise DependencyNotInstalled("gtsam_fls needs gtsam: pip install 'locbench[gtsam]'") from exc
+
+FloatArray = npt.NDArray[np.float64]
+logger = logging.getLogger(__name__)
+
+_X = gtsam.symbol_shorthand.X
+_L = gtsam.symbol_shorthand.L
+
+
+@dataclass(frozen=True, kw_only=True)
+class GtsamFLSConfig(FilterConfig):
+    """Configuration of :class:`GtsamFixedLagSmoother`.
+
+    Attributes
+    ----------
+    smoother : {"incremental", "batch"}
+        ``gtsam.IncrementalFixedLagSmoother`` (iSAM2) or ``gtsam.BatchFixedLagSmoother`` (Levenberg-Marquardt
+        over the whole window at every update).
+    lag_s : float
+        Smoother window, s: variables stamped earlier than the newest stamp minus ``lag_s`` are marginalised.
+    new_pose : {"observation", "odometry"}
+        Make a pose variable per fused observation (odometry composed in between) or per odometry event.
+    relinearize_threshold : float
+        iSAM2 relinearisation threshold on the tangent-space update (m, rad); gtsam's default is 0.1, 0.01
+        relinearises any pose that moved by more than 1 cm or 10 mrad.
+    relinearize_skip : int
+        iSAM2 checks for relinearisation every this many updates (gtsam default 10; 1 checks every update).
+    sigma_xy_m, sigma_theta_rad : float
+        Additive process noise per odometry step (report 003 eq. 8), isotropic in x, y; the defaults of
+        ``ekf_landmarks`` (1 mm, 0.5 mrad), which also keep a standstill increment from being singular.
+    input_noise, motion_model : see :class:`locbench.filters.ekf_landmarks.LandmarkEKFConfig`.
+    association : {"known", "nearest"}
+        Use observation ids, or associate every observation by nearest neighbour (``UNKNOWN_ID`` always is).
+    gate_probability : float
+        Chi-square (2 dof) gate of nearest-neighbour association; 0.99 -> 9.21.
+    prune_margin_m, prune_margin_rad : float
+        Margins on the sensor's range interval (m) and each side of its field of view (rad) when selecting
+        nearest-neighbour candidates.
+    landmark_sigma_m : float
+        Standard deviation of the prior holding each landmark variable at its map position, m, when the
+        map gives no ``std_xy`` (1 mm: PACKAGES.md sec. 3).
+    use_pose_fixes : bool
+        Fuse PoseFix events as pose priors; when False the runner does not route them.
+    pose_fix_heading_sigma_rad : float
+        Heading standard deviation of the prior made from a 2-D fix, rad (large: no heading information).
+    sigma_range_m, sigma_bearing_rad : float or None
+        Range-bearing noise (report 003 eq. 9); None takes the dataset's nominal value.
+    wheelbase_m, encoder_k_left, encoder_k_right : float or None
+        Overrides of W (m) and k_L, k_R (sqrt(m)); None takes the dataset's value.
+    odometry_sigma_xy_per_m, odometry_sigma_theta_per_m, odometry_sigma_theta_per_rad : float or None
+        Overrides of the increment fallback noise (m/sqrt(m), rad/sqrt(m), rad/sqrt(rad)).
+    """
+
+    smoother: Literal["incremental", "batch"] = "incremental"
+    lag_s: float = 2.0
+    new_pose: Literal["observation", "odometry"] = "observation"
+    relinearize_threshold: float = 0.01
+    relinearize_skip: int = 1
+    sigma_xy_m: float = 0.001
+    sigma_theta_rad: float = 0.0005
+    input_noise: InputNoise = "per_step"
+    motion_model: MotionKind = "auto"
+    association: Literal["known", "nearest"] = "known"
+    gate_probability: float = 0.99
+    prune_margin_m: float = 0.5
+    prune_margin_rad: float = 0.2
+    landmark_sigma_m: float = 0.001
+    use_pose_fixes: bool = False
+    pose_fix_heading_sigma_rad: float = 1000.0
+    sigma_range_m: float | None = None
+    sigma_bearing_rad: float | None = None
+    wheelbase_m: float | None = None
+    encoder_k_left: float | None = None
+    encoder_k_right: float | None = None
+    odometry_sigma_xy_per_m: float | None = None
+    odometry_sigma_theta_per_m: float | None = None
+    odometry_sigma_theta_per_rad: float | None = None
+
+    def __post_init__(self) -> None:
+        if not self.lag_s > 0.0:
+            raise ConfigError(f"lag_s must be > 0 s, got {self.lag_s}")
+        if not 0.0 < self.gate_probability < 1.0:
+            raise ConfigError(f"gate_probability must be in (0, 1), got {self.gate_probability}")
+        if self.relinearize_skip < 1:
+            raise ConfigError(f"relinearize_skip must be >= 1, got {self.relinearize_skip}")
+        for name in ("relinearize_threshold", "sigma_xy_m", "sigma_theta_rad", "prune_margin_m", "prune_margin_rad"):
+            if getattr(self, name) < 0.0:
+                raise ConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
+        for name in ("landmark_sigma_m", "pose_fix_heading_sigma_rad"):
+            if not getattr(self, name) > 0.0:
+                raise ConfigError(f"{name} must be > 0, got {getattr(self, name)}")
+        for name in ("sigma_range_m", "sigma_bearing_rad", "wheelbase_m"):
+            v = getattr(self, name)
+            if v is not None and v <= 0.0:
+                raise ConfigError(f"{name} must be > 0 (or None for the dataset's value), got {v}")
+
+
+def _rot3(theta: float) -> FloatArray:
+    """blockdiag(R(theta), 1): body-frame (x, y, theta) perturbations to world coordinates, shape (3, 3)."""
+    c, s = math.cos(theta), math.sin(theta)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _sym(a: FloatArray) -> FloatArray:
+    return 0.5 * (a + a.T)
+
+
+class GtsamFixedLagSmoother(Filter):
+    """gtsam fixed-lag smoother over recent poses, with odometry, range-bearing landmarks and pose fixes.
+
+    See the module docstring for the factors and choices. :meth:`estimate` is the filtered belief (the
+    newest pose, composed with the odometry since it); :meth:`extra_results` gives the lag-smoothed
+    trajectory.
+
+    Diagnostics of :meth:`estimate`: ``nis`` (sum of the NIS of the sightings fused by the last update,
+    against the belief before it; NaN after a predict or when none was fused), ``nis_dof``, ``accepted``
+    and ``rejected`` (counts of the last update), ``window_poses`` (pose variables in the smoother after the
+    last smoother update) and ``iterations`` (of the last smoother update; NaN when the smoother did not run).
+    """
+
+    consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LandmarkObservations, PoseFix})
+    requires: ClassVar[frozenset[MapKind]] = frozenset({MapKind.LANDMARKS})
+    Config: ClassVar[type[FilterConfig]] = GtsamFLSConfig
+    version: ClassVar[int] = 1
+    source: ClassVar[str] = (
+        "gtsam 4.3 fixed-lag smoothers (Dellaert & Kaess 2017); 003_e5c93f9be776ee5e (motion eq. 1-10, "
+        "range-bearing eq. 7, 9); 001_71e01b0c4f2511a1 (GPS fixes)"
+    )
+
+    config: GtsamFLSConfig
+
+    def routed_events(self) -> frozenset[type]:
+        """``consumes`` without PoseFix unless ``use_pose_fixes``."""
+        if self.config.use_pose_fixes:
+            return self.consumes
+        return self.consumes - {PoseFix}
+
+    @property
+    def smoother(self) -> Any:
+        """The underlying gtsam smoother (for inspection); None before the first smoother update."""
+        return getattr(self, "_smoother", None)
+
+    # --- reset ---------------------------------------------------------------------------------------------
+
+    def reset(self, initial: Gaussian2, world: WorldMap, sensors: SensorSpec, rng: np.random.Generator) -> None:
+        """Start from ``initial`` with the landmarks of ``world``; ``rng`` is unused (the smoother is deterministic)."""
+        cfg = self.config
+        if world.landmarks is None or len(world.landmarks) == 0:
+            raise ConfigError("GtsamFixedLagSmoother needs world.landmarks; the dataset provides none")
+        noise = resolve_motion_noise(
+            sensors,
+            input_noise=cfg.input_noise,
+            wheelbase_m=cfg.wheelbase_m,
+            encoder_k_left=cfg.encoder_k_left,
+            encoder_k_right=cfg.encoder_k_right,
+            odometry_sigma_xy_per_m=cfg.odometry_sigma_xy_per_m,
+            odometry_sigma_theta_per_m=cfg.odometry_sigma_theta_per_m,
+            odometry_sigma_theta_per_rad=cfg.odometry_sigma_theta_per_rad,
+        )
+        self._motion = MotionModel(noise, cfg.motion_model, mean="model")
+        self._qxy, self._qth = cfg.sigma_xy_m**2, cfg.sigma_theta_rad**2
+
+        sr = cfg.sigma_range_m if cfg.sigma_range_m is not None else sensors.landmark_sigma_range_m
+        sb = cfg.sigma_bearing_rad if cfg.sigma_bearing_rad is not None else sensors.landmark_sigma_bearing_rad
+        if sr is None or sb is None:
+            logger.warning(
+                "no nominal landmark noise in the config or dataset; using sigma_range_m=%g, sigma_bearing_rad=%g",
+                DEFAULT_SIGMA_RANGE_M,
+                DEFAULT_SIGMA_BEARING_RAD,
+            )
+        sr = DEFAULT_SIGMA_RANGE_M if sr is None else float(sr)
+        sb = DEFAULT_SIGMA_BEARING_RAD if sb is None else float(sb)
+        self._R = np.diag([sr * sr, sb * sb])
+        # BearingRangeFactor2D's error is (bearing, range).
+        self._br_noise = gtsam.noiseModel.Diagonal.Sigmas(np.array([sb, sr]))
+        self._gate = chi2_2dof_quantile(cfg.gate_probability)
+
+        lm = world.landmarks
+        self._lm_xy = np.asarray(lm.xy, dtype=np.float64).reshape(-1, 2)
+        self._lm_row = lm.index_of()
+        std = None if lm.std_xy is None else np.asarray(lm.std_xy, dtype=np.float64).reshape(-1, 2)
+        self._lm_noise = []
+        for k in range(len(self._lm_xy)):
+            s = (cfg.landmark_sigma_m, cfg.landmark_sigma_m) if std is None else tuple(np.maximum(std[k], 1e-6))
+            self._lm_noise.append(gtsam.noiseModel.Diagonal.Sigmas(np.array(s, dtype=np.float64)))
+        self._limits = self._sensor_limits(sensors)
+
+        m = np.asarray(initial.mean, dtype=np.float64)
+        c = _sym(np.asarray(initial.cov, dtype=np.float64))
+        # The newest graph pose (world mean, body-frame marginal covariance) and the increment since it.
+        self._node_pose = gtsam.Pose2(float(m[0]), float(m[1]), wrap_scalar(float(m[2])))
+        R0 = _rot3(self._node_pose.theta())
+        self._node_cov_body = _sym(R0.T @ c @ R0)
+        self._node_key = _X(0)
+        self._n_nodes = 1
+        self._delta = [0.0, 0.0, 0.0]
+        self._delta_cov = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
+        self._steps_since_node = 0
+        self._mean = np.array([m[0], m[1], wrap_scalar(float(m[2]))])
+        self._cov = c
+
+        self._smoother: Any = None
+        self._pending_prior: tuple[Any, Any] | None = (
+            gtsam.PriorFactorPose2(_X(0), self._node_pose, gtsam.noiseModel.Gaussian.Covariance(self._node_cov_body)),
+            self._node_pose,
+        )
+        self._t0 = math.nan
+        self._t = math.nan
+        self._lm_key: dict[int, int] = {}  # map row -> live gtsam key
+        self._lm_stamp: dict[int, float] = {}
+        self._n_lm_vars = 0
+        self._new_landmarks: list[tuple[int, int]] = []  # (key, map row) to insert at the next update
+        self._last_update_t = -math.inf
+        self._live_poses: list[tuple[float, int]] = []  # (stamp, node index) of poses in the window
+        # Per node: time, smoothed pose (filled when it leaves the window or at the end), odometry after it.
+        self._node_t: list[float] = [math.nan]
+        self._node_final: list[tuple[float, float, float] | None] = [None]
+        self._node_odo: list[list[tuple[float, float, float, float]]] = [[]]
+        self._nis, self._nis_dof, self._accepted, self._rejected = math.nan, 0, 0, 0
+        self._window_poses = 0
+        self._iterations = math.nan
+
+    def _sensor_limits(self, sensors: SensorSpec) -> tuple[float, float, float]:
+        """(min range, max range, half field of view) of nearest-neighbour candidates, widened by the margins."""
+        cfg = self.config
+        rmin, rmax, fov = sensors.landmark_min_range_m, sensors.landmark_max_range_m, sensors.landmark_fov_rad
+        lo = -math.inf if rmin is None else rmin - cfg.prune_margin_m
+        hi = math.inf if rmax is None else rmax + cfg.prune_margin_m
+        half = math.inf if fov is None or fov >= 2.0 * math.pi else 0.5 * fov + cfg.prune_margin_rad
+        return (lo, hi, half)
+
+    # --- predict -------------------------------------------------------------------------------------------
+
+    def predict(self, u: Odometry) -> None:
+        """Compose one odometry step onto the increment since the newest graph pose (report 003 eq. 1-5, 10)."""
+        if math.isnan(self._t0):
+            self._t0 = u.t - u.dt if math.isfinite(u.dt) else u.t
+            self._node_t[0] = self._t0
+        step = self._motion.step(self._delta, u)
+        # The step's noise is in the frame the increment is expressed in (the newest graph pose's); Q isotropic.
+        n = step.noise
+        q = (n[0] + self._qxy, n[1], n[2], n[3] + self._qxy, n[4], n[5] + self._qth)
+        self._delta_cov = propagate_covariance(self._delta_cov, step.f02, step.f12, q)
+        self._delta = list(step.pose)
+        self._steps_since_node += 1
+        self._t = u.t
+        self._nis, self._nis_dof, self._accepted, self._rejected = math.nan, 0, 0, 0
+        self._iterations = math.nan
+        if self.config.new_pose == "odometry":
+            self._smoother_update(u.t, gtsam.NonlinearFactorGraph(), {})
+        else:
+            self._node_odo[-1].append((u.t, self._delta[0], self._delta[1], self._delta[2]))
+            self._compose_estimate()
+
+    def _compose_estimate(self) -> None:
+        """Filtered belief: newest graph pose (+) increment; covariance F P_w F^T + G Sigma G^T (world coordinates)."""
+        node = self._node_pose
+        th = node.theta()
+        dx, dy, dth = self._delta
+        c, s = math.cos(th), math.sin(th)
+        ex, ey = c * dx - s * dy, s * dx + c * dy
+        G = _rot3(th)
+        Pw = G @ self._node_cov_body @ G.T
+        F = np.array([[1.0, 0.0, -ey], [0.0, 1.0, ex], [0.0, 0.0, 1.0]])
+        D = np.asarray(self._delta_cov)
+        self._mean = np.array([node.x() + ex, node.y() + ey, wrap_scalar(th + dth)])
+        self._cov = _sym(F @ Pw @ F.T + G @ D @ G.T)
+        if not (np.all(np.isfinite(self._mean)) and np.all(np.isfinite(self._cov))):
+            raise FilterDiverged(f"non-finite estimate at t={self._t:.3f} s")
+
+    # --- update --------------------------------------------------------------------------------------------
+
+    def update(self, z: Observation) -> None:
+        """Add the factors of one observation and update the smoother; TypeError for a type not consumed."""
+        if type(z) is LandmarkObservations:
+            factors, stamps = self._landmark_factors(z)
+        elif type(z) is PoseFix:
+            factors, stamps = self._pose_fix_factors(z)
+        else:
+            self.check_consumes(z)
+            raise TypeError(f"GtsamFixedLagSmoother does not consume {type(z).__name__}")  # pragma: no cover
+        if math.isnan(self._t0):
+            self._t0 = z.t
+            self._node_t[0] = z.t
+        self._t = z.t
+        self._iterations = math.nan
+        if factors.size() > 0:
+            self._smoother_update(z.t, factors, stamps)
+
+    def _target_key(self) -> int:
+        """Key of the pose an observation now attaches to: a new one if odometry arrived since the newest."""
+        return _X(self._n_nodes) if self._steps_since_node > 0 else self._node_key
+
+    def _landmark_factors(self, z: LandmarkObservations) -> tuple[Any, dict[int, float]]:
+        cfg = self.config
+        ids, ranges, bearings = z.ids.tolist(), z.ranges.tolist(), z.bearings.tolist()
+        use_ids = cfg.association == "known"
+        key = self._target_key()
+        factors = gtsam.NonlinearFactorGraph()
+        stamps: dict[int, float] = {}
+        used: set[int] = set()
+        deferred: list[int] = []
+        matches: list[tuple[int, int]] = []  # (observation index, map row)
+        rej = 0
+        for k, ident in enumerate(ids):
+            r, b = ranges[k], bearings[k]
+            if not (math.isfinite(r) and math.isfinite(b)) or r <= 0.0:
+                rej += 1
+            elif not use_ids or ident == UNKNOWN_ID:
+                deferred.append(k)
+            elif (row := self._lm_row.get(ident)) is None:
+                logger.debug("landmark id %d is not in the map; observation rejected", ident)
+                rej += 1
+            else:
+                matches.append((k, row))
+                used.add(row)
+        nis = 0.0
+        if deferred or matches:
+            d2_all = None
+            for k in deferred:
+                d2_all = self._mahalanobis(ranges[k], bearings[k])
+                if used:
+                    d2_all[list(used)] = np.inf
+                row = int(np.argmin(d2_all))
+                if d2_all[row] <= self._gate:
+                    matches.append((k, row))
+                    used.add(row)
+                else:
+                    rej += 1
+            for k, row in matches:
+                nis += float(self._mahalanobis(ranges[k], bearings[k], rows=[row])[0])
+                lkey = self._landmark_key(row, z.t, factors)
+                factors.add(
+                    gtsam.BearingRangeFactor2D(key, lkey, gtsam.Rot2.fromAngle(bearings[k]), ranges[k], self._br_noise)
+                )
+                stamps[lkey] = z.t
+        acc = len(matches)
+        self._nis = nis if acc else math.nan
+        self._nis_dof, self._accepted, self._rejected = 2 * acc, acc, rej
+        return factors, stamps
+
+    def _landmark_key(self, row: int, t: float, factors: Any) -> int:
+        """The live variable of landmark ``row``, or a new one (with its map prior) if it left the window."""
+        key = self._lm_key.get(row)
+        # Gone if the last smoother update already marginalised it (stamp before that update's cutoff).
+        if key is None or self._lm_stamp[row] < self._last_update_t - self.config.lag_s:
+            key = _L(self._n_lm_vars)
+            self._n_lm_vars += 1
+            self._lm_key[row] = key
+            self._new_landmarks.append((key, row))
+            factors.add(gtsam.PriorFactorPoint2(key, self._lm_xy[row], self._lm_noise[row]))
+        self._lm_stamp[row] = t
+        return key
+
+    def _mahalanobis(self, r: float, b: float, rows: list[int] | None = None) -> FloatArray:
+        """Squared Mahalanobis distance of (r, b) to map landmarks from the current belief (inf outside the limits).
+
+        H = [[-dx/d, -dy/d, 0], [dy/q, -dx/q, -1]] (report 001 fig. 2, corrected), S = H P H^T + R.
+        """
+        xy = self._lm_xy if rows is None else self._lm_xy[rows]
+        x, y, th = self._mean
+        lx, ly = xy[:, 0] - x, xy[:, 1] - y
+        q = np.maximum(lx * lx + ly * ly, 1e-12)
+        d = np.sqrt(q)
+        pb = wrap_angle(np.arctan2(ly, lx) - th)
+        H = np.zeros((len(d), 2, 3))
+        H[:, 0, 0], H[:, 0, 1] = -lx / d, -ly / d
+        H[:, 1, 0], H[:, 1, 1], H[:, 1, 2] = ly / q, -lx / q, -1.0
+        S = H @ self._cov @ H.transpose(0, 2, 1) + self._R
+        nu = np.stack([r - d, wrap_angle(b - pb)], axis=-1)
+        d2 = np.einsum("ni,ni->n", nu, np.linalg.solve(S, nu[..., None])[..., 0])
+        if rows is None:
+            lo, hi, half = self._limits
+            d2[(d < lo) | (d > hi) | (np.abs(pb) > half)] = np.inf
+        return d2
+
+    def _pose_fix_factors(self, z: PoseFix) -> tuple[Any, dict[int, float]]:
+        m = int(z.z.shape[0])
+        if m not in (2, 3) or z.cov.shape != (m, m):
+            raise ValueError(f"PoseFix at t={z.t} must have z (2,) or (3,) and a matching cov, got {z.cov.shape}")
+        cov = _sym(np.asarray(z.cov, dtype=np.float64))
+        if m == 2:
+            th = float(self._mean[2])  # no heading in the fix: the prior's heading is the current belief's
+            full = np.zeros((3, 3))
+            full[:2, :2] = cov
+            full[2, 2] = self.config.pose_fix_heading_sigma_rad**2
+        else:
+            th = float(z.z[2])
+            full = cov
+        R3 = _rot3(th)
+        prior = gtsam.Pose2(float(z.z[0]), float(z.z[1]), th)
+        factors = gtsam.NonlinearFactorGraph()
+        factors.add(
+            gtsam.PriorFactorPose2(
+                self._target_key(), prior, gtsam.noiseModel.Gaussian.Covariance(_sym(R3.T @ full @ R3))
+            )
+        )
+        nu = np.asarray(z.z, dtype=np.float64) - self._mean[:m]
+        if m == 3:
+            nu[2] = wrap_scalar(float(nu[2]))
+        S = self._cov[:m, :m] + cov
+        self._nis = float(nu @ np.linalg.solve(S, nu))
+        self._nis_dof, self._accepted, self._rejected = m, 1, 0
+        return factors, {}
+
+    # --- the smoother --------------------------------------------------------------------------------------
+
+    def _make_smoother(self) -> Any:
+        cfg = self.config
+        if cfg.smoother == "batch":
+            return gtsam.BatchFixedLagSmoother(cfg.lag_s, gtsam.LevenbergMarquardtParams())
+        params = gtsam.ISAM2Params()
+        params.setRelinearizeThreshold(cfg.relinearize_threshold)
+        params.relinearizeSkip = cfg.relinearize_skip
+        return gtsam.IncrementalFixedLagSmoother(cfg.lag_s, params)
+
+    def _between_noise(self) -> Any:
+        """Gaussian noise of the composed increment, in the newer pose's frame (gtsam's between error)."""
+        Rd = _rot3(self._delta[2])
+        return gtsam.noiseModel.Gaussian.Covariance(_sym(Rd.T @ np.asarray(self._delta_cov) @ Rd))
+
+    def _smoother_update(self, t: float, factors: Any, stamps: dict[int, float]) -> None:
+        """Add a pose for the odometry since the newest one (if any), the given factors, and update the smoother."""
+        cutoff = max(max(stamps.values(), default=t), t) - self.config.lag_s
+        # Poses about to be marginalised keep the estimate of the last update that still held them.
+        while self._live_poses and self._live_poses[0][0] < cutoff:
+            _, idx = self._live_poses.pop(0)
+            p = self._smoother.calculateEstimatePose2(_X(idx))
+            self._node_final[idx] = (p.x(), p.y(), p.theta())
+        values = gtsam.Values()
+        for key, row in self._new_landmarks:
+            values.insert(key, self._lm_xy[row])
+        self._new_landmarks = []
+        if self._pending_prior is not None:
+            factors.add(self._pending_prior[0])
+            values.insert(_X(0), self._pending_prior[1])
+            stamps[_X(0)] = self._t0
+            self._add_node_record(0, self._t0, self._pending_prior[1], cutoff)
+            self._pending_prior = None
+        if self._steps_since_node > 0:
+            idx = self._n_nodes
+            new_key = _X(idx)
+            dx, dy, dth = self._delta
+            inc = gtsam.Pose2(dx, dy, dth)
+            factors.add(gtsam.BetweenFactorPose2(self._node_key, new_key, inc, self._between_noise()))
+            guess = self._node_pose.compose(inc)
+            values.insert(new_key, guess)
+            stamps[new_key] = t
+            self._node_t.append(t)
+            self._node_final.append(None)
+            self._node_odo.append([])
+            self._add_node_record(idx, t, guess, cutoff)
+            self._node_key = new_key
+            self._n_nodes += 1
+        if self._smoother is None:
+            self._smoother = self._make_smoother()
+        try:
+            result = self._smoother.update(factors, values, stamps)
+            self._node_pose = self._smoother.calculateEstimatePose2(self._node_key)
+            self._node_cov_body = _sym(np.asarray(self._marginal(self._node_key)))
+        except RuntimeError as exc:
+            raise FilterDiverged(f"gtsam smoother failed at t={t:.3f} s: {exc}") from exc
+        self._last_update_t = t
+        self._iterations = float(result.getIterations())
+        self._window_poses = len(self._live_poses)
+        self._delta = [0.0, 0.0, 0.0]
+        self._delta_cov = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
+        self._steps_since_node = 0
+        self._compose_estimate()
+
+    def _add_node_record(self, idx: int, t: float, guess: Any, cutoff: float) -> None:
+        """Track a new pose variable; its initial value stands in if it is marginalised in its first update."""
+        self._node_final[idx] = (guess.x(), guess.y(), guess.theta())
+        if t >= cutoff:
+            self._live_poses.append((t, idx))
+
+    def _marginal(self, key: int) -> FloatArray:
+        s = self._smoother
+        if self.config.smoother == "incremental":
+            return s.marginalCovariance(key)
+        return gtsam.Marginals(s.getFactors(), s.calculateEstimate()).marginalCovariance(key)
+
+    # --- results -------------------------------------------------------------------------------------------
+
+    def estimate(self) -> Estimate:
+        """The filtered belief: newest pose (+) odometry since it, world-frame covariance (symmetrised)."""
+        return Estimate(
+            self._t,
+            self._mean.copy(),
+            self._cov.copy(),
+            {
+                "nis": self._nis,
+                "nis_dof": float(self._nis_dof),
+                "accepted": float(self._accepted),
+                "rejected": float(self._rejected),
+                "window_poses": float(self._window_poses),
+                "iterations": self._iterations,
+            },
+        )
+
+    def extra_results(self) -> dict[str, Any]:
+        """The lag-smoothed trajectory.
+
+        Returns
+        -------
+        dict
+            ``smoothed_t`` (n,) s and ``smoothed_mean`` (n, 3) (x m, y m, theta rad, world frame): every pose
+            variable's last estimate before it left the window (or the final one if still inside), and, with
+            ``new_pose="observation"``, each odometry time in between as that pose composed with the odometry
+            since it; ``smoothed_is_node`` (n,) bool marks the rows that are smoother variables.
+        """
+        final = list(self._node_final)
+        s = self._smoother
+        if s is not None:
+            for _, idx in self._live_poses:
+                p = s.calculateEstimatePose2(_X(idx))
+                final[idx] = (p.x(), p.y(), p.theta())
+        ts: list[float] = []
+        rows: list[tuple[float, float, float]] = []
+        node: list[bool] = []
+        for idx in range(len(self._node_t)):
+            base = final[idx]
+            if base is None:  # X_0 when the smoother never ran: the prior itself
+                base = (self._node_pose.x(), self._node_pose.y(), self._node_pose.theta())
+            if math.isfinite(self._node_t[idx]):
+                ts.append(self._node_t[idx])
+                rows.append(base)
+                node.append(True)
+            c, sn = math.cos(base[2]), math.sin(base[2])
+            for t, dx, dy, dth in self._node_odo[idx]:
+                ts.append(t)
+                rows.append((base[0] + c * dx - sn * dy, base[1] + sn * dx + c * dy, wrap_scalar(base[2] + dth)))
+                node.append(False)
+        mean = np.array(rows, dtype=np.float64).reshape(-1, 3)
+        return {
+            "smoothed_t": np.array(ts, dtype=np.float64),
+            "smoothed_mean": mean,
+            "smoothed_is_node": np.array(node, dtype=bool),
+        }
