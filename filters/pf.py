@@ -1,0 +1,693 @@
+"""Monte Carlo localization: the particle filter of report 003 (sec. 4.2), with augmented MCL.
+
+Report 003 runs a particle filter beside its EKF "with the same encoder model and landmark measurements"
+and "linear time resampling [8]" (Carpenter, Clifford & Fearnhead 1999). The standard algorithms it
+refers to are those of Dellaert, Fox, Burgard & Thrun (1999) and of Thrun, Burgard & Fox, *Probabilistic
+Robotics* (2005, below "PR"): MCL (PR table 8.2), augmented MCL (PR table 8.3) and the likelihood-field
+laser model (PR table 6.3).
+
+Belief
+    N weighted particles (x m, y m, theta rad) in the world frame, weights kept as normalised logs.
+    ``init="belief"`` draws them from the dataset's initial Gaussian; ``init="uniform"`` ignores its mean
+    and spreads them uniformly over the free cells of the occupancy grid (global localization), or over
+    the bounding box of the landmarks when there is no grid, with headings uniform in (-pi, pi].
+
+Prediction (report 003 eq. 1-2, 5, 10, 8)
+    Each particle draws its own wheel travel delta_l ~ N(d_l, sigma_L^2), delta_r ~ N(d_r, sigma_R^2) with
+    the eq. 10 variances (read per step by default, as the EKF does; see :mod:`locbench.filters._motion`)
+    and moves by eq. 5; then the additive system noise Q = diag(sigma_x^2, sigma_y^2, sigma_theta^2) of
+    eq. 8 is added, as in the EKF ("the same encoder model"). An event without wheel travel uses the
+    (dx, dy, dtheta) increment model instead. Noise constants come from the dataset's nominal
+    :class:`~locbench.datasets.base.SensorSpec` unless overridden.
+
+Correction
+    * Landmarks (report 003 eq. 7, 9): each sighting (range, bearing) is a Gaussian in range and wrapped
+      bearing with R = diag(sigma_range^2, sigma_bearing^2); sightings of one event are independent, so
+      their log-likelihoods add. A sighting whose identity is withheld (``UNKNOWN_ID``) is scored by the
+      *marginal* over map landmarks with a uniform prior, p(z | x) = (1/M) sum_j p(z | x, c = j) (a
+      log-sum-exp), not by the maximum: it is the exact likelihood under an unknown correspondence, it
+      never throws away a second plausible landmark, and its values stay comparable between particles.
+      Identities not in the map are ignored.
+    * Laser (optional): the likelihood field of :mod:`locbench.filters._likelihood_field` on a subset of
+      ``laser_beams`` beams, evenly spaced over the scan (as ROS AMCL's ``laser_max_beams``), max-range
+      readings skipped. Its defaults (z_hit 0.95, z_rand 0.05, sigma_hit 0.2 m, max distance 2 m) are
+      those of ROS AMCL, since PR gives the model but no values.
+
+Resampling
+    Systematic ("low-variance", linear-time) resampling, PR table 4.4 and report 003's ref. [8]: one
+    uniform offset u ~ U[0, 1/N) and the points u + k/N located in the cumulative weights by
+    ``numpy.searchsorted``; done when the effective sample size 1 / sum w_i^2 falls below
+    ``resample_ess_fraction * N`` (Liu & Chen's criterion) rather than at every step.
+
+Augmented MCL (PR table 8.3)
+    Short- and long-term averages of the measurement likelihood, w_fast and w_slow, updated with
+    alpha_fast >> alpha_slow; with probability max(0, 1 - w_fast / w_slow) a particle is replaced by a
+    random pose in free space. Choices made here, all documented in the config:
+
+    * w_avg is the predictive likelihood of the observation under the current weights,
+      sum_i w_i p(z | x_i), taken to the power 1/m for an observation of m sightings or beams (a geometric
+      mean per measurement). Without it a 60-beam scan's likelihood underflows and scans or events with
+      different numbers of sightings would not be comparable.
+    * Landmarks and laser keep separate (w_slow, w_fast) pairs: their densities have different units.
+    * Both averages start at the first w_avg (PR starts them at 0, which leaves the ratio undefined).
+    * Injection happens at the start of an update, as a resampling from the mixture (1 - p) belief +
+      p uniform, so the injected particles are weighted by that observation before the estimate is read
+      (in PR they enter unweighted and would drag the weighted mean until the next observation).
+    * alpha_slow = 0.001 and alpha_fast = 0.1, the values ROS AMCL's documentation suggests (PR only
+      requires 0 <= alpha_slow << alpha_fast).
+
+Estimate
+    Weighted mean of x and y, circular weighted mean of the heading, and the weighted covariance with the
+    heading residuals wrapped (symmetric PSD by construction). Diagnostics: ``n_eff`` (effective sample
+    size after the last weighting), ``resampled`` (0/1), ``injected`` (particles injected),
+    ``p_inject`` and ``w_fast_over_w_slow`` of the sensor of the last update.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from typing import ClassVar, Literal
+
+import numpy as np
+import numpy.typing as npt
+from numba import njit
+
+from locbench.datasets.base import Gaussian2, MapKind, OccupancyGrid, SensorSpec, WorldMap
+from locbench.errors import ConfigError, FilterDiverged
+from locbench.events import UNKNOWN_ID, LandmarkObservations, LaserScan, Observation, Odometry
+from locbench.filters._likelihood_field import (
+    LikelihoodField,
+    log_likelihood,
+    make_likelihood_field,
+    scan_endpoints_robot_frame,
+)
+from locbench.filters._motion import (
+    InputNoise,
+    MotionKind,
+    increment_variances,
+    resolve_motion_noise,
+    sample_increment_motion,
+    sample_wheel_motion,
+    wheel_variances,
+)
+from locbench.filters.base import Estimate, Filter, FilterConfig
+from locbench.geometry import wrap_angle
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+logger = logging.getLogger(__name__)
+
+#: Range-bearing noise used when neither the config nor the dataset gives one (logged at reset).
+DEFAULT_SIGMA_RANGE_M = 0.05
+DEFAULT_SIGMA_BEARING_RAD = 0.02
+
+_LOG_2PI = math.log(2.0 * math.pi)
+
+
+@dataclass(frozen=True, kw_only=True)
+class ParticleFilterConfig(FilterConfig):
+    """Configuration of :class:`ParticleFilter`.
+
+    Attributes
+    ----------
+    particles : int
+        Number of particles N. 1000 by default: Dellaert et al. (report 003's ref. [5]) track with
+        ~1000 samples; it keeps a 20-seed room and office sweep within seconds per run.
+    resample_ess_fraction : float
+        Resample when the effective sample size falls below this fraction of N (0.5, Liu & Chen); 1
+        resamples after every observation as PR's table 8.2 does.
+    augmented : bool
+        Augmented MCL (PR table 8.3): random particles when the short-term likelihood drops below the
+        long-term one (kidnap recovery).
+    alpha_slow, alpha_fast : float
+        Decay rates of w_slow and w_fast (0 <= alpha_slow < alpha_fast <= 1); ROS AMCL's suggested 0.001, 0.1.
+    init : {"belief", "uniform"}
+        ``"belief"``: particles from the dataset's initial Gaussian; ``"uniform"``: global localization from a
+        uniform prior over free space (the free grid cells, else the landmarks' bounding box).
+    use_landmarks : bool
+        Weight with landmark sightings (report 003's PF). Ignored, with a log line, on a world without landmarks.
+    use_laser : bool
+        Weight with the laser likelihood field on the occupancy grid. Off by default because report 003's PF
+        has no laser; on a dataset with a grid but no landmarks set it to true.
+    laser_beams : int
+        Beams used per scan, evenly spaced over the scan (ROS AMCL's laser_max_beams is 30; 60 here).
+    z_hit, z_rand : float
+        Mixture weights of the likelihood field (PR table 6.3); ROS AMCL's defaults 0.95 and 0.05.
+    sigma_hit_m : float
+        Standard deviation of the hit Gaussian, m; ROS AMCL's default 0.2 (it absorbs the map's
+        discretisation and the beams' correlation, which a 1 cm sensor sigma would ignore).
+    laser_max_dist_m : float
+        Distance to the nearest obstacle at which the likelihood field is clipped, m (AMCL default 2.0).
+    sigma_x_m, sigma_y_m, sigma_theta_rad : float
+        Additive system noise per odometry step (report 003 eq. 8), world frame; the EKF's defaults, so
+        that both filters have "the same encoder model". It also keeps duplicated particles apart while
+        the robot stands still.
+    input_noise : {"per_step", "cumulative"}
+        Reading of report 003 eq. 10 (see :mod:`locbench.filters._motion`).
+    motion_model : {"auto", "encoder", "increment"}
+        As in ``ekf_landmarks``: the encoder model when the event has wheel travel and the dataset gives the
+        wheelbase and encoder constants (``"auto"``), always when it can (``"encoder"``), or never.
+    sigma_range_m, sigma_bearing_rad : float or None
+        Landmark measurement noise R (report 003 eq. 9); None takes the dataset's nominal value.
+    wheelbase_m, encoder_k_left, encoder_k_right : float or None
+        Overrides of W (m) and k_L, k_R (sqrt(m)); None takes the dataset's value.
+    odometry_sigma_xy_per_m, odometry_sigma_theta_per_m, odometry_sigma_theta_per_rad : float or None
+        Overrides of the increment-model noise (m/sqrt(m), rad/sqrt(m), rad/sqrt(rad)).
+    """
+
+    particles: int = 1000
+    resample_ess_fraction: float = 0.5
+    augmented: bool = True
+    alpha_slow: float = 0.001
+    alpha_fast: float = 0.1
+    init: Literal["belief", "uniform"] = "belief"
+    use_landmarks: bool = True
+    use_laser: bool = False
+    laser_beams: int = 60
+    z_hit: float = 0.95
+    z_rand: float = 0.05
+    sigma_hit_m: float = 0.2
+    laser_max_dist_m: float = 2.0
+    sigma_x_m: float = 0.001
+    sigma_y_m: float = 0.001
+    sigma_theta_rad: float = 0.0005
+    input_noise: InputNoise = "per_step"
+    motion_model: MotionKind = "auto"
+    sigma_range_m: float | None = None
+    sigma_bearing_rad: float | None = None
+    wheelbase_m: float | None = None
+    encoder_k_left: float | None = None
+    encoder_k_right: float | None = None
+    odometry_sigma_xy_per_m: float | None = None
+    odometry_sigma_theta_per_m: float | None = None
+    odometry_sigma_theta_per_rad: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.particles < 2:
+            raise ConfigError(f"particles must be an integer >= 2, got {self.particles}")
+        if not 0.0 <= self.resample_ess_fraction <= 1.0:
+            raise ConfigError(f"resample_ess_fraction must be in [0, 1], got {self.resample_ess_fraction}")
+        if not 0.0 <= self.alpha_slow < self.alpha_fast <= 1.0:
+            raise ConfigError(
+                "need 0 <= alpha_slow < alpha_fast <= 1, "
+                f"got alpha_slow={self.alpha_slow}, alpha_fast={self.alpha_fast}"
+            )
+        if self.laser_beams < 1:
+            raise ConfigError(f"laser_beams must be >= 1, got {self.laser_beams}")
+        if not (self.z_hit >= 0.0 and self.z_rand >= 0.0 and self.z_hit + self.z_rand > 0.0):
+            raise ConfigError(f"z_hit and z_rand must be >= 0 and not both 0, got {self.z_hit}, {self.z_rand}")
+        for name in ("sigma_hit_m", "laser_max_dist_m"):
+            if not getattr(self, name) > 0.0:
+                raise ConfigError(f"{name} must be > 0 m, got {getattr(self, name)}")
+        for name in ("sigma_x_m", "sigma_y_m", "sigma_theta_rad"):
+            if getattr(self, name) < 0.0:
+                raise ConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
+        for name in ("sigma_range_m", "sigma_bearing_rad", "wheelbase_m"):
+            v = getattr(self, name)
+            if v is not None and v <= 0.0:
+                raise ConfigError(f"{name} must be > 0 (or None for the dataset's value), got {v}")
+        if not (self.use_landmarks or self.use_laser):
+            raise ConfigError("use_landmarks and use_laser are both false: the particle filter needs one of them")
+
+
+# --- compiled kernels --------------------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def _landmark_loglik(
+    poses: FloatArray,
+    ranges: FloatArray,
+    bearings: FloatArray,
+    rows: IntArray,
+    lm_xy: FloatArray,
+    inv_var_r: float,
+    inv_var_b: float,
+    log_norm: float,
+) -> FloatArray:
+    """Sum over sightings of log N(range) + log N(wrapped bearing); rows < 0 are marginalised over the map."""
+    n = poses.shape[0]
+    m = ranges.shape[0]
+    nl = lm_xy.shape[0]
+    log_nl = math.log(nl)
+    out = np.zeros(n)
+    tmp = np.empty(nl)
+    for p in range(n):
+        x = poses[p, 0]
+        y = poses[p, 1]
+        th = poses[p, 2]
+        acc = 0.0
+        for k in range(m):
+            row = rows[k]
+            lo = row if row >= 0 else 0
+            hi = row + 1 if row >= 0 else nl
+            best = -math.inf
+            for j in range(lo, hi):
+                dx = lm_xy[j, 0] - x
+                dy = lm_xy[j, 1] - y
+                vr = ranges[k] - math.sqrt(dx * dx + dy * dy)
+                vb = bearings[k] - math.atan2(dy, dx) + th
+                vb = vb - 2.0 * math.pi * math.floor((vb + math.pi) / (2.0 * math.pi))  # wrap to [-pi, pi)
+                ll = log_norm - 0.5 * (vr * vr * inv_var_r + vb * vb * inv_var_b)
+                tmp[j] = ll
+                if ll > best:
+                    best = ll
+            if row >= 0:
+                acc += best
+            else:
+                s = 0.0
+                for j in range(nl):
+                    s += math.exp(tmp[j] - best)
+                acc += best + math.log(s) - log_nl
+        out[p] = acc
+    return out
+
+
+@njit(cache=True)
+def _weighted_stats(poses: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Weighted mean (circular for the heading) and weighted covariance (heading residuals wrapped)."""
+    n = poses.shape[0]
+    mx = 0.0
+    my = 0.0
+    sc = 0.0
+    ss = 0.0
+    for i in range(n):
+        mx += w[i] * poses[i, 0]
+        my += w[i] * poses[i, 1]
+        sc += w[i] * math.cos(poses[i, 2])
+        ss += w[i] * math.sin(poses[i, 2])
+    mth = math.atan2(ss, sc)
+    if mth <= -math.pi:
+        mth = math.pi
+    c = np.zeros((3, 3))
+    for i in range(n):
+        r0 = poses[i, 0] - mx
+        r1 = poses[i, 1] - my
+        r2 = poses[i, 2] - mth
+        r2 = r2 - 2.0 * math.pi * math.floor((r2 + math.pi) / (2.0 * math.pi))
+        wi = w[i]
+        c[0, 0] += wi * r0 * r0
+        c[0, 1] += wi * r0 * r1
+        c[0, 2] += wi * r0 * r2
+        c[1, 1] += wi * r1 * r1
+        c[1, 2] += wi * r1 * r2
+        c[2, 2] += wi * r2 * r2
+    c[1, 0] = c[0, 1]
+    c[2, 0] = c[0, 2]
+    c[2, 1] = c[1, 2]
+    mean = np.empty(3)
+    mean[0] = mx
+    mean[1] = my
+    mean[2] = mth
+    return mean, c
+
+
+# --- helpers ------------------------------------------------------------------------------------------------
+
+
+def systematic_resample(weights: npt.ArrayLike, n: int, rng: np.random.Generator) -> IntArray:
+    """Indices of ``n`` draws by systematic (low-variance) resampling, O(N + n) (PR table 4.4; report 003 [8]).
+
+    ``weights`` (N,) non-negative, normalised here; one uniform u ~ U[0, 1) places the points (u + k) / n.
+    """
+    w = np.asarray(weights, dtype=np.float64)
+    cdf = np.cumsum(w)
+    cdf /= cdf[-1]
+    points = (rng.random() + np.arange(n, dtype=np.float64)) / n
+    idx = np.searchsorted(cdf, points, side="right")
+    return np.minimum(idx, w.shape[0] - 1).astype(np.int64)
+
+
+def _logsumexp(a: FloatArray) -> float:
+    m = float(np.max(a))
+    if not math.isfinite(m):
+        return m
+    return m + math.log(float(np.sum(np.exp(a - m))))
+
+
+class FreeSpaceSampler:
+    """Uniform poses over free space: the free cells of a grid, else an axis-aligned box (x0, y0, x1, y1), m."""
+
+    def __init__(self, grid: OccupancyGrid | None, box: tuple[float, float, float, float] | None) -> None:
+        self._cells: IntArray | None = None
+        self._grid = grid
+        self._box = box
+        if grid is not None:
+            cells = np.flatnonzero(grid.free())
+            if cells.size:
+                self._cells = cells
+        if self._cells is None and box is None:
+            raise ConfigError("no free space to sample from: the grid has no free cell and there are no landmarks")
+
+    def sample(self, n: int, rng: np.random.Generator) -> FloatArray:
+        """``n`` poses (x m, y m, theta rad), uniform over free space, heading uniform in (-pi, pi]."""
+        out = np.empty((n, 3))
+        if self._cells is not None and self._grid is not None:
+            g = self._grid
+            k = self._cells[rng.integers(0, self._cells.size, size=n)]
+            r, c = np.divmod(k, g.shape[1])
+            off = rng.random((n, 2))
+            out[:, 0] = g.origin[0] + (c + off[:, 0]) * g.resolution
+            out[:, 1] = g.origin[1] + (r + off[:, 1]) * g.resolution
+        else:
+            assert self._box is not None
+            x0, y0, x1, y1 = self._box
+            u = rng.random((n, 2))
+            out[:, 0] = x0 + (x1 - x0) * u[:, 0]
+            out[:, 1] = y0 + (y1 - y0) * u[:, 1]
+        out[:, 2] = wrap_angle(rng.uniform(-math.pi, math.pi, size=n))
+        return out
+
+
+def _sample_gaussian(mean: FloatArray, cov: FloatArray, n: int, rng: np.random.Generator) -> FloatArray:
+    """``n`` draws of N(mean, cov) through a symmetric square root (works for a singular PSD cov)."""
+    vals, vecs = np.linalg.eigh(0.5 * (cov + cov.T))
+    root = vecs * np.sqrt(np.clip(vals, 0.0, None))
+    out = mean + rng.standard_normal((n, 3)) @ root.T
+    out[:, 2] = wrap_angle(out[:, 2])
+    return out
+
+
+# --- the filter ---------------------------------------------------------------------------------------------
+
+
+class ParticleFilter(Filter):
+    """Monte Carlo localization with the encoder model, landmark and likelihood-field models, augmented MCL.
+
+    See the module docstring for the model, its sources (report 003 sec. 4.2; Probabilistic Robotics tables
+    4.4, 6.3, 8.2, 8.3) and the choices made. ``requires`` is empty because the filter needs landmarks *or*
+    an occupancy grid (``requires`` is an all-of set); ``reset`` raises :class:`ConfigError` when the
+    configured sensors have no usable map.
+    """
+
+    consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LandmarkObservations, LaserScan})
+    requires: ClassVar[frozenset[MapKind]] = frozenset()
+    Config: ClassVar[type[FilterConfig]] = ParticleFilterConfig
+    version: ClassVar[int] = 1
+    source: ClassVar[str] = "003_e5c93f9be776ee5e.txt sec. 4.2; Thrun, Burgard & Fox, Probabilistic Robotics ch. 6, 8"
+    config: ParticleFilterConfig
+
+    @property
+    def logdet_tolerance(self) -> float:
+        """How far log det of the sample covariance may fall in one predict by sampling noise alone.
+
+        Adding independent noise of covariance Q to N samples of covariance C changes log det C by
+        a = tr(C^-1 Q) plus a cross term of standard deviation 2 sqrt(a / N); the change is negative only when
+        that term beats a, and its worst value over a is k^2 / N at k standard deviations. 25 / N is 5 sigma.
+        """
+        return 25.0 / self.config.particles
+
+    def routed_events(self) -> frozenset[type]:
+        """Odometry, plus landmark sightings and laser scans as switched on in the config."""
+        out: set[type] = {Odometry}
+        if self.config.use_landmarks:
+            out.add(LandmarkObservations)
+        if self.config.use_laser:
+            out.add(LaserScan)
+        return frozenset(out)
+
+    # --- reset -------------------------------------------------------------------------------------------
+
+    def reset(self, initial: Gaussian2, world: WorldMap, sensors: SensorSpec, rng: np.random.Generator) -> None:
+        """Draw the particles (from ``initial`` or uniformly over free space) and resolve the noise models.
+
+        Raises
+        ------
+        ConfigError
+            When neither a landmark map (for ``use_landmarks``) nor an occupancy grid (for ``use_laser``)
+            is present.
+        """
+        cfg = self.config
+        self._rng = rng
+        self._n = int(cfg.particles)
+        self._noise = resolve_motion_noise(
+            sensors,
+            input_noise=cfg.input_noise,
+            wheelbase_m=cfg.wheelbase_m,
+            encoder_k_left=cfg.encoder_k_left,
+            encoder_k_right=cfg.encoder_k_right,
+            odometry_sigma_xy_per_m=cfg.odometry_sigma_xy_per_m,
+            odometry_sigma_theta_per_m=cfg.odometry_sigma_theta_per_m,
+            odometry_sigma_theta_per_rad=cfg.odometry_sigma_theta_per_rad,
+        )
+        nz = self._noise
+        self._use_encoder = nz.wheelbase_m is not None and (
+            cfg.motion_model == "encoder" or (cfg.motion_model == "auto" and nz.encoder_given)
+        )
+        self._travelled = [0.0, 0.0]
+        self._q_std = np.array([cfg.sigma_x_m, cfg.sigma_y_m, cfg.sigma_theta_rad])
+
+        lm = world.landmarks if world.landmarks is not None and len(world.landmarks) > 0 else None
+        grid = world.occupancy
+        self._use_lm = cfg.use_landmarks and lm is not None
+        self._use_laser = cfg.use_laser and grid is not None
+        if cfg.use_landmarks and lm is None:
+            logger.info("pf: the world has no landmarks; landmark sightings will not be used")
+        if cfg.use_laser and grid is None:
+            logger.info("pf: the world has no occupancy grid; laser scans will not be used")
+        if not (self._use_lm or self._use_laser):
+            raise ConfigError(
+                "pf: no usable sensor model: use_landmarks needs a landmark map and use_laser an occupancy grid; "
+                f"this world has {sorted(k.value for k in world.kinds) or 'neither'} "
+                f"(use_landmarks={cfg.use_landmarks}, use_laser={cfg.use_laser}); "
+                "set use_laser=true on a dataset with a grid"
+            )
+
+        if lm is not None:
+            self._lm_xy = np.ascontiguousarray(lm.xy, dtype=np.float64).reshape(-1, 2)
+            self._lm_row = lm.index_of()
+        else:
+            self._lm_xy = np.zeros((0, 2))
+            self._lm_row = {}
+        sr = cfg.sigma_range_m if cfg.sigma_range_m is not None else sensors.landmark_sigma_range_m
+        sb = cfg.sigma_bearing_rad if cfg.sigma_bearing_rad is not None else sensors.landmark_sigma_bearing_rad
+        if self._use_lm and (sr is None or sb is None):
+            logger.warning(
+                "no nominal landmark noise in the config or dataset; using sigma_range_m=%g, sigma_bearing_rad=%g",
+                DEFAULT_SIGMA_RANGE_M,
+                DEFAULT_SIGMA_BEARING_RAD,
+            )
+        sr = DEFAULT_SIGMA_RANGE_M if sr is None else float(sr)
+        sb = DEFAULT_SIGMA_BEARING_RAD if sb is None else float(sb)
+        self._inv_var_r, self._inv_var_b = 1.0 / (sr * sr), 1.0 / (sb * sb)
+        self._lm_log_norm = -_LOG_2PI - math.log(sr) - math.log(sb)
+
+        self._grid = grid
+        self._fields: dict[float, LikelihoodField] = {}
+        self._beam_idx: dict[int, IntArray] = {}
+
+        box = None
+        if lm is not None:
+            lo, hi = self._lm_xy.min(axis=0), self._lm_xy.max(axis=0)
+            box = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+        needs_space = cfg.init == "uniform" or cfg.augmented
+        self._space = FreeSpaceSampler(grid, box) if needs_space else None
+
+        if cfg.init == "uniform":
+            assert self._space is not None
+            self._x = self._space.sample(self._n, rng)
+        else:
+            self._x = _sample_gaussian(
+                np.asarray(initial.mean, dtype=np.float64), np.asarray(initial.cov, dtype=np.float64), self._n, rng
+            )
+        self._logw = np.full(self._n, -math.log(self._n))
+        # augmented MCL: per sensor [w_slow, w_fast], started at the first w_avg
+        self._w_avg: dict[type, list[float]] = {}
+        self._t = math.nan
+        self._diag = self._fresh_diag()
+        self._est: Estimate | None = None
+        self._check_finite(math.nan)
+
+    @staticmethod
+    def _fresh_diag() -> dict[str, float]:
+        return {
+            "n_eff": math.nan,
+            "resampled": 0.0,
+            "injected": 0.0,
+            "p_inject": math.nan,
+            "w_fast_over_w_slow": math.nan,
+        }
+
+    # --- predict -----------------------------------------------------------------------------------------
+
+    def predict(self, u: Odometry) -> None:
+        """Move every particle by its own draw from the encoder model (report 003 eq. 1-2, 5, 10) plus Q (eq. 8)."""
+        nz = self._noise
+        rng = self._rng
+        if self._use_encoder and u.d_left is not None and u.d_right is not None:
+            W = nz.wheelbase_m
+            assert W is not None
+            vl, vr = wheel_variances(
+                u.d_left, u.d_right, nz.k_left, nz.k_right, nz.input_noise, self._travelled[0], self._travelled[1]
+            )
+            self._travelled[0] += abs(u.d_left)
+            self._travelled[1] += abs(u.d_right)
+            x = sample_wheel_motion(self._x, u.d_left, u.d_right, W, vl, vr, rng)
+        else:
+            vxy, vth = increment_variances(
+                u.dx, u.dy, u.dtheta, nz.sigma_xy_per_m, nz.sigma_theta_per_m, nz.sigma_theta_per_rad
+            )
+            x = sample_increment_motion(self._x, u.dx, u.dy, u.dtheta, vxy, vth, rng)
+        if self._q_std.any():
+            x += rng.standard_normal((self._n, 3)) * self._q_std
+            x[:, 2] = wrap_angle(x[:, 2])
+        self._x = x
+        self._t = u.t
+        self._diag = self._fresh_diag()
+        self._est = None
+        self._check_finite(u.t)
+
+    # --- update ------------------------------------------------------------------------------------------
+
+    def update(self, z: Observation) -> None:
+        """Weight the particles with landmark sightings or a laser scan; resample and inject as configured."""
+        if type(z) is LandmarkObservations:
+            prepared = self._prepare_landmarks(z) if self._use_lm else None
+        elif type(z) is LaserScan:
+            prepared = self._prepare_scan(z) if self._use_laser else None
+        else:
+            self.check_consumes(z)
+            raise TypeError(f"ParticleFilter does not consume {type(z).__name__}")  # pragma: no cover
+        self._t = z.t
+        self._diag = self._fresh_diag()
+        self._est = None
+        if prepared is not None:
+            self._correct(type(z), *prepared)
+        self._check_finite(z.t)
+
+    def _prepare_landmarks(self, z: LandmarkObservations) -> tuple[int, tuple[FloatArray, FloatArray, IntArray]] | None:
+        ids = z.ids.tolist()
+        keep: list[int] = []
+        rows: list[int] = []
+        for k, ident in enumerate(ids):
+            r, b = float(z.ranges[k]), float(z.bearings[k])
+            if not (math.isfinite(r) and math.isfinite(b)) or r <= 0.0:
+                continue
+            if ident == UNKNOWN_ID:
+                row = -1
+            else:
+                row = self._lm_row.get(int(ident), -2)
+                if row == -2:
+                    logger.debug("landmark id %d is not in the map; sighting ignored", ident)
+                    continue
+            keep.append(k)
+            rows.append(row)
+        if not keep:
+            return None
+        sel = np.asarray(keep, dtype=np.int64)
+        data = (
+            np.ascontiguousarray(z.ranges[sel], dtype=np.float64),
+            np.ascontiguousarray(z.bearings[sel], dtype=np.float64),
+            np.asarray(rows, dtype=np.int64),
+        )
+        return len(keep), data
+
+    def _prepare_scan(self, z: LaserScan) -> tuple[int, tuple[FloatArray, FloatArray]] | None:
+        n_all = int(z.ranges.shape[0])
+        idx = self._beam_idx.get(n_all)
+        if idx is None:
+            k = min(self.config.laser_beams, n_all)
+            idx = np.unique(np.round(np.linspace(0.0, n_all - 1.0, k)).astype(np.int64))
+            self._beam_idx[n_all] = idx
+        r = z.ranges[idx]
+        ok = np.isfinite(r) & (r >= z.range_min) & (r < z.range_max)
+        if not ok.any():
+            return None
+        angles = z.angle_min + z.angle_increment * idx[ok].astype(np.float64)
+        ex, ey = scan_endpoints_robot_frame(r[ok], angles, z.sensor_pose)
+        zmax = float(z.range_max)
+        if zmax not in self._fields:
+            assert self._grid is not None
+            cfg = self.config
+            self._fields[zmax] = make_likelihood_field(
+                self._grid,
+                z_hit=cfg.z_hit,
+                z_rand=cfg.z_rand,
+                sigma_hit_m=cfg.sigma_hit_m,
+                max_dist_m=cfg.laser_max_dist_m,
+                z_max_m=zmax,
+            )
+        self._scan_field = self._fields[zmax]
+        return int(ok.sum()), (ex, ey)
+
+    def _loglik(self, kind: type, data: tuple[FloatArray, ...]) -> FloatArray:
+        if kind is LandmarkObservations:
+            ranges, bearings, rows = data
+            return _landmark_loglik(  # type: ignore[no-any-return]
+                self._x,
+                ranges,
+                bearings,
+                rows,
+                self._lm_xy,
+                self._inv_var_r,
+                self._inv_var_b,
+                self._lm_log_norm,
+            )
+        ex, ey = data
+        return log_likelihood(self._scan_field, self._x, ex, ey)
+
+    def _correct(self, kind: type, m: int, data: tuple[FloatArray, ...]) -> None:
+        """Augmented MCL step: inject, weight, update w_slow/w_fast, resample on low ESS."""
+        cfg = self.config
+        rng = self._rng
+        n = self._n
+        resampled = False
+        injected = 0
+        avg = self._w_avg.get(kind)
+        if cfg.augmented and avg is not None and avg[0] > 0.0:
+            ratio = avg[1] / avg[0]
+            p_inject = max(0.0, 1.0 - ratio)
+            self._diag["w_fast_over_w_slow"] = ratio
+            self._diag["p_inject"] = p_inject
+            injected = int(rng.binomial(n, p_inject)) if p_inject > 0.0 else 0
+            if injected:
+                # resample from the mixture (1 - p) belief + p uniform over free space (PR table 8.3)
+                assert self._space is not None
+                keep = systematic_resample(np.exp(self._logw), n - injected, rng)
+                self._x = np.concatenate([self._x[keep], self._space.sample(injected, rng)])
+                self._logw = np.full(n, -math.log(n))
+                resampled = True
+        ll = self._loglik(kind, data)
+        post = self._logw + ll
+        log_pred = _logsumexp(post)  # log sum_i w_i p(z | x_i): the predictive likelihood of z
+        if not math.isfinite(log_pred):
+            raise FilterDiverged(f"ParticleFilter: every particle has zero likelihood at t={self._t:.3f} s")
+        self._logw = post - log_pred
+        w = np.exp(self._logw)
+        n_eff = 1.0 / float(np.dot(w, w))
+        self._diag["n_eff"] = n_eff
+        if cfg.augmented:
+            # geometric mean per sighting or beam, so that the average neither underflows nor depends on m
+            w_avg = math.exp(log_pred / m)
+            if avg is None:
+                self._w_avg[kind] = [w_avg, w_avg]
+            else:
+                avg[0] += cfg.alpha_slow * (w_avg - avg[0])
+                avg[1] += cfg.alpha_fast * (w_avg - avg[1])
+        if n_eff < cfg.resample_ess_fraction * n:
+            idx = systematic_resample(w, n, rng)
+            self._x = self._x[idx]
+            self._logw = np.full(n, -math.log(n))
+            resampled = True
+        self._diag["resampled"] = 1.0 if resampled else 0.0
+        self._diag["injected"] = float(injected)
+
+    # --- output ------------------------------------------------------------------------------------------
+
+    def _check_finite(self, t: float) -> None:
+        if not (np.all(np.isfinite(self._x)) and np.all(np.isfinite(self._logw))):
+            raise FilterDiverged(f"ParticleFilter particles became non-finite at t={t:.3f} s")
+
+    def particles(self) -> tuple[FloatArray, FloatArray]:
+        """Copies of the particles (N, 3) (x m, y m, theta rad) and their normalised weights (N,)."""
+        return self._x.copy(), np.exp(self._logw)
+
+    def estimate(self) -> Estimate:
+        """Weighted mean (circular heading), weighted covariance (wrapped residuals) and diagnostics."""
+        if self._est is None:
+            mean, cov = _weighted_stats(self._x, np.exp(self._logw))
+            self._est = Estimate(t=self._t, mean=mean, cov=cov, diagnostics=dict(self._diag))
+        return Estimate(
+            t=self._est.t, mean=self._est.mean.copy(), cov=self._est.cov.copy(), diagnostics=dict(self._diag)
+        )
