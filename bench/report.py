@@ -31,6 +31,7 @@ from scipy import stats
 import locbench
 from locbench.claims import claims_for, sections_for, spec_id, waypoint_stats
 from locbench.claims.report_003 import ROOM_TABLE1_CM
+from locbench.errors import ConfigError
 from locbench.metrics import (
     CONFIDENCE,
     POSE_DOF,
@@ -41,6 +42,7 @@ from locbench.metrics import (
     nees_at_truth,
     run_metrics,
 )
+from locbench.spec import format_spec, parse_spec
 from locbench.store import RunRecord, Store, TruthRecord
 
 log = logging.getLogger(__name__)
@@ -63,6 +65,11 @@ COMPARISON: tuple[tuple[str, str], ...] = (
     ("update_us_median", "update median (us)"),
     ("realtime_factor", "real-time factor"),
 )
+
+#: Extra comparison column, shown beside ATE only for datasets where a filter reports a smoothed trajectory.
+SMOOTHED_COLUMN = ("smoothed_ate_m", "smoothed ATE (m)")
+#: A filter name containing this is scored in the "Global localization" section (started without a pose).
+GLOBAL_INIT_MARK = "init=uniform"
 
 FIG_SIZE = (7.0, 4.2)
 FIG_DPI = 110
@@ -300,6 +307,8 @@ def write_report(store: Store) -> Path:
             extra[ds] += sec_lines
             extra_figures.update(sec_figs)
     across_lines = _across_variants(df, figdir, sorted({spec_id(d) for d in datasets}), extra_figures)
+    kidnap_lines = _kidnap_section(df, figdir, extra_figures)
+    global_lines = _global_localization(df)
     written = {f for fs in figures.values() for f in fs} | extra_figures
     for stale in sorted(figdir.glob("*.png")):
         if stale.name not in written:
@@ -310,6 +319,8 @@ def write_report(store: Store) -> Path:
     for ds in datasets:
         lines += _dataset_section(df[df["dataset"] == ds], col, ds, figures[ds], extra[ds])
     lines += across_lines
+    lines += kidnap_lines
+    lines += global_lines
     lines += _failures(col)
     path = summary / "REPORT.md"
     _write_if_changed(path, ("\n".join(lines).rstrip() + "\n").encode())
@@ -342,6 +353,198 @@ def _across_variants(df: pd.DataFrame, figdir: Path, ids: list[str], figures_out
             lines += _md_table(["claim", "verdict", "measured", "report"], crow)
             lines.append("")
     return lines
+
+
+# --- kidnap recovery and global localization ------------------------------------------------------
+
+
+def wilson_interval(successes: int, n: int, confidence: float = CONFIDENCE) -> tuple[float, float]:
+    """Two-sided Wilson score interval of a binomial proportion (NaN, NaN for n = 0).
+
+    (p + z^2/2n -+ z sqrt(p(1-p)/n + z^2/4n^2)) / (1 + z^2/n) with p = successes / n and z the normal
+    quantile of (1 + confidence) / 2; unlike the Wald interval it stays inside [0, 1] and is not empty
+    at 0 or n successes.
+    """
+    if n <= 0:
+        return float("nan"), float("nan")
+    if not 0 <= successes <= n:
+        raise ValueError(f"successes must be in [0, {n}], got {successes}")
+    z = float(stats.norm.ppf(0.5 + confidence / 2.0))
+    p = successes / n
+    den = 1.0 + z * z / n
+    centre = (p + z * z / (2.0 * n)) / den
+    half = z * np.sqrt(p * (1.0 - p) / n + z * z / (4.0 * n * n)) / den
+    return max(0.0, float(centre - half)), min(1.0, float(centre + half))
+
+
+def _rate(values: pd.Series, runs: int) -> tuple[str, float, float, float]:
+    """``k/n = rate [low, high]`` text, and the rate with its Wilson interval, of a 1/0 series.
+
+    ``runs`` is n: every run that was not skipped, so a failed or diverged run (which has no 1/0 value)
+    counts as a failure.
+    """
+    v = values.to_numpy(dtype=np.float64)
+    k = int(np.sum(v > 0.5))
+    n = max(int(runs), int(v.size))
+    if n == 0:
+        return "n/a", float("nan"), float("nan"), float("nan")
+    lo, hi = wilson_interval(k, n)
+    return f"{k}/{n} = {k / n:.2f} [{lo:.2f}, {hi:.2f}]", k / n, lo, hi
+
+
+def _median(values: pd.Series) -> str:
+    v = values.to_numpy(dtype=np.float64)
+    v = v[~np.isnan(v)]
+    return _num(float(np.median(v))) if v.size else "n/a"
+
+
+def _kidnap_family(dataset: str) -> str:
+    """The dataset name without its kidnap distance: the variants that a recovery-against-distance line joins."""
+    try:
+        ident, params = parse_spec(dataset)
+    except ConfigError:
+        return dataset
+    params.pop("kidnap_m", None)
+    return format_spec(ident, params)
+
+
+def _kidnap_section(df: pd.DataFrame, figdir: Path, figures_out: set[str]) -> list[str]:
+    """Recovery rate, time to recover and false confidence per dataset id, filter and kidnap distance."""
+    if not len(df):
+        return []
+    dist = df[df["metric"] == "kidnap_distance_m"]
+    if dist.empty:
+        return []
+    # the distance of a dataset name is its recorded |d| (the same for every seed of a synthetic kidnap)
+    d_of = dist.groupby("dataset")["value"].median()
+    names = sorted(d_of.index, key=lambda n: (spec_id(n), _kidnap_family(n), float(d_of[n]), n))
+    lines = [
+        "## Kidnap recovery",
+        "",
+        "After the first kidnap of a run (a silent jump of the truth by a distance D), a filter has recovered "
+        "when its position error is <= 0.25 m and its heading error <= 0.25 rad at every ground-truth time "
+        "for 2 s, starting within 30 s of the kidnap. Recovery rate over the runs (a failed or diverged run "
+        "counts as not recovered) with a 95 % Wilson interval; "
+        "median time from the kidnap to the start of that hold, over the recovered runs; false confidence is "
+        "the fraction of the time from the kidnap to the recovery (or the end of the 30 s window) with the "
+        "NEES above its 99.9 % chi-square(3) quantile (mean ± 95 % interval over seeds).",
+        "",
+    ]
+    for ident in sorted({spec_id(n) for n in names}):
+        ds_names = [n for n in names if spec_id(n) == ident]
+        rows: list[list[str]] = []
+        # (filter, family) -> [(D, rate, low, high)]
+        curves: dict[tuple[str, str], list[tuple[float, float, float, float]]] = defaultdict(list)
+        families = sorted({_kidnap_family(n) for n in ds_names})
+        for f in _filter_order(df[df["dataset"].isin(ds_names)]["filter"].unique()):
+            for n in ds_names:
+                sub = df[(df["dataset"] == n) & (df["filter"] == f)]
+                if sub.empty:
+                    continue
+                rec = sub[sub["metric"] == "kidnap_recovered"]["value"]
+                status = sub[sub["metric"] == "failed"]["value"]
+                text, rate, lo, hi = _rate(rec, len(status))
+                if not np.isnan(rate):
+                    curves[(f, _kidnap_family(n))].append((float(d_of[n]), rate, lo, hi))
+                rows.append(
+                    [
+                        f"`{f}`",
+                        _num(float(d_of[n])),
+                        f"`{n}`",
+                        str(len(status)),
+                        str(int(status.sum())),
+                        text,
+                        _median(sub[sub["metric"] == "kidnap_time_to_recover_s"]["value"]),
+                        _mean_pm(sub[sub["metric"] == "kidnap_false_confidence_fraction"]["value"]),
+                    ]
+                )
+        lines += [f"### {ident}", ""]
+        lines += _md_table(
+            [
+                "filter",
+                "D (m)",
+                "dataset",
+                "runs",
+                "failed",
+                "recovered (95 % Wilson)",
+                "median time to recover (s)",
+                "false confidence",
+            ],
+            rows,
+        )
+        lines.append("")
+        if curves:
+            name = f"kidnap_{_slug(ident)}.png"
+            with matplotlib.style.context(["default", _STYLE]):
+                _save(_kidnap_figure(ident, curves, len(families) > 1), figdir / name)
+            figures_out.add(name)
+            lines += [f"![kidnap_{_slug(ident)}](figures/{name})", ""]
+    return lines
+
+
+def _kidnap_figure(
+    ident: str, curves: dict[tuple[str, str], list[tuple[float, float, float, float]]], show_family: bool
+) -> Figure:
+    """Recovery rate against kidnap distance, a line per filter, with 95 % Wilson intervals."""
+    fig = _new_figure()
+    ax = fig.add_subplot()
+    keys = sorted(curves, key=lambda k: (spec_id(k[0]) != "odometry", k[0], k[1]))
+    all_d = sorted({p[0] for pts in curves.values() for p in pts})
+    # a small sideways offset per line so that equal rates (0 or 1) and their intervals stay readable
+    log_x = all_d[0] > 0 and len(all_d) > 1
+    for i, key in enumerate(keys):
+        pts = np.array(sorted(curves[key]), dtype=np.float64)
+        shift = (i - (len(keys) - 1) / 2.0) * 0.02
+        x = pts[:, 0] * 2.0**shift if log_x else pts[:, 0] + shift * (all_d[-1] - all_d[0] + 1.0)
+        err = np.vstack([pts[:, 1] - pts[:, 2], pts[:, 3] - pts[:, 1]])
+        label = f"{key[0]} on {key[1]}" if show_family else key[0]
+        ax.errorbar(x, pts[:, 1], yerr=err, color=f"C{i % 10}", marker="o", ms=4, capsize=3, label=label)
+    if log_x:
+        ax.set_xscale("log", base=2)
+    ax.set_xticks(all_d, [f"{d:g}" for d in all_d])
+    ax.minorticks_off()
+    ax.set_ylim(-0.05, 1.05)
+    ax.set_xlabel("kidnap distance D (m)")
+    ax.set_ylabel("recovery rate")
+    ax.set_title(f"{ident}: recovery within 30 s (0.25 m, 0.25 rad held 2 s), 95 % Wilson intervals")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+    return fig
+
+
+def _global_localization(df: pd.DataFrame) -> list[str]:
+    """Success rate and median time to converge of the filters started without a pose (``init=uniform``)."""
+    if not len(df):
+        return []
+    sel = df[df["filter"].str.contains(GLOBAL_INIT_MARK, regex=False)]
+    if sel.empty:
+        return []
+    rows = []
+    for ds in sorted(sel["dataset"].unique()):
+        sub_ds = sel[sel["dataset"] == ds]
+        for f in _filter_order(sub_ds["filter"].unique()):
+            sub = sub_ds[sub_ds["filter"] == f]
+            status = sub[sub["metric"] == "failed"]["value"]
+            rows.append(
+                [
+                    f"`{ds}`",
+                    f"`{f}`",
+                    str(len(status)),
+                    str(int(status.sum())),
+                    _rate(sub[sub["metric"] == "converged"]["value"], len(status))[0],
+                    _median(sub[sub["metric"] == "time_to_converge_s"]["value"]),
+                ]
+            )
+    return [
+        "## Global localization",
+        "",
+        f"Filters started without knowing their pose (`{GLOBAL_INIT_MARK}`). A run has converged at the first "
+        "time from the start at which its position error is <= 0.25 m and its heading error <= 0.25 rad at "
+        "every ground-truth time for 2 s; success rate over the runs (a failed or diverged run counts as not "
+        "converged) with a 95 % Wilson interval, median time to converge over the converged runs.",
+        "",
+        *_md_table(["dataset", "filter", "runs", "failed", "converged (95 % Wilson)", "median time (s)"], rows),
+        "",
+    ]
 
 
 def _provenance(col: _Collected) -> list[str]:
@@ -390,15 +593,16 @@ def _dataset_section(
     if not filters:
         return [*lines, "No runs with metrics (all skipped).", ""]
     lines += [f"### Comparison (mean ± {100 * CONFIDENCE:.0f} % interval over seeds)", ""]
+    columns = _comparison_columns(df)
     rows = []
     for f in filters:
         sub = df[df["filter"] == f]
         failed = sub[sub["metric"] == "failed"]["value"]
         row = [f"`{f}`", str(len(failed)), str(int(failed.sum()))]
-        for metric, _ in COMPARISON:
+        for metric, _ in columns:
             row.append(_mean_pm(sub[sub["metric"] == metric]["value"]))
         rows.append(row)
-    lines += _md_table(["filter", "runs", "failed", *(h for _, h in COMPARISON)], rows)
+    lines += _md_table(["filter", "runs", "failed", *(h for _, h in columns)], rows)
     lines.append("")
 
     ws = waypoint_stats(df)
@@ -421,6 +625,16 @@ def _dataset_section(
         lines += [f"![{Path(f).stem}](figures/{f})" for f in figs]
         lines.append("")
     return lines
+
+
+def _comparison_columns(df: pd.DataFrame) -> tuple[tuple[str, str], ...]:
+    """The comparison columns; "smoothed ATE" beside ATE when any filter of the dataset has a smoothed trajectory."""
+    if not (df["metric"] == SMOOTHED_COLUMN[0]).any():
+        return COMPARISON
+    cols = list(COMPARISON)
+    at = next(i for i, (m, _) in enumerate(cols) if m == "ate_m") + 1
+    cols.insert(at, SMOOTHED_COLUMN)
+    return tuple(cols)
 
 
 def _waypoint_tables(ws: pd.DataFrame, filters: list[str], room: bool) -> list[str]:

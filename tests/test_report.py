@@ -211,6 +211,8 @@ def test_collect_metrics_is_tidy_and_sorted(store: Store) -> None:
         "update_us_median",
         "update_us_p95",
         "realtime_factor",
+        "converged",
+        "time_to_converge_s",
     }
     expected |= {f"waypoint_{j}_{q}" for j in range(1, 6) for q in ("error_m", "est_x_m", "est_y_m")}
     expected |= {f"waypoint_{j}_{q}" for j in range(1, 6) for q in ("marked_x_m", "marked_y_m")}
