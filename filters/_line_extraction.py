@@ -1,0 +1,277 @@
+"""Line extraction from a planar laser scan by split-and-merge, shared by the line-map filters.
+
+The front-end of report 002 (``ekf_lines``): the scan is turned into straight segments, each described by
+its infinite line in Hessian normal form in the robot frame, a 2x2 covariance, its end points and length.
+
+Steps
+-----
+1. **Points.** Every finite return within [range_min, range_max) becomes a point in the robot frame (the
+   sensor's mounting pose applied).
+2. **Breakpoints.** Consecutive points (in beam order) are cut apart where a beam has no return between
+   them or where they lie farther apart than ``max(gap_min_m, gap_factor * r * angle_increment)``: a
+   depth jump or a door gap, so that a segment never bridges two collinear walls.
+3. **Split** (iterative end-point fit, Ramer-Douglas-Peucker): a run is split at the point farthest from
+   the chord through its ends while that distance exceeds ``split_threshold_m``.
+4. **Merge.** Neighbouring segments whose joint fit keeps every point within ``split_threshold_m`` of the
+   line are merged (the split step can cut a straight wall where noise makes an end point an outlier).
+5. **Fit.** Each segment with at least ``min_points`` points and ``min_length_m`` length is fitted by total
+   least squares (orthogonal regression) and gets the first-order covariance of that fit.
+
+Line parameters: a line is {p : p . (cos psi, sin psi) = rho} in the robot frame with ``rho`` >= 0 (m) and
+``psi`` in (-pi, pi] (rad), the convention of :meth:`locbench.datasets.base.LineMap.rho_psi`. For a line
+passing (nearly) through the robot, rho is near 0 and the sign of the normal, hence psi, may flip by pi
+between scans; the consumer must compare lines modulo that flip (``ekf_lines`` does).
+
+Covariance of the fit: with n points, unit normal n(psi), tangent t(psi), centroid c, along-line coordinates
+s_i = (p_i - c) . t and S = sum s_i^2, and an independent error of variance sigma^2 across the line at each
+point, the linearised least-squares solution gives
+
+    var(psi) = sigma^2 / S,   var(rho) = sigma^2 / n + (c . t)^2 sigma^2 / S,   cov(rho, psi) = (c . t) sigma^2 / S.
+
+sigma is the laser's range noise (an upper bound on its component across the line).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from locbench.errors import ConfigError
+from locbench.events import LaserScan
+
+FloatArray = npt.NDArray[np.float64]
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, kw_only=True)
+class ExtractionParams:
+    """Parameters of :func:`extract_lines`.
+
+    Attributes
+    ----------
+    split_threshold_m : float
+        Largest distance of a point from its segment's line before the segment is split, m.
+    min_points : int
+        Fewest points a segment must have to be reported (>= 3, so the fit has redundancy).
+    min_length_m : float
+        Shortest segment reported (distance between its end points projected on the line), m.
+    gap_min_m : float
+        Consecutive points farther apart than ``max(gap_min_m, gap_factor * r * angle_increment)`` start a
+        new run, m.
+    gap_factor : float
+        Multiple of the beam spacing at range r that still counts as contiguous (>= 1).
+    sigma_m : float
+        Range noise of one point, m (> 0), for the covariance of the fit.
+    """
+
+    split_threshold_m: float = 0.05
+    min_points: int = 4
+    min_length_m: float = 0.3
+    gap_min_m: float = 0.2
+    gap_factor: float = 3.0
+    sigma_m: float = 0.01
+
+    def __post_init__(self) -> None:
+        if not self.split_threshold_m > 0:
+            raise ConfigError(f"split_threshold_m must be > 0 m, got {self.split_threshold_m}")
+        if self.min_points < 3:
+            raise ConfigError(f"min_points must be >= 3, got {self.min_points}")
+        if self.min_length_m < 0 or self.gap_min_m < 0:
+            raise ConfigError("min_length_m and gap_min_m must be >= 0 m")
+        if not self.gap_factor >= 1:
+            raise ConfigError(f"gap_factor must be >= 1, got {self.gap_factor}")
+        if not self.sigma_m > 0:
+            raise ConfigError(f"sigma_m must be > 0 m, got {self.sigma_m}")
+
+
+@dataclass(frozen=True, eq=False)
+class ExtractedLines:
+    """Lines extracted from one scan, robot frame.
+
+    Attributes
+    ----------
+    rho_psi : ndarray, shape (k, 2)
+        Hessian normal form (rho m >= 0, psi rad in (-pi, pi]).
+    cov : ndarray, shape (k, 2, 2)
+        Covariance of (rho, psi) from the fit (m^2, m rad, rad^2).
+    endpoints : ndarray, shape (k, 2, 2)
+        The two end points (x, y) of each segment, m: the first and last point projected on the line.
+    lengths : ndarray, shape (k,)
+        Distance between the end points, m.
+    n_points : ndarray of int64, shape (k,)
+        Points that entered each fit.
+    """
+
+    rho_psi: FloatArray
+    cov: FloatArray
+    endpoints: FloatArray
+    lengths: FloatArray
+    n_points: npt.NDArray[np.int64]
+
+    def __len__(self) -> int:
+        return int(self.rho_psi.shape[0])
+
+
+def scan_points(scan: LaserScan) -> tuple[FloatArray, FloatArray, npt.NDArray[np.int64]]:
+    """Valid returns of ``scan`` as robot-frame points.
+
+    Returns
+    -------
+    points : ndarray, shape (m, 2)
+        (x, y) in the robot frame, m, in beam order.
+    ranges : ndarray, shape (m,)
+        Their measured ranges, m.
+    beam : ndarray of int64, shape (m,)
+        Their beam indices.
+    """
+    r = np.asarray(scan.ranges, dtype=np.float64)
+    ok = np.isfinite(r) & (r >= scan.range_min) & (r < scan.range_max)
+    beam = np.flatnonzero(ok).astype(np.int64)
+    rr = r[beam]
+    sx, sy, sth = scan.sensor_pose
+    a = scan.angle_min + scan.angle_increment * beam + sth
+    pts = np.column_stack([sx + rr * np.cos(a), sy + rr * np.sin(a)])
+    return pts, rr, beam
+
+
+def fit_line(points: FloatArray, sigma_m: float) -> tuple[float, float, FloatArray, float]:
+    """Total-least-squares line through ``points`` (n, 2), n >= 2.
+
+    Returns
+    -------
+    rho, psi : float
+        Hessian normal form, rho >= 0 (m), psi in (-pi, pi] (rad).
+    cov : ndarray, shape (2, 2)
+        First-order covariance of (rho, psi) for an error of ``sigma_m`` across the line at each point.
+    max_residual : float
+        Largest distance of a point from the fitted line, m.
+    """
+    n = points.shape[0]
+    c = points.mean(axis=0)
+    d = points - c
+    sxx = float(d[:, 0] @ d[:, 0])
+    syy = float(d[:, 1] @ d[:, 1])
+    sxy = float(d[:, 0] @ d[:, 1])
+    # The normal is the direction of least spread: psi minimises sum ((p - c) . n)^2.
+    psi = 0.5 * math.atan2(-2.0 * sxy, syy - sxx)
+    cp, sp = math.cos(psi), math.sin(psi)
+    rho = c[0] * cp + c[1] * sp
+    if rho < 0.0:
+        rho, psi = -rho, psi + math.pi
+        cp, sp = -cp, -sp
+    psi = math.atan2(sp, cp)
+    s = -d[:, 0] * sp + d[:, 1] * cp  # along-line coordinates (t = (-sin psi, cos psi))
+    big_s = max(float(s @ s), 1e-12)
+    ct = -c[0] * sp + c[1] * cp
+    var = sigma_m * sigma_m
+    cov = np.array([[var / n + ct * ct * var / big_s, ct * var / big_s], [ct * var / big_s, var / big_s]])
+    resid = float(np.max(np.abs(d[:, 0] * cp + d[:, 1] * sp)))
+    return rho, psi, cov, resid
+
+
+def _split(points: FloatArray, lo: int, hi: int, thr: float, out: list[tuple[int, int]]) -> None:
+    """Iterative end-point fit on points[lo:hi]; appends (lo, hi) index ranges of the final pieces."""
+    stack = [(lo, hi)]
+    pieces: list[tuple[int, int]] = []
+    while stack:
+        a, b = stack.pop()
+        if b - a <= 2:
+            pieces.append((a, b))
+            continue
+        p, q = points[a], points[b - 1]
+        u = q - p
+        norm = math.hypot(float(u[0]), float(u[1]))
+        seg = points[a + 1 : b - 1] - p
+        # distance from the chord (from its start when both ends coincide)
+        dist = np.hypot(seg[:, 0], seg[:, 1]) if norm < 1e-12 else np.abs(seg[:, 0] * u[1] - seg[:, 1] * u[0]) / norm
+        k = int(np.argmax(dist))
+        if dist[k] > thr:
+            cut = a + 1 + k
+            # the farthest point (a corner) ends the first piece and starts the second
+            stack.append((cut, b))
+            stack.append((a, cut + 1))
+        else:
+            pieces.append((a, b))
+    pieces.sort()
+    out.extend(pieces)
+
+
+def extract_lines(scan: LaserScan, params: ExtractionParams | None = None) -> ExtractedLines:
+    """Split-and-merge line extraction from one scan; see the module docstring.
+
+    Parameters
+    ----------
+    scan : LaserScan
+        The scan; ranges in m, ``inf`` for no return.
+    params : ExtractionParams, optional
+        Thresholds; defaults when None.
+
+    Returns
+    -------
+    ExtractedLines
+        Robot-frame lines in beam order (possibly none).
+    """
+    prm = params if params is not None else ExtractionParams()
+    pts, rr, beam = scan_points(scan)
+    empty = ExtractedLines(
+        np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros((0, 2, 2)), np.zeros(0), np.zeros(0, dtype=np.int64)
+    )
+    m = pts.shape[0]
+    if m < prm.min_points:
+        return empty
+    # 2. breakpoints: a missing beam or a gap wider than the local beam spacing allows
+    step = np.hypot(*np.diff(pts, axis=0).T)
+    allowed = np.maximum(prm.gap_min_m, prm.gap_factor * np.minimum(rr[:-1], rr[1:]) * abs(scan.angle_increment))
+    cut = (np.diff(beam) > 1) | (step > allowed)
+    starts = np.concatenate([[0], np.flatnonzero(cut) + 1])
+    ends = np.concatenate([np.flatnonzero(cut) + 1, [m]])
+    # 3. split
+    pieces: list[tuple[int, int]] = []
+    for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
+        if b - a >= 2:
+            _split(pts, a, b, prm.split_threshold_m, pieces)
+    # 4. merge neighbours of the same run (they share an end point after a split)
+    merged: list[tuple[int, int]] = []
+    for a, b in pieces:
+        # pieces of one run share their corner point (previous end - 1 == this start); runs do not
+        if merged and merged[-1][1] > a and b - merged[-1][0] >= 3:
+            a0 = merged[-1][0]
+            if fit_line(pts[a0:b], prm.sigma_m)[3] <= prm.split_threshold_m:
+                merged[-1] = (a0, b)
+                continue
+        merged.append((a, b))
+    # 5. fit
+    rows_rp, rows_cov, rows_end, rows_len, rows_n = [], [], [], [], []
+    for k, (a, b) in enumerate(merged):
+        # a corner point shared with a neighbouring piece is left out of both fits, so it bends neither
+        lo = a + 1 if k > 0 and merged[k - 1][1] > a else a
+        hi = b - 1 if k + 1 < len(merged) and merged[k + 1][0] < b else b
+        seg = pts[lo:hi]
+        if seg.shape[0] < prm.min_points:
+            continue
+        rho, psi, cov, _ = fit_line(seg, prm.sigma_m)
+        t = np.array([-math.sin(psi), math.cos(psi)])
+        nrm = np.array([math.cos(psi), math.sin(psi)])
+        s = seg @ t
+        e = np.array([rho * nrm + s[0] * t, rho * nrm + s[-1] * t])
+        length = abs(float(s[-1] - s[0]))
+        if length < prm.min_length_m:
+            continue
+        rows_rp.append((rho, psi))
+        rows_cov.append(cov)
+        rows_end.append(e)
+        rows_len.append(length)
+        rows_n.append(seg.shape[0])
+    if not rows_rp:
+        return empty
+    return ExtractedLines(
+        rho_psi=np.asarray(rows_rp, dtype=np.float64),
+        cov=np.asarray(rows_cov, dtype=np.float64),
+        endpoints=np.asarray(rows_end, dtype=np.float64),
+        lengths=np.asarray(rows_len, dtype=np.float64),
+        n_points=np.asarray(rows_n, dtype=np.int64),
+    )

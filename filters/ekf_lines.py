@@ -1,0 +1,376 @@
+"""EKF localization on a map of lines (report 002, Peng, "EKF map based localization").
+
+Prediction (eq. 1-2): the robot's odometry increment u = (dx, dy, dtheta), in the previous robot frame, is
+compounded onto the pose, x_k^- = x_{k-1} (+) u_k, and
+
+    P_k^- = A P_{k-1} A^T + W Q_k W^T,
+
+with A = d(x (+) u)/dx and W = d(x (+) u)/du (the rotation by theta; see
+:func:`locbench.filters._motion.increment_jacobians`). Q_k is the increment's covariance: the dataset's
+nominal per-metre odometry noise (variance growing with the step's length and turn) plus a constant
+diagonal per step (report 002: "Q initially contains the sigma of noise in its diagonal").
+
+Observation: lines extracted from the laser scan by split-and-merge (:mod:`locbench.filters._line_extraction`),
+each (rho, psi) in the robot frame with the covariance of its fit. A map line (rho_w, psi_w) in the world
+frame (:meth:`locbench.datasets.base.LineMap.rho_psi`) seen from the pose (x, y, theta) is (eq. 3)
+
+    rho_r = rho_w - sqrt(x^2 + y^2) cos(atan2(y, x) - psi_w) = rho_w - (x cos psi_w + y sin psi_w),
+    psi_r = psi_w - theta,
+
+so H = [[-cos psi_w, -sin psi_w, 0], [0, 0, -1]] (checked against finite differences in the tests).
+rho_r may come out negative (the robot on the far side of the line from the world origin); the same line
+is then (-rho_r, psi_r + pi) and the rho row of H changes sign. Which of the two forms is compared with an
+observation is decided by the observation's own psi (the form whose psi is within pi/2 of it), so a line
+passing near the robot (rho ~ 0, where the sign of the extracted normal is arbitrary) is matched
+continuously.
+
+Association (eq. 4-5): for each observed line the innovation v = z - h(x^-) (psi wrapped) and
+S = H P^- H^T + R are computed against every map line; the map line with the smallest Mahalanobis distance
+v^T S^-1 v is taken if that distance is below the chi-square threshold (``chi2_threshold``), else the
+observation is rejected. Optionally (report 002's optional part, ``reject_longer``) an observation longer
+than its map line is rejected: a wall cannot be seen longer than it is. Map segments lying on the same
+infinite line (a wall split by doors) are indistinguishable by (rho, psi); the check compares with the
+longest of them.
+
+Update (eq. 6-8): every accepted observation of one scan is stacked into one update at the predicted state,
+as the report associates first and updates after, with K = P H^T S^-1, x = x^- + K v and the Joseph form
+P = (I - K H) P^- (I - K H)^T + K R K^T.
+
+R of one observation is the covariance of its line fit plus a constant diag(sigma_rho_m^2, sigma_psi_rad^2)
+for what the per-point range noise does not model: walls rasterised on an occupancy grid are seen up to a
+cell in front of their line, corners round off, and the map is not exact.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+import numpy.typing as npt
+
+from locbench.datasets.base import Gaussian2, MapKind, SensorSpec, WorldMap
+from locbench.errors import ConfigError, FilterDiverged
+from locbench.events import LaserScan, Observation, Odometry
+from locbench.filters._line_extraction import ExtractedLines, ExtractionParams, extract_lines
+from locbench.filters._motion import MotionModel, propagate_covariance, resolve_motion_noise
+from locbench.filters.base import Estimate, Filter, FilterConfig
+from locbench.geometry import wrap_angle, wrap_scalar
+
+FloatArray = npt.NDArray[np.float64]
+logger = logging.getLogger(__name__)
+
+#: Laser range noise used when neither the config nor the dataset gives one, m (logged at reset).
+DEFAULT_LASER_SIGMA_M = 0.01
+
+#: Chi-square quantile with 2 degrees of freedom at probability 0.99, the default gate: -2 ln(0.01).
+CHI2_2DOF_099 = 9.21
+
+
+def expected_line(pose: npt.ArrayLike, rho_w: npt.ArrayLike, psi_w: npt.ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Signed robot-frame (rho, psi) of world lines seen from ``pose`` (report 002 eq. 3).
+
+    Parameters
+    ----------
+    pose : array-like, shape (3,)
+        (x m, y m, theta rad), world frame.
+    rho_w, psi_w : array-like
+        World-frame Hessian normal form of the map lines (m, rad).
+
+    Returns
+    -------
+    rho_r : ndarray
+        rho_w - (x cos psi_w + y sin psi_w), m; negative when the robot and the world origin are on opposite
+        sides of the line (the line is then (-rho_r, psi_r + pi) with rho >= 0).
+    psi_r : ndarray
+        psi_w - theta wrapped to (-pi, pi], rad.
+    """
+    x, y, th = (float(v) for v in np.asarray(pose, dtype=np.float64)[:3])
+    rw = np.asarray(rho_w, dtype=np.float64)
+    pw = np.asarray(psi_w, dtype=np.float64)
+    return rw - (x * np.cos(pw) + y * np.sin(pw)), wrap_angle(pw - th)
+
+
+def expected_line_jacobian(psi_w: float, sign: float = 1.0) -> FloatArray:
+    """H = d(rho_r, psi_r)/d(x, y, theta) of eq. 3, shape (2, 3); ``sign`` = -1 for the flipped form."""
+    return np.array([[-sign * math.cos(psi_w), -sign * math.sin(psi_w), 0.0], [0.0, 0.0, -1.0]])
+
+
+@dataclass(frozen=True, kw_only=True)
+class LineEKFConfig(FilterConfig):
+    """Configuration of :class:`LineEKF`.
+
+    Attributes
+    ----------
+    chi2_threshold : float
+        Gate on the squared Mahalanobis distance v^T S^-1 v of an association (report 002 sec. 2.2-2.3);
+        default 9.21, the 0.99 quantile of chi-square with 2 dof (the report tunes it and gives no value).
+    reject_longer : bool
+        Reject an observed line longer than its associated map line plus ``length_margin_m`` (report 002's
+        optional check, which it keeps).
+    length_margin_m : float
+        Slack of that check, m: an extracted segment's ends are its outermost points projected on the line,
+        so noise and the raster can make it exceed the wall by a few cm.
+    sigma_rho_m, sigma_psi_rad : float
+        Constant part of R added to each line's fit covariance (m, rad): the map and raster error the
+        per-point noise does not cover (2 cm: a wall rasterised on a 0.05 m grid is seen up to one cell in
+        front of its line; 1 deg).
+    sigma_dx_m, sigma_dy_m, sigma_dtheta_rad : float
+        Constant per-step standard deviations of the odometry increment (robot frame), the diagonal Q of
+        report 002 eq. 2, added to the dataset's distance-proportional increment noise. As the additive Q of
+        ``ekf_landmarks``: 1 mm, 1 mm, 0.5 mrad per step.
+    laser_sigma_m : float or None
+        Range noise of one laser return, m, for the line-fit covariance; None takes the dataset's value.
+    split_threshold_m, min_points, min_length_m : float, int, float
+        Line extraction (see :class:`locbench.filters._line_extraction.ExtractionParams`).
+    odometry_sigma_xy_per_m, odometry_sigma_theta_per_m, odometry_sigma_theta_per_rad : float or None
+        Overrides of the dataset's nominal increment noise (m/sqrt(m), rad/sqrt(m), rad/sqrt(rad)).
+    """
+
+    chi2_threshold: float = CHI2_2DOF_099
+    reject_longer: bool = True
+    length_margin_m: float = 0.1
+    sigma_rho_m: float = 0.02
+    sigma_psi_rad: float = 0.0175
+    sigma_dx_m: float = 0.001
+    sigma_dy_m: float = 0.001
+    sigma_dtheta_rad: float = 0.0005
+    laser_sigma_m: float | None = None
+    split_threshold_m: float = 0.05
+    min_points: int = 4
+    min_length_m: float = 0.3
+    odometry_sigma_xy_per_m: float | None = None
+    odometry_sigma_theta_per_m: float | None = None
+    odometry_sigma_theta_per_rad: float | None = None
+
+    def __post_init__(self) -> None:
+        if not self.chi2_threshold > 0:
+            raise ConfigError(f"chi2_threshold must be > 0 (a squared Mahalanobis distance), got {self.chi2_threshold}")
+        for name in ("length_margin_m", "sigma_rho_m", "sigma_psi_rad", "sigma_dx_m", "sigma_dy_m", "sigma_dtheta_rad"):
+            if not getattr(self, name) >= 0.0:
+                raise ConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if self.laser_sigma_m is not None and not self.laser_sigma_m > 0:
+            raise ConfigError(f"laser_sigma_m must be > 0 m (or None for the dataset's), got {self.laser_sigma_m}")
+        if not self.split_threshold_m > 0 or self.min_points < 3 or self.min_length_m < 0:
+            raise ConfigError(
+                "line extraction: split_threshold_m must be > 0 m, min_points >= 3 and min_length_m >= 0 m, got "
+                f"{self.split_threshold_m}, {self.min_points}, {self.min_length_m}"
+            )
+
+
+class LineEKF(Filter):
+    """EKF on (x, y, theta) with laser lines matched to a line map (report 002).
+
+    See the module docstring for the equations. Diagnostics of :meth:`estimate` (after an update; after a
+    predict the counts are 0 and ``nis`` NaN): ``extracted`` (lines found in the scan), ``accepted``,
+    ``rejected`` (= ``rejected_gate`` + ``rejected_length``), ``nis`` (v^T S^-1 v of the stacked update; NaN
+    when nothing was accepted) and ``nis_dof`` (2 per accepted line).
+    """
+
+    consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LaserScan})
+    requires: ClassVar[frozenset[MapKind]] = frozenset({MapKind.LINES})
+    Config: ClassVar[type[FilterConfig]] = LineEKFConfig
+    version: ClassVar[int] = 1
+    source: ClassVar[str] = "002_f01b2dfd20d46b8b (EKF map-based localization with lines, eq. 1-8)"
+
+    config: LineEKFConfig
+
+    def reset(self, initial: Gaussian2, world: WorldMap, sensors: SensorSpec, rng: np.random.Generator) -> None:
+        """Start from ``initial`` with the lines of ``world``; ``rng`` is unused (the EKF is deterministic)."""
+        cfg = self.config
+        if world.lines is None or len(world.lines) == 0:
+            raise ConfigError("LineEKF needs world.lines; the dataset provides no line map")
+        noise = resolve_motion_noise(
+            sensors,
+            odometry_sigma_xy_per_m=cfg.odometry_sigma_xy_per_m,
+            odometry_sigma_theta_per_m=cfg.odometry_sigma_theta_per_m,
+            odometry_sigma_theta_per_rad=cfg.odometry_sigma_theta_per_rad,
+        )
+        # eq. 1-2 compound the robot's own increment: the increment model, mean = composition
+        self._motion = MotionModel(noise, "increment", mean="compose")
+        sigma = cfg.laser_sigma_m if cfg.laser_sigma_m is not None else sensors.laser_sigma_m
+        if sigma is None or not sigma > 0:
+            logger.warning("no nominal laser noise in the config or dataset; using %g m", DEFAULT_LASER_SIGMA_M)
+            sigma = DEFAULT_LASER_SIGMA_M
+        self._extract = ExtractionParams(
+            split_threshold_m=cfg.split_threshold_m,
+            min_points=cfg.min_points,
+            min_length_m=cfg.min_length_m,
+            sigma_m=float(sigma),
+        )
+        rp = world.lines.rho_psi()
+        self._rho_w = rp[:, 0].copy()
+        self._psi_w = rp[:, 1].copy()
+        self._cos_w = np.cos(self._psi_w)
+        self._sin_w = np.sin(self._psi_w)
+        self._len_w = _collinear_max_length(rp, world.lines.lengths())
+        self._R0 = np.diag([cfg.sigma_rho_m**2, cfg.sigma_psi_rad**2])
+
+        m = np.asarray(initial.mean, dtype=np.float64)
+        self._x = np.array([float(m[0]), float(m[1]), wrap_scalar(float(m[2]))])
+        c = np.asarray(initial.cov, dtype=np.float64)
+        self._P = 0.5 * (c + c.T)
+        self._t = math.nan
+        self._clear_diagnostics()
+        self._check_finite(math.nan)
+
+    def _clear_diagnostics(self) -> None:
+        self._nis = math.nan
+        self._nis_dof = 0
+        self._extracted = 0
+        self._accepted = 0
+        self._rej_gate = 0
+        self._rej_len = 0
+
+    # --- predict (eq. 1-2) ----------------------------------------------------------------------------------
+
+    def predict(self, u: Odometry) -> None:
+        """Compound the odometry increment onto the pose; P = A P A^T + W Q W^T (eq. 1-2)."""
+        cfg = self.config
+        x = self._x
+        step = self._motion.step((float(x[0]), float(x[1]), float(x[2])), u)
+        n = step.noise
+        # the constant robot-frame diagonal of Q, rotated to the world frame by W (rotation by theta)
+        c, s = math.cos(x[2]), math.sin(x[2])
+        vx, vy = cfg.sigma_dx_m**2, cfg.sigma_dy_m**2
+        q00, q01, q11 = c * c * vx + s * s * vy, c * s * (vx - vy), s * s * vx + c * c * vy
+        noise = (n[0] + q00, n[1] + q01, n[2], n[3] + q11, n[4], n[5] + cfg.sigma_dtheta_rad**2)
+        P = propagate_covariance(self._P.tolist(), step.f02, step.f12, noise)
+        self._x = np.array(step.pose)
+        self._P = np.array(P)
+        self._t = u.t
+        self._clear_diagnostics()
+        self._check_finite(u.t)
+
+    # --- update (eq. 3-8) -----------------------------------------------------------------------------------
+
+    def update(self, z: Observation) -> None:
+        """Extract lines from a scan, associate them (eq. 3-5) and correct the pose (eq. 6-8)."""
+        if type(z) is not LaserScan:
+            self.check_consumes(z)
+            raise TypeError(f"LineEKF does not consume {type(z).__name__}")  # pragma: no cover
+        lines = extract_lines(z, self._extract)
+        self._clear_diagnostics()
+        self._extracted = len(lines)
+        if len(lines):
+            self._correct(lines)
+        self._t = z.t
+        self._check_finite(z.t)
+
+    def associate(self, lines: ExtractedLines) -> list[tuple[int, int, float, float]]:
+        """Match each observed line to a map line at the current state (eq. 3-5).
+
+        Returns
+        -------
+        list of (observation index, map line index, sign, squared Mahalanobis distance)
+            For every observation inside the gate (and passing the length check when on), in observation
+            order; ``sign`` is -1 where the flipped form (-rho_r, psi_r + pi) of the map line is compared.
+            The rejection counts of the last update are set as a side effect.
+        """
+        cfg = self.config
+        rho_p, psi_p = expected_line(self._x, self._rho_w, self._psi_w)  # (n,)
+        z = lines.rho_psi
+        # choose per (observation, map line) the form of the map line whose psi lies within pi/2 of the observed psi
+        dpsi = wrap_angle(z[:, 1:2] - psi_p[None, :])  # (k, n)
+        flip = np.abs(dpsi) > 0.5 * math.pi
+        sign = np.where(flip, -1.0, 1.0)
+        v_rho = z[:, 0:1] - sign * rho_p[None, :]
+        v_psi = np.where(flip, wrap_angle(dpsi - math.pi), dpsi)
+        P = self._P
+        c, s = self._cos_w[None, :], self._sin_w[None, :]
+        R = lines.cov + self._R0  # (k, 2, 2)
+        # S = H P H^T + R with H = [[-sign c, -sign s, 0], [0, 0, -1]] (sign^2 = 1 in S00)
+        s00 = c * c * P[0, 0] + 2.0 * c * s * P[0, 1] + s * s * P[1, 1] + R[:, 0, 0:1]
+        s01 = sign * (c * P[0, 2] + s * P[1, 2]) + R[:, 0, 1:2]
+        s11 = P[2, 2] + R[:, 1, 1:2]
+        det = s00 * s11 - s01 * s01
+        d2 = (s11 * v_rho * v_rho - 2.0 * s01 * v_rho * v_psi + s00 * v_psi * v_psi) / det
+        d2 = np.where(det > 0.0, d2, np.inf)
+        best = np.argmin(d2, axis=1)
+        out: list[tuple[int, int, float, float]] = []
+        for j, i in enumerate(best.tolist()):
+            dist = float(d2[j, i])
+            if not dist <= cfg.chi2_threshold:
+                self._rej_gate += 1
+            elif cfg.reject_longer and lines.lengths[j] > self._len_w[i] + cfg.length_margin_m:
+                self._rej_len += 1
+            else:
+                out.append((j, i, float(sign[j, i]), dist))
+        return out
+
+    def _correct(self, lines: ExtractedLines) -> None:
+        matches = self.associate(lines)
+        if not matches:
+            return
+        k = len(matches)
+        x, P = self._x, self._P
+        H = np.zeros((2 * k, 3))
+        v = np.zeros(2 * k)
+        R = np.zeros((2 * k, 2 * k))
+        rho_p, psi_p = expected_line(x, self._rho_w, self._psi_w)
+        for r, (j, i, sg, _) in enumerate(matches):
+            H[2 * r : 2 * r + 2] = expected_line_jacobian(float(self._psi_w[i]), sg)
+            h_psi = float(psi_p[i]) + (math.pi if sg < 0 else 0.0)
+            v[2 * r] = lines.rho_psi[j, 0] - sg * float(rho_p[i])  # eq. 4
+            v[2 * r + 1] = wrap_scalar(lines.rho_psi[j, 1] - h_psi)
+            R[2 * r : 2 * r + 2, 2 * r : 2 * r + 2] = lines.cov[j] + self._R0
+        PHt = P @ H.T
+        S = H @ PHt + R  # eq. 5
+        S = 0.5 * (S + S.T)
+        Sinv_v = np.linalg.solve(S, v)
+        K = np.linalg.solve(S, PHt.T).T  # eq. 6: P H^T S^-1 (S symmetric)
+        x_new = x + K @ v  # eq. 7
+        x_new[2] = wrap_scalar(float(x_new[2]))
+        A = np.eye(3) - K @ H
+        P_new = A @ P @ A.T + K @ R @ K.T  # eq. 8, Joseph form
+        self._x = x_new
+        self._P = 0.5 * (P_new + P_new.T)
+        self._nis = float(v @ Sinv_v)
+        self._nis_dof = 2 * k
+        self._accepted = k
+
+    # --- output ---------------------------------------------------------------------------------------------
+
+    def _check_finite(self, t: float) -> None:
+        if not (np.all(np.isfinite(self._x)) and np.all(np.isfinite(self._P))):
+            raise FilterDiverged(f"LineEKF state became non-finite at t={t:.3f} s")
+
+    def estimate(self) -> Estimate:
+        """The current mean (3,), covariance (3, 3) and the diagnostics of the last call."""
+        rejected = self._rej_gate + self._rej_len
+        return Estimate(
+            t=self._t,
+            mean=self._x.copy(),
+            cov=self._P.copy(),
+            diagnostics={
+                "nis": self._nis,
+                "nis_dof": float(self._nis_dof),
+                "extracted": float(self._extracted),
+                "accepted": float(self._accepted),
+                "rejected": float(rejected),
+                "rejected_gate": float(self._rej_gate),
+                "rejected_length": float(self._rej_len),
+            },
+        )
+
+
+def _collinear_max_length(rho_psi: FloatArray, lengths: FloatArray, tol_m: float = 1e-6) -> FloatArray:
+    """For each map line, the longest length among the segments on the same infinite line, m, shape (n,).
+
+    Two lines are the same when their (rho, unit normal) agree, or agree with the normal reversed and rho
+    negated (rho = 0 lines), within ``tol_m``.
+    """
+    n = rho_psi.shape[0]
+    nrm = np.column_stack([np.cos(rho_psi[:, 1]), np.sin(rho_psi[:, 1])])
+    rho = rho_psi[:, 0]
+    d_rho = np.abs(rho[:, None] - rho[None, :])
+    s_rho = np.abs(rho[:, None] + rho[None, :])
+    d_nrm = np.linalg.norm(nrm[:, None] - nrm[None, :], axis=-1)
+    s_nrm = np.linalg.norm(nrm[:, None] + nrm[None, :], axis=-1)
+    same = ((d_rho < tol_m) & (d_nrm < tol_m)) | ((s_rho < tol_m) & (s_nrm < tol_m))
+    out = np.empty(n)
+    for i in range(n):
+        out[i] = float(np.max(lengths[same[i]]))
+    return out
