@@ -263,7 +263,7 @@ class GtsamFixedLagSmoother(Filter):
         # The newest graph pose (world mean, body-frame marginal covariance) and the increment since it.
         self._node_pose = gtsam.Pose2(float(m[0]), float(m[1]), wrap_scalar(float(m[2])))
         R0 = _rot3(self._node_pose.theta())
-        self._node_cov_body = _sym(R0.T @ c @ R0)
+        self._set_node_cov(R0.T @ c @ R0)
         self._node_key = _X(0)
         self._n_nodes = 1
         self._delta = [0.0, 0.0, 0.0]
@@ -307,7 +307,7 @@ class GtsamFixedLagSmoother(Filter):
     def predict(self, u: Odometry) -> None:
         """Compose one odometry step onto the increment since the newest graph pose (report 003 eq. 1-5, 10)."""
         if math.isnan(self._t0):
-            self._t0 = u.t - u.dt if math.isfinite(u.dt) else u.t
+            self._t0 = u.t - u.dt if u.dt is not None and math.isfinite(u.dt) else u.t
             self._node_t[0] = self._t0
         step = self._motion.step(self._delta, u)
         # The step's noise is in the frame the increment is expressed in (the newest graph pose's); Q isotropic.
@@ -326,20 +326,38 @@ class GtsamFixedLagSmoother(Filter):
             self._compose_estimate()
 
     def _compose_estimate(self) -> None:
-        """Filtered belief: newest graph pose (+) increment; covariance F P_w F^T + G Sigma G^T (world coordinates)."""
+        """Filtered belief: newest graph pose (+) increment; covariance F P_w F^T + G Sigma G^T (world coordinates).
+
+        Plain floats (this runs on every odometry event): F = [[1, 0, -ey], [0, 1, ex], [0, 0, 1]] with
+        (ex, ey) the increment's world displacement, G = blockdiag(R(theta_k), 1), P_w the newest pose's
+        marginal in world coordinates (cached at the smoother update).
+        """
         node = self._node_pose
         th = node.theta()
         dx, dy, dth = self._delta
         c, s = math.cos(th), math.sin(th)
         ex, ey = c * dx - s * dy, s * dx + c * dy
-        G = _rot3(th)
-        Pw = G @ self._node_cov_body @ G.T
-        F = np.array([[1.0, 0.0, -ey], [0.0, 1.0, ex], [0.0, 0.0, 1.0]])
-        D = np.asarray(self._delta_cov)
+        (d00, d01, d02), (_, d11, d12), (_, _, d22) = self._delta_cov
+        cc, ss, cs = c * c, s * s, c * s
+        rotated = (
+            cc * d00 - 2.0 * cs * d01 + ss * d11,
+            cs * (d00 - d11) + (cc - ss) * d01,
+            c * d02 - s * d12,
+            ss * d00 + 2.0 * cs * d01 + cc * d11,
+            s * d02 + c * d12,
+            d22,
+        )
+        cov = propagate_covariance(self._node_cov_world, -ey, ex, rotated)
         self._mean = np.array([node.x() + ex, node.y() + ey, wrap_scalar(th + dth)])
-        self._cov = _sym(F @ Pw @ F.T + G @ D @ G.T)
-        if not (np.all(np.isfinite(self._mean)) and np.all(np.isfinite(self._cov))):
+        self._cov = np.array(cov)
+        if not (math.isfinite(ex) and math.isfinite(ey) and all(math.isfinite(v) for v in rotated)):
             raise FilterDiverged(f"non-finite estimate at t={self._t:.3f} s")
+
+    def _set_node_cov(self, cov_body: FloatArray) -> None:
+        """Store the newest pose's body-frame marginal and its world-coordinate form P_w = G P_b G^T."""
+        self._node_cov_body = _sym(np.asarray(cov_body, dtype=np.float64))
+        G = _rot3(self._node_pose.theta())
+        self._node_cov_world = _sym(G @ self._node_cov_body @ G.T).tolist()
 
     # --- update --------------------------------------------------------------------------------------------
 
@@ -530,7 +548,7 @@ class GtsamFixedLagSmoother(Filter):
         try:
             result = self._smoother.update(factors, values, stamps)
             self._node_pose = self._smoother.calculateEstimatePose2(self._node_key)
-            self._node_cov_body = _sym(np.asarray(self._marginal(self._node_key)))
+            self._set_node_cov(self._marginal(self._node_key))
         except RuntimeError as exc:
             raise FilterDiverged(f"gtsam smoother failed at t={t:.3f} s: {exc}") from exc
         self._last_update_t = t
@@ -580,7 +598,8 @@ class GtsamFixedLagSmoother(Filter):
             ``smoothed_t`` (n,) s and ``smoothed_mean`` (n, 3) (x m, y m, theta rad, world frame): every pose
             variable's last estimate before it left the window (or the final one if still inside), and, with
             ``new_pose="observation"``, each odometry time in between as that pose composed with the odometry
-            since it; ``smoothed_is_node`` (n,) bool marks the rows that are smoother variables.
+            since it (times strictly increasing); ``smoothed_is_node`` (n,) bool marks the rows that are smoother
+            variables.
         """
         final = list(self._node_final)
         s = self._smoother
@@ -600,7 +619,11 @@ class GtsamFixedLagSmoother(Filter):
                 rows.append(base)
                 node.append(True)
             c, sn = math.cos(base[2]), math.sin(base[2])
+            # An odometry event at the time of the next pose is that pose (it was made right after).
+            until = self._node_t[idx + 1] if idx + 1 < len(self._node_t) else math.inf
             for t, dx, dy, dth in self._node_odo[idx]:
+                if t >= until:
+                    break
                 ts.append(t)
                 rows.append((base[0] + c * dx - sn * dy, base[1] + sn * dx + c * dy, wrap_scalar(base[2] + dth)))
                 node.append(False)
