@@ -1,0 +1,148 @@
+"""EKF-ICP (report 000): the ICP scan matcher, the prediction noise, the H = I update, the mismatch and kidnap rules."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from locbench.datasets.base import Gaussian2, SensorSpec
+from locbench.datasets.synthetic.scenarios import office_world
+from locbench.errors import ConfigError
+from locbench.events import LaserScan, Odometry
+from locbench.filters._icp import icp_2d, rigid_transform_2d
+from locbench.filters.ekf_icp import IcpEKF, IcpEKFConfig, scan_points
+from locbench.geometry import compose, inverse
+from locbench.raycast import cast_rays
+
+ANGLES = -math.radians(120.0) + math.radians(240.0) / 682 * np.arange(683)
+
+
+@pytest.fixture(scope="module")
+def world_map():  # type: ignore[no-untyped-def]
+    return office_world().world_map(0.05)
+
+
+def _scan(world_map, pose, sigma: float = 0.0, rng: np.random.Generator | None = None) -> LaserScan:  # type: ignore[no-untyped-def]
+    g = world_map.occupancy
+    r = cast_rays(g.occupied(), g.resolution, g.origin[:2], np.asarray(pose, dtype=float), ANGLES, 5.6)[0]
+    if sigma > 0 and rng is not None:
+        r = r + sigma * rng.standard_normal(r.shape)
+    r[r > 5.6] = np.inf
+    return LaserScan(
+        t=1.0, angle_min=float(ANGLES[0]), angle_increment=float(ANGLES[1] - ANGLES[0]), ranges=r,
+        range_min=0.02, range_max=5.6,
+    )  # fmt: skip
+
+
+def _filter(world_map, mean, cov=None, **cfg) -> IcpEKF:  # type: ignore[no-untyped-def]
+    f = IcpEKF(IcpEKFConfig(**cfg))
+    c = np.diag([0.05**2, 0.05**2, math.radians(2.0) ** 2]) if cov is None else cov
+    f.reset(Gaussian2(mean=np.asarray(mean, dtype=float), cov=c), world_map, SensorSpec(laser_sigma_m=0.01), None)  # type: ignore[arg-type]
+    return f
+
+
+def test_rigid_transform_exact() -> None:
+    rng = np.random.default_rng(1)
+    src = rng.uniform(-3, 3, (50, 2))
+    T = (0.3, -0.2, 0.4)
+    c, s = math.cos(T[2]), math.sin(T[2])
+    dst = src @ np.array([[c, s], [-s, c]]) + T[:2]
+    np.testing.assert_allclose(rigid_transform_2d(src, dst), T, atol=1e-12)
+
+
+def test_icp_recovers_offset_between_ray_cast_scans(world_map) -> None:  # type: ignore[no-untyped-def]
+    # in a room: in the corridor the match is degenerate along it (report 000 sec. V)
+    true_pose = np.array([15.5, 3.0, 0.1])
+    pred_pose = np.array([15.56, 2.96, 0.1 + math.radians(1.5)])
+    real, pred = _scan(world_map, true_pose), _scan(world_map, pred_pose)
+    ok_r, ok_p = np.isfinite(real.ranges), np.isfinite(pred.ranges)
+    src = scan_points(real.ranges[ok_r], ANGLES[ok_r], (0.0, 0.0, 0.0))
+    dst = scan_points(pred.ranges[ok_p], ANGLES[ok_p], (0.0, 0.0, 0.0))
+    res = icp_2d(src, dst, max_correspondence_m=0.4, min_correspondence_m=0.075)
+    assert res.converged and res.matched > 0.8 * src.shape[0]
+    expected = compose(inverse(pred_pose), true_pose)  # M = X^-1 T
+    np.testing.assert_allclose(res.transform[:2], expected[:2], atol=0.02)
+    assert abs(res.transform[2] - expected[2]) < math.radians(0.3)
+
+
+def test_icp_too_few_points_is_not_converged() -> None:
+    res = icp_2d(np.zeros((2, 2)), np.zeros((5, 2)), max_correspondence_m=0.1, min_correspondence_m=0.05)
+    assert not res.converged and res.matched == 0
+
+
+def test_update_moves_toward_truth_by_the_gain(world_map) -> None:  # type: ignore[no-untyped-def]
+    truth = np.array([15.5, 3.0, 0.3])
+    pred = truth + np.array([0.05, -0.04, math.radians(1.0)])
+    f = _filter(world_map, pred)
+    P = f.estimate().cov
+    f.update(_scan(world_map, truth))
+    est = f.estimate()
+    assert est.diagnostics["accepted"] == 1.0 and est.diagnostics["rejected"] == 0.0
+    K = P @ np.linalg.inv(P + np.diag([0.008, 0.008, 0.01]))
+    np.testing.assert_allclose(est.mean - pred, K @ (truth - pred), atol=0.012)
+    # Joseph form: symmetric, and smaller than the prior
+    np.testing.assert_allclose(est.cov, est.cov.T)
+    assert np.linalg.det(est.cov) < np.linalg.det(P)
+
+
+def test_repeated_scans_converge_to_truth(world_map) -> None:  # type: ignore[no-untyped-def]
+    rng = np.random.default_rng(3)
+    truth = np.array([15.0, 4.0, -1.2])
+    f = _filter(world_map, truth + np.array([-0.06, 0.05, -math.radians(2.0)]))
+    for k in range(40):  # standing still: zero odometry at 20 Hz, scans at 10 Hz
+        f.predict(Odometry(t=0.1 * k + 0.05, dx=0.0, dy=0.0, dtheta=0.0, dt=0.05))
+        f.predict(Odometry(t=0.1 * k + 0.1, dx=0.0, dy=0.0, dtheta=0.0, dt=0.05))
+        f.update(_scan(world_map, truth, sigma=0.01, rng=rng))
+    err = f.estimate().mean - truth
+    assert math.hypot(err[0], err[1]) < 0.02 and abs(err[2]) < math.radians(0.5)
+
+
+def test_prediction_eq_11_to_13(world_map) -> None:  # type: ignore[no-untyped-def]
+    f = _filter(world_map, (1.0, 2.0, math.pi / 2), cov=np.zeros((3, 3)))
+    f.predict(Odometry(t=0.05, dx=0.1, dy=0.0, dtheta=0.02, dt=0.05))
+    est = f.estimate()
+    # robot-frame dx = 0.1 at heading pi/2 is world dy = 0.1
+    np.testing.assert_allclose(est.mean, (1.0, 2.1, math.pi / 2 + 0.02), atol=1e-12)
+    # static terms per 0.1 s scaled to dt = 0.05 s, dynamic terms per |world increment|
+    np.testing.assert_allclose(
+        np.diag(est.cov), (0.00025 + 0.001 * 0.0, 0.00025 + 0.001 * 0.1, 0.00025 + 0.0011 * 0.02), atol=1e-15
+    )
+
+
+def test_mismatch_keeps_prediction_and_kidnap_rule(world_map) -> None:  # type: ignore[no-untyped-def]
+    truth = np.array([12.0, 7.25, 0.0])
+    f = _filter(world_map, truth, kidnap_mismatches=5)
+    empty = _scan(world_map, truth)
+    empty = LaserScan(
+        t=1.0, angle_min=empty.angle_min, angle_increment=empty.angle_increment,
+        ranges=np.full(683, np.inf), range_min=0.02, range_max=5.6,
+    )  # fmt: skip
+    P0 = f.estimate().cov
+    for k in range(4):
+        f.update(empty)
+        d = f.estimate().diagnostics
+        assert d["rejected"] == 1.0 and d["consecutive_mismatches"] == k + 1
+        np.testing.assert_array_equal(f.estimate().cov, P0)
+    f.update(empty)  # the 5th: covariance x 10, threshold tightened
+    np.testing.assert_allclose(f.estimate().cov, 10.0 * P0)
+    assert f.estimate().diagnostics["kidnap_resets"] == 1.0 and f._tightened
+    f.update(_scan(world_map, truth))
+    assert f.estimate().diagnostics["accepted"] == 1.0 and not f._tightened
+
+
+def test_scan_far_from_the_prediction_is_a_mismatch(world_map) -> None:  # type: ignore[no-untyped-def]
+    # the robot is in a room, the filter believes it is in the corridor: too few points agree
+    f = _filter(world_map, (12.0, 7.25, 0.0), cov=np.diag([1e-4, 1e-4, 1e-4]))
+    f.update(_scan(world_map, (3.0, 3.0, 1.0)))
+    assert f.estimate().diagnostics["rejected"] == 1.0
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [("q_x_stat_m2", -1.0), ("r_theta_rad2", 0.0), ("min_matched_fraction", 1.5), ("kidnap_threshold_factor", 0.0)],
+)
+def test_config_errors_name_the_field(field: str, value: float) -> None:
+    with pytest.raises(ConfigError, match=field):
+        IcpEKFConfig(**{field: value})
