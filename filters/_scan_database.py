@@ -1,0 +1,321 @@
+"""The scan-database sensor front-end of report 004: scans recorded at known poses and a tolerance matcher.
+
+Report 004 (section II) records, at each pose of a grid, the ranges seen at **eight fixed bearings**, and
+turns a live scan into a pose by "tolerance matching ... using an average difference estimation between
+corresponding values in each of the range sets". Here:
+
+Database
+    Positions on the square lattice (i * step_m, j * step_m) of the world frame over the occupancy grid
+    (the "grid poses"), kept where the nearest
+    occupied cell is at least ``clearance_m`` away (the robot cannot stand closer). Headings every
+    ``heading_step_deg`` (a divisor of 45 deg). The eight bearings are 0, 45, ..., 315 deg in the robot
+    frame. Because a heading change of 45 deg is a cyclic shift of the eight bearings, the database stores
+    per position the ranges of ``360 / heading_step_deg`` world-frame directions (one ray-cast with
+    :mod:`locbench.raycast`); the eight ranges of (position, heading h) are columns h, h + m, ..., h + 7m
+    (mod 360 / heading_step_deg) with m = 45 / heading_step_deg.
+
+Matching
+    The scan beam closest to each of the eight bearings is taken when it lies within half a beam spacing
+    (plus 1e-9) of it; a scan with a narrower field of view uses the bearings it covers (at least
+    ``min_bearings``). Ranges are capped at min(scan range_max, database max range), a "no return" (inf)
+    counting as the cap, and the score of an entry is the mean absolute difference over the used bearings
+    (report 004's average difference), m. Entries whose score is at most ``tolerance_m`` match. Optionally
+    (the filter's default) only entries inside a chi-square validation region around the predicted pose
+    are kept: a room with symmetries (a rectangle seen at 8 bearings looks the same turned by 180 deg)
+    otherwise matches poses far from the robot equally well.
+
+Pose measurement and its covariance
+    With d_i the scores of the n matches and weights w_i = 1 - d_i / tolerance (a triangular kernel: the
+    best matches count most, a match at the tolerance not at all; all 1 when every d_i = tolerance), the
+    measurement z is the weighted mean of the matched poses (headings averaged as wrapped differences
+    from the best match). Its covariance is
+
+        R = sum_i w_i (p_i - z)(p_i - z)^T / sum_i w_i  +  diag(s^2 / 12, s^2 / 12, h^2 / 12),
+
+    the weighted scatter of the matches (large when the room's symmetry or a loose tolerance lets distant
+    poses match; it keeps an ambiguous match from pulling the filter hard) plus the quantisation of the
+    database: the true pose lies anywhere within one lattice cell (spacing s) and heading bin (h) of a
+    database pose, and a uniform distribution over a width s has variance s^2 / 12.
+
+Frames and units: world frame, metres, radians (``heading_step_deg`` in degrees). The sensor's heading
+offset in the robot frame is taken into account; its (x, y) offset is ignored (the database is recorded at
+the robot origin; every locbench dataset mounts its laser there).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+from numba import njit
+from scipy import ndimage
+
+from locbench.datasets.base import OccupancyGrid
+from locbench.errors import ConfigError
+from locbench.events import LaserScan
+from locbench.geometry import wrap_angle
+from locbench.raycast import cast_rays
+
+logger = logging.getLogger(__name__)
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+#: The number of fixed bearings per recorded scan (report 004: "eight angles at each ... position").
+N_BEARINGS = 8
+#: Their spacing, rad.
+BEARING_STEP_RAD = 2.0 * math.pi / N_BEARINGS
+
+
+@njit(cache=True)
+def _scores(db: FloatArray, offsets: IntArray, r: FloatArray, tol: float) -> FloatArray:
+    """Mean |db[i, (h + o_b) mod M] - r_b| over b for every (i, h); inf once the partial sum exceeds k * tol."""
+    n, m = db.shape
+    k = offsets.shape[0]
+    limit = tol * k
+    out = np.full((n, m), np.inf)
+    for i in range(n):
+        for h in range(m):
+            s = 0.0
+            for b in range(k):
+                c = h + offsets[b]
+                if c >= m:
+                    c -= m
+                s += abs(db[i, c] - r[b])
+                if s > limit:  # most entries are rejected after one or two bearings
+                    break
+            if s <= limit:
+                out[i, h] = s / k
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class ScanMatch:
+    """A pose measurement from the database.
+
+    Attributes
+    ----------
+    z : ndarray, shape (3,)
+        Measured pose (x m, y m, theta rad in (-pi, pi]), world frame.
+    cov : ndarray, shape (3, 3)
+        Its covariance (see the module docstring).
+    n_matches : int
+        Database entries within the tolerance.
+    best_score_m : float
+        Smallest mean absolute range difference, m.
+    n_bearings : int
+        Bearings of the scan used.
+    """
+
+    z: FloatArray
+    cov: FloatArray
+    n_matches: int
+    best_score_m: float
+    n_bearings: int
+
+
+@dataclass(frozen=True, eq=False)
+class ScanDatabase:
+    """Scans recorded at lattice positions, every ``heading_step_deg``, at eight fixed bearings.
+
+    Attributes
+    ----------
+    positions : ndarray, shape (N, 2)
+        Recorded positions, world frame, m.
+    ranges : ndarray, shape (N, M)
+        Range from position i in world direction j * heading_step, m, capped at ``max_range_m`` (a beam
+        with no return within it is stored as ``max_range_m``).
+    step_m : float
+        Lattice spacing, m.
+    heading_step_deg : float
+        Heading spacing, deg (M = 360 / heading_step_deg).
+    max_range_m : float
+        Range cap of the recording, m.
+    """
+
+    positions: FloatArray
+    ranges: FloatArray
+    step_m: float
+    heading_step_deg: float
+    max_range_m: float
+
+    @property
+    def n_headings(self) -> int:
+        return int(self.ranges.shape[1])
+
+    @property
+    def heading_step_rad(self) -> float:
+        return math.radians(self.heading_step_deg)
+
+    def __len__(self) -> int:
+        """Number of (position, heading) entries."""
+        return int(self.ranges.shape[0] * self.ranges.shape[1])
+
+    def entry_ranges(self, i: int, h: int) -> FloatArray:
+        """The eight ranges of entry (position i, heading index h) at bearings 0, 45, ..., 315 deg, m."""
+        m = self.n_headings // N_BEARINGS
+        return self.ranges[i, (h + m * np.arange(N_BEARINGS)) % self.n_headings]
+
+    def entry_pose(self, i: int, h: int) -> FloatArray:
+        """World pose (x, y, theta) of entry (i, h)."""
+        return np.array([self.positions[i, 0], self.positions[i, 1], float(wrap_angle(h * self.heading_step_rad))])
+
+
+def build_database(
+    grid: OccupancyGrid,
+    step_m: float,
+    heading_step_deg: float,
+    max_range_m: float,
+    clearance_m: float,
+) -> ScanDatabase:
+    """Record the database on ``grid`` (ray-cast with :func:`locbench.raycast.cast_rays`).
+
+    Parameters
+    ----------
+    grid : OccupancyGrid
+        The map; cells above its occupied threshold block beams.
+    step_m : float
+        Lattice spacing of the recorded positions, m; the positions are the world points
+        (i * step_m, j * step_m) inside the grid.
+    heading_step_deg : float
+        Heading spacing, deg; must divide 45 exactly.
+    max_range_m : float
+        Recording range cap, m.
+    clearance_m : float
+        Positions closer than this to an occupied cell are left out, m.
+
+    Returns
+    -------
+    ScanDatabase
+    """
+    if not step_m > 0:
+        raise ConfigError(f"scan database: grid_step_m must be > 0 m, got {step_m}")
+    per_bearing = 45.0 / heading_step_deg if heading_step_deg > 0 else 0.0
+    if not (heading_step_deg > 0 and abs(per_bearing - round(per_bearing)) < 1e-9):
+        raise ConfigError(f"scan database: heading_step_deg must divide 45 deg exactly, got {heading_step_deg}")
+    if not (max_range_m > 0 and math.isfinite(max_range_m)):
+        raise ConfigError(f"scan database: max_range_m must be a finite distance > 0 m, got {max_range_m}")
+    if grid.origin[2] != 0.0:
+        raise ConfigError("scan database: rotated occupancy grids are not supported")
+    occ = grid.occupied()
+    rows, cols = grid.shape
+    res = grid.resolution
+    ox, oy = grid.origin[0], grid.origin[1]
+    # The lattice holds the world points (i * step, j * step) inside the grid: "grid poses" of the world.
+    xs = step_m * np.arange(math.ceil(ox / step_m), math.floor((ox + cols * res) / step_m) + 1)
+    ys = step_m * np.arange(math.ceil(oy / step_m), math.floor((oy + rows * res) / step_m) + 1)
+    gx, gy = np.meshgrid(xs, ys)
+    pts = np.column_stack([gx.ravel(), gy.ravel()])
+    # Distance (m) from each cell to the nearest occupied cell; no occupied cell at all means unbounded.
+    dist = ndimage.distance_transform_edt(~occ) * res if occ.any() else np.full(occ.shape, np.inf)
+    cells = grid.world_to_cell(pts)
+    keep = dist[np.clip(cells[:, 0], 0, rows - 1), np.clip(cells[:, 1], 0, cols - 1)] >= clearance_m
+    pts = pts[keep]
+    if pts.shape[0] == 0:
+        raise ConfigError(
+            f"scan database: no free position {clearance_m} m from the walls on a {step_m} m lattice; "
+            "expected a smaller grid_step_m or clearance_m"
+        )
+    n_dir = round(360.0 / heading_step_deg)
+    angles = np.arange(n_dir, dtype=np.float64) * math.radians(heading_step_deg)
+    poses = np.column_stack([pts, np.zeros(pts.shape[0])])
+    r = cast_rays(occ, res, (ox, oy), poses, angles, max_range_m)
+    r = np.minimum(r, max_range_m)
+    logger.debug("scan database: %d positions x %d headings (%d rays)", pts.shape[0], n_dir, r.size)
+    return ScanDatabase(
+        positions=pts, ranges=r, step_m=float(step_m), heading_step_deg=float(heading_step_deg), max_range_m=max_range_m
+    )
+
+
+def scan_bearing_ranges(scan: LaserScan) -> tuple[IntArray, FloatArray]:
+    """The scan's ranges at the eight database bearings it covers.
+
+    Returns
+    -------
+    bearing_index : ndarray of int64, shape (k,)
+        Which of the bearings 0, 45, ..., 315 deg (robot frame) are covered (0..7).
+    ranges : ndarray, shape (k,)
+        The range of the beam closest to each, m (inf = no return).
+    """
+    n = scan.ranges.shape[0]
+    if n == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0)
+    beam_robot = scan.sensor_pose[2] + scan.angles  # beam bearings in the robot frame
+    target = np.arange(N_BEARINGS) * BEARING_STEP_RAD
+    diff = np.abs(wrap_angle(beam_robot[None, :] - target[:, None]))  # (8, n)
+    nearest = np.argmin(diff, axis=1)
+    near = diff[np.arange(N_BEARINGS), nearest]
+    half = 0.5 * abs(scan.angle_increment) if n > 1 else 0.0
+    ok = near <= half + 1e-9
+    idx = np.flatnonzero(ok).astype(np.int64)
+    return idx, scan.ranges[nearest[idx]].astype(np.float64)
+
+
+def match_scan(
+    db: ScanDatabase,
+    scan: LaserScan,
+    tolerance_m: float,
+    min_bearings: int = 4,
+    prior: tuple[FloatArray, FloatArray] | None = None,
+    gate: float = math.inf,
+) -> tuple[ScanMatch | None, int]:
+    """Match a scan against the database (module docstring).
+
+    Parameters
+    ----------
+    db : ScanDatabase
+    scan : LaserScan
+    tolerance_m : float
+        Largest mean absolute range difference of a match, m.
+    min_bearings : int
+        Fewest covered bearings for a match to be tried.
+    prior : (mean (3,), cov (3, 3)) or None
+        The filter's predicted belief; with ``gate`` it restricts the matches to a validation region.
+    gate : float
+        Largest squared Mahalanobis distance between a matched database pose and the prior mean under
+        the prior covariance plus the database quantisation (a chi-square quantile with 3 dof); inf keeps
+        every match (report 004's global matching).
+
+    Returns
+    -------
+    match : ScanMatch or None
+        None when fewer than ``min_bearings`` bearings are covered or no entry is within the tolerance.
+    n_bearings : int
+        Bearings used.
+    """
+    b_idx, r = scan_bearing_ranges(scan)
+    k = int(b_idx.shape[0])
+    if k < min_bearings:
+        return None, k
+    cap = min(float(scan.range_max), db.max_range_m)
+    rc = np.minimum(np.where(np.isfinite(r), r, cap), cap)  # no return: beyond the cap
+    table = db.ranges if cap >= db.max_range_m else np.minimum(db.ranges, cap)
+    m = db.n_headings // N_BEARINGS
+    scores = _scores(table, (b_idx * m).astype(np.int64), rc, float(tolerance_m))
+    ii, hh = np.nonzero(scores <= tolerance_m)
+    hs = db.heading_step_rad
+    quant = np.diag([db.step_m**2 / 12.0, db.step_m**2 / 12.0, hs**2 / 12.0])
+    if prior is not None and math.isfinite(gate) and ii.size:
+        e = np.column_stack([db.positions[ii] - prior[0][:2], wrap_angle(hh * hs - prior[0][2])])
+        d2 = np.einsum("ij,ij->i", e @ np.linalg.inv(prior[1] + quant), e)
+        inside = d2 <= gate
+        ii, hh = ii[inside], hh[inside]
+    if ii.size == 0:
+        return None, k
+    d = scores[ii, hh]
+    best = int(np.argmin(d))
+    w = 1.0 - d / tolerance_m if tolerance_m > 0 else np.ones_like(d)
+    if not np.sum(w) > 0:
+        w = np.ones_like(d)
+    w = w / np.sum(w)
+    th = hh * hs
+    dth = wrap_angle(th - th[best])
+    xy = db.positions[ii]
+    z = np.array([w @ xy[:, 0], w @ xy[:, 1], float(wrap_angle(th[best] + w @ dth))])
+    dev = np.column_stack([xy[:, 0] - z[0], xy[:, 1] - z[1], wrap_angle(th - z[2])])
+    cov = (dev * w[:, None]).T @ dev + quant
+    cov = 0.5 * (cov + cov.T)
+    return ScanMatch(z=z, cov=cov, n_matches=int(ii.size), best_score_m=float(d[best]), n_bearings=k), k
