@@ -1,0 +1,99 @@
+"""Claims of report 004 (Bettaieb, linear Kalman filter with a scan database, STDR) on ``scan_grid``.
+
+Report 004 concludes (section III): "Given a linear control input and a good sensor model, a Kalman filter
+is a great way to localize a mobile robot ... However, if the linearity is broken in any way the Kalman
+filter will not produce accurate results." It gives no numbers. The claim is checked across two variants
+of ``scan_grid``: translate-or-rotate commands (``scan_grid``, the model's assumption holds) against
+commands that translate and rotate at once (``scan_grid[mixed_commands=true]``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from locbench.claims import Claim, ClaimResult, pick_filter, register, register_section
+
+SOURCE_004 = "004_2a620520509b0112.txt"
+LINEAR = "scan_grid"
+MIXED = "scan_grid[mixed_commands=true]"
+
+#: "Localizes well": mean ATE at most this fraction of dead reckoning's on the same data ...
+WELL_MAX_FRACTION_OF_ODOMETRY = 0.25
+#: ... and at most half the default database spacing (0.25 m): the filter keeps the robot within its cell.
+WELL_MAX_ATE_M = 0.125
+#: "Degrades": mean ATE with mixed commands at least this many times the translate-or-rotate mean ATE.
+DEGRADES_MIN_RATIO = 2.0
+
+
+def _mean_metric(df: pd.DataFrame, dataset: str, filter_name: str, metric: str) -> tuple[float, int]:
+    sel = df[(df["dataset"] == dataset) & (df["filter"] == filter_name) & (df["metric"] == metric)]
+    v = sel["value"].to_numpy(dtype=np.float64)
+    v = v[np.isfinite(v)]
+    return (float(np.mean(v)) if v.size else float("nan")), int(v.size)
+
+
+def _check_linear_kf(df: pd.DataFrame) -> ClaimResult:
+    names = {str(d) for d in df["dataset"].unique()}
+    missing = [n for n in (LINEAR, MIXED) if n not in names]
+    if missing:
+        return ClaimResult("not evaluated", f"no runs on {', '.join(missing)}")
+    lin_df, mix_df = df[df["dataset"] == LINEAR], df[df["dataset"] == MIXED]
+    kf_l, kf_m = pick_filter(lin_df, "kf_linear"), pick_filter(mix_df, "kf_linear")
+    odo = pick_filter(lin_df, "odometry")
+    if kf_l is None or kf_m is None or odo is None:
+        return ClaimResult("not evaluated", "needs kf_linear on both variants and odometry on scan_grid")
+    ate_l, n_l = _mean_metric(df, LINEAR, kf_l, "ate_m")
+    ate_m, n_m = _mean_metric(df, MIXED, kf_m, "ate_m")
+    ate_o, _ = _mean_metric(df, LINEAR, odo, "ate_m")
+    if not (np.isfinite(ate_l) and np.isfinite(ate_m) and np.isfinite(ate_o)):
+        return ClaimResult("not evaluated", "missing ate_m values")
+    frac = ate_l / ate_o
+    ratio = ate_m / ate_l if ate_l > 0 else float("inf")
+    well = frac <= WELL_MAX_FRACTION_OF_ODOMETRY and ate_l <= WELL_MAX_ATE_M
+    degrades = ratio >= DEGRADES_MIN_RATIO
+    text = (
+        f"{kf_l} mean ATE {100 * ate_l:.1f} cm ({n_l} runs) = {frac:.3f} x odometry's {100 * ate_o:.1f} cm; "
+        f"with mixed commands {100 * ate_m:.1f} cm ({n_m} runs), {ratio:.1f} x"
+    )
+    return ClaimResult("reproduced" if (well and degrades) else "not reproduced", text)
+
+
+register(
+    Claim(
+        id="scan_grid_linear_kf",
+        dataset="scan_grid",
+        source=SOURCE_004,
+        text=(
+            "The linear KF localizes well while its linear model holds and degrades when it does not: on "
+            f"`{LINEAR}` its mean ATE is at most {WELL_MAX_FRACTION_OF_ODOMETRY:g} x odometry's and at most "
+            f"{100 * WELL_MAX_ATE_M:g} cm (half the database spacing), and on `{MIXED}` it is at least "
+            f"{DEGRADES_MIN_RATIO:g} x that"
+        ),
+        reported="no numbers (sec. III: 'if the linearity is broken in any way the Kalman filter will not produce "
+        "accurate results')",
+        check=_check_linear_kf,
+        across_variants=True,
+    )
+)
+
+
+def _section(df: pd.DataFrame, figdir: Path, slug: str) -> tuple[list[str], list[str]]:
+    """Mean ATE and ANEES of every filter on every stored scan_grid variant."""
+    lines = [
+        "### scan_grid: translate-or-rotate against mixed commands (report 004)",
+        "",
+        "| dataset | filter | runs | mean ATE (cm) | mean ANEES |",
+        "|---|---|---|---|---|",
+    ]
+    for (dname, fname), _ in df.groupby(["dataset", "filter"], sort=True):
+        ate, n = _mean_metric(df, str(dname), str(fname), "ate_m")
+        anees, _ = _mean_metric(df, str(dname), str(fname), "anees")
+        lines.append(f"| `{dname}` | `{fname}` | {n} | {100 * ate:.2f} | {anees:.2f} |")
+    lines.append("")
+    return lines, []
+
+
+register_section("scan_grid", _section, across_variants=True)
