@@ -191,7 +191,9 @@ class Person:
         return a + (s / length)[:, None] * (b - a)
 
 
-def draw_people(world: World, n: int, rng: np.random.Generator, region: tuple[float, float, float, float]) -> list[Person]:
+def draw_people(
+    world: World, n: int, rng: np.random.Generator, region: tuple[float, float, float, float]
+) -> list[Person]:
     """``n`` people on straight free walks of at least 2 m inside ``region``, drawn from ``rng``."""
     people: list[Person] = []
     x0, y0, x1, y1 = region
