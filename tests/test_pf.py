@@ -1,0 +1,258 @@
+"""Tests of the particle filter (report 003 sec. 4.2) and its likelihood-field laser model."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from locbench.datasets.base import Gaussian2, Landmarks, OccupancyGrid, SensorSpec, WorldMap
+from locbench.errors import ConfigError
+from locbench.events import UNKNOWN_ID, LandmarkObservations, LaserScan, Odometry
+from locbench.filters import _likelihood_field as lf
+from locbench.filters.pf import ParticleFilter, ParticleFilterConfig, systematic_resample
+from locbench.raycast import cast_scan
+from locbench.registry import make_dataset, resolve_filter
+from locbench.runner import run_filter
+
+
+def _box_grid(width: float = 4.0, height: float = 3.0, res: float = 0.05) -> OccupancyGrid:
+    rows, cols = round(height / res), round(width / res)
+    occ = np.zeros((rows, cols))
+    occ[0, :] = occ[-1, :] = 1.0
+    occ[:, 0] = occ[:, -1] = 1.0
+    return OccupancyGrid(occupancy=occ, resolution=res, origin=(0.0, 0.0, 0.0))
+
+
+LM_XY = np.array([[0.5, 0.5], [3.5, 0.5], [3.5, 2.5], [0.5, 2.5]])
+SENSORS = SensorSpec(
+    wheelbase_m=0.4,
+    encoder_k_left=0.01,
+    encoder_k_right=0.01,
+    landmark_sigma_range_m=0.02,
+    landmark_sigma_bearing_rad=0.02,
+)
+
+
+def _world(grid: bool = True, landmarks: bool = True) -> WorldMap:
+    return WorldMap(
+        occupancy=_box_grid() if grid else None,
+        landmarks=Landmarks(ids=np.arange(4, dtype=np.int64), xy=LM_XY.copy()) if landmarks else None,
+    )
+
+
+def _initial(mean: tuple[float, float, float] = (2.0, 1.5, 0.3), sigma: float = 0.05) -> Gaussian2:
+    return Gaussian2(mean=np.array(mean), cov=np.diag([sigma**2, sigma**2, 0.05**2]))
+
+
+def _sightings(pose: np.ndarray, ids: list[int], t: float = 1.0, known: bool = True) -> LandmarkObservations:
+    d = LM_XY[ids] - pose[:2]
+    r = np.hypot(d[:, 0], d[:, 1])
+    b = np.angle(np.exp(1j * (np.arctan2(d[:, 1], d[:, 0]) - pose[2])))
+    out_ids = np.array(ids, dtype=np.int64) if known else np.full(len(ids), UNKNOWN_ID, dtype=np.int64)
+    return LandmarkObservations(t=t, ids=out_ids, ranges=r, bearings=b)
+
+
+def _pf(**kw: object) -> ParticleFilter:
+    return ParticleFilter(ParticleFilterConfig(**kw))  # type: ignore[arg-type]
+
+
+# --- likelihood field ---------------------------------------------------------------------------------------
+
+
+def test_distance_field_matches_brute_force_and_is_cached() -> None:
+    grid = _box_grid(1.0, 0.75, 0.05)
+    dist = lf.distance_field(grid)
+    occ = np.argwhere(grid.occupied())
+    rows, cols = grid.shape
+    ii, jj = np.mgrid[0:rows, 0:cols]
+    brute = np.min(np.hypot(ii[..., None] - occ[:, 0], jj[..., None] - occ[:, 1]), axis=-1) * 0.05
+    np.testing.assert_allclose(dist, brute, atol=1e-12)
+    same = OccupancyGrid(occupancy=grid.occupancy.copy(), resolution=0.05)
+    assert lf.distance_field(same) is dist  # equal content -> cached array
+    assert not dist.flags.writeable
+
+
+def test_beam_log_likelihood_is_the_mixture() -> None:
+    d = np.array([0.0, 0.1, 5.0])
+    got = lf.beam_log_likelihood(d, 0.9, 0.1, 0.2, 4.0)
+    want = np.log(0.9 * np.exp(-0.5 * (d / 0.2) ** 2) / (math.sqrt(2 * math.pi) * 0.2) + 0.1 / 4.0)
+    np.testing.assert_allclose(got, want)
+
+
+def test_scan_log_likelihood_peaks_at_the_true_pose() -> None:
+    grid = _box_grid()
+    field = lf.make_likelihood_field(grid, z_hit=0.95, z_rand=0.05, sigma_hit_m=0.05, max_dist_m=1.0, z_max_m=5.0)
+    truth = np.array([1.3, 1.1, 0.4])
+    angles = np.linspace(-2.0, 2.0, 41)
+    ranges = cast_scan(grid, truth, angles, 5.0)
+    ok = np.isfinite(ranges)
+    ex, ey = lf.scan_endpoints_robot_frame(ranges[ok], angles[ok], (0.0, 0.0, 0.0))
+    poses = truth + np.array([[0.0, 0.0, 0.0], [0.2, 0.0, 0.0], [0.0, -0.15, 0.0], [0.0, 0.0, 0.2]])
+    ll = lf.log_likelihood(field, poses, ex, ey)
+    assert int(np.argmax(ll)) == 0
+    # an endpoint off the grid scores like an endpoint at the clipping distance
+    far = lf.log_likelihood(field, np.array([[100.0, 100.0, 0.0]]), ex[:1], ey[:1])
+    assert far[0] == pytest.approx(field.log_p_outside)
+
+
+# --- resampling and config ----------------------------------------------------------------------------------
+
+
+def test_systematic_resample_counts_are_within_one_of_n_w() -> None:
+    rng = np.random.default_rng(3)
+    w = rng.random(50)
+    w /= w.sum()
+    idx = systematic_resample(w, 1000, rng)
+    counts = np.bincount(idx, minlength=50)
+    assert counts.sum() == 1000
+    assert np.all(np.abs(counts - 1000 * w) < 1.0 + 1e-9)  # the low-variance property
+
+
+@pytest.mark.parametrize(
+    ("kw", "field"),
+    [
+        ({"particles": 1}, "particles"),
+        ({"resample_ess_fraction": 1.5}, "resample_ess_fraction"),
+        ({"alpha_slow": 0.2, "alpha_fast": 0.1}, "alpha_slow"),
+        ({"sigma_hit_m": 0.0}, "sigma_hit_m"),
+        ({"use_landmarks": False, "use_laser": False}, "use_landmarks"),
+        ({"roughening_k": -1.0}, "roughening_k"),
+    ],
+)
+def test_config_errors_name_the_field(kw: dict[str, object], field: str) -> None:
+    with pytest.raises(ConfigError, match=field):
+        ParticleFilterConfig(**kw)  # type: ignore[arg-type]
+
+
+def test_spec_parses_config() -> None:
+    cfg = resolve_filter("pf[particles=500,init=uniform,use_laser=true]").params
+    assert isinstance(cfg, ParticleFilterConfig)
+    assert (cfg.particles, cfg.init, cfg.use_laser) == (500, "uniform", True)
+
+
+def test_routed_events_follow_the_config() -> None:
+    assert _pf().routed_events() == {Odometry, LandmarkObservations}
+    assert _pf(use_laser=True, use_landmarks=False).routed_events() == {Odometry, LaserScan}
+
+
+def test_reset_without_a_usable_map_is_a_clear_error() -> None:
+    with pytest.raises(ConfigError, match="use_laser=true"):
+        _pf().reset(_initial(), _world(landmarks=False), SENSORS, np.random.default_rng(0))
+
+
+# --- filtering ----------------------------------------------------------------------------------------------
+
+
+def test_estimate_is_the_weighted_circular_mean() -> None:
+    f = _pf(particles=4)
+    f.reset(_initial(), _world(), SENSORS, np.random.default_rng(0))
+    f._x = np.array([[0.0, 0.0, math.pi - 0.1], [1.0, 0.0, -math.pi + 0.1], [0.0, 2.0, math.pi], [1.0, 2.0, math.pi]])
+    f._logw = np.log(np.full(4, 0.25))
+    f._est = None
+    est = f.estimate()
+    assert est.mean[:2] == pytest.approx([0.5, 1.0])
+    assert abs(abs(est.mean[2]) - math.pi) < 1e-12  # across +-pi, not near 0
+    assert est.cov[2, 2] == pytest.approx(0.005, rel=1e-6)  # residuals wrapped: 0.1^2 / 2
+    np.testing.assert_allclose(est.cov, est.cov.T)
+
+
+def test_predict_follows_the_encoder_model_and_spreads() -> None:
+    f = _pf(particles=2000)
+    f.reset(_initial(sigma=0.001), _world(), SENSORS, np.random.default_rng(1))
+    before = f.estimate()
+    # straight 0.1 m with both wheels
+    f.predict(Odometry(t=0.1, dx=0.1, dy=0.0, dtheta=0.0, d_left=0.1, d_right=0.1))
+    after = f.estimate()
+    expected = before.mean[:2] + 0.1 * np.array([math.cos(before.mean[2]), math.sin(before.mean[2])])
+    np.testing.assert_allclose(after.mean[:2], expected, atol=2e-3)
+    assert np.linalg.slogdet(after.cov)[1] > np.linalg.slogdet(before.cov)[1]
+
+
+@pytest.mark.parametrize("known", [True, False])
+def test_landmark_update_converges_to_the_true_pose(known: bool) -> None:
+    truth = np.array([1.8, 1.2, 0.2])
+    f = _pf(particles=2000)
+    f.reset(_initial(mean=(2.0, 1.4, 0.3), sigma=0.2), _world(), SENSORS, np.random.default_rng(2))
+    for k in range(8):
+        f.predict(Odometry(t=0.2 * k, dx=0.0, dy=0.0, dtheta=0.0, d_left=0.0, d_right=0.0))
+        f.update(_sightings(truth, [0, 1, 2, 3], t=0.2 * k, known=known))
+    est = f.estimate()
+    # started 0.28 m away; 2000 particles over the prior leave a few cm of sampling resolution
+    assert np.hypot(*(est.mean[:2] - truth[:2])) < 0.06
+    assert abs(est.mean[2] - truth[2]) < 0.05
+    assert est.diagnostics["n_eff"] > 0
+
+
+def test_low_ess_triggers_resampling_and_uniform_weights() -> None:
+    f = _pf(particles=500)
+    f.reset(_initial(sigma=0.3), _world(), SENSORS, np.random.default_rng(4))
+    f.update(_sightings(np.array([2.0, 1.5, 0.3]), [0, 1, 2]))
+    est = f.estimate()
+    assert est.diagnostics["resampled"] == 1.0
+    assert est.diagnostics["n_eff"] < 250
+    _, w = f.particles()
+    np.testing.assert_allclose(w, 1.0 / 500)
+
+
+def test_uniform_init_covers_free_space() -> None:
+    f = _pf(particles=3000, init="uniform")
+    f.reset(_initial(), _world(), SENSORS, np.random.default_rng(5))
+    x, _ = f.particles()
+    grid = _box_grid()
+    cells = grid.world_to_cell(x[:, :2])
+    assert np.all(grid.free()[cells[:, 0], cells[:, 1]])
+    assert x[:, 0].min() < 0.5 and x[:, 0].max() > 3.5
+    assert np.ptp(x[:, 2]) > 6.0
+
+
+def test_uniform_init_without_a_grid_uses_the_landmark_box() -> None:
+    f = _pf(particles=500, init="uniform")
+    f.reset(_initial(), _world(grid=False), SENSORS, np.random.default_rng(6))
+    x, _ = f.particles()
+    assert np.all((x[:, 0] >= 0.5) & (x[:, 0] <= 3.5) & (x[:, 1] >= 0.5) & (x[:, 1] <= 2.5))
+
+
+def test_augmented_mcl_injects_after_a_kidnap() -> None:
+    f = _pf(particles=1000, augmented=True)
+    f.reset(_initial(sigma=0.02), _world(), SENSORS, np.random.default_rng(7))
+    pose = np.array([2.0, 1.5, 0.3])
+    still = Odometry(t=0.0, dx=0.0, dy=0.0, dtheta=0.0, d_left=0.0, d_right=0.0)
+    for k in range(10):
+        f.predict(still)
+        f.update(_sightings(pose, [0, 1, 2, 3], t=0.2 * k))
+    kidnapped = np.array([1.0, 0.8, -1.0])
+    injected = 0.0
+    for k in range(60):
+        f.predict(still)
+        f.update(_sightings(kidnapped, [0, 1, 2, 3], t=2.0 + 0.2 * k))
+        injected += f.estimate().diagnostics["injected"]
+    assert injected > 0
+    assert np.hypot(*(f.estimate().mean[:2] - kidnapped[:2])) < 0.1
+
+
+def test_laser_only_localizes_on_a_grid() -> None:
+    grid = _box_grid()
+    truth = np.array([1.2, 1.0, 0.5])
+    angles = np.linspace(-2.0, 2.0, 91)
+    ranges = cast_scan(grid, truth, angles, 5.0)
+    scan = LaserScan(t=0.1, angle_min=-2.0, angle_increment=4.0 / 90, ranges=ranges, range_min=0.02, range_max=5.0)
+    f = _pf(particles=2000, use_landmarks=False, use_laser=True, laser_beams=30, sigma_hit_m=0.05)
+    f.reset(_initial(mean=(1.3, 1.1, 0.45), sigma=0.1), _world(landmarks=False), SENSORS, np.random.default_rng(8))
+    for _ in range(5):
+        f.update(scan)
+    est = f.estimate()
+    assert np.hypot(*(est.mean[:2] - truth[:2])) < 0.05
+
+
+def test_deterministic_and_tracks_tiny_line() -> None:
+    ds = make_dataset("tiny_line", 0)
+    a = run_filter(_pf(particles=300), ds, np.random.default_rng(11))
+    b = run_filter(_pf(particles=300), ds, np.random.default_rng(11))
+    assert a.status == "ok"
+    np.testing.assert_array_equal(a.mean, b.mean)
+    gt = ds.ground_truth
+    idx = np.clip(np.searchsorted(gt.t, a.t, side="right") - 1, 0, len(gt) - 1)
+    err = np.hypot(*(a.mean[:, :2] - gt.xy[idx]).T)
+    assert float(np.sqrt(np.mean(err**2))) < 0.1
