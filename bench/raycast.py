@@ -1,7 +1,26 @@
 """Ray casting on an occupancy grid, shared by the laser simulator and the grid-based filters.
 
-One exact grid traversal (Amanatides & Woo, "A Fast Voxel Traversal Algorithm for Ray Tracing",
-Eurographics 1987) compiled with numba, plus a deliberately simple numpy reference used by tests.
+Two numba kernels behind one API (:func:`cast_rays`, :func:`cast_scan`), plus a deliberately simple
+numpy reference used by tests (:func:`cast_rays_reference`):
+
+``method="dda"``
+    Exact grid traversal (Amanatides & Woo, "A Fast Voxel Traversal Algorithm for Ray Tracing",
+    Eurographics 1987): visits every cell the beam crosses.
+``method="march"``
+    The same exact traversal, accelerated by ray marching on a distance field (the "ray marching"
+    method of range_libc / CDDT, Walsh & Karaman, "CDDT: Fast Approximate 2D Ray Casting for
+    Accelerated Localization", ICRA 2018). Each free cell stores a lower bound on the distance from
+    any point of the cell to any occupied cell, ``edt - sqrt(2)`` cells, with ``edt`` the Euclidean
+    distance transform between cell centres (``scipy.ndimage.distance_transform_edt``); where that
+    bound is at least :data:`MARCH_MIN_CELLS` the beam jumps ahead by it, elsewhere it takes exact
+    DDA steps. A jump never enters an occupied cell, so, unlike range_libc's marcher (which stops
+    within a tolerance of the wall), the range is the exact DDA range up to floating-point rounding
+    (about 1e-12 m; beams through the exact corner point of two cells may pick the other cell, as
+    any traversal must pick one). The distance field costs about 60 ns per cell to build (10 ms for
+    400 x 400): :func:`cast_scan` caches it per grid object, :func:`cast_rays` builds it per call.
+
+Measured on one core of the development machine (AMD EPYC, 400 x 400 grid at 0.05 m with walls and
+clutter, 10 m max range, ``tests/perf/test_raycast_perf.py``): see the README of the repository.
 
 Grid conventions are those of :class:`locbench.datasets.base.OccupancyGrid` (ROS map_server): row ``i``
 spans y in [oy + i*res, oy + (i+1)*res), column ``j`` spans x likewise, and ``origin_xy`` = (ox, oy) is
@@ -10,20 +29,27 @@ rad); beam angles are relative to the pose heading. A range is the distance from
 point where the beam enters the first occupied cell; ``inf`` when no occupied cell is entered within
 ``max_range``. A beam starting inside an occupied cell has range 0. Space outside the grid is free.
 
-Threads: the parallel kernel uses numba's threading layer; with the default ``workqueue`` layer it must
-not be called from several Python threads at once (processes are fine). Pass ``parallel=False`` there.
+Grids are treated as immutable (``OccupancyGrid`` is frozen): :func:`cast_scan` keys its cache on the
+grid object, so an ``occupancy`` array changed in place after the first cast is not seen.
+
+Threads: the parallel kernels use numba's threading layer; with the default ``workqueue`` layer they
+must not be called from several Python threads at once (processes are fine). Pass ``parallel=False``
+there.
 """
 
 from __future__ import annotations
 
 import logging
 import math
-from typing import TYPE_CHECKING
+import weakref
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Literal
 
 import numba
 import numpy as np
 import numpy.typing as npt
 from numba import njit, prange
+from scipy.ndimage import binary_dilation, distance_transform_edt
 
 if TYPE_CHECKING:
     from locbench.datasets.base import OccupancyGrid
@@ -32,25 +58,39 @@ logger = logging.getLogger(__name__)
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
+UInt8Array = npt.NDArray[np.uint8]
+IntArray = npt.NDArray[np.int64]
+Method = Literal["auto", "march", "dda"]
 
 #: Below this many rays a single thread is faster than waking the thread pool (measured on 2 cores).
 PARALLEL_MIN_RAYS = 8192
 
+#: Smallest jump, in cells, worth a ray-marching step; nearer to a wall the kernel takes DDA steps
+#: (a jump costs a floor and a DDA re-start, about two DDA steps).
+MARCH_MIN_CELLS = 1.0
+
+#: ``cast_rays(method="auto")`` marches when rays >= cells * this ratio: building the distance field
+#: (about 60 ns per cell) is then paid back by the faster traversal (about 0.2 us saved per ray).
+AUTO_MARCH_RAYS_PER_CELL = 0.5
+
+#: The march field stores clearances in whole units of this many cells (uint8, so that the field of a
+#: 400 x 400 grid, 160 kB, stays in a core's L2 cache; a float32 field was 1.6 times slower).
+JUMP_UNIT_CELLS = 0.5
+
+#: A DDA step moves this far (cells) past the cell's exit so that flooring the point gives the next
+#: cell; a cell the beam crosses for less than this is skipped (the exact traversal would enter it).
+_NUDGE_CELLS = 1e-9
+_HUGE = 1e300
+
+#: Field value of an occupied cell.
+FIELD_OCCUPIED = 255
+
 
 @njit(cache=True, inline="always")
-def _cast_one(
-    occ: BoolArray, inv_res: float, res: float, ox: float, oy: float, px: float, py: float, ang: float, max_range: float
-) -> float:
-    """Range of one beam by exact grid traversal, m (inf when nothing is hit within max_range)."""
-    rows = occ.shape[0]
-    cols = occ.shape[1]
-    dx = math.cos(ang)
-    dy = math.sin(ang)
-    # Work in grid units (one cell = 1); the direction stays a unit vector, so t * res is metres.
-    gx = (px - ox) * inv_res
-    gy = (py - oy) * inv_res
-    t_lim = max_range * inv_res
-    # Clip the ray to the grid rectangle [0, cols] x [0, rows] (slab test) so starts outside work too.
+def _clip_to_grid(rows: int, cols: int, gx: float, gy: float, dx: float, dy: float) -> tuple[float, float]:
+    """Ray parameters (t_in, t_out) where the ray is inside [0, cols] x [0, rows], cells (slab test)."""
+    if 0.0 <= gx < cols and 0.0 <= gy < rows:
+        return 0.0, math.inf  # starts inside (the common case); the traversal notices the exit itself
     t0 = 0.0
     t1 = math.inf
     if dx != 0.0:
@@ -59,14 +99,26 @@ def _cast_one(
         t0 = max(t0, min(a, b))
         t1 = min(t1, max(a, b))
     elif gx < 0.0 or gx >= cols:
-        return math.inf
+        return math.inf, -math.inf
     if dy != 0.0:
         a = -gy / dy
         b = (rows - gy) / dy
         t0 = max(t0, min(a, b))
         t1 = min(t1, max(a, b))
     elif gy < 0.0 or gy >= rows:
-        return math.inf
+        return math.inf, -math.inf
+    return t0, t1
+
+
+@njit(cache=True, inline="always")
+def _dda_one(occ: BoolArray, gx: float, gy: float, dx: float, dy: float, t_lim: float) -> float:
+    """Distance along one beam to the first occupied cell, in cells (inf if none within t_lim).
+
+    ``(gx, gy)`` is the start in grid units (one cell = 1), ``(dx, dy)`` the unit direction.
+    """
+    rows = occ.shape[0]
+    cols = occ.shape[1]
+    t0, t1 = _clip_to_grid(rows, cols, gx, gy, dx, dy)
     if t0 >= t1 or t0 > t_lim:
         return math.inf
     ex = gx + t0 * dx
@@ -100,7 +152,7 @@ def _cast_one(
     t = t0
     while True:
         if occ[i, j]:
-            return t * res
+            return t
         if t_next_x < t_next_y:
             t = t_next_x
             t_next_x += t_delta_x
@@ -118,35 +170,245 @@ def _cast_one(
 
 
 @njit(cache=True)
-def _cast_serial(
+def _dda_serial(
     occ: BoolArray, res: float, ox: float, oy: float, poses: FloatArray, angles: FloatArray, max_range: float
 ) -> FloatArray:
     n = poses.shape[0]
     nb = angles.shape[0]
     out = np.empty((n, nb))
     inv_res = 1.0 / res
+    t_lim = max_range * inv_res
+    cb = np.cos(angles)
+    sb = np.sin(angles)
     for p in range(n):
+        gx = (poses[p, 0] - ox) * inv_res
+        gy = (poses[p, 1] - oy) * inv_res
+        cp = math.cos(poses[p, 2])
+        sp = math.sin(poses[p, 2])
         for b in range(nb):
-            out[p, b] = _cast_one(
-                occ, inv_res, res, ox, oy, poses[p, 0], poses[p, 1], poses[p, 2] + angles[b], max_range
-            )
+            # cos/sin of (heading + beam) by the sum formulas: no trigonometry per ray
+            out[p, b] = _dda_one(occ, gx, gy, cp * cb[b] - sp * sb[b], sp * cb[b] + cp * sb[b], t_lim) * res
     return out
 
 
 @njit(cache=True, parallel=True)
-def _cast_parallel(
+def _dda_parallel(
     occ: BoolArray, res: float, ox: float, oy: float, poses: FloatArray, angles: FloatArray, max_range: float
 ) -> FloatArray:
     n = poses.shape[0]
     nb = angles.shape[0]
     out = np.empty((n, nb))
     inv_res = 1.0 / res
+    t_lim = max_range * inv_res
+    cb = np.cos(angles)
+    sb = np.sin(angles)
+    cp = np.cos(poses[:, 2])
+    sp = np.sin(poses[:, 2])
     # Flattened so that one pose with many beams also spreads over the threads.
     for k in prange(n * nb):
         p = k // nb
         b = k - p * nb
-        out[p, b] = _cast_one(occ, inv_res, res, ox, oy, poses[p, 0], poses[p, 1], poses[p, 2] + angles[b], max_range)
+        gx = (poses[p, 0] - ox) * inv_res
+        gy = (poses[p, 1] - oy) * inv_res
+        out[p, b] = _dda_one(occ, gx, gy, cp[p] * cb[b] - sp[p] * sb[b], sp[p] * cb[b] + cp[p] * sb[b], t_lim) * res
     return out
+
+
+#: Rays traced at once by one thread: their dependency chains (load, jump, floor, load) overlap in the
+#: CPU's out-of-order window, which a single ray's chain leaves mostly idle.
+LANES = 8
+
+
+@njit(cache=True, inline="always")
+def _march_start(
+    field: UInt8Array,
+    gx: float,
+    gy: float,
+    dx: float,
+    dy: float,
+    t_lim: float,
+    state: FloatArray,
+    cell: IntArray,
+    k: int,
+) -> bool:
+    """Set lane ``k`` up for a ray; False (and ``state[k, 0]`` = range) when it ends at once."""
+    rows = field.shape[0]
+    cols = field.shape[1]
+    t0, t1 = _clip_to_grid(rows, cols, gx, gy, dx, dy)
+    if t0 >= t1 or t0 > t_lim:
+        state[k, 0] = math.inf
+        return False
+    # The exit boundaries of cell (i, j) are x = j + ex_x and y = i + ex_y; the entry ones j + 1 - ex_x and
+    # i + 1 - ex_y. For an axis-parallel ray a huge inverse makes the exit time +huge and the entry time <= 0.
+    ex_x = 0.0 if dx < 0.0 else 1.0
+    ex_y = 0.0 if dy < 0.0 else 1.0
+    state[k, 0] = t0
+    state[k, 1] = t0
+    state[k, 2] = gx
+    state[k, 3] = gy
+    state[k, 4] = dx
+    state[k, 5] = dy
+    state[k, 6] = 1.0 / dx if dx != 0.0 else _HUGE
+    state[k, 7] = 1.0 / dy if dy != 0.0 else _HUGE
+    state[k, 8] = ex_x - gx
+    state[k, 9] = ex_y - gy
+    state[k, 10] = 1.0 - ex_x - gx
+    state[k, 11] = 1.0 - ex_y - gy
+    cell[k, 0] = min(max(math.floor(gy + t0 * dy), 0), rows - 1)
+    cell[k, 1] = min(max(math.floor(gx + t0 * dx), 0), cols - 1)
+    return True
+
+
+@njit(cache=True)
+def _march_range(
+    field: UInt8Array,
+    res: float,
+    ox: float,
+    oy: float,
+    poses: FloatArray,
+    cp: FloatArray,
+    sp: FloatArray,
+    cb: FloatArray,
+    sb: FloatArray,
+    t_lim: float,
+    first: int,
+    stop: int,
+    out: FloatArray,
+) -> None:
+    """Ranges (m) of the flattened rays ``first .. stop - 1`` (pose-major) into ``out``, LANES at a time.
+
+    Each step of a lane is branch-free: the beam moves to the farther of the jump target and the point
+    just past the current cell's exit (a DDA step). A hit reports the cell's exact entry point.
+    """
+    rows = field.shape[0]
+    cols = field.shape[1]
+    nb = cb.shape[0]
+    inv_res = 1.0 / res
+    state = np.empty((LANES, 12))
+    cell = np.empty((LANES, 2), dtype=np.int64)
+    ray = np.full(LANES, -1, dtype=np.int64)
+    nxt = first
+    active = 0
+    # fill the lanes
+    for k in range(LANES):
+        while nxt < stop:
+            r = nxt
+            nxt += 1
+            p = r // nb
+            b = r - p * nb
+            gx = (poses[p, 0] - ox) * inv_res
+            gy = (poses[p, 1] - oy) * inv_res
+            dx = cp[p] * cb[b] - sp[p] * sb[b]
+            dy = sp[p] * cb[b] + cp[p] * sb[b]
+            if _march_start(field, gx, gy, dx, dy, t_lim, state, cell, k):
+                ray[k] = r
+                active += 1
+                break
+            out[r] = state[k, 0]
+    while active > 0:
+        for k in range(LANES):
+            r = ray[k]
+            if r < 0:
+                continue
+            i = cell[k, 0]
+            j = cell[k, 1]
+            v = field[i, j]
+            t = state[k, 0]
+            done = False
+            result = math.inf
+            if v == FIELD_OCCUPIED:
+                # exact entry point: the later of the two slab entries (t0 if the beam starts inside)
+                t_in = max(state[k, 1], max((j + state[k, 10]) * state[k, 6], (i + state[k, 11]) * state[k, 7]))
+                if t_in <= t_lim:
+                    result = t_in * res
+                done = True
+            else:
+                t_exit = min((j + state[k, 8]) * state[k, 6], (i + state[k, 9]) * state[k, 7])
+                t = max(t + v * JUMP_UNIT_CELLS, t_exit + _NUDGE_CELLS)
+                j = math.floor(state[k, 2] + t * state[k, 4])
+                i = math.floor(state[k, 3] + t * state[k, 5])
+                # past max_range, or out of the grid (convex, with free space outside): no hit
+                if t > t_lim + _NUDGE_CELLS or j < 0 or j >= cols or i < 0 or i >= rows:
+                    done = True
+                state[k, 0] = t
+                cell[k, 0] = i
+                cell[k, 1] = j
+            if done:
+                out[r] = result
+                ray[k] = -1
+                active -= 1
+                while nxt < stop:
+                    r = nxt
+                    nxt += 1
+                    p = r // nb
+                    b = r - p * nb
+                    gx = (poses[p, 0] - ox) * inv_res
+                    gy = (poses[p, 1] - oy) * inv_res
+                    dx = cp[p] * cb[b] - sp[p] * sb[b]
+                    dy = sp[p] * cb[b] + cp[p] * sb[b]
+                    if _march_start(field, gx, gy, dx, dy, t_lim, state, cell, k):
+                        ray[k] = r
+                        active += 1
+                        break
+                    out[r] = state[k, 0]
+
+
+@njit(cache=True)
+def _march_serial(
+    field: UInt8Array, res: float, ox: float, oy: float, poses: FloatArray, angles: FloatArray, max_range: float
+) -> FloatArray:
+    n = poses.shape[0]
+    nb = angles.shape[0]
+    out = np.empty(n * nb)
+    cp = np.cos(poses[:, 2])
+    sp = np.sin(poses[:, 2])
+    _march_range(field, res, ox, oy, poses, cp, sp, np.cos(angles), np.sin(angles), max_range / res, 0, n * nb, out)
+    return out.reshape((n, nb))
+
+
+#: Rays per parallel work item of the march kernel.
+_CHUNK = 256
+
+
+@njit(cache=True, parallel=True)
+def _march_parallel(
+    field: UInt8Array, res: float, ox: float, oy: float, poses: FloatArray, angles: FloatArray, max_range: float
+) -> FloatArray:
+    n = poses.shape[0]
+    nb = angles.shape[0]
+    total = n * nb
+    out = np.empty(total)
+    cb = np.cos(angles)
+    sb = np.sin(angles)
+    cp = np.cos(poses[:, 2])
+    sp = np.sin(poses[:, 2])
+    t_lim = max_range / res
+    for c in prange((total + _CHUNK - 1) // _CHUNK):
+        _march_range(field, res, ox, oy, poses, cp, sp, cb, sb, t_lim, c * _CHUNK, min((c + 1) * _CHUNK, total), out)
+    return out.reshape((n, nb))
+
+
+def march_field(occupied: npt.ArrayLike) -> UInt8Array:
+    """The clearance field that ``method="march"`` jumps on, cells, shape (rows, cols), float32.
+
+    -1 on occupied cells. On a free cell, its clearance: the smallest distance between any point of
+    the cell and any point of an occupied cell, set to 0 where below :data:`MARCH_MIN_CELLS` (the
+    kernel takes DDA steps there); ``inf`` everywhere on a grid without occupied cells. Two unit cells
+    whose centres are (di, dj) cells apart are ``hypot(max(|di| - 1, 0), max(|dj| - 1, 0))`` apart,
+    which is the centre distance to the nearest of the 3 x 3 cells around the occupied one: the
+    clearance is the Euclidean distance transform of the occupied cells dilated by one cell.
+    """
+    occ = np.ascontiguousarray(occupied, dtype=np.bool_)
+    if not occ.any():
+        return np.full(occ.shape, FIELD_OCCUPIED - 1, dtype=np.uint8)
+    near = binary_dilation(occ, structure=np.ones((3, 3), dtype=bool))
+    clearance = distance_transform_edt(~near)
+    # Whole jump units, rounded down so a jump never exceeds the clearance; capped below the marker.
+    units = np.minimum(np.floor(clearance / JUMP_UNIT_CELLS), FIELD_OCCUPIED - 1)
+    units[clearance < MARCH_MIN_CELLS] = 0
+    field = units.astype(np.uint8)
+    field[occ] = FIELD_OCCUPIED
+    return np.ascontiguousarray(field)
 
 
 def _check_inputs(
@@ -155,6 +417,13 @@ def _check_inputs(
     occ = np.ascontiguousarray(occupied, dtype=np.bool_)
     if occ.ndim != 2 or occ.shape[0] == 0 or occ.shape[1] == 0:
         raise ValueError(f"occupied must be a non-empty 2-D array (rows, cols), got shape {occ.shape}")
+    p, a = _check_rays(resolution, poses, angles, max_range)
+    return occ, p, a
+
+
+def _check_rays(
+    resolution: float, poses: npt.ArrayLike, angles: npt.ArrayLike, max_range: float
+) -> tuple[FloatArray, FloatArray]:
     if not (resolution > 0.0 and math.isfinite(resolution)):
         raise ValueError(f"resolution must be a positive number of metres, got {resolution!r}")
     if not (max_range >= 0.0 and math.isfinite(max_range)):
@@ -165,7 +434,18 @@ def _check_inputs(
     if p.ndim != 2 or p.shape[1] != 3:
         raise ValueError(f"poses must have shape (N, 3) as (x m, y m, theta rad), got {np.shape(poses)}")
     a = np.ascontiguousarray(angles, dtype=np.float64).reshape(-1)
-    return occ, p, a
+    return p, a
+
+
+def _check_method(method: str) -> None:
+    if method not in ("auto", "march", "dda"):
+        raise ValueError(f"method must be 'auto', 'march' or 'dda', got {method!r}")
+
+
+def _use_threads(parallel: bool | None, n_rays: int) -> bool:
+    if parallel is None:
+        return n_rays >= PARALLEL_MIN_RAYS and numba.get_num_threads() > 1
+    return parallel
 
 
 def cast_rays(
@@ -177,6 +457,7 @@ def cast_rays(
     max_range: float,
     *,
     parallel: bool | None = None,
+    method: Method = "auto",
 ) -> FloatArray:
     """Cast ``B`` beams from each of ``N`` sensor poses through an occupancy grid.
 
@@ -196,6 +477,11 @@ def cast_rays(
         Beams that hit nothing within this distance return ``inf``, m.
     parallel : bool or None
         Spread the rays over numba's threads; ``None`` decides by the number of rays.
+    method : {"auto", "march", "dda"}
+        ``"dda"`` is the exact traversal, ``"march"`` the same ranges (to rounding) with distance-field
+        jumps, whose field is built in this call (about 60 ns per cell); ``"auto"`` marches when there
+        are at least :data:`AUTO_MARCH_RAYS_PER_CELL` rays per cell. For repeated casts in one map use
+        :func:`cast_scan`, which keeps the field.
 
     Returns
     -------
@@ -203,18 +489,68 @@ def cast_rays(
         Range to the entry point of the first occupied cell, m; 0 for a beam starting in an occupied
         cell; ``inf`` where nothing is hit within ``max_range``.
     """
+    _check_method(method)
     occ, p, a = _check_inputs(occupied, resolution, poses, angles, max_range)
     n_rays = p.shape[0] * a.shape[0]
-    if parallel is None:
-        parallel = n_rays >= PARALLEL_MIN_RAYS and numba.get_num_threads() > 1
-    kernel = _cast_parallel if parallel else _cast_serial
-    return kernel(occ, float(resolution), float(origin_xy[0]), float(origin_xy[1]), p, a, float(max_range))
+    if method == "auto":
+        method = "march" if n_rays >= AUTO_MARCH_RAYS_PER_CELL * occ.size else "dda"
+    grid_array = march_field(occ) if method == "march" else occ
+    return _run(grid_array, method, float(resolution), origin_xy, p, a, float(max_range), parallel)
+
+
+def _run(
+    grid_array: BoolArray | UInt8Array,
+    method: str,
+    resolution: float,
+    origin_xy: tuple[float, float],
+    p: FloatArray,
+    a: FloatArray,
+    max_range: float,
+    parallel: bool | None,
+) -> FloatArray:
+    threads = _use_threads(parallel, p.shape[0] * a.shape[0])
+    if method == "march":
+        kernel = _march_parallel if threads else _march_serial
+    else:
+        kernel = _dda_parallel if threads else _dda_serial
+    return kernel(grid_array, resolution, float(origin_xy[0]), float(origin_xy[1]), p, a, max_range)
+
+
+@dataclass(frozen=True)
+class _GridArrays:
+    occupied: BoolArray
+    field: UInt8Array
+
+
+#: Occupancy mask and distance field per grid object, dropped with the grid.
+_GRID_CACHE: weakref.WeakKeyDictionary[OccupancyGrid, _GridArrays] = weakref.WeakKeyDictionary()
+
+
+def _grid_arrays(grid: OccupancyGrid) -> _GridArrays:
+    arrays = _GRID_CACHE.get(grid)
+    if arrays is None:
+        occ = np.ascontiguousarray(grid.occupied(), dtype=np.bool_)
+        if occ.ndim != 2 or occ.shape[0] == 0 or occ.shape[1] == 0:
+            raise ValueError(f"grid.occupancy must be a non-empty 2-D array (rows, cols), got shape {occ.shape}")
+        arrays = _GridArrays(occupied=occ, field=march_field(occ))
+        _GRID_CACHE[grid] = arrays
+        logger.debug("ray caster: distance field built for a %d x %d grid", occ.shape[0], occ.shape[1])
+    return arrays
 
 
 def cast_scan(
-    grid: OccupancyGrid, pose: npt.ArrayLike, angles: npt.ArrayLike, max_range: float, *, parallel: bool | None = None
+    grid: OccupancyGrid,
+    pose: npt.ArrayLike,
+    angles: npt.ArrayLike,
+    max_range: float,
+    *,
+    parallel: bool | None = None,
+    method: Method = "auto",
 ) -> FloatArray:
     """Ranges of one scan (or several) cast in an :class:`OccupancyGrid`.
+
+    The grid's occupancy mask and distance field are built on the first call and kept while the grid
+    object lives, so repeated scans in one map (a filter's expected scans) pay only the traversal.
 
     Parameters
     ----------
@@ -226,15 +562,26 @@ def cast_scan(
         Beam angles relative to the sensor heading, rad.
     max_range : float
         m; farther beams return ``inf``.
+    parallel : bool or None
+        As in :func:`cast_rays`.
+    method : {"auto", "march", "dda"}
+        ``"auto"`` (the default) is ``"march"``, whose field is cached with the grid.
 
     Returns
     -------
     ndarray, shape (B,) for one pose, (N, B) for several
+        Ranges, m, as in :func:`cast_rays`.
     """
+    _check_method(method)
     if grid.origin[2] != 0.0:
         raise ValueError(f"grid.origin theta must be 0 (rotated grids are not supported), got {grid.origin[2]}")
     single = np.ndim(pose) == 1
-    out = cast_rays(grid.occupied(), grid.resolution, grid.origin[:2], pose, angles, max_range, parallel=parallel)
+    p, a = _check_rays(grid.resolution, pose, angles, max_range)
+    arrays = _grid_arrays(grid)
+    if method == "dda":
+        out = _run(arrays.occupied, "dda", float(grid.resolution), grid.origin[:2], p, a, float(max_range), parallel)
+    else:
+        out = _run(arrays.field, "march", float(grid.resolution), grid.origin[:2], p, a, float(max_range), parallel)
     return out[0] if single else out
 
 

@@ -7,9 +7,10 @@ import math
 import numpy as np
 import pytest
 
+from locbench import raycast
 from locbench.datasets.base import OccupancyGrid
 from locbench.datasets.synthetic.scenarios import office_world
-from locbench.raycast import cast_rays, cast_rays_reference, cast_scan
+from locbench.raycast import FIELD_OCCUPIED, JUMP_UNIT_CELLS, cast_rays, cast_rays_reference, cast_scan, march_field
 
 RES = 0.05
 
@@ -21,55 +22,66 @@ def box_grid(rows: int = 40, cols: int = 80) -> np.ndarray:
     return occ
 
 
+METHODS = ["march", "dda"]
+
+
+@pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("parallel", [False, True])
-def test_axis_aligned_rays_hit_walls_at_known_distance(parallel: bool) -> None:
+def test_axis_aligned_rays_hit_walls_at_known_distance(parallel: bool, method: str) -> None:
     occ = box_grid()
     pose = np.array([[1.0, 1.0, 0.0]])
     angles = np.array([0.0, math.pi / 2, math.pi, -math.pi / 2])
-    r = cast_rays(occ, RES, (0.0, 0.0), pose, angles, 10.0, parallel=parallel)
+    r = cast_rays(occ, RES, (0.0, 0.0), pose, angles, 10.0, parallel=parallel, method=method)
     # east wall cells start at x = 79 * 0.05, north at y = 39 * 0.05, west/south walls end at 0.05
     np.testing.assert_allclose(r[0], [79 * RES - 1.0, 39 * RES - 1.0, 1.0 - RES, 1.0 - RES], atol=1e-12)
 
 
-def test_diagonal_ray_enters_wall_at_the_analytic_point() -> None:
+@pytest.mark.parametrize("method", METHODS)
+def test_diagonal_ray_enters_wall_at_the_analytic_point(method: str) -> None:
     occ = box_grid()
-    r = cast_rays(occ, RES, (0.0, 0.0), [1.0, 1.0, math.pi / 4], [0.0], 10.0)
+    r = cast_rays(occ, RES, (0.0, 0.0), [1.0, 1.0, math.pi / 4], [0.0], 10.0, method=method)
     # y reaches the north wall (y = 1.95) before x reaches the east wall
     assert r[0, 0] == pytest.approx((39 * RES - 1.0) * math.sqrt(2.0), abs=1e-9)
 
 
-def test_origin_offset_and_wall_in_the_middle() -> None:
+@pytest.mark.parametrize("method", METHODS)
+def test_origin_offset_and_wall_in_the_middle(method: str) -> None:
     occ = np.zeros((20, 100), dtype=bool)
     occ[:, 60] = True  # wall cells span x in [ox + 3.0, ox + 3.05)
     ox, oy = -1.3, 2.2
-    r = cast_rays(occ, RES, (ox, oy), [ox + 0.5, oy + 0.5, 0.0], [0.0, math.pi], 10.0)
+    r = cast_rays(occ, RES, (ox, oy), [ox + 0.5, oy + 0.5, 0.0], [0.0, math.pi], 10.0, method=method)
     assert r[0, 0] == pytest.approx(2.5, abs=1e-9)
     assert r[0, 1] == np.inf  # nothing to the west: the ray leaves the grid
 
 
-def test_max_range_and_rays_leaving_the_grid() -> None:
+@pytest.mark.parametrize("method", METHODS)
+def test_max_range_and_rays_leaving_the_grid(method: str) -> None:
     occ = box_grid()
-    r = cast_rays(occ, RES, (0.0, 0.0), [1.0, 1.0, 0.0], [0.0], 2.95)
+    r = cast_rays(occ, RES, (0.0, 0.0), [1.0, 1.0, 0.0], [0.0], 2.95, method=method)
     assert r[0, 0] == pytest.approx(2.95)
-    assert cast_rays(occ, RES, (0.0, 0.0), [1.0, 1.0, 0.0], [0.0], 2.94)[0, 0] == np.inf
+    assert cast_rays(occ, RES, (0.0, 0.0), [1.0, 1.0, 0.0], [0.0], 2.94, method=method)[0, 0] == np.inf
     empty = np.zeros((10, 10), dtype=bool)
-    assert np.all(np.isinf(cast_rays(empty, RES, (0.0, 0.0), [0.2, 0.2, 0.3], np.linspace(-3, 3, 7), 100.0)))
+    r = cast_rays(empty, RES, (0.0, 0.0), [0.2, 0.2, 0.3], np.linspace(-3, 3, 7), 100.0, method=method)
+    assert np.all(np.isinf(r))
 
 
-def test_rays_from_outside_the_grid_enter_it() -> None:
+@pytest.mark.parametrize("method", METHODS)
+def test_rays_from_outside_the_grid_enter_it(method: str) -> None:
     occ = box_grid()
-    r = cast_rays(occ, RES, (0.0, 0.0), [[-1.0, 1.0, 0.0], [-1.0, 1.0, math.pi]], [0.0], 10.0)
+    r = cast_rays(occ, RES, (0.0, 0.0), [[-1.0, 1.0, 0.0], [-1.0, 1.0, math.pi]], [0.0], 10.0, method=method)
     assert r[0, 0] == pytest.approx(1.0)
     assert r[1, 0] == np.inf
 
 
-def test_start_inside_an_occupied_cell_is_zero() -> None:
+@pytest.mark.parametrize("method", METHODS)
+def test_start_inside_an_occupied_cell_is_zero(method: str) -> None:
     occ = box_grid()
-    r = cast_rays(occ, RES, (0.0, 0.0), [0.02, 0.5, 0.0], np.linspace(-3, 3, 9), 10.0)
+    r = cast_rays(occ, RES, (0.0, 0.0), [0.02, 0.5, 0.0], np.linspace(-3, 3, 9), 10.0, method=method)
     assert np.all(r == 0.0)
 
 
-def test_agrees_with_reference_on_random_poses_in_a_real_grid() -> None:
+@pytest.mark.parametrize("method", METHODS)
+def test_agrees_with_reference_on_random_poses_in_a_real_grid(method: str) -> None:
     grid = office_world().occupancy_grid(RES)
     rng = np.random.default_rng(7)
     free = np.argwhere(~grid.occupied())
@@ -77,7 +89,7 @@ def test_agrees_with_reference_on_random_poses_in_a_real_grid() -> None:
     xy = grid.cell_centers(cells) + rng.uniform(-0.02, 0.02, (60, 2))
     poses = np.column_stack([xy, rng.uniform(-math.pi, math.pi, 60)])
     angles = np.linspace(-2.0, 2.0, 41)
-    fast = cast_scan(grid, poses, angles, 6.0)
+    fast = cast_scan(grid, poses, angles, 6.0, method=method)
     ref = cast_rays_reference(grid.occupied(), RES, grid.origin[:2], poses, angles, 6.0, step_fraction=0.02)
     both = np.isfinite(fast) & np.isfinite(ref)
     assert np.mean(np.isfinite(fast) == np.isfinite(ref)) > 0.99
@@ -87,13 +99,14 @@ def test_agrees_with_reference_on_random_poses_in_a_real_grid() -> None:
     assert np.all(fast[both] <= ref[both] + 0.02 * RES + 1e-9)
 
 
-def test_parallel_and_serial_kernels_are_identical() -> None:
+@pytest.mark.parametrize("method", METHODS)
+def test_parallel_and_serial_kernels_are_identical(method: str) -> None:
     grid = office_world().occupancy_grid(RES)
     rng = np.random.default_rng(3)
     poses = np.column_stack([rng.uniform(0.5, 19.5, 300), rng.uniform(0.5, 14.5, 300), rng.uniform(-3, 3, 300)])
     angles = np.linspace(-2.1, 2.1, 61)
-    a = cast_rays(grid.occupied(), RES, grid.origin[:2], poses, angles, 8.0, parallel=False)
-    b = cast_rays(grid.occupied(), RES, grid.origin[:2], poses, angles, 8.0, parallel=True)
+    a = cast_rays(grid.occupied(), RES, grid.origin[:2], poses, angles, 8.0, parallel=False, method=method)
+    b = cast_rays(grid.occupied(), RES, grid.origin[:2], poses, angles, 8.0, parallel=True, method=method)
     np.testing.assert_array_equal(a, b)
 
 
@@ -104,3 +117,77 @@ def test_cast_scan_single_pose_shape_and_bad_inputs() -> None:
         cast_rays(box_grid(), RES, (0.0, 0.0), np.zeros((2, 2)), [0.0], 5.0)
     with pytest.raises(ValueError, match="resolution"):
         cast_rays(box_grid(), 0.0, (0.0, 0.0), [0.0, 0.0, 0.0], [0.0], 5.0)
+    with pytest.raises(ValueError, match="method"):
+        cast_scan(grid, [1.0, 1.0, 0.0], np.zeros(5), 5.0, method="bresenham")  # type: ignore[arg-type]
+
+
+def random_boxes_grid(seed: int, n_boxes: int = 80) -> np.ndarray:
+    """A 400 x 400 grid (20 m at 0.05 m) with a border wall and random boxes, some touching."""
+    rng = np.random.default_rng(seed)
+    occ = np.zeros((400, 400), dtype=bool)
+    occ[0, :] = occ[-1, :] = occ[:, 0] = occ[:, -1] = True
+    for _ in range(n_boxes):
+        h, w = rng.integers(1, 25, 2)
+        i, j = rng.integers(1, 380, 2)
+        occ[i : i + h, j : j + w] = True
+    return occ
+
+
+def random_poses(occ: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    free = np.argwhere(~occ)
+    cells = free[rng.choice(free.shape[0], n, replace=False)]
+    xy = (cells[:, ::-1] + rng.uniform(0.0, 1.0, (n, 2))) * RES
+    return np.column_stack([xy, rng.uniform(-math.pi, math.pi, n)])
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_march_equals_the_exact_traversal_on_random_boxes(seed: int) -> None:
+    occ = random_boxes_grid(seed)
+    rng = np.random.default_rng(100 + seed)
+    poses = random_poses(occ, 300, rng)
+    # include poses outside the grid and a few exactly axis-parallel / diagonal beams
+    poses = np.vstack([poses, [[-0.7, 3.3, 0.2], [21.0, 7.0, math.pi], [5.0, -2.0, 1.4]]])
+    angles = np.concatenate([np.linspace(-math.pi, math.pi, 90, endpoint=False), [0.0, math.pi / 4, math.pi / 2]])
+    dda = cast_rays(occ, RES, (0.0, 0.0), poses, angles, 12.0, method="dda")
+    march = cast_rays(occ, RES, (0.0, 0.0), poses, angles, 12.0, method="march")
+    same_inf = np.isinf(dda) == np.isinf(march)
+    assert np.mean(same_inf) > 0.9999  # only a beam through a cell corner may pick the other cell
+    both = np.isfinite(dda) & np.isfinite(march)
+    close = np.abs(dda[both] - march[both]) <= 1e-9
+    assert np.mean(close) > 0.9999
+    assert np.mean(np.isfinite(dda)) > 0.9  # the test exercises hits, not only misses
+
+
+def test_march_field_is_a_lower_bound_on_the_clearance_of_every_cell() -> None:
+    occ = random_boxes_grid(3, n_boxes=6)[:60, :60].copy()
+    field = march_field(occ)
+    assert field.dtype == np.uint8
+    assert np.all((field == FIELD_OCCUPIED) == occ)
+    oi, oj = np.nonzero(occ)
+    for i, j in np.argwhere(~occ)[::7]:
+        # distance between the unit squares of (i, j) and of every occupied cell, cells
+        gap = np.hypot(np.maximum(np.abs(oi - i) - 1, 0), np.maximum(np.abs(oj - j) - 1, 0)).min()
+        jump = field[i, j] * JUMP_UNIT_CELLS
+        assert jump <= gap
+        assert field[i, j] == 0 or jump > gap - JUMP_UNIT_CELLS - 1e-9  # and not needlessly small
+
+
+def test_grid_without_obstacles_and_auto_method() -> None:
+    empty = np.zeros((50, 50), dtype=bool)
+    assert np.all(march_field(empty) == FIELD_OCCUPIED - 1)
+    r = cast_rays(empty, RES, (0.0, 0.0), [1.0, 1.0, 0.3], np.linspace(-3, 3, 11), 100.0, method="march")
+    assert np.all(np.isinf(r))
+    # auto marches only when the rays pay for the field
+    occ = box_grid()
+    few = cast_rays(occ, RES, (0.0, 0.0), [1.0, 1.0, 0.1], [0.0], 10.0, method="auto")
+    many = cast_rays(occ, RES, (0.0, 0.0), np.tile([1.0, 1.0, 0.1], (2000, 1)), [0.0], 10.0, method="auto")
+    np.testing.assert_allclose(few[0, 0], many[:, 0], atol=1e-12)
+
+
+def test_cast_scan_keeps_the_field_with_the_grid() -> None:
+    grid = OccupancyGrid(occupancy=box_grid().astype(float), resolution=RES)
+    cast_scan(grid, [1.0, 1.0, 0.0], np.zeros(3), 5.0)
+    arrays = raycast._GRID_CACHE[grid]
+    cast_scan(grid, [1.5, 1.0, 0.0], np.zeros(3), 5.0)
+    assert raycast._GRID_CACHE[grid] is arrays
+    np.testing.assert_array_equal(arrays.field, march_field(grid.occupied()))
