@@ -11,7 +11,8 @@ Steps
    them or where they lie farther apart than ``max(gap_min_m, gap_factor * r * angle_increment)``: a
    depth jump or a door gap, so that a segment never bridges two collinear walls.
 3. **Split** (iterative end-point fit, Ramer-Douglas-Peucker): a run is split at the point farthest from
-   the chord through its ends while that distance exceeds ``split_threshold_m``.
+   the chord through its ends while that distance exceeds max(``split_threshold_m``, 3 ``sigma_m``): a point
+   on a straight wall lies within 3 sigma of it with probability 0.997, so noise alone rarely splits a wall.
 4. **Merge.** Neighbouring segments whose joint fit keeps every point within ``split_threshold_m`` of the
    line are merged (the split step can cut a straight wall where noise makes an end point an outlier).
 5. **Fit.** Each segment with at least ``min_points`` points and ``min_length_m`` length is fitted by total
@@ -39,6 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+from numba import njit
 
 from locbench.errors import ConfigError
 from locbench.events import LaserScan
@@ -54,7 +56,8 @@ class ExtractionParams:
     Attributes
     ----------
     split_threshold_m : float
-        Largest distance of a point from its segment's line before the segment is split, m.
+        Largest distance of a point from its segment's line before the segment is split, m (at least
+        3 ``sigma_m`` is used).
     min_points : int
         Fewest points a segment must have to be reported (>= 3, so the fit has redundancy).
     min_length_m : float
@@ -138,6 +141,51 @@ def scan_points(scan: LaserScan) -> tuple[FloatArray, FloatArray, npt.NDArray[np
     return pts, rr, beam
 
 
+@njit(cache=True)
+def _fit_core(xs: FloatArray, ys: FloatArray, var: float) -> tuple[float, float, float, float, float, float]:
+    """Total least squares on points (xs, ys); (rho, psi, var rho, cov rho psi, var psi, max residual)."""
+    n = xs.shape[0]
+    cx = 0.0
+    cy = 0.0
+    for i in range(n):
+        cx += xs[i]
+        cy += ys[i]
+    cx /= n
+    cy /= n
+    sxx = 0.0
+    syy = 0.0
+    sxy = 0.0
+    for i in range(n):
+        dx = xs[i] - cx
+        dy = ys[i] - cy
+        sxx += dx * dx
+        syy += dy * dy
+        sxy += dx * dy
+    # the normal is the direction of least spread: psi minimises sum ((p - c) . n)^2
+    psi = 0.5 * math.atan2(-2.0 * sxy, syy - sxx)
+    cp = math.cos(psi)
+    sp = math.sin(psi)
+    rho = cx * cp + cy * sp
+    if rho < 0.0:
+        rho = -rho
+        cp = -cp
+        sp = -sp
+    psi = math.atan2(sp, cp)
+    big_s = 0.0
+    resid = 0.0
+    for i in range(n):
+        dx = xs[i] - cx
+        dy = ys[i] - cy
+        s = -dx * sp + dy * cp  # along the line, t = (-sin psi, cos psi)
+        big_s += s * s
+        r = abs(dx * cp + dy * sp)
+        if r > resid:
+            resid = r
+    big_s = max(big_s, 1e-12)
+    ct = -cx * sp + cy * cp
+    return rho, psi, var / n + ct * ct * var / big_s, ct * var / big_s, var / big_s, resid
+
+
 def fit_line(points: FloatArray, sigma_m: float) -> tuple[float, float, FloatArray, float]:
     """Total-least-squares line through ``points`` (n, 2), n >= 2.
 
@@ -146,58 +194,52 @@ def fit_line(points: FloatArray, sigma_m: float) -> tuple[float, float, FloatArr
     rho, psi : float
         Hessian normal form, rho >= 0 (m), psi in (-pi, pi] (rad).
     cov : ndarray, shape (2, 2)
-        First-order covariance of (rho, psi) for an error of ``sigma_m`` across the line at each point.
+        First-order covariance of (rho, psi) for an error of ``sigma_m`` across the line at each point
+        (module docstring).
     max_residual : float
         Largest distance of a point from the fitted line, m.
     """
-    n = points.shape[0]
-    c = points.mean(axis=0)
-    d = points - c
-    sxx = float(d[:, 0] @ d[:, 0])
-    syy = float(d[:, 1] @ d[:, 1])
-    sxy = float(d[:, 0] @ d[:, 1])
-    # The normal is the direction of least spread: psi minimises sum ((p - c) . n)^2.
-    psi = 0.5 * math.atan2(-2.0 * sxy, syy - sxx)
-    cp, sp = math.cos(psi), math.sin(psi)
-    rho = c[0] * cp + c[1] * sp
-    if rho < 0.0:
-        rho, psi = -rho, psi + math.pi
-        cp, sp = -cp, -sp
-    psi = math.atan2(sp, cp)
-    s = -d[:, 0] * sp + d[:, 1] * cp  # along-line coordinates (t = (-sin psi, cos psi))
-    big_s = max(float(s @ s), 1e-12)
-    ct = -c[0] * sp + c[1] * cp
-    var = sigma_m * sigma_m
-    cov = np.array([[var / n + ct * ct * var / big_s, ct * var / big_s], [ct * var / big_s, var / big_s]])
-    resid = float(np.max(np.abs(d[:, 0] * cp + d[:, 1] * sp)))
-    return rho, psi, cov, resid
+    p = np.ascontiguousarray(points, dtype=np.float64)
+    rho, psi, vr, crp, vp, resid = _fit_core(p[:, 0].copy(), p[:, 1].copy(), sigma_m * sigma_m)
+    return rho, psi, np.array([[vr, crp], [crp, vp]]), resid
 
 
-def _split(points: FloatArray, lo: int, hi: int, thr: float, out: list[tuple[int, int]]) -> None:
-    """Iterative end-point fit on points[lo:hi]; appends (lo, hi) index ranges of the final pieces."""
+@njit(cache=True)
+def _split_core(xs: FloatArray, ys: FloatArray, lo: int, hi: int, thr: float) -> npt.NDArray[np.int64]:
+    """Iterative end-point fit on points[lo:hi]; (k, 2) index ranges of the pieces, sorted."""
     stack = [(lo, hi)]
-    pieces: list[tuple[int, int]] = []
-    while stack:
+    pieces = []
+    while len(stack) > 0:
         a, b = stack.pop()
         if b - a <= 2:
             pieces.append((a, b))
             continue
-        p, q = points[a], points[b - 1]
-        u = q - p
-        norm = math.hypot(float(u[0]), float(u[1]))
-        seg = points[a + 1 : b - 1] - p
-        # distance from the chord (from its start when both ends coincide)
-        dist = np.hypot(seg[:, 0], seg[:, 1]) if norm < 1e-12 else np.abs(seg[:, 0] * u[1] - seg[:, 1] * u[0]) / norm
-        k = int(np.argmax(dist))
-        if dist[k] > thr:
-            cut = a + 1 + k
+        px, py = xs[a], ys[a]
+        ux, uy = xs[b - 1] - px, ys[b - 1] - py
+        norm = math.hypot(ux, uy)
+        best = -1.0
+        cut = a
+        for i in range(a + 1, b - 1):
+            # distance from the chord (from its start when both ends coincide)
+            if norm < 1e-12:
+                d = math.hypot(xs[i] - px, ys[i] - py)
+            else:
+                d = abs((xs[i] - px) * uy - (ys[i] - py) * ux) / norm
+            if d > best:
+                best = d
+                cut = i
+        if best > thr:
             # the farthest point (a corner) ends the first piece and starts the second
             stack.append((cut, b))
             stack.append((a, cut + 1))
         else:
             pieces.append((a, b))
-    pieces.sort()
-    out.extend(pieces)
+    out = np.empty((len(pieces), 2), dtype=np.int64)
+    for k in range(len(pieces)):
+        out[k, 0] = pieces[k][0]
+        out[k, 1] = pieces[k][1]
+    order = np.argsort(out[:, 0])
+    return out[order]
 
 
 def extract_lines(scan: LaserScan, params: ExtractionParams | None = None) -> ExtractedLines:
@@ -230,17 +272,20 @@ def extract_lines(scan: LaserScan, params: ExtractionParams | None = None) -> Ex
     starts = np.concatenate([[0], np.flatnonzero(cut) + 1])
     ends = np.concatenate([np.flatnonzero(cut) + 1, [m]])
     # 3. split
+    thr = max(prm.split_threshold_m, 3.0 * prm.sigma_m)
+    xs, ys = np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1])
+    var = prm.sigma_m * prm.sigma_m
     pieces: list[tuple[int, int]] = []
     for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
         if b - a >= 2:
-            _split(pts, a, b, prm.split_threshold_m, pieces)
+            pieces.extend((int(u), int(w)) for u, w in _split_core(xs, ys, a, b, thr))
     # 4. merge neighbours of the same run (they share an end point after a split)
     merged: list[tuple[int, int]] = []
     for a, b in pieces:
         # pieces of one run share their corner point (previous end - 1 == this start); runs do not
         if merged and merged[-1][1] > a and b - merged[-1][0] >= 3:
             a0 = merged[-1][0]
-            if fit_line(pts[a0:b], prm.sigma_m)[3] <= prm.split_threshold_m:
+            if _fit_core(xs[a0:b], ys[a0:b], var)[5] <= thr:
                 merged[-1] = (a0, b)
                 continue
         merged.append((a, b))
@@ -253,7 +298,8 @@ def extract_lines(scan: LaserScan, params: ExtractionParams | None = None) -> Ex
         seg = pts[lo:hi]
         if seg.shape[0] < prm.min_points:
             continue
-        rho, psi, cov, _ = fit_line(seg, prm.sigma_m)
+        rho, psi, v_r, c_rp, v_p, _ = _fit_core(xs[lo:hi], ys[lo:hi], var)
+        cov = np.array([[v_r, c_rp], [c_rp, v_p]])
         t = np.array([-math.sin(psi), math.cos(psi)])
         nrm = np.array([math.cos(psi), math.sin(psi)])
         s = seg @ t
