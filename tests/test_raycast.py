@@ -80,8 +80,7 @@ def test_start_inside_an_occupied_cell_is_zero(method: str) -> None:
     assert np.all(r == 0.0)
 
 
-@pytest.mark.parametrize("method", METHODS)
-def test_agrees_with_reference_on_random_poses_in_a_real_grid(method: str) -> None:
+def test_agrees_with_reference_on_random_poses_in_a_real_grid() -> None:
     grid = office_world().occupancy_grid(RES)
     rng = np.random.default_rng(7)
     free = np.argwhere(~grid.occupied())
@@ -89,14 +88,15 @@ def test_agrees_with_reference_on_random_poses_in_a_real_grid(method: str) -> No
     xy = grid.cell_centers(cells) + rng.uniform(-0.02, 0.02, (60, 2))
     poses = np.column_stack([xy, rng.uniform(-math.pi, math.pi, 60)])
     angles = np.linspace(-2.0, 2.0, 41)
-    fast = cast_scan(grid, poses, angles, 6.0, method=method)
-    ref = cast_rays_reference(grid.occupied(), RES, grid.origin[:2], poses, angles, 6.0, step_fraction=0.02)
-    both = np.isfinite(fast) & np.isfinite(ref)
-    assert np.mean(np.isfinite(fast) == np.isfinite(ref)) > 0.99
-    diff = np.abs(fast[both] - ref[both])
-    assert np.mean(diff <= RES) > 0.99  # within one cell
-    # the exact traversal never reports a hit later than the sampled one (it may catch a clipped corner)
-    assert np.all(fast[both] <= ref[both] + 0.02 * RES + 1e-9)
+    ref = cast_rays_reference(grid.occupied(), RES, grid.origin[:2], poses, angles, 6.0, step_fraction=0.05)
+    for method in METHODS:  # the reference is slow: one sampling for both kernels
+        fast = cast_scan(grid, poses, angles, 6.0, method=method)
+        both = np.isfinite(fast) & np.isfinite(ref)
+        assert np.mean(np.isfinite(fast) == np.isfinite(ref)) > 0.99
+        diff = np.abs(fast[both] - ref[both])
+        assert np.mean(diff <= RES) > 0.99  # within one cell
+        # the exact traversal never reports a hit later than the sampled one (it may catch a clipped corner)
+        assert np.all(fast[both] <= ref[both] + 0.05 * RES + 1e-9)
 
 
 @pytest.mark.parametrize("method", METHODS)
