@@ -7,20 +7,25 @@ numpy reference used by tests (:func:`cast_rays_reference`):
     Exact grid traversal (Amanatides & Woo, "A Fast Voxel Traversal Algorithm for Ray Tracing",
     Eurographics 1987): visits every cell the beam crosses.
 ``method="march"``
-    The same exact traversal, accelerated by ray marching on a distance field (the "ray marching"
-    method of range_libc / CDDT, Walsh & Karaman, "CDDT: Fast Approximate 2D Ray Casting for
-    Accelerated Localization", ICRA 2018). Each free cell stores a lower bound on the distance from
-    any point of the cell to any occupied cell, ``edt - sqrt(2)`` cells, with ``edt`` the Euclidean
-    distance transform between cell centres (``scipy.ndimage.distance_transform_edt``); where that
-    bound is at least :data:`MARCH_MIN_CELLS` the beam jumps ahead by it, elsewhere it takes exact
-    DDA steps. A jump never enters an occupied cell, so, unlike range_libc's marcher (which stops
-    within a tolerance of the wall), the range is the exact DDA range up to floating-point rounding
-    (about 1e-12 m; beams through the exact corner point of two cells may pick the other cell, as
-    any traversal must pick one). The distance field costs about 60 ns per cell to build (10 ms for
-    400 x 400): :func:`cast_scan` caches it per grid object, :func:`cast_rays` builds it per call.
+    The same traversal, accelerated by ray marching on a distance field (the "ray marching" method of
+    range_libc / CDDT, Walsh & Karaman, "CDDT: Fast Approximate 2D Ray Casting for Accelerated
+    Localization", ICRA 2018). Each free cell stores its clearance, the smallest distance between any
+    of its points and any occupied cell (:func:`march_field`: the Euclidean distance transform,
+    ``scipy.ndimage.distance_transform_edt``, of the occupied cells dilated by one cell), rounded down
+    to half cells in a uint8. Each step moves the beam to the farther of ``clearance`` ahead and the
+    exit of the current cell (a DDA step), without a branch; 8 beams are traced at once per thread so
+    that their dependency chains overlap. A jump never enters an occupied cell and a hit reports the
+    exact entry point of the cell (the later of its two slab entries), so, unlike range_libc's marcher
+    (which stops within a tolerance of the wall), the ranges equal the exact traversal's up to
+    rounding (about 1e-12 m); a beam crossing a cell for less than 1e-9 cells (through a corner point)
+    may miss that cell. The field costs about 60 ns per cell (10 ms for 400 x 400): :func:`cast_scan`
+    caches it per grid object, :func:`cast_rays` builds it per call when there are enough rays.
 
-Measured on one core of the development machine (AMD EPYC, 400 x 400 grid at 0.05 m with walls and
-clutter, 10 m max range, ``tests/perf/test_raycast_perf.py``): see the README of the repository.
+Measured single-threaded (``tests/perf/test_raycast_perf.py``: 400 x 400 grid at 0.05 m with walls,
+doors and 60 boxes, 10 m max range) on the 2-core development machine while it was shared (load
+average 7-9, so absolute numbers are low and noisy; CPU-time medians): one pose x 683 beams 3.1 M
+rays/s with the original DDA, 6.9 M with ``march``; 1000 poses x 60 beams 2.9 M and 7.6 M; the
+fastest runs of ``march`` reached 78-80 ns per ray (12.5 M rays/s) on the 1000 x 60 workload.
 
 Grid conventions are those of :class:`locbench.datasets.base.OccupancyGrid` (ROS map_server): row ``i``
 spans y in [oy + i*res, oy + (i+1)*res), column ``j`` spans x likewise, and ``origin_xy`` = (ox, oy) is
@@ -74,7 +79,7 @@ MARCH_MIN_CELLS = 1.0
 AUTO_MARCH_RAYS_PER_CELL = 0.5
 
 #: The march field stores clearances in whole units of this many cells (uint8, so that the field of a
-#: 400 x 400 grid, 160 kB, stays in a core's L2 cache; a float32 field was 1.6 times slower).
+#: 400 x 400 grid, 160 kB, stays in a core's L2 cache, where a float32 one, 640 kB, does not).
 JUMP_UNIT_CELLS = 0.5
 
 #: A DDA step moves this far (cells) past the cell's exit so that flooring the point gives the next
@@ -389,11 +394,12 @@ def _march_parallel(
 
 
 def march_field(occupied: npt.ArrayLike) -> UInt8Array:
-    """The clearance field that ``method="march"`` jumps on, cells, shape (rows, cols), float32.
+    """The clearance field that ``method="march"`` jumps on, shape (rows, cols), uint8.
 
-    -1 on occupied cells. On a free cell, its clearance: the smallest distance between any point of
-    the cell and any point of an occupied cell, set to 0 where below :data:`MARCH_MIN_CELLS` (the
-    kernel takes DDA steps there); ``inf`` everywhere on a grid without occupied cells. Two unit cells
+    :data:`FIELD_OCCUPIED` on occupied cells. On a free cell, its clearance (the smallest distance
+    between any point of the cell and any point of an occupied cell) in whole units of
+    :data:`JUMP_UNIT_CELLS`, rounded down and capped at ``FIELD_OCCUPIED - 1``; 0 where the clearance is
+    below :data:`MARCH_MIN_CELLS` (the kernel takes DDA steps there). Two unit cells
     whose centres are (di, dj) cells apart are ``hypot(max(|di| - 1, 0), max(|dj| - 1, 0))`` apart,
     which is the centre distance to the nearest of the 3 x 3 cells around the occupied one: the
     clearance is the Euclidean distance transform of the occupied cells dilated by one cell.
