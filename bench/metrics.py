@@ -43,6 +43,8 @@ Metric ids added on top of the DESIGN list (each documented here, none changes a
   trajectory (``smoothed_t`` (n,), s, and ``smoothed_mean`` (n, 3), world frame), its ATE and wrapped
   heading RMSE, defined exactly as ``ate_m`` and ``heading_rmse_rad`` (zero-order hold of the
   smoothed poses at the ground-truth times).
+- ``accepted_fraction``: measurements fused over measurements offered, over the run, from the
+  ``accepted``/``rejected`` diagnostics (gated landmark sightings, extracted lines, ICP matches).
 """
 
 from __future__ import annotations
@@ -629,7 +631,22 @@ def run_metrics(run: RunRecord, truth: TruthRecord, rpe_delta_m: float = RPE_DEL
     out.update(convergence_metrics(run.t, run.mean, gt.t, gt_poses))
     out.update(kidnap_metrics(run.t, run.mean, run.cov, gt.t, gt_poses, truth.kidnaps))
     out.update(smoothed_metrics(run.extra, gt.t, gt_poses))
+    out.update(acceptance_metrics(run.diagnostics))
     return {k: v for k, v in out.items() if not np.isnan(v)}
+
+
+def acceptance_metrics(diagnostics: dict[str, FloatArray]) -> dict[str, float]:
+    """``accepted_fraction``: measurements a filter fused over those it was offered, over the whole run.
+
+    Read from the per-step ``accepted`` and ``rejected`` diagnostics (counts per update; NaN or 0 on
+    predict rows, so summing every row is right). Left out when a filter reports neither or was offered
+    nothing. For ``ekf_lines`` it is the fraction of extracted lines that passed the gate (report 002).
+    """
+    acc, rej = diagnostics.get("accepted"), diagnostics.get("rejected")
+    if acc is None or rej is None:
+        return {}
+    total = float(np.nansum(acc) + np.nansum(rej))
+    return {"accepted_fraction": float(np.nansum(acc)) / total} if total > 0 else {}
 
 
 # --- aggregations over seeds --------------------------------------------------------------------

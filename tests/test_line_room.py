@@ -66,7 +66,7 @@ def _rows(
 ) -> list[tuple[str, str, int, str, float]]:
     out = [(ds, flt, s, "ate_m", v) for s, v in enumerate(ate)]
     if acc is not None:
-        out += [(ds, flt, s, "lines_accepted_fraction", v) for s, v in enumerate(acc)]
+        out += [(ds, flt, s, "accepted_fraction", v) for s, v in enumerate(acc)]
     return out
 
 

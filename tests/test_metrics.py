@@ -244,3 +244,12 @@ def test_mean_over_runs_on_a_common_grid() -> None:
     np.testing.assert_array_equal(count, [2, 2, 1])
     empty, n0 = lm.mean_over_runs(grid, [])
     assert np.all(np.isnan(empty)) and not n0.any()
+
+
+def test_accepted_fraction_from_diagnostics() -> None:
+    from locbench.metrics import acceptance_metrics
+
+    diag = {"accepted": np.array([np.nan, 3.0, 0.0, 1.0]), "rejected": np.array([np.nan, 1.0, 0.0, 3.0])}
+    assert acceptance_metrics(diag) == {"accepted_fraction": 0.5}
+    assert acceptance_metrics({"accepted": np.zeros(3), "rejected": np.zeros(3)}) == {}
+    assert acceptance_metrics({"nis": np.ones(2)}) == {}

@@ -6,7 +6,7 @@ observed lines longer than their map line "slightly improves" the result. Both a
 variants ``ekf_lines[chi2_threshold=...,reject_longer=...]`` over every stored variant of ``line_room``
 (the accurate observations are the variant with the smallest ``laser_sigma_m``).
 
-The accepted fraction of lines is read from the metric ``lines_accepted_fraction`` (per run: the sum over the
+The accepted fraction of lines is read from the metric ``accepted_fraction`` (per run: the sum over the
 run's updates of the ``accepted`` diagnostic divided by the sum of ``accepted`` + ``rejected``); while
 ``metrics.csv`` lacks it, "accepts more" is not evaluated.
 """
@@ -33,7 +33,7 @@ SOURCE_002 = "002_f01b2dfd20d46b8b.txt"
 DATASET = "line_room"
 FILTER = "ekf_lines"
 #: Metric id of the per-run accepted fraction of extracted lines (see the module docstring).
-ACCEPTED_METRIC = "lines_accepted_fraction"
+ACCEPTED_METRIC = "accepted_fraction"
 
 _COLUMNS = ["dataset", "laser_sigma_m", "filter", "chi2", "reject_longer", "seed", "ate_m", "accepted"]
 
@@ -65,7 +65,7 @@ def _laser_sigma(name: str) -> float:
 def sweep_table(df: pd.DataFrame) -> pd.DataFrame:
     """One row per ``ekf_lines`` run: dataset, laser_sigma_m, filter, chi2, reject_longer, seed, ate_m, accepted.
 
-    ``accepted`` is the ``lines_accepted_fraction`` metric (NaN when absent). Failed runs have no ``ate_m``
+    ``accepted`` is the ``accepted_fraction`` metric (NaN when absent). Failed runs have no ``ate_m``
     and are left out.
     """
     sub = df[df["metric"].isin(["ate_m", ACCEPTED_METRIC])]
