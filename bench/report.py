@@ -496,7 +496,8 @@ def _kidnap_figure(
         pts = np.array(sorted(curves[key]), dtype=np.float64)
         shift = (i - (len(keys) - 1) / 2.0) * 0.02
         x = pts[:, 0] * 2.0**shift if log_x else pts[:, 0] + shift * (all_d[-1] - all_d[0] + 1.0)
-        err = np.vstack([pts[:, 1] - pts[:, 2], pts[:, 3] - pts[:, 1]])
+        # the Wilson bounds can land a rounding error inside a rate of exactly 0 or 1
+        err = np.clip(np.vstack([pts[:, 1] - pts[:, 2], pts[:, 3] - pts[:, 1]]), 0.0, None)
         label = f"{key[0]} on {key[1]}" if show_family else key[0]
         ax.errorbar(x, pts[:, 1], yerr=err, color=f"C{i % 10}", marker="o", ms=4, capsize=3, label=label)
     if log_x:
