@@ -37,39 +37,54 @@ def _cmd_list(args: argparse.Namespace) -> int:
         for ident in reg.ids():
             reason = reg.unavailable_reason(ident)
             state = f"  [{reason}]" if reason else ""
-            print(f"  {ident:<16} {reg.entry(ident).summary}{state}")
+            print(f"  {ident:<18} {reg.entry(ident).summary}{state}")
     print("suites:")
     for s in SUITES.values():
-        print(
-            f"  {s.name:<16} {len(s.filters)} filters x {len(s.datasets)} datasets x {s.seeds} seeds: {s.description}"
-        )
+        print(f"  {s.name:<18} {s.runs:>5} runs: {s.description}")
     return 0
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
+    from locbench.registry import resolve_dataset, resolve_filter
     from locbench.runner import run_many
-    from locbench.suites import get_suite
+    from locbench.suites import Block, get_suite
 
     if args.suite and (args.filter or args.dataset):
         raise ConfigError("give either --suite or --filter/--dataset, not both")
+    if args.seeds is not None and args.seeds < 1:
+        raise ConfigError(f"--seeds must be >= 1, got {args.seeds}")
+    if args.jobs < 1:
+        raise ConfigError(f"--jobs must be >= 1, got {args.jobs}")
     if args.filter or args.dataset:
         if not (args.filter and args.dataset):
             raise ConfigError("--filter and --dataset go together: name at least one of each (see 'locbench list')")
-        filters, datasets, seeds = list(args.filter), list(args.dataset), args.seeds or 1
+        blocks = [Block(tuple(args.filter), tuple(args.dataset), args.seeds or 1)]
     else:
-        suite = get_suite(args.suite or "default")
-        filters, datasets, seeds = list(suite.filters), list(suite.datasets), args.seeds or suite.seeds
-    if seeds < 1:
-        raise ConfigError(f"--seeds must be >= 1, got {seeds}")
-    if args.jobs < 1:
-        raise ConfigError(f"--jobs must be >= 1, got {args.jobs}")
-    total = len(filters) * len(datasets) * seeds
+        blocks = []
+        for name in args.suite or ["default"]:
+            suite = get_suite(name)
+            blocks += list((suite.with_seeds(args.seeds) if args.seeds else suite).blocks)
+    # resolve every spec before running anything, so a typo fails at once
+    for b in blocks:
+        for spec in b.filters:
+            resolve_filter(spec)
+        for spec in b.datasets:
+            resolve_dataset(spec)
+    total = sum(b.runs for b in blocks)
+    outcomes = []
     with tqdm(total=total, unit="run", desc="locbench run", disable=None if not args.no_progress else True) as bar:
-        outcomes = run_many(
-            filters, datasets, list(range(seeds)), args.results, jobs=args.jobs, force=args.force, progress=bar.update
-        )
+        for b in blocks:
+            outcomes += run_many(
+                list(b.filters),
+                list(b.datasets),
+                list(range(b.seeds)),
+                args.results,
+                jobs=args.jobs,
+                force=args.force,
+                progress=bar.update,
+            )
     counts = Counter(o.status for o in outcomes)
     print(f"{len(outcomes)} runs in {args.results}/runs: " + ", ".join(f"{n} {s}" for s, n in sorted(counts.items())))
     for o in outcomes:
@@ -111,7 +126,12 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_parser("list", help="registered filters, datasets and suites").set_defaults(func=_cmd_list)
 
     r = sub.add_parser("run", help="run filters over datasets and store the runs")
-    r.add_argument("--suite", help="a named suite (see 'locbench list') or a .toml suite file; default: default")
+    r.add_argument(
+        "--suite",
+        nargs="+",
+        action="extend",
+        help="named suites (see 'locbench list') or .toml suite files; default: default",
+    )
     r.add_argument(
         "--filter",
         nargs="+",

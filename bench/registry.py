@@ -138,6 +138,36 @@ FILTERS.register(
     "EKF, wheel-encoder motion model and range-bearing landmarks, optional GPS fixes (reports 003, 001)",
 )
 
+FILTERS.register(
+    "ekf_icp",
+    "locbench.filters.ekf_icp:IcpEKF",
+    "EKF whose update is ICP between the scan and a scan ray-cast from the occupancy grid (report 000)",
+)
+FILTERS.register(
+    "ekf_lines",
+    "locbench.filters.ekf_lines:LineEKF",
+    "EKF on a map of lines, chi-square gated association, Joseph form (report 002)",
+)
+FILTERS.register(
+    "kf_linear",
+    "locbench.filters.kf_linear:LinearKF",
+    "linear Kalman filter (filterpy) with a scan-database pose measurement (report 004)",
+    requires_modules=("filterpy",),
+    install_hint="pip install 'locbench[filterpy]'",
+)
+FILTERS.register(
+    "pf",
+    "locbench.filters.pf:ParticleFilter",
+    "Monte Carlo localization: encoder motion model, landmark and laser likelihood-field models, augmented MCL",
+)
+FILTERS.register(
+    "gtsam_fls",
+    "locbench.filters.gtsam_fls:GtsamFixedLagSmoother",
+    "gtsam fixed-lag smoother (incremental or batch): odometry between-factors, bearing-range factors, fixes",
+    requires_modules=("gtsam",),
+    install_hint="pip install 'locbench[gtsam]'",
+)
+
 DATASETS.register(
     "room",
     "locbench.datasets.synthetic.scenarios:RoomScenario",
@@ -159,6 +189,26 @@ DATASETS.register(
     "a circle whose heading crosses +-pi, 4 landmarks (conformance checks)",
 )
 
+DATASETS.register(
+    "lap",
+    "locbench.datasets.synthetic.lap:LapScenario",
+    "report 000's office lap: 0.05 m grid, rectangular lap, Hokuyo-like laser, people not on the map",
+)
+DATASETS.register(
+    "line_room",
+    "locbench.datasets.synthetic.line_room:LineRoomScenario",
+    "report 002's polygonal rooms for the line-map EKF",
+)
+DATASETS.register(
+    "scan_grid",
+    "locbench.datasets.synthetic.scan_grid:ScanGridScenario",
+    "report 004's scan database at grid poses, translate-or-rotate commands of 1 s",
+)
+DATASETS.register(
+    "landmark_geometry",
+    "locbench.datasets.synthetic.landmark_geometry:LandmarkGeometryScenario",
+    "report 001's paths x landmark layouts, landmarks detected by a 151-ray laser; GPS variant",
+)
 
 # --- making things from specs -------------------------------------------------------------------
 

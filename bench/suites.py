@@ -1,6 +1,10 @@
-"""Named suites: which filters on which datasets over how many seeds.
+"""Named suites: blocks of filters x datasets x seeds.
 
-A suite is also readable from a TOML file (``locbench run --suite my_suite.toml``)::
+``default`` is the main comparison (every registered filter on ``room`` and ``office``, a few
+minutes on 2 cores); each source report's experiment, the kidnap protocol and global localization are
+suites of their own; ``all`` is their union, what ``nox -s bench`` runs and ``results/summary`` holds.
+
+A suite is also readable from a TOML file (``locbench run --suite my_suite.toml``), one block::
 
     filters = ["odometry", "ekf_landmarks[association=nearest]"]
     datasets = ["room", "office[kidnap_m=1]"]
@@ -17,42 +21,145 @@ from locbench.errors import ConfigError, UnknownIdError
 
 
 @dataclass(frozen=True)
-class Suite:
-    """Filters x datasets x seeds (seeds 0 .. seeds-1)."""
+class Block:
+    """Every filter on every dataset for seeds 0 .. seeds-1."""
 
-    name: str
     filters: tuple[str, ...]
     datasets: tuple[str, ...]
     seeds: int
+
+    @property
+    def runs(self) -> int:
+        return len(self.filters) * len(self.datasets) * self.seeds
+
+
+@dataclass(frozen=True)
+class Suite:
+    """A named list of blocks."""
+
+    name: str
+    blocks: tuple[Block, ...]
     description: str = ""
 
+    @property
+    def runs(self) -> int:
+        return sum(b.runs for b in self.blocks)
 
-# ekf_landmarks twice: with the identities the sensor reports, and ignoring them (nearest neighbour
-# under the chi-square gate), on the same data so that the two rows are paired.
-_GAUSSIAN = ("odometry", "ekf_landmarks", "ekf_landmarks[association=nearest]")
+    def with_seeds(self, seeds: int) -> Suite:
+        """The same suite with every block's seed count replaced (``--seeds``)."""
+        return Suite(self.name, tuple(Block(b.filters, b.datasets, seeds) for b in self.blocks), self.description)
 
-SUITES: dict[str, Suite] = {
-    s.name: s
-    for s in (
-        Suite(
-            "default",
-            _GAUSSIAN,
-            ("room", "office"),
-            20,
-            "every registered filter on report 003's room and the common office; runs in a few minutes on 2 cores",
+
+#: Every registered filter with its default config: the rows of the main comparison.
+ALL_FILTERS = ("odometry", "ekf_landmarks", "ekf_lines", "ekf_icp", "kf_linear", "pf", "gtsam_fls")
+#: Each filter with its own source's kidnap policy: 000's inflation rule is built into ekf_icp; pf's
+#: augmented MCL is switched on (003's PF, the default, only resamples); the others have none.
+KIDNAP_FILTERS = ("odometry", "ekf_landmarks", "ekf_lines", "ekf_icp", "kf_linear", "pf[augmented=true]", "gtsam_fls")
+KIDNAP_DISTANCES_M = (0.5, 1, 2, 4)
+
+_LG_PATHS = ("circle", "star", "pentagon", "random")
+_LG_LAYOUTS = ("1", "2", "3", "4", "8")
+
+
+def _kidnap_datasets(base: str) -> tuple[str, ...]:
+    return tuple(f"{base}[kidnap_m={d:g}]" for d in KIDNAP_DISTANCES_M)
+
+
+_SUITES: tuple[Suite, ...] = (
+    Suite(
+        "default",
+        (Block((*ALL_FILTERS, "ekf_landmarks[association=nearest]"), ("room", "office"), 20),),
+        "the main comparison: every registered filter on report 003's room and the common office",
+    ),
+    Suite(
+        "room",
+        (Block(("odometry", "ekf_landmarks", "ekf_landmarks[association=nearest]", "pf", "gtsam_fls"), ("room",), 20),),
+        "report 003's experiment: 20 runs through 5 waypoints",
+    ),
+    Suite(
+        "lap",
+        (
+            Block(("odometry", "ekf_icp"), ("lap", "lap[people=0]"), 20),
+            Block(("ekf_icp",), ("lap[kidnap_m=0.3]", "lap[kidnap_m=1]", "lap[kidnap_m=2]"), 10),
         ),
-        Suite("room", _GAUSSIAN, ("room",), 20, "report 003's experiment: 20 runs through 5 waypoints"),
-        Suite("office", _GAUSSIAN, ("office",), 20, "the main comparison world"),
-        Suite(
-            "room_unknown_ids",
-            ("odometry", "ekf_landmarks[association=nearest]"),
-            ("room[known_ids=false]",),
-            20,
-            "room with landmark identities withheld: nearest-neighbour association under a chi-square gate",
+        "report 000's lap with people walking, and its small-kidnap claim",
+    ),
+    Suite(
+        "line_room",
+        (
+            Block(
+                (
+                    "odometry",
+                    "ekf_lines[chi2_threshold=1.39]",
+                    "ekf_lines[chi2_threshold=4.61]",
+                    "ekf_lines",
+                    "ekf_lines[chi2_threshold=13.82]",
+                    "ekf_lines[reject_longer=false]",
+                ),
+                ("line_room", "line_room[laser_sigma_m=0.05]"),
+                5,
+            ),
         ),
-        Suite("smoke", _GAUSSIAN, ("tiny_line", "tiny_circle"), 2, "seconds-long sanity run"),
-    )
-}
+        "report 002's chi-square gate sweep, with the line-length check on and off",
+    ),
+    Suite(
+        "scan_grid",
+        (Block(("odometry", "kf_linear"), ("scan_grid", "scan_grid[mixed_commands=true]"), 10),),
+        "report 004's translate-or-rotate commands against mixed commands",
+    ),
+    Suite(
+        "landmark_geometry",
+        (
+            Block(
+                ("odometry", "ekf_landmarks"),
+                tuple(f"landmark_geometry[landmarks={n},path={p}]" for p in _LG_PATHS for n in _LG_LAYOUTS),
+                5,
+            ),
+            Block(
+                ("odometry", "ekf_landmarks", "ekf_landmarks[use_pose_fixes=true]"),
+                (
+                    "landmark_geometry[gps=true,initial_offset_m=2]",
+                    "landmark_geometry[gps=true,initial_offset_m=2,landmarks=1]",
+                ),
+                5,
+            ),
+            Block(
+                ("odometry", "ekf_landmarks", "ekf_landmarks[association=nearest]"),
+                ("landmark_geometry[kidnap_m=1]", "landmark_geometry[kidnap_m=2]"),
+                5,
+            ),
+        ),
+        "report 001's paths x landmark layouts, the GPS variant from a wrong start, and kidnaps",
+    ),
+    Suite(
+        "kidnap",
+        (Block(KIDNAP_FILTERS, _kidnap_datasets("room") + _kidnap_datasets("office"), 20),),
+        "the kidnap protocol: every filter with its own recovery policy, D = 0.5, 1, 2, 4 m",
+    ),
+    Suite(
+        "global",
+        (
+            Block(
+                ("pf[augmented=true,init=uniform,use_laser=true]", "pf[augmented=true,init=uniform]"), ("office",), 10
+            ),
+        ),
+        "global localization: the particle filter from a uniform prior over free space",
+    ),
+    Suite(
+        "smoke",
+        (Block(("odometry", "ekf_landmarks", "ekf_landmarks[association=nearest]"), ("tiny_line", "tiny_circle"), 2),),
+        "seconds-long sanity run",
+    ),
+)
+
+_EXPERIMENTS = ("default", "lap", "line_room", "scan_grid", "landmark_geometry", "kidnap", "global")
+
+SUITES: dict[str, Suite] = {s.name: s for s in _SUITES}
+SUITES["all"] = Suite(
+    "all",
+    tuple(b for name in _EXPERIMENTS for b in SUITES[name].blocks),
+    "every experiment: " + ", ".join(_EXPERIMENTS) + " (what nox -s bench runs and results/summary holds)",
+)
 
 
 def get_suite(name: str) -> Suite:
@@ -68,7 +175,7 @@ def get_suite(name: str) -> Suite:
 
 
 def load_suite_file(path: Path) -> Suite:
-    """Read a suite from TOML; errors name the file and the field."""
+    """Read a one-block suite from TOML; errors name the file and the field."""
     try:
         data = tomllib.loads(path.read_text())
     except FileNotFoundError:
@@ -89,4 +196,5 @@ def load_suite_file(path: Path) -> Suite:
     seeds = data.get("seeds", 1)
     if not isinstance(seeds, int) or isinstance(seeds, bool) or seeds < 1:
         raise ConfigError(f"{path}: field 'seeds' must be a positive integer, got {seeds!r}")
-    return Suite(path.stem, tuple(data["filters"]), tuple(data["datasets"]), seeds, str(data.get("description", "")))
+    block = Block(tuple(data["filters"]), tuple(data["datasets"]), seeds)
+    return Suite(path.stem, (block,), str(data.get("description", "")))
