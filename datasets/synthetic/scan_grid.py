@@ -308,7 +308,9 @@ class ScanGridScenario(DatasetBuilder):
         world_map = world.world_map(0.05)
         grid = world_map.occupancy
         assert grid is not None
-        true_r = cast_rays(grid.occupied(), grid.resolution, grid.origin[:2], poses, laser.angles(), laser.max_range_m)
+        true_r = cast_rays(
+            grid.occupied(), grid.resolution, grid.origin[:2], poses, laser.angles(), laser.max_range_m, method="dda"
+        )
         zl = streams["laser"].standard_normal(true_r.shape)
         ul = streams["laser"].random(true_r.shape)
         with np.errstate(invalid="ignore"):

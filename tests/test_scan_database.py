@@ -1,0 +1,110 @@
+"""Tests of the scan-database front-end of report 004 (locbench.filters._scan_database)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from locbench.datasets.base import OccupancyGrid
+from locbench.errors import ConfigError
+from locbench.events import LaserScan
+from locbench.filters._scan_database import N_BEARINGS, build_database, match_scan, scan_bearing_ranges
+from locbench.raycast import cast_rays
+
+
+def _room() -> OccupancyGrid:
+    """A 4 m x 3 m room (0.05 m cells) with a block in one corner so that no symmetry aliases poses."""
+    res = 0.05
+    occ = np.zeros((70, 90))
+    occ[5, 5:86] = occ[65, 5:86] = 1.0
+    occ[5:66, 5] = occ[5:66, 85] = 1.0
+    occ[50:65, 70:85] = 1.0
+    return OccupancyGrid(occupancy=occ, resolution=res, origin=(-0.25, -0.25, 0.0))
+
+
+def _cast(grid: OccupancyGrid, pose: np.ndarray, angles: np.ndarray) -> np.ndarray:
+    return cast_rays(grid.occupied(), grid.resolution, grid.origin[:2], pose, angles, 8.0, method="dda")[0]
+
+
+def _scan(grid: OccupancyGrid, pose: np.ndarray, beams: int = 361, fov: float = 2 * math.pi) -> LaserScan:
+    angles = -0.5 * fov + fov / (beams - 1) * np.arange(beams)
+    r = _cast(grid, pose, angles)
+    return LaserScan(
+        t=0.0, angle_min=-0.5 * fov, angle_increment=fov / (beams - 1), ranges=r, range_min=0.0, range_max=8.0
+    )
+
+
+def test_database_positions_on_world_lattice_and_clear_of_walls() -> None:
+    grid = _room()
+    db = build_database(grid, 0.25, 15.0, 8.0, 0.2)
+    np.testing.assert_allclose(np.round(db.positions / 0.25) * 0.25, db.positions, atol=1e-12)
+    assert db.n_headings == 24 and len(db) == db.positions.shape[0] * 24
+    # every position at least 0.2 m from the walls (walls at x = 0 and 4, y = 0 and 3 in cell centres)
+    assert np.all(db.positions[:, 0] >= 0.2) and np.all(db.positions[:, 1] >= 0.2)
+
+
+def test_entry_ranges_are_the_eight_bearings_of_a_ray_cast() -> None:
+    grid = _room()
+    db = build_database(grid, 0.25, 15.0, 8.0, 0.2)
+    i, h = 7, 5
+    pose = db.entry_pose(i, h)
+    expected = _cast(grid, pose, np.arange(N_BEARINGS) * math.pi / 4)
+    np.testing.assert_allclose(db.entry_ranges(i, h), np.minimum(expected, 8.0), atol=1e-9)
+
+
+def test_exact_scan_at_a_database_pose_matches_it() -> None:
+    grid = _room()
+    db = build_database(grid, 0.25, 5.0, 8.0, 0.2)
+    pose = np.array([1.5, 1.0, math.radians(40.0)])
+    m, k = match_scan(db, _scan(grid, pose), tolerance_m=0.02)
+    assert m is not None and k == N_BEARINGS
+    np.testing.assert_allclose(m.z, pose, atol=1e-9)
+    assert m.best_score_m == pytest.approx(0.0, abs=1e-9)
+    # a single exact match: the covariance is the quantisation s^2/12, h^2/12
+    np.testing.assert_allclose(np.diag(m.cov), [0.25**2 / 12, 0.25**2 / 12, math.radians(5.0) ** 2 / 12], rtol=1e-9)
+
+
+def test_off_lattice_pose_matches_nearby_with_gate() -> None:
+    grid = _room()
+    db = build_database(grid, 0.25, 5.0, 8.0, 0.2)
+    pose = np.array([2.1, 1.62, -2.0])
+    prior = (pose + np.array([0.05, -0.05, 0.03]), np.diag([0.1**2, 0.1**2, 0.05**2]))
+    m, _ = match_scan(db, _scan(grid, pose), tolerance_m=0.15, prior=prior, gate=16.27)
+    assert m is not None
+    assert math.hypot(*(m.z[:2] - pose[:2])) < 0.2
+    assert abs(math.remainder(m.z[2] - pose[2], 2 * math.pi)) < math.radians(6.0)
+
+
+def test_narrow_scan_uses_the_bearings_it_covers_and_no_return_is_capped() -> None:
+    grid = _room()
+    pose = np.array([1.5, 1.0, 0.0])
+    scan = _scan(grid, pose, beams=31, fov=math.radians(240.0))
+    idx, r = scan_bearing_ranges(scan)
+    assert idx.tolist() == [0, 1, 2, 6, 7]  # 0, +-45, +-90 deg; 45 is 3 deg from its beam (8 deg spacing)
+    assert r.shape == (5,)
+    db = build_database(grid, 0.25, 5.0, 8.0, 0.2)
+    none, k = match_scan(db, scan, tolerance_m=0.15, min_bearings=6)
+    assert none is None and k == 5
+
+
+def test_no_match_beyond_tolerance() -> None:
+    grid = _room()
+    db = build_database(grid, 0.25, 5.0, 8.0, 0.2)
+    scan = _scan(grid, np.array([1.5, 1.0, 0.0]))
+    far = LaserScan(
+        t=0.0,
+        angle_min=scan.angle_min,
+        angle_increment=scan.angle_increment,
+        ranges=scan.ranges * 0 + 0.05,
+        range_min=0.0,
+        range_max=8.0,
+    )
+    assert match_scan(db, far, tolerance_m=0.05)[0] is None
+
+
+@pytest.mark.parametrize(("step", "hstep"), [(0.0, 5.0), (0.25, 7.0)])
+def test_bad_database_parameters(step: float, hstep: float) -> None:
+    with pytest.raises(ConfigError, match=r"grid_step_m|heading_step_deg"):
+        build_database(_room(), step, hstep, 8.0, 0.2)
