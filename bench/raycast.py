@@ -328,10 +328,23 @@ def _march_range(
                     result = t_in * res
                 done = True
             else:
-                t_exit = min((j + state[k, 8]) * state[k, 6], (i + state[k, 9]) * state[k, 7])
-                t = max(t + v * JUMP_UNIT_CELLS, t_exit + _NUDGE_CELLS)
-                j = math.floor(state[k, 2] + t * state[k, 4])
-                i = math.floor(state[k, 3] + t * state[k, 5])
+                tx = (j + state[k, 8]) * state[k, 6]
+                ty = (i + state[k, 9]) * state[k, 7]
+                t_jump = t + v * JUMP_UNIT_CELLS
+                # a zero clearance jumps nowhere: step the cell (an exit time of the cell the beam is
+                # leaving can be stale, <= t, when the beam lies on the cell's boundary)
+                if v > 0 and t_jump > min(tx, ty) + _NUDGE_CELLS:
+                    t = t_jump
+                    j = math.floor(state[k, 2] + t * state[k, 4])
+                    i = math.floor(state[k, 3] + t * state[k, 5])
+                elif tx <= ty:
+                    # step the index, not the rounded position: a nearly axis-parallel beam on a cell
+                    # boundary would otherwise floor back into the same cell and never advance
+                    t = max(t, tx)
+                    j += 1 if state[k, 4] > 0.0 else -1
+                else:
+                    t = max(t, ty)
+                    i += 1 if state[k, 5] > 0.0 else -1
                 # past max_range, or out of the grid (convex, with free space outside): no hit
                 if t > t_lim + _NUDGE_CELLS or j < 0 or j >= cols or i < 0 or i >= rows:
                     done = True

@@ -191,3 +191,20 @@ def test_cast_scan_keeps_the_field_with_the_grid() -> None:
     cast_scan(grid, [1.5, 1.0, 0.0], np.zeros(3), 5.0)
     assert raycast._GRID_CACHE[grid] is arrays
     np.testing.assert_array_equal(arrays.field, march_field(grid.occupied()))
+
+
+def test_march_terminates_on_lattice_poses_along_cell_boundaries() -> None:
+    """Regression: beams starting on cell corners, (nearly) axis-parallel, next to a wall used to loop forever.
+
+    cos(270 deg) is -1.8e-16, not 0: the beam runs along a grid line and flooring its position kept it in the
+    same cell while the clearance there was 0. The march now steps the cell index in that case.
+    """
+    occ = np.zeros((70, 90), dtype=bool)
+    occ[5, 5:85] = occ[65, 5:85] = True
+    occ[5:66, 5] = occ[5:66, 85] = True
+    lattice = np.array([[x, y, 0.0] for x in np.arange(0.0, 4.0, 0.25) for y in np.arange(0.0, 3.0, 0.25)])
+    angles = np.deg2rad(np.arange(0.0, 360.0, 5.0))
+    exact = cast_rays(occ, 0.05, (-0.25, -0.25), lattice, angles, 8.0, method="dda")
+    marched = cast_rays(occ, 0.05, (-0.25, -0.25), lattice, angles, 8.0, method="march")
+    both_inf = np.isinf(exact) & np.isinf(marched)
+    np.testing.assert_allclose(np.where(both_inf, 0.0, marched), np.where(both_inf, 0.0, exact), atol=1e-9)
