@@ -48,7 +48,7 @@ import logging
 import math
 import weakref
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Literal, cast
 
 import numba
 import numpy as np
@@ -264,7 +264,7 @@ def _march_start(
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _march_range(
     field: UInt8Array,
     res: float,
@@ -371,17 +371,47 @@ def _march_range(
                     out[r] = state[k, 0]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _march_serial(
-    field: UInt8Array, res: float, ox: float, oy: float, poses: FloatArray, angles: FloatArray, max_range: float
+    field: UInt8Array,
+    res: float,
+    ox: float,
+    oy: float,
+    poses: FloatArray,
+    angles: FloatArray,
+    max_range: float,
+    trig: FloatArray,
 ) -> FloatArray:
+    """Serial march; ``trig`` (3, B) caches (angles, cos, sin) between calls and is refreshed here if stale."""
     n = poses.shape[0]
     nb = angles.shape[0]
+    # cos/sin of the beam angles cost about 20 ns per beam, as much as a tenth of a scan's traversal:
+    # a scan's angles rarely change, so they are compared (1 ns per beam) and reused
+    for b in range(nb):
+        if trig[0, b] != angles[b]:
+            trig[0, b] = angles[b]
+            trig[1, b] = math.cos(angles[b])
+            trig[2, b] = math.sin(angles[b])
     out = np.empty(n * nb)
-    cp = np.cos(poses[:, 2])
-    sp = np.sin(poses[:, 2])
-    _march_range(field, res, ox, oy, poses, cp, sp, np.cos(angles), np.sin(angles), max_range / res, 0, n * nb, out)
+    cp = np.empty(n)
+    sp = np.empty(n)
+    for p in range(n):
+        cp[p] = math.cos(poses[p, 2])
+        sp[p] = math.sin(poses[p, 2])
+    _march_range(field, res, ox, oy, poses, cp, sp, trig[1], trig[2], max_range / res, 0, n * nb, out)
     return out.reshape((n, nb))
+
+
+#: Per number of beams, the (angles, cos, sin) rows that :func:`_march_serial` reuses (NaN: not yet set).
+_TRIG_CACHE: dict[int, FloatArray] = {}
+
+
+def _trig_rows(nb: int) -> FloatArray:
+    trig = _TRIG_CACHE.get(nb)
+    if trig is None:
+        trig = np.full((3, nb), np.nan)
+        _TRIG_CACHE[nb] = trig
+    return trig
 
 
 #: Rays per parallel work item of the march kernel.
@@ -528,17 +558,33 @@ def _run(
     parallel: bool | None,
 ) -> FloatArray:
     threads = _use_threads(parallel, p.shape[0] * a.shape[0])
+    ox = float(origin_xy[0])
+    oy = float(origin_xy[1])
     if method == "march":
-        kernel = _march_parallel if threads else _march_serial
-    else:
-        kernel = _dda_parallel if threads else _dda_serial
-    return kernel(grid_array, resolution, float(origin_xy[0]), float(origin_xy[1]), p, a, max_range)
+        field = cast("UInt8Array", grid_array)
+        if threads:
+            return _march_parallel(field, resolution, ox, oy, p, a, max_range)
+        return _march_serial(field, resolution, ox, oy, p, a, max_range, _trig_rows(a.shape[0]))
+    occ = cast("BoolArray", grid_array)
+    return (
+        _dda_parallel(occ, resolution, ox, oy, p, a, max_range)
+        if threads
+        else _dda_serial(occ, resolution, ox, oy, p, a, max_range)
+    )
 
 
 @dataclass(frozen=True)
 class _GridArrays:
     occupied: BoolArray
     field: UInt8Array
+    resolution: float
+    ox: float
+    oy: float
+
+
+def _plain_vector(x: npt.NDArray[np.generic], size: int = -1) -> bool:
+    """Whether ``x`` is a contiguous 1-D float64 array (of ``size`` elements if given)."""
+    return x.ndim == 1 and x.dtype == np.float64 and x.flags.c_contiguous and (size < 0 or x.shape[0] == size)
 
 
 #: Occupancy mask and distance field per grid object, dropped with the grid.
@@ -551,7 +597,17 @@ def _grid_arrays(grid: OccupancyGrid) -> _GridArrays:
         occ = np.ascontiguousarray(grid.occupied(), dtype=np.bool_)
         if occ.ndim != 2 or occ.shape[0] == 0 or occ.shape[1] == 0:
             raise ValueError(f"grid.occupancy must be a non-empty 2-D array (rows, cols), got shape {occ.shape}")
-        arrays = _GridArrays(occupied=occ, field=march_field(occ))
+        if not (grid.resolution > 0.0 and math.isfinite(grid.resolution)):
+            raise ValueError(f"grid.resolution must be a positive number of metres, got {grid.resolution!r}")
+        if grid.origin[2] != 0.0:
+            raise ValueError(f"grid.origin theta must be 0 (rotated grids are not supported), got {grid.origin[2]}")
+        arrays = _GridArrays(
+            occupied=occ,
+            field=march_field(occ),
+            resolution=float(grid.resolution),
+            ox=float(grid.origin[0]),
+            oy=float(grid.origin[1]),
+        )
         _GRID_CACHE[grid] = arrays
         logger.debug("ray caster: distance field built for a %d x %d grid", occ.shape[0], occ.shape[1])
     return arrays
@@ -591,6 +647,25 @@ def cast_scan(
     ndarray, shape (B,) for one pose, (N, B) for several
         Ranges, m, as in :func:`cast_rays`.
     """
+    arrays = _GRID_CACHE.get(grid)
+    if (
+        arrays is not None
+        and method == "auto"
+        and isinstance(pose, np.ndarray)
+        and isinstance(angles, np.ndarray)
+        and _plain_vector(pose, 3)
+        and _plain_vector(angles)
+        and (parallel is False or (parallel is None and angles.shape[0] < PARALLEL_MIN_RAYS))
+    ):
+        # fast path for one scan of float64 vectors in a cached grid: the general checks and conversions
+        # below cost about 5 us, 7 ns per beam of a 683-beam scan
+        if not (max_range >= 0.0 and math.isfinite(max_range)):
+            raise ValueError(f"max_range must be a finite number of metres >= 0, got {max_range!r}")
+        trig = _trig_rows(angles.shape[0])
+        out = _march_serial(
+            arrays.field, arrays.resolution, arrays.ox, arrays.oy, pose.reshape(1, 3), angles, float(max_range), trig
+        )
+        return out[0]
     _check_method(method)
     if grid.origin[2] != 0.0:
         raise ValueError(f"grid.origin theta must be 0 (rotated grids are not supported), got {grid.origin[2]}")
