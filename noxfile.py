@@ -54,9 +54,9 @@ def lint(session: nox.Session) -> None:
 
 @nox.session(python=PYTHON, default=False)
 def bench(session: nox.Session) -> None:
-    """Run the default suite (or 'locbench run' arguments given after --) and write the report."""
+    """Run every experiment (or 'locbench run' arguments given after --) and write the report."""
     _install(session, "all")
-    args = session.posargs or ["--suite", "default", "--jobs", "2"]
+    args = session.posargs or ["--suite", "all", "--jobs", "2"]
     session.run("locbench", "run", "--results", "results", *args)
     session.run("locbench", "report", "--results", "results")
 
@@ -70,7 +70,7 @@ def report(session: nox.Session) -> None:
 
 @nox.session(python=PYTHON, default=False)
 def perf(session: nox.Session) -> None:
-    """pytest-benchmark micro-benchmarks (per-call predict and update of each filter)."""
+    """pytest-benchmark micro-benchmarks: predict/update per filter, ray casting, particle throughput."""
     _install(session, "all,test")
     session.run(
         "pytest",
