@@ -208,3 +208,18 @@ def test_march_terminates_on_lattice_poses_along_cell_boundaries() -> None:
     marched = cast_rays(occ, 0.05, (-0.25, -0.25), lattice, angles, 8.0, method="march")
     both_inf = np.isinf(exact) & np.isinf(marched)
     np.testing.assert_allclose(np.where(both_inf, 0.0, marched), np.where(both_inf, 0.0, exact), atol=1e-9)
+
+
+def test_cast_scan_fast_path_matches_the_general_path_when_angles_change() -> None:
+    """The one-scan fast path reuses the beams' cos/sin: new angles of the same length must be seen."""
+    grid = OccupancyGrid(occupancy=random_boxes_grid(4, n_boxes=30).astype(float), resolution=RES)
+    pose = np.array([10.3, 9.7, 0.4])
+    for angles in (np.linspace(-2.0, 2.0, 50), np.linspace(-1.0, 3.0, 50), np.linspace(-2.0, 2.0, 51)):
+        fast = cast_scan(grid, pose, angles, 12.0)  # float64 vectors: fast path once the grid is cached
+        general = cast_scan(grid, pose.tolist(), angles.tolist(), 12.0, parallel=False)
+        exact = cast_scan(grid, pose, angles, 12.0, method="dda")
+        np.testing.assert_array_equal(fast, general)
+        both_inf = np.isinf(exact) & np.isinf(fast)
+        np.testing.assert_allclose(np.where(both_inf, 0.0, fast), np.where(both_inf, 0.0, exact), atol=1e-9)
+    with pytest.raises(ValueError, match="max_range"):
+        cast_scan(grid, pose, np.zeros(3), math.inf)
