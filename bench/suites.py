@@ -111,7 +111,7 @@ _SUITES: tuple[Suite, ...] = (
         "landmark_geometry",
         (
             Block(
-                ("odometry", "ekf_landmarks"),
+                ("odometry", "ekf_landmarks", "pf", "gtsam_fls"),
                 tuple(f"landmark_geometry[landmarks={n},path={p}]" for p in _LG_PATHS for n in _LG_LAYOUTS),
                 5,
             ),
