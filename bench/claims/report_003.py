@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import pandas as pd
 from scipy import stats
 
 from locbench.claims import Claim, ClaimResult, fmt_cm, pick_filter, register, series, waypoint_stats
+from locbench.spec import parse_spec
 
 SOURCE_003 = "003_e5c93f9be776ee5e.txt"
 
@@ -41,6 +44,18 @@ def _spearman(y: np.ndarray) -> float:
 
 
 # --- room (report 003) --------------------------------------------------------------------------
+
+
+def _undisturbed(check: Callable[[pd.DataFrame], ClaimResult]) -> Callable[[pd.DataFrame], ClaimResult]:
+    """Evaluate ``check`` only on a variant without a kidnap: 003's claims concern the undisturbed tour."""
+
+    def wrapped(df: pd.DataFrame) -> ClaimResult:
+        names = {str(d) for d in df["dataset"].unique()}
+        if any(float(parse_spec(n)[1].get("kidnap_m", "0")) > 0 for n in names):
+            return ClaimResult("not evaluated", "a kidnap variant (report 003's claims concern the undisturbed tour)")
+        return check(df)
+
+    return wrapped
 
 
 def _check_odometry_grows(df: pd.DataFrame) -> ClaimResult:
@@ -121,7 +136,7 @@ register(
         f"with the waypoint order >= {GROWTH_MIN_SPEARMAN} and RMSE at the last waypoint >= "
         f"{GROWTH_MIN_LAST_OVER_FIRST:g}x the first (fig. 5).",
         f"table 1 odometry {_ref_cm(ROOM_TABLE1_CM['odometry'])} cm (rho 0.90, last/first 8.2)",
-        _check_odometry_grows,
+        _undisturbed(_check_odometry_grows),
     ),
     Claim(
         "room_odometry_calibrated",
@@ -130,7 +145,7 @@ register(
         "World calibration: the odometry distance between each waypoint and the mean estimate is within a "
         f"factor {CALIBRATION_FACTOR:g} of table 1 at every waypoint.",
         f"table 1 odometry {_ref_cm(ROOM_TABLE1_CM['odometry'])} cm",
-        _check_odometry_calibrated,
+        _undisturbed(_check_odometry_calibrated),
     ),
     Claim(
         "room_ekf_far_below_odometry",
@@ -139,7 +154,7 @@ register(
         "The EKF (ekf_landmarks) is far below odometry at waypoints 3-5: RMSE_j(EKF) / RMSE_j(odometry) < 1 at "
         f"each and < {FAR_BELOW_MEAN_RATIO:g} on average over the three.",
         _table1_ratio_text(),
-        _check_ekf_far_below,
+        _undisturbed(_check_ekf_far_below),
     ),
     Claim(
         "room_pf_le_ekf",
@@ -148,6 +163,6 @@ register(
         "The PF is at least as accurate as the EKF: mean over waypoints of RMSE_j(pf) <= that of ekf_landmarks.",
         f"table 1 PF {_ref_cm(ROOM_TABLE1_CM['pf'])} cm vs EKF {_ref_cm(ROOM_TABLE1_CM['ekf_landmarks'])} cm "
         f"(means {np.mean(ROOM_TABLE1_CM['pf']):.1f} vs {np.mean(ROOM_TABLE1_CM['ekf_landmarks']):.1f})",
-        _check_pf_le_ekf,
+        _undisturbed(_check_pf_le_ekf),
     ),
 )
