@@ -68,7 +68,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
-from typing import ClassVar, Literal
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -555,6 +555,7 @@ class ParticleFilter(Filter):
 
     def update(self, z: Observation) -> None:
         """Weight the particles with landmark sightings or a laser scan; resample and inject as configured."""
+        prepared: tuple[int, tuple[Any, ...]] | None
         if type(z) is LandmarkObservations:
             prepared = self._prepare_landmarks(z) if self._use_lm else None
         elif type(z) is LaserScan:
@@ -627,11 +628,11 @@ class ParticleFilter(Filter):
     def _loglik(self, kind: type, data: tuple[FloatArray, ...]) -> FloatArray:
         if kind is LandmarkObservations:
             ranges, bearings, rows = data
-            return _landmark_loglik(  # type: ignore[no-any-return]
+            return _landmark_loglik(
                 self._x,
                 ranges,
                 bearings,
-                rows,
+                rows,  # type: ignore[arg-type]
                 self._lm_xy,
                 self._inv_var_r,
                 self._inv_var_b,

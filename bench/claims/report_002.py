@@ -74,7 +74,8 @@ def sweep_table(df: pd.DataFrame) -> pd.DataFrame:
     wide = sub.pivot_table(index=["dataset", "filter", "seed"], columns="metric", values="value", aggfunc="first")
     rows = []
     sigma_of: dict[str, float] = {}
-    for (ds, flt, seed), r in wide.iterrows():
+    for key, r in wide.iterrows():
+        ds, flt, seed = (str(key[0]), str(key[1]), int(key[2]))  # type: ignore[index]
         prm = _filter_params(str(flt))
         if prm is None or "ate_m" not in r or pd.isna(r["ate_m"]):
             continue
