@@ -65,9 +65,10 @@ from locbench.datasets.synthetic.sensors import (
     EncoderModel,
     LaserSensor,
     dead_reckon,
+    laser_sensor_poses,
     measured_wheel_travel,
+    noisy_scans,
     odometry_increments,
-    sample_steps,
 )
 from locbench.datasets.synthetic.world import World
 from locbench.errors import ConfigError
@@ -268,11 +269,7 @@ def laser_scans_with_people(
     """Laser scans ray-cast on the grid, with the people's discs in front where nearer (same draws as
     :func:`locbench.datasets.synthetic.sensors.laser_scans`: range noise then dropouts)."""
     grid = world_map_grid
-    steps = sample_steps(motion, sensor.rate_hz)
-    poses = motion.poses[steps]
-    sx, sy, sth = sensor.sensor_pose
-    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-    world_sensor = np.column_stack([poses[:, 0] + c * sx - s * sy, poses[:, 1] + s * sx + c * sy, poses[:, 2] + sth])
+    steps, world_sensor = laser_sensor_poses(motion, sensor)
     angles = sensor.angles()
     true_r = cast_rays(grid.occupied(), grid.resolution, grid.origin[:2], world_sensor, angles, sensor.max_range_m)
     if people:
@@ -280,23 +277,7 @@ def laser_scans_with_people(
         centres = np.stack([p.positions(t) for p in people], axis=1)  # (S, P, 2)
         radii = np.array([p.radius_m for p in people])
         true_r = np.minimum(true_r, disc_ranges(world_sensor, angles, centres, radii))
-    z = rng.standard_normal(true_r.shape)
-    u = rng.random(true_r.shape)
-    with np.errstate(invalid="ignore"):  # inf + noise stays inf
-        r = true_r + sensor.sigma_m * z
-    r[(u < sensor.dropout_prob) | (r > sensor.max_range_m) | (r < sensor.min_range_m)] = np.inf
-    return [
-        LaserScan(
-            t=float(motion.t[steps[k]]),
-            angle_min=sensor.angle_min,
-            angle_increment=sensor.angle_increment,
-            ranges=r[k].copy(),
-            range_min=sensor.min_range_m,
-            range_max=sensor.max_range_m,
-            sensor_pose=(float(sx), float(sy), float(sth)),
-        )
-        for k in range(steps.shape[0])
-    ]
+    return noisy_scans(motion, steps, true_r, sensor, rng)
 
 
 # --- the scenario ---------------------------------------------------------------------------------------

@@ -285,18 +285,23 @@ class LaserSensor:
         return self.angle_min + self.angle_increment * np.arange(self.beams, dtype=np.float64)
 
 
-def laser_scans(
-    motion: Motion, grid: OccupancyGrid, sensor: LaserSensor, rng: np.random.Generator, offset_steps: int = 0
-) -> list[LaserScan]:
-    """Laser scans at the sensor rate, all ray-cast in one call."""
+def laser_sensor_poses(
+    motion: Motion, sensor: LaserSensor, offset_steps: int = 0
+) -> tuple[npt.NDArray[np.int64], FloatArray]:
+    """The motion steps at the sensor rate and the world pose of the laser at each, shape (S,), (S, 3)."""
     steps = sample_steps(motion, sensor.rate_hz, offset_steps)
     poses = motion.poses[steps]
     sx, sy, sth = sensor.sensor_pose
     c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
     world_sensor = np.column_stack([poses[:, 0] + c * sx - s * sy, poses[:, 1] + s * sx + c * sy, poses[:, 2] + sth])
-    true_r = cast_rays(
-        grid.occupied(), grid.resolution, grid.origin[:2], world_sensor, sensor.angles(), sensor.max_range_m
-    )
+    return steps, world_sensor
+
+
+def noisy_scans(
+    motion: Motion, steps: npt.NDArray[np.int64], true_r: FloatArray, sensor: LaserSensor, rng: np.random.Generator
+) -> list[LaserScan]:
+    """LaserScan events from true ranges (S, B): Gaussian range noise, then dropouts and out-of-range -> inf."""
+    sx, sy, sth = sensor.sensor_pose
     z = rng.standard_normal(true_r.shape)
     u = rng.random(true_r.shape)
     with np.errstate(invalid="ignore"):  # inf + noise stays inf
@@ -314,6 +319,17 @@ def laser_scans(
         )
         for k in range(steps.shape[0])
     ]
+
+
+def laser_scans(
+    motion: Motion, grid: OccupancyGrid, sensor: LaserSensor, rng: np.random.Generator, offset_steps: int = 0
+) -> list[LaserScan]:
+    """Laser scans at the sensor rate, all ray-cast in one call."""
+    steps, world_sensor = laser_sensor_poses(motion, sensor, offset_steps)
+    true_r = cast_rays(
+        grid.occupied(), grid.resolution, grid.origin[:2], world_sensor, sensor.angles(), sensor.max_range_m
+    )
+    return noisy_scans(motion, steps, true_r, sensor, rng)
 
 
 # --- GPS-like fixes -----------------------------------------------------------------------------
