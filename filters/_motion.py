@@ -338,6 +338,42 @@ def _first(*values: float | None) -> float | None:
     return None
 
 
+@dataclass(frozen=True, kw_only=True)
+class MotionNoiseConfig:
+    """Config fields shared by the filters that use the odometry noise model (a mixin of their configs).
+
+    Attributes
+    ----------
+    input_noise : {"per_step", "cumulative"}
+        Reading of report 003 eq. 10 (see :func:`wheel_variances`).
+    wheelbase_m, encoder_k_left, encoder_k_right : float or None
+        Overrides of W (m) and k_L, k_R (sqrt(m)); None takes the dataset's nominal value.
+    odometry_sigma_xy_per_m, odometry_sigma_theta_per_m, odometry_sigma_theta_per_rad : float or None
+        Overrides of the increment noise (m/sqrt(m), rad/sqrt(m), rad/sqrt(rad)); None: the dataset's.
+    """
+
+    input_noise: InputNoise = "per_step"
+    wheelbase_m: float | None = None
+    encoder_k_left: float | None = None
+    encoder_k_right: float | None = None
+    odometry_sigma_xy_per_m: float | None = None
+    odometry_sigma_theta_per_m: float | None = None
+    odometry_sigma_theta_per_rad: float | None = None
+
+    def motion_noise(self, sensors: SensorSpec) -> MotionNoise:
+        """The noise model: each override, else the dataset's nominal value, else the module default."""
+        return resolve_motion_noise(
+            sensors,
+            input_noise=self.input_noise,
+            wheelbase_m=self.wheelbase_m,
+            encoder_k_left=self.encoder_k_left,
+            encoder_k_right=self.encoder_k_right,
+            odometry_sigma_xy_per_m=self.odometry_sigma_xy_per_m,
+            odometry_sigma_theta_per_m=self.odometry_sigma_theta_per_m,
+            odometry_sigma_theta_per_rad=self.odometry_sigma_theta_per_rad,
+        )
+
+
 def resolve_motion_noise(
     sensors: SensorSpec,
     *,

@@ -48,7 +48,7 @@ import numpy.typing as npt
 from locbench.datasets.base import Gaussian2, MapKind, SensorSpec, WorldMap
 from locbench.errors import ConfigError, FilterDiverged
 from locbench.events import UNKNOWN_ID, LandmarkObservations, Observation, Odometry, PoseFix
-from locbench.filters._motion import InputNoise, MotionKind, MotionModel, propagate_covariance, resolve_motion_noise
+from locbench.filters._motion import MotionKind, MotionModel, MotionNoiseConfig, propagate_covariance
 from locbench.filters.base import Estimate, Filter, FilterConfig
 from locbench.geometry import wrap_angle, wrap_scalar
 
@@ -122,7 +122,7 @@ def _inverse_small(S: list[list[float]]) -> list[list[float]] | None:
 
 
 @dataclass(frozen=True, kw_only=True)
-class LandmarkEKFConfig(FilterConfig):
+class LandmarkEKFConfig(FilterConfig, MotionNoiseConfig):
     """Configuration of :class:`LandmarkEKF`.
 
     Attributes
@@ -165,7 +165,6 @@ class LandmarkEKFConfig(FilterConfig):
     sigma_x_m: float = 0.001
     sigma_y_m: float = 0.001
     sigma_theta_rad: float = 0.0005
-    input_noise: InputNoise = "per_step"
     motion_model: MotionKind = "auto"
     association: Literal["known", "nearest"] = "known"
     gate_probability: float = 0.99
@@ -176,12 +175,6 @@ class LandmarkEKFConfig(FilterConfig):
     use_pose_fixes: bool = False
     sigma_range_m: float | None = None
     sigma_bearing_rad: float | None = None
-    wheelbase_m: float | None = None
-    encoder_k_left: float | None = None
-    encoder_k_right: float | None = None
-    odometry_sigma_xy_per_m: float | None = None
-    odometry_sigma_theta_per_m: float | None = None
-    odometry_sigma_theta_per_rad: float | None = None
 
     def __post_init__(self) -> None:
         if not 0.0 < self.gate_probability < 1.0:
@@ -227,16 +220,7 @@ class LandmarkEKF(Filter):
         cfg = self.config
         if world.landmarks is None or len(world.landmarks) == 0:
             raise ConfigError("LandmarkEKF needs world.landmarks; the dataset provides none")
-        noise = resolve_motion_noise(
-            sensors,
-            input_noise=cfg.input_noise,
-            wheelbase_m=cfg.wheelbase_m,
-            encoder_k_left=cfg.encoder_k_left,
-            encoder_k_right=cfg.encoder_k_right,
-            odometry_sigma_xy_per_m=cfg.odometry_sigma_xy_per_m,
-            odometry_sigma_theta_per_m=cfg.odometry_sigma_theta_per_m,
-            odometry_sigma_theta_per_rad=cfg.odometry_sigma_theta_per_rad,
-        )
+        noise = cfg.motion_noise(sensors)
         self._motion = MotionModel(noise, cfg.motion_model, mean="model")
         self._q = (cfg.sigma_x_m**2, cfg.sigma_y_m**2, cfg.sigma_theta_rad**2)
 

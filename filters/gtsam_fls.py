@@ -63,7 +63,7 @@ import numpy.typing as npt
 from locbench.datasets.base import Gaussian2, MapKind, SensorSpec, WorldMap
 from locbench.errors import ConfigError, DependencyNotInstalled, FilterDiverged
 from locbench.events import UNKNOWN_ID, LandmarkObservations, Observation, Odometry, PoseFix
-from locbench.filters._motion import InputNoise, MotionKind, MotionModel, propagate_covariance, resolve_motion_noise
+from locbench.filters._motion import MotionKind, MotionModel, MotionNoiseConfig, propagate_covariance
 from locbench.filters.base import Estimate, Filter, FilterConfig
 from locbench.filters.ekf_landmarks import DEFAULT_SIGMA_BEARING_RAD, DEFAULT_SIGMA_RANGE_M, chi2_2dof_quantile
 from locbench.geometry import wrap_angle, wrap_scalar
@@ -81,7 +81,7 @@ _L = gtsam.symbol_shorthand.L
 
 
 @dataclass(frozen=True, kw_only=True)
-class GtsamFLSConfig(FilterConfig):
+class GtsamFLSConfig(FilterConfig, MotionNoiseConfig):
     """Configuration of :class:`GtsamFixedLagSmoother`.
 
     Attributes
@@ -131,7 +131,6 @@ class GtsamFLSConfig(FilterConfig):
     relinearize_skip: int = 1
     sigma_xy_m: float = 0.001
     sigma_theta_rad: float = 0.0005
-    input_noise: InputNoise = "per_step"
     motion_model: MotionKind = "auto"
     association: Literal["known", "nearest"] = "known"
     gate_probability: float = 0.99
@@ -142,12 +141,6 @@ class GtsamFLSConfig(FilterConfig):
     pose_fix_heading_sigma_rad: float = 1000.0
     sigma_range_m: float | None = None
     sigma_bearing_rad: float | None = None
-    wheelbase_m: float | None = None
-    encoder_k_left: float | None = None
-    encoder_k_right: float | None = None
-    odometry_sigma_xy_per_m: float | None = None
-    odometry_sigma_theta_per_m: float | None = None
-    odometry_sigma_theta_per_rad: float | None = None
 
     def __post_init__(self) -> None:
         if not self.lag_s > 0.0:
@@ -220,16 +213,7 @@ class GtsamFixedLagSmoother(Filter):
         cfg = self.config
         if world.landmarks is None or len(world.landmarks) == 0:
             raise ConfigError("GtsamFixedLagSmoother needs world.landmarks; the dataset provides none")
-        noise = resolve_motion_noise(
-            sensors,
-            input_noise=cfg.input_noise,
-            wheelbase_m=cfg.wheelbase_m,
-            encoder_k_left=cfg.encoder_k_left,
-            encoder_k_right=cfg.encoder_k_right,
-            odometry_sigma_xy_per_m=cfg.odometry_sigma_xy_per_m,
-            odometry_sigma_theta_per_m=cfg.odometry_sigma_theta_per_m,
-            odometry_sigma_theta_per_rad=cfg.odometry_sigma_theta_per_rad,
-        )
+        noise = cfg.motion_noise(sensors)
         self._motion = MotionModel(noise, cfg.motion_model, mean="model")
         self._qxy, self._qth = cfg.sigma_xy_m**2, cfg.sigma_theta_rad**2
 

@@ -84,10 +84,9 @@ from locbench.filters._likelihood_field import (
     scan_endpoints_robot_frame,
 )
 from locbench.filters._motion import (
-    InputNoise,
     MotionKind,
+    MotionNoiseConfig,
     increment_variances,
-    resolve_motion_noise,
     sample_increment_motion,
     sample_wheel_motion,
     wheel_variances,
@@ -107,7 +106,7 @@ _LOG_2PI = math.log(2.0 * math.pi)
 
 
 @dataclass(frozen=True, kw_only=True)
-class ParticleFilterConfig(FilterConfig):
+class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
     """Configuration of :class:`ParticleFilter`.
 
     Attributes
@@ -184,16 +183,9 @@ class ParticleFilterConfig(FilterConfig):
     sigma_x_m: float = 0.001
     sigma_y_m: float = 0.001
     sigma_theta_rad: float = 0.0005
-    input_noise: InputNoise = "per_step"
     motion_model: MotionKind = "auto"
     sigma_range_m: float | None = None
     sigma_bearing_rad: float | None = None
-    wheelbase_m: float | None = None
-    encoder_k_left: float | None = None
-    encoder_k_right: float | None = None
-    odometry_sigma_xy_per_m: float | None = None
-    odometry_sigma_theta_per_m: float | None = None
-    odometry_sigma_theta_per_rad: float | None = None
 
     def __post_init__(self) -> None:
         if self.particles < 2:
@@ -434,16 +426,7 @@ class ParticleFilter(Filter):
         cfg = self.config
         self._rng = rng
         self._n = int(cfg.particles)
-        self._noise = resolve_motion_noise(
-            sensors,
-            input_noise=cfg.input_noise,
-            wheelbase_m=cfg.wheelbase_m,
-            encoder_k_left=cfg.encoder_k_left,
-            encoder_k_right=cfg.encoder_k_right,
-            odometry_sigma_xy_per_m=cfg.odometry_sigma_xy_per_m,
-            odometry_sigma_theta_per_m=cfg.odometry_sigma_theta_per_m,
-            odometry_sigma_theta_per_rad=cfg.odometry_sigma_theta_per_rad,
-        )
+        self._noise = cfg.motion_noise(sensors)
         nz = self._noise
         self._use_encoder = nz.wheelbase_m is not None and (
             cfg.motion_model == "encoder" or (cfg.motion_model == "auto" and nz.encoder_given)
