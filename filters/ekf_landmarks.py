@@ -68,6 +68,25 @@ def chi2_2dof_quantile(p: float) -> float:
     return -2.0 * math.log1p(-p)
 
 
+def landmark_noise(
+    sigma_range_m: float | None, sigma_bearing_rad: float | None, sensors: SensorSpec, warn: bool = True
+) -> tuple[float, float]:
+    """Range and bearing standard deviations (m, rad): the config override, else the dataset's nominal
+    value, else :data:`DEFAULT_SIGMA_RANGE_M` / :data:`DEFAULT_SIGMA_BEARING_RAD` (logged when ``warn``)."""
+    sr = sigma_range_m if sigma_range_m is not None else sensors.landmark_sigma_range_m
+    sb = sigma_bearing_rad if sigma_bearing_rad is not None else sensors.landmark_sigma_bearing_rad
+    if warn and (sr is None or sb is None):
+        logger.warning(
+            "no nominal landmark noise in the config or dataset; using sigma_range_m=%g, sigma_bearing_rad=%g",
+            DEFAULT_SIGMA_RANGE_M,
+            DEFAULT_SIGMA_BEARING_RAD,
+        )
+    return (
+        DEFAULT_SIGMA_RANGE_M if sr is None else float(sr),
+        DEFAULT_SIGMA_BEARING_RAD if sb is None else float(sb),
+    )
+
+
 def range_bearing(pose: npt.ArrayLike, landmarks_xy: npt.ArrayLike) -> FloatArray:
     """Expected (range m, bearing rad) of landmarks seen from ``pose`` (report 003 eq. 7), shape (..., 2).
 
@@ -224,16 +243,7 @@ class LandmarkEKF(Filter):
         self._motion = MotionModel(noise, cfg.motion_model, mean="model")
         self._q = (cfg.sigma_x_m**2, cfg.sigma_y_m**2, cfg.sigma_theta_rad**2)
 
-        sr = cfg.sigma_range_m if cfg.sigma_range_m is not None else sensors.landmark_sigma_range_m
-        sb = cfg.sigma_bearing_rad if cfg.sigma_bearing_rad is not None else sensors.landmark_sigma_bearing_rad
-        if sr is None or sb is None:
-            logger.warning(
-                "no nominal landmark noise in the config or dataset; using sigma_range_m=%g, sigma_bearing_rad=%g",
-                DEFAULT_SIGMA_RANGE_M,
-                DEFAULT_SIGMA_BEARING_RAD,
-            )
-        sr = DEFAULT_SIGMA_RANGE_M if sr is None else float(sr)
-        sb = DEFAULT_SIGMA_BEARING_RAD if sb is None else float(sb)
+        sr, sb = landmark_noise(cfg.sigma_range_m, cfg.sigma_bearing_rad, sensors)
         self._rr, self._rb = sr * sr, sb * sb
         self._gate = chi2_2dof_quantile(cfg.gate_probability)
 

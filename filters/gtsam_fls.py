@@ -65,7 +65,7 @@ from locbench.errors import ConfigError, DependencyNotInstalled, FilterDiverged
 from locbench.events import UNKNOWN_ID, LandmarkObservations, Observation, Odometry, PoseFix
 from locbench.filters._motion import MotionKind, MotionModel, MotionNoiseConfig, propagate_covariance
 from locbench.filters.base import Estimate, Filter, FilterConfig
-from locbench.filters.ekf_landmarks import DEFAULT_SIGMA_BEARING_RAD, DEFAULT_SIGMA_RANGE_M, chi2_2dof_quantile
+from locbench.filters.ekf_landmarks import chi2_2dof_quantile, landmark_noise
 from locbench.geometry import wrap_angle, wrap_scalar
 
 try:
@@ -217,16 +217,7 @@ class GtsamFixedLagSmoother(Filter):
         self._motion = MotionModel(noise, cfg.motion_model, mean="model")
         self._qxy, self._qth = cfg.sigma_xy_m**2, cfg.sigma_theta_rad**2
 
-        sr = cfg.sigma_range_m if cfg.sigma_range_m is not None else sensors.landmark_sigma_range_m
-        sb = cfg.sigma_bearing_rad if cfg.sigma_bearing_rad is not None else sensors.landmark_sigma_bearing_rad
-        if sr is None or sb is None:
-            logger.warning(
-                "no nominal landmark noise in the config or dataset; using sigma_range_m=%g, sigma_bearing_rad=%g",
-                DEFAULT_SIGMA_RANGE_M,
-                DEFAULT_SIGMA_BEARING_RAD,
-            )
-        sr = DEFAULT_SIGMA_RANGE_M if sr is None else float(sr)
-        sb = DEFAULT_SIGMA_BEARING_RAD if sb is None else float(sb)
+        sr, sb = landmark_noise(cfg.sigma_range_m, cfg.sigma_bearing_rad, sensors)
         self._R = np.diag([sr * sr, sb * sb])
         # BearingRangeFactor2D's error is (bearing, range).
         self._br_noise = gtsam.noiseModel.Diagonal.Sigmas(np.array([sb, sr]))

@@ -92,15 +92,13 @@ from locbench.filters._motion import (
     wheel_variances,
 )
 from locbench.filters.base import Estimate, Filter, FilterConfig
+from locbench.filters.ekf_landmarks import landmark_noise
 from locbench.geometry import wrap_angle
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 logger = logging.getLogger(__name__)
 
-#: Range-bearing noise used when neither the config nor the dataset gives one (logged at reset).
-DEFAULT_SIGMA_RANGE_M = 0.05
-DEFAULT_SIGMA_BEARING_RAD = 0.02
 
 _LOG_2PI = math.log(2.0 * math.pi)
 
@@ -456,16 +454,7 @@ class ParticleFilter(Filter):
         else:
             self._lm_xy = np.zeros((0, 2))
             self._lm_row = {}
-        sr = cfg.sigma_range_m if cfg.sigma_range_m is not None else sensors.landmark_sigma_range_m
-        sb = cfg.sigma_bearing_rad if cfg.sigma_bearing_rad is not None else sensors.landmark_sigma_bearing_rad
-        if self._use_lm and (sr is None or sb is None):
-            logger.warning(
-                "no nominal landmark noise in the config or dataset; using sigma_range_m=%g, sigma_bearing_rad=%g",
-                DEFAULT_SIGMA_RANGE_M,
-                DEFAULT_SIGMA_BEARING_RAD,
-            )
-        sr = DEFAULT_SIGMA_RANGE_M if sr is None else float(sr)
-        sb = DEFAULT_SIGMA_BEARING_RAD if sb is None else float(sb)
+        sr, sb = landmark_noise(cfg.sigma_range_m, cfg.sigma_bearing_rad, sensors, warn=self._use_lm)
         self._inv_var_r, self._inv_var_b = 1.0 / (sr * sr), 1.0 / (sb * sb)
         self._lm_log_norm = -_LOG_2PI - math.log(sr) - math.log(sb)
 

@@ -73,6 +73,7 @@ from locbench.datasets.synthetic.robot import Arc, DriveLimits, GoTo, Leg, Motio
 from locbench.datasets.synthetic.scenarios import (
     SensorSuite,
     assemble,
+    check_kidnap_params,
     nominal_odometry_spec,
     robot_encoder_model,
     true_wheelbase,
@@ -472,10 +473,7 @@ def _check_params(p: LandmarkGeometryParams) -> None:
         raise ConfigError(f"parameter 'path' must be one of {', '.join(PATHS)}, got {p.path!r}")
     if p.landmarks not in LAYOUTS:
         raise ConfigError(f"parameter 'landmarks' must be one of {', '.join(LAYOUTS)}, got {p.landmarks!r}")
-    if not (p.kidnap_m >= 0 and math.isfinite(p.kidnap_m)):
-        raise ConfigError(f"parameter 'kidnap_m' must be a distance >= 0 m, got {p.kidnap_m}")
-    if not abs(p.kidnap_rad) <= math.pi:
-        raise ConfigError(f"parameter 'kidnap_rad' must be a rotation in [-pi, pi] rad, got {p.kidnap_rad}")
+    check_kidnap_params(p.kidnap_m, p.kidnap_rad)
     if not (p.initial_offset_m >= 0 and math.isfinite(p.initial_offset_m)):
         raise ConfigError(f"parameter 'initial_offset_m' must be a distance >= 0 m, got {p.initial_offset_m}")
     if not p.pose_fix_sigma_m > 0:

@@ -54,8 +54,8 @@ from locbench.datasets.synthetic.scenarios import (
     WHEELBASE_TRUE_RATIO,
     SensorSuite,
     _check_beams,
-    _check_kidnap,
     assemble,
+    check_kidnap_params,
     drive,
     nominal_odometry_spec,
     office_world,
@@ -315,7 +315,7 @@ class LapScenario(DatasetBuilder):
     )
 
     def build(self, params: LapParams, rng: np.random.Generator) -> Dataset:
-        _check_kidnap(params.kidnap_m, params.kidnap_rad)
+        check_kidnap_params(params.kidnap_m, params.kidnap_rad)
         _check_beams("laser_beams", params.laser_beams, allow_zero=False)
         if params.people < 0:
             raise ConfigError(f"parameter 'people' must be a count >= 0, got {params.people}")

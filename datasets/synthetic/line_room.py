@@ -35,6 +35,7 @@ from locbench.datasets.synthetic.robot import DriveLimits, GoTo, Leg
 from locbench.datasets.synthetic.scenarios import (
     SensorSuite,
     assemble,
+    check_kidnap_params,
     drive,
     nominal_odometry_spec,
     robot_encoder_model,
@@ -120,10 +121,7 @@ class LineRoomScenario(DatasetBuilder):
     description: ClassVar[str] = "report 002's polygonal rooms: wall lines, a laser, 7 waypoints"
 
     def build(self, params: LineRoomParams, rng: np.random.Generator) -> Dataset:
-        if not (params.kidnap_m >= 0 and math.isfinite(params.kidnap_m)):
-            raise ConfigError(f"parameter 'kidnap_m' must be a distance >= 0 m, got {params.kidnap_m}")
-        if not abs(params.kidnap_rad) <= math.pi:
-            raise ConfigError(f"parameter 'kidnap_rad' must be a rotation in [-pi, pi] rad, got {params.kidnap_rad}")
+        check_kidnap_params(params.kidnap_m, params.kidnap_rad)
         if params.laser_beams < 2:
             raise ConfigError(f"parameter 'laser_beams' must be >= 2, got {params.laser_beams}")
         if not (params.laser_sigma_m > 0 and math.isfinite(params.laser_sigma_m)):

@@ -54,6 +54,7 @@ from locbench.datasets.synthetic.scenarios import (
     ENCODER_K_TRUE,
     GENERATOR_VERSION,
     WHEELBASE_NOMINAL_M,
+    check_kidnap_params,
     kidnap_chooser,
     nominal_odometry_spec,
     robot_encoder_model,
@@ -259,10 +260,7 @@ class ScanGridScenario(DatasetBuilder):
     def build(self, params: ScanGridParams, rng: np.random.Generator) -> Dataset:
         if not 0.05 <= params.grid_step_m <= 0.5:
             raise ConfigError(f"parameter 'grid_step_m' must be in [0.05, 0.5] m, got {params.grid_step_m}")
-        if not (params.kidnap_m >= 0 and math.isfinite(params.kidnap_m)):
-            raise ConfigError(f"parameter 'kidnap_m' must be a distance >= 0 m, got {params.kidnap_m}")
-        if not abs(params.kidnap_rad) <= math.pi:
-            raise ConfigError(f"parameter 'kidnap_rad' must be a rotation in [-pi, pi] rad, got {params.kidnap_rad}")
+        check_kidnap_params(params.kidnap_m, params.kidnap_rad)
         streams = split_streams(rng)
         world = scan_grid_world()
         v_max = params.grid_step_m / COMMAND_S

@@ -250,7 +250,8 @@ def assemble(
     return ds
 
 
-def _check_kidnap(kidnap_m: float, kidnap_rad: float) -> None:
+def check_kidnap_params(kidnap_m: float, kidnap_rad: float) -> None:
+    """ConfigError unless ``kidnap_m`` >= 0 m (finite) and |``kidnap_rad``| <= pi (shared by every scenario)."""
     if not (kidnap_m >= 0 and math.isfinite(kidnap_m)):
         raise ConfigError(f"parameter 'kidnap_m' must be a distance >= 0 m, got {kidnap_m}")
     if not (abs(kidnap_rad) <= math.pi):
@@ -329,7 +330,7 @@ class RoomScenario(DatasetBuilder):
     )
 
     def build(self, params: RoomParams, rng: np.random.Generator) -> Dataset:
-        _check_kidnap(params.kidnap_m, params.kidnap_rad)
+        check_kidnap_params(params.kidnap_m, params.kidnap_rad)
         _check_beams("laser_beams", params.laser_beams, allow_zero=True)
         streams = split_streams(rng)
         world = room_world()
@@ -546,7 +547,7 @@ class OfficeScenario(DatasetBuilder):
     description: ClassVar[str] = "one office floor with walls, doors, landmarks and a waypoint tour; every sensor"
 
     def build(self, params: OfficeParams, rng: np.random.Generator) -> Dataset:
-        _check_kidnap(params.kidnap_m, params.kidnap_rad)
+        check_kidnap_params(params.kidnap_m, params.kidnap_rad)
         _check_beams("laser_beams", params.laser_beams, allow_zero=False)
         if not params.pose_fix_sigma_m > 0:
             raise ConfigError(f"parameter 'pose_fix_sigma_m' must be > 0 m, got {params.pose_fix_sigma_m}")
