@@ -28,3 +28,7 @@ class IncompatibleRun(LocbenchError):
 
 class FilterDiverged(LocbenchError):
     """Raised by a filter (or detected by the runner) when its estimate is no longer meaningful."""
+
+
+class DataNotFound(ConfigError):
+    """A recorded dataset's files are not on this machine; runs on it are recorded as skipped with this reason."""

@@ -111,6 +111,28 @@ class LandmarkObservations:
 
 
 @dataclass(frozen=True, slots=True, eq=False)
+class RangeObservations:
+    """Range-only measurements to point landmarks (radio beacons) at one instant.
+
+    Attributes
+    ----------
+    t : float
+        Time stamp, s.
+    ids : ndarray of int64, shape (n,)
+        Landmark (beacon) identities; :data:`UNKNOWN_ID` (-1) where the identity is withheld.
+    ranges : ndarray, shape (n,)
+        Distance from the robot origin to the landmark, m.
+    """
+
+    t: float
+    ids: IntArray
+    ranges: FloatArray
+
+    def __len__(self) -> int:
+        return int(self.ranges.shape[0])
+
+
+@dataclass(frozen=True, slots=True, eq=False)
 class PoseFix:
     """An absolute pose measurement in the world frame (GPS, scan-database match).
 
@@ -133,12 +155,12 @@ class PoseFix:
         return int(self.z.shape[0]) == 3
 
 
-Observation: TypeAlias = LaserScan | LandmarkObservations | PoseFix
-Event: TypeAlias = Odometry | LaserScan | LandmarkObservations | PoseFix
+Observation: TypeAlias = LaserScan | LandmarkObservations | PoseFix | RangeObservations
+Event: TypeAlias = Odometry | LaserScan | LandmarkObservations | PoseFix | RangeObservations
 
 #: Every event type, in the order used to break ties between equal time stamps (odometry first).
-EVENT_TYPES: tuple[type, ...] = (Odometry, LaserScan, LandmarkObservations, PoseFix)
-OBSERVATION_TYPES: tuple[type, ...] = (LaserScan, LandmarkObservations, PoseFix)
+EVENT_TYPES: tuple[type, ...] = (Odometry, LaserScan, LandmarkObservations, PoseFix, RangeObservations)
+OBSERVATION_TYPES: tuple[type, ...] = (LaserScan, LandmarkObservations, PoseFix, RangeObservations)
 
 
 def event_order(ev: Event) -> tuple[float, int]:

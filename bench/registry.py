@@ -89,7 +89,7 @@ class Registry(Generic[T]):
         except KeyError:
             raise UnknownIdError(f"unknown {self.kind} {id!r}; valid: {', '.join(self.ids())}") from None
 
-    def unavailable_reason(self, id: str) -> str | None:
+    def missing_dependency(self, id: str) -> str | None:
         """None when the entry's optional dependencies import, else 'unavailable: install ...'."""
         e = self.entry(id)
         for mod in e.requires_modules:
@@ -99,10 +99,22 @@ class Registry(Generic[T]):
                 return f"unavailable: {mod} is not installed; install it with: {e.install_hint or 'pip install ' + mod}"
         return None
 
+    def unavailable_reason(self, id: str) -> str | None:
+        """Why the entry cannot run here with its default parameters: a missing dependency or missing data.
+
+        A class may define a classmethod ``data_unavailable()`` returning the reason its default data is
+        absent (recorded datasets), or None.
+        """
+        reason = self.missing_dependency(id)
+        if reason is not None:
+            return reason
+        probe = getattr(self.load(id), "data_unavailable", None)
+        return probe() if callable(probe) else None
+
     def load(self, id: str) -> type[T]:
         """Import and return the registered class; ``DependencyNotInstalled`` when an optional dependency is missing."""
         e = self.entry(id)
-        reason = self.unavailable_reason(id)
+        reason = self.missing_dependency(id)
         if reason is not None:
             raise DependencyNotInstalled(f"{self.kind} {id!r} is {reason}")
         module_name, attr = e.entry_point.split(":", 1)

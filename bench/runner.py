@@ -23,7 +23,7 @@ import numpy as np
 
 from locbench import provenance
 from locbench.datasets.base import Dataset
-from locbench.errors import FilterDiverged
+from locbench.errors import DataNotFound, FilterDiverged
 from locbench.events import EVENT_TYPES, Odometry
 from locbench.filters.base import Filter
 from locbench.registry import DATASETS, FILTERS, Resolved, make_dataset, resolve_dataset, resolve_filter
@@ -60,6 +60,12 @@ def incompatibility(flt: Filter, ds: Dataset) -> str | None:
     missing = sorted(k.value for k in flt.requires - ds.world.kinds)
     if missing:
         return f"{type(flt).__name__} requires map kinds {missing} which {ds.name or ds.id} does not provide"
+    wanted = flt.routed_events() - {Odometry}
+    present = {type(e) for e in ds.events}
+    if wanted and not wanted & present:
+        # A filter that would see no observation at all would only dead-reckon under another name.
+        names = ", ".join(sorted(t.__name__ for t in wanted))
+        return f"{type(flt).__name__} uses {names}, none of which {ds.name or ds.id} provides"
     return None
 
 
@@ -208,6 +214,14 @@ def run_group(
     t_build = time.perf_counter()
     try:
         ds: Dataset = make_dataset(dr, seed)
+    except DataNotFound as exc:
+        # Recorded data that is not on this machine: a recorded skip with the reason, not a failure.
+        msg = f"data not found: {exc}"
+        for fr, key in todo:
+            meta = _meta(fr, dr, seed, key) | {"status": "skipped", "message": msg, "wall_s": 0.0}
+            store.write_run(_empty_record(meta))
+            outcomes.append(RunOutcome(fr.name, dr.name, seed, "skipped", msg))
+        return outcomes
     except Exception as exc:
         msg = f"dataset build failed: {type(exc).__name__}: {exc}"
         log.error("%s seed %d: %s", dr.name, seed, msg)

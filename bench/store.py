@@ -25,14 +25,15 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import Dataset, Kidnap, Trajectory2D, Waypoints
+from locbench.datasets.base import Dataset, Kidnap, Relations, Trajectory2D, Waypoints
 from locbench.errors import ConfigError
 
 FloatArray = npt.NDArray[np.float64]
 
 TRUTH_DIR = "_truth"
 #: Event kinds stored in ``RunRecord.kind``: the index into this tuple.
-KIND_NAMES = ("Odometry", "LaserScan", "LandmarkObservations", "PoseFix", "reset")
+# Codes are stored in runs: append new kinds at the end, never reorder.
+KIND_NAMES = ("Odometry", "LaserScan", "LandmarkObservations", "PoseFix", "reset", "RangeObservations")
 STATUSES = ("ok", "skipped", "diverged", "error")
 
 
@@ -55,13 +56,28 @@ class TruthRecord:
     #: The world's line segments (n, 4) and landmark positions (m, 2), m, for figures; empty when absent.
     map_segments: FloatArray = field(default_factory=lambda: np.zeros((0, 4)))
     map_landmarks: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
+    #: Reference relative poses (Intel), and what the trajectory is ("ground truth" or "SLAM reference").
+    relations: Relations | None = None
+    truth_label: str = "ground truth"
 
     @classmethod
     def from_dataset(cls, ds: Dataset, seed: int, meta: dict[str, Any]) -> TruthRecord:
         w = ds.world
         segs = w.lines.segments if w.lines is not None else np.zeros((0, 4))
         lms = w.landmarks.xy if w.landmarks is not None else np.zeros((0, 2))
-        return cls(ds.name or ds.id, seed, ds.ground_truth, ds.waypoints, ds.kidnaps, ds.duration, meta, segs, lms)
+        return cls(
+            ds.name or ds.id,
+            seed,
+            ds.ground_truth,
+            ds.waypoints,
+            ds.kidnaps,
+            ds.duration,
+            meta,
+            segs,
+            lms,
+            ds.relations,
+            ds.truth_label,
+        )
 
 
 @dataclass(eq=False)
@@ -170,7 +186,9 @@ class Store:
             "map_segments": np.asarray(rec.map_segments, dtype=np.float64).reshape(-1, 4),
             "map_landmarks": np.asarray(rec.map_landmarks, dtype=np.float64).reshape(-1, 2),
         }
-        meta = {"dataset": rec.dataset, "seed": rec.seed, **rec.meta}
+        if rec.relations is not None:
+            arrays.update(rel_t1=rec.relations.t1, rel_t2=rec.relations.t2, rel_delta=rec.relations.delta)
+        meta = {"dataset": rec.dataset, "seed": rec.seed, "truth_label": rec.truth_label, **rec.meta}
         _atomic_write(path, lambda p: np.savez_compressed(p, **arrays))  # type: ignore[arg-type]
         _atomic_write(path.with_suffix(".json"), lambda p: p.write_text(json.dumps(meta, indent=2, default=str)))
 
@@ -221,9 +239,11 @@ class Store:
             duration = float(z["duration_s"])
             segs = z["map_segments"] if "map_segments" in z.files else np.zeros((0, 4))
             lms = z["map_landmarks"] if "map_landmarks" in z.files else np.zeros((0, 2))
+            rel = Relations(z["rel_t1"], z["rel_t2"], z["rel_delta"]) if "rel_t1" in z.files else None
         meta_path = path.with_suffix(".json")
         meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
-        return TruthRecord(dataset, seed, gt, wp, kid, duration, meta, segs, lms)
+        label = str(meta.get("truth_label", "ground truth"))
+        return TruthRecord(dataset, seed, gt, wp, kid, duration, meta, segs, lms, rel, label)
 
     def read_run(self, run_dir: str | os.PathLike[str]) -> RunRecord:
         d = Path(run_dir)

@@ -15,7 +15,16 @@ import numpy as np
 import numpy.typing as npt
 
 from locbench.errors import ConfigError
-from locbench.events import EVENT_TYPES, Event, LandmarkObservations, LaserScan, Odometry, PoseFix, event_order
+from locbench.events import (
+    EVENT_TYPES,
+    Event,
+    LandmarkObservations,
+    LaserScan,
+    Odometry,
+    PoseFix,
+    RangeObservations,
+    event_order,
+)
 from locbench.geometry import is_symmetric_psd, wrap_angle
 
 FloatArray = npt.NDArray[np.float64]
@@ -189,6 +198,23 @@ class Waypoints:
         return int(self.t.shape[0])
 
 
+@dataclass(frozen=True, eq=False)
+class Relations:
+    """Reference relative poses between pairs of times (Kuemmerle et al. 2009, "On measuring the accuracy of SLAM
+    algorithms", Auton. Robots 27(4)).
+
+    Row k says: the pose at ``t2[k]`` seen from the pose at ``t1[k]`` is ``delta[k]`` = (dx m, dy m, dtheta rad),
+    in the frame of the pose at ``t1[k]``. It is relative, not an absolute trajectory.
+    """
+
+    t1: FloatArray
+    t2: FloatArray
+    delta: FloatArray
+
+    def __len__(self) -> int:
+        return int(self.t1.shape[0])
+
+
 @dataclass(frozen=True)
 class Kidnap:
     """At time ``t`` (s) the true pose jumps by ``delta`` (dx m, dy m, dtheta rad, world frame).
@@ -226,6 +252,8 @@ class SensorSpec:
         Range noise of the laser, m.
     pose_fix_sigma_xy_m : float or None
         Standard deviation of a GPS-like fix per axis, m.
+    range_sigma_m : float or None
+        Standard deviation of a range-only (radio beacon) measurement, m.
     """
 
     wheelbase_m: float | None = None
@@ -241,6 +269,11 @@ class SensorSpec:
     landmark_fov_rad: float | None = None
     laser_sigma_m: float | None = None
     pose_fix_sigma_xy_m: float | None = None
+    range_sigma_m: float | None = None
+
+
+#: Labels of :attr:`Dataset.truth_label`: what the "ground truth" trajectory really is.
+TRUTH_LABELS = ("ground truth", "SLAM reference")
 
 
 @dataclass(frozen=True, eq=False)
@@ -269,6 +302,11 @@ class Dataset:
         The display / storage name ``id[key=value,...]`` (non-default parameters only).
     metadata : dict
         Free-form provenance (calibration, generator version, source files).
+    relations : Relations or None
+        Reference relative poses for the relation error (Intel); None elsewhere.
+    truth_label : str
+        ``"ground truth"`` for a measured truth (simulator, Vicon, GPS) or ``"SLAM reference"`` when the
+        trajectory is another estimator's output (Intel's GMapping poses); the report labels it.
     """
 
     id: str
@@ -282,6 +320,8 @@ class Dataset:
     kidnaps: tuple[Kidnap, ...] = ()
     name: str = ""
     metadata: dict[str, Any] = field(default_factory=dict)
+    relations: Relations | None = None
+    truth_label: str = "ground truth"
 
     @property
     def duration(self) -> float:
@@ -328,6 +368,8 @@ def check_dataset_contract(ds: Dataset) -> None:
     present = {type(e) for e in ds.events}
     if LandmarkObservations in present and MapKind.LANDMARKS not in kinds:
         raise ConfigError(f"{where}: has landmark observations but world.landmarks is empty")
+    if RangeObservations in present and MapKind.LANDMARKS not in kinds:
+        raise ConfigError(f"{where}: has range observations but world.landmarks (the beacons) is empty")
     if LaserScan in present and not (kinds & {MapKind.OCCUPANCY, MapKind.LINES}):
         raise ConfigError(f"{where}: has laser scans but neither an occupancy grid nor a line map")
     if Odometry not in present:
@@ -336,6 +378,13 @@ def check_dataset_contract(ds: Dataset) -> None:
         for k, e in enumerate(ds.events):
             if isinstance(e, PoseFix) and e.cov.shape != (e.z.shape[0], e.z.shape[0]):
                 raise ConfigError(f"{where}: events[{k}] PoseFix cov shape {e.cov.shape} does not match z")
+    if ds.truth_label not in TRUTH_LABELS:
+        raise ConfigError(f"{where}: truth_label {ds.truth_label!r} is not one of {TRUTH_LABELS}")
+    if ds.relations is not None:
+        r = ds.relations
+        n = r.t1.shape[0]
+        if r.t1.shape != (n,) or r.t2.shape != (n,) or r.delta.shape != (n, 3):
+            raise ConfigError(f"{where}: relations must be t1 (n,), t2 (n,), delta (n, 3)")
     if ds.waypoints is not None:
         w = ds.waypoints
         if w.xy.shape != (w.t.shape[0], 2):
@@ -364,3 +413,12 @@ class DatasetBuilder(abc.ABC):
     @abc.abstractmethod
     def build(self, params: Any, rng: np.random.Generator) -> Dataset:
         """Make the dataset for resolved ``params`` with all randomness drawn from ``rng``."""
+
+    @classmethod
+    def data_unavailable(cls) -> str | None:
+        """Why the default parameters' data is not on this machine (recorded datasets), or None."""
+        return None
+
+    def fetch(self, params: Any) -> list[str]:
+        """Download (and verify) what ``params`` needs into the cache; the local paths. Synthetic data: nothing."""
+        return []
