@@ -254,6 +254,10 @@ class SensorSpec:
         Standard deviation of a GPS-like fix per axis, m.
     range_sigma_m : float or None
         Standard deviation of a range-only (radio beacon) measurement, m.
+    twist_sigma_v_mps, twist_sigma_omega_radps : float or None
+        White noise of a MEASURED twist (speed m/s, turn rate rad/s) per odometry sample, for datasets whose
+        odometry is (v, omega) held for ``dt`` (MRCLAM, Lost in the Woods): the increment's variance is
+        (sigma * dt)^2 per component.
     """
 
     wheelbase_m: float | None = None
@@ -270,6 +274,8 @@ class SensorSpec:
     laser_sigma_m: float | None = None
     pose_fix_sigma_xy_m: float | None = None
     range_sigma_m: float | None = None
+    twist_sigma_v_mps: float | None = None
+    twist_sigma_omega_radps: float | None = None
 
 
 #: Labels of :attr:`Dataset.truth_label`: what the "ground truth" trajectory really is.
