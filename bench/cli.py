@@ -5,6 +5,7 @@ locbench run [--suite NAME|FILE.toml | --filter SPEC ... --dataset SPEC ...]
              [--seeds N] [--results DIR] [--jobs N] [--force]
 locbench report [--results DIR]
 locbench check [ID ...]
+locbench fetch SPEC [SPEC ...]
 """
 
 from __future__ import annotations
@@ -117,6 +118,19 @@ def _cmd_check(args: argparse.Namespace) -> int:
     return 1 if failed else 0
 
 
+def _cmd_fetch(args: argparse.Namespace) -> int:
+    from locbench.registry import DATASETS, resolve_dataset
+
+    for spec in args.specs:
+        r = resolve_dataset(spec)
+        paths = DATASETS.load(r.id)().fetch(r.params)
+        if not paths:
+            print(f"{r.name}: nothing to fetch (synthetic)")
+        for path in paths:
+            print(f"{r.name}: {path}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="locbench", description="Comparative benchmark of 2-D localization filters.")
     p.add_argument("--version", action="version", version=f"locbench {__version__}")
@@ -157,6 +171,13 @@ def build_parser() -> argparse.ArgumentParser:
     c = sub.add_parser("check", help="conformance checks for filters and datasets")
     c.add_argument("ids", nargs="*", help="filter or dataset ids/specs (default: all registered)")
     c.set_defaults(func=_cmd_check)
+
+    fe = sub.add_parser(
+        "fetch",
+        help="download recorded datasets from their official source into the cache, verified by sha256",
+    )
+    fe.add_argument("specs", nargs="+", metavar="SPEC", help="e.g. plaza[run=1] or mrclam[dataset=6,robot=1]")
+    fe.set_defaults(func=_cmd_fetch)
     return p
 
 

@@ -73,7 +73,7 @@ class RemoteFile:
     download_sha256 : str or None
         Hex digest of the downloaded bytes when they differ from the file's (a compressed download).
     decompress : str or None
-        ``"bz2"`` or ``"gzip"`` when the download must be decompressed.
+        ``"bz2"`` (or ``"bzip2"``) or ``"gzip"`` when the download must be decompressed.
     """
 
     relpath: str
@@ -187,7 +187,8 @@ def _fetch(spec: RemoteFile, target: Path) -> Path:
     known = spec.download_sha256 or (spec.sha256 if spec.decompress is None else None)
     processor: Callable[..., str] | None = None
     if spec.decompress is not None:
-        processor = pooch.Decompress(method=spec.decompress, name=target.name)
+        method = {"bz2": "bzip2", "gz": "gzip"}.get(spec.decompress, spec.decompress)
+        processor = pooch.Decompress(method=method, name=target.name)
     try:
         got = pooch.retrieve(
             spec.url,
@@ -198,7 +199,7 @@ def _fetch(spec: RemoteFile, target: Path) -> Path:
             progressbar=False,
         )
     except ValueError as exc:  # pooch's hash mismatch; it has already removed the bad download
-        raise RecordedDataError(target, f"download from {spec.url} failed verification: {exc}") from None
+        raise RecordedDataError(target, f"download from {spec.url} failed: {exc}") from None
     path = Path(got)
     if spec.sha256:
         try:
