@@ -211,7 +211,8 @@ def _numeric(path: Path, mat: dict[str, Any], name: str, expected: str) -> Float
         idx = np.unravel_index(int(bad[0]), arr.shape)
         where = ", ".join(str(int(i) + 1) for i in idx)
         raise RecordedDataError(
-            path, f"field {name!r}: non-finite value {arr[idx]!r} at ({where}) (1-based), expected finite numbers"
+            path,
+            f"field {name!r}: non-finite value {float(arr[idx])!r} at ({where}) (1-based), expected finite numbers",
         )
     return arr
 
@@ -279,7 +280,7 @@ def _read_cached(path_str: str, size: int, mtime_ns: int) -> LostInTheWoodsData:
         k = int(back[0]) + 1
         raise RecordedDataError(
             path,
-            f"field 't': time goes backwards at sample {k + 1} (1-based): {t[k]!r} after {t[k - 1]!r} "
+            f"field 't': time goes backwards at sample {k + 1} (1-based): {float(t[k])!r} after {float(t[k - 1])!r} "
             "(expected non-decreasing)",
         )
     v = _vector(path, mat, "v", n, "speed in m/s")
@@ -290,7 +291,7 @@ def _read_cached(path_str: str, size: int, mtime_ns: int) -> LostInTheWoodsData:
     valid = _vector(path, mat, "true_valid", n, "validity flag 0/1")
     if not np.all((valid == 0.0) | (valid == 1.0)):
         k = int(np.flatnonzero((valid != 0.0) & (valid != 1.0))[0])
-        raise RecordedDataError(path, f"field 'true_valid': {valid[k]!r} at sample {k + 1}, expected 0 or 1")
+        raise RecordedDataError(path, f"field 'true_valid': {float(valid[k])!r} at sample {k + 1}, expected 0 or 1")
 
     lm = _numeric(path, mat, "l", "landmark positions, an L x 2 array (x, y) in m")
     if lm.ndim != 2 or lm.shape[1] != 2 or lm.shape[0] < 1:
@@ -307,7 +308,7 @@ def _read_cached(path_str: str, size: int, mtime_ns: int) -> LostInTheWoodsData:
     if np.any(meas["r"] < 0.0):
         k, j = (int(i) for i in np.argwhere(meas["r"] < 0.0)[0])
         raise RecordedDataError(
-            path, f"field 'r': {meas['r'][k, j]!r} at ({k + 1}, {j + 1}), expected a range >= 0 (0 = not seen)"
+            path, f"field 'r': {float(meas['r'][k, j])!r} at ({k + 1}, {j + 1}), expected a range >= 0 (0 = not seen)"
         )
     d = _scalar(path, mat, "d", "laser offset in m", positive=False)
     variances = {
