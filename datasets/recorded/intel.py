@@ -1,0 +1,615 @@
+"""The Intel Research Lab (Seattle) laser log of the Freiburg SLAM benchmark, as the dataset ``intel``.
+
+Source and citation
+-------------------
+Official origin: http://ais.informatik.uni-freiburg.de/slamevaluation/datasets.php (``intel.clf``,
+``intel.relations``); raw log recorded by Dirk Haehnel, distributed through Radish (A. Howard, N. Roy, "The
+Robotics Data Set Repository (Radish)", 2003). The relations and the relation error: R. Kuemmerle, B. Steder,
+C. Dornhege, M. Ruhnke, G. Grisetti, C. Stachniss, A. Kleiner, "On measuring the accuracy of SLAM algorithms",
+Autonomous Robots 27(4):387-407, 2009. ``intel.gfs.log`` is GMapping output (G. Grisetti, C. Stachniss,
+W. Burgard, "Improved techniques for grid mapping with Rao-Blackwellized particle filters", IEEE T-RO 23(1),
+2007) from C. Stachniss' dataset page. Downloads used by :meth:`IntelDataset.fetch`: ``intel.clf`` from the
+bzip2 blob of ``MOLAorg/mola_test_datasets`` (CC BY 3.0), the relations and the GMapping log from
+``xiaofeng419/SLAM-2D-LIDAR-SCAN``, each at the commit and with the sha256 of ``shared/datasets/SOURCES.md``.
+
+Files and format
+----------------
+``LOCBENCH_DATA/freiburg_slam_benchmark/``: ``intel.clf`` (the raw CARMEN log: 26915 ODOM, 13631 FLASER of
+180 beams; see :mod:`locbench.datasets.recorded.carmen`), ``intel.gfs.log`` (CARMEN; 910 FLASER whose pose is
+GMapping's corrected pose, times = logger seconds) and ``intel.relations`` (``t1 t2 dx dy dz droll dpitch
+dyaw``: the pose at ipc time t2 in the frame of the pose at t1, m and rad; 2984 rows).
+
+Time base, frames, units
+------------------------
+Every time is the raw log's ``ipc_timestamp`` (Unix s), the clock of the relations. Poses are (x m, y m,
+theta rad) in the frame of the GMapping map (its first pose is near the origin). The laser sits at the robot
+origin (``PARAM robot_frontlaser_offset 0.0``).
+
+Events
+------
+* ``Odometry``: the increment between consecutive raw ODOM poses, ``between(prev, cur)`` in the previous robot
+  frame, stamped with the later message's time. The log's ``tv`` and ``rv`` fields are all zero, so no twist
+  is given.
+* ``LaserScan``: each FLASER: 180 beams, first at -90 deg, 1 deg apart (the Freiburg description of this
+  log). CARMEN's SICK driver writes 81.83 m when a beam has no return (2.8 % of the readings; the largest
+  other reading is 26.4 m); readings at or above 81.83 m become ``inf`` and ``range_max`` is 81.83 m.
+* Stamps that go backwards: 631 FLASER and 602 ODOM messages are stamped earlier than the message before them
+  in the file, by up to 0.90 s. Both streams are ordered by stamp (a stable sort, so equal stamps keep file
+  order) and the odometry increments are taken between consecutive poses in that order: the odometry pose
+  handed to a filter at time t is then the logged pose with the latest stamp <= t, and every scan is used at
+  the time the relations give it. A step back of more than 1 s is still an error.
+
+Reference trajectory (a SLAM reference, not ground truth)
+---------------------------------------------------------
+The 910 corrected FLASER poses of ``intel.gfs.log``, each matched to the ``intel.clf`` FLASER whose
+``logger_timestamp`` is nearest (every match within 5 ms, one to one), stamped with that scan's
+``ipc_timestamp`` and ordered by it; ``truth_label = "SLAM reference"``. Events are trimmed to its time span
+(32.9 s to 2683.8 s of the log). The initial belief is the first reference pose with standard deviations
+0.1 m and 0.05 rad: the reference is itself an estimate, and this is of the order of its own error; the
+value is not tuned on any filter result.
+
+Primary metric: the relations of Kuemmerle et al. (``Dataset.relations``): every relation time is checked to
+be the ``ipc_timestamp`` of a FLASER of ``intel.clf`` (all 2984 are; all lie inside the reference span).
+
+Map
+---
+An occupancy grid built from the reference: for each of the 910 corrected scans, every beam with a return
+adds the log-odds of a hit, log(0.7/0.3), to its end cell and of a miss, log(0.4/0.6), to every cell a
+Bresenham line crosses from the laser cell to it (the inverse sensor model of occupancy-grid mapping,
+S. Thrun, W. Burgard, D. Fox, "Probabilistic Robotics", MIT Press 2005, ch. 9); no-return beams add
+nothing. Cells never crossed are unknown (-1); the others hold p = 1 / (1 + exp(-l)) with ROS thresholds
+(occupied above 0.65, free below 0.196). Default cell 0.05 m. Built once per (file, size, mtime, resolution).
+
+Map lines (for ``ekf_lines``): a Hough transform of the occupied cells (1 deg x one cell), taken greedily:
+at the strongest bin, the cells within one cell of its line are fitted by total least squares, the cells
+within one cell of the fitted line are split into runs wherever two neighbours lie more than 0.3 m apart,
+each run at least 0.5 m long becomes a segment, and all those cells leave the accumulator; this stops when
+the strongest bin holds fewer cells than a 0.5 m diagonal wall. :func:`extract_map_lines` returns the counts
+(stored in ``metadata["map"]``).
+
+Nominal noise (``SensorSpec``)
+------------------------------
+No official values exist. ``laser_sigma_m`` = 0.05 m: GMapping's default ``sigma`` (the endpoint-matching
+standard deviation, ROS ``gmapping`` parameter ``~sigma``), the model with which the reference itself was
+computed. The odometry noise is derived from the reference, never from filter results: for each pair of
+consecutive reference scans, u = between(odometry at scan i, odometry at scan i+1) from the raw log's FLASER
+odometry fields, z = the same between the reference poses, e = between(u, z); with d = |u_xy| and
+a = |u_theta|, the method-of-moments fit of the model of :func:`locbench.filters._motion.increment_variances`
+gives sigma_xy^2 = sum((e_x^2 + e_y^2) / 2) / sum(d) and (sigma_theta_m^2, sigma_theta_rad^2) as the
+non-negative least-squares fit of e_theta^2 ~ sigma_theta_m^2 d + sigma_theta_rad^2 a. The reference's own
+error enters these values (an upper bound on the odometry noise); :func:`derive_odometry_noise` returns them.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+import numpy.typing as npt
+from numba import njit
+from scipy.optimize import nnls
+
+from locbench.datasets.base import (
+    Dataset,
+    Gaussian2,
+    LineMap,
+    OccupancyGrid,
+    Relations,
+    SensorSpec,
+    Trajectory2D,
+    WorldMap,
+    sort_events,
+)
+from locbench.datasets.recorded.base import RecordedDataset
+from locbench.datasets.recorded.carmen import CarmenLog, read_carmen
+from locbench.datasets.recorded.files import RecordedDataError, RemoteFile, locate, read_table
+from locbench.errors import ConfigError
+from locbench.events import Event, LaserScan, Odometry
+from locbench.geometry import between, wrap_angle
+
+FloatArray = npt.NDArray[np.float64]
+logger = logging.getLogger(__name__)
+
+FOLDER = "freiburg_slam_benchmark"
+_MOLA = "https://github.com/MOLAorg/mola_test_datasets/raw/13a2ed141116bc654e14ffca1d88fb740b3d1253/datasets/radish"
+_XF = "https://raw.githubusercontent.com/xiaofeng419/SLAM-2D-LIDAR-SCAN/d469252f5b33e574bd239ad2625779497ac1d4cc/DataSet/RawData"
+
+CLF = RemoteFile(
+    f"{FOLDER}/intel.clf",
+    sha256="8db0ad6231b48bad4118e6a2dc78e83213b2c306be3b4ed80a90969891abfe7b",
+    url=f"{_MOLA}/intel.clf.bz2",
+    download_sha256="d9ce4addefc9405d5e78fd883d2214766552537d262009f8e6f0137885f9f72a",
+    decompress="bz2",
+)
+GFS = RemoteFile(
+    f"{FOLDER}/intel.gfs.log",
+    sha256="b066a0e3c62e69901540895017871835169d13c56a4cbb78f42599cf3563484f",
+    url=f"{_XF}/intel.gfs.log",
+)
+RELATIONS = RemoteFile(
+    f"{FOLDER}/intel.relations",
+    sha256="330378f153eeae652d6756c1746f335801f66c3e097d90611548e6c4f593c359",
+    url=f"{_XF}/intel.relations",
+)
+
+#: CARMEN's no-return reading of this log's SICK laser, m.
+NO_RETURN_M = 81.83
+#: Beam geometry of the Intel FLASER messages: 180 beams, first at -90 deg, 1 deg apart.
+ANGLE_MIN_RAD = -math.pi / 2
+ANGLE_INCREMENT_RAD = math.pi / 180
+#: Largest tolerated step back of a stream's stamps, s (the log's worst is 0.90 s).
+MAX_BACKSTEP_S = 1.0
+#: Largest |logger time difference| between a reference scan and its raw scan, s (SOURCES.md).
+MATCH_TOLERANCE_S = 0.005
+#: GMapping's default endpoint-matching sigma, m (ROS gmapping ``~sigma``).
+LASER_SIGMA_M = 0.05
+#: Standard deviation of the initial belief around the first reference pose (x, y m; theta rad).
+INITIAL_SIGMA = (0.1, 0.1, 0.05)
+#: Inverse sensor model of the grid build (Probabilistic Robotics ch. 9).
+P_HIT, P_MISS = 0.7, 0.4
+
+
+@dataclass(frozen=True, kw_only=True)
+class IntelParams:
+    """Parameters of ``intel``.
+
+    Attributes
+    ----------
+    root : str
+        Folder that holds ``freiburg_slam_benchmark/`` (empty: ``$LOCBENCH_DATA``, then the download cache).
+    map_resolution_m : float
+        Cell side of the occupancy grid built from the reference, m.
+    """
+
+    root: str = ""
+    map_resolution_m: float = 0.05
+
+
+# --- occupancy grid --------------------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def _accumulate(
+    logodds: npt.NDArray[np.float64],
+    touched: npt.NDArray[np.bool_],
+    c0: npt.NDArray[np.int64],
+    r0: npt.NDArray[np.int64],
+    c1: npt.NDArray[np.int64],
+    r1: npt.NDArray[np.int64],
+    l_hit: float,
+    l_miss: float,
+) -> None:  # pragma: no cover - compiled
+    for b in range(c0.shape[0]):
+        x, y, x1, y1 = c0[b], r0[b], c1[b], r1[b]
+        dx = abs(x1 - x)
+        dy = -abs(y1 - y)
+        sx = 1 if x < x1 else -1
+        sy = 1 if y < y1 else -1
+        err = dx + dy
+        while x != x1 or y != y1:
+            logodds[y, x] += l_miss
+            touched[y, x] = True
+            e2 = 2 * err
+            if e2 >= dy:
+                err += dy
+                x += sx
+            if e2 <= dx:
+                err += dx
+                y += sy
+        logodds[y1, x1] += l_hit
+        touched[y1, x1] = True
+
+
+def build_occupancy_grid(
+    poses: npt.ArrayLike,
+    ranges: npt.ArrayLike,
+    angles: npt.ArrayLike,
+    resolution_m: float,
+    max_range_m: float = NO_RETURN_M,
+    margin_m: float = 1.0,
+) -> OccupancyGrid:
+    """Occupancy grid of scans taken at known poses, by log-odds ray casting (see the module docstring).
+
+    Parameters
+    ----------
+    poses : array-like, shape (n, 3)
+        Laser poses (x m, y m, theta rad), world frame.
+    ranges : array-like, shape (n, B)
+        Ranges, m; values >= ``max_range_m`` or non-finite are no-returns and add nothing.
+    angles : array-like, shape (B,)
+        Beam bearings in the laser frame, rad.
+    resolution_m : float
+        Cell side, m.
+    max_range_m : float
+        No-return reading, m.
+    margin_m : float
+        Unknown border around the scans' extent, m.
+
+    Returns
+    -------
+    OccupancyGrid
+        Probabilities in [0, 1], -1 for never-observed cells; origin at the lower-left corner.
+    """
+    if not resolution_m > 0:
+        raise ConfigError(f"map_resolution_m must be > 0 m, got {resolution_m}")
+    P = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    R = np.asarray(ranges, dtype=np.float64)
+    a = np.asarray(angles, dtype=np.float64)
+    hit = np.isfinite(R) & (max_range_m > R)
+    bearing = P[:, 2:3] + a[None, :]
+    ex = (P[:, 0:1] + R * np.cos(bearing))[hit]
+    ey = (P[:, 1:2] + R * np.sin(bearing))[hit]
+    sx = np.broadcast_to(P[:, 0:1], R.shape)[hit]
+    sy = np.broadcast_to(P[:, 1:2], R.shape)[hit]
+    x_lo = math.floor((min(ex.min(initial=np.inf), P[:, 0].min()) - margin_m) / resolution_m) * resolution_m
+    y_lo = math.floor((min(ey.min(initial=np.inf), P[:, 1].min()) - margin_m) / resolution_m) * resolution_m
+    x_hi = max(ex.max(initial=-np.inf), P[:, 0].max()) + margin_m
+    y_hi = max(ey.max(initial=-np.inf), P[:, 1].max()) + margin_m
+    cols = math.ceil((x_hi - x_lo) / resolution_m)
+    rows = math.ceil((y_hi - y_lo) / resolution_m)
+    logodds = np.zeros((rows, cols))
+    touched = np.zeros((rows, cols), dtype=np.bool_)
+
+    def cell(v: FloatArray, lo: float) -> npt.NDArray[np.int64]:
+        return np.floor((v - lo) / resolution_m).astype(np.int64)
+
+    l_hit = math.log(P_HIT / (1 - P_HIT))
+    l_miss = math.log(P_MISS / (1 - P_MISS))
+    _accumulate(logodds, touched, cell(sx, x_lo), cell(sy, y_lo), cell(ex, x_lo), cell(ey, y_lo), l_hit, l_miss)
+    occ = np.where(touched, 1.0 / (1.0 + np.exp(-logodds)), -1.0)
+    return OccupancyGrid(occ, float(resolution_m), (float(x_lo), float(y_lo), 0.0))
+
+
+# --- map lines -------------------------------------------------------------------------------------------
+
+
+def extract_map_lines(
+    grid: OccupancyGrid,
+    *,
+    min_length_m: float = 0.5,
+    max_gap_m: float = 0.3,
+    angle_step_deg: float = 1.0,
+) -> tuple[LineMap, dict[str, float]]:
+    """Line segments along the occupied cells of a grid by greedy Hough voting (see the module docstring).
+
+    Parameters
+    ----------
+    grid : OccupancyGrid
+        The map.
+    min_length_m : float
+        Shortest segment kept, m.
+    max_gap_m : float
+        Largest gap between neighbouring cells of one segment, m.
+    angle_step_deg : float
+        Angular bin of the Hough accumulator, deg; the distance bin is one cell.
+
+    Returns
+    -------
+    LineMap
+        Segments (x1, y1, x2, y2), world frame, m.
+    dict
+        ``occupied_cells``, ``cells_on_lines`` (cells within one cell of a kept segment's line, in its runs),
+        ``segments``, ``total_length_m``.
+    """
+    res = grid.resolution
+    cells = np.argwhere(grid.occupied())
+    pts = grid.cell_centers(cells)
+    n = pts.shape[0]
+    ang = np.deg2rad(np.arange(0.0, 180.0, angle_step_deg))
+    na = ang.shape[0]
+    normals = np.stack([np.cos(ang), np.sin(ang)], axis=1)
+    rho = pts @ normals.T  # (n, na)
+    rho_lo = float(rho.min(initial=0.0)) - res
+    bins = np.floor((rho - rho_lo) / res).astype(np.int64)
+    nb = int(bins.max(initial=0)) + 2
+    flat = bins + (np.arange(na, dtype=np.int64) * nb)[None, :]
+    acc = np.bincount(flat.ravel(), minlength=na * nb).astype(np.int64)
+    alive = np.ones(n, dtype=bool)
+    min_votes = max(2, math.floor(min_length_m / (res * math.sqrt(2.0))))
+    tol = res
+    segments: list[tuple[float, float, float, float]] = []
+    on_lines = 0
+    while True:
+        k = int(np.argmax(acc))
+        if acc[k] < min_votes:
+            break
+        ia, ib = divmod(k, nb)
+        idx = np.flatnonzero(alive)
+        voters = idx[bins[idx, ia] == ib]
+        line_rho = rho_lo + (ib + 0.5) * res
+        near = idx[np.abs(rho[idx, ia] - line_rho) <= tol]
+        nrm, c = normals[ia], pts[near].mean(axis=0)
+        if near.shape[0] >= 2:  # total least squares: the normal is the direction of least spread
+            d = pts[near] - c
+            _, vecs = np.linalg.eigh(d.T @ d)
+            nrm = vecs[:, 0]
+        sel = idx[np.abs((pts[idx] - c) @ nrm) <= tol]
+        tangent = np.array([-nrm[1], nrm[0]])
+        s = np.sort((pts[sel] - c) @ tangent)
+        if s.size:
+            cut = np.flatnonzero(np.diff(s) > max_gap_m)
+            starts = np.r_[0, cut + 1]
+            ends = np.r_[cut, s.size - 1]
+            for i0, i1 in zip(starts, ends, strict=True):
+                lo, hi = s[i0] - 0.5 * res, s[i1] + 0.5 * res
+                if hi - lo >= min_length_m and i1 - i0 + 1 >= min_votes:
+                    p1, p2 = c + lo * tangent, c + hi * tangent
+                    segments.append((float(p1[0]), float(p1[1]), float(p2[0]), float(p2[1])))
+                    on_lines += int(i1 - i0 + 1)
+        gone = np.union1d(voters, sel)
+        alive[gone] = False
+        acc -= np.bincount(flat[gone].ravel(), minlength=na * nb)
+    seg = np.array(segments, dtype=np.float64).reshape(-1, 4)
+    lm = LineMap(seg)
+    stats = {
+        "occupied_cells": float(n),
+        "cells_on_lines": float(on_lines),
+        "segments": float(len(lm)),
+        "total_length_m": float(lm.lengths().sum()),
+    }
+    return lm, stats
+
+
+# --- reference, relations, noise ---------------------------------------------------------------------------
+
+
+def match_reference(clf: CarmenLog, gfs: CarmenLog) -> npt.NDArray[np.int64]:
+    """Index into ``clf.flaser`` of each FLASER of ``gfs``, matched by nearest ``logger_timestamp``.
+
+    Raises
+    ------
+    RecordedDataError
+        A reference scan has no raw scan within 5 ms, or two reference scans match the same raw scan.
+    """
+    lg = clf.flaser.logger_t
+    order = np.argsort(lg, kind="stable")
+    s = lg[order]
+    q = gfs.flaser.logger_t
+    if s.size == 0:
+        raise RecordedDataError(clf.path, "no FLASER messages (expected the raw scans of the reference)")
+    j = np.clip(np.searchsorted(s, q), 1, max(s.size - 1, 1))
+    left = np.clip(j - 1, 0, s.size - 1)
+    right = np.clip(j, 0, s.size - 1)
+    pick = np.where(np.abs(s[right] - q) < np.abs(s[left] - q), right, left)
+    err = np.abs(s[pick] - q)
+    bad = np.flatnonzero(err > MATCH_TOLERANCE_S)
+    if bad.size:
+        k = int(bad[0])
+        raise RecordedDataError(
+            gfs.path,
+            f"FLASER logger_timestamp {q[k]:.6f} has no FLASER in {clf.path.name} within "
+            f"{MATCH_TOLERANCE_S * 1e3:g} ms (nearest is {err[k] * 1e3:.1f} ms away)",
+            int(gfs.flaser.lines[k]),
+        )
+    idx = order[pick]
+    uniq, first = np.unique(idx, return_index=True)
+    if uniq.size != idx.size:
+        dup = np.setdiff1d(np.arange(idx.size), first)[0]
+        raise RecordedDataError(
+            gfs.path, "FLASER matches a raw scan already matched by another reference scan", int(gfs.flaser.lines[dup])
+        )
+    return idx.astype(np.int64)
+
+
+def read_relations(path: str | os.PathLike[str], scan_times: npt.ArrayLike) -> Relations:
+    """Read a ``.relations`` file and check every time against the raw log's FLASER ``ipc_timestamp``.
+
+    Parameters
+    ----------
+    path : path-like
+        ``t1 t2 dx dy dz droll dpitch dyaw`` per line (s, m, rad).
+    scan_times : array-like
+        The FLASER ``ipc_timestamp`` values of the raw log, s.
+
+    Raises
+    ------
+    RecordedDataError
+        A malformed line, or a time that is no FLASER time (naming the line).
+    """
+    cols = ("t1 s", "t2 s", "dx m", "dy m", "dz m", "droll rad", "dpitch rad", "dyaw rad")
+    tab = read_table(path, cols)
+    known = np.unique(np.asarray(scan_times, dtype=np.float64))
+    for c, name in ((0, "t1"), (1, "t2")):
+        t = tab.column(c)
+        pos = np.clip(np.searchsorted(known, t), 0, max(known.size - 1, 0))
+        miss = np.flatnonzero(known[pos] != t) if known.size else np.arange(t.size)
+        if miss.size:
+            r = int(miss[0])
+            raise tab.fail(r, f"{name} = {t[r]:.6f} is not the ipc_timestamp of any FLASER of the log (expected one)")
+    delta = np.column_stack([tab.column(2), tab.column(3), wrap_angle(tab.column(7))])
+    return Relations(tab.column(0).copy(), tab.column(1).copy(), delta)
+
+
+def derive_odometry_noise(odom_poses: npt.ArrayLike, ref_poses: npt.ArrayLike) -> tuple[float, float, float]:
+    """Per-distance odometry noise from consecutive reference poses (method of moments; module docstring).
+
+    Parameters
+    ----------
+    odom_poses, ref_poses : array-like, shape (n, 3)
+        Raw odometry and reference poses at the same n instants, in time order.
+
+    Returns
+    -------
+    sigma_xy_per_m, sigma_theta_per_m, sigma_theta_per_rad : float
+        m / sqrt(m), rad / sqrt(m), rad / sqrt(rad).
+    """
+    o = np.asarray(odom_poses, dtype=np.float64)
+    r = np.asarray(ref_poses, dtype=np.float64)
+    u = between(o[:-1], o[1:])
+    z = between(r[:-1], r[1:])
+    e = between(u, z)
+    d = np.hypot(u[:, 0], u[:, 1])
+    a = np.abs(u[:, 2])
+    sxy2 = float(np.sum(0.5 * (e[:, 0] ** 2 + e[:, 1] ** 2)) / max(float(np.sum(d)), 1e-12))
+    coef, _ = nnls(np.column_stack([d, a]), e[:, 2] ** 2)
+    return math.sqrt(sxy2), math.sqrt(float(coef[0])), math.sqrt(float(coef[1]))
+
+
+@functools.lru_cache(maxsize=4)
+def _reference_map(gfs_path: str, size: int, mtime_ns: int, resolution_m: float) -> tuple[OccupancyGrid, LineMap, dict]:
+    gfs = read_carmen(gfs_path, max_backstep_s=MAX_BACKSTEP_S, time_checked=("FLASER",))
+    beams = gfs.flaser.ranges.shape[1]
+    angles = ANGLE_MIN_RAD + ANGLE_INCREMENT_RAD * np.arange(beams)
+    grid = build_occupancy_grid(gfs.flaser.pose, gfs.flaser.ranges, angles, resolution_m)
+    grid.occupancy.setflags(write=False)
+    lines, stats = extract_map_lines(grid)
+    lines.segments.setflags(write=False)
+    stats = {**stats, "resolution_m": resolution_m, "rows": float(grid.shape[0]), "cols": float(grid.shape[1])}
+    return grid, lines, stats
+
+
+def reference_map(gfs_path: str | os.PathLike[str], resolution_m: float = 0.05) -> tuple[OccupancyGrid, LineMap, dict]:
+    """The occupancy grid and map lines built from a corrected CARMEN log (cached per file and resolution)."""
+    p = Path(gfs_path)
+    st = p.stat()
+    return _reference_map(str(p.resolve()), st.st_size, st.st_mtime_ns, float(resolution_m))
+
+
+# --- the dataset -----------------------------------------------------------------------------------------
+
+
+def load_intel(
+    folder: str | os.PathLike[str] | None = None, *, map_resolution_m: float = 0.05, verify: bool = True
+) -> Dataset:
+    """The Intel Research Lab dataset from a folder holding ``freiburg_slam_benchmark/`` (see the module docstring).
+
+    Parameters
+    ----------
+    folder : path-like or None
+        The data root (the folder that contains ``freiburg_slam_benchmark/``); None: ``$LOCBENCH_DATA``, then
+        the download cache.
+    map_resolution_m : float
+        Cell side of the occupancy grid, m.
+    verify : bool
+        Check each file's sha256 against the published one (a copy that differs raises a checksum mismatch).
+
+    Raises
+    ------
+    RecordedDataError
+        A missing, corrupt or malformed file (naming the file, the line and what was expected).
+    """
+    root = None if folder is None or str(folder) == "" else folder
+    clf_path = locate(CLF, root, verify=verify)
+    gfs_path = locate(GFS, root, verify=verify)
+    rel_path = locate(RELATIONS, root, verify=verify)
+    return _assemble(clf_path, gfs_path, rel_path, map_resolution_m)
+
+
+def _assemble(clf_path: Path, gfs_path: Path, rel_path: Path, map_resolution_m: float) -> Dataset:
+    clf = read_carmen(clf_path, max_backstep_s=MAX_BACKSTEP_S)
+    gfs = read_carmen(gfs_path, max_backstep_s=MAX_BACKSTEP_S, time_checked=("FLASER",))
+    if clf.flaser.ranges.shape[1] != 180 or gfs.flaser.ranges.shape[1] != 180:
+        raise RecordedDataError(clf_path, f"FLASER has {clf.flaser.ranges.shape[1]} ranges, expected 180 (Intel)")
+    if len(gfs.flaser) < 2:
+        raise RecordedDataError(gfs_path, "fewer than 2 FLASER messages (expected the 910 corrected scans)")
+    match = match_reference(clf, gfs)
+    ref_t_unsorted = clf.flaser.ipc_t[match]
+    order = np.argsort(ref_t_unsorted, kind="stable")
+    ref_t = ref_t_unsorted[order]
+    ref_pose = np.asarray(gfs.flaser.pose)[order]
+    ref_pose = np.column_stack([ref_pose[:, :2], wrap_angle(ref_pose[:, 2])])
+    t0, t1 = float(ref_t[0]), float(ref_t[-1])
+
+    events: list[Event] = []
+    od = clf.odom
+    o_order = np.argsort(od.ipc_t, kind="stable")
+    ot = od.ipc_t[o_order]
+    op = od.pose[o_order]
+    inc = between(op[:-1], op[1:])
+    for k in np.flatnonzero((ot[1:] >= t0) & (ot[1:] <= t1)):
+        events.append(Odometry(float(ot[k + 1]), float(inc[k, 0]), float(inc[k, 1]), float(inc[k, 2])))
+    las = clf.flaser
+    offset = float(clf.params.get("robot_frontlaser_offset", "0.0"))
+    ranges = np.where(las.ranges >= NO_RETURN_M, np.inf, las.ranges)
+    for k in np.flatnonzero((las.ipc_t >= t0) & (las.ipc_t <= t1)):
+        events.append(
+            LaserScan(
+                float(las.ipc_t[k]),
+                ANGLE_MIN_RAD,
+                ANGLE_INCREMENT_RAD,
+                ranges[k].copy(),
+                0.0,
+                NO_RETURN_M,
+                (offset, 0.0, 0.0),
+            )
+        )
+
+    grid, lines, map_stats = reference_map(gfs_path, map_resolution_m)
+    relations = read_relations(rel_path, las.ipc_t)
+    odo_at_ref = np.asarray(las.odom_pose)[match][order]
+    sxy, stm, str_ = derive_odometry_noise(odo_at_ref, ref_pose)
+    sensors = SensorSpec(
+        laser_sigma_m=LASER_SIGMA_M,
+        odometry_sigma_xy_per_m=sxy,
+        odometry_sigma_theta_per_m=stm,
+        odometry_sigma_theta_per_rad=str_,
+    )
+    initial = Gaussian2(ref_pose[0].copy(), np.diag(np.square(INITIAL_SIGMA)))
+    truth = Trajectory2D(ref_t, ref_pose[:, :2].copy(), ref_pose[:, 2].copy())
+    backsteps = {
+        "ODOM": int(np.sum(np.diff(od.ipc_t) < 0)),
+        "FLASER": int(np.sum(np.diff(las.ipc_t) < 0)),
+    }
+    metadata: dict[str, Any] = {
+        "source": "Freiburg SLAM benchmark, Intel Research Lab (Kuemmerle et al. 2009; Radish)",
+        "files": [str(clf_path), str(gfs_path), str(rel_path)],
+        "odom_messages": len(od),
+        "flaser_messages": len(las),
+        "skipped_messages": dict(clf.skipped),
+        "stamps_back_in_file_order": backsteps,
+        "reference_scans": len(gfs.flaser),
+        "relations": len(relations),
+        "map": map_stats,
+        "odometry_noise_derived": {
+            "sigma_xy_per_m": sxy,
+            "sigma_theta_per_m": stm,
+            "sigma_theta_per_rad": str_,
+            "pairs": len(gfs.flaser) - 1,
+        },
+    }
+    return Dataset(
+        id="intel",
+        params={"map_resolution_m": map_resolution_m},
+        events=sort_events(events),
+        ground_truth=truth,
+        initial=initial,
+        world=WorldMap(occupancy=grid, lines=lines),
+        sensors=sensors,
+        metadata=metadata,
+        relations=relations,
+        truth_label="SLAM reference",
+    )
+
+
+class IntelDataset(RecordedDataset):
+    """Intel Research Lab (Freiburg SLAM benchmark): raw CARMEN log, GMapping reference, Kuemmerle relations."""
+
+    Params: ClassVar[type] = IntelParams
+    version: ClassVar[int] = 1
+    description: ClassVar[str] = (
+        "Intel Research Lab laser log (Freiburg SLAM benchmark): relation error; GMapping poses as SLAM reference"
+    )
+    folder: ClassVar[str] = FOLDER
+
+    @classmethod
+    def files(cls, params: Any) -> list[RemoteFile]:
+        """``intel.clf``, ``intel.gfs.log`` and ``intel.relations`` with their checksums and downloads."""
+        return [CLF, GFS, RELATIONS]
+
+    def paths(self, params: Any) -> dict[str, Path]:
+        """Verified local paths, looking in ``params.root`` first when it is set."""
+        root = params.root or None
+        return {spec.relpath: locate(spec, root) for spec in self.files(params)}
+
+    def build(self, params: IntelParams, rng: np.random.Generator) -> Dataset:
+        """The dataset (the recording does not depend on ``rng``)."""
+        if not params.map_resolution_m > 0:
+            raise ConfigError(f"parameter 'map_resolution_m' must be > 0 m, got {params.map_resolution_m}")
+        p = self.paths(params)
+        return _assemble(p[CLF.relpath], p[GFS.relpath], p[RELATIONS.relpath], params.map_resolution_m)
