@@ -1,0 +1,922 @@
+"""The UTIAS Multi-Robot Cooperative Localization and Mapping dataset (MRCLAM): 5 robots, 15 landmarks, Vicon truth.
+
+Source
+------
+K. Y. K. Leung, Y. Halpern, T. D. Barfoot, H. H. T. Liu, "The UTIAS Multi-Robot Cooperative Localization and
+Mapping Dataset", Int. J. Robotics Research 30(8):969-974, 2011. Official download:
+http://asrl.utias.utoronto.ca/datasets/mrclam/ (``MRCLAM_Dataset1.zip`` .. ``MRCLAM_Dataset9.zip``). Five iRobot
+Create robots (subjects 1-5) drive for 15-30 minutes in a 15 m x 8 m hall among 15 cylindrical landmarks
+(subjects 6-20) carrying barcodes; each robot's monocular camera reports range and bearing to the barcodes it
+reads. A Vicon system gives every robot's pose (about 1 mm) and the landmarks' surveyed positions.
+
+Files and checksums
+-------------------
+The loader reads ``$LOCBENCH_DATA/utias_mrclam/MRCLAM_DatasetN/`` (N = 1..9). Only Dataset 6 is in the shared
+data folder and only its 17 files have known sha256 (SOURCES.md); they are verified file by file, wherever the
+file comes from. For Datasets 1-5 and 7-9 NOTHING is verified: their files are read as found. The download
+(:meth:`MrclamDataset.fetch`) takes the official zip with pooch and unpacks it into the cache (``pooch.Unzip``);
+the zip's own hash is unknown, so the download itself is not verified, but after extraction every Dataset 6
+file is checked against its sha256 (a mismatch is removed from the cache and raised); other datasets'
+extracted files stay unverified.
+
+Format
+------
+Whitespace/tab separated text, 4 ``#`` header lines, CRLF line ends (read with
+:func:`~locbench.datasets.recorded.files.read_table`):
+
+==========================  ==========================================================================
+file                        columns
+==========================  ==========================================================================
+``Barcodes.dat``            subject #, barcode #
+``Landmark_Groundtruth``    subject #, x (m), y (m), x std-dev (m), y std-dev (m)
+``RobotR_Groundtruth.dat``  time (s), x (m), y (m), heading (rad): Vicon, about 100 Hz
+``RobotR_Odometry.dat``     time (s), forward speed v (m/s), turn rate omega (rad/s): the velocity commands
+``RobotR_Measurement.dat``  time (s), BARCODE # (despite the header's "Subject #"), range (m), bearing (rad)
+==========================  ==========================================================================
+
+Time is Unix seconds (NTP-synchronised between robots and Vicon); it is kept as is (no shift). The world frame is
+the Vicon frame; the robot frame has x forward; bearings are counter-clockwise from x, measured from the robot
+origin (the camera is treated as sitting on it, as the dataset's own measurement model does).
+
+How the dataset is derived
+--------------------------
+* **Time span.** Events are trimmed to the ground truth: the first odometry sample at or after the first Vicon
+  sample starts the run (time t0), and no event lies after the last Vicon sample. The truth starts with its
+  pose at t0 (linearly interpolated between the two Vicon samples around t0, headings unwrapped; at most 10 ms
+  apart) followed by every Vicon sample after t0, so the truth covers every event and its first pose is the
+  pose at the start of the odometry. Sightings before t0 are dropped (nothing moves the filters there).
+* **Odometry.** Sample k = (t_k, v_k, omega_k) is a command held until the next sample (causal zero-order hold):
+  one :class:`~locbench.events.Odometry` at t_{k+1} carries ``v = v_k``, ``omega = omega_k``,
+  ``dt = t_{k+1} - t_k`` and the exact constant-twist increment in the frame of the pose at t_k, with
+  a = omega dt::
+
+      dx = v dt sin(a) / a,   dy = v dt (1 - cos a) / a,   dtheta = a      (a -> 0: dx = v dt, dy = 0)
+
+  (:func:`twist_increment`, through ``sinc`` so it is exact and stable at a = 0). The exact arc is chosen over a
+  first-order step because it is what the twist says happened; at 100 Hz the two differ by far less than the
+  twist's own error. Samples with a repeated time stamp (dt = 0, 10 in Robot 4's file) move nothing and give
+  no event.
+* **Observations.** The barcode column maps to a subject through ``Barcodes.dat``. Subjects 6-20 (landmarks)
+  become :class:`~locbench.events.LandmarkObservations` with ``ids`` = subject numbers, one event per time
+  stamp (all rows of one camera frame together). Sightings of the other robots (subjects 1-5) are NOT given to
+  the filters: they are counted in ``metadata["robot_sightings"]`` and returned in full by
+  :func:`read_robot_sightings` (a side array: time, subject, range, bearing). Barcodes missing from
+  ``Barcodes.dat`` (misreads, e.g. 43, 34 and 50 in Dataset 6) are dropped and counted per barcode in
+  ``metadata["unknown_barcodes"]``.
+* **Map.** ``Landmark_Groundtruth.dat``: ids = subjects, positions and their Vicon standard deviations
+  (:attr:`~locbench.datasets.base.Landmarks.std_xy`).
+* **Initial belief.** Mean = the truth pose at t0. Covariance diag(0.01 m, 0.01 m, 0.02 rad)^2
+  (:data:`INITIAL_SIGMA_XY_M`, :data:`INITIAL_SIGMA_THETA_RAD`): ten times Vicon's ~1 mm for position, and a
+  heading margin that covers the offsets between the Vicon body frame and the camera's axis seen in Dataset 6
+  (per-robot median bearing residual up to 0.014 rad, robot 4). The filters thus start "known", as on
+  ``room``, without being told a sub-millimetre certainty the robot frame does not have.
+* **Waypoints.** Every ``waypoint_spacing_m`` (default 5 m) of distance travelled along the truth, waypoint j is
+  the first Vicon sample at which the travelled distance reaches j * spacing, marked at the truth position
+  at that time. The distance is measured along the truth thinned to points at least
+  :data:`PATH_STEP_M` = 5 cm apart, because the raw 100 Hz Vicon jitter (about 1 mm per sample against
+  0.7 mm of travel) inflates the raw path length by 5-10 %.
+
+Nominal noise: how the frozen constants were derived
+----------------------------------------------------
+The dataset publishes no noise figures. The constants below (:data:`TWIST_SIGMA_V_MPS` ...) were computed ONCE
+by :func:`derive_nominal_noise` on Dataset 6, robots 1-5 (pooled), against the Vicon truth and the surveyed
+map, and frozen here; ``tests/test_recorded_mrclam.py`` recomputes them from the shared files and checks they
+agree within 10 %. They were not chosen by looking at any filter's error. The procedure (robust std
+s(e) = 1.4826 median |e|, taken about zero so that a bias counts as noise, since the filters model none):
+
+1. **Camera.** For every landmark sighting inside the truth span: the truth pose interpolated at its time
+   (linear, heading unwrapped), the predicted range and bearing to the surveyed landmark, the residuals
+   e_r and e_b (wrapped). sigma_range = s(e_r), sigma_bearing = s(e_b).
+2. **Twist.** The truth span is cut into consecutive windows of T = :data:`NOISE_WINDOW_S` = 1 s (windows that
+   overlap a Vicon or odometry gap longer than 0.2 s are skipped). In each window, the Vicon displacement
+   (expressed in the frame of the Vicon pose at the window's start: forward e_f, lateral) and heading change
+   are compared with the exact integration of the commanded twist (in its own start frame). If the twist had
+   white noise sigma per sample, the accumulated error over the window would have variance
+   sigma^2 sum(dt_k^2) = sigma^2 T dt_eff, with dt_eff = sum(dt^2)/sum(dt) over the sample intervals of at most
+   0.2 s (those of the windows kept); hence
+   sigma_v = s(e_f) / sqrt(T dt_eff) and sigma_omega = s(e_theta) / sqrt(T dt_eff). The real error is
+   correlated in time, so this is the white noise that gives the right spread over 1 s (about the time between
+   landmark sightings), not a per-sample truth.
+3. **Per-metre fallback** (``odometry_sigma_*``, for filters that model increment noise per distance): from the
+   same windows, with D the commanded distance and A the commanded turn in a window:
+   sigma_xy_per_m = sqrt((s(e_f/sqrt D)^2 + s(e_lat/sqrt D)^2) / 2) and sigma_theta_per_m = s(e_theta/sqrt D) over
+   windows with D >= 3 cm and A < 0.05 rad (driving straight); sigma_theta_per_rad = s(e_theta/sqrt A) over windows
+   with D < 1 cm and A >= 0.05 rad (turning in place).
+
+Known caveats: the camera has outliers (misread barcodes mapped to a wrong landmark, reflections) that a robust
+std ignores; a filter that fuses every detection without a gate sees them at full weight.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import os
+import re
+import shutil
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+import numpy.typing as npt
+
+from locbench.datasets.base import (
+    Dataset,
+    Gaussian2,
+    Landmarks,
+    SensorSpec,
+    Trajectory2D,
+    Waypoints,
+    WorldMap,
+    sort_events,
+)
+from locbench.datasets.recorded.base import RecordedDataset
+from locbench.datasets.recorded.files import (
+    RecordedDataError,
+    RemoteFile,
+    Table,
+    cache_root,
+    locate,
+    read_table,
+    verify_sha256,
+)
+from locbench.errors import ConfigError, DependencyNotInstalled
+from locbench.events import Event, LandmarkObservations, Odometry
+from locbench.geometry import wrap_angle
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+#: Sub-folder of the data root.
+FOLDER = "utias_mrclam"
+#: Official zip of dataset N.
+ZIP_URL = "http://asrl.utias.utoronto.ca/datasets/mrclam/MRCLAM_Dataset{n}.zip"
+#: Dataset numbers and robot numbers.
+DATASET_NUMBERS = tuple(range(1, 10))
+ROBOTS = tuple(range(1, 6))
+#: Subjects that are robots; landmarks are subjects 6-20.
+ROBOT_SUBJECTS = frozenset(ROBOTS)
+FIRST_LANDMARK_SUBJECT = 6
+CITATION = (
+    'K. Y. K. Leung, Y. Halpern, T. D. Barfoot, H. H. T. Liu, "The UTIAS Multi-Robot Cooperative Localization '
+    'and Mapping Dataset", Int. J. Robotics Research 30(8):969-974, 2011'
+)
+
+#: sha256 of Dataset 6's files (SOURCES.md); the other datasets' are unknown.
+DATASET6_SHA256: dict[str, str] = {
+    "Barcodes.dat": "6b418dfacabb6556e0bf3a4e90efeca89775fae1e73521d7baeb8844828186eb",
+    "Landmark_Groundtruth.dat": "ca586b164e66caf642895f735c66fe4195ceb963ba7dce303b3aa0307072795d",
+    "Robot1_Groundtruth.dat": "a5922ef6a548ed5a9ca656817f0ac23ab1226a4725e296068abf51df7133906e",
+    "Robot1_Measurement.dat": "0ad9f9baf5bf45746363c3a7653c2292f75e65ef851933c79b5a22622131a5b3",
+    "Robot1_Odometry.dat": "11aff992a8d6825afb4a1fd0ba0f00c49cdd341acabe590dce73545607f1d7d6",
+    "Robot2_Groundtruth.dat": "94a6b85947715d1a4d26428ea0eb5244f267b72198b3cf9f62df13b2a3282e24",
+    "Robot2_Measurement.dat": "658f259bf510a46b20b3f6b011b4ec3fb94abf4cb151e4b70157bcf59976ef9c",
+    "Robot2_Odometry.dat": "a99435568f62a9f371c2287730a1d83d94d75bbf1351bb3d470ed70e60b1cbfe",
+    "Robot3_Groundtruth.dat": "9de1eceb29374b0e805215e81fa93677ff47db28767f5c9e1f05dceb526904b4",
+    "Robot3_Measurement.dat": "7a09702f5f6b9eefc903eb626c55413c606b3c018a85d775d43c551754eeb11d",
+    "Robot3_Odometry.dat": "a08e5b6a5dd208c8c63ab972022b9a609865628a219b04d0addbb939ea77bda3",
+    "Robot4_Groundtruth.dat": "285bc8ce97ed13f8f6096d99ac42c1af6a2a6f598f21e58ca9f7fd51a54b39d4",
+    "Robot4_Measurement.dat": "a9669363963cfdf57e1ad4d2f6af39ea8cec0269c69e3d02260758af5cddad89",
+    "Robot4_Odometry.dat": "c7027d13fdc31ed9686097fcc7fbaf19b95935a7970e7ab433fdc1a1d119e97f",
+    "Robot5_Groundtruth.dat": "121bab6a92544864dd39138eaf3f3bc273d0342e3cdd0a745d0d2019c0b5757e",
+    "Robot5_Measurement.dat": "9cfb9b8872395b40bb64b0e194b98e7b480711a379a4005674850f83cdebd151",
+    "Robot5_Odometry.dat": "d6e9fab30a0da8f73917a2fabf71360387a42975d42f552f9042496538cb2efe",
+}
+KNOWN_SHA256: dict[int, dict[str, str]] = {6: DATASET6_SHA256}
+
+#: Initial belief standard deviations around the first truth pose (see the module docstring).
+INITIAL_SIGMA_XY_M = 0.01
+INITIAL_SIGMA_THETA_RAD = 0.02
+#: Minimum spacing of the thinned truth used to measure distance travelled, m.
+PATH_STEP_M = 0.05
+#: Default distance between waypoints, m.
+WAYPOINT_SPACING_M = 5.0
+
+# --- the nominal noise: frozen output of derive_nominal_noise(Dataset 6, robots 1-5) -----------------------
+#: Window length of the twist comparison, s.
+NOISE_WINDOW_S = 1.0
+#: Windows that overlap a gap longer than this in the Vicon or odometry stream are skipped, s.
+NOISE_MAX_GAP_S = 0.2
+#: Per-metre fallback: windows with at least this commanded distance count as "moving", m.
+NOISE_MIN_TRAVEL_M = 0.03
+#: ... and less than this commanded turn as "straight", rad.
+NOISE_STRAIGHT_MAX_TURN_RAD = 0.05
+#: Turning in place: less than this distance, m, and at least NOISE_STRAIGHT_MAX_TURN_RAD of turn.
+NOISE_IN_PLACE_MAX_TRAVEL_M = 0.01
+
+# derive_nominal_noise on Dataset 6 gave (pooled over robots 1-5): 15383 landmark sightings (median residual
+# +0.012 m, -0.0014 rad), 3511 one-second windows (1969 straight, 118 turning in place), dt_eff = 0.0185 s.
+TWIST_SIGMA_V_MPS = 0.0542
+TWIST_SIGMA_OMEGA_RADPS = 0.115
+ODOMETRY_SIGMA_XY_PER_M = 0.0215
+ODOMETRY_SIGMA_THETA_PER_M = 0.0331
+ODOMETRY_SIGMA_THETA_PER_RAD = 0.182
+LANDMARK_SIGMA_RANGE_M = 0.139
+LANDMARK_SIGMA_BEARING_RAD = 0.00841
+
+_GT_COLUMNS = ("time [s]", "x [m]", "y [m]", "heading [rad]")
+_ODO_COLUMNS = ("time [s]", "forward velocity [m/s]", "angular velocity [rad/s]")
+_MEAS_COLUMNS = ("time [s]", "barcode #", "range [m]", "bearing [rad]")
+_BARCODE_COLUMNS = ("subject #", "barcode #")
+_LANDMARK_COLUMNS = ("subject #", "x [m]", "y [m]", "x std-dev [m]", "y std-dev [m]")
+
+
+def nominal_sensors() -> SensorSpec:
+    """The frozen nominal noise of MRCLAM (derived on Dataset 6; see the module docstring)."""
+    return SensorSpec(
+        twist_sigma_v_mps=TWIST_SIGMA_V_MPS,
+        twist_sigma_omega_radps=TWIST_SIGMA_OMEGA_RADPS,
+        odometry_sigma_xy_per_m=ODOMETRY_SIGMA_XY_PER_M,
+        odometry_sigma_theta_per_m=ODOMETRY_SIGMA_THETA_PER_M,
+        odometry_sigma_theta_per_rad=ODOMETRY_SIGMA_THETA_PER_RAD,
+        landmark_sigma_range_m=LANDMARK_SIGMA_RANGE_M,
+        landmark_sigma_bearing_rad=LANDMARK_SIGMA_BEARING_RAD,
+    )
+
+
+# --- file names ------------------------------------------------------------------------------------------
+
+
+def dataset_folder_name(dataset: int) -> str:
+    """``MRCLAM_DatasetN``."""
+    return f"MRCLAM_Dataset{dataset}"
+
+
+def robot_file_names(robot: int) -> dict[str, str]:
+    """The three per-robot files, keyed ``groundtruth``, ``odometry``, ``measurement``."""
+    return {
+        "groundtruth": f"Robot{robot}_Groundtruth.dat",
+        "odometry": f"Robot{robot}_Odometry.dat",
+        "measurement": f"Robot{robot}_Measurement.dat",
+    }
+
+
+def file_names(robot: int) -> dict[str, str]:
+    """Every file one robot's run needs, keyed ``barcodes``, ``landmarks`` and those of :func:`robot_file_names`."""
+    return {"barcodes": "Barcodes.dat", "landmarks": "Landmark_Groundtruth.dat", **robot_file_names(robot)}
+
+
+def _check_numbers(dataset: int, robot: int) -> None:
+    if dataset not in DATASET_NUMBERS:
+        raise ConfigError(f"dataset must be one of {list(DATASET_NUMBERS)}, got {dataset!r}")
+    if robot not in ROBOTS:
+        raise ConfigError(f"robot must be one of {list(ROBOTS)}, got {robot!r}")
+
+
+# --- parsing (cached per path, size and mtime) -----------------------------------------------------------
+
+
+def _cache_key(path: str | os.PathLike[str]) -> tuple[str, int, int]:
+    p = Path(path)
+    try:
+        st = p.stat()
+    except FileNotFoundError:
+        raise RecordedDataError(p, "missing file (expected an MRCLAM .dat text file)") from None
+    return str(p.resolve()), st.st_size, st.st_mtime_ns
+
+
+@functools.lru_cache(maxsize=32)
+def _table_cached(path: str, size: int, mtime_ns: int, columns: tuple[str, ...], ints: tuple[int, ...]) -> Table:
+    return read_table(path, columns, integer_columns=ints)
+
+
+def _table(path: str | os.PathLike[str], columns: tuple[str, ...], ints: tuple[int, ...] = ()) -> Table:
+    return _table_cached(*_cache_key(path), columns, ints)
+
+
+def read_barcodes(path: str | os.PathLike[str]) -> dict[int, int]:
+    """Barcode # -> subject # from ``Barcodes.dat``.
+
+    Raises
+    ------
+    RecordedDataError
+        A malformed line, or a barcode or subject listed twice (naming the line).
+    """
+    tab = _table(path, _BARCODE_COLUMNS, (0, 1))
+    out: dict[int, int] = {}
+    seen_subject: set[int] = set()
+    for k, (s, b) in enumerate(tab.rows):
+        subject, barcode = int(s), int(b)
+        if barcode in out:
+            raise tab.fail(k, f"barcode {barcode} listed twice (expected one subject per barcode)")
+        if subject in seen_subject:
+            raise tab.fail(k, f"subject {subject} listed twice (expected one barcode per subject)")
+        out[barcode] = subject
+        seen_subject.add(subject)
+    if not out:
+        raise RecordedDataError(path, "no barcodes (expected 'subject# barcode#' lines)")
+    return out
+
+
+def read_landmarks(path: str | os.PathLike[str]) -> Landmarks:
+    """The surveyed landmarks of ``Landmark_Groundtruth.dat``: ids = subjects, (x, y) m and their std-dev m."""
+    tab = _table(path, _LANDMARK_COLUMNS, (0,))
+    ids = tab.rows[:, 0].astype(np.int64)
+    for k in range(ids.shape[0]):
+        if ids[k] < FIRST_LANDMARK_SUBJECT:
+            raise tab.fail(k, f"subject {ids[k]} is a robot (expected a landmark subject >= {FIRST_LANDMARK_SUBJECT})")
+        if np.any(tab.rows[k, 3:5] < 0):
+            raise tab.fail(k, "negative standard deviation (expected >= 0)")
+    seen: set[int] = set()
+    for k, i in enumerate(ids.tolist()):
+        if i in seen:
+            raise tab.fail(k, f"landmark {i} listed twice (expected one line per landmark)")
+        seen.add(i)
+    if ids.size == 0:
+        raise RecordedDataError(path, "no landmarks (expected 'subject# x y x_std y_std' lines)")
+    return Landmarks(ids=ids, xy=tab.rows[:, 1:3].copy(), std_xy=tab.rows[:, 3:5].copy())
+
+
+def read_groundtruth(path: str | os.PathLike[str]) -> Trajectory2D:
+    """The Vicon poses of one robot (headings wrapped to (-pi, pi]); time must not go backwards."""
+    tab = _table(path, _GT_COLUMNS)
+    if tab.rows.shape[0] < 2:
+        raise RecordedDataError(path, f"{tab.rows.shape[0]} ground-truth rows (expected at least 2)")
+    tab.check_time_non_decreasing(0, "time [s]")
+    return Trajectory2D(t=tab.rows[:, 0].copy(), xy=tab.rows[:, 1:3].copy(), theta=wrap_angle(tab.rows[:, 3]))
+
+
+def read_odometry(path: str | os.PathLike[str]) -> Table:
+    """The velocity commands (t s, v m/s, omega rad/s); time must not go backwards."""
+    tab = _table(path, _ODO_COLUMNS)
+    if tab.rows.shape[0] < 2:
+        raise RecordedDataError(path, f"{tab.rows.shape[0]} odometry rows (expected at least 2)")
+    tab.check_time_non_decreasing(0, "time [s]")
+    return tab
+
+
+def read_measurements(path: str | os.PathLike[str]) -> Table:
+    """The camera's barcode sightings (t s, barcode #, range m, bearing rad); time must not go backwards."""
+    tab = _table(path, _MEAS_COLUMNS, (1,))
+    tab.check_time_non_decreasing(0, "time [s]")
+    bad = np.flatnonzero(tab.rows[:, 2] < 0)
+    if bad.size:
+        raise tab.fail(int(bad[0]), f"range {tab.rows[bad[0], 2]!r} is negative (expected >= 0 m)")
+    return tab
+
+
+# --- derived quantities -----------------------------------------------------------------------------------
+
+
+def twist_increment(
+    v: npt.ArrayLike, omega: npt.ArrayLike, dt: npt.ArrayLike
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Exact increment of a constant twist held for ``dt``, in the frame of the starting pose.
+
+    Parameters
+    ----------
+    v, omega, dt : array-like
+        Forward speed (m/s), turn rate (rad/s) and duration (s), broadcast together.
+
+    Returns
+    -------
+    dx, dy, dtheta : ndarray
+        (m, m, rad): with a = omega dt, dx = v dt sin(a)/a, dy = v dt (1 - cos a)/a, dtheta = a; written as a
+        chord v dt sinc(a/2) at heading a/2, which is exact and has no 0/0 at a = 0.
+    """
+    vv = np.asarray(v, dtype=np.float64)
+    a = np.asarray(omega, dtype=np.float64) * np.asarray(dt, dtype=np.float64)
+    s = vv * np.asarray(dt, dtype=np.float64)
+    chord = s * np.sinc(a / (2.0 * np.pi))  # np.sinc(x) = sin(pi x) / (pi x): sin(a/2) / (a/2)
+    return chord * np.cos(0.5 * a), chord * np.sin(0.5 * a), a
+
+
+def odometry_events(t: FloatArray, v: FloatArray, omega: FloatArray) -> list[Odometry]:
+    """One :class:`Odometry` per interval between consecutive samples with dt > 0 (zero-order hold of sample k).
+
+    ``t``, ``v``, ``omega`` are the samples (n,) in s, m/s, rad/s; the event of interval (t_k, t_{k+1}] is stamped
+    t_{k+1} and carries (v_k, omega_k, dt) and the exact increment of :func:`twist_increment`.
+    """
+    dt = np.diff(t)
+    keep = np.flatnonzero(dt > 0)
+    dx, dy, dth = twist_increment(v[keep], omega[keep], dt[keep])
+    te = t[keep + 1]
+    return [
+        Odometry(t=float(te[i]), dx=float(dx[i]), dy=float(dy[i]), dtheta=float(dth[i]),
+                 v=float(v[k]), omega=float(omega[k]), dt=float(dt[k]))
+        for i, k in enumerate(keep.tolist())
+    ]  # fmt: skip
+
+
+@dataclass(frozen=True, eq=False)
+class Sightings:
+    """Camera sightings as parallel arrays: ``t`` (n,) s, ``subject`` (n,) int64, ``ranges`` (n,) m, ``bearings``
+    (n,) rad (robot frame)."""
+
+    t: FloatArray
+    subject: IntArray
+    ranges: FloatArray
+    bearings: FloatArray
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+    def select(self, mask: npt.NDArray[np.bool_]) -> Sightings:
+        return Sightings(self.t[mask], self.subject[mask], self.ranges[mask], self.bearings[mask])
+
+
+def split_sightings(meas: Table, barcodes: dict[int, int]) -> tuple[Sightings, Sightings, dict[int, int]]:
+    """Map barcodes to subjects and split: (landmark sightings, robot sightings, {unknown barcode: count}).
+
+    Landmark sightings are subjects >= 6, robot sightings subjects 1-5; rows whose barcode is not in
+    ``barcodes`` are dropped and counted.
+    """
+    rows = meas.rows
+    codes = rows[:, 1].astype(np.int64)
+    subject = np.array([barcodes.get(int(c), -1) for c in codes], dtype=np.int64)
+    unknown = subject < 0
+    counts: dict[int, int] = {}
+    for c in codes[unknown].tolist():
+        counts[int(c)] = counts.get(int(c), 0) + 1
+    allsight = Sightings(rows[:, 0].copy(), subject, rows[:, 2].copy(), wrap_angle(rows[:, 3]))
+    is_robot = np.isin(subject, list(ROBOT_SUBJECTS))
+    return allsight.select(subject >= FIRST_LANDMARK_SUBJECT), allsight.select(is_robot), dict(sorted(counts.items()))
+
+
+def landmark_events(s: Sightings) -> list[LandmarkObservations]:
+    """One :class:`LandmarkObservations` per distinct time stamp (rows are in time order)."""
+    if len(s) == 0:
+        return []
+    starts = np.flatnonzero(np.r_[True, np.diff(s.t) != 0])
+    ends = np.r_[starts[1:], len(s)]
+    return [
+        LandmarkObservations(t=float(s.t[a]), ids=s.subject[a:b].copy(), ranges=s.ranges[a:b].copy(),
+                             bearings=s.bearings[a:b].copy())
+        for a, b in zip(starts.tolist(), ends.tolist(), strict=True)
+    ]  # fmt: skip
+
+
+def interpolate_pose(truth: Trajectory2D, t: npt.ArrayLike) -> FloatArray:
+    """Truth poses (x, y, theta wrapped) linearly interpolated at times ``t`` (heading unwrapped first), (n, 3)."""
+    tq = np.atleast_1d(np.asarray(t, dtype=np.float64))
+    th = np.unwrap(truth.theta)
+    return np.column_stack(
+        [np.interp(tq, truth.t, truth.xy[:, 0]), np.interp(tq, truth.t, truth.xy[:, 1]),
+         wrap_angle(np.interp(tq, truth.t, th))]
+    )  # fmt: skip
+
+
+def distance_travelled(xy: FloatArray, step_m: float = PATH_STEP_M) -> FloatArray:
+    """Distance travelled up to each point, m, along the path thinned to points at least ``step_m`` apart.
+
+    A point is kept when it lies ``step_m`` or more from the last kept point; the distance at every point is
+    that of the last kept point at or before it (so jitter smaller than ``step_m`` adds nothing).
+    """
+    n = xy.shape[0]
+    out = np.zeros(n)
+    last = xy[0]
+    acc = 0.0
+    # A Python loop over ~6e4 points (tens of ms); the thinning is sequential by nature.
+    xs, ys = xy[:, 0].tolist(), xy[:, 1].tolist()
+    lx, ly = float(last[0]), float(last[1])
+    for i in range(1, n):
+        d = math.hypot(xs[i] - lx, ys[i] - ly)
+        if d >= step_m:
+            acc += d
+            lx, ly = xs[i], ys[i]
+        out[i] = acc
+    return out
+
+
+def waypoints_by_distance(truth: Trajectory2D, spacing_m: float, step_m: float = PATH_STEP_M) -> Waypoints:
+    """Waypoint j (from 1) at the first truth sample where the distance travelled reaches j * ``spacing_m``."""
+    s = distance_travelled(truth.xy, step_m)
+    n = int(s[-1] // spacing_m) if s.size else 0
+    idx = np.searchsorted(s, spacing_m * np.arange(1, n + 1), side="left")
+    return Waypoints(t=truth.t[idx].copy(), xy=truth.xy[idx].copy())
+
+
+# --- the run of one robot --------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class RobotRun:
+    """Everything parsed for one robot, before it becomes a :class:`Dataset`.
+
+    Attributes
+    ----------
+    truth : Trajectory2D
+        Trimmed Vicon truth starting at t0 (see the module docstring).
+    odometry : list of Odometry
+        Events in the truth span.
+    landmarks : Sightings
+        Landmark sightings (subjects 6-20) in the truth span.
+    robots : Sightings
+        Sightings of the other robots (subjects 1-5) in the truth span: the side array not given to filters.
+    unknown_barcodes : dict
+        {barcode: count} of rows whose barcode is not in ``Barcodes.dat`` (whole file).
+    world : Landmarks
+        The surveyed landmark map.
+    """
+
+    truth: Trajectory2D
+    odometry: list[Odometry]
+    landmarks: Sightings
+    robots: Sightings
+    unknown_barcodes: dict[int, int]
+    world: Landmarks
+
+
+def _resolve_paths(folder: str | os.PathLike[str], robot: int) -> dict[str, Path]:
+    base = Path(folder)
+    return {key: base / name for key, name in file_names(robot).items()}
+
+
+def _verify_folder(paths: dict[str, Path], dataset: int | None) -> None:
+    sums = KNOWN_SHA256.get(dataset, {}) if dataset is not None else {}
+    for p in paths.values():
+        if not p.is_file():
+            raise RecordedDataError(p, "missing file (expected an MRCLAM .dat text file)")
+        if p.name in sums:
+            verify_sha256(p, sums[p.name])
+
+
+def parse_robot_run(paths: dict[str, Path]) -> RobotRun:
+    """Parse one robot's files (keys as in :func:`file_names`) and trim everything to the truth span."""
+    barcodes = read_barcodes(paths["barcodes"])
+    world = read_landmarks(paths["landmarks"])
+    gt = read_groundtruth(paths["groundtruth"])
+    odo = read_odometry(paths["odometry"])
+    meas = read_measurements(paths["measurement"])
+    t, v, om = odo.rows[:, 0], odo.rows[:, 1], odo.rows[:, 2]
+    g0, g1 = float(gt.t[0]), float(gt.t[-1])
+    inside = np.flatnonzero((t >= g0) & (t <= g1))
+    if inside.size < 2:
+        raise RecordedDataError(
+            paths["odometry"], f"fewer than 2 odometry samples inside the ground truth span [{g0:.3f}, {g1:.3f}] s"
+        )
+    t0 = float(t[inside[0]])
+    events = odometry_events(t[inside], v[inside], om[inside])
+    after = gt.t > t0
+    first = interpolate_pose(gt, t0)[0]
+    truth = Trajectory2D(
+        t=np.r_[t0, gt.t[after]],
+        xy=np.vstack([first[None, :2], gt.xy[after]]),
+        theta=np.r_[first[2], gt.theta[after]],
+    )
+    lms, robots, unknown = split_sightings(meas, barcodes)
+    lms = lms.select((lms.t >= t0) & (lms.t <= g1))
+    robots = robots.select((robots.t >= t0) & (robots.t <= g1))
+    unknown_ids = sorted(set(lms.subject.tolist()) - set(world.ids.tolist()))
+    if unknown_ids:
+        k = int(np.flatnonzero(np.isin(meas.rows[:, 0], lms.t[np.isin(lms.subject, unknown_ids)]))[0])
+        raise meas.fail(
+            k, f"barcode maps to subject {unknown_ids[0]}, which is not in {paths['landmarks'].name} "
+            f"(expected a surveyed landmark)"
+        )  # fmt: skip
+    return RobotRun(truth, events, lms, robots, unknown, world)
+
+
+def dataset_from_run(run: RobotRun, *, waypoint_spacing_m: float, metadata: dict[str, Any]) -> Dataset:
+    """Assemble the :class:`Dataset` of one parsed robot run (see the module docstring)."""
+    if not (math.isfinite(waypoint_spacing_m) and waypoint_spacing_m > 0):
+        raise ConfigError(f"waypoint_spacing_m must be a distance > 0 m, got {waypoint_spacing_m}")
+    truth = run.truth
+    events: list[Event] = [*run.odometry, *landmark_events(run.landmarks)]
+    mean = truth.poses[0].copy()
+    cov = np.diag([INITIAL_SIGMA_XY_M**2, INITIAL_SIGMA_XY_M**2, INITIAL_SIGMA_THETA_RAD**2])
+    robot_counts: dict[int, int] = {}
+    for s in run.robots.subject.tolist():
+        robot_counts[int(s)] = robot_counts.get(int(s), 0) + 1
+    meta = {
+        **metadata,
+        "citation": CITATION,
+        "t0_unix_s": float(truth.t[0]),
+        "landmark_sightings": len(run.landmarks),
+        "robot_sightings": {"total": len(run.robots), "per_subject": dict(sorted(robot_counts.items()))},
+        "robot_sightings_note": "not given to filters; read_robot_sightings() returns them",
+        "unknown_barcodes": {str(k): v for k, v in run.unknown_barcodes.items()},
+        "unknown_barcode_rows": int(sum(run.unknown_barcodes.values())),
+        "waypoint_spacing_m": waypoint_spacing_m,
+        "initial_sigma": {"xy_m": INITIAL_SIGMA_XY_M, "theta_rad": INITIAL_SIGMA_THETA_RAD},
+        "nominal_noise": "frozen from derive_nominal_noise(Dataset 6, robots 1-5); see the module docstring",
+    }
+    return Dataset(
+        id="mrclam",
+        params={},
+        events=sort_events(events),
+        ground_truth=truth,
+        initial=Gaussian2(mean=mean, cov=cov),
+        world=WorldMap(landmarks=run.world),
+        sensors=nominal_sensors(),
+        waypoints=waypoints_by_distance(truth, waypoint_spacing_m),
+        metadata=meta,
+    )
+
+
+_FOLDER_RE = re.compile(r"MRCLAM_Dataset(\d)$")
+
+
+def _dataset_number(folder: str | os.PathLike[str]) -> int | None:
+    m = _FOLDER_RE.search(Path(folder).name)
+    return int(m.group(1)) if m else None
+
+
+def load_mrclam(
+    folder: str | os.PathLike[str],
+    robot: int,
+    *,
+    waypoint_spacing_m: float = WAYPOINT_SPACING_M,
+    verify: bool = True,
+) -> Dataset:
+    """Load one robot's run from an unpacked MRCLAM folder (a user's own copy).
+
+    Parameters
+    ----------
+    folder : path-like
+        The folder holding ``Barcodes.dat``, ``Landmark_Groundtruth.dat`` and ``RobotR_*.dat``. When its name is
+        ``MRCLAM_DatasetN`` and N has known checksums (only 6), the files are verified.
+    robot : int
+        1..5.
+    waypoint_spacing_m : float
+        Distance travelled between waypoints, m.
+    verify : bool
+        Check sha256 where known.
+
+    Raises
+    ------
+    RecordedDataError
+        A missing, corrupt or malformed file (naming the file, the line and what was expected).
+    """
+    dataset = _dataset_number(folder)
+    if robot not in ROBOTS:
+        raise ConfigError(f"robot must be one of {list(ROBOTS)}, got {robot!r}")
+    paths = _resolve_paths(folder, robot)
+    _verify_folder(paths, dataset if verify else None)
+    run = parse_robot_run(paths)
+    meta = {"dataset": dataset, "robot": robot, "folder": str(Path(folder)), "verified": verify and dataset == 6}
+    return dataset_from_run(run, waypoint_spacing_m=waypoint_spacing_m, metadata=meta)
+
+
+def read_robot_sightings(folder: str | os.PathLike[str], robot: int) -> Sightings:
+    """The other robots' sightings (subjects 1-5) by ``robot`` inside its truth span: the side array of a run."""
+    return parse_robot_run(_resolve_paths(folder, robot)).robots
+
+
+# --- deriving the nominal noise ---------------------------------------------------------------------------
+
+
+def robust_std(e: npt.ArrayLike) -> float:
+    """1.4826 median |e|: the standard deviation of a zero-mean Gaussian, robust to outliers (a bias counts)."""
+    a = np.abs(np.asarray(e, dtype=np.float64))
+    return float(1.4826 * np.median(a)) if a.size else math.nan
+
+
+def _gap_free(a: FloatArray, b: FloatArray, t: FloatArray, max_gap: float) -> npt.NDArray[np.bool_]:
+    """Which windows [a, b] overlap no gap longer than ``max_gap`` between samples ``t``."""
+    ok = np.ones(a.shape[0], dtype=bool)
+    gaps = np.flatnonzero(np.diff(t) > max_gap)
+    for g in gaps.tolist():
+        ok &= ~((a < t[g + 1]) & (b > t[g]))
+    return ok
+
+
+@dataclass(frozen=True)
+class _Windows:
+    e_forward: FloatArray
+    e_lateral: FloatArray
+    e_theta: FloatArray
+    travel: FloatArray
+    turn: FloatArray
+
+
+def _twist_windows(truth: Trajectory2D, odo: Table, window_s: float) -> tuple[_Windows, float, float]:
+    """Window errors of the integrated twist against Vicon; also sum(dt^2) and sum(dt) of the samples."""
+    t, v, om = odo.rows[:, 0], odo.rows[:, 1], odo.rows[:, 2]
+    dt = np.diff(t)
+    dx, dy, dth = twist_increment(v[:-1], om[:-1], dt)
+    th = np.r_[0.0, np.cumsum(dth)]
+    c, s = np.cos(th[:-1]), np.sin(th[:-1])
+    X = np.r_[0.0, np.cumsum(c * dx - s * dy)]
+    Y = np.r_[0.0, np.cumsum(s * dx + c * dy)]
+    D = np.r_[0.0, np.cumsum(np.abs(v[:-1] * dt))]
+    A = np.r_[0.0, np.cumsum(np.abs(dth))]
+    lo, hi = max(t[0], truth.t[0]), min(t[-1], truth.t[-1])
+    a = np.arange(lo, hi - window_s, window_s)
+    b = a + window_s
+    ok = _gap_free(a, b, truth.t, NOISE_MAX_GAP_S) & _gap_free(a, b, t, NOISE_MAX_GAP_S)
+    a, b = a[ok], b[ok]
+
+    def odo_at(q: FloatArray) -> tuple[FloatArray, ...]:
+        return tuple(np.interp(q, t, arr) for arr in (X, Y, th, D, A))
+
+    ox0, oy0, ot0, od0, oa0 = odo_at(a)
+    ox1, oy1, ot1, od1, oa1 = odo_at(b)
+    gth = np.unwrap(truth.theta)
+    gx0, gy0, gt0 = (np.interp(a, truth.t, arr) for arr in (truth.xy[:, 0], truth.xy[:, 1], gth))
+    gx1, gy1, gt1 = (np.interp(b, truth.t, arr) for arr in (truth.xy[:, 0], truth.xy[:, 1], gth))
+
+    def local(
+        x0: FloatArray, y0: FloatArray, h0: FloatArray, x1: FloatArray, y1: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
+        ch, sh = np.cos(h0), np.sin(h0)
+        return ch * (x1 - x0) + sh * (y1 - y0), -sh * (x1 - x0) + ch * (y1 - y0)
+
+    ofx, ofy = local(ox0, oy0, ot0, ox1, oy1)
+    gfx, gfy = local(gx0, gy0, gt0, gx1, gy1)
+    w = _Windows(gfx - ofx, gfy - ofy, (gt1 - gt0) - (ot1 - ot0), od1 - od0, oa1 - oa0)
+    inner = dt[dt <= NOISE_MAX_GAP_S]  # the steps of the windows kept (those across a gap are skipped)
+    return w, float(np.sum(inner * inner)), float(np.sum(inner))
+
+
+def derive_nominal_noise(
+    folder: str | os.PathLike[str], robots: Iterable[int] = ROBOTS, window_s: float = NOISE_WINDOW_S
+) -> dict[str, float]:
+    """Recompute the nominal noise from the Vicon truth and the surveyed map (the procedure of the module docstring).
+
+    Parameters
+    ----------
+    folder : path-like
+        An MRCLAM dataset folder (the constants were frozen from Dataset 6).
+    robots : iterable of int
+        Robots to pool.
+    window_s : float
+        Window length of the twist comparison, s.
+
+    Returns
+    -------
+    dict
+        ``twist_sigma_v_mps``, ``twist_sigma_omega_radps``, ``odometry_sigma_xy_per_m``,
+        ``odometry_sigma_theta_per_m``, ``odometry_sigma_theta_per_rad``, ``landmark_sigma_range_m``,
+        ``landmark_sigma_bearing_rad``, plus diagnostics: the medians (biases) ``range_median_m``,
+        ``bearing_median_rad``, the counts ``n_sightings``, ``n_windows``, ``n_straight``, ``n_in_place`` and
+        ``dt_eff_s``.
+    """
+    er: list[FloatArray] = []
+    eb: list[FloatArray] = []
+    wins: list[_Windows] = []
+    sum_dt2 = sum_dt = 0.0
+    for robot in robots:
+        paths = _resolve_paths(folder, robot)
+        barcodes = read_barcodes(paths["barcodes"])
+        world = read_landmarks(paths["landmarks"])
+        truth = read_groundtruth(paths["groundtruth"])
+        lms, _, _ = split_sightings(read_measurements(paths["measurement"]), barcodes)
+        lms = lms.select((lms.t >= truth.t[0]) & (lms.t <= truth.t[-1]) & np.isin(lms.subject, world.ids))
+        pose = interpolate_pose(truth, lms.t)
+        index = world.index_of()
+        L = world.xy[[index[int(i)] for i in lms.subject.tolist()]].reshape(-1, 2)
+        d = L - pose[:, :2]
+        er.append(lms.ranges - np.hypot(d[:, 0], d[:, 1]))
+        eb.append(wrap_angle(lms.bearings - (np.arctan2(d[:, 1], d[:, 0]) - pose[:, 2])))
+        w, s2, s1 = _twist_windows(truth, read_odometry(paths["odometry"]), window_s)
+        wins.append(w)
+        sum_dt2 += s2
+        sum_dt += s1
+    e_r, e_b = np.concatenate(er), np.concatenate(eb)
+    W = _Windows(
+        *(
+            np.concatenate([getattr(w, f) for w in wins])
+            for f in ("e_forward", "e_lateral", "e_theta", "travel", "turn")
+        )
+    )
+    dt_eff = sum_dt2 / sum_dt
+    scale = math.sqrt(window_s * dt_eff)
+    straight = (W.travel >= NOISE_MIN_TRAVEL_M) & (W.turn < NOISE_STRAIGHT_MAX_TURN_RAD)
+    moving = W.travel >= NOISE_MIN_TRAVEL_M
+    in_place = (W.travel < NOISE_IN_PLACE_MAX_TRAVEL_M) & (W.turn >= NOISE_STRAIGHT_MAX_TURN_RAD)
+    root_d = np.sqrt(W.travel[moving])
+    sxy = math.sqrt(
+        0.5 * (robust_std(W.e_forward[moving] / root_d) ** 2 + robust_std(W.e_lateral[moving] / root_d) ** 2)
+    )
+    return {
+        "twist_sigma_v_mps": robust_std(W.e_forward) / scale,
+        "twist_sigma_omega_radps": robust_std(W.e_theta) / scale,
+        "odometry_sigma_xy_per_m": sxy,
+        "odometry_sigma_theta_per_m": robust_std(W.e_theta[straight] / np.sqrt(W.travel[straight])),
+        "odometry_sigma_theta_per_rad": robust_std(W.e_theta[in_place] / np.sqrt(W.turn[in_place])),
+        "landmark_sigma_range_m": robust_std(e_r),
+        "landmark_sigma_bearing_rad": robust_std(e_b),
+        "range_median_m": float(np.median(e_r)),
+        "bearing_median_rad": float(np.median(e_b)),
+        "n_sightings": float(e_r.shape[0]),
+        "n_windows": float(W.travel.shape[0]),
+        "n_straight": float(np.count_nonzero(straight)),
+        "n_in_place": float(np.count_nonzero(in_place)),
+        "dt_eff_s": dt_eff,
+    }
+
+
+# --- the registered builder -------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, kw_only=True)
+class MrclamParams:
+    """Parameters of ``mrclam``.
+
+    Attributes
+    ----------
+    dataset : int
+        MRCLAM dataset number, 1..9 (only 6 is in the shared data folder, and only 6 is checksum-verified).
+    robot : int
+        Robot (subject) number, 1..5.
+    waypoint_spacing_m : float
+        Distance travelled along the truth between waypoints, m.
+    """
+
+    dataset: int = 6
+    robot: int = 1
+    waypoint_spacing_m: float = WAYPOINT_SPACING_M
+
+    def __post_init__(self) -> None:
+        _check_numbers(self.dataset, self.robot)
+        if not (math.isfinite(self.waypoint_spacing_m) and self.waypoint_spacing_m > 0):
+            raise ConfigError(f"waypoint_spacing_m must be a distance > 0 m, got {self.waypoint_spacing_m}")
+
+
+class MrclamDataset(RecordedDataset):
+    """MRCLAM: one robot of one dataset, landmark sightings by subject, Vicon truth (module docstring)."""
+
+    Params: ClassVar[type] = MrclamParams
+    version: ClassVar[int] = 1
+    description: ClassVar[str] = (
+        "UTIAS MRCLAM: one of 5 robots, twist odometry, camera range-bearing to 15 landmarks, Vicon truth"
+    )
+    folder: ClassVar[str] = FOLDER
+
+    @classmethod
+    def files(cls, params: Any) -> list[RemoteFile]:
+        """The five files of one robot; sha256 for Dataset 6 only; ``url`` is the zip that holds them."""
+        p: MrclamParams = params
+        sums = KNOWN_SHA256.get(p.dataset, {})
+        sub = f"{FOLDER}/{dataset_folder_name(p.dataset)}"
+        url = ZIP_URL.format(n=p.dataset)
+        return [RemoteFile(f"{sub}/{name}", sums.get(name), url) for name in file_names(p.robot).values()]
+
+    def build(self, params: MrclamParams, rng: np.random.Generator) -> Dataset:
+        located = self.paths(params)
+        by_name = {Path(rel).name: path for rel, path in located.items()}
+        paths = {key: by_name[name] for key, name in file_names(params.robot).items()}
+        run = parse_robot_run(paths)
+        meta = {
+            "dataset": params.dataset,
+            "robot": params.robot,
+            "files": {k: str(v) for k, v in paths.items()},
+            "verified": params.dataset in KNOWN_SHA256,
+        }
+        return dataset_from_run(run, waypoint_spacing_m=params.waypoint_spacing_m, metadata=meta)
+
+    def fetch(self, params: Any) -> list[str]:
+        """Download the official zip with pooch (unverified: its hash is unknown), unpack it into the cache and
+        verify every extracted file whose sha256 is known (Dataset 6); every local path of :meth:`files`."""
+        p: MrclamParams = params
+        specs = self.files(p)
+        try:
+            return [str(locate(s)) for s in specs]
+        except RecordedDataError as exc:
+            if "checksum mismatch" in str(exc):
+                raise
+        try:
+            import pooch
+        except ImportError:
+            raise DependencyNotInstalled(
+                "downloading MRCLAM needs pooch; install it with: pip install 'locbench[data]'"
+            ) from None
+        target = cache_root() / FOLDER / dataset_folder_name(p.dataset)
+        target.mkdir(parents=True, exist_ok=True)
+        members = pooch.retrieve(
+            ZIP_URL.format(n=p.dataset),
+            known_hash=None,
+            fname=f"{dataset_folder_name(p.dataset)}.zip",
+            path=cache_root() / FOLDER,
+            processor=pooch.Unzip(extract_dir=f"{dataset_folder_name(p.dataset)}.unzipped"),
+            progressbar=False,
+        )
+        return [str(_place(members, s, target)) for s in specs]
+
+
+def _place(members: Sequence[str], spec: RemoteFile, target: Path) -> Path:
+    """Move the extracted member named like ``spec`` into ``target`` and verify it where its sha256 is known."""
+    name = spec.relpath.rsplit("/", 1)[-1]
+    found = [Path(m) for m in members if Path(m).name == name]
+    dest = target / name
+    if not found and not dest.is_file():
+        raise RecordedDataError(dest, f"missing file: the downloaded zip has no {name} (expected it in the archive)")
+    if found:
+        shutil.copyfile(found[0], dest)
+    if spec.sha256:
+        try:
+            verify_sha256(dest, spec.sha256)
+        except RecordedDataError:
+            dest.unlink(missing_ok=True)  # nothing unverified stays where locate() would find it
+            raise
+    return dest
+
+
+def known_checksums(dataset: int) -> dict[str, str]:
+    """sha256 by file name for ``dataset`` (empty: nothing is verified for it)."""
+    return dict(KNOWN_SHA256.get(dataset, {}))
+
+
+__all__: Sequence[str] = (
+    "MrclamDataset",
+    "MrclamParams",
+    "Sightings",
+    "derive_nominal_noise",
+    "load_mrclam",
+    "nominal_sensors",
+    "read_robot_sightings",
+    "twist_increment",
+)
