@@ -105,7 +105,7 @@ def test_beam_count_changes(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("old", "new", "where"),
     [
-        ("ODOM 0.500000 0.100000 0.200000", "ODOM 0.500000 0.1x0000 0.200000", r":7: ODOM field 3 \(y\) is '0\.1x0000'"),
+        ("ODOM 0.500000 0.100000 0.2", "ODOM 0.500000 0.1x0000 0.2", r":7: ODOM field 3 \(y\) is '0\.1x0000'"),
         ("FLASER 3 4.00 81.83", "FLASER 3 4.00 abc", r":9: FLASER field 4 \(r_2\) is 'abc'"),
         ("0.4 0.5 0.6 1.4", "0.4 0.5 nan 1.4", r":9: FLASER field 8 \(theta\) is 'nan', expected a finite number"),
         ("nohost 900.150000", "nohost 9o0.150000", r":9: FLASER field 14 \(logger_timestamp\) is '9o0\.150000'"),
