@@ -8,6 +8,26 @@ Two ways to move a pose with one :class:`~locbench.events.Odometry` event:
 * **increment** (fallback when an event carries no wheel travel, or by choice): the robot's own
   (dx, dy, dtheta) in the previous robot frame is composed onto the pose, with a per-step noise whose
   variance is proportional to the distance travelled and the angle turned (``SensorSpec.odometry_sigma_*``).
+* **twist noise** (for recorded odometry that is a *measured* twist (v, omega) held for dt, when the dataset
+  gives ``SensorSpec.twist_sigma_v_mps`` / ``twist_sigma_omega_radps`` and the event carries v, omega and dt):
+  the increment is still the event's (dx, dy, dtheta); only its covariance changes, see below.
+
+Twist noise
+-----------
+A measured speed and turn rate with white noise of standard deviations sigma_v (m/s) and sigma_omega
+(rad/s), held for dt, give the travelled arc length s = v dt and the turned angle a = omega dt with
+variances (sigma_v dt)^2 and (sigma_omega dt)^2, independent. The constant-twist (circular arc) motion maps
+them to the increment in the previous robot frame,
+
+    dx = s sin(a) / a,    dy = s (1 - cos(a)) / a,    dtheta = a        (a -> 0: dx = s, dy = 0),
+
+so its covariance is Sigma = J diag((sigma_v dt)^2, (sigma_omega dt)^2) J^T with J = d(dx, dy, dtheta)/d(s, a)
+evaluated at the measured (v dt, omega dt) (:func:`twist_increment_covariance`; series near a = 0). Sigma has
+rank 2 (no lateral slip is modelled; the filters' additive process noise covers it). It **replaces** the
+per-distance increment noise for such events (both describe the same error); an event without v, omega and dt,
+or a dataset that gives neither sigma, keeps the increment noise, so results on data without twist noise are
+unchanged. The particle filter draws (s, a) per particle and moves through the exact arc
+(:func:`sample_twist_motion`), offset so that the noise-free draw is the event's own increment.
 
 Reading of report 003 eq. 10
 ----------------------------
@@ -28,8 +48,9 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
-from typing import Literal
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -51,6 +72,10 @@ DEFAULT_ENCODER_K = 0.01
 DEFAULT_SIGMA_XY_PER_M = 0.02
 DEFAULT_SIGMA_THETA_PER_M = 0.02
 DEFAULT_SIGMA_THETA_PER_RAD = 0.02
+
+#: Field metadata of config fields added after runs were stored: a run key may leave such a field out while it
+#: holds its default (which reproduces the earlier behaviour), so that adding it does not invalidate stored runs.
+RUN_KEY_OMIT_IF_DEFAULT: MappingProxyType[str, Any] = MappingProxyType({"run_key_omit_if_default": True})
 
 # --- the encoder model (report 003 eq. 1-5, 10) -----------------------------------------------------------
 
@@ -236,6 +261,51 @@ def increment_covariance(
     return np.diag([vxy, vxy, vth])
 
 
+# --- twist noise ----------------------------------------------------------------------------------------
+
+# Below this |a| (rad) the arc functions use their Taylor series (the exact forms lose digits to cancellation).
+_SERIES_A = 1e-3
+
+
+def twist_increment(s: npt.ArrayLike, a: npt.ArrayLike) -> FloatArray:
+    """Increment (dx, dy, dtheta) in the previous robot frame of a constant-twist arc, shape (..., 3).
+
+    ``s`` is the arc length (m, v dt) and ``a`` the turned angle (rad, omega dt), broadcast together:
+    dx = s sin(a)/a, dy = s (1 - cos a)/a, dtheta = a.
+    """
+    s_ = np.asarray(s, dtype=np.float64)
+    a_ = np.asarray(a, dtype=np.float64)
+    sinc = np.sinc(a_ / np.pi)  # sin(a) / a, exact at 0
+    small = np.abs(a_) < _SERIES_A
+    safe = np.where(small, 1.0, a_)
+    cosc = np.where(small, a_ * (0.5 - a_ * a_ / 24.0), (1.0 - np.cos(a_)) / safe)  # (1 - cos a) / a
+    return np.stack(np.broadcast_arrays(s_ * sinc, s_ * cosc, a_ + 0.0 * s_), axis=-1)
+
+
+def twist_jacobian(s: float, a: float) -> FloatArray:
+    """J = d(dx, dy, dtheta)/d(s, a) of :func:`twist_increment` at (s m, a rad), shape (3, 2)."""
+    if abs(a) < _SERIES_A:
+        a2 = a * a
+        f, g = 1.0 - a2 / 6.0, a * (0.5 - a2 / 24.0)  # sin(a)/a, (1 - cos a)/a
+        df, dg = a * (-1.0 / 3.0 + a2 / 30.0), 0.5 - a2 / 8.0  # their derivatives in a
+    else:
+        sa, ca = math.sin(a), math.cos(a)
+        f, g = sa / a, (1.0 - ca) / a
+        df, dg = (a * ca - sa) / (a * a), (a * sa - (1.0 - ca)) / (a * a)
+    return np.array([[f, s * df], [g, s * dg], [0.0, 1.0]])
+
+
+def twist_increment_covariance(v: float, omega: float, dt: float, sigma_v: float, sigma_omega: float) -> FloatArray:
+    """Covariance (3, 3) of the increment (dx m, dy m, dtheta rad), previous robot frame, of a measured twist.
+
+    J diag((sigma_v dt)^2, (sigma_omega dt)^2) J^T with J from :func:`twist_jacobian` at s = v dt, a = omega dt
+    (see the module docstring). ``v`` m/s, ``omega`` rad/s, ``dt`` s, ``sigma_v`` m/s, ``sigma_omega`` rad/s.
+    """
+    J = twist_jacobian(v * dt, omega * dt)
+    var = np.array([(sigma_v * dt) ** 2, (sigma_omega * dt) ** 2])
+    return (J * var) @ J.T
+
+
 # --- sampling (particle filters) -------------------------------------------------------------------------
 
 
@@ -300,6 +370,47 @@ def sample_increment_motion(
     return np.stack([p[:, 0] + c * ix - s * iy, p[:, 1] + s * ix + c * iy, wrap_angle(p[:, 2] + ith)], axis=-1)
 
 
+def sample_twist_motion(
+    poses: npt.ArrayLike,
+    u: Odometry,
+    sigma_v: float,
+    sigma_omega: float,
+    rng: np.random.Generator,
+) -> FloatArray:
+    """Draw one noisy successor per pose from the twist-noise model of the module docstring.
+
+    Each row draws s ~ N(v dt, (sigma_v dt)^2) and a ~ N(omega dt, (sigma_omega dt)^2) and moves by the
+    event's increment plus f(s, a) - f(v dt, omega dt), f the exact arc of :func:`twist_increment`: the noise
+    of the arc, centred on the robot's own (dx, dy, dtheta). ``u`` must carry v, omega and dt.
+
+    Parameters
+    ----------
+    poses : array-like, shape (N, 3)
+        Particles (x m, y m, theta rad), world frame.
+    u : Odometry
+        The event (increment in the previous robot frame; v m/s, omega rad/s, dt s).
+    sigma_v, sigma_omega : float
+        White noise of the measured speed (m/s) and turn rate (rad/s).
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+    """
+    assert u.v is not None and u.omega is not None and u.dt is not None
+    p = np.asarray(poses, dtype=np.float64)
+    n = p.shape[0]
+    s0, a0 = u.v * u.dt, u.omega * u.dt
+    noise = rng.standard_normal((2, n))
+    inc = twist_increment(s0 + sigma_v * u.dt * noise[0], a0 + sigma_omega * u.dt * noise[1])
+    base = twist_increment(s0, a0)
+    ix = u.dx + inc[:, 0] - base[0]
+    iy = u.dy + inc[:, 1] - base[1]
+    ith = u.dtheta + inc[:, 2] - base[2]
+    c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
+    return np.stack([p[:, 0] + c * ix - s * iy, p[:, 1] + s * ix + c * iy, wrap_angle(p[:, 2] + ith)], axis=-1)
+
+
 # --- the resolved noise and the per-step propagation used by the filters ---------------------------------
 
 
@@ -319,6 +430,9 @@ class MotionNoise:
         Increment noise, m/sqrt(m), rad/sqrt(m), rad/sqrt(rad).
     input_noise : {"per_step", "cumulative"}
         Reading of eq. 10.
+    twist_sigma_v_mps, twist_sigma_omega_radps : float or None
+        White noise of a measured twist (m/s, rad/s); None when not given. When either is given the other
+        counts as 0 and events with v, omega and dt use the twist noise (module docstring).
     """
 
     wheelbase_m: float | None
@@ -329,6 +443,20 @@ class MotionNoise:
     sigma_theta_per_m: float
     sigma_theta_per_rad: float
     input_noise: InputNoise = "per_step"
+    twist_sigma_v_mps: float | None = None
+    twist_sigma_omega_radps: float | None = None
+
+    @property
+    def twist_given(self) -> bool:
+        """Whether a twist noise was given (config or dataset)."""
+        return self.twist_sigma_v_mps is not None or self.twist_sigma_omega_radps is not None
+
+    def twist_sigmas(self, u: Odometry) -> tuple[float, float] | None:
+        """(sigma_v m/s, sigma_omega rad/s) when the twist noise applies to ``u``, else None."""
+        if not self.twist_given or u.v is None or u.omega is None or u.dt is None:
+            return None
+        sv, so = self.twist_sigma_v_mps, self.twist_sigma_omega_radps
+        return (0.0 if sv is None else sv, 0.0 if so is None else so)
 
 
 def _first(*values: float | None) -> float | None:
@@ -350,6 +478,8 @@ class MotionNoiseConfig:
         Overrides of W (m) and k_L, k_R (sqrt(m)); None takes the dataset's nominal value.
     odometry_sigma_xy_per_m, odometry_sigma_theta_per_m, odometry_sigma_theta_per_rad : float or None
         Overrides of the increment noise (m/sqrt(m), rad/sqrt(m), rad/sqrt(rad)); None: the dataset's.
+    twist_sigma_v_mps, twist_sigma_omega_radps : float or None
+        Overrides of the white noise of a measured twist (m/s, rad/s); None: the dataset's (module docstring).
     """
 
     input_noise: InputNoise = "per_step"
@@ -359,6 +489,8 @@ class MotionNoiseConfig:
     odometry_sigma_xy_per_m: float | None = None
     odometry_sigma_theta_per_m: float | None = None
     odometry_sigma_theta_per_rad: float | None = None
+    twist_sigma_v_mps: float | None = field(default=None, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    twist_sigma_omega_radps: float | None = field(default=None, metadata=RUN_KEY_OMIT_IF_DEFAULT)
 
     def motion_noise(self, sensors: SensorSpec) -> MotionNoise:
         """The noise model: each override, else the dataset's nominal value, else the module default."""
@@ -371,6 +503,8 @@ class MotionNoiseConfig:
             odometry_sigma_xy_per_m=self.odometry_sigma_xy_per_m,
             odometry_sigma_theta_per_m=self.odometry_sigma_theta_per_m,
             odometry_sigma_theta_per_rad=self.odometry_sigma_theta_per_rad,
+            twist_sigma_v_mps=self.twist_sigma_v_mps,
+            twist_sigma_omega_radps=self.twist_sigma_omega_radps,
         )
 
 
@@ -384,6 +518,8 @@ def resolve_motion_noise(
     odometry_sigma_xy_per_m: float | None = None,
     odometry_sigma_theta_per_m: float | None = None,
     odometry_sigma_theta_per_rad: float | None = None,
+    twist_sigma_v_mps: float | None = None,
+    twist_sigma_omega_radps: float | None = None,
 ) -> MotionNoise:
     """Take each value from the keyword override, else from ``sensors``, else the module default (logged)."""
     kl = _first(encoder_k_left, sensors.encoder_k_left)
@@ -404,6 +540,8 @@ def resolve_motion_noise(
         sigma_theta_per_m=DEFAULT_SIGMA_THETA_PER_M if stm is None else stm,
         sigma_theta_per_rad=str_ if str_ is not None else default_per_rad,
         input_noise=input_noise,
+        twist_sigma_v_mps=_first(twist_sigma_v_mps, sensors.twist_sigma_v_mps),
+        twist_sigma_omega_radps=_first(twist_sigma_omega_radps, sensors.twist_sigma_omega_radps),
     )
 
 
@@ -434,6 +572,8 @@ class MotionModel:
         ``"auto"``: the encoder model (report 003) when the event has wheel travel, the wheelbase is known
         and the encoder constants were given; ``"encoder"``: whenever the event has wheel travel and the
         wheelbase is known (default constants otherwise); ``"increment"``: always the increment fallback.
+        Without the encoder model, an event's increment gets the twist noise when the noise has one and the
+        event carries v, omega and dt, else the per-distance increment noise.
     mean : {"model", "compose"}
         ``"model"``: the mean follows the chosen model (eq. 5 for the encoder); ``"compose"``: the mean is
         always pose (+) (dx, dy, dtheta), the robot's own report (dead reckoning), and only the covariance
@@ -485,6 +625,27 @@ class MotionModel:
             )
             if not self._compose:
                 return Step((x + dd * c, y + dd * s, wrap_scalar(th + dth)), -dd * s, dd * c, noise, True)
+        elif (tw := nz.twist_sigmas(u)) is not None:
+            assert u.v is not None and u.omega is not None and u.dt is not None  # guaranteed by twist_sigmas
+            sg = twist_increment_covariance(u.v, u.omega, u.dt, tw[0], tw[1])
+            # World frame: G Sigma G^T, G = blockdiag(R(theta), 1) (Sigma is not isotropic here).
+            c0, s0 = math.cos(th), math.sin(th)
+            a00, a01, a02, a11, a12, a22 = (
+                float(sg[0, 0]),
+                float(sg[0, 1]),
+                float(sg[0, 2]),
+                float(sg[1, 1]),
+                float(sg[1, 2]),
+                float(sg[2, 2]),
+            )
+            noise = (
+                c0 * c0 * a00 - 2.0 * c0 * s0 * a01 + s0 * s0 * a11,
+                c0 * s0 * (a00 - a11) + (c0 * c0 - s0 * s0) * a01,
+                c0 * a02 - s0 * a12,
+                s0 * s0 * a00 + 2.0 * c0 * s0 * a01 + c0 * c0 * a11,
+                s0 * a02 + c0 * a12,
+                a22,
+            )
         else:
             vxy, vth = increment_variances(
                 u.dx, u.dy, u.dtheta, nz.sigma_xy_per_m, nz.sigma_theta_per_m, nz.sigma_theta_per_rad

@@ -23,6 +23,19 @@ in the tests.
 GPS-like pose fixes (report 001): H = [[1, 0, 0], [0, 1, 0]] (or I_3 with a heading) with the fix's own
 covariance.
 
+Range-only beacons (:class:`~locbench.events.RangeObservations`, e.g. the CMU Plaza radios; Djugash et al.
+2009): a beacon at (x_B, y_B) of ``world.landmarks`` is measured at range r = |B - p| + noise from the robot
+origin, R = sigma^2 with sigma = ``range_only_sigma_m`` (else ``SensorSpec.range_sigma_m``), and
+
+    h(x) = sqrt(dx^2 + dy^2),    H = [-dx/d, -dy/d, 0],
+
+a scalar update in the Joseph form, one range at a time as for landmarks. Ranging radios produce gross
+outliers (multipath, a wrong first peak), so every range is gated: it is fused only if its squared
+Mahalanobis distance nu^2 / S, S = H P H^T + R, is inside the chi-square quantile with 1 degree of freedom of
+``range_gate_probability`` (0.99 -> 6.63; 1 disables the gate). A range without a known beacon identity
+(``UNKNOWN_ID``, or an id not in the map) is rejected: one range fits every beacon on a circle, so there is
+no association by nearest neighbour for ranges.
+
 Choices the reports leave open, made here:
 
 * Observations of one event are fused **sequentially**, one landmark at a time, each linearised at
@@ -39,7 +52,8 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from statistics import NormalDist
 from typing import ClassVar, Literal
 
 import numpy as np
@@ -47,8 +61,14 @@ import numpy.typing as npt
 
 from locbench.datasets.base import Gaussian2, MapKind, SensorSpec, WorldMap
 from locbench.errors import ConfigError, FilterDiverged
-from locbench.events import UNKNOWN_ID, LandmarkObservations, Observation, Odometry, PoseFix
-from locbench.filters._motion import MotionKind, MotionModel, MotionNoiseConfig, propagate_covariance
+from locbench.events import UNKNOWN_ID, LandmarkObservations, Observation, Odometry, PoseFix, RangeObservations
+from locbench.filters._motion import (
+    RUN_KEY_OMIT_IF_DEFAULT,
+    MotionKind,
+    MotionModel,
+    MotionNoiseConfig,
+    propagate_covariance,
+)
 from locbench.filters.base import Estimate, Filter, FilterConfig
 from locbench.geometry import wrap_angle, wrap_scalar
 
@@ -66,6 +86,24 @@ _VECTOR_NN_MIN = 48
 def chi2_2dof_quantile(p: float) -> float:
     """The ``p`` quantile of the chi-square distribution with 2 degrees of freedom: -2 ln(1 - p)."""
     return -2.0 * math.log1p(-p)
+
+
+def chi2_1dof_quantile(p: float) -> float:
+    """The ``p`` quantile of the chi-square distribution with 1 degree of freedom, Phi^-1((1 + p) / 2)^2; inf at 1."""
+    if p >= 1.0:
+        return math.inf
+    return NormalDist().inv_cdf(0.5 * (1.0 + p)) ** 2
+
+
+def range_only_noise(range_only_sigma_m: float | None, sensors: SensorSpec, warn: bool = True) -> float:
+    """Standard deviation of a range-only (beacon) measurement, m: the config override, else the dataset's
+    ``SensorSpec.range_sigma_m``, else :data:`DEFAULT_SIGMA_RANGE_M` (logged when ``warn``)."""
+    sr = range_only_sigma_m if range_only_sigma_m is not None else sensors.range_sigma_m
+    if sr is None:
+        if warn:
+            logger.warning("no nominal range-only noise in the config or dataset; using %g m", DEFAULT_SIGMA_RANGE_M)
+        return DEFAULT_SIGMA_RANGE_M
+    return float(sr)
 
 
 def landmark_noise(
@@ -175,10 +213,17 @@ class LandmarkEKFConfig(FilterConfig, MotionNoiseConfig):
         Fuse PoseFix events (report 001's GPS variant). When False the runner does not route them.
     sigma_range_m, sigma_bearing_rad : float or None
         Measurement noise R (report 003 eq. 9); None takes the dataset's nominal value.
+    range_only_sigma_m : float or None
+        Standard deviation of a range-only (beacon) measurement, m; None takes ``SensorSpec.range_sigma_m``.
+    range_gate_probability : float
+        Probability of the chi-square gate (1 dof) on each range-only innovation (outlier rejection);
+        0.99 -> 6.63, the same probability as the landmark gate; 1 fuses every range.
     wheelbase_m, encoder_k_left, encoder_k_right : float or None
         Overrides of W (m) and k_L, k_R (sqrt(m)); None takes the dataset's value.
     odometry_sigma_xy_per_m, odometry_sigma_theta_per_m, odometry_sigma_theta_per_rad : float or None
         Overrides of the increment fallback noise (m/sqrt(m), rad/sqrt(m), rad/sqrt(rad)).
+    twist_sigma_v_mps, twist_sigma_omega_radps : float or None
+        Overrides of the white noise of a measured twist (m/s, rad/s); see :mod:`locbench.filters._motion`.
     """
 
     sigma_x_m: float = 0.001
@@ -194,14 +239,18 @@ class LandmarkEKFConfig(FilterConfig, MotionNoiseConfig):
     use_pose_fixes: bool = False
     sigma_range_m: float | None = None
     sigma_bearing_rad: float | None = None
+    range_only_sigma_m: float | None = field(default=None, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    range_gate_probability: float = field(default=0.99, metadata=RUN_KEY_OMIT_IF_DEFAULT)
 
     def __post_init__(self) -> None:
         if not 0.0 < self.gate_probability < 1.0:
             raise ConfigError(f"gate_probability must be in (0, 1), got {self.gate_probability}")
+        if not 0.0 < self.range_gate_probability <= 1.0:
+            raise ConfigError(f"range_gate_probability must be in (0, 1], got {self.range_gate_probability}")
         for name in ("sigma_x_m", "sigma_y_m", "sigma_theta_rad", "prune_margin_m", "prune_margin_rad"):
             if getattr(self, name) < 0.0:
                 raise ConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
-        for name in ("sigma_range_m", "sigma_bearing_rad", "wheelbase_m"):
+        for name in ("sigma_range_m", "sigma_bearing_rad", "wheelbase_m", "range_only_sigma_m"):
             v = getattr(self, name)
             if v is not None and v <= 0.0:
                 raise ConfigError(f"{name} must be > 0 (or None for the dataset's value), got {v}")
@@ -218,7 +267,7 @@ class LandmarkEKF(Filter):
     chi-square check), ``accepted`` and ``rejected`` (counts of the last update; 0 after a predict).
     """
 
-    consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LandmarkObservations, PoseFix})
+    consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LandmarkObservations, PoseFix, RangeObservations})
     requires: ClassVar[frozenset[MapKind]] = frozenset({MapKind.LANDMARKS})
     Config: ClassVar[type[FilterConfig]] = LandmarkEKFConfig
     version: ClassVar[int] = 1
@@ -243,9 +292,16 @@ class LandmarkEKF(Filter):
         self._motion = MotionModel(noise, cfg.motion_model, mean="model")
         self._q = (cfg.sigma_x_m**2, cfg.sigma_y_m**2, cfg.sigma_theta_rad**2)
 
-        sr, sb = landmark_noise(cfg.sigma_range_m, cfg.sigma_bearing_rad, sensors)
+        sr, sb = landmark_noise(cfg.sigma_range_m, cfg.sigma_bearing_rad, sensors, warn=False)
+        # Warn about defaulted landmark noise only once sightings arrive (a range-only dataset has none).
+        self._lm_warn = cfg.sigma_range_m is None and sensors.landmark_sigma_range_m is None
+        self._lm_warn |= cfg.sigma_bearing_rad is None and sensors.landmark_sigma_bearing_rad is None
         self._rr, self._rb = sr * sr, sb * sb
         self._gate = chi2_2dof_quantile(cfg.gate_probability)
+        self._range_sigma = range_only_noise(cfg.range_only_sigma_m, sensors, warn=False)
+        # Warn about a defaulted range noise only if ranges arrive (most datasets have none).
+        self._range_warn = cfg.range_only_sigma_m is None and sensors.range_sigma_m is None
+        self._range_gate = chi2_1dof_quantile(cfg.range_gate_probability)
 
         lm = world.landmarks
         self._lm_xy = np.asarray(lm.xy, dtype=np.float64).reshape(-1, 2)
@@ -291,9 +347,11 @@ class LandmarkEKF(Filter):
     # --- update --------------------------------------------------------------------------------------------
 
     def update(self, z: Observation) -> None:
-        """Correct with landmark observations (eq. 7) or a pose fix (report 001); TypeError for other types."""
+        """Correct with landmark observations (eq. 7), beacon ranges or a pose fix (report 001); TypeError otherwise."""
         if type(z) is LandmarkObservations:
             self._update_landmarks(z)
+        elif type(z) is RangeObservations:
+            self._update_ranges(z)
         elif type(z) is PoseFix:
             self._update_pose_fix(z)
         else:
@@ -303,6 +361,9 @@ class LandmarkEKF(Filter):
         self._check_finite(z.t)
 
     def _update_landmarks(self, z: LandmarkObservations) -> None:
+        if self._lm_warn:
+            landmark_noise(None, None, SensorSpec(), warn=True)
+            self._lm_warn = False
         nis, dof, acc, rej = 0.0, 0, 0, 0
         ids = z.ids.tolist()
         ranges = z.ranges.tolist()
@@ -484,6 +545,59 @@ class LandmarkEKF(Filter):
         q22 = b20 * a20 + b21 * a21 + b22 * a22 + k20 * k20 * rr + k21 * k21 * rb
         self._P = [[q00, q01, q02], [q01, q11, q12], [q02, q12, q22]]
         return d2
+
+    def _update_ranges(self, z: RangeObservations) -> None:
+        """Fuse beacon ranges one at a time (module docstring): scalar Joseph update, chi-square (1 dof) gate."""
+        if self._range_warn:
+            range_only_noise(None, SensorSpec(), warn=True)
+            self._range_warn = False
+        nis, acc, rej = 0.0, 0, 0
+        rr = self._range_sigma * self._range_sigma
+        gate = self._range_gate
+        for ident, r in zip(z.ids.tolist(), z.ranges.tolist(), strict=True):
+            row = self._lm_row.get(ident) if ident != UNKNOWN_ID else None
+            if row is None or not (math.isfinite(r) and r >= 0.0):
+                rej += 1
+                continue
+            lx, ly = self._lm_list[row]
+            x, y, th = self._x
+            dx, dy = lx - x, ly - y
+            d = math.hypot(dx, dy)
+            if d < 1e-9:
+                rej += 1  # on the beacon: the range's gradient is undefined
+                continue
+            h0, h1 = -dx / d, -dy / d
+            P = self._P
+            p00, p01, p02 = P[0]
+            p11, p12 = P[1][1], P[1][2]
+            # P H^T (H = [h0, h1, 0]) and S = H P H^T + R.
+            u0, u1, u2 = p00 * h0 + p01 * h1, p01 * h0 + p11 * h1, p02 * h0 + p12 * h1
+            S = h0 * u0 + h1 * u1 + rr
+            nu = r - d
+            d2 = nu * nu / S
+            if not d2 <= gate:
+                rej += 1
+                continue
+            k0, k1, k2 = u0 / S, u1 / S, u2 / S
+            self._x = [x + k0 * nu, y + k1 * nu, wrap_scalar(th + k2 * nu)]
+            # Joseph form A P A^T + K R K^T with A = I - K H.
+            A = (
+                (1.0 - k0 * h0, -k0 * h1, 0.0),
+                (-k1 * h0, 1.0 - k1 * h1, 0.0),
+                (-k2 * h0, -k2 * h1, 1.0),
+            )
+            AP = [[A[i][0] * P[0][j] + A[i][1] * P[1][j] + A[i][2] * P[2][j] for j in range(3)] for i in range(3)]
+            K = (k0, k1, k2)
+            out = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
+            for i in range(3):
+                for j in range(i, 3):
+                    v = AP[i][0] * A[j][0] + AP[i][1] * A[j][1] + AP[i][2] * A[j][2] + K[i] * K[j] * rr
+                    out[i][j] = out[j][i] = v
+            self._P = out
+            nis += d2
+            acc += 1
+        self._nis = nis if acc else math.nan
+        self._nis_dof, self._accepted, self._rejected = acc, acc, rej
 
     def _update_pose_fix(self, z: PoseFix) -> None:
         """GPS-like fix (report 001): H = [I_2 0] or I_3; the fix's own covariance; heading innovation wrapped.

@@ -22,6 +22,16 @@ Factors
   known map enters as these nearly fixed variables. A landmark variable is stamped with the time of every
   sighting; one not seen for ``lag_s`` leaves the window with the poses, and its next sighting makes a
   fresh variable with a fresh prior (so the map prior is counted once more, harmless at 1 mm).
+* **Beacon ranges** (``RangeFactor2D``, gtsam's pose-to-point range factor, for
+  :class:`~locbench.events.RangeObservations`): the distance from the robot origin to a beacon of
+  ``world.landmarks``, attached to the same landmark variables as the sightings. Ranging radios produce gross
+  outliers, so two defences, both configured: (1) a gate on the innovation against the current filtered
+  belief, nu^2 / (H P H^T + sigma^2) inside the chi-square (1 dof) quantile of ``range_gate_probability``
+  (0.99, as ``ekf_landmarks``; 1 disables it), which drops ranges that are far off before they enter the
+  graph; (2) a Huber M-estimator on the ranges that do enter (``range_robust="huber"``, threshold
+  ``range_huber_k`` = 1.345 whitened units, the classic 95 %-efficiency constant of Huber 1981 for Gaussian
+  data), which bounds the pull of a residual beyond k sigma once the smoother relinearises. A range of an
+  unknown id is rejected (a range cannot be associated by nearest neighbour).
 * **Pose fixes** (``PriorFactorPose2``, when ``use_pose_fixes``): a 2-D fix is a pose prior whose
   heading standard deviation is ``pose_fix_heading_sigma_rad`` (1000 rad: no heading information); a 3-D
   fix uses its full covariance. Both are rotated into the prior's frame, as gtsam measures the error there.
@@ -54,7 +64,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal
 
 import numpy as np
@@ -62,10 +72,16 @@ import numpy.typing as npt
 
 from locbench.datasets.base import Gaussian2, MapKind, SensorSpec, WorldMap
 from locbench.errors import ConfigError, DependencyNotInstalled, FilterDiverged
-from locbench.events import UNKNOWN_ID, LandmarkObservations, Observation, Odometry, PoseFix
-from locbench.filters._motion import MotionKind, MotionModel, MotionNoiseConfig, propagate_covariance
+from locbench.events import UNKNOWN_ID, LandmarkObservations, Observation, Odometry, PoseFix, RangeObservations
+from locbench.filters._motion import (
+    RUN_KEY_OMIT_IF_DEFAULT,
+    MotionKind,
+    MotionModel,
+    MotionNoiseConfig,
+    propagate_covariance,
+)
 from locbench.filters.base import Estimate, Filter, FilterConfig
-from locbench.filters.ekf_landmarks import chi2_2dof_quantile, landmark_noise
+from locbench.filters.ekf_landmarks import chi2_1dof_quantile, chi2_2dof_quantile, landmark_noise, range_only_noise
 from locbench.geometry import wrap_angle, wrap_scalar
 
 try:
@@ -118,10 +134,20 @@ class GtsamFLSConfig(FilterConfig, MotionNoiseConfig):
         Heading standard deviation of the prior made from a 2-D fix, rad (large: no heading information).
     sigma_range_m, sigma_bearing_rad : float or None
         Range-bearing noise (report 003 eq. 9); None takes the dataset's nominal value.
+    range_only_sigma_m : float or None
+        Standard deviation of a beacon range, m; None takes ``SensorSpec.range_sigma_m``.
+    range_gate_probability : float
+        Chi-square (1 dof) gate on each beacon range's innovation against the filtered belief; 1 disables it.
+    range_robust : {"huber", "none"}
+        Noise model of the range factors: a Huber M-estimator on the Gaussian, or the Gaussian alone.
+    range_huber_k : float
+        Huber threshold in whitened units (sigmas); 1.345 (Huber 1981).
     wheelbase_m, encoder_k_left, encoder_k_right : float or None
         Overrides of W (m) and k_L, k_R (sqrt(m)); None takes the dataset's value.
     odometry_sigma_xy_per_m, odometry_sigma_theta_per_m, odometry_sigma_theta_per_rad : float or None
         Overrides of the increment fallback noise (m/sqrt(m), rad/sqrt(m), rad/sqrt(rad)).
+    twist_sigma_v_mps, twist_sigma_omega_radps : float or None
+        Overrides of the white noise of a measured twist (m/s, rad/s); see :mod:`locbench.filters._motion`.
     """
 
     smoother: Literal["incremental", "batch"] = "incremental"
@@ -141,21 +167,27 @@ class GtsamFLSConfig(FilterConfig, MotionNoiseConfig):
     pose_fix_heading_sigma_rad: float = 1000.0
     sigma_range_m: float | None = None
     sigma_bearing_rad: float | None = None
+    range_only_sigma_m: float | None = field(default=None, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    range_gate_probability: float = field(default=0.99, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    range_robust: Literal["huber", "none"] = field(default="huber", metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    range_huber_k: float = field(default=1.345, metadata=RUN_KEY_OMIT_IF_DEFAULT)
 
     def __post_init__(self) -> None:
         if not self.lag_s > 0.0:
             raise ConfigError(f"lag_s must be > 0 s, got {self.lag_s}")
         if not 0.0 < self.gate_probability < 1.0:
             raise ConfigError(f"gate_probability must be in (0, 1), got {self.gate_probability}")
+        if not 0.0 < self.range_gate_probability <= 1.0:
+            raise ConfigError(f"range_gate_probability must be in (0, 1], got {self.range_gate_probability}")
         if self.relinearize_skip < 1:
             raise ConfigError(f"relinearize_skip must be >= 1, got {self.relinearize_skip}")
         for name in ("relinearize_threshold", "sigma_xy_m", "sigma_theta_rad", "prune_margin_m", "prune_margin_rad"):
             if getattr(self, name) < 0.0:
                 raise ConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
-        for name in ("landmark_sigma_m", "pose_fix_heading_sigma_rad"):
+        for name in ("landmark_sigma_m", "pose_fix_heading_sigma_rad", "range_huber_k"):
             if not getattr(self, name) > 0.0:
                 raise ConfigError(f"{name} must be > 0, got {getattr(self, name)}")
-        for name in ("sigma_range_m", "sigma_bearing_rad", "wheelbase_m"):
+        for name in ("sigma_range_m", "sigma_bearing_rad", "wheelbase_m", "range_only_sigma_m"):
             v = getattr(self, name)
             if v is not None and v <= 0.0:
                 raise ConfigError(f"{name} must be > 0 (or None for the dataset's value), got {v}")
@@ -184,7 +216,7 @@ class GtsamFixedLagSmoother(Filter):
     last smoother update) and ``iterations`` (of the last smoother update; NaN when the smoother did not run).
     """
 
-    consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LandmarkObservations, PoseFix})
+    consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LandmarkObservations, PoseFix, RangeObservations})
     requires: ClassVar[frozenset[MapKind]] = frozenset({MapKind.LANDMARKS})
     Config: ClassVar[type[FilterConfig]] = GtsamFLSConfig
     version: ClassVar[int] = 1
@@ -217,11 +249,24 @@ class GtsamFixedLagSmoother(Filter):
         self._motion = MotionModel(noise, cfg.motion_model, mean="model")
         self._qxy, self._qth = cfg.sigma_xy_m**2, cfg.sigma_theta_rad**2
 
-        sr, sb = landmark_noise(cfg.sigma_range_m, cfg.sigma_bearing_rad, sensors)
+        sr, sb = landmark_noise(cfg.sigma_range_m, cfg.sigma_bearing_rad, sensors, warn=False)
+        # Warn about defaulted landmark noise only once sightings arrive (a range-only dataset has none).
+        self._lm_warn = cfg.sigma_range_m is None and sensors.landmark_sigma_range_m is None
+        self._lm_warn |= cfg.sigma_bearing_rad is None and sensors.landmark_sigma_bearing_rad is None
         self._R = np.diag([sr * sr, sb * sb])
         # BearingRangeFactor2D's error is (bearing, range).
         self._br_noise = gtsam.noiseModel.Diagonal.Sigmas(np.array([sb, sr]))
         self._gate = chi2_2dof_quantile(cfg.gate_probability)
+        sg = range_only_noise(cfg.range_only_sigma_m, sensors, warn=False)
+        self._range_warn = cfg.range_only_sigma_m is None and sensors.range_sigma_m is None
+        self._range_var = sg * sg
+        self._range_gate = chi2_1dof_quantile(cfg.range_gate_probability)
+        gauss = gtsam.noiseModel.Isotropic.Sigma(1, sg)
+        self._range_noise = (
+            gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(cfg.range_huber_k), gauss)
+            if cfg.range_robust == "huber"
+            else gauss
+        )
 
         lm = world.landmarks
         self._lm_xy = np.asarray(lm.xy, dtype=np.float64).reshape(-1, 2)
@@ -340,6 +385,8 @@ class GtsamFixedLagSmoother(Filter):
         """Add the factors of one observation and update the smoother; TypeError for a type not consumed."""
         if type(z) is LandmarkObservations:
             factors, stamps = self._landmark_factors(z)
+        elif type(z) is RangeObservations:
+            factors, stamps = self._range_factors(z)
         elif type(z) is PoseFix:
             factors, stamps = self._pose_fix_factors(z)
         else:
@@ -358,6 +405,9 @@ class GtsamFixedLagSmoother(Filter):
         return _X(self._n_nodes) if self._steps_since_node > 0 else self._node_key
 
     def _landmark_factors(self, z: LandmarkObservations) -> tuple[Any, dict[int, float]]:
+        if self._lm_warn:
+            landmark_noise(None, None, SensorSpec(), warn=True)
+            self._lm_warn = False
         cfg = self.config
         ids, ranges, bearings = z.ids.tolist(), z.ranges.tolist(), z.bearings.tolist()
         use_ids = cfg.association == "known"
@@ -403,6 +453,42 @@ class GtsamFixedLagSmoother(Filter):
         acc = len(matches)
         self._nis = nis if acc else math.nan
         self._nis_dof, self._accepted, self._rejected = 2 * acc, acc, rej
+        return factors, stamps
+
+    def _range_factors(self, z: RangeObservations) -> tuple[Any, dict[int, float]]:
+        """Gated ``RangeFactor2D`` to the beacons' landmark variables (module docstring)."""
+        if self._range_warn:
+            range_only_noise(None, SensorSpec(), warn=True)
+            self._range_warn = False
+        key = self._target_key()
+        factors = gtsam.NonlinearFactorGraph()
+        stamps: dict[int, float] = {}
+        x, y = float(self._mean[0]), float(self._mean[1])
+        P = self._cov
+        nis, acc, rej = 0.0, 0, 0
+        for ident, r in zip(z.ids.tolist(), z.ranges.tolist(), strict=True):
+            row = self._lm_row.get(ident) if ident != UNKNOWN_ID else None
+            if row is None or not (math.isfinite(r) and r >= 0.0):
+                rej += 1
+                continue
+            dx, dy = float(self._lm_xy[row, 0]) - x, float(self._lm_xy[row, 1]) - y
+            d = math.hypot(dx, dy)
+            if d < 1e-9:
+                rej += 1
+                continue
+            h0, h1 = -dx / d, -dy / d
+            S = h0 * h0 * P[0, 0] + 2.0 * h0 * h1 * P[0, 1] + h1 * h1 * P[1, 1] + self._range_var
+            d2 = (r - d) ** 2 / S
+            if not d2 <= self._range_gate:
+                rej += 1
+                continue
+            lkey = self._landmark_key(row, z.t, factors)
+            factors.add(gtsam.RangeFactor2D(key, lkey, r, self._range_noise))
+            stamps[lkey] = z.t
+            nis += d2
+            acc += 1
+        self._nis = nis if acc else math.nan
+        self._nis_dof, self._accepted, self._rejected = acc, acc, rej
         return factors, stamps
 
     def _landmark_key(self, row: int, t: float, factors: Any) -> int:

@@ -28,6 +28,18 @@ Correction
       log-sum-exp), not by the maximum: it is the exact likelihood under an unknown correspondence, it
       never throws away a second plausible landmark, and its values stay comparable between particles.
       Identities not in the map are ignored.
+    * Beacon ranges (:class:`~locbench.events.RangeObservations`, range-only radios such as the CMU Plaza
+      data): the same structure as the landmark model with the range term only, made robust to the gross
+      outliers of ranging radios by a mixture with a uniform floor (the z_hit / z_rand form of PR table 6.3):
+
+          p(r | x) = (1 - eps) N(r; |B - p|, sigma^2) + eps / r_span,
+
+      eps = ``range_outlier_fraction`` (0.05, the z_rand of the laser model) and r_span =
+      ``range_outlier_span_m`` (100 m: the order of a ranging radio's reach; the floor is a density over
+      [0, r_span]). Without the floor a single 20 m outlier at sigma 0.3 m would weigh every particle by
+      e^-2000 relative to its neighbours and collapse the cloud on the particles nearest the wrong circle.
+      A range whose id is withheld is marginalised over the beacons as for landmarks; ids not in the map
+      are ignored.
     * Laser (optional): the likelihood field of :mod:`locbench.filters._likelihood_field` on a subset of
       ``laser_beams`` beams, evenly spaced over the scan (as ROS AMCL's ``laser_max_beams``), max-range
       readings skipped. Its defaults (z_hit 0.95, z_rand 0.05, sigma_hit 0.2 m, max distance 2 m) are
@@ -67,7 +79,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal
 
 import numpy as np
@@ -76,7 +88,7 @@ from numba import njit
 
 from locbench.datasets.base import Gaussian2, MapKind, OccupancyGrid, SensorSpec, WorldMap
 from locbench.errors import ConfigError, FilterDiverged
-from locbench.events import UNKNOWN_ID, LandmarkObservations, LaserScan, Observation, Odometry
+from locbench.events import UNKNOWN_ID, LandmarkObservations, LaserScan, Observation, Odometry, RangeObservations
 from locbench.filters._likelihood_field import (
     LikelihoodField,
     log_likelihood,
@@ -84,15 +96,17 @@ from locbench.filters._likelihood_field import (
     scan_endpoints_robot_frame,
 )
 from locbench.filters._motion import (
+    RUN_KEY_OMIT_IF_DEFAULT,
     MotionKind,
     MotionNoiseConfig,
     increment_variances,
     sample_increment_motion,
+    sample_twist_motion,
     sample_wheel_motion,
     wheel_variances,
 )
 from locbench.filters.base import Estimate, Filter, FilterConfig
-from locbench.filters.ekf_landmarks import landmark_noise
+from locbench.filters.ekf_landmarks import landmark_noise, range_only_noise
 from locbench.geometry import wrap_angle
 
 FloatArray = npt.NDArray[np.float64]
@@ -135,6 +149,14 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
         uniform prior over free space (the free grid cells, else the landmarks' bounding box).
     use_landmarks : bool
         Weight with landmark sightings (report 003's PF). Ignored, with a log line, on a world without landmarks.
+    use_ranges : bool
+        Weight with range-only beacon measurements (to ``world.landmarks``). Ignored on a world without landmarks.
+    range_only_sigma_m : float or None
+        Standard deviation of a beacon range, m; None takes ``SensorSpec.range_sigma_m``.
+    range_outlier_fraction : float
+        Weight eps of the uniform outlier floor in the range likelihood (module docstring), in [0, 1).
+    range_outlier_span_m : float
+        Width of the interval over which the outlier floor is uniform, m (its density is 1 / span).
     use_laser : bool
         Weight with the laser likelihood field on the occupancy grid. Off by default because report 003's PF
         has no laser; on a dataset with a grid but no landmarks set it to true.
@@ -162,6 +184,8 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
         Overrides of W (m) and k_L, k_R (sqrt(m)); None takes the dataset's value.
     odometry_sigma_xy_per_m, odometry_sigma_theta_per_m, odometry_sigma_theta_per_rad : float or None
         Overrides of the increment-model noise (m/sqrt(m), rad/sqrt(m), rad/sqrt(rad)).
+    twist_sigma_v_mps, twist_sigma_omega_radps : float or None
+        Overrides of the white noise of a measured twist (m/s, rad/s); see :mod:`locbench.filters._motion`.
     """
 
     particles: int = 1000
@@ -172,6 +196,10 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
     roughening_k: float = 0.2
     init: Literal["belief", "uniform"] = "belief"
     use_landmarks: bool = True
+    use_ranges: bool = field(default=True, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    range_only_sigma_m: float | None = field(default=None, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    range_outlier_fraction: float = field(default=0.05, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    range_outlier_span_m: float = field(default=100.0, metadata=RUN_KEY_OMIT_IF_DEFAULT)
     use_laser: bool = False
     laser_beams: int = 60
     z_hit: float = 0.95
@@ -201,18 +229,22 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
             raise ConfigError(f"laser_beams must be >= 1, got {self.laser_beams}")
         if not (self.z_hit >= 0.0 and self.z_rand >= 0.0 and self.z_hit + self.z_rand > 0.0):
             raise ConfigError(f"z_hit and z_rand must be >= 0 and not both 0, got {self.z_hit}, {self.z_rand}")
-        for name in ("sigma_hit_m", "laser_max_dist_m"):
+        if not 0.0 <= self.range_outlier_fraction < 1.0:
+            raise ConfigError(f"range_outlier_fraction must be in [0, 1), got {self.range_outlier_fraction}")
+        for name in ("sigma_hit_m", "laser_max_dist_m", "range_outlier_span_m"):
             if not getattr(self, name) > 0.0:
                 raise ConfigError(f"{name} must be > 0 m, got {getattr(self, name)}")
         for name in ("sigma_x_m", "sigma_y_m", "sigma_theta_rad"):
             if getattr(self, name) < 0.0:
                 raise ConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
-        for name in ("sigma_range_m", "sigma_bearing_rad", "wheelbase_m"):
+        for name in ("sigma_range_m", "sigma_bearing_rad", "wheelbase_m", "range_only_sigma_m"):
             v = getattr(self, name)
             if v is not None and v <= 0.0:
                 raise ConfigError(f"{name} must be > 0 (or None for the dataset's value), got {v}")
-        if not (self.use_landmarks or self.use_laser):
-            raise ConfigError("use_landmarks and use_laser are both false: the particle filter needs one of them")
+        if not (self.use_landmarks or self.use_laser or self.use_ranges):
+            raise ConfigError(
+                "use_landmarks, use_ranges and use_laser are all false: the particle filter needs one of them"
+            )
 
 
 # --- compiled kernels --------------------------------------------------------------------------------------
@@ -253,6 +285,56 @@ def _landmark_loglik(
                 vb = bearings[k] - math.atan2(dy, dx) + th
                 vb = vb - 2.0 * math.pi * math.floor((vb + math.pi) / (2.0 * math.pi))  # wrap to [-pi, pi)
                 ll = log_norm - 0.5 * (vr * vr * inv_var_r + vb * vb * inv_var_b)
+                tmp[j] = ll
+                if ll > best:
+                    best = ll
+            if row >= 0:
+                acc += best
+            else:
+                s = 0.0
+                for j in range(nl):
+                    s += math.exp(tmp[j] - best)
+                acc += best + math.log(s) - log_nl
+        out[p] = acc
+    return out
+
+
+@njit(cache=True)
+def _range_loglik(
+    poses: FloatArray,
+    ranges: FloatArray,
+    rows: IntArray,
+    lm_xy: FloatArray,
+    inv_var: float,
+    log_hit: float,
+    log_floor: float,
+) -> FloatArray:
+    """Sum over ranges of log((1 - eps) N(r; |B - p|, sigma^2) + eps / span); rows < 0 marginalised over the map.
+
+    ``log_hit`` = log(1 - eps) - log(sigma sqrt(2 pi)); ``log_floor`` = log(eps / span) (-inf when eps = 0).
+    """
+    n = poses.shape[0]
+    m = ranges.shape[0]
+    nl = lm_xy.shape[0]
+    log_nl = math.log(nl)
+    out = np.zeros(n)
+    tmp = np.empty(nl)
+    for p in range(n):
+        x = poses[p, 0]
+        y = poses[p, 1]
+        acc = 0.0
+        for k in range(m):
+            row = rows[k]
+            lo = row if row >= 0 else 0
+            hi = row + 1 if row >= 0 else nl
+            best = -math.inf
+            for j in range(lo, hi):
+                dx = lm_xy[j, 0] - x
+                dy = lm_xy[j, 1] - y
+                vr = ranges[k] - math.sqrt(dx * dx + dy * dy)
+                a = log_hit - 0.5 * vr * vr * inv_var
+                # log(e^a + e^floor) without overflow
+                ll = max(a, log_floor) + math.log1p(math.exp(-abs(a - log_floor))) if log_floor > -math.inf else a
                 tmp[j] = ll
                 if ll > best:
                     best = ll
@@ -384,7 +466,7 @@ class ParticleFilter(Filter):
     configured sensors have no usable map.
     """
 
-    consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LandmarkObservations, LaserScan})
+    consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LandmarkObservations, LaserScan, RangeObservations})
     requires: ClassVar[frozenset[MapKind]] = frozenset()
     Config: ClassVar[type[FilterConfig]] = ParticleFilterConfig
     version: ClassVar[int] = 1
@@ -402,10 +484,12 @@ class ParticleFilter(Filter):
         return 25.0 / self.config.particles
 
     def routed_events(self) -> frozenset[type]:
-        """Odometry, plus landmark sightings and laser scans as switched on in the config."""
+        """Odometry, plus landmark sightings, beacon ranges and laser scans as switched on in the config."""
         out: set[type] = {Odometry}
         if self.config.use_landmarks:
             out.add(LandmarkObservations)
+        if self.config.use_ranges:
+            out.add(RangeObservations)
         if self.config.use_laser:
             out.add(LaserScan)
         return frozenset(out)
@@ -435,16 +519,17 @@ class ParticleFilter(Filter):
         lm = world.landmarks if world.landmarks is not None and len(world.landmarks) > 0 else None
         grid = world.occupancy
         self._use_lm = cfg.use_landmarks and lm is not None
+        self._use_ranges = cfg.use_ranges and lm is not None
         self._use_laser = cfg.use_laser and grid is not None
         if cfg.use_landmarks and lm is None:
-            logger.info("pf: the world has no landmarks; landmark sightings will not be used")
+            logger.info("pf: the world has no landmarks; landmark sightings and ranges will not be used")
         if cfg.use_laser and grid is None:
             logger.info("pf: the world has no occupancy grid; laser scans will not be used")
-        if not (self._use_lm or self._use_laser):
+        if not (self._use_lm or self._use_laser or self._use_ranges):
             raise ConfigError(
-                "pf: no usable sensor model: use_landmarks needs a landmark map and use_laser an occupancy grid; "
-                f"this world has {sorted(k.value for k in world.kinds) or 'neither'} "
-                f"(use_landmarks={cfg.use_landmarks}, use_laser={cfg.use_laser}); "
+                "pf: no usable sensor model: use_landmarks and use_ranges need a landmark map and use_laser an "
+                f"occupancy grid; this world has {sorted(k.value for k in world.kinds) or 'neither'} "
+                f"(use_landmarks={cfg.use_landmarks}, use_ranges={cfg.use_ranges}, use_laser={cfg.use_laser}); "
                 "set use_laser=true on a dataset with a grid"
             )
 
@@ -457,6 +542,12 @@ class ParticleFilter(Filter):
         sr, sb = landmark_noise(cfg.sigma_range_m, cfg.sigma_bearing_rad, sensors, warn=self._use_lm)
         self._inv_var_r, self._inv_var_b = 1.0 / (sr * sr), 1.0 / (sb * sb)
         self._lm_log_norm = -_LOG_2PI - math.log(sr) - math.log(sb)
+        srange = range_only_noise(cfg.range_only_sigma_m, sensors, warn=False)
+        self._range_warn = self._use_ranges and cfg.range_only_sigma_m is None and sensors.range_sigma_m is None
+        eps = cfg.range_outlier_fraction
+        self._range_inv_var = 1.0 / (srange * srange)
+        self._range_log_hit = math.log1p(-eps) - 0.5 * _LOG_2PI - math.log(srange)
+        self._range_log_floor = math.log(eps / cfg.range_outlier_span_m) if eps > 0.0 else -math.inf
 
         self._grid = grid
         self._fields: dict[float, LikelihoodField] = {}
@@ -509,6 +600,8 @@ class ParticleFilter(Filter):
             self._travelled[0] += abs(u.d_left)
             self._travelled[1] += abs(u.d_right)
             x = sample_wheel_motion(self._x, u.d_left, u.d_right, W, vl, vr, rng)
+        elif (tw := nz.twist_sigmas(u)) is not None:
+            x = sample_twist_motion(self._x, u, tw[0], tw[1], rng)
         else:
             vxy, vth = increment_variances(
                 u.dx, u.dy, u.dtheta, nz.sigma_xy_per_m, nz.sigma_theta_per_m, nz.sigma_theta_per_rad
@@ -526,10 +619,12 @@ class ParticleFilter(Filter):
     # --- update ------------------------------------------------------------------------------------------
 
     def update(self, z: Observation) -> None:
-        """Weight the particles with landmark sightings or a laser scan; resample and inject as configured."""
+        """Weight the particles with landmark sightings, beacon ranges or a laser scan; resample and inject."""
         prepared: tuple[int, tuple[Any, ...]] | None
         if type(z) is LandmarkObservations:
             prepared = self._prepare_landmarks(z) if self._use_lm else None
+        elif type(z) is RangeObservations:
+            prepared = self._prepare_ranges(z) if self._use_ranges else None
         elif type(z) is LaserScan:
             prepared = self._prepare_scan(z) if self._use_laser else None
         else:
@@ -568,6 +663,26 @@ class ParticleFilter(Filter):
             np.asarray(rows, dtype=np.int64),
         )
         return len(keep), data
+
+    def _prepare_ranges(self, z: RangeObservations) -> tuple[int, tuple[FloatArray, IntArray]] | None:
+        if self._range_warn:
+            range_only_noise(None, SensorSpec(), warn=True)
+            self._range_warn = False
+        keep: list[int] = []
+        rows: list[int] = []
+        for k, (ident, r) in enumerate(zip(z.ids.tolist(), z.ranges.tolist(), strict=True)):
+            if not (math.isfinite(r) and r >= 0.0):
+                continue
+            row = -1 if ident == UNKNOWN_ID else self._lm_row.get(int(ident), -2)
+            if row == -2:
+                logger.debug("beacon id %d is not in the map; range ignored", ident)
+                continue
+            keep.append(k)
+            rows.append(row)
+        if not keep:
+            return None
+        sel = np.asarray(keep, dtype=np.int64)
+        return len(keep), (np.ascontiguousarray(z.ranges[sel], dtype=np.float64), np.asarray(rows, dtype=np.int64))
 
     def _prepare_scan(self, z: LaserScan) -> tuple[int, tuple[FloatArray, FloatArray]] | None:
         n_all = int(z.ranges.shape[0])
@@ -609,6 +724,17 @@ class ParticleFilter(Filter):
                 self._inv_var_r,
                 self._inv_var_b,
                 self._lm_log_norm,
+            )
+        if kind is RangeObservations:
+            ranges, rows = data
+            return _range_loglik(
+                self._x,
+                ranges,
+                rows,  # type: ignore[arg-type]
+                self._lm_xy,
+                self._range_inv_var,
+                self._range_log_hit,
+                self._range_log_floor,
             )
         ex, ey = data
         return log_likelihood(self._scan_field, self._x, ex, ey)

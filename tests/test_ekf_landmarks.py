@@ -6,15 +6,17 @@ import math
 
 import numpy as np
 import pytest
+import range_only_support as ro
 from numpy.testing import assert_allclose
 
 from locbench.datasets.base import Gaussian2, Landmarks, MapKind, SensorSpec, WorldMap
 from locbench.errors import ConfigError, FilterDiverged
-from locbench.events import UNKNOWN_ID, LandmarkObservations, LaserScan, Odometry, PoseFix
+from locbench.events import UNKNOWN_ID, LandmarkObservations, LaserScan, Odometry, PoseFix, RangeObservations
 from locbench.filters._motion import predict_midpoint
 from locbench.filters.ekf_landmarks import (
     LandmarkEKF,
     LandmarkEKFConfig,
+    chi2_1dof_quantile,
     chi2_2dof_quantile,
     joseph_update,
     range_bearing,
@@ -251,9 +253,11 @@ def test_pose_fix_pulls_the_estimate_and_shrinks_the_covariance(with_heading: bo
 
 def test_routed_events_drop_pose_fixes_unless_enabled() -> None:
     assert PoseFix not in make_ekf().routed_events()
-    assert make_ekf().routed_events() == frozenset({Odometry, LandmarkObservations})
-    assert make_ekf(use_pose_fixes=True).routed_events() == frozenset({Odometry, LandmarkObservations, PoseFix})
-    assert LandmarkEKF.consumes == frozenset({Odometry, LandmarkObservations, PoseFix})
+    assert make_ekf().routed_events() == frozenset({Odometry, LandmarkObservations, RangeObservations})
+    assert make_ekf(use_pose_fixes=True).routed_events() == frozenset(
+        {Odometry, LandmarkObservations, PoseFix, RangeObservations}
+    )
+    assert LandmarkEKF.consumes == frozenset({Odometry, LandmarkObservations, PoseFix, RangeObservations})
     assert LandmarkEKF.requires == frozenset({MapKind.LANDMARKS})
 
 
@@ -344,3 +348,92 @@ def test_config_from_spec_and_validation() -> None:
         LandmarkEKFConfig(sigma_range_m=0.0)
     with pytest.raises(ConfigError, match="landmarks"):
         make_ekf().reset(Gaussian2(np.zeros(3), np.eye(3)), WorldMap(), SENSORS, RNG)
+
+
+# --- range-only beacons --------------------------------------------------------------------------------
+
+
+def test_chi2_1dof_quantiles() -> None:
+    assert chi2_1dof_quantile(0.95) == pytest.approx(3.841459, abs=1e-5)
+    assert chi2_1dof_quantile(0.99) == pytest.approx(6.634897, abs=1e-5)
+    assert chi2_1dof_quantile(1.0) == math.inf
+
+
+def test_range_only_update_reduces_the_error_of_drifting_odometry() -> None:
+    events, _, truth = ro.scenario()
+    odo, _ = ro.run(make_filter("odometry"), events, use_ranges=False)
+    ekf, diags = ro.run(make_ekf(), events)
+    e_odo, e_ekf = ro.position_rmse(odo, truth), ro.position_rmse(ekf, truth)
+    assert e_odo > 0.3  # the odometry's 3 % / 5 % bias drifts
+    assert e_ekf < 0.25 * e_odo
+    assert sum(d["accepted"] for d in diags) >= 0.95 * len(diags)
+
+
+def test_range_update_equals_the_numpy_joseph_form_with_a_numeric_jacobian() -> None:
+    f = make_ekf()
+    P0 = np.array([[0.04, 0.01, 0.002], [0.01, 0.09, -0.003], [0.002, -0.003, 0.01]])
+    x0 = np.array([0.5, -0.2, 0.3])
+    f.reset(Gaussian2(x0, P0), ro.WORLD, ro.SENSORS, RNG)
+    beacon = ro.BEACON_XY[1]
+    r = float(np.hypot(*(beacon - x0[:2]))) + 0.15  # inside the gate
+    f.update(RangeObservations(0.1, np.array([5]), np.array([r])))
+
+    def h(x: np.ndarray) -> float:
+        return float(np.hypot(*(beacon - x[:2])))
+
+    eps = 1e-7
+    H = np.array([[(h(x0 + eps * e) - h(x0 - eps * e)) / (2 * eps) for e in np.eye(3)]])
+    x1, P1, nis = joseph_update(x0, P0, H, np.array([[0.1**2]]), np.array([r - h(x0)]))
+    est = f.estimate()
+    assert_allclose(est.mean, x1, atol=1e-9)
+    assert_allclose(est.cov, P1, atol=1e-10)
+    assert est.diagnostics["nis"] == pytest.approx(nis, rel=1e-6)
+    assert (est.diagnostics["accepted"], est.diagnostics["nis_dof"]) == (1.0, 1.0)
+
+
+def test_range_gate_rejects_a_gross_outlier() -> None:
+    events, _, truth = ro.scenario(n=100)
+    gated, open_ = make_ekf(), make_ekf(range_gate_probability=1.0)
+    for f in (gated, open_):
+        f.reset(ro.INITIAL, ro.WORLD, ro.SENSORS, RNG)
+        for ev in events:
+            f.predict(ev) if isinstance(ev, Odometry) else f.update(ev)
+    before = gated.estimate()
+    bad = RangeObservations(
+        10.1, ro.BEACON_IDS[:1].copy(), np.array([np.hypot(*(ro.BEACON_XY[0] - truth[-1, :2])) + 20.0])
+    )
+    gated.update(bad)
+    open_before = open_.estimate().mean
+    open_.update(bad)
+    after = gated.estimate()
+    assert (after.diagnostics["accepted"], after.diagnostics["rejected"]) == (0.0, 1.0)
+    assert_allclose(after.mean, before.mean, atol=0)
+    assert_allclose(after.cov, before.cov, atol=0)
+    assert np.hypot(*(open_.estimate().mean[:2] - open_before[:2])) > 0.5  # ungated, the outlier drags the pose
+
+
+def test_ranges_of_unknown_or_unmapped_beacons_are_rejected() -> None:
+    f = make_ekf()
+    f.reset(ro.INITIAL, ro.WORLD, ro.SENSORS, RNG)
+    f.update(RangeObservations(0.1, np.array([UNKNOWN_ID, 99, 3], dtype=np.int64), np.array([5.0, 5.0, np.nan])))
+    d = f.estimate().diagnostics
+    assert (d["accepted"], d["rejected"]) == (0.0, 3.0)
+    assert_allclose(f.estimate().mean, ro.INITIAL.mean, atol=0)
+
+
+def test_range_noise_override_and_the_dataset_value() -> None:
+    def nis(**kw: object) -> float:
+        f = make_ekf(**kw)
+        f.reset(ro.INITIAL, ro.WORLD, ro.SENSORS, RNG)
+        f.update(RangeObservations(0.1, np.array([3]), np.array([8.6])))
+        return f.estimate().diagnostics["nis"]
+
+    P, nu = ro.INITIAL.cov, 8.6 - float(np.hypot(*ro.BEACON_XY[0]))
+    h = -ro.BEACON_XY[0] / np.hypot(*ro.BEACON_XY[0])
+    hph = float(h @ P[:2, :2] @ h)
+    assert nis() == pytest.approx(nu * nu / (hph + 0.1**2))  # SensorSpec.range_sigma_m
+    assert nis(range_only_sigma_m=0.5) == pytest.approx(nu * nu / (hph + 0.5**2))
+    with pytest.raises(ConfigError, match="range_gate_probability"):
+        make_ekf(range_gate_probability=0.0)
+    with pytest.raises(ConfigError, match="range_only_sigma_m"):
+        make_ekf(range_only_sigma_m=-1.0)

@@ -11,10 +11,11 @@ from numpy.testing import assert_allclose
 pytest.importorskip("gtsam")
 
 import gtsam
+import range_only_support as ro
 
 from locbench.datasets.base import Gaussian2, Landmarks, SensorSpec, WorldMap
 from locbench.errors import ConfigError
-from locbench.events import UNKNOWN_ID, LandmarkObservations, Odometry, PoseFix
+from locbench.events import UNKNOWN_ID, LandmarkObservations, Odometry, PoseFix, RangeObservations
 from locbench.filters.gtsam_fls import GtsamFixedLagSmoother, GtsamFLSConfig
 from locbench.geometry import is_symmetric_psd, pose_error
 from locbench.registry import make_dataset, make_filter
@@ -209,3 +210,68 @@ def test_extra_results_hold_the_smoothed_trajectory(tiny_line_runs: dict) -> Non
         e_f = pose_error(tr.mean, _truth_at(ds, tr.t))
         assert np.sqrt(np.mean(e_s[:, 0] ** 2 + e_s[:, 1] ** 2)) <= np.sqrt(np.mean(e_f[:, 0] ** 2 + e_f[:, 1] ** 2))
     assert np.count_nonzero(tiny_line_runs["gtsam_fls"].extra["smoothed_is_node"]) < n_odo / 2
+
+
+# --- range-only beacons --------------------------------------------------------------------------------
+
+
+def _ro(**kw: object) -> GtsamFixedLagSmoother:
+    return GtsamFixedLagSmoother(GtsamFLSConfig(**kw))  # type: ignore[arg-type]
+
+
+def test_range_only_update_reduces_the_error_of_drifting_odometry() -> None:
+    events, _, truth = ro.scenario()
+    odo, _ = ro.run(make_filter("odometry"), events, use_ranges=False)
+    f = _ro()
+    est, diags = ro.run(f, events)
+    e_odo, e_fls = ro.position_rmse(odo, truth), ro.position_rmse(est, truth)
+    assert e_odo > 0.3
+    assert e_fls < 0.25 * e_odo
+    assert sum(d["accepted"] for d in diags) >= 0.95 * len(diags)
+    counts = _factor_types(f)
+    assert counts.get("RangeFactor2D", 0) > 0 and "BearingRangeFactor2D" not in counts
+
+
+def _after_drive(f: GtsamFixedLagSmoother, n: int = 60) -> np.ndarray:
+    events, _, truth = ro.scenario(n=n)
+    f.reset(ro.INITIAL, ro.WORLD, ro.SENSORS, np.random.default_rng(0))
+    for ev in events:
+        f.predict(ev) if isinstance(ev, Odometry) else f.update(ev)
+    return truth[-1]
+
+
+def _outlier(truth: np.ndarray, t: float = 6.1, extra_m: float = 20.0) -> RangeObservations:
+    return RangeObservations(
+        t, ro.BEACON_IDS[:1].copy(), np.array([np.hypot(*(ro.BEACON_XY[0] - truth[:2])) + extra_m])
+    )
+
+
+def test_range_gate_rejects_a_gross_outlier() -> None:
+    f = _ro()
+    truth = _after_drive(f)
+    n_factors = f.smoother.getFactors().size()
+    before = f.estimate().mean
+    f.update(_outlier(truth))
+    d = f.estimate().diagnostics
+    assert (d["accepted"], d["rejected"]) == (0.0, 1.0)
+    assert f.smoother.getFactors().size() == n_factors  # nothing entered the graph
+    assert_allclose(f.estimate().mean, before, atol=0)
+
+
+def test_huber_bounds_the_pull_of_an_ungated_outlier() -> None:
+    moved = {}
+    for robust in ("huber", "none"):
+        f = _ro(range_gate_probability=1.0, range_robust=robust)
+        truth = _after_drive(f)
+        before = f.estimate().mean
+        f.update(_outlier(truth, extra_m=5.0))
+        moved[robust] = float(np.hypot(*(f.estimate().mean[:2] - before[:2])))
+    assert moved["none"] > 0.3
+    assert moved["huber"] < 0.5 * moved["none"]
+
+
+def test_range_config_is_checked() -> None:
+    with pytest.raises(ConfigError, match="range_gate_probability"):
+        _ro(range_gate_probability=1.5)
+    with pytest.raises(ConfigError, match="range_huber_k"):
+        _ro(range_huber_k=0.0)

@@ -15,6 +15,7 @@ from locbench.filters._motion import (
     MotionModel,
     increment_covariance,
     increment_jacobians,
+    increment_variances,
     input_covariance,
     jacobian_state,
     jacobian_wheels,
@@ -23,7 +24,11 @@ from locbench.filters._motion import (
     propagate_covariance,
     resolve_motion_noise,
     sample_increment_motion,
+    sample_twist_motion,
     sample_wheel_motion,
+    twist_increment,
+    twist_increment_covariance,
+    twist_jacobian,
     wheel_to_motion,
     wheel_variances,
 )
@@ -226,3 +231,96 @@ def test_sampled_increment_motion_is_deterministic_and_centred() -> None:
     assert_allclose(a, b, rtol=0, atol=0)
     assert_allclose(a[:, :2].mean(axis=0), compose([1.0, 1.0, 3.0], [0.2, 0.0, 0.1])[:2], atol=2e-4)
     assert np.all((a[:, 2] > -math.pi) & (a[:, 2] <= math.pi))
+
+
+# --- twist noise ---------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("a", [0.0, 1e-5, 9e-4, 1.1e-3, 0.3, -1.2, 2.5])
+def test_twist_jacobian_matches_finite_differences(a: float) -> None:
+    s = 0.7
+    num = numeric_jacobian(lambda q: twist_increment(q[0], q[1]), np.array([s, a]), eps=1e-6)
+    assert_allclose(twist_jacobian(s, a), num, atol=1e-8)
+
+
+def test_twist_increment_is_the_exact_arc() -> None:
+    # A quarter circle of radius 2: from the origin heading +x to (2, 2) heading +y.
+    assert_allclose(twist_increment(math.pi, math.pi / 2), [2.0, 2.0, math.pi / 2], atol=1e-12)
+    assert_allclose(twist_increment(0.4, 0.0), [0.4, 0.0, 0.0], atol=0)
+
+
+def test_twist_covariance_formula_without_turning() -> None:
+    # omega = 0: J = [[1, 0], [0, s/2], [0, 1]], so Sigma = [[vs, 0, 0], [0, s^2/4 va, s/2 va], [0, s/2 va, va]]
+    # with s = v dt, vs = (sigma_v dt)^2, va = (sigma_omega dt)^2.
+    v, dt, sv, so = 0.8, 0.2, 0.05, 0.1
+    s, vs, va = v * dt, (sv * dt) ** 2, (so * dt) ** 2
+    expected = np.array([[vs, 0.0, 0.0], [0.0, s * s / 4 * va, s / 2 * va], [0.0, s / 2 * va, va]])
+    assert_allclose(twist_increment_covariance(v, 0.0, dt, sv, so), expected, rtol=1e-12, atol=1e-20)
+
+
+def test_twist_covariance_matches_sampled_arcs() -> None:
+    v, w, dt, sv, so = 1.0, 0.8, 0.5, 0.02, 0.02
+    rng = np.random.default_rng(7)
+    n = 200_000
+    inc = twist_increment(v * dt + sv * dt * rng.standard_normal(n), w * dt + so * dt * rng.standard_normal(n))
+    assert_cov_close(np.cov(inc.T), twist_increment_covariance(v, w, dt, sv, so))
+
+
+def assert_cov_close(sampled: np.ndarray, expected: np.ndarray, tol: float = 0.02) -> None:
+    """Entries agree to ``tol`` of sqrt(C_ii C_jj) (a sampled off-diagonal near 0 has no relative accuracy)."""
+    scale = np.sqrt(np.outer(np.diag(expected), np.diag(expected)))
+    assert np.all(np.abs(sampled - expected) <= tol * scale), (sampled, expected)
+
+
+def _twist_event(v: float = 0.6, w: float = 0.4, dt: float = 0.25) -> Odometry:
+    inc = twist_increment(v * dt, w * dt)
+    return Odometry(1.0, float(inc[0]), float(inc[1]), float(inc[2]), v=v, omega=w, dt=dt)
+
+
+def test_motion_model_uses_the_twist_noise_rotated_to_the_world() -> None:
+    sensors = SensorSpec(odometry_sigma_xy_per_m=0.1, twist_sigma_v_mps=0.05, twist_sigma_omega_radps=0.02)
+    u = _twist_event()
+    th = 0.9
+    step = MotionModel(resolve_motion_noise(sensors)).step((1.0, 2.0, th), u)
+    assert u.v is not None and u.omega is not None and u.dt is not None
+    G = np.array([[math.cos(th), -math.sin(th), 0.0], [math.sin(th), math.cos(th), 0.0], [0.0, 0.0, 1.0]])
+    N = G @ twist_increment_covariance(u.v, u.omega, u.dt, 0.05, 0.02) @ G.T
+    assert_allclose(step.noise, [N[0, 0], N[0, 1], N[0, 2], N[1, 1], N[1, 2], N[2, 2]], rtol=1e-12, atol=1e-20)
+    # The mean is still the event's own increment.
+    assert_allclose(step.pose, compose([1.0, 2.0, th], [u.dx, u.dy, u.dtheta]), atol=1e-12)
+
+
+def test_twist_noise_applies_only_when_given_and_the_event_has_a_twist() -> None:
+    base = SensorSpec(odometry_sigma_xy_per_m=0.1, odometry_sigma_theta_per_m=0.05)
+    u = _twist_event()
+    plain = MotionModel(resolve_motion_noise(base)).step((0.0, 0.0, 0.3), u)
+    vxy, vth = increment_variances(u.dx, u.dy, u.dtheta, 0.1, 0.05, 0.0)
+    assert plain.noise == (vxy, 0.0, 0.0, vxy, 0.0, vth)  # no twist sigma: the increment noise, unchanged
+    given = resolve_motion_noise(SensorSpec(odometry_sigma_xy_per_m=0.1, twist_sigma_v_mps=0.05))
+    no_twist = Odometry(1.0, u.dx, u.dy, u.dtheta)
+    assert MotionModel(given).step((0.0, 0.0, 0.3), no_twist).noise[1] == 0.0  # isotropic increment noise
+    # Only sigma_v given: sigma_omega counts as 0, so the heading gets no noise from the twist.
+    assert MotionModel(given).step((0.0, 0.0, 0.3), u).noise[5] == 0.0
+
+
+def test_twist_overrides_take_precedence() -> None:
+    sensors = SensorSpec(twist_sigma_v_mps=0.1, twist_sigma_omega_radps=0.2)
+    assert resolve_motion_noise(sensors).twist_sigmas(_twist_event()) == (0.1, 0.2)
+    noise = resolve_motion_noise(sensors, twist_sigma_v_mps=0.3)
+    assert (noise.twist_sigma_v_mps, noise.twist_sigma_omega_radps) == (0.3, 0.2)
+    assert resolve_motion_noise(SensorSpec()).twist_sigmas(_twist_event()) is None
+
+
+def test_sampled_twist_motion_matches_the_covariance_and_the_event() -> None:
+    u = _twist_event(v=1.0, w=0.8, dt=0.5)
+    assert u.v is not None and u.omega is not None and u.dt is not None
+    # The event's increment differs from the exact arc of its twist (a loader may compose differently):
+    # the samples are centred on the event, with the arc's noise.
+    u = Odometry(u.t, u.dx + 0.01, u.dy, u.dtheta, v=u.v, omega=u.omega, dt=u.dt)
+    pose = np.array([0.5, -1.0, -2.0])
+    x = sample_twist_motion(np.tile(pose, (200_000, 1)), u, 0.02, 0.02, np.random.default_rng(2))
+    assert_allclose(x.mean(axis=0), compose(pose, [u.dx, u.dy, u.dtheta]), atol=2e-4)
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    G = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    expected = G @ twist_increment_covariance(u.v, u.omega, u.dt, 0.02, 0.02) @ G.T
+    assert_cov_close(np.cov(x.T), expected)

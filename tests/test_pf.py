@@ -6,12 +6,14 @@ import math
 
 import numpy as np
 import pytest
+import range_only_support as ro
 
 from locbench.datasets.base import Gaussian2, Landmarks, OccupancyGrid, SensorSpec, WorldMap
 from locbench.errors import ConfigError
-from locbench.events import UNKNOWN_ID, LandmarkObservations, LaserScan, Odometry
+from locbench.events import UNKNOWN_ID, LandmarkObservations, LaserScan, Odometry, RangeObservations
 from locbench.filters import _likelihood_field as lf
-from locbench.filters.pf import ParticleFilter, ParticleFilterConfig, systematic_resample
+from locbench.filters._motion import twist_increment, twist_increment_covariance
+from locbench.filters.pf import ParticleFilter, ParticleFilterConfig, _range_loglik, systematic_resample
 from locbench.raycast import cast_scan
 from locbench.registry import make_dataset, resolve_filter
 from locbench.runner import run_filter
@@ -117,7 +119,7 @@ def test_systematic_resample_counts_are_within_one_of_n_w() -> None:
         ({"resample_ess_fraction": 1.5}, "resample_ess_fraction"),
         ({"alpha_slow": 0.2, "alpha_fast": 0.1}, "alpha_slow"),
         ({"sigma_hit_m": 0.0}, "sigma_hit_m"),
-        ({"use_landmarks": False, "use_laser": False}, "use_landmarks"),
+        ({"use_landmarks": False, "use_laser": False, "use_ranges": False}, "use_landmarks"),
         ({"roughening_k": -1.0}, "roughening_k"),
     ],
 )
@@ -133,8 +135,9 @@ def test_spec_parses_config() -> None:
 
 
 def test_routed_events_follow_the_config() -> None:
-    assert _pf().routed_events() == {Odometry, LandmarkObservations}
-    assert _pf(use_laser=True, use_landmarks=False).routed_events() == {Odometry, LaserScan}
+    assert _pf().routed_events() == {Odometry, LandmarkObservations, RangeObservations}
+    assert _pf(use_laser=True, use_landmarks=False, use_ranges=False).routed_events() == {Odometry, LaserScan}
+    assert _pf(use_ranges=False).routed_events() == {Odometry, LandmarkObservations}
 
 
 def test_reset_without_a_usable_map_is_a_clear_error() -> None:
@@ -256,3 +259,79 @@ def test_deterministic_and_tracks_tiny_line() -> None:
     idx = np.clip(np.searchsorted(gt.t, a.t, side="right") - 1, 0, len(gt) - 1)
     err = np.hypot(*(a.mean[:, :2] - gt.xy[idx]).T)
     assert float(np.sqrt(np.mean(err**2))) < 0.1
+
+
+# --- range-only beacons and twist noise ----------------------------------------------------------------
+
+
+def test_range_only_update_reduces_the_error_of_drifting_odometry() -> None:
+    events, _, truth = ro.scenario()
+    odo, _ = ro.run(_pf(), events, use_ranges=False)
+    pf, _ = ro.run(_pf(), events)
+    e_odo, e_pf = ro.position_rmse(odo, truth), ro.position_rmse(pf, truth)
+    assert e_odo > 0.3
+    assert e_pf < 0.25 * e_odo
+
+
+def test_range_loglik_is_the_robust_mixture_and_marginalises_unknown_ids() -> None:
+    poses = np.array([[0.0, 0.0, 0.0], [1.0, 2.0, 1.0]])
+    lm = ro.BEACON_XY.copy()
+    ranges = np.array([8.0, 30.0, 9.0])
+    rows = np.array([0, 1, -1], dtype=np.int64)
+    sigma, eps, span = 0.2, 0.05, 100.0
+    log_hit = math.log(1 - eps) - 0.5 * math.log(2 * math.pi) - math.log(sigma)
+    got = _range_loglik(poses, ranges, rows, lm, 1 / sigma**2, log_hit, math.log(eps / span))
+
+    def p(r: float, d: float) -> float:
+        return (1 - eps) * math.exp(-0.5 * ((r - d) / sigma) ** 2) / (sigma * math.sqrt(2 * math.pi)) + eps / span
+
+    for i, pose in enumerate(poses):
+        d = np.hypot(*(lm - pose[:2]).T)
+        expected = math.log(p(8.0, d[0])) + math.log(p(30.0, d[1])) + math.log(np.mean([p(9.0, dj) for dj in d]))
+        assert got[i] == pytest.approx(expected, rel=1e-12)
+    # Without the floor (eps = 0) it is the plain Gaussian.
+    plain = _range_loglik(poses[:1], ranges[:1], rows[:1], lm, 1 / sigma**2, log_hit - math.log(1 - eps), -math.inf)
+    d0 = float(np.hypot(*lm[0]))
+    assert plain[0] == pytest.approx(-0.5 * ((8.0 - d0) / sigma) ** 2 - math.log(sigma * math.sqrt(2 * math.pi)))
+
+
+@pytest.mark.parametrize(("eps", "robust"), [(0.05, True), (0.0, False)])
+def test_outlier_floor_keeps_the_particles_from_collapsing(eps: float, robust: bool) -> None:
+    f = _pf(range_outlier_fraction=eps, resample_ess_fraction=0.0)
+    init = Gaussian2(mean=np.zeros(3), cov=np.diag([0.25, 0.25, 0.01]))
+    f.reset(init, ro.WORLD, ro.SENSORS, np.random.default_rng(0))
+    r_true = float(np.hypot(*ro.BEACON_XY[0]))
+    f.update(RangeObservations(0.1, ro.BEACON_IDS[:1].copy(), np.array([r_true + 20.0])))
+    n_eff = f.estimate().diagnostics["n_eff"]
+    if robust:
+        assert n_eff > 0.9 * 1000  # the outlier is explained by the floor for every particle
+    else:
+        assert n_eff < 0.05 * 1000  # the Gaussian alone puts the weight on the particles nearest the wrong circle
+
+
+def test_ranges_without_a_landmark_map_are_ignored_and_use_ranges_routes() -> None:
+    f = _pf(use_ranges=False)
+    assert RangeObservations not in f.routed_events()
+    f = _pf(use_landmarks=False, use_laser=False)
+    f.reset(ro.INITIAL, ro.WORLD, ro.SENSORS, np.random.default_rng(0))  # ranges alone are a usable sensor
+    with pytest.raises(ConfigError, match="use_ranges"):
+        _pf(use_landmarks=False, use_laser=False, use_ranges=False)
+    with pytest.raises(ConfigError, match="range_outlier_fraction"):
+        _pf(range_outlier_fraction=1.0)
+
+
+def test_predict_draws_the_twist_noise_when_the_dataset_gives_it() -> None:
+    sensors = SensorSpec(twist_sigma_v_mps=0.04, twist_sigma_omega_radps=0.03)
+    f = _pf(particles=100_000, sigma_x_m=0.0, sigma_y_m=0.0, sigma_theta_rad=0.0)
+    f.reset(
+        Gaussian2(mean=np.array([1.0, 1.0, 0.5]), cov=np.zeros((3, 3))), ro.WORLD, sensors, np.random.default_rng(4)
+    )
+    v, w, dt = 0.8, 0.5, 0.5
+    inc = twist_increment(v * dt, w * dt)
+    f.predict(Odometry(0.5, float(inc[0]), float(inc[1]), float(inc[2]), v=v, omega=w, dt=dt))
+    x, _ = f.particles()
+    c, s = math.cos(0.5), math.sin(0.5)
+    G = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    expected = G @ twist_increment_covariance(v, w, dt, 0.04, 0.03) @ G.T
+    scale = np.sqrt(np.outer(np.diag(expected), np.diag(expected)))
+    assert np.all(np.abs(np.cov(x.T) - expected) <= 0.03 * scale)
