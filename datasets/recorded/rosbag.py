@@ -1,0 +1,520 @@
+"""Users' own recordings: ROS 1 and ROS 2 bags (read with the ``rosbags`` package) as a locbench dataset.
+
+Spec: ``rosbag[path=<bag>,map=<map.yaml>,odom_topic=/odom,scan_topic=/scan,truth_topic=/ground_truth,...]``.
+``path`` is a ROS 1 ``.bag`` file or a ROS 2 bag folder (``metadata.yaml`` plus sqlite3 ``.db3`` or ``.mcap``
+storage); a relative path is looked up in the working folder, then under ``$LOCBENCH_DATA``. Spec values cannot
+hold ``,`` or ``]``: put such files under a plain name. Reading needs ``pip install 'locbench[ros]'``.
+
+What is read, and how it becomes the dataset:
+
+- **Odometry** (``odom_topic``, ``nav_msgs/Odometry``): the message's pose is the robot's pose in its odometry
+  frame (only x, y and the yaw of the quaternion are used). Event ``k`` is the increment between consecutive
+  poses, expressed in the previous robot frame: (dx, dy) = R(-theta_{k-1}) (p_k - p_{k-1}), dtheta =
+  wrap(theta_k - theta_{k-1}); the odometry frame's own origin drops out. The twist's ``linear.x`` and
+  ``angular.z`` are passed as ``v`` and ``omega`` with ``dt`` the time since the previous message (the robot's
+  velocity estimate, for filters with a velocity model). No wheel travel is known (``d_left``/``d_right`` None).
+- **Laser** (``scan_topic``, ``sensor_msgs/LaserScan``): ranges to float64; NaN, +-inf and readings outside
+  [range_min, range_max] become ``inf`` (no return, REP 117). Angles are the message's (counter-clockwise from the
+  sensor's x axis). The sensor's pose in the robot frame comes from the parameters ``laser_x_m``, ``laser_y_m``,
+  ``laser_yaw_rad``: tf is not read (out of scope), so a scanner mounted upside down must be handled before
+  recording. ``scan_topic=`` (empty) drops the scans.
+- **Ground truth** (``truth_topic``): ``nav_msgs/Odometry``, ``geometry_msgs/PoseStamped`` or
+  ``geometry_msgs/PoseWithCovarianceStamped``, whichever type the topic has; its poses must be in the map frame.
+  ``truth_label`` says whether it is a measured ground truth or another estimator's output (AMCL, SLAM).
+- **Map**: the ROS map_server map named by ``map`` (:func:`~locbench.datasets.recorded.ros_map.load_map_server_map`);
+  required when there are scans.
+- **Time**: the messages' header stamps (s, as recorded: usually Unix time; ``stamps=bag`` uses the time the bag
+  recorded each message instead, for drivers that leave headers unset). Each topic's stamps must not go backwards
+  (an error names the topic and the message number). Events are trimmed to the ground truth's time span; the
+  odometry reference pose is the last message at or before the first truth stamp.
+- **Initial belief**: the first ground-truth pose with the covariance diag(``initial_sigma_xy_m``^2 x 2,
+  ``initial_sigma_theta_rad``^2).
+- **Nominal noise** handed to filters (nothing in a bag says it; documented defaults, override per recording):
+  ``laser_sigma_m`` = 0.03 m (a typical scanner's range noise), ``odometry_sigma_xy_per_m`` = 0.05 m/sqrt(m),
+  ``odometry_sigma_theta_per_m`` = 0.05 rad/sqrt(m) and ``odometry_sigma_theta_per_rad`` = 0.05 rad/sqrt(rad)
+  (a few per cent of the distance travelled, generous for wheel odometry on a flat floor).
+
+Message types are taken from the bag's own definitions (ROS 1 always, ROS 2 from Iron on); older ROS 2 bags
+without definitions are decoded with rosbags' latest standard types. A bag that lacks a requested topic raises an
+error listing the topics it has. Parsed streams are cached per (bag, size, mtime, topics).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, ClassVar, Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from locbench.datasets.base import (
+    Dataset,
+    DatasetBuilder,
+    Gaussian2,
+    SensorSpec,
+    Trajectory2D,
+    WorldMap,
+    check_dataset_contract,
+    sort_events,
+)
+from locbench.datasets.recorded.files import DATA_ENV, MissingDataFile, RecordedDataError
+from locbench.datasets.recorded.ros_map import load_map_server_map
+from locbench.errors import ConfigError, DependencyNotInstalled
+from locbench.events import Event, LaserScan, Odometry
+from locbench.geometry import wrap_angle
+from locbench.spec import params_to_dict
+
+FloatArray = npt.NDArray[np.float64]
+
+ODOMETRY_TYPES = ("nav_msgs/msg/Odometry",)
+SCAN_TYPES = ("sensor_msgs/msg/LaserScan",)
+TRUTH_TYPES = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped")
+_INSTALL = "reading ROS bags needs the rosbags package; install it with: pip install 'locbench[ros]'"
+
+
+@dataclass(frozen=True, kw_only=True)
+class RosbagParams:
+    """Parameters of ``rosbag``.
+
+    Attributes
+    ----------
+    path : str
+        The ROS 1 ``.bag`` file or ROS 2 bag folder.
+    map : str
+        The map_server YAML file of the map the truth is expressed in ("" = no map; then no scans are allowed).
+    odom_topic, scan_topic, truth_topic : str
+        Topic names; ``scan_topic`` may be "" to ignore the laser.
+    stamps : {"header", "bag"}
+        Time of each message: its header stamp, or the time the bag recorded it.
+    laser_x_m, laser_y_m, laser_yaw_rad : float
+        The scanner's pose in the robot frame (m, m, rad).
+    laser_sigma_m : float
+        Nominal range noise of the scanner, m.
+    odometry_sigma_xy_per_m, odometry_sigma_theta_per_m, odometry_sigma_theta_per_rad : float
+        Nominal odometry increment noise (see :class:`~locbench.datasets.base.SensorSpec`).
+    initial_sigma_xy_m, initial_sigma_theta_rad : float
+        Standard deviations of the initial belief around the first truth pose, m and rad.
+    truth_label : {"ground truth", "SLAM reference"}
+        What the truth topic is.
+    """
+
+    path: str = ""
+    map: str = ""
+    odom_topic: str = "/odom"
+    scan_topic: str = "/scan"
+    truth_topic: str = "/ground_truth"
+    stamps: Literal["header", "bag"] = "header"
+    laser_x_m: float = 0.0
+    laser_y_m: float = 0.0
+    laser_yaw_rad: float = 0.0
+    laser_sigma_m: float = 0.03
+    odometry_sigma_xy_per_m: float = 0.05
+    odometry_sigma_theta_per_m: float = 0.05
+    odometry_sigma_theta_per_rad: float = 0.05
+    initial_sigma_xy_m: float = 0.05
+    initial_sigma_theta_rad: float = 0.05
+    truth_label: Literal["ground truth", "SLAM reference"] = "ground truth"
+
+    def __post_init__(self) -> None:
+        for name in (
+            "laser_sigma_m",
+            "odometry_sigma_xy_per_m",
+            "odometry_sigma_theta_per_m",
+            "odometry_sigma_theta_per_rad",
+            "initial_sigma_xy_m",
+            "initial_sigma_theta_rad",
+        ):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0.0):
+                raise ConfigError(f"rosbag: parameter {name!r} must be a finite number >= 0, got {v!r}")
+        for name in ("laser_x_m", "laser_y_m", "laser_yaw_rad"):
+            if not math.isfinite(getattr(self, name)):
+                raise ConfigError(f"rosbag: parameter {name!r} must be finite, got {getattr(self, name)!r}")
+        if not self.odom_topic or not self.truth_topic:
+            raise ConfigError("rosbag: 'odom_topic' and 'truth_topic' must name topics")
+
+
+# --- reading the bag -----------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class ScanMessage:
+    """One ``sensor_msgs/LaserScan`` as read: time s, angles rad, raw ranges m (float32 widened), limits m."""
+
+    t: float
+    angle_min: float
+    angle_increment: float
+    ranges: FloatArray
+    range_min: float
+    range_max: float
+
+
+@dataclass(frozen=True, eq=False)
+class BagStreams:
+    """The three streams of a bag as arrays (the parsed content, before any trimming).
+
+    Attributes
+    ----------
+    odom_t : ndarray (n,)
+        Odometry times, s.
+    odom_pose : ndarray (n, 3)
+        Poses (x m, y m, yaw rad) in the odometry frame.
+    odom_twist : ndarray (n, 2)
+        ``twist.linear.x`` m/s and ``twist.angular.z`` rad/s.
+    scans : tuple of ScanMessage
+    truth_t : ndarray (m,)
+        Ground-truth times, s.
+    truth_pose : ndarray (m, 3)
+        Ground-truth poses (x m, y m, yaw rad).
+    truth_type : str
+        The truth topic's message type.
+    topics : dict
+        Every topic of the bag -> (message type, message count).
+    """
+
+    odom_t: FloatArray
+    odom_pose: FloatArray
+    odom_twist: FloatArray
+    scans: tuple[ScanMessage, ...]
+    truth_t: FloatArray
+    truth_pose: FloatArray
+    truth_type: str
+    topics: dict[str, tuple[str, int]]
+
+
+def quaternion_yaw(x: float, y: float, z: float, w: float) -> float:
+    """Yaw (rotation about z, rad, in (-pi, pi]) of a unit quaternion (x, y, z, w)."""
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def _stamp(msg: Any, recorded_ns: int, stamps: str) -> float:
+    if stamps == "bag":
+        return recorded_ns * 1e-9
+    st = msg.header.stamp
+    return float(st.sec) + float(st.nanosec) * 1e-9
+
+
+def _pose_of(msg: Any, msgtype: str) -> Any:
+    """The geometry_msgs/Pose inside a truth or odometry message."""
+    return msg.pose if msgtype == "geometry_msgs/msg/PoseStamped" else msg.pose.pose
+
+
+def resolve_bag_path(path: str | os.PathLike[str], what: str = "bag") -> Path:
+    """A user file's local path: as given (absolute or relative to the working folder), else under ``$LOCBENCH_DATA``.
+
+    For a bag, a ROS 2 storage file (``.db3``/``.mcap``) whose folder has a ``metadata.yaml`` stands for that folder.
+
+    Raises
+    ------
+    MissingDataFile
+        When it is in neither place.
+    """
+    p = Path(path).expanduser()
+    candidates = [p]
+    root = os.environ.get(DATA_ENV, "")
+    if not p.is_absolute() and root:
+        candidates.append(Path(root).expanduser() / p)
+    for c in candidates:
+        if c.exists():
+            storage_file = c.is_file() and c.suffix in (".db3", ".mcap")
+            if what == "bag" and storage_file and (c.parent / "metadata.yaml").is_file():
+                return c.parent
+            return c
+    looked = " or ".join(str(c) for c in candidates)
+    expected = "a ROS 1 .bag file or a ROS 2 bag folder" if what == "bag" else "a map_server YAML file"
+    raise MissingDataFile(p, f"missing {what} (looked for {looked}); expected {expected}")
+
+
+def _signature(path: Path) -> tuple[tuple[str, int, int], ...]:
+    """(name, size, mtime) of the bag's files, so that a re-recorded bag is parsed again."""
+    files = sorted(q for q in path.iterdir() if q.is_file()) if path.is_dir() else [path]
+    return tuple((q.name, q.stat().st_size, q.stat().st_mtime_ns) for q in files)
+
+
+def read_bag_streams(
+    path: str | os.PathLike[str],
+    odom_topic: str = "/odom",
+    scan_topic: str = "/scan",
+    truth_topic: str = "/ground_truth",
+    stamps: str = "header",
+) -> BagStreams:
+    """Parse the odometry, scan and truth topics of a ROS 1 or ROS 2 bag (cached per file signature).
+
+    Raises
+    ------
+    MissingDataFile
+        The bag is not there.
+    RecordedDataError
+        The bag cannot be read, a topic is missing (the message lists the bag's topics) or has the wrong message
+        type, or a topic's time stamps go backwards.
+    DependencyNotInstalled
+        rosbags is not installed.
+    """
+    p = resolve_bag_path(path)
+    return _read_streams_cached(str(p.resolve()), _signature(p), odom_topic, scan_topic, truth_topic, stamps)
+
+
+@functools.lru_cache(maxsize=4)
+def _read_streams_cached(
+    path: str,
+    signature: tuple[tuple[str, int, int], ...],
+    odom_topic: str,
+    scan_topic: str,
+    truth_topic: str,
+    stamps: str,
+) -> BagStreams:
+    del signature  # part of the cache key only
+    try:
+        from rosbags.highlevel import AnyReader, AnyReaderError
+        from rosbags.typesys import Stores, get_typestore
+    except ImportError:
+        raise DependencyNotInstalled(_INSTALL) from None
+    p = Path(path)
+    try:
+        reader = AnyReader([p], default_typestore=get_typestore(Stores.LATEST))
+        reader.open()
+    except (AnyReaderError, OSError) as exc:
+        what = "expected a ROS 1 .bag file or a ROS 2 bag folder"
+        raise RecordedDataError(p, f"unreadable bag ({exc}); {what}") from None
+    try:
+        topics = {name: (info.msgtype or "?", int(info.msgcount)) for name, info in reader.topics.items()}
+        listing = ", ".join(f"{n} ({t}, {c} messages)" for n, (t, c) in sorted(topics.items())) or "(none)"
+        wanted = {"odom_topic": (odom_topic, ODOMETRY_TYPES), "truth_topic": (truth_topic, TRUTH_TYPES)}
+        if scan_topic:
+            wanted["scan_topic"] = (scan_topic, SCAN_TYPES)
+        for param, (topic, types) in wanted.items():
+            if topic not in topics:
+                raise RecordedDataError(p, f"no topic {topic!r} ({param}); the bag has: {listing}")
+            if topics[topic][0] not in types:
+                raise RecordedDataError(
+                    p, f"topic {topic!r} ({param}) has type {topics[topic][0]}, expected {' or '.join(types)}"
+                )
+        truth_type = topics[truth_topic][0]
+        by_topic: dict[str, list[tuple[float, Any]]] = {t: [] for t, _ in wanted.values()}
+        conns = [c for c in reader.connections if c.topic in by_topic]
+        for conn, recorded_ns, raw in reader.messages(connections=conns):
+            try:
+                msg = reader.deserialize(raw, conn.msgtype)
+            except AnyReaderError as exc:
+                n = len(by_topic[conn.topic]) + 1
+                raise RecordedDataError(p, f"topic {conn.topic!r} message {n}: cannot decode ({exc})") from None
+            by_topic[conn.topic].append((_stamp(msg, recorded_ns, stamps), msg))
+    finally:
+        reader.close()
+
+    for topic, items in by_topic.items():
+        ts = np.array([t for t, _ in items], dtype=np.float64)
+        back = np.flatnonzero(np.diff(ts) < 0)
+        if back.size:
+            k = int(back[0]) + 1
+            raise RecordedDataError(
+                p,
+                f"topic {topic!r} message {k + 1} of {ts.size}: {stamps} stamp {ts[k]!r} s goes backwards from "
+                f"{ts[k - 1]!r} s (expected non-decreasing stamps"
+                + ("; stamps=bag uses the recording time instead)" if stamps == "header" else ")"),
+            )
+
+    odom = by_topic[odom_topic]
+    odom_t = np.array([t for t, _ in odom], dtype=np.float64)
+    odom_pose = np.zeros((len(odom), 3))
+    odom_twist = np.zeros((len(odom), 2))
+    for k, (_, m) in enumerate(odom):
+        pose = m.pose.pose
+        q = pose.orientation
+        odom_pose[k] = (pose.position.x, pose.position.y, quaternion_yaw(q.x, q.y, q.z, q.w))
+        odom_twist[k] = (m.twist.twist.linear.x, m.twist.twist.angular.z)
+    truth = by_topic[truth_topic]
+    truth_t = np.array([t for t, _ in truth], dtype=np.float64)
+    truth_pose = np.zeros((len(truth), 3))
+    for k, (_, m) in enumerate(truth):
+        pose = _pose_of(m, truth_type)
+        q = pose.orientation
+        truth_pose[k] = (pose.position.x, pose.position.y, quaternion_yaw(q.x, q.y, q.z, q.w))
+    scans = tuple(
+        ScanMessage(
+            t,
+            float(m.angle_min),
+            float(m.angle_increment),
+            np.asarray(m.ranges, dtype=np.float64),
+            float(m.range_min),
+            float(m.range_max),
+        )
+        for t, m in (by_topic[scan_topic] if scan_topic else [])
+    )
+    for name, arr in (("odometry", odom_pose), ("ground truth", truth_pose)):
+        bad = np.flatnonzero(~np.all(np.isfinite(arr), axis=1))
+        if bad.size:
+            topic = odom_topic if name == "odometry" else truth_topic
+            raise RecordedDataError(p, f"topic {topic!r} message {int(bad[0]) + 1}: non-finite {name} pose")
+    for a in (odom_t, odom_pose, odom_twist, truth_t, truth_pose):
+        a.setflags(write=False)  # shared through the cache
+    return BagStreams(odom_t, odom_pose, odom_twist, scans, truth_t, truth_pose, truth_type, topics)
+
+
+# --- from streams to a dataset -------------------------------------------------------------------
+
+
+def odometry_increments(pose: FloatArray) -> FloatArray:
+    """Increments (dx m, dy m, dtheta rad) between consecutive odometry poses, in the previous robot frame.
+
+    ``pose`` (n, 3) -> (n - 1, 3).
+    """
+    d = np.diff(pose[:, :2], axis=0)
+    c, s = np.cos(pose[:-1, 2]), np.sin(pose[:-1, 2])
+    return np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], wrap_angle(np.diff(pose[:, 2]))])
+
+
+def clean_ranges(ranges: FloatArray, range_min: float, range_max: float) -> FloatArray:
+    """Ranges with NaN, +-inf and readings outside [range_min, range_max] set to ``inf`` (no return)."""
+    r = np.array(ranges, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        bad = ~np.isfinite(r) | (r < range_min) | (r > range_max)
+    r[bad] = np.inf
+    return r
+
+
+def load_rosbag(
+    path: str | os.PathLike[str], map_yaml: str | os.PathLike[str] | None = None, **options: Any
+) -> Dataset:
+    """Load a ROS 1 or ROS 2 bag as a dataset (see the module docstring for what is read and how).
+
+    Parameters
+    ----------
+    path : path-like
+        The ``.bag`` file or ROS 2 bag folder.
+    map_yaml : path-like or None
+        The map_server YAML of the map (required when the bag's scans are used).
+    **options
+        Any other field of :class:`RosbagParams` (topics, laser pose, nominal noise ...).
+
+    Returns
+    -------
+    Dataset
+        Odometry and laser events in time order, ground truth, initial belief, occupancy map, nominal noise.
+    """
+    params = RosbagParams(path=str(path), map="" if map_yaml is None else str(map_yaml), **options)
+    return build_rosbag_dataset(params)
+
+
+def build_rosbag_dataset(params: RosbagParams) -> Dataset:
+    """The dataset of ``params`` (what :class:`RosbagDataset` builds)."""
+    if not params.path:
+        raise ConfigError("rosbag: parameter 'path' is required: rosbag[path=<.bag file or ROS 2 folder>,map=<yaml>]")
+    bag = resolve_bag_path(params.path)
+    streams = read_bag_streams(bag, params.odom_topic, params.scan_topic, params.truth_topic, params.stamps)
+    if streams.truth_t.size == 0:
+        raise RecordedDataError(bag, f"topic {params.truth_topic!r} has no messages (expected the ground truth)")
+    t0, t1 = float(streams.truth_t[0]), float(streams.truth_t[-1])
+
+    # odometry: the reference is the last pose at or before the first truth stamp
+    ot = streams.odom_t
+    first = max(int(np.searchsorted(ot, t0, side="right")) - 1, 0)
+    last = int(np.searchsorted(ot, t1, side="right"))
+    events: list[Event] = []
+    if last - first >= 2:
+        inc = odometry_increments(np.asarray(streams.odom_pose[first:last]))
+        tw = streams.odom_twist
+        for j, (dx, dy, dth) in enumerate(inc):
+            k = first + 1 + j
+            events.append(
+                Odometry(
+                    float(ot[k]),
+                    float(dx),
+                    float(dy),
+                    float(dth),
+                    v=float(tw[k, 0]),
+                    omega=float(tw[k, 1]),
+                    dt=float(ot[k] - ot[k - 1]),
+                )
+            )
+    if not events:
+        raise RecordedDataError(
+            bag,
+            f"no odometry increments on {params.odom_topic!r} within the ground truth's span [{t0!r}, {t1!r}] s "
+            f"({ot.size} odometry messages in [{ot[0] if ot.size else float('nan')!r}, "
+            f"{ot[-1] if ot.size else float('nan')!r}] s)",
+        )
+
+    grid = None
+    if params.map:
+        grid = load_map_server_map(resolve_bag_path(params.map, "map"))
+    sensor_pose = (params.laser_x_m, params.laser_y_m, params.laser_yaw_rad)
+    scans_in = [s for s in streams.scans if t0 <= s.t <= t1]
+    if scans_in and grid is None:
+        raise ConfigError(
+            f"rosbag {bag}: {len(scans_in)} scans on {params.scan_topic!r} need a map: give map=<map_server yaml> "
+            "(or scan_topic= to ignore the laser)"
+        )
+    for s in scans_in:
+        events.append(
+            LaserScan(
+                s.t,
+                s.angle_min,
+                s.angle_increment,
+                clean_ranges(s.ranges, s.range_min, s.range_max),
+                s.range_min,
+                s.range_max,
+                sensor_pose,
+            )
+        )
+
+    truth = Trajectory2D(
+        np.array(streams.truth_t), np.array(streams.truth_pose[:, :2]), wrap_angle(np.array(streams.truth_pose[:, 2]))
+    )
+    sxy, sth = params.initial_sigma_xy_m, params.initial_sigma_theta_rad
+    initial = Gaussian2(truth.poses[0].copy(), np.diag([sxy**2, sxy**2, sth**2]))
+    sensors = SensorSpec(
+        odometry_sigma_xy_per_m=params.odometry_sigma_xy_per_m,
+        odometry_sigma_theta_per_m=params.odometry_sigma_theta_per_m,
+        odometry_sigma_theta_per_rad=params.odometry_sigma_theta_per_rad,
+        laser_sigma_m=params.laser_sigma_m,
+    )
+    ds = Dataset(
+        id="rosbag",
+        params=params_to_dict(params),
+        events=sort_events(events),
+        ground_truth=truth,
+        initial=initial,
+        world=WorldMap(occupancy=grid),
+        sensors=sensors,
+        name="rosbag",
+        metadata={
+            "source": str(bag),
+            "format": "ROS 1 bag" if bag.is_file() else "ROS 2 bag",
+            "topics": {k: list(v) for k, v in streams.topics.items()},
+            "truth_type": streams.truth_type,
+            "stamps": params.stamps,
+            "map": params.map,
+        },
+        truth_label=params.truth_label,
+    )
+    check_dataset_contract(ds)
+    return ds
+
+
+class RosbagDataset(DatasetBuilder):
+    """A user's ROS 1 or ROS 2 bag: odometry, laser scans, a ground-truth pose topic and a map_server map."""
+
+    Params: ClassVar[type] = RosbagParams
+    version: ClassVar[int] = 1
+    description: ClassVar[str] = "a ROS 1 / ROS 2 bag: nav_msgs/Odometry, sensor_msgs/LaserScan, a truth pose topic"
+
+    def build(self, params: RosbagParams, rng: np.random.Generator) -> Dataset:
+        del rng  # a recording: every seed is the same data
+        return build_rosbag_dataset(params)
+
+    @classmethod
+    def data_unavailable(cls) -> str | None:
+        """Always a reason for the default parameters: there is no default bag."""
+        return "unavailable: no default recording; name one with rosbag[path=<.bag or ROS 2 folder>,map=<map yaml>]"
+
+    def fetch(self, params: RosbagParams) -> list[str]:
+        """Nothing to download: the local paths of the bag and map (an error when absent)."""
+        out = [str(resolve_bag_path(params.path))]
+        if params.map:
+            out.append(str(resolve_bag_path(params.map, "map")))
+        return out
