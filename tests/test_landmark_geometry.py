@@ -109,8 +109,12 @@ def test_gps_and_initial_offset() -> None:
 
 
 def test_kidnap_moves_the_rest_of_the_run_rigidly() -> None:
-    ds = make_dataset("landmark_geometry[circuits=1,kidnap_m=1.5]", 2)
-    plain = make_dataset(CIRCLE, 2)
+    from locbench.seeding import dataset_rng
+
+    name = "landmark_geometry[circuits=1,kidnap_m=1.5]"
+    ds = make_dataset(name, 2)
+    # the kidnap-free run with the same draws (execution noise included): the dataset's own generator
+    plain = lg.LandmarkGeometryScenario().build(lg.LandmarkGeometryParams(circuits=1), dataset_rng(name, 2))
     (kd,) = ds.kidnaps
     assert math.hypot(kd.delta[0], kd.delta[1]) == pytest.approx(1.5)
     assert abs(kd.delta[2]) == pytest.approx(0.5)
@@ -130,7 +134,8 @@ def test_kidnap_moves_the_rest_of_the_run_rigidly() -> None:
 def test_paths_close_each_circuit_at_the_start(path: str) -> None:
     ds = make_dataset(f"landmark_geometry[path={path},circuits=1,landmarks=1]", 0)
     assert len(ds.waypoints) == 1
-    np.testing.assert_allclose(ds.ground_truth.xy[-1], lg.START[:2], atol=1e-4)  # the arc's step rounding
+    # within 1 cm: the robot steers back onto its path under execution noise and stops a few mm from the start
+    assert math.dist(ds.ground_truth.xy[-1], lg.START[:2]) < 0.01
     world = lg.geometry_world("8")
     assert np.all(world.is_free(ds.ground_truth.xy, 0.5))
 

@@ -30,7 +30,7 @@ def test_contract_route_and_laser(ds) -> None:  # type: ignore[no-untyped-def]
     assert math.isclose(scans[0].angle_increment * 682, math.radians(240.0))
     np.testing.assert_allclose(np.diff([s.t for s in scans]), 0.1, atol=1e-9)  # 10 Hz
     # one lap: back on the start, four corners and the start marked
-    np.testing.assert_allclose(ds.ground_truth.xy[-1], lap.LAP_START[:2], atol=1e-6)
+    assert math.dist(ds.ground_truth.xy[-1], lap.LAP_START[:2]) < 0.01  # steered onto it under execution noise
     np.testing.assert_allclose(ds.waypoints.xy, [*lap.LAP_CORNERS, lap.LAP_START[:2]], atol=1e-9)
     assert 24.0 < ds.ground_truth.path_length() < 25.5
     assert ds.world.occupancy is not None and ds.world.occupancy.resolution == 0.05

@@ -31,6 +31,9 @@ Every path keeps at least 0.6 m from every landmark disc of every layout.
 
 Sensors:
 
+* the shared robot's execution noise (wheel slip ``SLIP_K_TRUE`` between the commanded twist and the
+  true motion, :mod:`locbench.datasets.synthetic.robot`; the robot steers back onto its circle or line),
+  from the ``execution`` stream;
 * wheel odometry of the shared robot (:func:`~locbench.datasets.synthetic.scenarios.robot_encoder_model`:
   the room-calibrated systematic and random encoder error, report 003 eq. 10) rather than report 001
   fig. 1's velocity-noise model, so that every synthetic world has the same robot; 20 Hz;
@@ -71,6 +74,7 @@ import numpy.typing as npt
 from locbench.datasets.base import Dataset, DatasetBuilder, Gaussian2, Kidnap, SensorSpec, sort_events
 from locbench.datasets.synthetic.robot import Arc, DriveLimits, GoTo, Leg, Motion, simulate_route
 from locbench.datasets.synthetic.scenarios import (
+    SLIP_K_TRUE,
     SensorSuite,
     assemble,
     check_kidnap_params,
@@ -384,14 +388,14 @@ class LandmarkGeometryParams:
 
 
 #: Independent noise streams, in a fixed order (adding one at the end leaves the others unchanged).
-STREAMS = ("odometry", "landmarks", "laser", "fixes", "kidnap", "route", "initial")
+STREAMS = ("odometry", "landmarks", "laser", "fixes", "kidnap", "route", "initial", "execution")
 
 
 class LandmarkGeometryScenario(DatasetBuilder):
     """Report 001's micro-simulator: paths x landmark layouts, laser-detected disc landmarks, GPS variant."""
 
     Params: ClassVar[type] = LandmarkGeometryParams
-    version: ClassVar[int] = 1
+    version: ClassVar[int] = 2
     description: ClassVar[str] = (
         "report 001's paths x landmark layouts, landmarks detected by a 151-ray laser; GPS variant"
     )
@@ -402,7 +406,7 @@ class LandmarkGeometryScenario(DatasetBuilder):
         world = geometry_world(params.landmarks)
         limits = dataclasses.replace(LIMITS, wheelbase_m=true_wheelbase())
         legs = path_legs(params.path, params.circuits, streams["route"])
-        motion = simulate_route(START, legs, limits)
+        motion = simulate_route(START, legs, limits, slip_k=SLIP_K_TRUE, slip_rng=streams["execution"])
         if params.kidnap_m > 0:
             motion = kidnap_remainder(motion, world, params.kidnap_m, params.kidnap_rad, 0.5, streams["kidnap"])
         fixes = (

@@ -11,7 +11,8 @@ is not ambiguous". Its map and route are not given; this scenario is a documente
   in the east room;
 * a route from the west room through the door to three waypoints in the east room and back, 7 marked
   waypoints in all;
-* the shared robot and its calibrated wheel-odometry error (:func:`robot_encoder_model`);
+* the shared robot, its calibrated wheel-odometry error (:func:`robot_encoder_model`) and its execution
+  noise (wheel slip ``SLIP_K_TRUE`` between the commanded twist and the true motion, own stream);
 * a 240 deg laser (5 Hz, 5.6 m, ``laser_beams`` beams, range noise ``laser_sigma_m``) ray-cast on a 0.02 m
   occupancy grid of the walls: finer than the 0.05 m of the other scenarios so that the raster (walls seen
   up to a cell in front of their line) stays below the laser's own noise and ``laser_sigma_m`` really sets
@@ -33,10 +34,12 @@ import numpy as np
 from locbench.datasets.base import Dataset, DatasetBuilder, SensorSpec
 from locbench.datasets.synthetic.robot import DriveLimits, GoTo, Leg
 from locbench.datasets.synthetic.scenarios import (
+    SLIP_K_TRUE,
     SensorSuite,
     assemble,
     check_kidnap_params,
     drive,
+    execution_stream,
     nominal_odometry_spec,
     robot_encoder_model,
     split_streams,
@@ -117,7 +120,7 @@ class LineRoomScenario(DatasetBuilder):
     """Report 002's experiment: laser lines in two polygonal rooms; see the module docstring."""
 
     Params: ClassVar[type] = LineRoomParams
-    version: ClassVar[int] = 1
+    version: ClassVar[int] = 2
     description: ClassVar[str] = "report 002's polygonal rooms: wall lines, a laser, 7 waypoints"
 
     def build(self, params: LineRoomParams, rng: np.random.Generator) -> Dataset:
@@ -127,6 +130,7 @@ class LineRoomScenario(DatasetBuilder):
         if not (params.laser_sigma_m > 0 and math.isfinite(params.laser_sigma_m)):
             raise ConfigError(f"parameter 'laser_sigma_m' must be a range noise > 0 m, got {params.laser_sigma_m}")
         streams = split_streams(rng)
+        slip_rng = execution_stream(rng)
         world = line_room_world()
         limits = dataclasses.replace(LINE_ROOM_LIMITS, wheelbase_m=true_wheelbase())
         motion = drive(
@@ -138,6 +142,8 @@ class LineRoomScenario(DatasetBuilder):
             params.kidnap_rad,
             0.5,
             streams["kidnap"],
+            slip_k=SLIP_K_TRUE,
+            slip_rng=slip_rng,
         )
         laser = LaserSensor(
             rate_hz=5.0,

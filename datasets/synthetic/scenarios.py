@@ -6,7 +6,11 @@ landmarks, laser, fixes, kidnap), so that e.g. ``laser_beams`` or ``known_ids`` 
 odometry realisation of a seed.
 
 Every scenario's robot is the same H20-like differential drive with the same wheel-odometry error
-(calibrated on the room, see :func:`calibrate_room_odometry`); the tiny scenarios can switch all noise off.
+(calibrated on the room, see :func:`calibrate_room_odometry`) and the same execution noise between its
+commanded twist and its true motion (wheel slip, :data:`SLIP_K_TRUE`, see
+:mod:`locbench.datasets.synthetic.robot`), drawn from its own child stream (:func:`execution_stream`,
+spawned after every other stream so that those are unchanged by it); the tiny scenarios can switch all
+noise off.
 """
 
 from __future__ import annotations
@@ -54,7 +58,8 @@ logger = logging.getLogger(__name__)
 FloatArray = npt.NDArray[np.float64]
 
 #: Recorded in every dataset's metadata; bump with any change of the generated data.
-GENERATOR_VERSION = 1
+#: 2: execution noise (wheel slip) between the commanded twist and the true motion; re-fitted calibration.
+GENERATOR_VERSION = 2
 
 # --- the robot's wheel-odometry error (calibrated on the room, shared by every scenario) -----------------
 
@@ -65,7 +70,11 @@ ENCODER_K_TRUE = 0.002
 # Systematic errors fitted by calibrate_room_odometry() on 2026-11-22: scipy least_squares on the log ratio
 # (measured / 003 table 1) at the 5 waypoints, measured as table 1 does (distance between each waypoint
 # and the mean over seeds 0..19 of the dead-reckoned position at the waypoint time), k fixed at
-# ENCODER_K_TRUE, starting from zero error. Achieved (cm): see ROOM_CALIBRATION_ACHIEVED_CM.
+# ENCODER_K_TRUE, starting from zero error; fitted for exact execution (generator version 1). Kept for
+# version 2 (execution noise, SLIP_K_TRUE) because the calibration still holds: room_dead_reckoning_errors()
+# gives ROOM_CALIBRATION_ACHIEVED_CM, ratios 0.83-1.24 to table 1 (re-running calibrate_room_odometry() on
+# version 2 moves the constants in the fourth digit, to -0.026114, -0.019487, 0.948018, and the achieved
+# errors by < 0.05 cm; the shared constants also drive scan_grid, whose data they would change).
 #: Relative travel error of the left wheel (wheel-diameter mismatch): measured = true x (1 + scale).
 ENCODER_SCALE_LEFT = -0.02603665815749769
 #: Relative travel error of the right wheel.
@@ -74,8 +83,18 @@ ENCODER_SCALE_RIGHT = -0.019413738308876265
 WHEELBASE_TRUE_RATIO = 0.9481160253691738
 #: Table 1 of report 003, odometry row (cm).
 ROOM_TABLE1_ODOMETRY_CM = (7.3634, 5.6828, 18.6643, 34.9313, 60.7425)
-#: What the frozen constants give over seeds 0..19 (cm), recorded by calibrate_room_odometry().
-ROOM_CALIBRATION_ACHIEVED_CM: tuple[float, ...] = (6.555, 6.020, 23.203, 28.954, 62.779)
+#: What the frozen constants give over seeds 0..19 (cm), recorded with room_dead_reckoning_errors() for generator
+#: version 2 (version 1, exact execution, as calibrate_room_odometry() recorded it: 6.555, 6.020, 23.203, 28.954,
+#: 62.779).
+ROOM_CALIBRATION_ACHIEVED_CM: tuple[float, ...] = (6.538, 6.016, 23.178, 28.940, 62.646)
+
+#: Execution noise of the shared robot, sqrt(m): each wheel's true travel in a step is the commanded travel c
+#: plus a zero-mean error of variance SLIP_K_TRUE^2 |c| (wheel slip and speed-servo tracking error, the form of
+#: report 003 eq. 10). Assumed, not fitted: the value ``scan_grid`` uses for its slip, so every world's robot
+#: executes its commands the same way; it equals the random encoder constant and is small against the
+#: systematic odometry error (on ``room``, seeds 0-9, dead reckoning the commanded twist has an ATE of about
+#: 4 cm and ends 1-15 cm off; the odometry has an ATE of about 29 cm and ends about 60 cm off).
+SLIP_K_TRUE = ENCODER_K_TRUE
 
 #: Nominal k handed to filters, sqrt(m): larger than the true random k so that it also covers the
 #: systematic error a filter does not model.
@@ -126,6 +145,28 @@ def split_streams(rng: np.random.Generator) -> dict[str, np.random.Generator]:
     return dict(zip(STREAMS, rng.spawn(len(STREAMS)), strict=True))
 
 
+def execution_stream(rng: np.random.Generator) -> np.random.Generator:
+    """The child generator of the execution noise (wheel slip): the next child of ``rng``.
+
+    Call it after every other spawn of the scenario (the streams of :func:`split_streams`, and any
+    scenario-specific ones), so that adding it left every older stream, hence their draws, unchanged.
+    """
+    return rng.spawn(1)[0]
+
+
+def execution_metadata(motion: Motion) -> dict[str, Any]:
+    """The execution noise of ``motion`` as recorded in a dataset's metadata."""
+    return {
+        "model": (
+            "per step and wheel: true travel = commanded travel c + slip_k sqrt(|c|) z, z ~ N(0, 1) (wheel slip "
+            "and speed-servo tracking error); the planner steers on the true pose (locbench.datasets.synthetic.robot)"
+        ),
+        "slip_k_sqrt_m": motion.slip_k,
+        "stream": "execution (the child spawned after every other stream)",
+        "odometry_commands": "Odometry.v / omega / dt are the commanded twist, not the executed one",
+    }
+
+
 def kidnap_chooser(
     world: World, distance_m: float, rotation_rad: float, clearance_m: float, rng: np.random.Generator
 ) -> KidnapChooser:
@@ -160,14 +201,24 @@ def drive(
     kidnap_fraction: float,
     rng: np.random.Generator,
     clearance_m: float = 0.3,
+    slip_k: float = 0.0,
+    slip_rng: np.random.Generator | None = None,
 ) -> Motion:
-    """Simulate the route; with ``kidnap_m`` > 0 kidnap the robot at ``kidnap_fraction`` of the kidnap-free run."""
-    motion = simulate_route(start, legs, limits)
+    """Simulate the route; with ``kidnap_m`` > 0 kidnap the robot at ``kidnap_fraction`` of the kidnap-free run.
+
+    ``rng`` chooses the kidnap, ``slip_k`` / ``slip_rng`` are the execution noise (see
+    :func:`~locbench.datasets.synthetic.robot.simulate_route`). The kidnap time comes from a run without
+    execution noise, so that it depends on the parameters only; before the kidnap the robot moves exactly as
+    in the kidnap-free run of the same seed.
+    """
     if kidnap_m <= 0:
-        return motion
-    t_kidnap = round(kidnap_fraction * motion.duration / limits.dt_s) * limits.dt_s
+        return simulate_route(start, legs, limits, slip_k=slip_k, slip_rng=slip_rng)
+    probe = simulate_route(start, legs, limits)
+    t_kidnap = round(kidnap_fraction * probe.duration / limits.dt_s) * limits.dt_s
     chooser = kidnap_chooser(world, kidnap_m, kidnap_rad, clearance_m, rng)
-    motion = simulate_route(start, legs, limits, kidnap_t_s=t_kidnap, kidnap_chooser=chooser)
+    motion = simulate_route(
+        start, legs, limits, kidnap_t_s=t_kidnap, kidnap_chooser=chooser, slip_k=slip_k, slip_rng=slip_rng
+    )
     if not motion.kidnaps:
         raise ConfigError(
             f"kidnap_m={kidnap_m}: no free landing {kidnap_m} m away was found after t={t_kidnap:.1f} s; "
@@ -221,6 +272,7 @@ def assemble(
             **dataclasses.asdict(suite.encoder),
             "wheelbase_true_m": motion.wheelbase_m,
         },
+        "execution_noise": execution_metadata(motion),
         "calibration": {
             "procedure": "locbench.datasets.synthetic.scenarios.calibrate_room_odometry",
             "target_cm": list(ROOM_TABLE1_ODOMETRY_CM),
@@ -282,10 +334,11 @@ def room_world() -> World:
     return World(walls=np.array(walls), landmarks=np.array(landmarks), bounds=(0.0, 0.0, 7.0, 2.0), name="room")
 
 
-def room_motion(noise_free: bool = False) -> Motion:
-    """The kidnap-free room tour."""
-    limits = dataclasses.replace(ROOM_LIMITS, wheelbase_m=true_wheelbase(noise_free))
-    return simulate_route(ROOM_START, [GoTo(w) for w in ROOM_WAYPOINTS], limits)
+def room_motion(noise_free: bool = False, seed: int | None = None) -> Motion:
+    """The kidnap-free room tour; with a ``seed`` (and not ``noise_free``), with the execution noise of
+    ``make_dataset("room", seed)``, else executed exactly."""
+    ratio = 1.0 if noise_free else WHEELBASE_TRUE_RATIO
+    return room_motion_for(ratio, None if noise_free else seed)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -315,7 +368,7 @@ class RoomScenario(DatasetBuilder):
     Kinect-like range-bearing sensor (0.8-3.5 m, 57 deg) and calibrated wheel-encoder odometry."""
 
     Params: ClassVar[type] = RoomParams
-    version: ClassVar[int] = 1
+    version: ClassVar[int] = 2
     description: ClassVar[str] = "report 003's 7 m x 2 m room: 4 landmarks, start + 5 waypoints, Kinect-like sensor"
 
     #: Kinect-like detector: 0.8-3.5 m, 57 deg horizontal field of view, cm-level range noise (report 003 sec. 3).
@@ -333,10 +386,22 @@ class RoomScenario(DatasetBuilder):
         check_kidnap_params(params.kidnap_m, params.kidnap_rad)
         _check_beams("laser_beams", params.laser_beams, allow_zero=True)
         streams = split_streams(rng)
+        slip_rng = execution_stream(rng)
         world = room_world()
         limits = dataclasses.replace(ROOM_LIMITS, wheelbase_m=true_wheelbase())
         legs = [GoTo(w) for w in ROOM_WAYPOINTS]
-        motion = drive(world, ROOM_START, legs, limits, params.kidnap_m, params.kidnap_rad, 0.6, streams["kidnap"])
+        motion = drive(
+            world,
+            ROOM_START,
+            legs,
+            limits,
+            params.kidnap_m,
+            params.kidnap_rad,
+            0.6,
+            streams["kidnap"],
+            slip_k=SLIP_K_TRUE,
+            slip_rng=slip_rng,
+        )
         lm = dataclasses.replace(self.landmark_sensor, known_ids=params.known_ids)
         laser = LaserSensor(beams=params.laser_beams) if params.laser_beams else None
         suite = SensorSuite(encoder=robot_encoder_model(), landmarks=lm, laser=laser)
@@ -367,55 +432,68 @@ def room_dead_reckoning_errors(
     wheelbase_ratio: float,
     k: float = ENCODER_K_TRUE,
     seeds: Sequence[int] = tuple(range(20)),
-    z: FloatArray | None = None,
+    z: Sequence[FloatArray] | None = None,
 ) -> FloatArray:
     """Table-1 odometry error at each room waypoint for given error constants, m, shape (5,).
 
     The distance between each waypoint and the mean over ``seeds`` of the dead-reckoned position at the
-    waypoint time, with the same noise draws as ``make_dataset("room", seed)``. ``z`` (seeds, n, 2) may
-    hold those draws precomputed.
+    waypoint time, with the same noise draws as ``make_dataset("room", seed)`` (the execution noise of the
+    true motion and the encoder noise). ``z`` (one (n_seed, 2) array of encoder draws per seed) may hold
+    the encoder draws precomputed.
     """
     from locbench.seeding import dataset_rng
 
-    motion = room_motion_for(wheelbase_ratio)
     model = EncoderModel(
         wheelbase_nominal_m=WHEELBASE_NOMINAL_M, scale_left=scale_left, scale_right=scale_right, k_left=k, k_right=k
     )
-    wp_steps = np.round(motion.waypoint_t / motion.dt).astype(np.int64)
     ends = []
+    waypoints = None
     for s_i, seed in enumerate(seeds):
+        motion = room_motion_for(wheelbase_ratio, seed)
+        waypoints = motion.waypoint_xy
         if z is None:
             dl, dr = measured_wheel_travel(motion, model, split_streams(dataset_rng("room", seed))["odometry"])
         else:
-            dl = motion.d_left * (1 + scale_left) + k * np.sqrt(np.abs(motion.d_left)) * z[s_i, :, 0]
-            dr = motion.d_right * (1 + scale_right) + k * np.sqrt(np.abs(motion.d_right)) * z[s_i, :, 1]
+            dl = motion.d_left * (1 + scale_left) + k * np.sqrt(np.abs(motion.d_left)) * z[s_i][: motion.n_steps, 0]
+            dr = motion.d_right * (1 + scale_right) + k * np.sqrt(np.abs(motion.d_right)) * z[s_i][: motion.n_steps, 1]
         path = dead_reckon(motion.poses[0], odometry_increments(dl, dr, WHEELBASE_NOMINAL_M))
-        ends.append(path[wp_steps, 0:2])
+        ends.append(path[np.round(motion.waypoint_t / motion.dt).astype(np.int64), 0:2])
+    assert waypoints is not None
     mean_xy = np.mean(np.asarray(ends), axis=0)
-    return np.hypot(*(mean_xy - motion.waypoint_xy).T)
+    return np.hypot(*(mean_xy - waypoints).T)
 
 
-def room_motion_for(wheelbase_ratio: float) -> Motion:
-    """The kidnap-free room tour with a given true / nominal wheelbase ratio."""
+def room_motion_for(wheelbase_ratio: float, seed: int | None = None) -> Motion:
+    """The kidnap-free room tour with a given true / nominal wheelbase ratio; with a ``seed``, with the
+    execution noise of ``make_dataset("room", seed)`` (its execution stream), else executed exactly."""
     limits = dataclasses.replace(ROOM_LIMITS, wheelbase_m=WHEELBASE_NOMINAL_M * wheelbase_ratio)
-    return simulate_route(ROOM_START, [GoTo(w) for w in ROOM_WAYPOINTS], limits)
+    legs = [GoTo(w) for w in ROOM_WAYPOINTS]
+    if seed is None:
+        return simulate_route(ROOM_START, legs, limits)
+    from locbench.seeding import dataset_rng
+
+    rng = dataset_rng("room", seed)
+    split_streams(rng)
+    return simulate_route(ROOM_START, legs, limits, slip_k=SLIP_K_TRUE, slip_rng=execution_stream(rng))
 
 
 def calibrate_room_odometry(seeds: Sequence[int] = tuple(range(20))) -> dict[str, Any]:
     """Fit the world's systematic odometry error to report 003 table 1 (reproducible; not run at build time).
 
     Least squares (scipy ``least_squares``) over (scale_left, scale_right, wheelbase_ratio) of
-    log(measured / target) at the 5 waypoints, with the random constant k fixed at ENCODER_K_TRUE and
-    the noise draws of ``make_dataset("room", seed)`` for ``seeds``. Returns the fitted constants, the
-    achieved errors (cm) and the ratios; freeze them as the module constants.
+    log(measured / target) at the 5 waypoints, with the random constant k fixed at ENCODER_K_TRUE, the
+    execution noise at SLIP_K_TRUE and the noise draws of ``make_dataset("room", seed)`` for ``seeds``
+    (the true motion is re-simulated for each wheelbase ratio). Returns the fitted constants, the achieved
+    errors (cm) and the ratios; freeze them as the module constants.
     """
     from scipy.optimize import least_squares
 
     from locbench.seeding import dataset_rng
 
     target = np.asarray(ROOM_TABLE1_ODOMETRY_CM) / 100.0
-    n = room_motion().n_steps
-    z = np.stack([split_streams(dataset_rng("room", s))["odometry"].standard_normal((n, 2)) for s in seeds])
+    # Encoder draws for more steps than any tour takes (a prefix of the stream is what a dataset uses).
+    n = 2 * room_motion().n_steps
+    z = [split_streams(dataset_rng("room", s))["odometry"].standard_normal((n, 2)) for s in seeds]
 
     def residual(p: FloatArray) -> FloatArray:
         e = room_dead_reckoning_errors(p[0] * 1e-2, p[1] * 1e-2, 1.0 + p[2] * 1e-2, seeds=seeds, z=z)
@@ -543,7 +621,7 @@ class OfficeScenario(DatasetBuilder):
     """One office floor with walls, doors, 22 landmarks and a 9-waypoint tour; every sensor."""
 
     Params: ClassVar[type] = OfficeParams
-    version: ClassVar[int] = 1
+    version: ClassVar[int] = 2
     description: ClassVar[str] = "one office floor with walls, doors, landmarks and a waypoint tour; every sensor"
 
     def build(self, params: OfficeParams, rng: np.random.Generator) -> Dataset:
@@ -552,10 +630,20 @@ class OfficeScenario(DatasetBuilder):
         if not params.pose_fix_sigma_m > 0:
             raise ConfigError(f"parameter 'pose_fix_sigma_m' must be > 0 m, got {params.pose_fix_sigma_m}")
         streams = split_streams(rng)
+        slip_rng = execution_stream(rng)
         world = office_world()
         limits = dataclasses.replace(OFFICE_LIMITS, wheelbase_m=true_wheelbase())
         motion = drive(
-            world, OFFICE_START, office_route(), limits, params.kidnap_m, params.kidnap_rad, 0.5, streams["kidnap"]
+            world,
+            OFFICE_START,
+            office_route(),
+            limits,
+            params.kidnap_m,
+            params.kidnap_rad,
+            0.5,
+            streams["kidnap"],
+            slip_k=SLIP_K_TRUE,
+            slip_rng=slip_rng,
         )
         lm = LandmarkSensor(
             rate_hz=5.0,
@@ -610,8 +698,8 @@ class TinyParams:
     Attributes
     ----------
     noise_free : bool
-        No odometry error of any kind, exact landmark, laser and fix measurements (the nominal noise
-        handed to filters stays positive).
+        No odometry error of any kind, no execution noise (the commanded twist is the true motion), exact
+        landmark, laser and fix measurements (the nominal noise handed to filters stays positive).
     known_ids : bool
         Landmark identities reported (True) or withheld.
     """
@@ -630,7 +718,7 @@ class _TinyScenario(DatasetBuilder):
     """Shared build of the tiny scenarios: a box world, every sensor type, optionally noise-free."""
 
     Params: ClassVar[type] = TinyParams
-    version: ClassVar[int] = 1
+    version: ClassVar[int] = 2
     dataset_id: ClassVar[str] = ""
 
     def world(self) -> World:
@@ -641,11 +729,12 @@ class _TinyScenario(DatasetBuilder):
 
     def build(self, params: TinyParams, rng: np.random.Generator) -> Dataset:
         streams = split_streams(rng)
+        slip_rng = execution_stream(rng)
         world = self.world()
         start, legs = self.route()
         nf = params.noise_free
         limits = dataclasses.replace(TINY_LIMITS, wheelbase_m=true_wheelbase(nf))
-        motion = simulate_route(start, legs, limits)
+        motion = simulate_route(start, legs, limits, slip_k=0.0 if nf else SLIP_K_TRUE, slip_rng=slip_rng)
         lm = LandmarkSensor(
             rate_hz=5.0,
             min_range_m=0.3,
