@@ -533,6 +533,18 @@ def _verify_folder(paths: dict[str, Path], dataset: int | None) -> None:
             verify_sha256(p, sums[p.name])
 
 
+def _check_subjects_on_map(meas: Table, barcodes: dict[int, int], world: Landmarks, map_name: str) -> None:
+    """Raise at the first sighting whose barcode names a landmark subject that the map does not have."""
+    on_map = set(world.ids.tolist())
+    for k, code in enumerate(meas.rows[:, 1].astype(np.int64).tolist()):
+        subject = barcodes.get(code, -1)
+        if subject >= FIRST_LANDMARK_SUBJECT and subject not in on_map:
+            raise meas.fail(
+                k,
+                f"barcode {code} maps to subject {subject}, which is not in {map_name} (expected a surveyed landmark)",
+            )
+
+
 def parse_robot_run(paths: dict[str, Path]) -> RobotRun:
     """Parse one robot's files (keys as in :func:`file_names`) and trim everything to the truth span."""
     barcodes = read_barcodes(paths["barcodes"])
@@ -556,16 +568,10 @@ def parse_robot_run(paths: dict[str, Path]) -> RobotRun:
         xy=np.vstack([first[None, :2], gt.xy[after]]),
         theta=np.r_[first[2], gt.theta[after]],
     )
+    _check_subjects_on_map(meas, barcodes, world, paths["landmarks"].name)
     lms, robots, unknown = split_sightings(meas, barcodes)
     lms = lms.select((lms.t >= t0) & (lms.t <= g1))
     robots = robots.select((robots.t >= t0) & (robots.t <= g1))
-    unknown_ids = sorted(set(lms.subject.tolist()) - set(world.ids.tolist()))
-    if unknown_ids:
-        k = int(np.flatnonzero(np.isin(meas.rows[:, 0], lms.t[np.isin(lms.subject, unknown_ids)]))[0])
-        raise meas.fail(
-            k, f"barcode maps to subject {unknown_ids[0]}, which is not in {paths['landmarks'].name} "
-            f"(expected a surveyed landmark)"
-        )  # fmt: skip
     return RobotRun(truth, events, lms, robots, unknown, world)
 
 
