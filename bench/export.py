@@ -1,0 +1,267 @@
+"""Trajectories in the TUM format, so that stored runs can be checked with other tools (evo, rpg_trajectory_evaluation).
+
+A TUM trajectory file (TUM RGB-D benchmark; the format evo reads with ``evo_ape tum truth.tum est.tum``) has one
+pose per line::
+
+    timestamp tx ty tz qx qy qz qw
+
+with the time in seconds, the position in metres and the orientation as a unit quaternion (Hamilton, scalar
+last). A planar pose (x, y, theta) is written with tz = 0 and the rotation about z by theta:
+(qx, qy, qz, qw) = (0, 0, sin(theta / 2), cos(theta / 2)), qw >= 0 for theta in (-pi, pi]. Fields are separated by
+one space, numbers are written in their shortest exact form (a read-back gives the same float64), one ``#`` comment
+line says what the file holds (evo skips comment lines).
+
+Timestamps are strictly increasing, as evo expects: where several estimates share a time (an odometry step and a
+scan at the same stamp) the last one, the estimate after every event of that instant, is written; it is the one
+locbench's metrics hold at that time. Estimate rows that are not finite (a run that diverged) are left out with a
+warning. The times are the dataset's own (recordings keep their Unix stamps), so an export lines up with the
+recording and with other tools' output on it. Every file is written to a temporary file and renamed into place.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import tempfile
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+from locbench.datasets.base import Trajectory2D
+from locbench.errors import ConfigError
+from locbench.geometry import wrap_angle
+from locbench.store import RunRecord, Store, TruthRecord
+
+log = logging.getLogger(__name__)
+
+FloatArray = npt.NDArray[np.float64]
+
+TUM_COLUMNS = ("timestamp [s]", "tx [m]", "ty [m]", "tz [m]", "qx", "qy", "qz", "qw")
+TUM_HEADER = "# timestamp tx ty tz qx qy qz qw"
+
+
+def yaw_to_quaternion(theta: npt.ArrayLike) -> FloatArray:
+    """Unit quaternions (qx, qy, qz, qw) of rotations by ``theta`` (rad) about z, shape (..., 4); qw >= 0."""
+    half = 0.5 * wrap_angle(theta)
+    z = np.zeros_like(half)
+    return np.stack([z, z, np.sin(half), np.cos(half)], axis=-1)
+
+
+def quaternion_to_yaw(q: npt.ArrayLike) -> FloatArray:
+    """Yaw (rad, in (-pi, pi]) of quaternions (qx, qy, qz, qw), shape (..., 4) -> (...); q and -q give the same."""
+    a = np.asarray(q, dtype=np.float64)
+    x, y, z, w = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
+    return np.asarray(wrap_angle(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))), dtype=np.float64)
+
+
+def _last_per_time(t: FloatArray, rows: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Keep, for each distinct time of a non-decreasing ``t``, the last row."""
+    keep = np.ones(t.shape[0], dtype=bool)
+    keep[:-1] = t[1:] != t[:-1]
+    return t[keep], rows[keep]
+
+
+def _fmt(v: float) -> str:
+    return repr(float(v))  # the shortest string that reads back as the same float64
+
+
+def write_tum(path: str | os.PathLike[str], t: npt.ArrayLike, poses: npt.ArrayLike, comment: str | None = None) -> Path:
+    """Write planar poses as a TUM trajectory file (atomically).
+
+    Parameters
+    ----------
+    path : path-like
+        The file to write; its folder is created.
+    t : array-like, shape (n,)
+        Times, s, non-decreasing; rows sharing a time collapse to the last.
+    poses : array-like, shape (n, 3)
+        World-frame poses (x m, y m, theta rad); rows with a non-finite value are left out (logged).
+    comment : str or None
+        Text of a second ``#`` line (provenance).
+
+    Returns
+    -------
+    Path
+        The file.
+
+    Raises
+    ------
+    ConfigError
+        Shapes that do not match, times going backwards, or no finite pose at all.
+    """
+    tt = np.asarray(t, dtype=np.float64)
+    pp = np.asarray(poses, dtype=np.float64)
+    if tt.ndim != 1 or pp.shape != (tt.shape[0], 3):
+        raise ConfigError(f"{path}: expected times (n,) and poses (n, 3), got {tt.shape} and {pp.shape}")
+    finite = np.isfinite(tt) & np.all(np.isfinite(pp), axis=1)
+    if not np.all(finite):
+        log.warning("%s: leaving out %d non-finite pose rows of %d", path, int(np.sum(~finite)), tt.shape[0])
+        tt, pp = tt[finite], pp[finite]
+    if tt.shape[0] == 0:
+        raise ConfigError(f"{path}: no finite pose to write")
+    back = np.flatnonzero(np.diff(tt) < 0)
+    if back.size:
+        k = int(back[0]) + 1
+        raise ConfigError(f"{path}: time goes backwards at row {k}: {float(tt[k])!r} s after {float(tt[k - 1])!r} s")
+    tt, pp = _last_per_time(tt, pp)
+    q = yaw_to_quaternion(pp[:, 2])
+    lines = [TUM_HEADER]
+    if comment:
+        lines.append("# " + " ".join(comment.split()))
+    for k in range(tt.shape[0]):
+        x, y = pp[k, 0], pp[k, 1]
+        lines.append(" ".join(_fmt(v) for v in (tt[k], x, y, 0.0, q[k, 0], q[k, 1], q[k, 2], q[k, 3])))
+    out = Path(path)
+    _atomic_write_text(out, "\n".join(lines) + "\n")
+    return out
+
+
+def read_tum(path: str | os.PathLike[str]) -> Trajectory2D:
+    """Read a TUM trajectory file as planar poses (the yaw of each quaternion; z and roll/pitch are dropped).
+
+    Raises
+    ------
+    RecordedDataError
+        Naming the line: a wrong column count, a field that is not a number, time going backwards.
+    """
+    from locbench.datasets.recorded.files import read_table  # the numeric table reader with line-numbered errors
+
+    table = read_table(path, TUM_COLUMNS)
+    table.check_time_non_decreasing(0, "timestamp")
+    rows = table.rows
+    return Trajectory2D(rows[:, 0].copy(), rows[:, 1:3].copy(), quaternion_to_yaw(rows[:, 4:8]))
+
+
+def _load_run(run: RunRecord | str | os.PathLike[str]) -> RunRecord:
+    if isinstance(run, RunRecord):
+        return run
+    d = Path(run)
+    return Store(d.parent).read_run(d)
+
+
+def export_tum(run: RunRecord | str | os.PathLike[str], path: str | os.PathLike[str], smoothed: bool = False) -> Path:
+    """Write a stored run's estimated trajectory as a TUM file.
+
+    Parameters
+    ----------
+    run : RunRecord or path-like
+        The run, or its folder (``runs/<dataset>/<filter>/seed-NNNN``).
+    path : path-like
+        The file to write.
+    smoothed : bool
+        Write the smoothed trajectory of a smoother (``extra`` ``smoothed_t`` / ``smoothed_mean``) instead of
+        the filtered estimate after each event.
+
+    Returns
+    -------
+    Path
+        The file.
+
+    Raises
+    ------
+    ConfigError
+        An unreadable run folder, a run without estimates (skipped), or ``smoothed`` on a run without a smoothed
+        trajectory.
+    """
+    rec = _load_run(run)
+    meta = rec.meta
+    what = f"run {meta.get('filter', '?')} on {meta.get('dataset', '?')} seed {meta.get('seed', '?')}"
+    if rec.status != "ok":
+        log.warning("%s has status %s (%s): exporting what it estimated", what, rec.status, meta.get("message", ""))
+    if smoothed:
+        if "smoothed_t" not in rec.extra or "smoothed_mean" not in rec.extra:
+            raise ConfigError(f"{what} has no smoothed trajectory (only smoothers such as gtsam_fls store one)")
+        t, poses = rec.extra["smoothed_t"], rec.extra["smoothed_mean"]
+    else:
+        t, poses = rec.t, rec.mean
+    if np.asarray(t).shape[0] == 0:
+        raise ConfigError(f"{what} has no estimates (status {rec.status}: {meta.get('message', '')})")
+    label = "smoothed" if smoothed else "filtered"
+    comment = (
+        f"locbench {label} estimate: filter {meta.get('filter')} dataset {meta.get('dataset')} seed {meta.get('seed')}"
+    )
+    return write_tum(path, t, poses, comment)
+
+
+def export_truth_tum(truth: TruthRecord | Trajectory2D, path: str | os.PathLike[str]) -> Path:
+    """Write a ground truth (or a SLAM reference) as a TUM file.
+
+    Parameters
+    ----------
+    truth : TruthRecord or Trajectory2D
+        A stored truth record (its label goes into the comment line) or a trajectory.
+    path : path-like
+        The file to write.
+    """
+    if isinstance(truth, TruthRecord):
+        gt = truth.ground_truth
+        comment = f"locbench {truth.truth_label}: dataset {truth.dataset} seed {truth.seed}"
+    else:
+        gt, comment = truth, "locbench trajectory"
+    return write_tum(path, gt.t, gt.poses, comment)
+
+
+def export_results(
+    results: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    *,
+    datasets: Iterable[str] = (),
+    filters: Iterable[str] = (),
+    smoothed: bool = False,
+) -> list[Path]:
+    """Export every stored run (and the truth of each dataset realisation) of a results folder as TUM files.
+
+    Layout: ``<out>/<dataset>/<filter>/seed-NNNN.tum`` and ``<out>/<dataset>/_truth/seed-NNNN.tum`` (folder names
+    as in the run store). Runs without estimates (skipped) are passed over; with ``smoothed``, only runs that
+    have a smoothed trajectory are written.
+
+    Parameters
+    ----------
+    results : path-like
+        The results folder (the one holding ``runs/``).
+    out : path-like
+        The output folder.
+    datasets, filters : iterable of str
+        Only these dataset / filter names (as stored: ``room[kidnap_m=2]``); empty = all.
+    smoothed : bool
+        Export the smoothed trajectories instead of the filtered ones.
+
+    Returns
+    -------
+    list of Path
+        Every file written, in order.
+    """
+    store = Store(results)
+    want_d, want_f = set(datasets), set(filters)
+    root = Path(out)
+    written: list[Path] = []
+    truths: set[tuple[str, int]] = set()
+    for run_dir in store.iter_runs():
+        rec = store.read_run(run_dir)
+        dname, fname, seed = str(rec.meta["dataset"]), str(rec.meta["filter"]), int(rec.meta["seed"])
+        if (want_d and dname not in want_d) or (want_f and fname not in want_f):
+            continue
+        if rec.t.shape[0] == 0 or (smoothed and "smoothed_t" not in rec.extra):
+            continue
+        rel = run_dir.relative_to(store.runs)
+        written.append(export_tum(rec, (root / rel).with_suffix(".tum"), smoothed=smoothed))
+        if (dname, seed) not in truths and store.has_truth(dname, seed):
+            truths.add((dname, seed))
+            truth_rel = store.truth_path(dname, seed).relative_to(store.runs)
+            written.append(export_truth_tum(store.read_truth(dname, seed), (root / truth_rel).with_suffix(".tum")))
+    return written
+
+
+def _atomic_write_text(path: Path, text: str) -> None:
+    """Write through a temporary file in the same folder, then rename over ``path``."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=path.suffix, dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="ascii") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
