@@ -65,6 +65,7 @@ from locbench.datasets.recorded.files import DATA_ENV, MissingDataFile, Recorded
 from locbench.datasets.recorded.ros_map import load_map_server_map
 from locbench.errors import ConfigError, DependencyNotInstalled
 from locbench.events import Event, LaserScan, Odometry
+from locbench.export import quaternion_to_yaw
 from locbench.geometry import wrap_angle
 from locbench.spec import params_to_dict
 
@@ -186,11 +187,6 @@ class BagStreams:
     topics: dict[str, tuple[str, int]]
 
 
-def quaternion_yaw(x: float, y: float, z: float, w: float) -> float:
-    """Yaw (rotation about z, rad, in (-pi, pi]) of a unit quaternion (x, y, z, w)."""
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-
-
 def _stamp(msg: Any, recorded_ns: int, stamps: str) -> float:
     if stamps == "bag":
         return recorded_ns * 1e-9
@@ -201,6 +197,18 @@ def _stamp(msg: Any, recorded_ns: int, stamps: str) -> float:
 def _pose_of(msg: Any, msgtype: str) -> Any:
     """The geometry_msgs/Pose inside a truth or odometry message."""
     return msg.pose if msgtype == "geometry_msgs/msg/PoseStamped" else msg.pose.pose
+
+
+def _planar_poses(poses: list[Any]) -> FloatArray:
+    """(x m, y m, yaw rad) of geometry_msgs/Pose messages, shape (n, 3)."""
+    xyq = np.array(
+        [
+            (p.position.x, p.position.y, p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w)
+            for p in poses
+        ],
+        dtype=np.float64,
+    ).reshape(-1, 6)
+    return np.column_stack([xyq[:, :2], quaternion_to_yaw(xyq[:, 2:])])
 
 
 def resolve_bag_path(path: str | os.PathLike[str], what: str = "bag") -> Path:
@@ -313,27 +321,19 @@ def _read_streams_cached(
             k = int(back[0]) + 1
             raise RecordedDataError(
                 p,
-                f"topic {topic!r} message {k + 1} of {ts.size}: {stamps} stamp {ts[k]!r} s goes backwards from "
-                f"{ts[k - 1]!r} s (expected non-decreasing stamps"
+                f"topic {topic!r} message {k + 1} of {ts.size}: {stamps} stamp {float(ts[k])!r} s goes backwards from "
+                f"{float(ts[k - 1])!r} s (expected non-decreasing stamps"
                 + ("; stamps=bag uses the recording time instead)" if stamps == "header" else ")"),
             )
 
     odom = by_topic[odom_topic]
     odom_t = np.array([t for t, _ in odom], dtype=np.float64)
-    odom_pose = np.zeros((len(odom), 3))
-    odom_twist = np.zeros((len(odom), 2))
-    for k, (_, m) in enumerate(odom):
-        pose = m.pose.pose
-        q = pose.orientation
-        odom_pose[k] = (pose.position.x, pose.position.y, quaternion_yaw(q.x, q.y, q.z, q.w))
-        odom_twist[k] = (m.twist.twist.linear.x, m.twist.twist.angular.z)
+    odom_pose = _planar_poses([m.pose.pose for _, m in odom])
+    odom_twist = np.array([(m.twist.twist.linear.x, m.twist.twist.angular.z) for _, m in odom], dtype=np.float64)
+    odom_twist = odom_twist.reshape(-1, 2)
     truth = by_topic[truth_topic]
     truth_t = np.array([t for t, _ in truth], dtype=np.float64)
-    truth_pose = np.zeros((len(truth), 3))
-    for k, (_, m) in enumerate(truth):
-        pose = _pose_of(m, truth_type)
-        q = pose.orientation
-        truth_pose[k] = (pose.position.x, pose.position.y, quaternion_yaw(q.x, q.y, q.z, q.w))
+    truth_pose = _planar_poses([_pose_of(m, truth_type) for _, m in truth])
     scans = tuple(
         ScanMessage(
             t,
@@ -435,8 +435,8 @@ def build_rosbag_dataset(params: RosbagParams) -> Dataset:
         raise RecordedDataError(
             bag,
             f"no odometry increments on {params.odom_topic!r} within the ground truth's span [{t0!r}, {t1!r}] s "
-            f"({ot.size} odometry messages in [{ot[0] if ot.size else float('nan')!r}, "
-            f"{ot[-1] if ot.size else float('nan')!r}] s)",
+            f"({ot.size} odometry messages in [{float(ot[0]) if ot.size else float('nan')!r}, "
+            f"{float(ot[-1]) if ot.size else float('nan')!r}] s)",
         )
 
     grid = None
