@@ -539,7 +539,12 @@ class ParticleFilter(Filter):
         else:
             self._lm_xy = np.zeros((0, 2))
             self._lm_row = {}
-        sr, sb = landmark_noise(cfg.sigma_range_m, cfg.sigma_bearing_rad, sensors, warn=self._use_lm)
+        sr, sb = landmark_noise(cfg.sigma_range_m, cfg.sigma_bearing_rad, sensors, warn=False)
+        # Warn about defaulted landmark noise only once sightings arrive (a range-only dataset has none).
+        self._lm_warn = self._use_lm and (
+            (cfg.sigma_range_m is None and sensors.landmark_sigma_range_m is None)
+            or (cfg.sigma_bearing_rad is None and sensors.landmark_sigma_bearing_rad is None)
+        )
         self._inv_var_r, self._inv_var_b = 1.0 / (sr * sr), 1.0 / (sb * sb)
         self._lm_log_norm = -_LOG_2PI - math.log(sr) - math.log(sb)
         srange = range_only_noise(cfg.range_only_sigma_m, sensors, warn=False)
@@ -638,6 +643,9 @@ class ParticleFilter(Filter):
         self._check_finite(z.t)
 
     def _prepare_landmarks(self, z: LandmarkObservations) -> tuple[int, tuple[FloatArray, FloatArray, IntArray]] | None:
+        if self._lm_warn:
+            landmark_noise(None, None, SensorSpec(), warn=True)
+            self._lm_warn = False
         ids = z.ids.tolist()
         keep: list[int] = []
         rows: list[int] = []
