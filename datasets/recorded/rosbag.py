@@ -22,7 +22,9 @@ What is read, and how it becomes the dataset:
   ``geometry_msgs/PoseWithCovarianceStamped``, whichever type the topic has; its poses must be in the map frame.
   ``truth_label`` says whether it is a measured ground truth or another estimator's output (AMCL, SLAM).
 - **Map**: the ROS map_server map named by ``map`` (:func:`~locbench.datasets.recorded.ros_map.load_map_server_map`);
-  required when there are scans.
+  required when there are scans. With ``map_lines`` (default) line segments are also extracted from its occupied
+  cells (the greedy Hough extraction of :func:`~locbench.datasets.recorded.intel.extract_map_lines`), so that the
+  line-map filter runs too; the map is parsed once per file version.
 - **Time**: the messages' header stamps (s, as recorded: usually Unix time; ``stamps=bag`` uses the time the bag
   recorded each message instead, for drivers that leave headers unset). Each topic's stamps must not go backwards
   (an error names the topic and the message number). Events are trimmed to the ground truth's time span; the
@@ -55,6 +57,8 @@ from locbench.datasets.base import (
     Dataset,
     DatasetBuilder,
     Gaussian2,
+    LineMap,
+    OccupancyGrid,
     SensorSpec,
     Trajectory2D,
     WorldMap,
@@ -62,6 +66,7 @@ from locbench.datasets.base import (
     sort_events,
 )
 from locbench.datasets.recorded.files import DATA_ENV, MissingDataFile, RecordedDataError
+from locbench.datasets.recorded.intel import extract_map_lines
 from locbench.datasets.recorded.ros_map import load_map_server_map
 from locbench.errors import ConfigError, DependencyNotInstalled
 from locbench.events import Event, LaserScan, Odometry
@@ -101,6 +106,8 @@ class RosbagParams:
         Standard deviations of the initial belief around the first truth pose, m and rad.
     truth_label : {"ground truth", "SLAM reference"}
         What the truth topic is.
+    map_lines : bool
+        Also extract line segments from the map's occupied cells (for ``ekf_lines``).
     """
 
     path: str = ""
@@ -119,6 +126,7 @@ class RosbagParams:
     initial_sigma_xy_m: float = 0.05
     initial_sigma_theta_rad: float = 0.05
     truth_label: Literal["ground truth", "SLAM reference"] = "ground truth"
+    map_lines: bool = True
 
     def __post_init__(self) -> None:
         for name in (
@@ -400,6 +408,24 @@ def load_rosbag(
     return build_rosbag_dataset(params)
 
 
+def _map(path: Path, with_lines: bool) -> tuple[OccupancyGrid, LineMap | None]:
+    st = path.stat()
+    return _map_cached(str(path.resolve()), st.st_size, st.st_mtime_ns, with_lines)
+
+
+@functools.lru_cache(maxsize=4)
+def _map_cached(path: str, size: int, mtime_ns: int, with_lines: bool) -> tuple[OccupancyGrid, LineMap | None]:
+    """The map (and its lines) of a map_server YAML, cached per file version (a re-saved map is read again)."""
+    del size, mtime_ns  # cache key only
+    grid = load_map_server_map(path)
+    grid.occupancy.setflags(write=False)
+    if not with_lines:
+        return grid, None
+    lines, _ = extract_map_lines(grid)
+    lines.segments.setflags(write=False)
+    return grid, lines
+
+
 def build_rosbag_dataset(params: RosbagParams) -> Dataset:
     """The dataset of ``params`` (what :class:`RosbagDataset` builds)."""
     if not params.path:
@@ -439,9 +465,9 @@ def build_rosbag_dataset(params: RosbagParams) -> Dataset:
             f"{float(ot[-1]) if ot.size else float('nan')!r}] s)",
         )
 
-    grid = None
+    grid, lines = None, None
     if params.map:
-        grid = load_map_server_map(resolve_bag_path(params.map, "map"))
+        grid, lines = _map(resolve_bag_path(params.map, "map"), params.map_lines)
     sensor_pose = (params.laser_x_m, params.laser_y_m, params.laser_yaw_rad)
     scans_in = [s for s in streams.scans if t0 <= s.t <= t1]
     if scans_in and grid is None:
@@ -479,7 +505,7 @@ def build_rosbag_dataset(params: RosbagParams) -> Dataset:
         events=sort_events(events),
         ground_truth=truth,
         initial=initial,
-        world=WorldMap(occupancy=grid),
+        world=WorldMap(occupancy=grid, lines=lines),
         sensors=sensors,
         name="rosbag",
         metadata={
