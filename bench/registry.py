@@ -222,6 +222,23 @@ DATASETS.register(
     "report 001's paths x landmark layouts, landmarks detected by a 151-ray laser; GPS variant",
 )
 
+DATASETS.register(
+    "mrclam",
+    "locbench.datasets.recorded.mrclam:MrclamDataset",
+    "UTIAS MRCLAM (recorded): one robot of a dataset, (v, omega) odometry, camera landmark sightings, Vicon truth",
+)
+DATASETS.register(
+    "lost_in_the_woods",
+    "locbench.datasets.recorded.lost_in_the_woods:LostInTheWoods",
+    "Barfoot's Lost in the Woods (recorded): v/omega at 10 Hz, range-bearing to 17 tubes, Vicon truth",
+)
+DATASETS.register(
+    "intel",
+    "locbench.datasets.recorded.intel:IntelDataset",
+    "Intel Research Lab (recorded CARMEN log): odometry, 180-beam laser, grid and lines from the GMapping "
+    "reference, Kuemmerle relations",
+)
+
 # --- making things from specs -------------------------------------------------------------------
 
 
