@@ -43,6 +43,7 @@ error listing the topics it has. Parsed streams are cached per (bag, size, mtime
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import os
@@ -151,18 +152,6 @@ class RosbagParams:
 
 
 @dataclass(frozen=True, eq=False)
-class ScanMessage:
-    """One ``sensor_msgs/LaserScan`` as read: time s, angles rad, raw ranges m (float32 widened), limits m."""
-
-    t: float
-    angle_min: float
-    angle_increment: float
-    ranges: FloatArray
-    range_min: float
-    range_max: float
-
-
-@dataclass(frozen=True, eq=False)
 class BagStreams:
     """The three streams of a bag as arrays (the parsed content, before any trimming).
 
@@ -174,7 +163,8 @@ class BagStreams:
         Poses (x m, y m, yaw rad) in the odometry frame.
     odom_twist : ndarray (n, 2)
         ``twist.linear.x`` m/s and ``twist.angular.z`` rad/s.
-    scans : tuple of ScanMessage
+    scans : tuple of LaserScan
+        The scans with invalid readings set to ``inf`` (:func:`clean_ranges`) and the sensor at the robot origin.
     truth_t : ndarray (m,)
         Ground-truth times, s.
     truth_pose : ndarray (m, 3)
@@ -188,7 +178,7 @@ class BagStreams:
     odom_t: FloatArray
     odom_pose: FloatArray
     odom_twist: FloatArray
-    scans: tuple[ScanMessage, ...]
+    scans: tuple[LaserScan, ...]
     truth_t: FloatArray
     truth_pose: FloatArray
     truth_type: str
@@ -343,16 +333,18 @@ def _read_streams_cached(
     truth_t = np.array([t for t, _ in truth], dtype=np.float64)
     truth_pose = _planar_poses([_pose_of(m, truth_type) for _, m in truth])
     scans = tuple(
-        ScanMessage(
+        LaserScan(
             t,
             float(m.angle_min),
             float(m.angle_increment),
-            np.asarray(m.ranges, dtype=np.float64),
+            clean_ranges(m.ranges, float(m.range_min), float(m.range_max)),
             float(m.range_min),
             float(m.range_max),
         )
         for t, m in (by_topic[scan_topic] if scan_topic else [])
     )
+    for scan in scans:
+        scan.ranges.setflags(write=False)
     for name, arr in (("odometry", odom_pose), ("ground truth", truth_pose)):
         bad = np.flatnonzero(~np.all(np.isfinite(arr), axis=1))
         if bad.size:
@@ -475,18 +467,7 @@ def build_rosbag_dataset(params: RosbagParams) -> Dataset:
             f"rosbag {bag}: {len(scans_in)} scans on {params.scan_topic!r} need a map: give map=<map_server yaml> "
             "(or scan_topic= to ignore the laser)"
         )
-    for s in scans_in:
-        events.append(
-            LaserScan(
-                s.t,
-                s.angle_min,
-                s.angle_increment,
-                clean_ranges(s.ranges, s.range_min, s.range_max),
-                s.range_min,
-                s.range_max,
-                sensor_pose,
-            )
-        )
+    events.extend(dataclasses.replace(s, sensor_pose=sensor_pose) for s in scans_in)
 
     truth = Trajectory2D(
         np.array(streams.truth_t), np.array(streams.truth_pose[:, :2]), wrap_angle(np.array(streams.truth_pose[:, 2]))
