@@ -6,6 +6,7 @@ locbench run [--suite NAME|FILE.toml | --filter SPEC ... --dataset SPEC ...]
 locbench report [--results DIR]
 locbench check [ID ...]
 locbench fetch SPEC [SPEC ...]
+locbench export [--results DIR] [--out DIR] [--dataset SPEC ...] [--filter SPEC ...] [--smoothed]
 """
 
 from __future__ import annotations
@@ -131,6 +132,24 @@ def _cmd_fetch(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_export(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from locbench.export import export_results
+    from locbench.registry import resolve_dataset, resolve_filter
+
+    out = args.out or str(Path(args.results) / "tum")
+    written = export_results(
+        args.results,
+        out,
+        datasets=[resolve_dataset(s).name for s in args.dataset],
+        filters=[resolve_filter(s).name for s in args.filter],
+        smoothed=args.smoothed,
+    )
+    print(f"{len(written)} TUM trajectory files written under {out}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="locbench", description="Comparative benchmark of 2-D localization filters.")
     p.add_argument("--version", action="version", version=f"locbench {__version__}")
@@ -178,6 +197,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     fe.add_argument("specs", nargs="+", metavar="SPEC", help="e.g. plaza[run=1] or mrclam[dataset=6,robot=1]")
     fe.set_defaults(func=_cmd_fetch)
+
+    ex = sub.add_parser("export", help="write stored runs and their truth as TUM trajectories (for evo)")
+    ex.add_argument("--results", default=_results_default(), help="results folder (default: results/)")
+    ex.add_argument("--out", default=None, help="output folder (default: RESULTS/tum)")
+    ex.add_argument("--dataset", nargs="+", action="extend", default=[], metavar="SPEC", help="only these datasets")
+    ex.add_argument("--filter", nargs="+", action="extend", default=[], metavar="SPEC", help="only these filters")
+    ex.add_argument("--smoothed", action="store_true", help="export smoothed trajectories (gtsam_fls) instead")
+    ex.set_defaults(func=_cmd_export)
     return p
 
 

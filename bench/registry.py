@@ -239,6 +239,19 @@ DATASETS.register(
     "reference, Kuemmerle relations",
 )
 
+DATASETS.register(
+    "plaza",
+    "locbench.datasets.recorded.plaza:PlazaDataset",
+    "CMU Plaza range-only runs (recorded, Djugash et al. 2009): odometry, radio ranges to 4 beacons, GPS truth",
+)
+DATASETS.register(
+    "rosbag",
+    "locbench.datasets.recorded.rosbag:RosbagDataset",
+    "a user's ROS 1 / ROS 2 bag: nav_msgs/Odometry, sensor_msgs/LaserScan, a truth pose topic, a map_server map",
+    requires_modules=("rosbags",),
+    install_hint="pip install 'locbench[ros]'",
+)
+
 # --- making things from specs -------------------------------------------------------------------
 
 

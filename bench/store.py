@@ -13,6 +13,7 @@ half-written run behind. Names are the canonical specs (``room[kidnap_m=2]``).
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import shutil
@@ -37,9 +38,23 @@ KIND_NAMES = ("Odometry", "LaserScan", "LandmarkObservations", "PoseFix", "reset
 STATUSES = ("ok", "skipped", "diverged", "error")
 
 
+#: Longest folder name written (POSIX allows 255 bytes; room is left for the ".old" and ".tmp-" variants).
+_MAX_NAME_BYTES = 200
+
+
 def _safe(name: str) -> str:
-    """A file-system-safe folder name for a spec (only '/' and NUL can't appear in a POSIX name)."""
-    return name.replace("/", "_").replace("\\", "_").replace("\x00", "")
+    """A file-system-safe folder name for a spec (only '/' and NUL can't appear in a POSIX name).
+
+    A name longer than :data:`_MAX_NAME_BYTES` (a spec with long paths) is cut and given a sha256 suffix of the
+    whole name, so distinct specs keep distinct folders; ``meta.json`` keeps the full name.
+    """
+    safe = name.replace("/", "_").replace("\\", "_").replace("\x00", "")
+    raw = safe.encode()
+    if len(raw) <= _MAX_NAME_BYTES:
+        return safe
+    digest = hashlib.sha256(name.encode()).hexdigest()[:16]
+    head = raw[: _MAX_NAME_BYTES - 17].decode(errors="ignore")
+    return f"{head}~{digest}"
 
 
 @dataclass(eq=False)

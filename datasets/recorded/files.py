@@ -234,7 +234,8 @@ class Table:
         back = np.flatnonzero(np.diff(t) < 0)
         if back.size:
             k = int(back[0]) + 1
-            raise self.fail(k, f"{name} goes backwards: {t[k]!r} after {t[k - 1]!r} (expected non-decreasing)")
+            now, before = float(t[k]), float(t[k - 1])
+            raise self.fail(k, f"{name} goes backwards: {now!r} after {before!r} (expected non-decreasing)")
 
 
 _SPLIT = re.compile(r"[ \t,]+")
