@@ -2,7 +2,7 @@
 
 nox                 the tests (the default session)
 nox -s lint         ruff and mypy
-nox -s bench        run the default suite and write results/summary (posargs go to 'locbench run')
+nox -s bench        run every experiment and write results/summary (posargs go to 'locbench run')
 nox -s report       regenerate results/summary from the stored runs, no re-run
 nox -s perf         pytest-benchmark micro-benchmarks of each filter's predict and update
 """
@@ -22,6 +22,16 @@ PYTHON = "3.11"
 CONSTRAINTS = ("-c", "constraints.txt")
 
 
+#: Where the recorded datasets lie when LOCBENCH_DATA is not set: ../shared/datasets beside the checkout, if present.
+_SHARED_DATA = os.path.join(os.path.dirname(os.path.abspath(__file__)), os.pardir, "shared", "datasets")
+
+
+def _data_env() -> dict[str, str]:
+    """LOCBENCH_DATA for the session: the caller's, else ../shared/datasets when it exists, else empty (skips)."""
+    data = os.environ.get("LOCBENCH_DATA") or (os.path.normpath(_SHARED_DATA) if os.path.isdir(_SHARED_DATA) else "")
+    return {"LOCBENCH_DATA": data}
+
+
 def _install(session: nox.Session, extras: str) -> None:
     # A regular (non-editable) install: the tests import the installed package, as users do.
     session.install(*CONSTRAINTS, f".[{extras}]")
@@ -31,16 +41,14 @@ def _install(session: nox.Session, extras: str) -> None:
 def tests(session: nox.Session) -> None:
     """Run the test suite (recorded-data tests read $LOCBENCH_DATA and skip without it)."""
     _install(session, "all,test")
-    env = {"LOCBENCH_DATA": os.environ.get("LOCBENCH_DATA", "")}
-    session.run("pytest", "--benchmark-disable", *session.posargs, env=env)
+    session.run("pytest", "--benchmark-disable", *session.posargs, env=_data_env())
 
 
 @nox.session(python=PYTHON, default=False)
 def tests_lowest(session: nox.Session) -> None:
     """The tests against the lower bounds of every dependency (gtsam-free: its extra has one release)."""
     session.install("-c", "constraints-lowest.txt", ".[filterpy,test]")
-    env = {"LOCBENCH_DATA": os.environ.get("LOCBENCH_DATA", "")}
-    session.run("pytest", "--benchmark-disable", *session.posargs, env=env)
+    session.run("pytest", "--benchmark-disable", *session.posargs, env=_data_env())
 
 
 @nox.session(python=PYTHON, default=False)
@@ -57,7 +65,7 @@ def bench(session: nox.Session) -> None:
     """Run every experiment (or 'locbench run' arguments given after --) and write the report."""
     _install(session, "all")
     args = session.posargs or ["--suite", "all", "--jobs", "2"]
-    session.run("locbench", "run", "--results", "results", *args)
+    session.run("locbench", "run", "--results", "results", *args, env=_data_env())
     session.run("locbench", "report", "--results", "results")
 
 

@@ -57,6 +57,15 @@ ALL_FILTERS = ("odometry", "ekf_landmarks", "ekf_lines", "ekf_icp", "kf_linear",
 KIDNAP_FILTERS = ("odometry", "ekf_landmarks", "ekf_lines", "ekf_icp", "kf_linear", "pf[augmented=true]", "gtsam_fls")
 KIDNAP_DISTANCES_M = (0.5, 1, 2, 4)
 
+#: The recorded datasets of the recorded-data table (MRCLAM Dataset 6, all five robots; Dataset 6 is the default).
+RECORDED_LANDMARK_DATASETS = (
+    *(f"mrclam[robot={r}]" for r in range(1, 6)),
+    "lost_in_the_woods",
+    "plaza[run=1]",
+    "plaza[run=2]",
+)
+RECORDED_LASER_DATASETS = ("intel",)
+
 _LG_PATHS = ("circle", "star", "pentagon", "random")
 _LG_LAYOUTS = ("1", "2", "3", "4", "8")
 
@@ -146,13 +155,23 @@ _SUITES: tuple[Suite, ...] = (
         "global localization: the particle filter from a uniform prior over free space",
     ),
     Suite(
+        "recorded",
+        (
+            Block(ALL_FILTERS, RECORDED_LANDMARK_DATASETS, 1),
+            # pf's laser model is off by default (003's PF uses landmarks); Intel has only the laser.
+            Block((*ALL_FILTERS, "pf[use_laser=true]"), RECORDED_LASER_DATASETS, 1),
+        ),
+        "every filter on the recorded datasets (skips where data or a map kind is missing): MRCLAM 6 robots 1-5, "
+        "Lost in the Woods, Intel, CMU Plaza 1 and 2",
+    ),
+    Suite(
         "smoke",
         (Block(("odometry", "ekf_landmarks", "ekf_landmarks[association=nearest]"), ("tiny_line", "tiny_circle"), 2),),
         "seconds-long sanity run",
     ),
 )
 
-_EXPERIMENTS = ("default", "lap", "line_room", "scan_grid", "landmark_geometry", "kidnap", "global")
+_EXPERIMENTS = ("default", "lap", "line_room", "scan_grid", "landmark_geometry", "kidnap", "global", "recorded")
 
 SUITES: dict[str, Suite] = {s.name: s for s in _SUITES}
 SUITES["all"] = Suite(
