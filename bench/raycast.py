@@ -263,8 +263,11 @@ def _march_start(
     state[k, 9] = ex_y - gy
     state[k, 10] = 1.0 - ex_x - gx
     state[k, 11] = 1.0 - ex_y - gy
-    cell[k, 0] = min(max(math.floor(gy + t0 * dy), 0), rows - 1)
-    cell[k, 1] = min(max(math.floor(gx + t0 * dx), 0), cols - 1)
+    i = min(max(math.floor(gy + t0 * dy), 0), rows - 1)
+    j = min(max(math.floor(gx + t0 * dx), 0), cols - 1)
+    cell[k, 0] = i
+    cell[k, 1] = j
+    cell[k, 2] = field[i, j]
     return True
 
 
@@ -294,7 +297,7 @@ def _march_range(
     nb = cb.shape[0]
     inv_res = 1.0 / res
     state = np.empty((LANES, 12))
-    cell = np.empty((LANES, 2), dtype=np.int64)
+    cell = np.empty((LANES, 3), dtype=np.int64)
     ray = np.full(LANES, -1, dtype=np.int64)
     nxt = first
     active = 0
@@ -321,7 +324,7 @@ def _march_range(
                 continue
             i = cell[k, 0]
             j = cell[k, 1]
-            v = field[i, j]
+            v = cell[k, 2]
             t = state[k, 0]
             done = False
             result = math.inf
@@ -352,6 +355,9 @@ def _march_range(
                 # past max_range, or out of the grid (convex, with free space outside): no hit
                 if t > t_lim + _NUDGE_CELLS or j < 0 or j >= cols or i < 0 or i >= rows:
                     done = True
+                else:
+                    # load the next cell's value now: the next visit's branches then do not wait for it
+                    cell[k, 2] = field[i, j]
                 state[k, 0] = t
                 cell[k, 0] = i
                 cell[k, 1] = j
