@@ -60,6 +60,8 @@ import numpy.typing as npt
 from numba import njit, prange
 from scipy.ndimage import binary_dilation, distance_transform_edt
 
+from locbench._raycast_sectors import SAFETY_CELLS, sector_bounds
+
 if TYPE_CHECKING:
     from locbench.datasets.base import OccupancyGrid
 
@@ -231,6 +233,8 @@ LANES = 8
 @njit(cache=True, inline="always")
 def _march_start(
     field: UInt8Array,
+    planes: UInt8Array,
+    plane_size: int,
     gx: float,
     gy: float,
     dx: float,
@@ -240,7 +244,11 @@ def _march_start(
     cell: IntArray,
     k: int,
 ) -> bool:
-    """Set lane ``k`` up for a ray; False (and ``state[k, 0]`` = range) when it ends at once."""
+    """Set lane ``k`` up for a ray; False (and ``state[k, 0]`` = range) when it ends at once.
+
+    ``planes`` is the flattened field that the ray marches on: the isotropic one (``plane_size`` 0) or the
+    eight octant planes of :func:`march_sector_field` (``plane_size`` rows * cols). ``field`` gives the shape.
+    """
     rows = field.shape[0]
     cols = field.shape[1]
     t0, t1 = _clip_to_grid(rows, cols, gx, gy, dx, dy)
@@ -265,15 +273,20 @@ def _march_start(
     state[k, 11] = 1.0 - ex_y - gy
     i = min(max(math.floor(gy + t0 * dy), 0), rows - 1)
     j = min(max(math.floor(gx + t0 * dx), 0), cols - 1)
+    # the octant of the direction: exact signs and |dy| > |dx| (the octant planes' convention)
+    base = (((dx < 0.0) * 2 + (dy < 0.0)) * 2 + (abs(dy) > abs(dx))) * plane_size
     cell[k, 0] = i
     cell[k, 1] = j
-    cell[k, 2] = field[i, j]
+    cell[k, 3] = base
+    cell[k, 2] = planes[base + i * cols + j]
     return True
 
 
 @njit(cache=True, error_model="numpy")
 def _march_range(
     field: UInt8Array,
+    planes: UInt8Array,
+    plane_size: int,
     res: float,
     ox: float,
     oy: float,
@@ -297,7 +310,7 @@ def _march_range(
     nb = cb.shape[0]
     inv_res = 1.0 / res
     state = np.empty((LANES, 12))
-    cell = np.empty((LANES, 3), dtype=np.int64)
+    cell = np.empty((LANES, 4), dtype=np.int64)
     ray = np.full(LANES, -1, dtype=np.int64)
     nxt = first
     active = 0
@@ -312,7 +325,7 @@ def _march_range(
             gy = (poses[p, 1] - oy) * inv_res
             dx = cp[p] * cb[b] - sp[p] * sb[b]
             dy = sp[p] * cb[b] + cp[p] * sb[b]
-            if _march_start(field, gx, gy, dx, dy, t_lim, state, cell, k):
+            if _march_start(field, planes, plane_size, gx, gy, dx, dy, t_lim, state, cell, k):
                 ray[k] = r
                 active += 1
                 break
@@ -357,7 +370,7 @@ def _march_range(
                     done = True
                 else:
                     # load the next cell's value now: the next visit's branches then do not wait for it
-                    cell[k, 2] = field[i, j]
+                    cell[k, 2] = planes[cell[k, 3] + i * cols + j]
                 state[k, 0] = t
                 cell[k, 0] = i
                 cell[k, 1] = j
@@ -374,7 +387,7 @@ def _march_range(
                     gy = (poses[p, 1] - oy) * inv_res
                     dx = cp[p] * cb[b] - sp[p] * sb[b]
                     dy = sp[p] * cb[b] + cp[p] * sb[b]
-                    if _march_start(field, gx, gy, dx, dy, t_lim, state, cell, k):
+                    if _march_start(field, planes, plane_size, gx, gy, dx, dy, t_lim, state, cell, k):
                         ray[k] = r
                         active += 1
                         break
@@ -384,6 +397,8 @@ def _march_range(
 @njit(cache=True, error_model="numpy")
 def _march_serial(
     field: UInt8Array,
+    planes: UInt8Array,
+    plane_size: int,
     res: float,
     ox: float,
     oy: float,
@@ -408,7 +423,8 @@ def _march_serial(
     for p in range(n):
         cp[p] = math.cos(poses[p, 2])
         sp[p] = math.sin(poses[p, 2])
-    _march_range(field, res, ox, oy, poses, cp, sp, trig[1], trig[2], max_range / res, 0, n * nb, out)
+    t_lim = max_range / res
+    _march_range(field, planes, plane_size, res, ox, oy, poses, cp, sp, trig[1], trig[2], t_lim, 0, n * nb, out)
     return out.reshape((n, nb))
 
 
@@ -430,7 +446,15 @@ _CHUNK = 256
 
 @njit(cache=True, parallel=True)
 def _march_parallel(
-    field: UInt8Array, res: float, ox: float, oy: float, poses: FloatArray, angles: FloatArray, max_range: float
+    field: UInt8Array,
+    planes: UInt8Array,
+    plane_size: int,
+    res: float,
+    ox: float,
+    oy: float,
+    poses: FloatArray,
+    angles: FloatArray,
+    max_range: float,
 ) -> FloatArray:
     n = poses.shape[0]
     nb = angles.shape[0]
@@ -442,7 +466,9 @@ def _march_parallel(
     sp = np.sin(poses[:, 2])
     t_lim = max_range / res
     for c in prange((total + _CHUNK - 1) // _CHUNK):
-        _march_range(field, res, ox, oy, poses, cp, sp, cb, sb, t_lim, c * _CHUNK, min((c + 1) * _CHUNK, total), out)
+        first = c * _CHUNK
+        last = min(first + _CHUNK, total)
+        _march_range(field, planes, plane_size, res, ox, oy, poses, cp, sp, cb, sb, t_lim, first, last, out)
     return out.reshape((n, nb))
 
 
@@ -468,6 +494,29 @@ def march_field(occupied: npt.ArrayLike) -> UInt8Array:
     field = units.astype(np.uint8)
     field[occ] = FIELD_OCCUPIED
     return np.ascontiguousarray(field)
+
+
+def march_sector_field(occupied: npt.ArrayLike, field: UInt8Array | None = None) -> UInt8Array:
+    """Per-octant march field, shape (8, rows, cols), uint8, for beams cast from one pose.
+
+    Plane ``((dx < 0) * 2 + (dy < 0)) * 2 + (|dy| > |dx|)`` serves the beams whose direction (dx, dy) lies in
+    that octant: on a free cell it holds the larger of the cell's clearance (:func:`march_field`, passed as
+    ``field`` if already built) and a lower bound on how far any such beam can travel from any point of the
+    cell before it enters an occupied cell (:func:`locbench._raycast_sectors.sector_bounds`), in whole units
+    of :data:`JUMP_UNIT_CELLS` rounded down and capped below :data:`FIELD_OCCUPIED`; :data:`FIELD_OCCUPIED`
+    on occupied cells. A beam along a wall has a clearance of a cell or two but an octant bound of up to the
+    wall's length: the march takes 5.0 instead of 8.8 steps per ray on the benchmark map.
+    """
+    occ = np.ascontiguousarray(occupied, dtype=np.bool_)
+    iso = march_field(occ) if field is None else field
+    if not occ.any():
+        return np.ascontiguousarray(np.broadcast_to(iso, (8, *iso.shape)))
+    cap_cells = (FIELD_OCCUPIED - 1) * JUMP_UNIT_CELLS + 1.0
+    bounds = sector_bounds(occ, 1, cap_cells)
+    units = np.minimum(np.floor((bounds - SAFETY_CELLS) / JUMP_UNIT_CELLS), FIELD_OCCUPIED - 1)
+    planes = np.maximum(units, iso[None].astype(np.float64)).astype(np.uint8)
+    planes[:, occ] = FIELD_OCCUPIED
+    return np.ascontiguousarray(planes)
 
 
 def _check_inputs(
@@ -572,9 +621,10 @@ def _run(
     oy = float(origin_xy[1])
     if method == "march":
         field = cast("UInt8Array", grid_array)
+        planes = field.reshape(-1)
         if threads:
-            return _march_parallel(field, resolution, ox, oy, p, a, max_range)
-        return _march_serial(field, resolution, ox, oy, p, a, max_range, _trig_rows(a.shape[0]))
+            return _march_parallel(field, planes, 0, resolution, ox, oy, p, a, max_range)
+        return _march_serial(field, planes, 0, resolution, ox, oy, p, a, max_range, _trig_rows(a.shape[0]))
     occ = cast("BoolArray", grid_array)
     return (
         _dda_parallel(occ, resolution, ox, oy, p, a, max_range)
@@ -599,6 +649,40 @@ def _plain_vector(x: npt.NDArray[np.generic], size: int = -1) -> bool:
 
 #: Occupancy mask and distance field per grid object, dropped with the grid.
 _GRID_CACHE: weakref.WeakKeyDictionary[OccupancyGrid, _GridArrays] = weakref.WeakKeyDictionary()
+
+#: The octant planes (:func:`march_sector_field`, flattened) per grid object, built at the grid's first
+#: one-pose cast (about 0.2 s for 400 x 400 cells).
+_SECTOR_CACHE: weakref.WeakKeyDictionary[OccupancyGrid, UInt8Array] = weakref.WeakKeyDictionary()
+
+
+def _sector_planes(grid: OccupancyGrid, arrays: _GridArrays) -> UInt8Array:
+    planes = _SECTOR_CACHE.get(grid)
+    if planes is None:
+        planes = march_sector_field(arrays.occupied, arrays.field).reshape(-1)
+        _SECTOR_CACHE[grid] = planes
+        logger.debug("ray caster: octant planes built for a %d x %d grid", *arrays.occupied.shape)
+    return planes
+
+
+def _march_one_pose(
+    grid: OccupancyGrid, arrays: _GridArrays, pose: FloatArray, angles: FloatArray, max_range: float
+) -> FloatArray:
+    """One pose's ranges (B,), serial, on the octant planes: its beams sweep the planes in turn, so the planes
+    in use stay in cache, while the many headings of many poses would spread every call over all eight (1.3 MB
+    for 400 x 400 cells, more than a core's L2) and those are faster on the isotropic field (160 kB)."""
+    out = _march_serial(
+        arrays.field,
+        _sector_planes(grid, arrays),
+        arrays.field.size,
+        arrays.resolution,
+        arrays.ox,
+        arrays.oy,
+        pose.reshape(1, 3),
+        angles,
+        max_range,
+        _trig_rows(angles.shape[0]),
+    )
+    return out[0]
 
 
 def _grid_arrays(grid: OccupancyGrid) -> _GridArrays:
@@ -671,11 +755,7 @@ def cast_scan(
         # below cost about 5 us, 7 ns per beam of a 683-beam scan
         if not (max_range >= 0.0 and math.isfinite(max_range)):
             raise ValueError(f"max_range must be a finite number of metres >= 0, got {max_range!r}")
-        trig = _trig_rows(angles.shape[0])
-        out = _march_serial(
-            arrays.field, arrays.resolution, arrays.ox, arrays.oy, pose.reshape(1, 3), angles, float(max_range), trig
-        )
-        return out[0]
+        return _march_one_pose(grid, arrays, pose, angles, float(max_range))
     _check_method(method)
     if grid.origin[2] != 0.0:
         raise ValueError(f"grid.origin theta must be 0 (rotated grids are not supported), got {grid.origin[2]}")
@@ -684,6 +764,8 @@ def cast_scan(
     arrays = _grid_arrays(grid)
     if method == "dda":
         out = _run(arrays.occupied, "dda", float(grid.resolution), grid.origin[:2], p, a, float(max_range), parallel)
+    elif p.shape[0] == 1 and not _use_threads(parallel, a.shape[0]):
+        out = _march_one_pose(grid, arrays, p[0], a, float(max_range))[None]
     else:
         out = _run(arrays.field, "march", float(grid.resolution), grid.origin[:2], p, a, float(max_range), parallel)
     return out[0] if single else out

@@ -7,10 +7,18 @@ import math
 import numpy as np
 import pytest
 
-from locbench import raycast
+from locbench import _raycast_sectors, raycast
 from locbench.datasets.base import OccupancyGrid
 from locbench.datasets.synthetic.scenarios import office_world
-from locbench.raycast import FIELD_OCCUPIED, JUMP_UNIT_CELLS, cast_rays, cast_rays_reference, cast_scan, march_field
+from locbench.raycast import (
+    FIELD_OCCUPIED,
+    JUMP_UNIT_CELLS,
+    cast_rays,
+    cast_rays_reference,
+    cast_scan,
+    march_field,
+    march_sector_field,
+)
 
 RES = 0.05
 
@@ -191,6 +199,11 @@ def test_cast_scan_keeps_the_field_with_the_grid() -> None:
     cast_scan(grid, [1.5, 1.0, 0.0], np.zeros(3), 5.0)
     assert raycast._GRID_CACHE[grid] is arrays
     np.testing.assert_array_equal(arrays.field, march_field(grid.occupied()))
+    # one-pose scans keep the octant planes too
+    planes = raycast._SECTOR_CACHE[grid]
+    cast_scan(grid, np.array([1.2, 0.8, 0.3]), np.zeros(3), 5.0)
+    assert raycast._SECTOR_CACHE[grid] is planes
+    np.testing.assert_array_equal(planes, march_sector_field(grid.occupied()).reshape(-1))
 
 
 def test_march_terminates_on_lattice_poses_along_cell_boundaries() -> None:
@@ -223,3 +236,100 @@ def test_cast_scan_fast_path_matches_the_general_path_when_angles_change() -> No
         np.testing.assert_allclose(np.where(both_inf, 0.0, fast), np.where(both_inf, 0.0, exact), atol=1e-9)
     with pytest.raises(ValueError, match="max_range"):
         cast_scan(grid, pose, np.zeros(3), math.inf)
+
+
+def test_sector_table_rows_are_non_decreasing_inside_the_wedge() -> None:
+    """The row scan of the octant bounds takes each row's first occupied cell: that needs these rows sorted."""
+    for n_sub in (1, 2, 4):
+        k_tab, first, last, _ = _raycast_sectors.kernel_tables(n_sub, 90)
+        for s in range(n_sub):
+            for dy in range(90):
+                if first[s, dy] >= 90:
+                    continue
+                row = k_tab[s, dy, first[s, dy] + 1 : min(last[s, dy], 88) + 2]
+                assert np.all(np.isfinite(row))
+                assert np.all(np.diff(row) >= -1e-12), (n_sub, s, dy)
+
+
+def test_sector_bounds_equal_the_minimum_over_every_occupied_cell() -> None:
+    rng = np.random.default_rng(11)
+    occ = rng.random((24, 30)) < 0.06
+    for n_sub in (1, 2):
+        dirs = _raycast_sectors._wedge_directions(n_sub)
+        bounds = _raycast_sectors.sector_bounds(occ, n_sub, 40.0)
+        oi, oj = np.nonzero(occ)
+        for i, j in np.argwhere(~occ)[::5]:
+            for s in range(n_sub):
+                brute = 40.0
+                for a, b in zip(oi - i, oj - j, strict=True):
+                    k = _raycast_sectors._wedge_rect_distance(b - 1, b + 1, a - 1, a + 1, *dirs[s], *dirs[s + 1])
+                    brute = min(brute, k)
+                assert bounds[_raycast_sectors.sector_index(False, False, False, s, n_sub), i, j] == pytest.approx(
+                    brute, abs=1e-12
+                )
+
+
+def test_octant_planes_bound_every_sampled_beam_of_their_octant() -> None:
+    """No beam of an octant, from any point of a cell, hits anything nearer than the cell's octant bound."""
+    occ = random_boxes_grid(5, n_boxes=25)[:80, :80].copy()
+    planes = march_sector_field(occ)
+    iso = march_field(occ)
+    assert planes.shape == (8, 80, 80)
+    assert np.all((planes == FIELD_OCCUPIED) == occ[None])
+    assert np.all(planes >= iso[None])
+    rng = np.random.default_rng(2)
+    free = np.argwhere(~occ)
+    cells = free[rng.choice(free.shape[0], 150, replace=False)]
+    n = 64
+    for octant in range(8):
+        # directions inside the octant: (dx < 0, dy < 0, |dy| > |dx|) from its index, boundaries included
+        sx = -1.0 if octant & 4 else 1.0
+        sy = -1.0 if octant & 2 else 1.0
+        # (the octant's boundary directions are rounded into a neighbour octant by cos and sin: the
+        # lattice test below covers them)
+        phi = rng.uniform(1e-7, math.pi / 4 - 1e-7, n)
+        major, minor = np.cos(phi), np.sin(phi)
+        dx, dy = (minor, major) if octant & 1 else (major, minor)
+        angles = np.arctan2(sy * dy, sx * dx)
+        for i, j in cells:
+            start = (np.array([j, i]) + rng.uniform(0.0, 1.0, (8, 2))) * RES
+            poses = np.column_stack([start, np.zeros(8)])
+            exact = cast_rays(occ, RES, (0.0, 0.0), poses, angles, 20.0, method="dda") / RES
+            bound = planes[octant, i, j] * JUMP_UNIT_CELLS
+            assert exact.min() >= bound - 1e-9, (octant, i, j, exact.min(), bound)
+    # and the octant bounds are worth their memory: far above the isotropic clearance on average
+    assert planes[:, ~occ].mean() > 1.5 * iso[~occ].mean()
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_one_pose_scans_on_octant_planes_equal_the_exact_traversal(seed: int) -> None:
+    occ = random_boxes_grid(seed)
+    grid = OccupancyGrid(occupancy=occ.astype(float), resolution=RES)
+    rng = np.random.default_rng(200 + seed)
+    poses = random_poses(occ, 40, rng)
+    poses = np.vstack([poses, [[-0.7, 3.3, 0.2], [5.0, 5.0, 0.0], [7.5, 2.5, math.pi / 2]]])
+    angles = np.concatenate([np.linspace(-math.pi, math.pi, 180, endpoint=False), [math.pi / 4, -3 * math.pi / 4]])
+    isotropic = cast_rays(occ, RES, (0.0, 0.0), poses, angles, 12.0, method="march")
+    dda = cast_rays(occ, RES, (0.0, 0.0), poses, angles, 12.0, method="dda")
+    for k, pose in enumerate(poses):
+        one = cast_scan(grid, pose, angles, 12.0)  # one pose: the octant planes
+        np.testing.assert_array_equal(one, isotropic[k])  # the same ranges, bit for bit
+        with np.errstate(invalid="ignore"):  # inf - inf
+            same = (one == dda[k]) | (np.abs(one - dda[k]) <= 1e-9)
+        assert np.mean(same) > 0.999  # only a beam through a cell corner may pick the other cell
+    assert np.mean(np.isfinite(dda)) > 0.9
+
+
+def test_octant_planes_terminate_on_lattice_poses_along_cell_boundaries() -> None:
+    """The lattice regression above, for one-pose scans on the octant planes."""
+    occ = np.zeros((70, 90), dtype=bool)
+    occ[5, 5:85] = occ[65, 5:85] = True
+    occ[5:66, 5] = occ[5:66, 85] = True
+    grid = OccupancyGrid(occupancy=occ.astype(float), resolution=0.05, origin=(-0.25, -0.25, 0.0))
+    lattice = np.array([[x, y, 0.0] for x in np.arange(0.0, 4.0, 0.25) for y in np.arange(0.0, 3.0, 0.25)])
+    angles = np.deg2rad(np.arange(0.0, 360.0, 5.0))
+    exact = cast_rays(occ, 0.05, (-0.25, -0.25), lattice, angles, 8.0, method="dda")
+    for k, pose in enumerate(lattice):
+        marched = cast_scan(grid, pose, angles, 8.0)
+        both_inf = np.isinf(exact[k]) & np.isinf(marched)
+        np.testing.assert_allclose(np.where(both_inf, 0.0, marched), np.where(both_inf, 0.0, exact[k]), atol=1e-9)
