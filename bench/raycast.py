@@ -12,24 +12,43 @@ numpy reference used by tests (:func:`cast_rays_reference`):
     Localization", ICRA 2018). Each free cell stores its clearance, the smallest distance between any
     of its points and any occupied cell (:func:`march_field`: the Euclidean distance transform,
     ``scipy.ndimage.distance_transform_edt``, of the occupied cells dilated by one cell), rounded down
-    to half cells in a uint8. Each step moves the beam to the farther of ``clearance`` ahead and the
-    exit of the current cell (a DDA step), without a branch; 8 beams are traced at once per thread so
-    that their dependency chains overlap. A jump never enters an occupied cell and a hit reports the
-    exact entry point of the cell (the later of its two slab entries), so, unlike range_libc's marcher
-    (which stops within a tolerance of the wall), the ranges equal the exact traversal's up to
-    rounding (about 1e-12 m); a beam crossing a cell for less than 1e-9 cells (through a corner point)
-    may miss that cell. The field costs about 60 ns per cell (10 ms for 400 x 400): :func:`cast_scan`
-    caches it per grid object, :func:`cast_rays` builds it per call when there are enough rays.
+    to half cells in a uint8. Each step moves the beam by the clearance, or, when that does not leave
+    the current cell, one cell on (a DDA step); 8 beams are traced at once per thread so that their
+    dependency chains overlap, and a cell's value is loaded when the beam enters it, so that the next
+    step's (often mispredicted) branches do not wait for the load. A jump never enters an occupied cell
+    and a hit reports the exact entry point of the cell (the later of its two slab entries), so, unlike
+    range_libc's marcher (which stops within a tolerance of the wall), the ranges equal the exact
+    traversal's up to rounding (about 1e-12 m); a beam crossing a cell for less than 1e-9 cells
+    (through a corner point) may miss that cell. The field costs about 60 ns per cell (10 ms for
+    400 x 400): :func:`cast_scan` caches it per grid object, :func:`cast_rays` builds it per call when
+    there are enough rays. One-pose scans of :func:`cast_scan` march on :func:`march_sector_field`
+    instead: per octant of beam directions, the larger of the clearance and an exact lower bound on the
+    free distance along any direction of the octant (:mod:`locbench._raycast_sectors`), so that a beam
+    running along a wall jumps along it (4.9 instead of 8.7 steps per ray on the benchmark map). Its
+    eight planes (1.3 MB for 400 x 400 cells, built in about 0.2 s at the grid's first one-pose scan)
+    stay in cache for a scan, whose beams sweep the octants in turn, but not for many poses at once,
+    which march on the isotropic field (160 kB). The ranges are the same, bit for bit, on either field.
 
-Measured single-threaded (``tests/perf/test_raycast_perf.py``: 400 x 400 grid at 0.05 m with walls,
-doors and 60 boxes, 10 m max range) on the 2-core development machine while it was shared (load
-average 2-3, so the numbers are noisy; medians): one pose x 683 beams 3.4 M rays/s with the original
-DDA, 7.6-8.1 M with ``march`` (6.1-7.9 M before :func:`cast_scan`'s fast path and the reused beam
-cos/sin; the call costs about 3.5 us besides the traversal); 1000 poses x 60 beams 3.5 M and 6.6-7.6 M.
-A ray costs about 30 ns to set up and 8.7 march steps (6.8 jumps, 1.9 DDA steps) of about 15 ns each;
-finer clearance units (quarter or eighth cells) save under 1 % of the steps, and neither struct-of-arrays
-lane state, 4 or 16 lanes, nor branch-free steps (finished lanes frozen, checked every 1-4 steps) were
-faster.
+Measured single-threaded (``tests/perf/test_raycast_perf.py``: 400 x 400 grid at 0.05 m with walls, doors
+and 60 boxes, 10 m max range; 1 pose x 683 beams over 240 deg, a new pose per call, and 1000 poses x 60
+beams over 360 deg) on the 2-core development machine (AMD EPYC Zen 3 under KVM, 2.45 GHz) while other
+engineers' tests ran on it: load average 2.5-3 during the final figures, 3-9 while the ideas below were
+tried, so every comparison interleaves the old and new kernels in one process (alternating order, CPU time
+per call, medians of 21 rounds) and absolute rates vary by 1.5x with the load. Against the kernel of commit
+e1118f8 (a single isotropic field, value loaded at use), two runs: one pose x 683 beams 6.33 -> 7.77 and
+6.67 -> 7.91 M rays/s (x 1.23 and 1.19), 1000 x 60 6.47 -> 7.06 and 6.47 -> 7.41 M (x 1.09 and 1.14); the
+early value load alone gave x 1.12-1.36 and the octant planes x 1.05-1.24 on one-pose scans. Four ``pytest
+tests/perf --benchmark-only`` runs at load 3 read 7.5-11.7 M (scan) and 6.9-9.4 M (particles) with ``march``
+(which now takes :func:`cast_scan`'s one-scan fast path, as ``"auto"`` did: about 5 us less per call), 3.2 M
+and 3.1-4.0 M with ``dda``. The issue's 10 M rays/s on one core is therefore reached only in quiet moments,
+not as a median under the usual load. A ray costs about 30 ns to set up plus 5-9 steps of about 12 ns. Tried
+without gain (measured the same way): the octant or 16/32-sector bounds as a second lookup beside the
+clearance (at 2x2, 4x4 or 8x8 cells per bound, 20-640 kB: the extra load per step cost more than the 30-45 %
+fewer steps saved), 16 sector planes per cell (2.6 MB: cache misses), many poses on the octant planes, also
+with the rays sorted by octant, branch-free steps (both moves computed, one selected), over-relaxed jumps
+(more steps: the half-cell clearances are small), 4, 12 or 16 lanes, and pose/beam counters instead of a
+division per ray. Earlier: finer clearance units (quarter or eighth cells) save under 1 % of the steps, and
+struct-of-arrays lane state was no faster.
 
 Grid conventions are those of :class:`locbench.datasets.base.OccupancyGrid` (ROS map_server): row ``i``
 spans y in [oy + i*res, oy + (i+1)*res), column ``j`` spans x likewise, and ``origin_xy`` = (ox, oy) is
@@ -734,7 +753,8 @@ def cast_scan(
     parallel : bool or None
         As in :func:`cast_rays`.
     method : {"auto", "march", "dda"}
-        ``"auto"`` (the default) is ``"march"``, whose field is cached with the grid.
+        ``"auto"`` (the default) is ``"march"``, whose fields are cached with the grid (a one-pose serial
+        scan marches on :func:`march_sector_field`, several poses on :func:`march_field`; same ranges).
 
     Returns
     -------
@@ -744,7 +764,7 @@ def cast_scan(
     arrays = _GRID_CACHE.get(grid)
     if (
         arrays is not None
-        and method == "auto"
+        and method in ("auto", "march")
         and isinstance(pose, np.ndarray)
         and isinstance(angles, np.ndarray)
         and _plain_vector(pose, 3)

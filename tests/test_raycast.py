@@ -232,6 +232,7 @@ def test_cast_scan_fast_path_matches_the_general_path_when_angles_change() -> No
         general = cast_scan(grid, pose.tolist(), angles.tolist(), 12.0, parallel=False)
         exact = cast_scan(grid, pose, angles, 12.0, method="dda")
         np.testing.assert_array_equal(fast, general)
+        np.testing.assert_array_equal(cast_scan(grid, pose, angles, 12.0, method="march"), general)
         both_inf = np.isinf(exact) & np.isinf(fast)
         np.testing.assert_allclose(np.where(both_inf, 0.0, fast), np.where(both_inf, 0.0, exact), atol=1e-9)
     with pytest.raises(ValueError, match="max_range"):
