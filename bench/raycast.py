@@ -321,14 +321,16 @@ def _march_range(
 ) -> None:
     """Ranges (m) of the flattened rays ``first .. stop - 1`` (pose-major) into ``out``, LANES at a time.
 
-    Each step of a lane is branch-free: the beam moves to the farther of the jump target and the point
-    just past the current cell's exit (a DDA step). A hit reports the cell's exact entry point.
+    Each step of a lane moves the beam by the field value of its cell (from ``planes``, see
+    :func:`_march_start`), or one cell on (a DDA step) when that jump would not leave the cell. A hit
+    reports the cell's exact entry point.
     """
     rows = field.shape[0]
     cols = field.shape[1]
     nb = cb.shape[0]
     inv_res = 1.0 / res
     state = np.empty((LANES, 12))
+    # per lane: row i, column j, the field value of (i, j), the offset of the ray's plane in ``planes``
     cell = np.empty((LANES, 4), dtype=np.int64)
     ray = np.full(LANES, -1, dtype=np.int64)
     nxt = first
@@ -524,7 +526,7 @@ def march_sector_field(occupied: npt.ArrayLike, field: UInt8Array | None = None)
     cell before it enters an occupied cell (:func:`locbench._raycast_sectors.sector_bounds`), in whole units
     of :data:`JUMP_UNIT_CELLS` rounded down and capped below :data:`FIELD_OCCUPIED`; :data:`FIELD_OCCUPIED`
     on occupied cells. A beam along a wall has a clearance of a cell or two but an octant bound of up to the
-    wall's length: the march takes 5.0 instead of 8.8 steps per ray on the benchmark map.
+    wall's length: the march takes 4.9 instead of 8.7 steps per ray on the benchmark map's scans.
     """
     occ = np.ascontiguousarray(occupied, dtype=np.bool_)
     iso = march_field(occ) if field is None else field
