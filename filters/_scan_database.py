@@ -6,7 +6,8 @@ corresponding values in each of the range sets". Here:
 
 Database
     Positions on the square lattice (i * step_m, j * step_m) of the world frame over the occupancy grid
-    (the "grid poses"), kept inside the building (free space not connected to the grid border) and where the nearest
+    (the "grid poses"), kept on known-free cells inside the building (not connected to the grid border through
+    known-free cells; unknown cells of a mapped grid do not connect) and where the nearest
     occupied cell is at least ``clearance_m`` away (the robot cannot stand closer). Headings every
     ``heading_step_deg`` (a divisor of 45 deg). The eight bearings are 0, 45, ..., 315 deg in the robot
     frame. Because a heading change of 45 deg is a cyclic shift of the eight bearings, the database stores
@@ -211,14 +212,21 @@ def build_database(
     pts = np.column_stack([gx.ravel(), gy.ravel()])
     # Distance (m) from each cell to the nearest occupied cell; no occupied cell at all means unbounded.
     dist = ndimage.distance_transform_edt(~occ) * res if occ.any() else np.full(occ.shape, np.inf)
-    # Free space connected to the grid border lies outside the building: no robot stands there.
-    labels, _ = ndimage.label(~occ)
+    # Free space connected to the grid border lies outside the building: no robot stands there. Only cells known to
+    # be free count (a mapped grid's unknown cells, -1, would otherwise join the inside to the border through every
+    # open door; on a grid without unknown cells this is all of ~occ).
+    free = grid.free()
+    labels, _ = ndimage.label(free)
     border = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
     outside = np.isin(labels, border[border > 0])
     cells = grid.world_to_cell(pts)
     inside = (cells[:, 0] >= 0) & (cells[:, 0] < rows) & (cells[:, 1] >= 0) & (cells[:, 1] < cols)
     pts, cells = pts[inside], cells[inside]
-    keep = (dist[cells[:, 0], cells[:, 1]] >= clearance_m) & ~outside[cells[:, 0], cells[:, 1]]
+    keep = (
+        free[cells[:, 0], cells[:, 1]]
+        & (dist[cells[:, 0], cells[:, 1]] >= clearance_m)
+        & ~outside[cells[:, 0], cells[:, 1]]
+    )
     pts = pts[keep]
     if pts.shape[0] == 0:
         raise ConfigError(
