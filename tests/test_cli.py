@@ -72,3 +72,26 @@ def test_run_then_report(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
     assert (summary / "metrics.csv").is_file() and (summary / "REPORT.md").is_file()
     header = (summary / "metrics.csv").read_text().splitlines()[0]
     assert header == "dataset,filter,seed,metric,value"
+    # every stored run and its truth as TUM trajectories, for evo
+    out = tmp_path / "tum"
+    assert main(["export", "--results", res, "--out", str(out), "--filter", "odometry"]) == 0
+    assert "TUM trajectory files written" in capsys.readouterr().out
+    files = sorted(p.relative_to(out).as_posix() for p in out.rglob("*.tum"))
+    assert any(f.startswith("tiny_line/odometry/") for f in files)
+    assert any("/_truth/" in f for f in files)
+    assert not any("ekf_landmarks" in f for f in files)
+
+
+def test_fetch_synthetic_has_nothing_to_fetch(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["fetch", "room"]) == 0
+    assert "nothing to fetch" in capsys.readouterr().out
+
+
+def test_fetch_without_an_official_download_is_a_one_line_error(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setenv("LOCBENCH_DATA", str(tmp_path / "nodata"))
+    monkeypatch.setenv("LOCBENCH_CACHE", str(tmp_path / "cache"))
+    assert main(["fetch", "lost_in_the_woods"]) == 2
+    err = capsys.readouterr().err
+    assert "no official download" in err and err.count("\n") == 1

@@ -80,3 +80,20 @@ def test_no_half_written_runs(tmp_path: Path) -> None:
     run_many(["bad[fail_at_s=100]"], ["line"], [0], str(tmp_path))
     leftovers = [p for p in tmp_path.rglob(".tmp-*")]
     assert leftovers == []
+
+
+def test_missing_recorded_data_is_a_recorded_skip(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("LOCBENCH_DATA", str(tmp_path / "nodata"))
+    monkeypatch.setenv("LOCBENCH_CACHE", str(tmp_path / "cache"))
+    out = run_many(["odometry", "ekf_landmarks"], ["lost_in_the_woods"], [0], str(tmp_path / "res"))
+    assert [o.status for o in out] == ["skipped", "skipped"]
+    assert all("data not found" in o.message and "dataset2.mat" in o.message for o in out)
+    store = Store(tmp_path / "res")
+    assert not store.has_truth("lost_in_the_woods", 0)  # nothing half-made: no truth without data
+
+
+def test_filter_that_sees_no_observation_is_a_recorded_skip(tmp_path: Path) -> None:
+    # pf with its laser model off consumes landmarks only; a laser-only world gives it nothing to fuse
+    out = run_many(["pf", "pf[use_laser=true]"], ["lap[people=0]"], [0], str(tmp_path))
+    assert out[0].status == "skipped" and "none of which" in out[0].message
+    assert out[1].status == "ok"
