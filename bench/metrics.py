@@ -288,7 +288,9 @@ def nees(errors: npt.ArrayLike, cov: npt.ArrayLike) -> FloatArray:
     -------
     ndarray, shape (n,)
         NEES (dimensionless, chi-square(d) for a consistent filter). A singular covariance claims
-        certainty: its NEES is +inf unless the error is exactly zero (then 0).
+        certainty: its NEES is +inf unless the error is exactly zero (then 0). A covariance that is
+        singular to rounding (a collapsed particle set) can make the solve return a negative value;
+        that is not a NEES but the same claim of certainty, so it is +inf as well.
     """
     e = np.asarray(errors, dtype=np.float64)
     P = np.asarray(cov, dtype=np.float64)
@@ -303,6 +305,7 @@ def nees(errors: npt.ArrayLike, cov: npt.ArrayLike) -> FloatArray:
                 out[k] = float(e[k] @ np.linalg.solve(P[k], e[k]))
             except np.linalg.LinAlgError:
                 out[k] = 0.0 if not np.any(e[k]) else np.inf
+    out[out < 0.0] = np.inf
     return out
 
 

@@ -132,6 +132,15 @@ def test_nees_singular_covariance_is_infinite_unless_error_is_zero() -> None:
     np.testing.assert_array_equal(lm.nees(e, cov), [np.inf, 0.0, 3.0])
 
 
+def test_nees_of_a_covariance_singular_to_rounding_is_infinite_not_negative() -> None:
+    # a collapsed particle set: no spread in heading, and rounding has left a tiny negative eigenvalue there
+    c, s = np.cos(0.3), np.sin(0.3)
+    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    cov = rot @ np.diag([1e-4, 4e-4, -1e-20]) @ rot.T
+    e = np.array([0.01, -0.02, 0.003])
+    assert lm.nees(e[None], cov[None])[0] == np.inf
+
+
 def test_chi2_band_single_and_mean_over_runs() -> None:
     lo, hi = lm.chi2_band(3, 1)
     assert (lo, hi) == pytest.approx((0.2158, 9.3484), abs=1e-4)
