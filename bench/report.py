@@ -727,7 +727,7 @@ def _recorded_section(df: pd.DataFrame, col: _Collected) -> list[str]:
             return "skipped"
         if st - {"ok"}:
             return "failed"
-        return ""
+        return "not run" if not st else ""
 
     header = ["filter", *(f"`{ds}`" for ds in names)]
     lines = [
