@@ -853,6 +853,16 @@ def _trajectory_figure(store: Store, col: _Collected, ds: str) -> Figure | None:
         ax.plot(wp[:, 0], wp[:, 1], ls="none", marker="x", ms=7, color="black", label="waypoints")
         for j, (x, y) in enumerate(wp, start=1):
             ax.annotate(str(j), (x, y), textcoords="offset points", xytext=(4, 4), fontsize=7)
+    # Frame the world (truth, map, waypoints), not the estimates: a dead-reckoned track or its ellipses can run
+    # hundreds of metres off and would shrink the world to a dot; what leaves the frame is clipped.
+    pts = [gt.xy, truth.map_segments.reshape(-1, 2), truth.map_landmarks]
+    if truth.waypoints is not None:
+        pts.append(truth.waypoints.xy)
+    world = np.vstack([p for p in pts if len(p)])
+    lo, hi = world.min(axis=0), world.max(axis=0)
+    pad = 0.15 * float(np.max(hi - lo)) + 1.0
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
