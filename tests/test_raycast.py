@@ -334,3 +334,51 @@ def test_octant_planes_terminate_on_lattice_poses_along_cell_boundaries() -> Non
         marched = cast_scan(grid, pose, angles, 8.0)
         both_inf = np.isinf(exact[k]) & np.isinf(marched)
         np.testing.assert_allclose(np.where(both_inf, 0.0, marched), np.where(both_inf, 0.0, exact[k]), atol=1e-9)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_many_pose_casts_jump_first_on_the_octant_planes_with_the_same_ranges(seed: int) -> None:
+    """Serial casts from several poses take each beam's first jump on the octant planes (interleaved per cell)
+    and march on the isotropic field after it: the ranges are those of the isotropic march, bit for bit."""
+    occ = random_boxes_grid(seed)
+    grid = OccupancyGrid(occupancy=occ.astype(float), resolution=RES)
+    rng = np.random.default_rng(300 + seed)
+    poses = random_poses(occ, 200, rng)
+    occupied_cell = np.argwhere(occ)[7]
+    extra = [
+        [-0.7, 3.3, 0.2],  # outside the grid
+        [25.0, -1.0, 2.5],
+        [5.0, 5.0, 0.0],  # on cell corners
+        [7.5, 2.5, math.pi / 2],
+        [(occupied_cell[1] + 0.5) * RES, (occupied_cell[0] + 0.5) * RES, 1.0],  # in an occupied cell
+    ]
+    poses = np.vstack([poses, extra])
+    angles = np.concatenate([np.linspace(-math.pi, math.pi, 90, endpoint=False), [math.pi / 4, -3 * math.pi / 4]])
+    many = cast_scan(grid, poses, angles, 12.0, parallel=False)
+    starts = raycast._START_CACHE[grid]  # the path under test was taken
+    np.testing.assert_array_equal(starts.reshape(*occ.shape, 8), np.moveaxis(march_sector_field(occ), 0, -1))
+    isotropic = cast_rays(occ, RES, (0.0, 0.0), poses, angles, 12.0, parallel=True, method="march")
+    np.testing.assert_array_equal(many, isotropic)
+    # the isotropic field's own first jump (cast_rays, serial) gives the same ranges too
+    serial = cast_rays(occ, RES, (0.0, 0.0), poses, angles, 12.0, parallel=False, method="march")
+    np.testing.assert_array_equal(serial, isotropic)
+    dda = cast_rays(occ, RES, (0.0, 0.0), poses, angles, 12.0, method="dda")
+    with np.errstate(invalid="ignore"):  # inf - inf
+        same = (many == dda) | (np.abs(many - dda) <= 1e-9)
+    assert np.mean(same) > 0.999
+    assert np.all(many[-1] == 0.0)
+    assert np.mean(np.isfinite(dda)) > 0.9
+
+
+def test_many_pose_casts_terminate_on_lattice_poses_along_cell_boundaries() -> None:
+    """The lattice regression above, for serial casts from many poses (first jumps on the octant planes)."""
+    occ = np.zeros((70, 90), dtype=bool)
+    occ[5, 5:85] = occ[65, 5:85] = True
+    occ[5:66, 5] = occ[5:66, 85] = True
+    grid = OccupancyGrid(occupancy=occ.astype(float), resolution=0.05, origin=(-0.25, -0.25, 0.0))
+    lattice = np.array([[x, y, 0.0] for x in np.arange(0.0, 4.0, 0.25) for y in np.arange(0.0, 3.0, 0.25)])
+    angles = np.deg2rad(np.arange(0.0, 360.0, 5.0))
+    exact = cast_rays(occ, 0.05, (-0.25, -0.25), lattice, angles, 8.0, method="dda")
+    marched = cast_scan(grid, lattice, angles, 8.0, parallel=False)
+    both_inf = np.isinf(exact) & np.isinf(marched)
+    np.testing.assert_allclose(np.where(both_inf, 0.0, marched), np.where(both_inf, 0.0, exact), atol=1e-9)
