@@ -580,13 +580,8 @@ def _march_serial(
     angles: FloatArray,
     max_range: float,
     trig: FloatArray,
-    starts: UInt8Array,
 ) -> FloatArray:
-    """Serial march; ``trig`` (3, B) caches (angles, cos, sin) between calls and is refreshed here if stale.
-
-    One pose marches on ``planes`` (:func:`_march_range`); several on ``field`` with their first jumps from
-    ``starts`` (:func:`_march_poses`).
-    """
+    """Serial march; ``trig`` (3, B) caches (angles, cos, sin) between calls and is refreshed here if stale."""
     n = poses.shape[0]
     nb = angles.shape[0]
     # cos/sin of the beam angles cost about 20 ns per beam, as much as a tenth of a scan's traversal:
@@ -603,10 +598,37 @@ def _march_serial(
         cp[p] = math.cos(poses[p, 2])
         sp[p] = math.sin(poses[p, 2])
     t_lim = max_range / res
-    if n > 1:
-        _march_poses(field, starts, res, ox, oy, poses, cp, sp, trig[1], trig[2], t_lim, out)
-    else:
-        _march_range(field, planes, plane_size, res, ox, oy, poses, cp, sp, trig[1], trig[2], t_lim, 0, n * nb, out)
+    _march_range(field, planes, plane_size, res, ox, oy, poses, cp, sp, trig[1], trig[2], t_lim, 0, n * nb, out)
+    return out.reshape((n, nb))
+
+
+@njit(cache=True, error_model="numpy")
+def _march_serial_poses(
+    field: UInt8Array,
+    starts: UInt8Array,
+    res: float,
+    ox: float,
+    oy: float,
+    poses: FloatArray,
+    angles: FloatArray,
+    max_range: float,
+    trig: FloatArray,
+) -> FloatArray:
+    """Serial march from several poses (:func:`_march_poses`); ``trig`` as in :func:`_march_serial`."""
+    n = poses.shape[0]
+    nb = angles.shape[0]
+    for b in range(nb):
+        if trig[0, b] != angles[b]:
+            trig[0, b] = angles[b]
+            trig[1, b] = math.cos(angles[b])
+            trig[2, b] = math.sin(angles[b])
+    out = np.empty(n * nb)
+    cp = np.empty(n)
+    sp = np.empty(n)
+    for p in range(n):
+        cp[p] = math.cos(poses[p, 2])
+        sp[p] = math.sin(poses[p, 2])
+    _march_poses(field, starts, res, ox, oy, poses, cp, sp, trig[1], trig[2], max_range / res, out)
     return out.reshape((n, nb))
 
 
@@ -806,7 +828,9 @@ def _run(
         planes = field.reshape(-1)
         if threads:
             return _march_parallel(field, planes, 0, resolution, ox, oy, p, a, max_range)
-        return _march_serial(field, planes, 0, resolution, ox, oy, p, a, max_range, _trig_rows(a.shape[0]), _NO_STARTS)
+        if p.shape[0] > 1:
+            return _march_serial_poses(field, _NO_STARTS, resolution, ox, oy, p, a, max_range, _trig_rows(a.shape[0]))
+        return _march_serial(field, planes, 0, resolution, ox, oy, p, a, max_range, _trig_rows(a.shape[0]))
     occ = cast("BoolArray", grid_array)
     return (
         _dda_parallel(occ, resolution, ox, oy, p, a, max_range)
@@ -878,7 +902,6 @@ def _march_one_pose(
         angles,
         max_range,
         _trig_rows(angles.shape[0]),
-        _NO_STARTS,
     )
     return out[0]
 
@@ -968,10 +991,9 @@ def cast_scan(
         out = _march_one_pose(grid, arrays, p[0], a, float(max_range))[None]
     elif not _use_threads(parallel, p.shape[0] * a.shape[0]):
         # several poses, serial: each beam's first jump on the octant planes, then the isotropic field
-        out = _march_serial(
+        out = _march_serial_poses(
             arrays.field,
-            arrays.field.reshape(-1),
-            0,
+            _start_octants(grid, arrays),
             arrays.resolution,
             arrays.ox,
             arrays.oy,
@@ -979,7 +1001,6 @@ def cast_scan(
             a,
             float(max_range),
             _trig_rows(a.shape[0]),
-            _start_octants(grid, arrays),
         )
     else:
         out = _run(arrays.field, "march", float(grid.resolution), grid.origin[:2], p, a, float(max_range), parallel)
