@@ -27,7 +27,10 @@ numpy reference used by tests (:func:`cast_rays_reference`):
     running along a wall jumps along it (4.9 instead of 8.7 steps per ray on the benchmark map). Its
     eight planes (1.3 MB for 400 x 400 cells, built in about 0.2 s at the grid's first one-pose scan)
     stay in cache for a scan, whose beams sweep the octants in turn, but not for many poses at once,
-    which march on the isotropic field (160 kB). The ranges are the same, bit for bit, on either field.
+    which march on the isotropic field (160 kB). Serial casts from many poses take only each beam's first
+    jump on the planes: all beams of a pose start in one cell, whose eight octant values (the planes
+    interleaved per cell, another 1.3 MB per grid) are gathered for all poses before marching, one cache
+    line per pose. The ranges are the same, bit for bit, on either field.
 
 Measured single-threaded (``tests/perf/test_raycast_perf.py``: 400 x 400 grid at 0.05 m with walls, doors
 and 60 boxes, 10 m max range; 1 pose x 683 beams over 240 deg, a new pose per call, and 1000 poses x 60
@@ -49,6 +52,22 @@ with the rays sorted by octant, branch-free steps (both moves computed, one sele
 (more steps: the half-cell clearances are small), 4, 12 or 16 lanes, and pose/beam counters instead of a
 division per ray. Earlier: finer clearance units (quarter or eighth cells) save under 1 % of the steps, and
 struct-of-arrays lane state was no faster.
+
+Many poses, first jump per pose (:func:`_march_poses`), against the kernel of commit fdd7065 on the quieter
+machine (load 0.7-0.9), interleaved as above: 1000 x 60 7.4 -> 9.1, 7.1 -> 9.1 and 7.2 -> 9.2 M rays/s
+(medians of 21-31 rounds, paired ratios x 1.25, 1.27, 1.25), one pose x 683 unchanged (x 0.99-1.01). Steps to
+it: the per-pose set-up with the shared first jump by the isotropic clearance alone x 1.01 (the set-up is not
+the cost); the first jump by the octant value, read from the plane-major planes x 1.18, interleaved per cell x
+1.30 (quiet); gathering the poses' start values before marching x 1.11 on top. Tried without gain: 16 or 32
+sectors for the first jump (interleaved, 2.6 or 5.1 MB; their first jumps are 39 and 44 cells on average
+against the octants' 32 and the clearance's 12), x 0.93 against the octants (before the gathering) with the
+sector found by comparisons, x 1.00 with 32 sectors in angle order (the sector of heading + beam angle), the
+octant value also at the first jump's landing cell (x 0.76 before the gathering: a cache miss per ray), every
+step on the interleaved planes (x 0.98 against the old kernel), octant values for the steps where the
+clearance is under 1 or 2 cells (x 0.90), poses ordered by 8- or 32-cell tiles (x 0.96-0.99), 6 or 12 lanes
+(noise). ``pytest tests/perf --benchmark-only`` at load 0.8-0.9 (wall clock, 30 rounds): particles 9.07 M
+rays/s median (12.5 M at the fastest round), scan 9.06 M median; the 10 M median for many poses is still not
+reached.
 
 Grid conventions are those of :class:`locbench.datasets.base.OccupancyGrid` (ROS map_server): row ``i``
 spans y in [oy + i*res, oy + (i+1)*res), column ``j`` spans x likewise, and ``origin_xy`` = (ox, oy) is
