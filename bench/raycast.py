@@ -58,8 +58,9 @@ machine (load 0.7-0.9), interleaved as above: 1000 x 60 7.4 -> 9.1, 7.1 -> 9.1 a
 (medians of 21-31 rounds, paired ratios x 1.25, 1.27, 1.25), one pose x 683 unchanged (x 0.99-1.01). Steps to
 it: the per-pose set-up with the shared first jump by the isotropic clearance alone x 1.01 (the set-up is not
 the cost); the first jump by the octant value, read from the plane-major planes x 1.18, interleaved per cell x
-1.30 (quiet); gathering the poses' start values before marching x 1.11 on top. Tried without gain: 16 or 32
-sectors for the first jump (interleaved, 2.6 or 5.1 MB; their first jumps are 39 and 44 cells on average
+1.30 (quiet); gathering the poses' start values before marching x 1.11 on top; :func:`cast_rays` from many
+poses (no octant planes: the shared first jump by the clearance, gathered) x 1.09. Tried without gain: 16 or
+32 sectors for the first jump (interleaved, 2.6 or 5.1 MB; their first jumps are 39 and 44 cells on average
 against the octants' 32 and the clearance's 12), x 0.93 against the octants (before the gathering) with the
 sector found by comparisons, x 1.00 with 32 sectors in angle order (the sector of heading + beam angle), the
 octant value also at the first jump's landing cell (x 0.76 before the gathering: a cache miss per ray), every
