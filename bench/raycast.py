@@ -68,9 +68,9 @@ step on the interleaved planes (x 0.98 against the old kernel), octant values fo
 clearance is under 1 or 2 cells (x 0.90), poses ordered by 8- or 32-cell tiles (x 0.96-0.99), 6 or 12 lanes
 (noise). ``pytest tests/perf --benchmark-only`` at load 0.8-0.9 (wall clock, 30 rounds): particles 9.07 M
 rays/s median (12.5 M at the fastest round), scan 9.06 M median; the 10 M median for many poses is still not
-reached. The two lane loops share one step function (:func:`_march_step`, inlined by numba); interleaved
-against the two hand-written copies it measured paired ratios of x 0.96-0.98 (scan) and x 0.98 (particles),
-about the run-to-run noise here, and the ranges are the same bit for bit.
+reached. The lane loops of :func:`_march_range` and :func:`_march_poses` repeat the same step on purpose: one
+shared step function, inlined by numba, gave the same ranges but paired ratios of x 0.96-0.98 against the two
+copies (41 interleaved rounds), which is why they stay written out twice.
 
 Grid conventions are those of :class:`locbench.datasets.base.OccupancyGrid` (ROS map_server): row ``i``
 spans y in [oy + i*res, oy + (i+1)*res), column ``j`` spans x likewise, and ``origin_xy`` = (ox, oy) is
@@ -323,59 +323,6 @@ def _march_start(
     return True
 
 
-@njit(cache=True, inline="always")
-def _march_step(
-    values: UInt8Array,
-    base: int,
-    rows: int,
-    cols: int,
-    t_lim: float,
-    res: float,
-    state: FloatArray,
-    cell: IntArray,
-    k: int,
-) -> float:
-    """One step of lane ``k`` (see :func:`_march_range`); its range in m when the ray ends, else -1.
-
-    ``values[base + i * cols + j]`` is the field value of cell (i, j) that the next step jumps by (``base`` selects
-    a plane of the octant planes, 0 for the isotropic field).
-    """
-    i = cell[k, 0]
-    j = cell[k, 1]
-    v = cell[k, 2]
-    t = state[k, 0]
-    if v == FIELD_OCCUPIED:
-        # exact entry point: the later of the two slab entries (t0 if the beam starts inside)
-        t_in = max(state[k, 1], max((j + state[k, 10]) * state[k, 6], (i + state[k, 11]) * state[k, 7]))
-        return t_in * res if t_in <= t_lim else math.inf
-    tx = (j + state[k, 8]) * state[k, 6]
-    ty = (i + state[k, 9]) * state[k, 7]
-    t_jump = t + v * JUMP_UNIT_CELLS
-    # a zero clearance jumps nowhere: step the cell (an exit time of the cell the beam is
-    # leaving can be stale, <= t, when the beam lies on the cell's boundary)
-    if v > 0 and t_jump > min(tx, ty) + _NUDGE_CELLS:
-        t = t_jump
-        j = math.floor(state[k, 2] + t * state[k, 4])
-        i = math.floor(state[k, 3] + t * state[k, 5])
-    elif tx <= ty:
-        # step the index, not the rounded position: a nearly axis-parallel beam on a cell
-        # boundary would otherwise floor back into the same cell and never advance
-        t = max(t, tx)
-        j += 1 if state[k, 4] > 0.0 else -1
-    else:
-        t = max(t, ty)
-        i += 1 if state[k, 5] > 0.0 else -1
-    # past max_range, or out of the grid (convex, with free space outside): no hit
-    if t > t_lim + _NUDGE_CELLS or j < 0 or j >= cols or i < 0 or i >= rows:
-        return math.inf
-    # load the next cell's value now: the next visit's branches then do not wait for it
-    cell[k, 2] = values[base + i * cols + j]
-    state[k, 0] = t
-    cell[k, 0] = i
-    cell[k, 1] = j
-    return -1.0
-
-
 @njit(cache=True, error_model="numpy")
 def _march_range(
     field: UInt8Array,
@@ -431,8 +378,46 @@ def _march_range(
             r = ray[k]
             if r < 0:
                 continue
-            result = _march_step(planes, cell[k, 3], rows, cols, t_lim, res, state, cell, k)
-            if result >= 0.0:
+            i = cell[k, 0]
+            j = cell[k, 1]
+            v = cell[k, 2]
+            t = state[k, 0]
+            done = False
+            result = math.inf
+            if v == FIELD_OCCUPIED:
+                # exact entry point: the later of the two slab entries (t0 if the beam starts inside)
+                t_in = max(state[k, 1], max((j + state[k, 10]) * state[k, 6], (i + state[k, 11]) * state[k, 7]))
+                if t_in <= t_lim:
+                    result = t_in * res
+                done = True
+            else:
+                tx = (j + state[k, 8]) * state[k, 6]
+                ty = (i + state[k, 9]) * state[k, 7]
+                t_jump = t + v * JUMP_UNIT_CELLS
+                # a zero clearance jumps nowhere: step the cell (an exit time of the cell the beam is
+                # leaving can be stale, <= t, when the beam lies on the cell's boundary)
+                if v > 0 and t_jump > min(tx, ty) + _NUDGE_CELLS:
+                    t = t_jump
+                    j = math.floor(state[k, 2] + t * state[k, 4])
+                    i = math.floor(state[k, 3] + t * state[k, 5])
+                elif tx <= ty:
+                    # step the index, not the rounded position: a nearly axis-parallel beam on a cell
+                    # boundary would otherwise floor back into the same cell and never advance
+                    t = max(t, tx)
+                    j += 1 if state[k, 4] > 0.0 else -1
+                else:
+                    t = max(t, ty)
+                    i += 1 if state[k, 5] > 0.0 else -1
+                # past max_range, or out of the grid (convex, with free space outside): no hit
+                if t > t_lim + _NUDGE_CELLS or j < 0 or j >= cols or i < 0 or i >= rows:
+                    done = True
+                else:
+                    # load the next cell's value now: the next visit's branches then do not wait for it
+                    cell[k, 2] = planes[cell[k, 3] + i * cols + j]
+                state[k, 0] = t
+                cell[k, 0] = i
+                cell[k, 1] = j
+            if done:
                 out[r] = result
                 ray[k] = -1
                 active -= 1
@@ -517,8 +502,39 @@ def _march_poses(
         for k in range(LANES):
             r = ray[k]
             if r >= 0:
-                result = _march_step(flat, 0, rows, cols, t_lim, res, state, cell, k)
-                if result < 0.0:
+                i = cell[k, 0]
+                j = cell[k, 1]
+                v = cell[k, 2]
+                t = state[k, 0]
+                done = False
+                result = math.inf
+                if v == FIELD_OCCUPIED:
+                    t_in = max(state[k, 1], max((j + state[k, 10]) * state[k, 6], (i + state[k, 11]) * state[k, 7]))
+                    if t_in <= t_lim:
+                        result = t_in * res
+                    done = True
+                else:
+                    tx = (j + state[k, 8]) * state[k, 6]
+                    ty = (i + state[k, 9]) * state[k, 7]
+                    t_jump = t + v * JUMP_UNIT_CELLS
+                    if v > 0 and t_jump > min(tx, ty) + _NUDGE_CELLS:
+                        t = t_jump
+                        j = math.floor(state[k, 2] + t * state[k, 4])
+                        i = math.floor(state[k, 3] + t * state[k, 5])
+                    elif tx <= ty:
+                        t = max(t, tx)
+                        j += 1 if state[k, 4] > 0.0 else -1
+                    else:
+                        t = max(t, ty)
+                        i += 1 if state[k, 5] > 0.0 else -1
+                    if t > t_lim + _NUDGE_CELLS or j < 0 or j >= cols or i < 0 or i >= rows:
+                        done = True
+                    else:
+                        cell[k, 2] = flat[i * cols + j]
+                    state[k, 0] = t
+                    cell[k, 0] = i
+                    cell[k, 1] = j
+                if not done:
                     continue
                 out[r] = result
                 ray[k] = -1
@@ -574,6 +590,25 @@ def _march_poses(
                 out[r] = state[k, 0]
 
 
+@njit(cache=True, inline="always")
+def _pose_trig(poses: FloatArray, angles: FloatArray, trig: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """cos and sin of each pose heading; refreshes the beams' (angle, cos, sin) cache ``trig`` (3, B) if stale."""
+    # cos/sin of the beam angles cost about 20 ns per beam, as much as a tenth of a scan's traversal:
+    # a scan's angles rarely change, so they are compared (1 ns per beam) and reused
+    for b in range(angles.shape[0]):
+        if trig[0, b] != angles[b]:
+            trig[0, b] = angles[b]
+            trig[1, b] = math.cos(angles[b])
+            trig[2, b] = math.sin(angles[b])
+    n = poses.shape[0]
+    cp = np.empty(n)
+    sp = np.empty(n)
+    for p in range(n):
+        cp[p] = math.cos(poses[p, 2])
+        sp[p] = math.sin(poses[p, 2])
+    return cp, sp
+
+
 @njit(cache=True, error_model="numpy")
 def _march_serial(
     field: UInt8Array,
@@ -590,19 +625,8 @@ def _march_serial(
     """Serial march; ``trig`` (3, B) caches (angles, cos, sin) between calls and is refreshed here if stale."""
     n = poses.shape[0]
     nb = angles.shape[0]
-    # cos/sin of the beam angles cost about 20 ns per beam, as much as a tenth of a scan's traversal:
-    # a scan's angles rarely change, so they are compared (1 ns per beam) and reused
-    for b in range(nb):
-        if trig[0, b] != angles[b]:
-            trig[0, b] = angles[b]
-            trig[1, b] = math.cos(angles[b])
-            trig[2, b] = math.sin(angles[b])
     out = np.empty(n * nb)
-    cp = np.empty(n)
-    sp = np.empty(n)
-    for p in range(n):
-        cp[p] = math.cos(poses[p, 2])
-        sp[p] = math.sin(poses[p, 2])
+    cp, sp = _pose_trig(poses, angles, trig)
     t_lim = max_range / res
     _march_range(field, planes, plane_size, res, ox, oy, poses, cp, sp, trig[1], trig[2], t_lim, 0, n * nb, out)
     return out.reshape((n, nb))
@@ -623,17 +647,8 @@ def _march_serial_poses(
     """Serial march from several poses (:func:`_march_poses`); ``trig`` as in :func:`_march_serial`."""
     n = poses.shape[0]
     nb = angles.shape[0]
-    for b in range(nb):
-        if trig[0, b] != angles[b]:
-            trig[0, b] = angles[b]
-            trig[1, b] = math.cos(angles[b])
-            trig[2, b] = math.sin(angles[b])
     out = np.empty(n * nb)
-    cp = np.empty(n)
-    sp = np.empty(n)
-    for p in range(n):
-        cp[p] = math.cos(poses[p, 2])
-        sp[p] = math.sin(poses[p, 2])
+    cp, sp = _pose_trig(poses, angles, trig)
     _march_poses(field, starts, res, ox, oy, poses, cp, sp, trig[1], trig[2], max_range / res, out)
     return out.reshape((n, nb))
 
