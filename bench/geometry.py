@@ -73,6 +73,29 @@ def between(a: npt.ArrayLike, b: npt.ArrayLike) -> FloatArray:
     return compose(inverse(a), b)
 
 
+def twist_increment(
+    v: npt.ArrayLike, omega: npt.ArrayLike, dt: npt.ArrayLike
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Exact increment of a constant twist held for ``dt``, in the frame of the starting pose.
+
+    Parameters
+    ----------
+    v, omega, dt : array-like
+        Forward speed (m/s), turn rate (rad/s) and duration (s), broadcast together.
+
+    Returns
+    -------
+    dx, dy, dtheta : ndarray
+        (m, m, rad): with a = omega dt, dx = v dt sin(a)/a, dy = v dt (1 - cos a)/a, dtheta = a; written as a
+        chord v dt sinc(a/2) at heading a/2, which is exact and has no 0/0 at a = 0.
+    """
+    dt_ = np.asarray(dt, dtype=np.float64)
+    a = np.asarray(omega, dtype=np.float64) * dt_
+    s = np.asarray(v, dtype=np.float64) * dt_
+    chord = s * np.sinc(a / (2.0 * np.pi))  # np.sinc(x) = sin(pi x) / (pi x): sin(a/2) / (a/2)
+    return chord * np.cos(0.5 * a), chord * np.sin(0.5 * a), a
+
+
 def is_symmetric_psd(cov: npt.ArrayLike, atol: float = 1e-9) -> bool:
     """True when ``cov`` is symmetric and positive semi-definite up to ``atol`` (relative to its scale)."""
     m = np.asarray(cov, dtype=np.float64)

@@ -19,13 +19,12 @@ from locbench.datasets.recorded.lost_in_the_woods import (
     LostInTheWoods,
     LostInTheWoodsParams,
     centre_sigmas,
-    constant_twist_increment,
     laser_to_centre,
     load_lost_in_the_woods,
 )
 from locbench.errors import ConfigError
 from locbench.events import LandmarkObservations, Odometry
-from locbench.geometry import compose, wrap_angle
+from locbench.geometry import compose, twist_increment, wrap_angle
 from locbench.registry import DATASETS, make_dataset
 
 D = 0.2
@@ -45,7 +44,7 @@ def _small_mat(n: int = 40, twist_index: int = -1) -> dict[str, Any]:
     poses[0] = (0.5, -0.2, 3.0)  # heading near pi: wrapping is exercised
     for k in range(1, n):
         j = k - 1 if twist_index == -1 else k
-        inc = constant_twist_increment(v[j], om[j], t[k] - t[k - 1])
+        inc = twist_increment(v[j], om[j], t[k] - t[k - 1])
         poses[k] = compose(poses[k - 1], [float(c) for c in inc])
     # sightings at the laser, d ahead of the centre
     lx = poses[:, 0:1] + D * np.cos(poses[:, 2:3])
@@ -98,13 +97,13 @@ def _dead_reckon(start: np.ndarray, events: tuple[Any, ...]) -> dict[float, np.n
 
 def test_constant_twist_increment_is_the_arc() -> None:
     # a quarter circle of radius 2: from the start frame the end is at (2, 2), turned by pi/2
-    dx, dy, dth = constant_twist_increment(math.pi, 0.5 * math.pi, 1.0)
+    dx, dy, dth = twist_increment(math.pi, 0.5 * math.pi, 1.0)
     assert (float(dx), float(dy), float(dth)) == pytest.approx((2.0, 2.0, 0.5 * math.pi), abs=1e-12)
-    dx0, dy0, dth0 = constant_twist_increment(0.3, 0.0, 0.1)
+    dx0, dy0, dth0 = twist_increment(0.3, 0.0, 0.1)
     assert (float(dx0), float(dy0), float(dth0)) == (pytest.approx(0.03, abs=1e-15), 0.0, 0.0)
     # near zero turn rate the arc agrees with its series expansion (no cancellation)
     a = 1e-7
-    dxs, dys, _ = constant_twist_increment(1.0, a, 1.0)
+    dxs, dys, _ = twist_increment(1.0, a, 1.0)
     assert float(dys) == pytest.approx(a / 2.0, rel=1e-9)
     assert float(dxs) == pytest.approx(1.0 - a * a / 6.0, rel=1e-15)
 

@@ -20,11 +20,11 @@ from locbench.datasets.recorded.mrclam import (
     derive_nominal_noise,
     load_mrclam,
     read_robot_sightings,
-    twist_increment,
     waypoints_by_distance,
 )
 from locbench.errors import ConfigError
 from locbench.events import LandmarkObservations, Odometry
+from locbench.geometry import twist_increment
 from locbench.registry import DATASETS, make_dataset
 
 HEADER = (

@@ -44,12 +44,12 @@ How the dataset is derived
 
       dx = v dt sin(a) / a,   dy = v dt (1 - cos a) / a,   dtheta = a      (a -> 0: dx = v dt, dy = 0)
 
-  evaluated through sinc so that it is exact and stable for any a. Which sample's twist drives the interval
-  (t[k-1], t[k]] is the parameter ``twist_sample``: ``"previous"`` (default) holds the sample taken at
-  ``t[k-1]`` forward (causal zero-order hold); ``"current"`` uses the sample at ``t[k]``, the convention of the
-  course's motion model x_k = f(x_{k-1}, v_k, om_k). On this file the default fits the Vicon motion better:
-  the RMS difference between the Vicon speed (turn rate) over an interval and the twist is 0.063 m/s
-  (0.067 rad/s) with ``"previous"`` and 0.065 m/s (0.088 rad/s) with ``"current"``.
+  evaluated through sinc (:func:`locbench.geometry.twist_increment`) so that it is exact and stable for any a.
+  Which sample's twist drives the interval (t[k-1], t[k]] is the parameter ``twist_sample``: ``"previous"``
+  (default) holds the sample taken at ``t[k-1]`` forward (causal zero-order hold); ``"current"`` uses the sample
+  at ``t[k]``, the convention of the course's motion model x_k = f(x_{k-1}, v_k, om_k). On this file the
+  default fits the Vicon motion better: the RMS difference between the Vicon speed (turn rate) over an interval
+  and the twist is 0.063 m/s (0.067 rad/s) with ``"previous"`` and 0.065 m/s (0.088 rad/s) with ``"current"``.
 * **Landmark observations.** One :class:`~locbench.events.LandmarkObservations` per sample with at least one
   tube seen (``r > 0``), ids as above. The laser measures (r, b) from a point d ahead of the robot centre, but
   our observations are from the robot origin; each sighting is therefore converted exactly: the tube lies at
@@ -122,7 +122,7 @@ from locbench.datasets.recorded.base import RecordedDataset
 from locbench.datasets.recorded.files import MissingDataFile, RecordedDataError, RemoteFile
 from locbench.errors import ConfigError
 from locbench.events import Event, LandmarkObservations, Odometry
-from locbench.geometry import wrap_angle
+from locbench.geometry import twist_increment, wrap_angle
 from locbench.spec import params_to_dict
 
 FloatArray = npt.NDArray[np.float64]
@@ -341,22 +341,6 @@ def _read_cached(path_str: str, size: int, mtime_ns: int) -> LostInTheWoodsData:
 # --- the geometry ----------------------------------------------------------------------------------------
 
 
-def constant_twist_increment(
-    v: npt.ArrayLike, omega: npt.ArrayLike, dt: npt.ArrayLike
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Exact increment (dx m, dy m, dtheta rad) in the start frame of a twist (v m/s, omega rad/s) held ``dt`` s.
-
-    dx = v dt sin(a)/a, dy = v dt (1 - cos a)/a, dtheta = a with a = omega dt, written with sinc
-    ((1 - cos a)/a = sin(a/2) sinc(a/2)) so that a -> 0 needs no special case.
-    """
-    v_, w_, dt_ = (np.asarray(x, dtype=np.float64) for x in (v, omega, dt))
-    a = w_ * dt_
-    s = v_ * dt_
-    dx = s * np.sinc(a / np.pi)
-    dy = s * np.sin(0.5 * a) * np.sinc(0.5 * a / np.pi)
-    return dx, dy, a
-
-
 def laser_to_centre(r: npt.ArrayLike, b: npt.ArrayLike, d: float) -> tuple[FloatArray, FloatArray]:
     """Range (m) and bearing (rad, wrapped) from the robot centre of a point seen at (r, b) from a laser d m ahead."""
     r_, b_ = np.asarray(r, dtype=np.float64), np.asarray(b, dtype=np.float64)
@@ -467,7 +451,7 @@ def load_lost_in_the_woods(
     src = ks - 1 if p.twist_sample == "previous" else ks
     dt = t[ks] - t[ks - 1]
     v, om = data.v[src], data.om[src]
-    dx, dy, dth = constant_twist_increment(v, om, dt)
+    dx, dy, dth = twist_increment(v, om, dt)
     events: list[Event] = [
         Odometry(t=tk, dx=a, dy=b_, dtheta=c, v=vk, omega=wk, dt=h)
         for tk, a, b_, c, vk, wk, h in zip(

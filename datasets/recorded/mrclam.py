@@ -52,10 +52,10 @@ How the dataset is derived
 
       dx = v dt sin(a) / a,   dy = v dt (1 - cos a) / a,   dtheta = a      (a -> 0: dx = v dt, dy = 0)
 
-  (:func:`twist_increment`, through ``sinc`` so it is exact and stable at a = 0). The exact arc is chosen over a
-  first-order step because it is what the twist says happened; at 100 Hz the two differ by far less than the
-  twist's own error. Samples with a repeated time stamp (dt = 0, 10 in Robot 4's file) move nothing and give
-  no event.
+  (:func:`locbench.geometry.twist_increment`, through ``sinc`` so it is exact and stable at a = 0). The exact
+  arc is chosen over a first-order step because it is what the twist says happened; at 100 Hz the two differ
+  by far less than the twist's own error. Samples with a repeated time stamp (dt = 0, 10 in Robot 4's file)
+  move nothing and give no event.
 * **Observations.** The barcode column maps to a subject through ``Barcodes.dat``. Subjects 6-20 (landmarks)
   become :class:`~locbench.events.LandmarkObservations` with ``ids`` = subject numbers, one event per time
   stamp (all rows of one camera frame together). Sightings of the other robots (subjects 1-5) are NOT given to
@@ -144,7 +144,7 @@ from locbench.datasets.recorded.files import (
 )
 from locbench.errors import ConfigError, DependencyNotInstalled
 from locbench.events import Event, LandmarkObservations, Odometry
-from locbench.geometry import wrap_angle
+from locbench.geometry import twist_increment, wrap_angle
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -360,34 +360,11 @@ def read_measurements(path: str | os.PathLike[str]) -> Table:
 # --- derived quantities -----------------------------------------------------------------------------------
 
 
-def twist_increment(
-    v: npt.ArrayLike, omega: npt.ArrayLike, dt: npt.ArrayLike
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Exact increment of a constant twist held for ``dt``, in the frame of the starting pose.
-
-    Parameters
-    ----------
-    v, omega, dt : array-like
-        Forward speed (m/s), turn rate (rad/s) and duration (s), broadcast together.
-
-    Returns
-    -------
-    dx, dy, dtheta : ndarray
-        (m, m, rad): with a = omega dt, dx = v dt sin(a)/a, dy = v dt (1 - cos a)/a, dtheta = a; written as a
-        chord v dt sinc(a/2) at heading a/2, which is exact and has no 0/0 at a = 0.
-    """
-    vv = np.asarray(v, dtype=np.float64)
-    a = np.asarray(omega, dtype=np.float64) * np.asarray(dt, dtype=np.float64)
-    s = vv * np.asarray(dt, dtype=np.float64)
-    chord = s * np.sinc(a / (2.0 * np.pi))  # np.sinc(x) = sin(pi x) / (pi x): sin(a/2) / (a/2)
-    return chord * np.cos(0.5 * a), chord * np.sin(0.5 * a), a
-
-
 def odometry_events(t: FloatArray, v: FloatArray, omega: FloatArray) -> list[Odometry]:
     """One :class:`Odometry` per interval between consecutive samples with dt > 0 (zero-order hold of sample k).
 
     ``t``, ``v``, ``omega`` are the samples (n,) in s, m/s, rad/s; the event of interval (t_k, t_{k+1}] is stamped
-    t_{k+1} and carries (v_k, omega_k, dt) and the exact increment of :func:`twist_increment`.
+    t_{k+1} and carries (v_k, omega_k, dt) and the exact increment of :func:`locbench.geometry.twist_increment`.
     """
     dt = np.diff(t)
     keep = np.flatnonzero(dt > 0)
@@ -924,5 +901,4 @@ __all__: Sequence[str] = (
     "load_mrclam",
     "nominal_sensors",
     "read_robot_sightings",
-    "twist_increment",
 )
