@@ -357,7 +357,6 @@ class LapScenario(DatasetBuilder):
             params.kidnap_rad,
             0.5,
             streams["kidnap"],
-            slip_k=SLIP_K_TRUE,
             slip_rng=slip_rng,
         )
         laser = LaserSensor(

@@ -34,7 +34,6 @@ import numpy as np
 from locbench.datasets.base import Dataset, DatasetBuilder, SensorSpec
 from locbench.datasets.synthetic.robot import DriveLimits, GoTo, Leg
 from locbench.datasets.synthetic.scenarios import (
-    SLIP_K_TRUE,
     SensorSuite,
     assemble,
     check_kidnap_params,
@@ -142,7 +141,6 @@ class LineRoomScenario(DatasetBuilder):
             params.kidnap_rad,
             0.5,
             streams["kidnap"],
-            slip_k=SLIP_K_TRUE,
             slip_rng=slip_rng,
         )
         laser = LaserSensor(

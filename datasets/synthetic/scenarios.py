@@ -201,16 +201,16 @@ def drive(
     kidnap_fraction: float,
     rng: np.random.Generator,
     clearance_m: float = 0.3,
-    slip_k: float = 0.0,
     slip_rng: np.random.Generator | None = None,
 ) -> Motion:
     """Simulate the route; with ``kidnap_m`` > 0 kidnap the robot at ``kidnap_fraction`` of the kidnap-free run.
 
-    ``rng`` chooses the kidnap, ``slip_k`` / ``slip_rng`` are the execution noise (see
-    :func:`~locbench.datasets.synthetic.robot.simulate_route`). The kidnap time comes from a run without
-    execution noise, so that it depends on the parameters only; before the kidnap the robot moves exactly as
-    in the kidnap-free run of the same seed.
+    ``rng`` chooses the kidnap; ``slip_rng`` draws the execution noise, wheel slip of :data:`SLIP_K_TRUE` (see
+    :func:`~locbench.datasets.synthetic.robot.simulate_route`; None: the commands are executed exactly). The
+    kidnap time comes from a run without execution noise, so that it depends on the parameters only; before the
+    kidnap the robot moves exactly as in the kidnap-free run of the same seed.
     """
+    slip_k = SLIP_K_TRUE if slip_rng is not None else 0.0
     if kidnap_m <= 0:
         return simulate_route(start, legs, limits, slip_k=slip_k, slip_rng=slip_rng)
     probe = simulate_route(start, legs, limits)
@@ -399,7 +399,6 @@ class RoomScenario(DatasetBuilder):
             params.kidnap_rad,
             0.6,
             streams["kidnap"],
-            slip_k=SLIP_K_TRUE,
             slip_rng=slip_rng,
         )
         lm = dataclasses.replace(self.landmark_sensor, known_ids=params.known_ids)
@@ -642,7 +641,6 @@ class OfficeScenario(DatasetBuilder):
             params.kidnap_rad,
             0.5,
             streams["kidnap"],
-            slip_k=SLIP_K_TRUE,
             slip_rng=slip_rng,
         )
         lm = LandmarkSensor(
