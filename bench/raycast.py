@@ -68,9 +68,23 @@ step on the interleaved planes (x 0.98 against the old kernel), octant values fo
 clearance is under 1 or 2 cells (x 0.90), poses ordered by 8- or 32-cell tiles (x 0.96-0.99), 6 or 12 lanes
 (noise). ``pytest tests/perf --benchmark-only`` at load 0.8-0.9 (wall clock, 30 rounds): particles 9.07 M
 rays/s median (12.5 M at the fastest round), scan 9.06 M median; the 10 M median for many poses is still not
-reached. The lane loops of :func:`_march_range` and :func:`_march_poses` repeat the same step on purpose: one
-shared step function, inlined by numba, gave the same ranges but paired ratios of x 0.96-0.98 against the two
-copies (41 interleaved rounds), which is why they stay written out twice.
+reached. One-pose scans refill their lanes in lock-step (:func:`_march_range`): 8 neighbouring beams at a time,
+the next 8 once all have ended. Their branches then agree from lane to lane and are predicted; against
+commit d01c1c5, interleaved as above (load 0.5-0.8): x 1.27, 1.09, 1.12, 1.15 and 1.13 in runs of 12-24 paired
+rounds, ranges bit for bit the same; lock-step with 12, 16, 24 or 32 lanes x 1.16-1.21 (noise), refilling when
+half the lanes have ended x 0.98-1.06, refilling each lane at the end of the round instead of at once x 0.97 (so
+the gain is the agreement, not where the refill code sits). For the particles' beams, 6 deg apart, lock-step
+loses (x 0.83 on :func:`_march_poses`, x 0.89 on :func:`_march_range`), so they keep refilling lane by lane.
+Also tried without gain on the scan: an odd beam starting where its two even neighbours prove it free (an
+occupied cell entered at t lies within t + sqrt(2) and, while (t + sqrt(2)) * chord < 1, is wider than the
+wedge between them, so one of them passes through it): the odd beams' remaining distance fell to a median of
+1.6 cells, but marching even and odd beams in two passes cost more (x 0.88) than the steps saved; a shortcut for
+jumps of at least 3 units that skips the exit times (x 0.87-0.90: one more unpredictable branch); unsigned index
+and bound checks (noise); octant bounds at 4 x 4 cells (78 kB, in L2) as a second lookup beside the
+clearance (x 1.06 scan, x 1.02 particles). The lane loops of :func:`_march_range` and :func:`_march_poses`
+repeat the same step on purpose: one shared step function, inlined by numba, gave the same ranges but paired
+ratios of x 0.96-0.98 against the two copies (41 interleaved rounds), which is why they stay written out twice
+(the lanes' refill is shared, :func:`_next_ray`: it runs once per ray, not once per step).
 
 Grid conventions are those of :class:`locbench.datasets.base.OccupancyGrid` (ROS map_server): row ``i``
 spans y in [oy + i*res, oy + (i+1)*res), column ``j`` spans x likewise, and ``origin_xy`` = (ox, oy) is
@@ -323,6 +337,45 @@ def _march_start(
     return True
 
 
+@njit(cache=True, inline="always")
+def _next_ray(
+    field: UInt8Array,
+    planes: UInt8Array,
+    plane_size: int,
+    inv_res: float,
+    ox: float,
+    oy: float,
+    poses: FloatArray,
+    cp: FloatArray,
+    sp: FloatArray,
+    cb: FloatArray,
+    sb: FloatArray,
+    t_lim: float,
+    nxt: int,
+    stop: int,
+    out: FloatArray,
+    state: FloatArray,
+    cell: IntArray,
+    k: int,
+) -> tuple[int, int]:
+    """Set lane ``k`` up for the first of the rays ``nxt .. stop - 1`` that needs marching; the rays that end
+    at once get their ranges in ``out``. Returns (the next ray to take, the lane's ray or -1 if none is left)."""
+    nb = cb.shape[0]
+    while nxt < stop:
+        r = nxt
+        nxt += 1
+        p = r // nb
+        b = r - p * nb
+        gx = (poses[p, 0] - ox) * inv_res
+        gy = (poses[p, 1] - oy) * inv_res
+        dx = cp[p] * cb[b] - sp[p] * sb[b]
+        dy = sp[p] * cb[b] + cp[p] * sb[b]
+        if _march_start(field, planes, plane_size, gx, gy, dx, dy, t_lim, state, cell, k):
+            return nxt, r
+        out[r] = state[k, 0]
+    return nxt, -1
+
+
 @njit(cache=True, error_model="numpy")
 def _march_range(
     field: UInt8Array,
@@ -340,16 +393,23 @@ def _march_range(
     first: int,
     stop: int,
     out: FloatArray,
+    lockstep: bool,
 ) -> None:
     """Ranges (m) of the flattened rays ``first .. stop - 1`` (pose-major) into ``out``, LANES at a time.
 
     Each step of a lane moves the beam by the field value of its cell (from ``planes``, see
     :func:`_march_start`), or one cell on (a DDA step) when that jump would not leave the cell. A hit
     reports the cell's exact entry point.
+
+    With ``lockstep`` the lanes are refilled together, LANES consecutive rays at a time, once all of them
+    have ended; otherwise a lane takes the next ray as soon as its own ends. Lock-step suits the dense
+    beams of a scan: neighbouring beams take nearly the same steps, so the lanes' branches agree round
+    after round and are predicted, which outweighs the rounds spent waiting for the longest beam of the
+    group (one pose x 683 beams: x 1.16-1.21 in paired rounds); for beams several degrees apart it loses
+    (x 0.89 on 1000 poses x 60 beams).
     """
     rows = field.shape[0]
     cols = field.shape[1]
-    nb = cb.shape[0]
     inv_res = 1.0 / res
     state = np.empty((LANES, 12))
     # per lane: row i, column j, the field value of (i, j), the offset of the ray's plane in ``planes``
@@ -357,23 +417,35 @@ def _march_range(
     ray = np.full(LANES, -1, dtype=np.int64)
     nxt = first
     active = 0
-    # fill the lanes
-    for k in range(LANES):
-        while nxt < stop:
-            r = nxt
-            nxt += 1
-            p = r // nb
-            b = r - p * nb
-            gx = (poses[p, 0] - ox) * inv_res
-            gy = (poses[p, 1] - oy) * inv_res
-            dx = cp[p] * cb[b] - sp[p] * sb[b]
-            dy = sp[p] * cb[b] + cp[p] * sb[b]
-            if _march_start(field, planes, plane_size, gx, gy, dx, dy, t_lim, state, cell, k):
+    while True:
+        if active == 0:
+            # (re)fill all lanes: at the start, and in lock-step once the group has ended
+            for k in range(LANES):
+                nxt, r = _next_ray(
+                    field,
+                    planes,
+                    plane_size,
+                    inv_res,
+                    ox,
+                    oy,
+                    poses,
+                    cp,
+                    sp,
+                    cb,
+                    sb,
+                    t_lim,
+                    nxt,
+                    stop,
+                    out,
+                    state,
+                    cell,
+                    k,
+                )
                 ray[k] = r
-                active += 1
-                break
-            out[r] = state[k, 0]
-    while active > 0:
+                if r >= 0:
+                    active += 1
+            if active == 0:
+                return
         for k in range(LANES):
             r = ray[k]
             if r < 0:
@@ -421,20 +493,30 @@ def _march_range(
                 out[r] = result
                 ray[k] = -1
                 active -= 1
-                while nxt < stop:
-                    r = nxt
-                    nxt += 1
-                    p = r // nb
-                    b = r - p * nb
-                    gx = (poses[p, 0] - ox) * inv_res
-                    gy = (poses[p, 1] - oy) * inv_res
-                    dx = cp[p] * cb[b] - sp[p] * sb[b]
-                    dy = sp[p] * cb[b] + cp[p] * sb[b]
-                    if _march_start(field, planes, plane_size, gx, gy, dx, dy, t_lim, state, cell, k):
-                        ray[k] = r
+                if not lockstep:
+                    nxt, r = _next_ray(
+                        field,
+                        planes,
+                        plane_size,
+                        inv_res,
+                        ox,
+                        oy,
+                        poses,
+                        cp,
+                        sp,
+                        cb,
+                        sb,
+                        t_lim,
+                        nxt,
+                        stop,
+                        out,
+                        state,
+                        cell,
+                        k,
+                    )
+                    ray[k] = r
+                    if r >= 0:
                         active += 1
-                        break
-                    out[r] = state[k, 0]
 
 
 @njit(cache=True, error_model="numpy")
@@ -628,7 +710,8 @@ def _march_serial(
     out = np.empty(n * nb)
     cp, sp = _pose_trig(poses, angles, trig)
     t_lim = max_range / res
-    _march_range(field, planes, plane_size, res, ox, oy, poses, cp, sp, trig[1], trig[2], t_lim, 0, n * nb, out)
+    # one pose: its beams form one fan, whose neighbours step alike (lock-step)
+    _march_range(field, planes, plane_size, res, ox, oy, poses, cp, sp, trig[1], trig[2], t_lim, 0, n * nb, out, n == 1)
     return out.reshape((n, nb))
 
 
@@ -693,7 +776,7 @@ def _march_parallel(
     for c in prange((total + _CHUNK - 1) // _CHUNK):
         first = c * _CHUNK
         last = min(first + _CHUNK, total)
-        _march_range(field, planes, plane_size, res, ox, oy, poses, cp, sp, cb, sb, t_lim, first, last, out)
+        _march_range(field, planes, plane_size, res, ox, oy, poses, cp, sp, cb, sb, t_lim, first, last, out, False)
     return out.reshape((n, nb))
 
 
