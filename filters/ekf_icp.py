@@ -17,7 +17,8 @@ per 100 ms SIP cycle, 10 Hz); here they are scaled by dt / ``static_noise_period
 the same variance per second at any odometry rate (the synthetic robots report at 20 Hz).
 
 Observation (sec. III-A.2, eq. 2-3, 14). At each LaserScan a scan is ray-cast from the occupancy grid
-(:func:`locbench.raycast.cast_rays`) at the predicted sensor pose with the real scan's geometry
+(:func:`locbench.raycast.cast_scan`, which marches on fields cached with the grid; version 1 used the plain
+traversal, whose ranges differ only by rounding) at the predicted sensor pose with the real scan's geometry
 (angle_min, angle_increment, beam count, range_max, sensor_pose). Both scans become points in the robot
 frame, and point-to-point ICP (:mod:`locbench.filters._icp`) aligns the real points (source) onto the
 ray-cast points (target). If the world point w is seen at p_real = T^-1 w from the true pose T and at
@@ -74,7 +75,7 @@ from locbench.events import LaserScan, Observation, Odometry
 from locbench.filters._icp import MIN_PAIRS, IcpResult, icp_2d
 from locbench.filters.base import Estimate, Filter, FilterConfig
 from locbench.geometry import wrap_scalar
-from locbench.raycast import cast_rays
+from locbench.raycast import cast_scan
 
 FloatArray = npt.NDArray[np.float64]
 logger = logging.getLogger(__name__)
@@ -207,7 +208,7 @@ class IcpEKF(Filter):
     consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LaserScan})
     requires: ClassVar[frozenset[MapKind]] = frozenset({MapKind.OCCUPANCY})
     Config: ClassVar[type[FilterConfig]] = IcpEKFConfig
-    version: ClassVar[int] = 1
+    version: ClassVar[int] = 2
     source: ClassVar[str] = "000_2af74c528ee7b17b (EKF with LRF: eq. 11-18, sec. III-B, IV-B, appendix A)"
 
     config: IcpEKFConfig
@@ -220,7 +221,7 @@ class IcpEKF(Filter):
             raise ConfigError("IcpEKF needs world.occupancy; the dataset provides no occupancy grid")
         if grid.origin[2] != 0.0:
             raise ConfigError(f"IcpEKF: the occupancy grid origin theta must be 0, got {grid.origin[2]}")
-        self._occ = np.ascontiguousarray(grid.occupied())
+        self._grid = grid
         self._res = float(grid.resolution)
         self._origin = (float(grid.origin[0]), float(grid.origin[1]))
         sigma_l = cfg.laser_sigma_m if cfg.laser_sigma_m is not None else sensors.laser_sigma_m
@@ -301,8 +302,9 @@ class IcpEKF(Filter):
         sx, sy, sth = z.sensor_pose
         x, y, th = (float(v) for v in self._x)
         c, s = math.cos(th), math.sin(th)
-        sensor_world = np.array([[x + c * sx - s * sy, y + s * sx + c * sy, th + sth]])
-        pred = cast_rays(self._occ, self._res, self._origin, sensor_world, angles, z.range_max, parallel=False)[0]
+        sensor_world = np.array([x + c * sx - s * sy, y + s * sx + c * sy, th + sth])
+        # the shared caster's one-scan path: its fields are cached with the grid object
+        pred = cast_scan(self._grid, sensor_world, np.asarray(angles, dtype=np.float64), z.range_max, parallel=False)
         real = np.asarray(z.ranges, dtype=np.float64)
         ok_real = np.isfinite(real) & (real >= z.range_min) & (real <= z.range_max)
         ok_pred = np.isfinite(pred) & (pred >= z.range_min)
