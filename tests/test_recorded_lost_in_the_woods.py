@@ -251,7 +251,7 @@ def _broken(name: str) -> tuple[dict[str, Any], str, str]:
         return mat, "v", "non-finite value nan at (8, 1)"
     if name == "non-numeric":
         mat["d"] = "0.2"
-        return mat, "d", "expected laser offset in m, a 1 x 1 number of numbers"
+        return mat, "d", "expected laser offset in m, a 1 x 1 number of real numbers"
     if name == "time backwards":
         mat["t"] = mat["t"].copy()
         mat["t"][20, 0] = 1.0
@@ -293,7 +293,7 @@ def test_malformed_file_names_file_field_and_expectation(tmp_path: Path, kind: s
         load_lost_in_the_woods(path)
     msg = str(err.value)
     assert str(path) in msg
-    assert f"field {field!r}" in msg
+    assert f"variable {field!r}" in msg
     assert "expected" in msg
     assert phrase in msg
 

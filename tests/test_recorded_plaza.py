@@ -181,9 +181,9 @@ def test_tiny_file_events_truth_and_odometry_model(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("edit", "message"),
     [
-        (lambda d: d.pop("TD"), r"variable 'TD' is missing \(expected a real \(n, 4\) matrix \[t s sender_id"),
+        (lambda d: d.pop("TD"), r"variable 'TD': missing variable, expected a real \(n, 4\) matrix \[t s sender_id"),
         (lambda d: d.__setitem__("DR", d["DR"][:, :2]), r"variable 'DR' has shape \(4, 2\).*expected a real \(n, 3\)"),
-        (lambda d: d["GT"].__setitem__((2, 1), np.nan), r"variable 'GT' row 3 has a non-finite value"),
+        (lambda d: d["GT"].__setitem__((2, 1), np.nan), r"variable 'GT': non-finite value nan at \(3, 2\) \(1-based\)"),
         (lambda d: d["DR"].__setitem__((2, 0), 0.2), r"variable 'DR' row 3: time goes backwards"),
         (lambda d: d["GT"].__setitem__((1, 0), 1.7), r"variable 'GT' row 3: time goes backwards"),
         (lambda d: d["TD"].__setitem__((1, 2), 9.0), r"variable 'TD' row 2: beacon_id 9.0 is not in TL"),

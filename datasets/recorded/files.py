@@ -19,9 +19,10 @@ from __future__ import annotations
 import hashlib
 import os
 import re
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -311,3 +312,28 @@ def read_table(
         r = int(np.flatnonzero(~np.all(np.isfinite(arr), axis=1))[0])
         raise RecordedDataError(p, "non-finite value (expected finite numbers)", numbers[r])
     return Table(p, arr, np.array(numbers, dtype=np.int64))
+
+
+def mat_numbers(path: str | os.PathLike[str], mat: Mapping[str, Any], name: str, expected: str) -> FloatArray:
+    """Variable ``name`` of a loaded MATLAB file (``scipy.io.loadmat``'s dict) as float64.
+
+    Raises :class:`RecordedDataError` naming the file, the variable and ``expected`` (what the caller wants,
+    in words) when the variable is missing, is not real numbers (text, a struct, complex) or holds a
+    non-finite value (its 1-based index is given). The shape is the caller's to check.
+    """
+    if name not in mat:
+        have = sorted(k for k in mat if not k.startswith("__"))
+        raise RecordedDataError(path, f"variable {name!r}: missing variable, expected {expected} (the file has {have})")
+    raw = np.asarray(mat[name])
+    if raw.dtype.kind not in "biuf":
+        raise RecordedDataError(path, f"variable {name!r}: {raw.dtype} array, expected {expected} of real numbers")
+    arr = raw.astype(np.float64)
+    bad = np.flatnonzero(~np.isfinite(arr.ravel()))
+    if bad.size:
+        idx = np.unravel_index(int(bad[0]), arr.shape)
+        where = ", ".join(str(int(i) + 1) for i in idx)
+        raise RecordedDataError(
+            path,
+            f"variable {name!r}: non-finite value {float(arr[idx])!r} at ({where}) (1-based), expected finite numbers",
+        )
+    return arr

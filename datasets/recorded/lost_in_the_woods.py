@@ -119,7 +119,7 @@ from locbench.datasets.base import (
     sort_events,
 )
 from locbench.datasets.recorded.base import RecordedDataset
-from locbench.datasets.recorded.files import MissingDataFile, RecordedDataError, RemoteFile
+from locbench.datasets.recorded.files import MissingDataFile, RecordedDataError, RemoteFile, mat_numbers
 from locbench.errors import ConfigError
 from locbench.events import Event, LandmarkObservations, Odometry
 from locbench.geometry import twist_increment, wrap_angle
@@ -199,40 +199,22 @@ class LostInTheWoodsData:
     b_var: float
 
 
-def _numeric(path: Path, mat: dict[str, Any], name: str, expected: str) -> FloatArray:
-    if name not in mat:
-        raise RecordedDataError(path, f"field {name!r}: missing variable, expected {expected}")
-    raw = np.asarray(mat[name])
-    if raw.dtype.kind not in "biuf":
-        raise RecordedDataError(path, f"field {name!r}: {raw.dtype} array, expected {expected} of numbers")
-    arr = raw.astype(np.float64)
-    bad = np.flatnonzero(~np.isfinite(arr.ravel()))
-    if bad.size:
-        idx = np.unravel_index(int(bad[0]), arr.shape)
-        where = ", ".join(str(int(i) + 1) for i in idx)
-        raise RecordedDataError(
-            path,
-            f"field {name!r}: non-finite value {float(arr[idx])!r} at ({where}) (1-based), expected finite numbers",
-        )
-    return arr
-
-
 def _vector(path: Path, mat: dict[str, Any], name: str, n: int | None, what: str) -> FloatArray:
     expected = f"{what}, an N x 1 column" + (f" with N = {n}" if n is not None else "")
-    arr = _numeric(path, mat, name, expected)
+    arr = mat_numbers(path, mat, name, expected)
     if arr.ndim != 2 or 1 not in arr.shape or (n is not None and arr.size != n):
-        raise RecordedDataError(path, f"field {name!r}: shape {arr.shape}, expected {expected}")
+        raise RecordedDataError(path, f"variable {name!r}: shape {arr.shape}, expected {expected}")
     return arr.ravel()
 
 
 def _scalar(path: Path, mat: dict[str, Any], name: str, what: str, positive: bool) -> float:
-    arr = _numeric(path, mat, name, f"{what}, a 1 x 1 number")
+    arr = mat_numbers(path, mat, name, f"{what}, a 1 x 1 number")
     if arr.size != 1:
-        raise RecordedDataError(path, f"field {name!r}: shape {arr.shape}, expected {what}, a 1 x 1 number")
+        raise RecordedDataError(path, f"variable {name!r}: shape {arr.shape}, expected {what}, a 1 x 1 number")
     value = float(arr.ravel()[0])
     if (positive and value <= 0.0) or value < 0.0:
         bound = "> 0" if positive else ">= 0"
-        raise RecordedDataError(path, f"field {name!r}: {value!r}, expected {what} {bound}")
+        raise RecordedDataError(path, f"variable {name!r}: {value!r}, expected {what} {bound}")
     return value
 
 
@@ -247,7 +229,7 @@ def read_lost_in_the_woods(path: str | os.PathLike[str]) -> LostInTheWoodsData:
     Raises
     ------
     RecordedDataError
-        Naming the file and the variable (field): a missing file, a file that is not a MATLAB file, a missing
+        Naming the file and the variable: a missing file, a file that is not a MATLAB file, a missing
         variable, a wrong shape, a non-numeric or non-finite value, time going backwards, a validity flag other
         than 0/1, a negative range or a non-positive variance.
     """
@@ -274,13 +256,13 @@ def _read_cached(path_str: str, size: int, mtime_ns: int) -> LostInTheWoodsData:
     t = _vector(path, mat, "t", None, "time in s")
     n = t.size
     if n < 2:
-        raise RecordedDataError(path, f"field 't': {n} sample(s), expected at least 2")
+        raise RecordedDataError(path, f"variable 't': {n} sample(s), expected at least 2")
     back = np.flatnonzero(np.diff(t) < 0.0)
     if back.size:
         k = int(back[0]) + 1
         raise RecordedDataError(
             path,
-            f"field 't': time goes backwards at sample {k + 1} (1-based): {float(t[k])!r} after {float(t[k - 1])!r} "
+            f"variable 't': time goes backwards at sample {k + 1} (1-based): {float(t[k])!r} after {float(t[k - 1])!r} "
             "(expected non-decreasing)",
         )
     v = _vector(path, mat, "v", n, "speed in m/s")
@@ -291,24 +273,25 @@ def _read_cached(path_str: str, size: int, mtime_ns: int) -> LostInTheWoodsData:
     valid = _vector(path, mat, "true_valid", n, "validity flag 0/1")
     if not np.all((valid == 0.0) | (valid == 1.0)):
         k = int(np.flatnonzero((valid != 0.0) & (valid != 1.0))[0])
-        raise RecordedDataError(path, f"field 'true_valid': {float(valid[k])!r} at sample {k + 1}, expected 0 or 1")
+        raise RecordedDataError(path, f"variable 'true_valid': {float(valid[k])!r} at sample {k + 1}, expected 0 or 1")
 
-    lm = _numeric(path, mat, "l", "landmark positions, an L x 2 array (x, y) in m")
+    lm = mat_numbers(path, mat, "l", "landmark positions, an L x 2 array (x, y) in m")
     if lm.ndim != 2 or lm.shape[1] != 2 or lm.shape[0] < 1:
-        raise RecordedDataError(path, f"field 'l': shape {lm.shape}, expected an L x 2 array (x, y) in m")
+        raise RecordedDataError(path, f"variable 'l': shape {lm.shape}, expected an L x 2 array (x, y) in m")
     n_lm = lm.shape[0]
     meas: dict[str, FloatArray] = {}
     for name, what in (("r", "ranges in m"), ("b", "bearings in rad")):
-        arr = _numeric(path, mat, name, f"{what}, an N x L array")
+        arr = mat_numbers(path, mat, name, f"{what}, an N x L array")
         if arr.shape != (n, n_lm):
             raise RecordedDataError(
-                path, f"field {name!r}: shape {arr.shape}, expected {what}, N x L = {n} x {n_lm} (t by l)"
+                path, f"variable {name!r}: shape {arr.shape}, expected {what}, N x L = {n} x {n_lm} (t by l)"
             )
         meas[name] = arr
     if np.any(meas["r"] < 0.0):
         k, j = (int(i) for i in np.argwhere(meas["r"] < 0.0)[0])
         raise RecordedDataError(
-            path, f"field 'r': {float(meas['r'][k, j])!r} at ({k + 1}, {j + 1}), expected a range >= 0 (0 = not seen)"
+            path,
+            f"variable 'r': {float(meas['r'][k, j])!r} at ({k + 1}, {j + 1}), expected a range >= 0 (0 = not seen)",
         )
     d = _scalar(path, mat, "d", "laser offset in m", positive=False)
     variances = {

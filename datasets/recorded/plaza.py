@@ -94,7 +94,7 @@ from locbench.datasets.base import (
     sort_events,
 )
 from locbench.datasets.recorded.base import RecordedDataset
-from locbench.datasets.recorded.files import MissingDataFile, RecordedDataError, RemoteFile, verify_sha256
+from locbench.datasets.recorded.files import MissingDataFile, RecordedDataError, RemoteFile, mat_numbers, verify_sha256
 from locbench.errors import ConfigError
 from locbench.events import Event, Odometry, RangeObservations
 from locbench.geometry import wrap_angle
@@ -177,19 +177,9 @@ class PlazaArrays:
 def _variable(path: Path, mat: dict[str, Any], name: str) -> FloatArray:
     cols = COLUMNS[name]
     what = f"a real (n, {len(cols)}) matrix [{' '.join(cols)}]"
-    if name not in mat:
-        have = sorted(k for k in mat if not k.startswith("__"))
-        raise RecordedDataError(path, f"variable {name!r} is missing (expected {what}; the file has {have})")
-    a = np.asarray(mat[name])
-    if a.ndim != 2 or a.shape[1] != len(cols) or a.shape[0] < 1 or not np.issubdtype(a.dtype, np.number):
-        raise RecordedDataError(path, f"variable {name!r} has shape {a.shape} and dtype {a.dtype}, expected {what}")
-    if np.iscomplexobj(a):
-        raise RecordedDataError(path, f"variable {name!r} is complex, expected {what}")
-    a = a.astype(np.float64)
-    bad = ~np.all(np.isfinite(a), axis=1)
-    if bad.any():
-        r = int(np.flatnonzero(bad)[0])
-        raise RecordedDataError(path, f"variable {name!r} row {r + 1} has a non-finite value (expected finite numbers)")
+    a = mat_numbers(path, mat, name, what)
+    if a.ndim != 2 or a.shape[1] != len(cols) or a.shape[0] < 1:
+        raise RecordedDataError(path, f"variable {name!r} has shape {a.shape}, expected {what}")
     return a
 
 
