@@ -251,17 +251,26 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
 
 
 @njit(cache=True)
-def _landmark_loglik(
+def _sightings_loglik(
     poses: FloatArray,
     ranges: FloatArray,
     bearings: FloatArray,
     rows: IntArray,
     lm_xy: FloatArray,
+    with_bearing: bool,
     inv_var_r: float,
     inv_var_b: float,
-    log_norm: float,
+    log_a: float,
+    log_floor: float,
 ) -> FloatArray:
-    """Sum over sightings of log N(range) + log N(wrapped bearing); rows < 0 are marginalised over the map."""
+    """Log-likelihood (N,) of the sightings of every particle, summed over sightings; rows < 0 are marginalised
+    over the map (log of the mean likelihood over its landmarks).
+
+    With ``with_bearing`` a sighting is a range and a bearing: log N(range) + log N(wrapped bearing), ``log_a``
+    the log of the normalising constant (``log_floor`` unused). Otherwise a range only (``bearings`` unused):
+    log((1 - eps) N(r; |B - p|, sigma^2) + eps / span), ``log_a`` = log(1 - eps) - log(sigma sqrt(2 pi)) and
+    ``log_floor`` = log(eps / span) (-inf when eps = 0).
+    """
     n = poses.shape[0]
     m = ranges.shape[0]
     nl = lm_xy.shape[0]
@@ -282,59 +291,14 @@ def _landmark_loglik(
                 dx = lm_xy[j, 0] - x
                 dy = lm_xy[j, 1] - y
                 vr = ranges[k] - math.sqrt(dx * dx + dy * dy)
-                vb = bearings[k] - math.atan2(dy, dx) + th
-                vb = vb - 2.0 * math.pi * math.floor((vb + math.pi) / (2.0 * math.pi))  # wrap to [-pi, pi)
-                ll = log_norm - 0.5 * (vr * vr * inv_var_r + vb * vb * inv_var_b)
-                tmp[j] = ll
-                if ll > best:
-                    best = ll
-            if row >= 0:
-                acc += best
-            else:
-                s = 0.0
-                for j in range(nl):
-                    s += math.exp(tmp[j] - best)
-                acc += best + math.log(s) - log_nl
-        out[p] = acc
-    return out
-
-
-@njit(cache=True)
-def _range_loglik(
-    poses: FloatArray,
-    ranges: FloatArray,
-    rows: IntArray,
-    lm_xy: FloatArray,
-    inv_var: float,
-    log_hit: float,
-    log_floor: float,
-) -> FloatArray:
-    """Sum over ranges of log((1 - eps) N(r; |B - p|, sigma^2) + eps / span); rows < 0 marginalised over the map.
-
-    ``log_hit`` = log(1 - eps) - log(sigma sqrt(2 pi)); ``log_floor`` = log(eps / span) (-inf when eps = 0).
-    """
-    n = poses.shape[0]
-    m = ranges.shape[0]
-    nl = lm_xy.shape[0]
-    log_nl = math.log(nl)
-    out = np.zeros(n)
-    tmp = np.empty(nl)
-    for p in range(n):
-        x = poses[p, 0]
-        y = poses[p, 1]
-        acc = 0.0
-        for k in range(m):
-            row = rows[k]
-            lo = row if row >= 0 else 0
-            hi = row + 1 if row >= 0 else nl
-            best = -math.inf
-            for j in range(lo, hi):
-                dx = lm_xy[j, 0] - x
-                dy = lm_xy[j, 1] - y
-                vr = ranges[k] - math.sqrt(dx * dx + dy * dy)
-                a = log_hit - 0.5 * vr * vr * inv_var
-                # log(e^a + e^floor) without overflow
-                ll = max(a, log_floor) + math.log1p(math.exp(-abs(a - log_floor))) if log_floor > -math.inf else a
+                if with_bearing:
+                    vb = bearings[k] - math.atan2(dy, dx) + th
+                    vb = vb - 2.0 * math.pi * math.floor((vb + math.pi) / (2.0 * math.pi))  # wrap to [-pi, pi)
+                    ll = log_a - 0.5 * (vr * vr * inv_var_r + vb * vb * inv_var_b)
+                else:
+                    a = log_a - 0.5 * vr * vr * inv_var_r
+                    # log(e^a + e^floor) without overflow
+                    ll = max(a, log_floor) + math.log1p(math.exp(-abs(a - log_floor))) if log_floor > -math.inf else a
                 tmp[j] = ll
                 if ll > best:
                     best = ll
@@ -723,24 +687,29 @@ class ParticleFilter(Filter):
     def _loglik(self, kind: type, data: tuple[FloatArray, ...]) -> FloatArray:
         if kind is LandmarkObservations:
             ranges, bearings, rows = data
-            return _landmark_loglik(
+            return _sightings_loglik(
                 self._x,
                 ranges,
                 bearings,
                 rows,  # type: ignore[arg-type]
                 self._lm_xy,
+                True,
                 self._inv_var_r,
                 self._inv_var_b,
                 self._lm_log_norm,
+                -math.inf,
             )
         if kind is RangeObservations:
             ranges, rows = data
-            return _range_loglik(
+            return _sightings_loglik(
                 self._x,
                 ranges,
+                ranges,  # no bearings
                 rows,  # type: ignore[arg-type]
                 self._lm_xy,
+                False,
                 self._range_inv_var,
+                0.0,
                 self._range_log_hit,
                 self._range_log_floor,
             )
