@@ -13,7 +13,7 @@ from locbench.errors import ConfigError
 from locbench.events import UNKNOWN_ID, LandmarkObservations, LaserScan, Odometry, RangeObservations
 from locbench.filters import _likelihood_field as lf
 from locbench.filters._motion import twist_increment, twist_increment_covariance
-from locbench.filters.pf import ParticleFilter, ParticleFilterConfig, _range_loglik, systematic_resample
+from locbench.filters.pf import ParticleFilter, ParticleFilterConfig, _sightings_loglik, systematic_resample
 from locbench.raycast import cast_scan
 from locbench.registry import make_dataset, resolve_filter
 from locbench.runner import run_filter
@@ -280,7 +280,7 @@ def test_range_loglik_is_the_robust_mixture_and_marginalises_unknown_ids() -> No
     rows = np.array([0, 1, -1], dtype=np.int64)
     sigma, eps, span = 0.2, 0.05, 100.0
     log_hit = math.log(1 - eps) - 0.5 * math.log(2 * math.pi) - math.log(sigma)
-    got = _range_loglik(poses, ranges, rows, lm, 1 / sigma**2, log_hit, math.log(eps / span))
+    got = _sightings_loglik(poses, ranges, ranges, rows, lm, False, 1 / sigma**2, 0.0, log_hit, math.log(eps / span))
 
     def p(r: float, d: float) -> float:
         return (1 - eps) * math.exp(-0.5 * ((r - d) / sigma) ** 2) / (sigma * math.sqrt(2 * math.pi)) + eps / span
@@ -290,9 +290,32 @@ def test_range_loglik_is_the_robust_mixture_and_marginalises_unknown_ids() -> No
         expected = math.log(p(8.0, d[0])) + math.log(p(30.0, d[1])) + math.log(np.mean([p(9.0, dj) for dj in d]))
         assert got[i] == pytest.approx(expected, rel=1e-12)
     # Without the floor (eps = 0) it is the plain Gaussian.
-    plain = _range_loglik(poses[:1], ranges[:1], rows[:1], lm, 1 / sigma**2, log_hit - math.log(1 - eps), -math.inf)
+    log_gauss = log_hit - math.log(1 - eps)
+    plain = _sightings_loglik(
+        poses[:1], ranges[:1], ranges[:1], rows[:1], lm, False, 1 / sigma**2, 0.0, log_gauss, -math.inf
+    )
     d0 = float(np.hypot(*lm[0]))
     assert plain[0] == pytest.approx(-0.5 * ((8.0 - d0) / sigma) ** 2 - math.log(sigma * math.sqrt(2 * math.pi)))
+
+
+def test_bearing_range_loglik_wraps_the_bearing_and_marginalises_unknown_ids() -> None:
+    poses = np.array([[0.0, 0.0, 3.0], [1.0, -2.0, -2.5]])
+    lm = np.array([[4.0, 1.0], [-3.0, 2.0], [0.5, -6.0]])
+    ranges = np.array([4.2, 3.5])
+    bearings = np.array([-2.9, 2.7])
+    rows = np.array([0, -1], dtype=np.int64)
+    sr, sb = 0.3, 0.1
+    log_norm = -math.log(2 * math.pi * sr * sb)
+    got = _sightings_loglik(poses, ranges, bearings, rows, lm, True, 1 / sr**2, 1 / sb**2, log_norm, -math.inf)
+
+    def p(pose: np.ndarray, r: float, b: float, j: int) -> float:
+        dx, dy = lm[j] - pose[:2]
+        vb = math.remainder(b - (math.atan2(dy, dx) - pose[2]), 2 * math.pi)
+        return math.exp(log_norm - 0.5 * ((r - math.hypot(dx, dy)) ** 2 / sr**2 + vb**2 / sb**2))
+
+    for i, pose in enumerate(poses):
+        expected = math.log(p(pose, 4.2, -2.9, 0)) + math.log(np.mean([p(pose, 3.5, 2.7, j) for j in range(3)]))
+        assert got[i] == pytest.approx(expected, rel=1e-12)
 
 
 @pytest.mark.parametrize(("eps", "robust"), [(0.05, True), (0.0, False)])
