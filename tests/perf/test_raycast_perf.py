@@ -78,6 +78,11 @@ def rays_per_second_summary(request: pytest.FixtureRequest) -> Iterator[None]:
         reporter.write_sep("-", "ray casting, one core, median rays/s")
         for name, rate in sorted(_RATES.items()):
             reporter.write_line(f"{name:<24} {rate / 1e6:8.2f} M rays/s")
+        # the plain traversal runs in the same session: the ratio is steadier than either rate on a shared host
+        for workload in sorted({name.rsplit(" ", 1)[0] for name in _RATES}):
+            march, dda = _RATES.get(f"{workload} march"), _RATES.get(f"{workload} dda")
+            if march is not None and dda is not None:
+                reporter.write_line(f"{workload + ' march/dda':<24} {march / dda:8.2f} x")
 
 
 def _record(benchmark: Any, name: str, n_rays: int) -> None:
