@@ -89,10 +89,17 @@ unpredictable branches (both moves computed; the jump-or-step choice by integer 
 in the assembly) measured x 0.90-0.91 (the chain from a cell's value to the next cell's address gets longer
 when nothing is speculated), testing a stepped-into cell for a hit at once instead of at the next visit x
 0.93-0.98, and an upper bound for dropping the grid-bound checks and the floors (trunc, on a map with walls
-all round) x 1.01-1.05. The lane loops of :func:`_march_range` and :func:`_march_poses`
-repeat the same step on purpose: one shared step function, inlined by numba, gave the same ranges but paired
-ratios of x 0.96-0.98 against the two copies (41 interleaved rounds), which is why they stay written out twice
-(the lanes' refill is shared, :func:`_next_ray`: it runs once per ray, not once per step).
+all round) x 1.01-1.05; the particles' rays in octant order on the octant planes (one 160 kB plane at a
+time, 6.0 instead of 8.2 visits per ray, no sort: a counting pass) x 0.91, in lock-step x 0.82; 6, 12 or
+16 lanes (noise). With lock-step and the leaner call, ``pytest tests/perf --benchmark-only`` in 17
+sessions over 35 minutes (load 0.1-0.8; the plain traversal's own rate moved between 3.0 and 4.5 M
+rays/s): scan 7.8-13.5 M rays/s, median of the sessions 8.9 M; particles 8.2-11.8 M, median 9.0 M. The
+10 M target is met in 4 and 3 of the 17 sessions, not as a median.
+
+The lane loops of :func:`_march_range` and :func:`_march_poses` repeat the same step on purpose: one shared
+step function, inlined by numba, gave the same ranges but paired ratios of x 0.96-0.98 against the two copies
+(41 interleaved rounds), which is why they stay written out twice (the lanes' refill is shared,
+:func:`_next_ray`: it runs once per ray, not once per step).
 
 Grid conventions are those of :class:`locbench.datasets.base.OccupancyGrid` (ROS map_server): row ``i``
 spans y in [oy + i*res, oy + (i+1)*res), column ``j`` spans x likewise, and ``origin_xy`` = (ox, oy) is
