@@ -610,51 +610,42 @@ class ParticleFilter(Filter):
         if self._lm_warn:
             landmark_noise(None, None, SensorSpec(), warn=True)
             self._lm_warn = False
-        ids = z.ids.tolist()
-        keep: list[int] = []
-        rows: list[int] = []
-        for k, ident in enumerate(ids):
-            r, b = float(z.ranges[k]), float(z.bearings[k])
-            if not (math.isfinite(r) and math.isfinite(b)) or r <= 0.0:
-                continue
-            if ident == UNKNOWN_ID:
-                row = -1
-            else:
-                row = self._lm_row.get(int(ident), -2)
-                if row == -2:
-                    logger.debug("landmark id %d is not in the map; sighting ignored", ident)
-                    continue
-            keep.append(k)
-            rows.append(row)
-        if not keep:
+        ok = np.isfinite(z.ranges) & np.isfinite(z.bearings) & (z.ranges > 0.0)
+        sel, rows = self._map_rows(z.ids, ok, "landmark")
+        if sel.size == 0:
             return None
-        sel = np.asarray(keep, dtype=np.int64)
         data = (
             np.ascontiguousarray(z.ranges[sel], dtype=np.float64),
             np.ascontiguousarray(z.bearings[sel], dtype=np.float64),
-            np.asarray(rows, dtype=np.int64),
+            rows,
         )
-        return len(keep), data
+        return int(sel.size), data
 
     def _prepare_ranges(self, z: RangeObservations) -> tuple[int, tuple[FloatArray, IntArray]] | None:
         if self._range_warn:
             range_only_noise(None, SensorSpec(), warn=True)
             self._range_warn = False
+        ok = np.isfinite(z.ranges) & (z.ranges >= 0.0)
+        sel, rows = self._map_rows(z.ids, ok, "beacon")
+        if sel.size == 0:
+            return None
+        return int(sel.size), (np.ascontiguousarray(z.ranges[sel], dtype=np.float64), rows)
+
+    def _map_rows(self, ids: IntArray, ok: npt.NDArray[np.bool_], what: str) -> tuple[IntArray, IntArray]:
+        """The indices of the usable observations (``ok``, id withheld or in the map) and their landmark rows
+        (-1: withheld, marginalised over the map by :func:`_sightings_loglik`)."""
         keep: list[int] = []
         rows: list[int] = []
-        for k, (ident, r) in enumerate(zip(z.ids.tolist(), z.ranges.tolist(), strict=True)):
-            if not (math.isfinite(r) and r >= 0.0):
+        for k, ident in enumerate(ids.tolist()):
+            if not ok[k]:
                 continue
             row = -1 if ident == UNKNOWN_ID else self._lm_row.get(int(ident), -2)
             if row == -2:
-                logger.debug("beacon id %d is not in the map; range ignored", ident)
+                logger.debug("%s id %d is not in the map; ignored", what, ident)
                 continue
             keep.append(k)
             rows.append(row)
-        if not keep:
-            return None
-        sel = np.asarray(keep, dtype=np.int64)
-        return len(keep), (np.ascontiguousarray(z.ranges[sel], dtype=np.float64), np.asarray(rows, dtype=np.int64))
+        return np.asarray(keep, dtype=np.int64), np.asarray(rows, dtype=np.int64)
 
     def _prepare_scan(self, z: LaserScan) -> tuple[int, tuple[FloatArray, FloatArray]] | None:
         n_all = int(z.ranges.shape[0])
