@@ -304,7 +304,7 @@ class IcpEKF(Filter):
         c, s = math.cos(th), math.sin(th)
         sensor_world = np.array([x + c * sx - s * sy, y + s * sx + c * sy, th + sth])
         # the shared caster's one-scan path: its fields are cached with the grid object
-        pred = cast_scan(self._grid, sensor_world, np.asarray(angles, dtype=np.float64), z.range_max, parallel=False)
+        pred = cast_scan(self._grid, sensor_world, angles, z.range_max, parallel=False)
         real = np.asarray(z.ranges, dtype=np.float64)
         ok_real = np.isfinite(real) & (real >= z.range_min) & (real <= z.range_max)
         ok_pred = np.isfinite(pred) & (pred >= z.range_min)

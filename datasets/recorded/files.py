@@ -314,6 +314,20 @@ def read_table(
     return Table(p, arr, np.array(numbers, dtype=np.int64))
 
 
+def load_mat(path: str | os.PathLike[str], what: str = "MATLAB file") -> dict[str, Any]:
+    """The variables of a MATLAB file (``scipy.io.loadmat``); :class:`MissingDataFile` if it does not exist,
+    :class:`RecordedDataError` naming the file when it is not a readable ``what``."""
+    from scipy.io import loadmat  # scipy is a core dependency; imported here to keep `import locbench` light
+
+    try:
+        mat: dict[str, Any] = loadmat(os.fspath(path))
+    except FileNotFoundError:
+        raise MissingDataFile(path, "missing file") from None
+    except Exception as exc:  # scipy raises ValueError, MatReadError, TypeError ... for a file that is not one
+        raise RecordedDataError(path, f"not a readable {what} ({type(exc).__name__}: {exc})") from None
+    return mat
+
+
 def mat_numbers(path: str | os.PathLike[str], mat: Mapping[str, Any], name: str, expected: str) -> FloatArray:
     """Variable ``name`` of a loaded MATLAB file (``scipy.io.loadmat``'s dict) as float64.
 

@@ -119,7 +119,7 @@ from locbench.datasets.base import (
     sort_events,
 )
 from locbench.datasets.recorded.base import RecordedDataset
-from locbench.datasets.recorded.files import MissingDataFile, RecordedDataError, RemoteFile, mat_numbers
+from locbench.datasets.recorded.files import MissingDataFile, RecordedDataError, RemoteFile, load_mat, mat_numbers
 from locbench.errors import ConfigError
 from locbench.events import Event, LandmarkObservations, Odometry
 from locbench.geometry import twist_increment, wrap_angle
@@ -243,13 +243,8 @@ def read_lost_in_the_woods(path: str | os.PathLike[str]) -> LostInTheWoodsData:
 
 @functools.lru_cache(maxsize=4)
 def _read_cached(path_str: str, size: int, mtime_ns: int) -> LostInTheWoodsData:
-    import scipy.io
-
     path = Path(path_str)
-    try:
-        mat = scipy.io.loadmat(path_str, squeeze_me=False)
-    except Exception as exc:  # scipy raises ValueError, TypeError, OSError ... for a file that is not a MAT file
-        raise RecordedDataError(path, f"not a readable MATLAB file ({type(exc).__name__}: {exc})") from None
+    mat = load_mat(path)
     header = mat.get("__header__", b"")
     header_text = header.decode("latin-1") if isinstance(header, bytes) else str(header)
 

@@ -94,7 +94,14 @@ from locbench.datasets.base import (
     sort_events,
 )
 from locbench.datasets.recorded.base import RecordedDataset
-from locbench.datasets.recorded.files import MissingDataFile, RecordedDataError, RemoteFile, mat_numbers, verify_sha256
+from locbench.datasets.recorded.files import (
+    MissingDataFile,
+    RecordedDataError,
+    RemoteFile,
+    load_mat,
+    mat_numbers,
+    verify_sha256,
+)
 from locbench.errors import ConfigError
 from locbench.events import Event, Odometry, RangeObservations
 from locbench.geometry import wrap_angle
@@ -196,15 +203,8 @@ def _check_time(path: Path, name: str, a: FloatArray) -> None:
 
 @functools.lru_cache(maxsize=8)
 def _read_cached(path: str, size: int, mtime_ns: int) -> PlazaArrays:
-    from scipy.io import loadmat  # scipy is a core dependency; imported here to keep `import locbench` light
-
     p = Path(path)
-    try:
-        mat = loadmat(p)
-    except FileNotFoundError:
-        raise MissingDataFile(p, "missing file") from None
-    except Exception as exc:  # scipy raises ValueError, MatReadError, TypeError ... for a file that is not MAT v5
-        raise RecordedDataError(p, f"not a readable MATLAB v5 file ({type(exc).__name__}: {exc})") from None
+    mat = load_mat(p, "MATLAB v5 file")
     v = {name: _variable(p, mat, name) for name in _REQUIRED}
     drp = _variable(p, mat, "DRp") if "DRp" in mat else None
     for name in ("GT", "DR"):
