@@ -206,21 +206,32 @@ def test_cast_scan_keeps_the_field_with_the_grid() -> None:
     np.testing.assert_array_equal(planes, march_sector_field(grid.occupied()).reshape(-1))
 
 
+def _lattice_case() -> tuple[np.ndarray, OccupancyGrid, np.ndarray, np.ndarray, np.ndarray]:
+    """A walled 70 x 90 room, poses on a lattice of cell corners, beams every 5 deg, and their exact ranges."""
+    occ = np.zeros((70, 90), dtype=bool)
+    occ[5, 5:85] = occ[65, 5:85] = True
+    occ[5:66, 5] = occ[5:66, 85] = True
+    grid = OccupancyGrid(occupancy=occ.astype(float), resolution=0.05, origin=(-0.25, -0.25, 0.0))
+    lattice = np.array([[x, y, 0.0] for x in np.arange(0.0, 4.0, 0.25) for y in np.arange(0.0, 3.0, 0.25)])
+    angles = np.deg2rad(np.arange(0.0, 360.0, 5.0))
+    exact = cast_rays(occ, 0.05, (-0.25, -0.25), lattice, angles, 8.0, method="dda")
+    return occ, grid, lattice, angles, exact
+
+
+def _assert_lattice_ranges(marched: np.ndarray, exact: np.ndarray) -> None:
+    both_inf = np.isinf(exact) & np.isinf(marched)
+    np.testing.assert_allclose(np.where(both_inf, 0.0, marched), np.where(both_inf, 0.0, exact), atol=1e-9)
+
+
 def test_march_terminates_on_lattice_poses_along_cell_boundaries() -> None:
     """Regression: beams starting on cell corners, (nearly) axis-parallel, next to a wall used to loop forever.
 
     cos(270 deg) is -1.8e-16, not 0: the beam runs along a grid line and flooring its position kept it in the
     same cell while the clearance there was 0. The march now steps the cell index in that case.
     """
-    occ = np.zeros((70, 90), dtype=bool)
-    occ[5, 5:85] = occ[65, 5:85] = True
-    occ[5:66, 5] = occ[5:66, 85] = True
-    lattice = np.array([[x, y, 0.0] for x in np.arange(0.0, 4.0, 0.25) for y in np.arange(0.0, 3.0, 0.25)])
-    angles = np.deg2rad(np.arange(0.0, 360.0, 5.0))
-    exact = cast_rays(occ, 0.05, (-0.25, -0.25), lattice, angles, 8.0, method="dda")
+    occ, _, lattice, angles, exact = _lattice_case()
     marched = cast_rays(occ, 0.05, (-0.25, -0.25), lattice, angles, 8.0, method="march")
-    both_inf = np.isinf(exact) & np.isinf(marched)
-    np.testing.assert_allclose(np.where(both_inf, 0.0, marched), np.where(both_inf, 0.0, exact), atol=1e-9)
+    _assert_lattice_ranges(marched, exact)
 
 
 def test_cast_scan_fast_path_matches_the_general_path_when_angles_change() -> None:
@@ -323,17 +334,9 @@ def test_one_pose_scans_on_octant_planes_equal_the_exact_traversal(seed: int) ->
 
 def test_octant_planes_terminate_on_lattice_poses_along_cell_boundaries() -> None:
     """The lattice regression above, for one-pose scans on the octant planes."""
-    occ = np.zeros((70, 90), dtype=bool)
-    occ[5, 5:85] = occ[65, 5:85] = True
-    occ[5:66, 5] = occ[5:66, 85] = True
-    grid = OccupancyGrid(occupancy=occ.astype(float), resolution=0.05, origin=(-0.25, -0.25, 0.0))
-    lattice = np.array([[x, y, 0.0] for x in np.arange(0.0, 4.0, 0.25) for y in np.arange(0.0, 3.0, 0.25)])
-    angles = np.deg2rad(np.arange(0.0, 360.0, 5.0))
-    exact = cast_rays(occ, 0.05, (-0.25, -0.25), lattice, angles, 8.0, method="dda")
+    _, grid, lattice, angles, exact = _lattice_case()
     for k, pose in enumerate(lattice):
-        marched = cast_scan(grid, pose, angles, 8.0)
-        both_inf = np.isinf(exact[k]) & np.isinf(marched)
-        np.testing.assert_allclose(np.where(both_inf, 0.0, marched), np.where(both_inf, 0.0, exact[k]), atol=1e-9)
+        _assert_lattice_ranges(cast_scan(grid, pose, angles, 8.0), exact[k])
 
 
 @pytest.mark.parametrize("seed", [0, 1])
@@ -372,13 +375,5 @@ def test_many_pose_casts_jump_first_on_the_octant_planes_with_the_same_ranges(se
 
 def test_many_pose_casts_terminate_on_lattice_poses_along_cell_boundaries() -> None:
     """The lattice regression above, for serial casts from many poses (first jumps on the octant planes)."""
-    occ = np.zeros((70, 90), dtype=bool)
-    occ[5, 5:85] = occ[65, 5:85] = True
-    occ[5:66, 5] = occ[5:66, 85] = True
-    grid = OccupancyGrid(occupancy=occ.astype(float), resolution=0.05, origin=(-0.25, -0.25, 0.0))
-    lattice = np.array([[x, y, 0.0] for x in np.arange(0.0, 4.0, 0.25) for y in np.arange(0.0, 3.0, 0.25)])
-    angles = np.deg2rad(np.arange(0.0, 360.0, 5.0))
-    exact = cast_rays(occ, 0.05, (-0.25, -0.25), lattice, angles, 8.0, method="dda")
-    marched = cast_scan(grid, lattice, angles, 8.0, parallel=False)
-    both_inf = np.isinf(exact) & np.isinf(marched)
-    np.testing.assert_allclose(np.where(both_inf, 0.0, marched), np.where(both_inf, 0.0, exact), atol=1e-9)
+    _, grid, lattice, angles, exact = _lattice_case()
+    _assert_lattice_ranges(cast_scan(grid, lattice, angles, 8.0, parallel=False), exact)
