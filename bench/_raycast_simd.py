@@ -10,16 +10,19 @@ flags), so the ranges are the same bit for bit.
 
 State layout (one column per lane, ``W`` lanes, a multiple of 4):
 
-``S`` (NF, W) float64
+``fstate`` (NF, W) float64
     rows :data:`T` (the beam's parameter, cells), :data:`T0` (where it entered the grid), :data:`GX`, :data:`GY`
     (start, cells), :data:`DX`, :data:`DY` (unit direction), :data:`IX`, :data:`IY` (1 / direction, or a huge
     number for an axis-parallel beam), :data:`AX`, :data:`AY` (exit-boundary offsets: cell (i, j) is left at
     x = j + AX + GX), :data:`BX`, :data:`BY` (entry-boundary offsets), and :data:`RES` (written: the range in m
     of a lane that ended at this step, inf for no hit).
-``C`` (NC, W) int32
+``istate`` (NC, W) int32
     rows :data:`CI`, :data:`CJ` (the cell), :data:`CB` (offset of the beam's plane in ``planes``).
 
 A lane whose :data:`T` is inf is idle: it never reports a hit and ends at every step.
+
+numba's on-disk cache of the kernels that call :data:`step4` is keyed on :mod:`locbench.raycast`'s source alone:
+after editing this module, delete the ``*.nbi`` / ``*.nbc`` files under ``bench/__pycache__``.
 """
 
 from __future__ import annotations
@@ -32,10 +35,10 @@ from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-#: Rows of the float state ``S``.
+#: Rows of the float state ``fstate``.
 T, T0, GX, GY, DX, DY, IX, IY, AX, AY, BX, BY, RES = range(13)
 NF = 13
-#: Rows of the integer state ``C``.
+#: Rows of the integer state ``istate``.
 CI, CJ, CB = range(3)
 NC = 3
 
@@ -55,11 +58,10 @@ def _const(vty: ir.VectorType, x: float) -> ir.Constant:
     return ir.Constant(vty, [x] * 4)
 
 
-@intrinsic
-def step4(
+def _step4(
     typingctx: Any,
-    S: Any,
-    C: Any,
+    fstate: Any,
+    istate: Any,
     planes: Any,
     q: Any,
     cols: Any,
@@ -73,7 +75,7 @@ def step4(
 ) -> Any:
     """One step of lanes ``q .. q + 3``; returns the 4-bit mask of the lanes that ended (bit k: lane q + k).
 
-    Per lane, with ``v`` the value of its cell in ``planes`` (at ``C[CB] + i * cols + j``): a cell valued
+    Per lane, with ``v`` the value of its cell in ``planes`` (at ``istate[CB] + i * cols + j``): a cell valued
     ``occupied`` is a hit at the cell's entry time ``max(T0, (j + BX) * IX, (i + BY) * IY)``, reported as that
     times ``res`` (m) if it is within ``t_lim`` (cells), else inf. Otherwise the beam jumps to
     ``t + v * jump_unit`` if that leaves the cell by more than ``nudge``, else steps to the next cell across
@@ -81,7 +83,7 @@ def step4(
     An ended lane keeps its cell (so its next load stays in bounds). The next cell's line is prefetched, so that
     the lane's next visit, a whole sweep of the pool later, finds it in L1.
     """
-    sig = types.int64(S, C, planes, q, cols, rows, t_end, t_lim, res, occupied, jump_unit, nudge)
+    sig = types.int64(fstate, istate, planes, q, cols, rows, t_end, t_lim, res, occupied, jump_unit, nudge)
 
     def codegen(context: Any, builder: ir.IRBuilder, signature: Any, args: Any) -> ir.Value:
         s_arr = context.make_array(signature.args[0])(context, builder, args[0])
@@ -202,3 +204,8 @@ def step4(
         return builder.zext(builder.bitcast(done, ir.IntType(4)), _I64)
 
     return sig, codegen
+
+
+#: The intrinsic, called from numba code as ``step4(fstate, istate, planes, q, cols, rows, t_end, t_lim, res,
+#: occupied, jump_unit, nudge)`` (the typing context is numba's).
+step4: Any = intrinsic(_step4)

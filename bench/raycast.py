@@ -711,8 +711,8 @@ def _poolable(poses: FloatArray, ox: float, oy: float, inv_res: float, rows: int
 
 @njit(cache=True, inline="always")
 def _pool_take(
-    S: FloatArray,
-    C: npt.NDArray[np.int32],
+    fstate: FloatArray,
+    istate: npt.NDArray[np.int32],
     k: int,
     gx: float,
     gy: float,
@@ -741,21 +741,21 @@ def _pool_take(
     gone = (t > t_end) | (j < 0) | (j >= cols) | (i < 0) | (i >= rows)
     ex_x = 0.0 if neg_x else 1.0
     ex_y = 0.0 if neg_y else 1.0
-    S[vec.T, k] = math.inf if gone else t
-    S[vec.T0, k] = 0.0
-    S[vec.GX, k] = gx
-    S[vec.GY, k] = gy
-    S[vec.DX, k] = dx
-    S[vec.DY, k] = dy
-    S[vec.IX, k] = 1.0 / dx if dx != 0.0 else _HUGE
-    S[vec.IY, k] = 1.0 / dy if dy != 0.0 else _HUGE
-    S[vec.AX, k] = ex_x - gx
-    S[vec.AY, k] = ex_y - gy
-    S[vec.BX, k] = 1.0 - ex_x - gx
-    S[vec.BY, k] = 1.0 - ex_y - gy
-    C[vec.CI, k] = 0 if gone else i
-    C[vec.CJ, k] = 0 if gone else j
-    C[vec.CB, k] = 0 if gone else octant * plane_size
+    fstate[vec.T, k] = math.inf if gone else t
+    fstate[vec.T0, k] = 0.0
+    fstate[vec.GX, k] = gx
+    fstate[vec.GY, k] = gy
+    fstate[vec.DX, k] = dx
+    fstate[vec.DY, k] = dy
+    fstate[vec.IX, k] = 1.0 / dx if dx != 0.0 else _HUGE
+    fstate[vec.IY, k] = 1.0 / dy if dy != 0.0 else _HUGE
+    fstate[vec.AX, k] = ex_x - gx
+    fstate[vec.AY, k] = ex_y - gy
+    fstate[vec.BX, k] = 1.0 - ex_x - gx
+    fstate[vec.BY, k] = 1.0 - ex_y - gy
+    istate[vec.CI, k] = 0 if gone else i
+    istate[vec.CJ, k] = 0 if gone else j
+    istate[vec.CB, k] = 0 if gone else octant * plane_size
 
 
 @njit(cache=True, error_model="numpy")
@@ -805,9 +805,9 @@ def _march_pool(
         if starts.shape[0] > 0 and flat[c0] != FIELD_OCCUPIED:
             for o in range(8):
                 first[p, o] = starts[8 * c0 + o]
-    S = np.zeros((vec.NF, POOL_LANES))
-    C = np.zeros((vec.NC, POOL_LANES), dtype=np.int32)
-    S[vec.T, :] = math.inf  # idle
+    fstate = np.zeros((vec.NF, POOL_LANES))
+    istate = np.zeros((vec.NC, POOL_LANES), dtype=np.int32)
+    fstate[vec.T, :] = math.inf  # idle
     ray = np.full(POOL_LANES, -1, dtype=np.int64)
     nxt = 0
     p = 0
@@ -819,35 +819,37 @@ def _march_pool(
             b = 0
         dx = cp[p] * cb[b] - sp[p] * sb[b]
         dy = sp[p] * cb[b] + cp[p] * sb[b]
-        _pool_take(S, C, k, gxy[p, 0], gxy[p, 1], dx, dy, first[p], plane_size, t_end, rows, cols)
+        _pool_take(fstate, istate, k, gxy[p, 0], gxy[p, 1], dx, dy, first[p], plane_size, t_end, rows, cols)
         ray[k] = nxt
         nxt += 1
         b += 1
         alive += 1
     while alive > 0:
         for q in range(0, POOL_LANES, 4):
-            ended = vec.step4(S, C, planes, q, cols, rows, t_end, t_lim, res, FIELD_OCCUPIED, JUMP_UNIT_CELLS, _NUDGE_CELLS)
+            ended = vec.step4(
+                fstate, istate, planes, q, cols, rows, t_end, t_lim, res, FIELD_OCCUPIED, JUMP_UNIT_CELLS, _NUDGE_CELLS
+            )
             while ended:
                 k = q + _LOWEST_BIT[ended]
                 ended &= ended - 1
                 r = ray[k]
                 if r < 0:
                     continue  # idle lane
-                out[r] = S[vec.RES, k]
+                out[r] = fstate[vec.RES, k]
                 if nxt < total:
                     if b == nb:
                         p += 1
                         b = 0
                     dx = cp[p] * cb[b] - sp[p] * sb[b]
                     dy = sp[p] * cb[b] + cp[p] * sb[b]
-                    _pool_take(S, C, k, gxy[p, 0], gxy[p, 1], dx, dy, first[p], plane_size, t_end, rows, cols)
+                    _pool_take(fstate, istate, k, gxy[p, 0], gxy[p, 1], dx, dy, first[p], plane_size, t_end, rows, cols)
                     ray[k] = nxt
                     nxt += 1
                     b += 1
                 else:
                     ray[k] = -1
                     alive -= 1
-                    S[vec.T, k] = math.inf
+                    fstate[vec.T, k] = math.inf
 
 
 @njit(cache=True, inline="always")

@@ -377,3 +377,66 @@ def test_many_pose_casts_terminate_on_lattice_poses_along_cell_boundaries() -> N
     """The lattice regression above, for serial casts from many poses (first jumps on the octant planes)."""
     _, grid, lattice, angles, exact = _lattice_case()
     _assert_lattice_ranges(cast_scan(grid, lattice, angles, 8.0, parallel=False), exact)
+
+
+def _lane_and_pool_ranges(
+    occ: np.ndarray, poses: np.ndarray, angles: np.ndarray, max_range: float, octant_planes: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    """Ranges of the scalar lane kernels and of the vector pool kernel, called directly on the same rays.
+
+    ``octant_planes``: one-pose scans' layout (every step on the beam's octant plane, lanes in lock-step when
+    there is one pose); otherwise the many-pose layout (first jump on the interleaved octant values, then the
+    isotropic field)."""
+    field = march_field(occ)
+    planes = march_sector_field(occ, field).reshape(-1)
+    cp, sp = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    cb, sb = np.cos(angles), np.sin(angles)
+    t_lim = max_range / RES
+    total = poses.shape[0] * angles.shape[0]
+    lanes, pool = np.full(total, np.nan), np.full(total, np.nan)
+    if octant_planes:
+        lockstep = poses.shape[0] == 1
+        args = (field, planes, field.size, RES, 0.0, 0.0, poses, cp, sp, cb, sb, t_lim)
+        raycast._march_range(*args, 0, total, lanes, lockstep)
+        raycast._march_pool(field, planes, field.size, raycast._NO_STARTS, *args[3:], pool)
+    else:
+        starts = np.ascontiguousarray(planes.reshape(8, -1).T).reshape(-1)
+        raycast._march_poses(field, starts, RES, 0.0, 0.0, poses, cp, sp, cb, sb, t_lim, lanes)
+        raycast._march_pool(field, field.reshape(-1), 0, starts, RES, 0.0, 0.0, poses, cp, sp, cb, sb, t_lim, pool)
+    return lanes, pool
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("octant_planes", [True, False])
+def test_vector_pool_kernel_equals_the_scalar_lane_kernels_bit_for_bit(seed: int, octant_planes: bool) -> None:
+    """The pool kernel (four beams per vector step) and the scalar kernels it replaces for poses inside the grid
+    give the same ranges bit for bit: random poses, poses on cell corners and in an occupied cell, beams along
+    the axes and diagonals, max ranges from 0 (every beam ends at once) to beyond the grid."""
+    occ = random_boxes_grid(seed)
+    rng = np.random.default_rng(500 + seed)
+    occupied_cell = np.argwhere(occ)[11]
+    corners = [[5.0, 5.0, 0.0], [7.5, 2.5, math.pi / 2], [0.05, 0.05, math.pi / 4]]
+    poses = np.vstack(
+        [random_poses(occ, 40, rng), corners, [[(occupied_cell[1] + 0.5) * RES, (occupied_cell[0] + 0.5) * RES, 1.0]]]
+    )
+    angles = np.concatenate([np.linspace(-math.pi, math.pi, 60, endpoint=False), [math.pi / 4, -3 * math.pi / 4]])
+    assert raycast._poolable(poses, 0.0, 0.0, 1.0 / RES, *occ.shape, occ.size * 8)
+    for max_range in (0.0, 0.3, 4.0, 30.0):
+        lanes, pool = _lane_and_pool_ranges(occ, poses, angles, max_range, octant_planes)
+        np.testing.assert_array_equal(pool, lanes)
+        # one pose at a time (a scan; lock-step lanes on the octant planes), and fewer beams than lanes
+        for k in (0, poses.shape[0] - 1):
+            for beams in (angles, angles[:3]):
+                lanes, pool = _lane_and_pool_ranges(occ, poses[k : k + 1], beams, max_range, octant_planes)
+                np.testing.assert_array_equal(pool, lanes)
+    assert np.mean(np.isfinite(lanes)) > 0.5  # hits, not only misses
+
+
+def test_pool_kernel_is_used_only_for_poses_inside_the_grid() -> None:
+    occ = random_boxes_grid(0)
+    inside = random_poses(occ, 5, np.random.default_rng(0))
+    assert raycast._poolable(inside, 0.0, 0.0, 1.0 / RES, *occ.shape, occ.size)
+    for outside in ([-0.01, 3.0, 0.0], [3.0, 20.0, 0.0], [np.nan, 1.0, 0.0]):
+        assert not raycast._poolable(np.vstack([inside, outside]), 0.0, 0.0, 1.0 / RES, *occ.shape, occ.size)
+    # offsets that do not fit the int32 lanes
+    assert not raycast._poolable(inside, 0.0, 0.0, 1.0 / RES, *occ.shape, 2**31)
