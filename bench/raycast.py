@@ -773,9 +773,12 @@ def _march_pool(
     cb: FloatArray,
     sb: FloatArray,
     t_lim: float,
+    start: int,
+    stop: int,
     out: FloatArray,
 ) -> None:
-    """Ranges (m) of all rays of ``poses`` (pose-major, all inside the grid: :func:`_poolable`) into ``out``.
+    """Ranges (m) of the flattened rays ``start .. stop - 1`` (pose-major) of ``poses`` (all inside the grid:
+    :func:`_poolable`) into ``out``.
 
     The same march as :func:`_march_range` (``starts`` empty: ``planes`` and ``plane_size`` as there) and
     :func:`_march_poses` (``starts`` given: the first jump by the start cell's octant value, then the isotropic
@@ -788,43 +791,33 @@ def _march_pool(
     cols = field.shape[1]
     flat = field.reshape(-1)
     inv_res = 1.0 / res
-    n = poses.shape[0]
     nb = cb.shape[0]
-    total = n * nb
     t_end = t_lim + _NUDGE_CELLS
+    p0 = start // nb
+    p1 = (stop - 1) // nb + 1 if stop > start else p0
     # per pose: the start in cells and the start cell's octant values, gathered before marching (the poses'
     # cache misses overlap)
-    gxy = np.empty((n, 2))
-    first = np.zeros((n, 8), dtype=np.int64)
-    for p in range(n):
+    gxy = np.empty((p1 - p0, 2))
+    first = np.zeros((p1 - p0, 8), dtype=np.int64)
+    for p in range(p0, p1):
         gx = (poses[p, 0] - ox) * inv_res
         gy = (poses[p, 1] - oy) * inv_res
-        gxy[p, 0] = gx
-        gxy[p, 1] = gy
+        gxy[p - p0, 0] = gx
+        gxy[p - p0, 1] = gy
         c0 = math.floor(gy) * cols + math.floor(gx)
         if starts.shape[0] > 0 and flat[c0] != FIELD_OCCUPIED:
             for o in range(8):
-                first[p, o] = starts[8 * c0 + o]
+                first[p - p0, o] = starts[8 * c0 + o]
     fstate = np.zeros((vec.NF, POOL_LANES))
     istate = np.zeros((vec.NC, POOL_LANES), dtype=np.int32)
-    fstate[vec.T, :] = math.inf  # idle
+    # every lane starts idle: it ends at the first step and takes a beam then
+    fstate[vec.T, :] = math.inf
     ray = np.full(POOL_LANES, -1, dtype=np.int64)
-    nxt = 0
-    p = 0
-    b = 0
+    nxt = start
+    p = p0
+    b = start - p0 * nb
     alive = 0
-    for k in range(min(POOL_LANES, total)):
-        if b == nb:
-            p += 1
-            b = 0
-        dx = cp[p] * cb[b] - sp[p] * sb[b]
-        dy = sp[p] * cb[b] + cp[p] * sb[b]
-        _pool_take(fstate, istate, k, gxy[p, 0], gxy[p, 1], dx, dy, first[p], plane_size, t_end, rows, cols)
-        ray[k] = nxt
-        nxt += 1
-        b += 1
-        alive += 1
-    while alive > 0:
+    while alive > 0 or nxt < stop:
         for q in range(0, POOL_LANES, 4):
             ended = vec.step4(
                 fstate, istate, planes, q, cols, rows, t_end, t_lim, res, FIELD_OCCUPIED, JUMP_UNIT_CELLS, _NUDGE_CELLS
@@ -833,23 +826,23 @@ def _march_pool(
                 k = q + _LOWEST_BIT[ended]
                 ended &= ended - 1
                 r = ray[k]
-                if r < 0:
-                    continue  # idle lane
-                out[r] = fstate[vec.RES, k]
-                if nxt < total:
+                if r >= 0:
+                    out[r] = fstate[vec.RES, k]
+                    ray[k] = -1
+                    alive -= 1
+                    fstate[vec.T, k] = math.inf
+                if nxt < stop:
                     if b == nb:
                         p += 1
                         b = 0
                     dx = cp[p] * cb[b] - sp[p] * sb[b]
                     dy = sp[p] * cb[b] + cp[p] * sb[b]
-                    _pool_take(fstate, istate, k, gxy[p, 0], gxy[p, 1], dx, dy, first[p], plane_size, t_end, rows, cols)
+                    g = p - p0
+                    _pool_take(fstate, istate, k, gxy[g, 0], gxy[g, 1], dx, dy, first[g], plane_size, t_end, rows, cols)
                     ray[k] = nxt
                     nxt += 1
                     b += 1
-                else:
-                    ray[k] = -1
-                    alive -= 1
-                    fstate[vec.T, k] = math.inf
+                    alive += 1
 
 
 @njit(cache=True, inline="always")
@@ -893,7 +886,9 @@ def _march_serial(
     cp, sp = _pose_trig(poses, angles, trig)
     t_lim = max_range / res
     if _poolable(poses, ox, oy, 1.0 / res, field.shape[0], field.shape[1], planes.shape[0]):
-        _march_pool(field, planes, plane_size, _NO_STARTS, res, ox, oy, poses, cp, sp, trig[1], trig[2], t_lim, out)
+        _march_pool(
+            field, planes, plane_size, _NO_STARTS, res, ox, oy, poses, cp, sp, trig[1], trig[2], t_lim, 0, n * nb, out
+        )
     else:
         # one pose: its beams form one fan, whose neighbours step alike (lock-step)
         _march_range(
@@ -921,7 +916,8 @@ def _march_serial_poses(
     cp, sp = _pose_trig(poses, angles, trig)
     flat = field.reshape(-1)
     if _poolable(poses, ox, oy, 1.0 / res, field.shape[0], field.shape[1], flat.shape[0]):
-        _march_pool(field, flat, 0, starts, res, ox, oy, poses, cp, sp, trig[1], trig[2], max_range / res, out)
+        t_lim = max_range / res
+        _march_pool(field, flat, 0, starts, res, ox, oy, poses, cp, sp, trig[1], trig[2], t_lim, 0, n * nb, out)
     else:
         _march_poses(field, starts, res, ox, oy, poses, cp, sp, trig[1], trig[2], max_range / res, out)
     return out.reshape((n, nb))
@@ -941,6 +937,9 @@ def _trig_rows(nb: int) -> FloatArray:
 
 #: Rays per parallel work item of the march kernel.
 _CHUNK = 256
+
+#: Rays per parallel work item of the pool kernel: larger, since a pool idles while its last beams end.
+_POOL_CHUNK = 2048
 
 
 @njit(cache=True, parallel=True)
@@ -964,10 +963,18 @@ def _march_parallel(
     cp = np.cos(poses[:, 2])
     sp = np.sin(poses[:, 2])
     t_lim = max_range / res
-    for c in prange((total + _CHUNK - 1) // _CHUNK):
-        first = c * _CHUNK
-        last = min(first + _CHUNK, total)
-        _march_range(field, planes, plane_size, res, ox, oy, poses, cp, sp, cb, sb, t_lim, first, last, out, False)
+    if _poolable(poses, ox, oy, 1.0 / res, field.shape[0], field.shape[1], planes.shape[0]):
+        for c in prange((total + _POOL_CHUNK - 1) // _POOL_CHUNK):
+            first = c * _POOL_CHUNK
+            last = min(first + _POOL_CHUNK, total)
+            _march_pool(
+                field, planes, plane_size, _NO_STARTS, res, ox, oy, poses, cp, sp, cb, sb, t_lim, first, last, out
+            )
+    else:
+        for c in prange((total + _CHUNK - 1) // _CHUNK):
+            first = c * _CHUNK
+            last = min(first + _CHUNK, total)
+            _march_range(field, planes, plane_size, res, ox, oy, poses, cp, sp, cb, sb, t_lim, first, last, out, False)
     return out.reshape((n, nb))
 
 

@@ -398,11 +398,17 @@ def _lane_and_pool_ranges(
         lockstep = poses.shape[0] == 1
         args = (field, planes, field.size, RES, 0.0, 0.0, poses, cp, sp, cb, sb, t_lim)
         raycast._march_range(*args, 0, total, lanes, lockstep)
-        raycast._march_pool(field, planes, field.size, raycast._NO_STARTS, *args[3:], pool)
+        raycast._march_pool(field, planes, field.size, raycast._NO_STARTS, *args[3:], 0, total, pool)
     else:
         starts = np.ascontiguousarray(planes.reshape(8, -1).T).reshape(-1)
         raycast._march_poses(field, starts, RES, 0.0, 0.0, poses, cp, sp, cb, sb, t_lim, lanes)
-        raycast._march_pool(field, field.reshape(-1), 0, starts, RES, 0.0, 0.0, poses, cp, sp, cb, sb, t_lim, pool)
+        pool_args = (field, field.reshape(-1), 0, starts, RES, 0.0, 0.0, poses, cp, sp, cb, sb, t_lim)
+        raycast._march_pool(*pool_args, 0, total, pool)
+        # and in pieces that start and end inside a pose's fan, as the parallel kernel cuts them
+        pieces = np.full(total, np.nan)
+        for first in range(0, total, 77):
+            raycast._march_pool(*pool_args, first, min(first + 77, total), pieces)
+        np.testing.assert_array_equal(pieces, pool)
     return lanes, pool
 
 
