@@ -32,7 +32,30 @@ numpy reference used by tests (:func:`cast_rays_reference`):
     interleaved per cell, another 1.3 MB per grid) are gathered for all poses before marching, one cache
     line per pose. The ranges are the same, bit for bit, on either field.
 
-Measured single-threaded (``tests/perf/test_raycast_perf.py``: 400 x 400 grid at 0.05 m with walls, doors
+    Casts from poses inside the grid (all the benchmark's, the filters' and the simulator's but a few)
+    march in the pool kernel (:func:`_march_pool`): the same steps on the same fields, with the same ranges
+    bit for bit, but four beams per step in LLVM vector instructions (:func:`locbench._raycast_simd.step4`,
+    a numba intrinsic), whose selects replace the scalar step's data-dependent branches. A pool of
+    :data:`POOL_LANES` beams is swept over and over; a lane whose beam ends takes the next beam at once,
+    and every lane's next cell is prefetched at each step, so that the lane's next visit, a sweep later,
+    finds it in L1. Beams from poses outside the grid, which need the slab clip first, take the scalar
+    lane kernels (:func:`_march_range`, :func:`_march_poses`), whose history follows the pool's.
+
+Pool kernel, measured single-threaded on the benchmark below, paired against the scalar lane kernels of commit
+7ae847f in one process (alternating order, CPU time, medians of 8-16 rounds; ranges compared bit for bit on 256
+scans, on 1000 x 60 and on :func:`cast_rays`): one pose x 683 beams x 1.39-1.51, 1000 poses x 60 beams x
+1.38-1.41. ``pytest tests/perf --benchmark-only`` in 12 sessions over 5 minutes at load 0.6-1.0 (the plain
+traversal read 3.2-4.5 M rays/s): scan 11.4-15.8 M rays/s, median of the sessions 12.2 M; particles 11.9-14.5
+M, median 12.8 M; march/dda 3.3-4.5 and 2.8-4.1. Every session met the issue's 10 M rays/s on one core, as did
+8 earlier ones on the same code (scan 12.2-15.1 M, particles 11.9-15.0 M). On the way: a plain wavefront in numba (one scalar branch-free step per live beam and
+sweep, compacted in place) ran x 0.49-0.70, as that step is about 130 instructions; the vector step alone costs
+about 4 ns per beam-step (150 instructions per four beams), but with the beams set up by a scalar refill that
+branched on each outcome (ends at once, first jump, occupied start cell) the pool only matched the lane kernels
+(x 0.96-1.0), half of its time in the refill; the prefetch of the next cell gave x 1.07 and the branch-free
+refill (a beam that ends at once becomes an idle lane, which its first step ends with range inf) the rest. Pools
+of 8-128 lanes measured the same (noise).
+
+Scalar lane kernels, measured single-threaded (``tests/perf/test_raycast_perf.py``: 400 x 400 grid at 0.05 m with walls, doors
 and 60 boxes, 10 m max range; 1 pose x 683 beams over 240 deg, a new pose per call, and 1000 poses x 60
 beams over 360 deg) on the 2-core development machine (AMD EPYC Zen 3 under KVM, 2.45 GHz) while other
 engineers' tests ran on it: load average 2.5-3 during the final figures, 3-9 while the ideas below were
