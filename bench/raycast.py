@@ -45,19 +45,19 @@ Pool kernel, measured single-threaded on the benchmark below, paired against the
 7ae847f in one process (alternating order, CPU time, medians of 8-16 rounds; ranges compared bit for bit on 256
 scans, on 1000 x 60 and on :func:`cast_rays`): one pose x 683 beams x 1.39-1.51, 1000 poses x 60 beams x
 1.38-1.41. ``pytest tests/perf --benchmark-only`` in 12 sessions over 5 minutes at load 0.6-1.0 (the plain
-traversal read 3.2-4.5 M rays/s): scan 11.4-15.8 M rays/s, median of the sessions 12.2 M; particles 11.9-14.5
-M, median 12.8 M; march/dda 3.3-4.5 and 2.8-4.1. Every session met the issue's 10 M rays/s on one core, as did
-8 earlier ones on the same code (scan 12.2-15.1 M, particles 11.9-15.0 M). On the way: a plain wavefront in numba (one scalar branch-free step per live beam and
-sweep, compacted in place) ran x 0.49-0.70, as that step is about 130 instructions; the vector step alone costs
-about 4 ns per beam-step (150 instructions per four beams), but with the beams set up by a scalar refill that
-branched on each outcome (ends at once, first jump, occupied start cell) the pool only matched the lane kernels
-(x 0.96-1.0), half of its time in the refill; the prefetch of the next cell gave x 1.07 and the branch-free
-refill (a beam that ends at once becomes an idle lane, which its first step ends with range inf) the rest. Pools
-of 8-128 lanes measured the same (noise).
+traversal read 3.2-4.5 M rays/s): scan 11.4-15.8 M rays/s, median of the sessions 12.2 M; particles 11.9-14.5 M,
+median 12.8 M; march/dda 3.3-4.5 and 2.8-4.1. Every session met the issue's 10 M rays/s on one core, as did 8
+earlier ones on the same code (scan 12.2-15.1 M, particles 11.9-15.0 M). On the way: a plain wavefront in numba
+(one scalar branch-free step per live beam and sweep, compacted in place) ran x 0.49-0.70, as that step is about
+130 instructions; the vector step alone costs about 4 ns per beam-step (150 instructions per four beams), but
+with the beams set up by a scalar refill that branched on each outcome (ends at once, first jump, occupied start
+cell) the pool only matched the lane kernels (x 0.96-1.0), half of its time in the refill; the prefetch of the
+next cell gave x 1.07 and the branch-free refill (a beam that ends at once becomes an idle lane, which its first
+step ends with range inf) the rest. Pools of 8-128 lanes measured the same (noise).
 
-Scalar lane kernels, measured single-threaded (``tests/perf/test_raycast_perf.py``: 400 x 400 grid at 0.05 m with walls, doors
-and 60 boxes, 10 m max range; 1 pose x 683 beams over 240 deg, a new pose per call, and 1000 poses x 60
-beams over 360 deg) on the 2-core development machine (AMD EPYC Zen 3 under KVM, 2.45 GHz) while other
+Scalar lane kernels, measured single-threaded (``tests/perf/test_raycast_perf.py``: 400 x 400 grid at 0.05 m
+with walls, doors and 60 boxes, 10 m max range; 1 pose x 683 beams over 240 deg, a new pose per call, and 1000
+poses x 60 beams over 360 deg) on the 2-core development machine (AMD EPYC Zen 3 under KVM, 2.45 GHz) while other
 engineers' tests ran on it: load average 2.5-3 during the final figures, 3-9 while the ideas below were
 tried, so every comparison interleaves the old and new kernels in one process (alternating order, CPU time
 per call, medians of 21 rounds) and absolute rates vary by 1.5x with the load. Against the kernel of commit

@@ -12,8 +12,9 @@ rooms and 60 boxes of clutter), max range 10 m, serial kernels (``parallel=False
 
 ``march`` is :func:`cast_scan`'s default (distance-field jumps, fields cached with the grid: the scan
 marches on the per-octant planes, the particles on the isotropic field, both in the vector pool kernel
-since every pose is inside the grid); ``dda`` is the plain exact traversal, kept for comparison. The issue's target is 10 M rays/s on one core for both ``march``
-workloads; the module docstring of :mod:`locbench.raycast` has the measured rates and their conditions.
+since every pose is inside the grid); ``dda`` is the plain exact traversal, kept for comparison. The
+issue's target is 10 M rays/s on one core for both ``march`` workloads; the module docstring of
+:mod:`locbench.raycast` has the measured rates and their conditions.
 """
 
 from __future__ import annotations
