@@ -1,6 +1,6 @@
 """Ray casting on an occupancy grid, shared by the laser simulator and the grid-based filters.
 
-Two numba kernels behind one API (:func:`cast_rays`, :func:`cast_scan`), plus a deliberately simple
+Two methods, in numba kernels, behind one API (:func:`cast_rays`, :func:`cast_scan`), plus a deliberately simple
 numpy reference used by tests (:func:`cast_rays_reference`):
 
 ``method="dda"``
@@ -32,7 +32,7 @@ numpy reference used by tests (:func:`cast_rays_reference`):
     interleaved per cell, another 1.3 MB per grid) are gathered for all poses before marching, one cache
     line per pose. The ranges are the same, bit for bit, on either field.
 
-    Casts from poses inside the grid (all the benchmark's, the filters' and the simulator's but a few)
+    Casts from poses inside the grid (nearly all casts of the benchmark, the filters and the simulator)
     march in the pool kernel (:func:`_march_pool`): the same steps on the same fields, with the same ranges
     bit for bit, but four beams per step in LLVM vector instructions (:func:`locbench._raycast_simd.step4`,
     a numba intrinsic), whose selects replace the scalar step's data-dependent branches. A pool of
@@ -41,7 +41,7 @@ numpy reference used by tests (:func:`cast_rays_reference`):
     finds it in L1. Beams from poses outside the grid, which need the slab clip first, take the scalar
     lane kernels (:func:`_march_range`, :func:`_march_poses`), whose history follows the pool's.
 
-Pool kernel, measured single-threaded on the benchmark below, paired against the scalar lane kernels of commit
+Pool kernel, measured single-threaded on the benchmark described below, paired against the scalar lane kernels of commit
 7ae847f in one process (alternating order, CPU time, medians of 8-16 rounds; ranges compared bit for bit on 256
 scans, on 1000 x 60 and on :func:`cast_rays`): one pose x 683 beams x 1.39-1.51, 1000 poses x 60 beams x
 1.38-1.41. ``pytest tests/perf --benchmark-only`` in 12 sessions over 5 minutes at load 0.6-1.0 (the plain
