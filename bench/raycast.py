@@ -13,9 +13,11 @@ numpy reference used by tests (:func:`cast_rays_reference`):
     of its points and any occupied cell (:func:`march_field`: the Euclidean distance transform,
     ``scipy.ndimage.distance_transform_edt``, of the occupied cells dilated by one cell), rounded down
     to half cells in a uint8. Each step moves the beam by the clearance, or, when that does not leave
-    the current cell, one cell on (a DDA step); 8 beams are traced at once per thread so that their
-    dependency chains overlap, and a cell's value is loaded when the beam enters it, so that the next
-    step's (often mispredicted) branches do not wait for the load. A jump never enters an occupied cell
+    the current cell, one cell on (a DDA step). Four beams step at once, in LLVM vector instructions
+    (:func:`locbench._raycast_simd.step4`, a numba intrinsic), whose selects replace a scalar step's
+    data-dependent branches: a pool of :data:`POOL_LANES` beams (:func:`_march_pool`) is swept over and
+    over, a lane whose beam ends takes the next beam at once, and every lane's next cell is prefetched at
+    each step, so that the lane's next visit, a sweep later, finds it in L1. A jump never enters an occupied cell
     and a hit reports the exact entry point of the cell (the later of its two slab entries), so, unlike
     range_libc's marcher (which stops within a tolerance of the wall), the ranges equal the exact
     traversal's up to rounding (about 1e-12 m); a beam crossing a cell for less than 1e-9 cells
@@ -30,16 +32,9 @@ numpy reference used by tests (:func:`cast_rays_reference`):
     which march on the isotropic field (160 kB). Serial casts from many poses take only each beam's first
     jump on the planes: all beams of a pose start in one cell, whose eight octant values (the planes
     interleaved per cell, another 1.3 MB per grid) are gathered for all poses before marching, one cache
-    line per pose. The ranges are the same, bit for bit, on either field.
-
-    Casts from poses inside the grid (nearly all casts of the benchmark, the filters and the simulator)
-    march in the pool kernel (:func:`_march_pool`): the same steps on the same fields, with the same ranges
-    bit for bit, but four beams per step in LLVM vector instructions (:func:`locbench._raycast_simd.step4`,
-    a numba intrinsic), whose selects replace the scalar step's data-dependent branches. A pool of
-    :data:`POOL_LANES` beams is swept over and over; a lane whose beam ends takes the next beam at once,
-    and every lane's next cell is prefetched at each step, so that the lane's next visit, a sweep later,
-    finds it in L1. Beams from poses outside the grid, which need the slab clip first, take the scalar
-    lane kernels (:func:`_march_range`, :func:`_march_poses`), whose history follows the pool's.
+    line per pose. The ranges are the same, bit for bit, on either field. The lanes address cells with int32
+    offsets: the march serves grids of fewer than :data:`MARCH_MAX_CELLS` cells, the octant planes grids of
+    an eighth of that (larger ones scan on the isotropic field).
 
 Pool kernel, measured single-threaded on the benchmark described below, paired against the scalar lane kernels of commit
 7ae847f in one process (alternating order, CPU time, medians of 8-16 rounds; ranges compared bit for bit on 256
@@ -53,7 +48,12 @@ earlier ones on the same code (scan 12.2-15.1 M, particles 11.9-15.0 M). On the 
 with the beams set up by a scalar refill that branched on each outcome (ends at once, first jump, occupied start
 cell) the pool only matched the lane kernels (x 0.96-1.0), half of its time in the refill; the prefetch of the
 next cell gave x 1.07 and the branch-free refill (a beam that ends at once becomes an idle lane, which its first
-step ends with range inf) the rest. Pools of 8-128 lanes measured the same (noise).
+step ends with range inf) the rest. Pools of 8-128 lanes measured the same (noise). At first the pool took
+poses inside the grid only and the scalar lane kernels below the rest; with the slab clip in the pool's set-up
+(every beam; a branch on the pose's side instead measured x 0.83-0.88) one kernel serves every pose, the same
+ranges bit for bit (also from outside the grid, in parallel and with an origin offset), at x 0.94-0.98 against
+that split (paired, 12-16 rounds). The lane kernels (``_march_range``, ``_march_poses``) are in the history up
+to commit 835edea.
 
 Scalar lane kernels, measured single-threaded (``tests/perf/test_raycast_perf.py``: 400 x 400 grid at 0.05 m
 with walls, doors and 60 boxes, 10 m max range; 1 pose x 683 beams over 240 deg, a new pose per call, and 1000
@@ -76,7 +76,7 @@ with the rays sorted by octant, branch-free steps (both moves computed, one sele
 division per ray. Earlier: finer clearance units (quarter or eighth cells) save under 1 % of the steps, and
 struct-of-arrays lane state was no faster.
 
-Many poses, first jump per pose (:func:`_march_poses`), against the kernel of commit fdd7065 on the quieter
+Many poses, first jump per pose (``_march_poses``), against the kernel of commit fdd7065 on the quieter
 machine (load 0.7-0.9), interleaved as above: 1000 x 60 7.4 -> 9.1, 7.1 -> 9.1 and 7.2 -> 9.2 M rays/s
 (medians of 21-31 rounds, paired ratios x 1.25, 1.27, 1.25), one pose x 683 unchanged (x 0.99-1.01). Steps to
 it: the per-pose set-up with the shared first jump by the isotropic clearance alone x 1.01 (the set-up is not
@@ -91,13 +91,13 @@ step on the interleaved planes (x 0.98 against the old kernel), octant values fo
 clearance is under 1 or 2 cells (x 0.90), poses ordered by 8- or 32-cell tiles (x 0.96-0.99), 6 or 12 lanes
 (noise). ``pytest tests/perf --benchmark-only`` at load 0.8-0.9 (wall clock, 30 rounds): particles 9.07 M
 rays/s median (12.5 M at the fastest round), scan 9.06 M median; the 10 M median for many poses is still not
-reached. One-pose scans refill their lanes in lock-step (:func:`_march_range`): 8 neighbouring beams at a time,
+reached. One-pose scans refill their lanes in lock-step (``_march_range``): 8 neighbouring beams at a time,
 the next 8 once all have ended. Their branches then agree from lane to lane and are predicted; against
 commit d01c1c5, interleaved as above (load 0.5-0.8): x 1.27, 1.09, 1.12, 1.15 and 1.13 in runs of 12-24 paired
 rounds, ranges bit for bit the same; lock-step with 12, 16, 24 or 32 lanes x 1.16-1.21 (noise), refilling when
 half the lanes have ended x 0.98-1.06, refilling each lane at the end of the round instead of at once x 0.97 (so
 the gain is the agreement, not where the refill code sits). For the particles' beams, 6 deg apart, lock-step
-loses (x 0.83 on :func:`_march_poses`, x 0.89 on :func:`_march_range`), so they keep refilling lane by lane.
+loses (x 0.83 on ``_march_poses``, x 0.89 on ``_march_range``), so they keep refilling lane by lane.
 Also tried without gain on the scan: an odd beam starting where its two even neighbours prove it free (an
 occupied cell entered at t lies within t + sqrt(2) and, while (t + sqrt(2)) * chord < 1, is wider than the
 wedge between them, so one of them passes through it): the odd beams' remaining distance fell to a median of
@@ -119,10 +119,9 @@ sessions over 35 minutes (load 0.1-0.8; the plain traversal's own rate moved bet
 rays/s): scan 7.8-13.5 M rays/s, median of the sessions 8.9 M; particles 8.2-11.8 M, median 9.0 M. The
 10 M target is met in 4 and 3 of the 17 sessions, not as a median.
 
-The lane loops of :func:`_march_range` and :func:`_march_poses` repeat the same step on purpose: one shared
-step function, inlined by numba, gave the same ranges but paired ratios of x 0.96-0.98 against the two copies
-(41 interleaved rounds), which is why they stay written out twice (the lanes' refill is shared,
-:func:`_next_ray`: it runs once per ray, not once per step).
+The lane loops of ``_march_range`` and ``_march_poses`` repeated the same step on purpose: one shared step
+function, inlined by numba, gave the same ranges but paired ratios of x 0.96-0.98 against the two copies (41
+interleaved rounds).
 
 Grid conventions are those of :class:`locbench.datasets.base.OccupancyGrid` (ROS map_server): row ``i``
 spans y in [oy + i*res, oy + (i+1)*res), column ``j`` spans x likewise, and ``origin_xy`` = (ox, oy) is
@@ -189,6 +188,11 @@ _HUGE = 1e300
 
 #: Field value of an occupied cell.
 FIELD_OCCUPIED = 255
+
+#: The pool kernel's lanes address cells with int32 offsets: the march serves grids below this many cells (a
+#: larger grid's distance transform alone would take 17 GB), and the eight octant planes grids below an eighth
+#: of it (larger grids scan on the isotropic field, with the same ranges).
+MARCH_MAX_CELLS = 2**31
 
 
 @njit(cache=True, inline="always")
@@ -319,417 +323,11 @@ def _dda_parallel(
     return out
 
 
-#: Rays traced at once by one thread: their dependency chains (load, jump, floor, load) overlap in the
-#: CPU's out-of-order window, which a single ray's chain leaves mostly idle.
-LANES = 8
-
-
-@njit(cache=True, inline="always")
-def _march_start(
-    field: UInt8Array,
-    planes: UInt8Array,
-    plane_size: int,
-    gx: float,
-    gy: float,
-    dx: float,
-    dy: float,
-    t_lim: float,
-    state: FloatArray,
-    cell: IntArray,
-    k: int,
-) -> bool:
-    """Set lane ``k`` up for a ray; False (and ``state[k, 0]`` = range) when it ends at once.
-
-    ``planes`` is the flattened field that the ray marches on: the isotropic one (``plane_size`` 0) or the
-    eight octant planes of :func:`march_sector_field` (``plane_size`` rows * cols). ``field`` gives the shape.
-    """
-    rows = field.shape[0]
-    cols = field.shape[1]
-    t0, t1 = _clip_to_grid(rows, cols, gx, gy, dx, dy)
-    if t0 >= t1 or t0 > t_lim:
-        state[k, 0] = math.inf
-        return False
-    # The exit boundaries of cell (i, j) are x = j + ex_x and y = i + ex_y; the entry ones j + 1 - ex_x and
-    # i + 1 - ex_y. For an axis-parallel ray a huge inverse makes the exit time +huge and the entry time <= 0.
-    ex_x = 0.0 if dx < 0.0 else 1.0
-    ex_y = 0.0 if dy < 0.0 else 1.0
-    state[k, 0] = t0
-    state[k, 1] = t0
-    state[k, 2] = gx
-    state[k, 3] = gy
-    state[k, 4] = dx
-    state[k, 5] = dy
-    state[k, 6] = 1.0 / dx if dx != 0.0 else _HUGE
-    state[k, 7] = 1.0 / dy if dy != 0.0 else _HUGE
-    state[k, 8] = ex_x - gx
-    state[k, 9] = ex_y - gy
-    state[k, 10] = 1.0 - ex_x - gx
-    state[k, 11] = 1.0 - ex_y - gy
-    i = min(max(math.floor(gy + t0 * dy), 0), rows - 1)
-    j = min(max(math.floor(gx + t0 * dx), 0), cols - 1)
-    # the octant of the direction: exact signs and |dy| > |dx| (the octant planes' convention)
-    base = (((dx < 0.0) * 2 + (dy < 0.0)) * 2 + (abs(dy) > abs(dx))) * plane_size
-    cell[k, 0] = i
-    cell[k, 1] = j
-    cell[k, 3] = base
-    cell[k, 2] = planes[base + i * cols + j]
-    return True
-
-
-@njit(cache=True, inline="always")
-def _next_ray(
-    field: UInt8Array,
-    planes: UInt8Array,
-    plane_size: int,
-    inv_res: float,
-    ox: float,
-    oy: float,
-    poses: FloatArray,
-    cp: FloatArray,
-    sp: FloatArray,
-    cb: FloatArray,
-    sb: FloatArray,
-    t_lim: float,
-    nxt: int,
-    stop: int,
-    out: FloatArray,
-    state: FloatArray,
-    cell: IntArray,
-    k: int,
-) -> tuple[int, int]:
-    """Set lane ``k`` up for the first of the rays ``nxt .. stop - 1`` that needs marching; the rays that end
-    at once get their ranges in ``out``. Returns (the next ray to take, the lane's ray or -1 if none is left)."""
-    nb = cb.shape[0]
-    while nxt < stop:
-        r = nxt
-        nxt += 1
-        p = r // nb
-        b = r - p * nb
-        gx = (poses[p, 0] - ox) * inv_res
-        gy = (poses[p, 1] - oy) * inv_res
-        dx = cp[p] * cb[b] - sp[p] * sb[b]
-        dy = sp[p] * cb[b] + cp[p] * sb[b]
-        if _march_start(field, planes, plane_size, gx, gy, dx, dy, t_lim, state, cell, k):
-            return nxt, r
-        out[r] = state[k, 0]
-    return nxt, -1
-
-
-@njit(cache=True, error_model="numpy")
-def _march_range(
-    field: UInt8Array,
-    planes: UInt8Array,
-    plane_size: int,
-    res: float,
-    ox: float,
-    oy: float,
-    poses: FloatArray,
-    cp: FloatArray,
-    sp: FloatArray,
-    cb: FloatArray,
-    sb: FloatArray,
-    t_lim: float,
-    first: int,
-    stop: int,
-    out: FloatArray,
-    lockstep: bool,
-) -> None:
-    """Ranges (m) of the flattened rays ``first .. stop - 1`` (pose-major) into ``out``, LANES at a time.
-
-    Each step of a lane moves the beam by the field value of its cell (from ``planes``, see
-    :func:`_march_start`), or one cell on (a DDA step) when that jump would not leave the cell. A hit
-    reports the cell's exact entry point.
-
-    With ``lockstep`` the lanes are refilled together, LANES consecutive rays at a time, once all of them
-    have ended; otherwise a lane takes the next ray as soon as its own ends. Lock-step suits the dense
-    beams of a scan: neighbouring beams take nearly the same steps, so the lanes' branches agree round
-    after round and are predicted, which outweighs the rounds spent waiting for the longest beam of the
-    group (one pose x 683 beams: x 1.16-1.21 in paired rounds); for beams several degrees apart it loses
-    (x 0.89 on 1000 poses x 60 beams).
-    """
-    rows = field.shape[0]
-    cols = field.shape[1]
-    inv_res = 1.0 / res
-    state = np.empty((LANES, 12))
-    # per lane: row i, column j, the field value of (i, j), the offset of the ray's plane in ``planes``
-    cell = np.empty((LANES, 4), dtype=np.int64)
-    ray = np.full(LANES, -1, dtype=np.int64)
-    nxt = first
-    active = 0
-    while True:
-        if active == 0:
-            # (re)fill all lanes: at the start, and in lock-step once the group has ended
-            for k in range(LANES):
-                nxt, r = _next_ray(
-                    field,
-                    planes,
-                    plane_size,
-                    inv_res,
-                    ox,
-                    oy,
-                    poses,
-                    cp,
-                    sp,
-                    cb,
-                    sb,
-                    t_lim,
-                    nxt,
-                    stop,
-                    out,
-                    state,
-                    cell,
-                    k,
-                )
-                ray[k] = r
-                if r >= 0:
-                    active += 1
-            if active == 0:
-                return
-        for k in range(LANES):
-            r = ray[k]
-            if r < 0:
-                continue
-            i = cell[k, 0]
-            j = cell[k, 1]
-            v = cell[k, 2]
-            t = state[k, 0]
-            done = False
-            result = math.inf
-            if v == FIELD_OCCUPIED:
-                # exact entry point: the later of the two slab entries (t0 if the beam starts inside)
-                t_in = max(state[k, 1], max((j + state[k, 10]) * state[k, 6], (i + state[k, 11]) * state[k, 7]))
-                if t_in <= t_lim:
-                    result = t_in * res
-                done = True
-            else:
-                tx = (j + state[k, 8]) * state[k, 6]
-                ty = (i + state[k, 9]) * state[k, 7]
-                t_jump = t + v * JUMP_UNIT_CELLS
-                # a zero clearance jumps nowhere: step the cell (an exit time of the cell the beam is
-                # leaving can be stale, <= t, when the beam lies on the cell's boundary)
-                if v > 0 and t_jump > min(tx, ty) + _NUDGE_CELLS:
-                    t = t_jump
-                    j = math.floor(state[k, 2] + t * state[k, 4])
-                    i = math.floor(state[k, 3] + t * state[k, 5])
-                elif tx <= ty:
-                    # step the index, not the rounded position: a nearly axis-parallel beam on a cell
-                    # boundary would otherwise floor back into the same cell and never advance
-                    t = max(t, tx)
-                    j += 1 if state[k, 4] > 0.0 else -1
-                else:
-                    t = max(t, ty)
-                    i += 1 if state[k, 5] > 0.0 else -1
-                # past max_range, or out of the grid (convex, with free space outside): no hit
-                if t > t_lim + _NUDGE_CELLS or j < 0 or j >= cols or i < 0 or i >= rows:
-                    done = True
-                else:
-                    # load the next cell's value now: the next visit's branches then do not wait for it
-                    cell[k, 2] = planes[cell[k, 3] + i * cols + j]
-                state[k, 0] = t
-                cell[k, 0] = i
-                cell[k, 1] = j
-            if done:
-                out[r] = result
-                ray[k] = -1
-                active -= 1
-                if not lockstep:
-                    nxt, r = _next_ray(
-                        field,
-                        planes,
-                        plane_size,
-                        inv_res,
-                        ox,
-                        oy,
-                        poses,
-                        cp,
-                        sp,
-                        cb,
-                        sb,
-                        t_lim,
-                        nxt,
-                        stop,
-                        out,
-                        state,
-                        cell,
-                        k,
-                    )
-                    ray[k] = r
-                    if r >= 0:
-                        active += 1
-
-
-@njit(cache=True, error_model="numpy")
-def _march_poses(
-    field: UInt8Array,
-    starts: UInt8Array,
-    res: float,
-    ox: float,
-    oy: float,
-    poses: FloatArray,
-    cp: FloatArray,
-    sp: FloatArray,
-    cb: FloatArray,
-    sb: FloatArray,
-    t_lim: float,
-    out: FloatArray,
-) -> None:
-    """Ranges (m) of all rays of ``poses`` (pose-major) into ``out``, marching on ``field``, LANES at a time.
-
-    The steps are those of :func:`_march_range` on the isotropic field; only the first one is shared per pose.
-    All beams of a pose start at the same point, in the same cell, so each jumps first by that cell's value
-    for the beam's octant: ``starts`` (rows * cols * 8, uint8) holds the octant planes of
-    :func:`march_sector_field` interleaved per cell, so that a pose's eight values share one cache line (an
-    empty ``starts`` jumps by the isotropic value). A value of at least 3 units (1.5 cells, more than a
-    cell's diagonal) always leaves the start cell, so this jump is the step that the lane would take from
-    t = 0. After it the beam marches on the isotropic field (160 kB for 400 x 400 cells), which stays in
-    cache where the planes (1.3 MB) would not: the shared start value costs one cache line per pose, a
-    per-step octant value one per step.
-    """
-    flat = field.reshape(-1)
-    n = poses.shape[0]
-    nb = cb.shape[0]
-    rows = field.shape[0]
-    cols = field.shape[1]
-    inv_res = 1.0 / res
-    state = np.empty((LANES, 12))
-    cell = np.empty((LANES, 4), dtype=np.int64)
-    ray = np.full(LANES, -1, dtype=np.int64)
-    # per pose: the start in cells and the start cell's value per octant (0: no shared first jump), gathered
-    # first, so that the poses' cache misses overlap instead of stalling each pose's first rays
-    gxy = np.empty((n, 2))
-    pv = np.zeros((n, 8), dtype=np.int64)
-    for p in range(n):
-        gx = (poses[p, 0] - ox) * inv_res
-        gy = (poses[p, 1] - oy) * inv_res
-        gxy[p, 0] = gx
-        gxy[p, 1] = gy
-        if 0.0 <= gx < cols and 0.0 <= gy < rows:
-            c0 = math.floor(gy) * cols + math.floor(gx)
-            if flat[c0] != FIELD_OCCUPIED:
-                if starts.shape[0] == 0:
-                    v0 = flat[c0]
-                    for o in range(8):
-                        pv[p, o] = v0
-                else:
-                    for o in range(8):
-                        pv[p, o] = starts[8 * c0 + o]
-    p = 0
-    b = 0
-    gx = 0.0
-    gy = 0.0
-    pending = n * nb
-    active = 0
-    while active > 0 or pending > 0:
-        for k in range(LANES):
-            r = ray[k]
-            if r >= 0:
-                i = cell[k, 0]
-                j = cell[k, 1]
-                v = cell[k, 2]
-                t = state[k, 0]
-                done = False
-                result = math.inf
-                if v == FIELD_OCCUPIED:
-                    t_in = max(state[k, 1], max((j + state[k, 10]) * state[k, 6], (i + state[k, 11]) * state[k, 7]))
-                    if t_in <= t_lim:
-                        result = t_in * res
-                    done = True
-                else:
-                    tx = (j + state[k, 8]) * state[k, 6]
-                    ty = (i + state[k, 9]) * state[k, 7]
-                    t_jump = t + v * JUMP_UNIT_CELLS
-                    if v > 0 and t_jump > min(tx, ty) + _NUDGE_CELLS:
-                        t = t_jump
-                        j = math.floor(state[k, 2] + t * state[k, 4])
-                        i = math.floor(state[k, 3] + t * state[k, 5])
-                    elif tx <= ty:
-                        t = max(t, tx)
-                        j += 1 if state[k, 4] > 0.0 else -1
-                    else:
-                        t = max(t, ty)
-                        i += 1 if state[k, 5] > 0.0 else -1
-                    if t > t_lim + _NUDGE_CELLS or j < 0 or j >= cols or i < 0 or i >= rows:
-                        done = True
-                    else:
-                        cell[k, 2] = flat[i * cols + j]
-                    state[k, 0] = t
-                    cell[k, 0] = i
-                    cell[k, 1] = j
-                if not done:
-                    continue
-                out[r] = result
-                ray[k] = -1
-                active -= 1
-            # refill the lane with the next ray that needs marching; its first jump is taken here
-            while pending > 0:
-                pending -= 1
-                if b == nb:
-                    p += 1
-                    b = 0
-                if b == 0:
-                    gx = gxy[p, 0]
-                    gy = gxy[p, 1]
-                r = p * nb + b
-                dx = cp[p] * cb[b] - sp[p] * sb[b]
-                dy = sp[p] * cb[b] + cp[p] * sb[b]
-                b += 1
-                # the octant as in _march_start: exact signs and |dy| > |dx|
-                v0 = pv[p, ((dx < 0.0) * 2 + (dy < 0.0)) * 2 + (abs(dy) > abs(dx))]
-                if v0 >= 3:
-                    t = v0 * JUMP_UNIT_CELLS
-                    j = math.floor(gx + t * dx)
-                    i = math.floor(gy + t * dy)
-                    if t > t_lim + _NUDGE_CELLS or j < 0 or j >= cols or i < 0 or i >= rows:
-                        out[r] = math.inf
-                        continue
-                    ex_x = 0.0 if dx < 0.0 else 1.0
-                    ex_y = 0.0 if dy < 0.0 else 1.0
-                    state[k, 0] = t
-                    state[k, 1] = 0.0
-                    state[k, 2] = gx
-                    state[k, 3] = gy
-                    state[k, 4] = dx
-                    state[k, 5] = dy
-                    state[k, 6] = 1.0 / dx if dx != 0.0 else _HUGE
-                    state[k, 7] = 1.0 / dy if dy != 0.0 else _HUGE
-                    state[k, 8] = ex_x - gx
-                    state[k, 9] = ex_y - gy
-                    state[k, 10] = 1.0 - ex_x - gx
-                    state[k, 11] = 1.0 - ex_y - gy
-                    cell[k, 0] = i
-                    cell[k, 1] = j
-                    cell[k, 3] = 0
-                    cell[k, 2] = flat[i * cols + j]
-                    ray[k] = r
-                    active += 1
-                    break
-                # from outside the grid, in an occupied cell or near a wall: the plain set-up
-                if _march_start(field, flat, 0, gx, gy, dx, dy, t_lim, state, cell, k):
-                    ray[k] = r
-                    active += 1
-                    break
-                out[r] = state[k, 0]
-
-
 #: Lanes of the pool kernel (:func:`_march_pool`), a multiple of 4: each sweep steps them all, four at a time.
 POOL_LANES = 32
 
 #: The lowest set bit's index of each 4-bit mask (0 for 0).
 _LOWEST_BIT = np.array([0, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0], dtype=np.int64)
-
-
-@njit(cache=True)
-def _poolable(poses: FloatArray, ox: float, oy: float, inv_res: float, rows: int, cols: int, size: int) -> bool:
-    """Whether :func:`_march_pool` takes these poses: all start inside the grid (the pool sets beams up without
-    the slab clip) and every cell offset of ``size`` elements fits its int32 lanes."""
-    if size >= 2**31:
-        return False
-    for p in range(poses.shape[0]):
-        gx = (poses[p, 0] - ox) * inv_res
-        gy = (poses[p, 1] - oy) * inv_res
-        if not (0.0 <= gx < cols and 0.0 <= gy < rows):
-            return False
-    return True
 
 
 @njit(cache=True, inline="always")
@@ -743,29 +341,41 @@ def _pool_take(
     dy: float,
     first: IntArray,
     plane_size: int,
+    t_lim: float,
     t_end: float,
     rows: int,
     cols: int,
 ) -> None:
-    """Set lane ``k`` of the pool up for a beam from (gx, gy), inside the grid, along (dx, dy).
+    """Set lane ``k`` of the pool up for a beam from (gx, gy), in cells, along the unit direction (dx, dy).
 
-    ``first`` holds the start cell's value per octant (0: no shared first jump, see :func:`_march_poses`). A beam
-    that ends at once (its first jump leaves the grid or passes ``t_end``) becomes an idle lane, which its first
-    step ends with range inf: no branch on it here.
+    ``first`` holds the start cell's value per octant for a shared first jump (all 0 for none, and for a pose
+    outside the grid or in an occupied cell; see :func:`_march_pool`). A beam from outside the grid starts where
+    it enters it (slab clip). A beam that ends at once (it misses the grid, enters it past ``t_lim``, or its first
+    jump leaves the grid or passes ``t_end``) becomes an idle lane, which its first step ends with range inf: no
+    branch on it here.
     """
     neg_x = dx < 0.0
     neg_y = dy < 0.0
+    # the octant of the direction: exact signs and |dy| > |dx| (the octant planes' convention)
     octant = (neg_x * 2 + neg_y) * 2 + (abs(dy) > abs(dx))
+    t0, t1 = _clip_to_grid(rows, cols, gx, gy, dx, dy)  # (0, inf) from inside the grid
+    missed = (t0 >= t1) | (t0 > t_lim)
     v0 = first[octant]
-    # a first jump of 3 units (1.5 cells) or more always leaves the start cell; t = 0 gives the start cell
-    t = v0 * JUMP_UNIT_CELLS if v0 >= 3 else 0.0
+    # a first jump of 3 units (1.5 cells) or more always leaves the start cell: it is the step that the march
+    # would take from t = 0
+    jump = v0 >= 3
+    t = v0 * JUMP_UNIT_CELLS if jump else (0.0 if missed else t0)
     j = math.floor(gx + t * dx)
     i = math.floor(gy + t * dy)
-    gone = (t > t_end) | (j < 0) | (j >= cols) | (i < 0) | (i >= rows)
+    if not jump:
+        # a beam from outside starts where it enters the grid: in the cell on the grid's edge
+        j = min(max(j, 0), cols - 1)
+        i = min(max(i, 0), rows - 1)
+    gone = missed | (t > t_end) | (j < 0) | (j >= cols) | (i < 0) | (i >= rows)
     ex_x = 0.0 if neg_x else 1.0
     ex_y = 0.0 if neg_y else 1.0
     fstate[vec.T, k] = math.inf if gone else t
-    fstate[vec.T0, k] = 0.0
+    fstate[vec.T0, k] = t0
     fstate[vec.GX, k] = gx
     fstate[vec.GY, k] = gy
     fstate[vec.DX, k] = dx
@@ -800,15 +410,20 @@ def _march_pool(
     stop: int,
     out: FloatArray,
 ) -> None:
-    """Ranges (m) of the flattened rays ``start .. stop - 1`` (pose-major) of ``poses`` (all inside the grid:
-    :func:`_poolable`) into ``out``.
+    """Ranges (m) of the flattened rays ``start .. stop - 1`` (pose-major) of ``poses`` into ``out``.
 
-    The same march as :func:`_march_range` (``starts`` empty: ``planes`` and ``plane_size`` as there) and
-    :func:`_march_poses` (``starts`` given: the first jump by the start cell's octant value, then the isotropic
-    ``planes``), with the same ranges bit for bit, but stepped four lanes at a time by the vector step
-    :func:`locbench._raycast_simd.step4`: a pool of :data:`POOL_LANES` beams is swept over and over, and a lane
-    whose beam has ended takes the next beam at once. Its selects replace the scalar step's unpredictable
-    branches, which cost about half of the scalar kernels' time; what is left of branching is one per ended beam.
+    ``field`` gives the grid's shape and occupancy. The beams march on ``planes``: the isotropic field
+    flattened (``plane_size`` 0), or the eight octant planes of :func:`march_sector_field` flattened
+    (``plane_size`` rows * cols), where each beam reads its octant's plane. With ``starts`` (rows * cols * 8,
+    uint8: the octant planes interleaved per cell, so that a pose's eight values share one cache line) every
+    beam from a free cell jumps first by its start cell's value for its octant, gathered per pose before
+    marching so that the poses' cache misses overlap; an empty ``starts`` gives no shared first jump.
+
+    Each step moves a beam by the value of its cell, or one cell on (a DDA step) when that jump would not leave
+    the cell; a hit reports the cell's exact entry point. Four lanes step at once (the vector step
+    :func:`locbench._raycast_simd.step4`): a pool of :data:`POOL_LANES` beams is swept over and over, and a lane
+    whose beam has ended takes the next beam at once. The step's selects replace the unpredictable branches of a
+    scalar step; what is left of branching is one per ended beam.
     """
     rows = field.shape[0]
     cols = field.shape[1]
@@ -818,8 +433,6 @@ def _march_pool(
     t_end = t_lim + _NUDGE_CELLS
     p0 = start // nb
     p1 = (stop - 1) // nb + 1 if stop > start else p0
-    # per pose: the start in cells and the start cell's octant values, gathered before marching (the poses'
-    # cache misses overlap)
     gxy = np.empty((p1 - p0, 2))
     first = np.zeros((p1 - p0, 8), dtype=np.int64)
     for p in range(p0, p1):
@@ -827,10 +440,11 @@ def _march_pool(
         gy = (poses[p, 1] - oy) * inv_res
         gxy[p - p0, 0] = gx
         gxy[p - p0, 1] = gy
-        c0 = math.floor(gy) * cols + math.floor(gx)
-        if starts.shape[0] > 0 and flat[c0] != FIELD_OCCUPIED:
-            for o in range(8):
-                first[p - p0, o] = starts[8 * c0 + o]
+        if starts.shape[0] > 0 and 0.0 <= gx < cols and 0.0 <= gy < rows:
+            c0 = math.floor(gy) * cols + math.floor(gx)
+            if flat[c0] != FIELD_OCCUPIED:
+                for o in range(8):
+                    first[p - p0, o] = starts[8 * c0 + o]
     fstate = np.zeros((vec.NF, POOL_LANES))
     istate = np.zeros((vec.NC, POOL_LANES), dtype=np.int32)
     # every lane starts idle: it ends at the first step and takes a beam then
@@ -858,10 +472,13 @@ def _march_pool(
                     if b == nb:
                         p += 1
                         b = 0
+                    # cos/sin of (heading + beam) by the sum formulas: no trigonometry per ray
                     dx = cp[p] * cb[b] - sp[p] * sb[b]
                     dy = sp[p] * cb[b] + cp[p] * sb[b]
                     g = p - p0
-                    _pool_take(fstate, istate, k, gxy[g, 0], gxy[g, 1], dx, dy, first[g], plane_size, t_end, rows, cols)
+                    _pool_take(
+                        fstate, istate, k, gxy[g, 0], gxy[g, 1], dx, dy, first[g], plane_size, t_lim, t_end, rows, cols
+                    )
                     ray[k] = nxt
                     nxt += 1
                     b += 1
@@ -892,37 +509,6 @@ def _march_serial(
     field: UInt8Array,
     planes: UInt8Array,
     plane_size: int,
-    res: float,
-    ox: float,
-    oy: float,
-    poses: FloatArray,
-    angles: FloatArray,
-    max_range: float,
-    trig: FloatArray,
-) -> FloatArray:
-    """Serial march from ``poses`` (3,) or (N, 3), returning (N, B); ``trig`` (3, B) caches (angles, cos, sin)
-    between calls and is refreshed here if stale."""
-    poses = poses.reshape((-1, 3))
-    n = poses.shape[0]
-    nb = angles.shape[0]
-    out = np.empty(n * nb)
-    cp, sp = _pose_trig(poses, angles, trig)
-    t_lim = max_range / res
-    if _poolable(poses, ox, oy, 1.0 / res, field.shape[0], field.shape[1], planes.shape[0]):
-        _march_pool(
-            field, planes, plane_size, _NO_STARTS, res, ox, oy, poses, cp, sp, trig[1], trig[2], t_lim, 0, n * nb, out
-        )
-    else:
-        # one pose: its beams form one fan, whose neighbours step alike (lock-step)
-        _march_range(
-            field, planes, plane_size, res, ox, oy, poses, cp, sp, trig[1], trig[2], t_lim, 0, n * nb, out, n == 1
-        )
-    return out.reshape((n, nb))
-
-
-@njit(cache=True, error_model="numpy")
-def _march_serial_poses(
-    field: UInt8Array,
     starts: UInt8Array,
     res: float,
     ox: float,
@@ -932,17 +518,15 @@ def _march_serial_poses(
     max_range: float,
     trig: FloatArray,
 ) -> FloatArray:
-    """Serial march from several poses (:func:`_march_poses`); ``trig`` as in :func:`_march_serial`."""
+    """Serial march (:func:`_march_pool`, arguments as there) from ``poses`` (3,) or (N, 3), returning (N, B);
+    ``trig`` (3, B) caches (angles, cos, sin) between calls and is refreshed here if stale."""
+    poses = poses.reshape((-1, 3))
     n = poses.shape[0]
     nb = angles.shape[0]
     out = np.empty(n * nb)
     cp, sp = _pose_trig(poses, angles, trig)
-    flat = field.reshape(-1)
-    if _poolable(poses, ox, oy, 1.0 / res, field.shape[0], field.shape[1], flat.shape[0]):
-        t_lim = max_range / res
-        _march_pool(field, flat, 0, starts, res, ox, oy, poses, cp, sp, trig[1], trig[2], t_lim, 0, n * nb, out)
-    else:
-        _march_poses(field, starts, res, ox, oy, poses, cp, sp, trig[1], trig[2], max_range / res, out)
+    t_lim = max_range / res
+    _march_pool(field, planes, plane_size, starts, res, ox, oy, poses, cp, sp, trig[1], trig[2], t_lim, 0, n * nb, out)
     return out.reshape((n, nb))
 
 
@@ -958,18 +542,13 @@ def _trig_rows(nb: int) -> FloatArray:
     return trig
 
 
-#: Rays per parallel work item of the march kernel.
-_CHUNK = 256
-
-#: Rays per parallel work item of the pool kernel: larger, since a pool idles while its last beams end.
-_POOL_CHUNK = 2048
+#: Rays per parallel work item of the march kernel: a pool (:func:`_march_pool`) idles while its last beams end.
+_CHUNK = 2048
 
 
 @njit(cache=True, parallel=True)
 def _march_parallel(
     field: UInt8Array,
-    planes: UInt8Array,
-    plane_size: int,
     res: float,
     ox: float,
     oy: float,
@@ -977,27 +556,21 @@ def _march_parallel(
     angles: FloatArray,
     max_range: float,
 ) -> FloatArray:
+    """March from ``poses`` on the isotropic ``field``, the rays spread over numba's threads."""
     n = poses.shape[0]
     nb = angles.shape[0]
     total = n * nb
     out = np.empty(total)
+    flat = field.reshape(-1)
     cb = np.cos(angles)
     sb = np.sin(angles)
     cp = np.cos(poses[:, 2])
     sp = np.sin(poses[:, 2])
     t_lim = max_range / res
-    if _poolable(poses, ox, oy, 1.0 / res, field.shape[0], field.shape[1], planes.shape[0]):
-        for c in prange((total + _POOL_CHUNK - 1) // _POOL_CHUNK):
-            first = c * _POOL_CHUNK
-            last = min(first + _POOL_CHUNK, total)
-            _march_pool(
-                field, planes, plane_size, _NO_STARTS, res, ox, oy, poses, cp, sp, cb, sb, t_lim, first, last, out
-            )
-    else:
-        for c in prange((total + _CHUNK - 1) // _CHUNK):
-            first = c * _CHUNK
-            last = min(first + _CHUNK, total)
-            _march_range(field, planes, plane_size, res, ox, oy, poses, cp, sp, cb, sb, t_lim, first, last, out, False)
+    for c in prange((total + _CHUNK - 1) // _CHUNK):
+        first = c * _CHUNK
+        last = min(first + _CHUNK, total)
+        _march_pool(field, flat, 0, _NO_STARTS, res, ox, oy, poses, cp, sp, cb, sb, t_lim, first, last, out)
     return out.reshape((n, nb))
 
 
@@ -1013,6 +586,11 @@ def march_field(occupied: npt.ArrayLike) -> UInt8Array:
     clearance is the Euclidean distance transform of the occupied cells dilated by one cell.
     """
     occ = np.ascontiguousarray(occupied, dtype=np.bool_)
+    if occ.size >= MARCH_MAX_CELLS:
+        raise ValueError(
+            f"the march serves grids of fewer than {MARCH_MAX_CELLS} cells, got {occ.shape[0]} x {occ.shape[1]}: "
+            "use method='dda'"
+        )
     if not occ.any():
         return np.full(occ.shape, FIELD_OCCUPIED - 1, dtype=np.uint8)
     near = binary_dilation(occ, structure=np.ones((3, 3), dtype=bool))
@@ -1130,7 +708,7 @@ def cast_rays(
     occ, p, a = _check_inputs(occupied, resolution, poses, angles, max_range)
     n_rays = p.shape[0] * a.shape[0]
     if method == "auto":
-        method = "march" if n_rays >= AUTO_MARCH_RAYS_PER_CELL * occ.size else "dda"
+        method = "march" if AUTO_MARCH_RAYS_PER_CELL * occ.size <= n_rays and occ.size < MARCH_MAX_CELLS else "dda"
     grid_array = march_field(occ) if method == "march" else occ
     return _run(grid_array, method, float(resolution), origin_xy, p, a, float(max_range), parallel)
 
@@ -1150,12 +728,10 @@ def _run(
     oy = float(origin_xy[1])
     if method == "march":
         field = cast("UInt8Array", grid_array)
-        planes = field.reshape(-1)
         if threads:
-            return _march_parallel(field, planes, 0, resolution, ox, oy, p, a, max_range)
-        if p.shape[0] > 1:
-            return _march_serial_poses(field, _NO_STARTS, resolution, ox, oy, p, a, max_range, _trig_rows(a.shape[0]))
-        return _march_serial(field, planes, 0, resolution, ox, oy, p, a, max_range, _trig_rows(a.shape[0]))
+            return _march_parallel(field, resolution, ox, oy, p, a, max_range)
+        flat = field.reshape(-1)
+        return _march_serial(field, flat, 0, _NO_STARTS, resolution, ox, oy, p, a, max_range, _trig_rows(a.shape[0]))
     occ = cast("BoolArray", grid_array)
     return (
         _dda_parallel(occ, resolution, ox, oy, p, a, max_range)
@@ -1195,7 +771,7 @@ def _sector_planes(grid: OccupancyGrid, arrays: _GridArrays) -> UInt8Array:
     return planes
 
 
-#: ``starts`` of :func:`_march_poses` that jumps first by the isotropic clearance (no octant planes at hand).
+#: ``starts`` of :func:`_march_pool` for no shared first jump.
 _NO_STARTS = np.zeros(0, dtype=np.uint8)
 
 #: The octant planes interleaved per cell (rows * cols * 8) per grid object, for casts from many poses.
@@ -1211,10 +787,10 @@ def _start_octants(grid: OccupancyGrid, arrays: _GridArrays) -> UInt8Array:
 
 
 #: Per grid object, the leading arguments of :func:`_march_serial` for one-pose scans (field, octant planes,
-#: plane size, resolution, ox, oy), so that :func:`cast_scan`'s fast path finds them in one lookup.
-_SCAN_CACHE: weakref.WeakKeyDictionary[OccupancyGrid, tuple[UInt8Array, UInt8Array, int, float, float, float]] = (
-    weakref.WeakKeyDictionary()
-)
+#: plane size, no first jump, resolution, ox, oy), so that :func:`cast_scan`'s fast path finds them in one lookup.
+_SCAN_CACHE: weakref.WeakKeyDictionary[
+    OccupancyGrid, tuple[UInt8Array, UInt8Array, int, UInt8Array, float, float, float]
+] = weakref.WeakKeyDictionary()
 
 
 def _march_one_pose(
@@ -1226,7 +802,18 @@ def _march_one_pose(
     scan = _SCAN_CACHE.get(grid)
     if scan is None:
         field = arrays.field
-        scan = (field, _sector_planes(grid, arrays), field.size, arrays.resolution, arrays.ox, arrays.oy)
+        if 8 * field.size < MARCH_MAX_CELLS:
+            scan = (
+                field,
+                _sector_planes(grid, arrays),
+                field.size,
+                _NO_STARTS,
+                arrays.resolution,
+                arrays.ox,
+                arrays.oy,
+            )
+        else:
+            scan = (field, field.reshape(-1), 0, _NO_STARTS, arrays.resolution, arrays.ox, arrays.oy)
         _SCAN_CACHE[grid] = scan
     return _march_serial(*scan, pose, angles, max_range, _trig_rows(angles.shape[0]))[0]
 
@@ -1319,8 +906,10 @@ def cast_scan(
         out = _march_one_pose(grid, arrays, p[0], a, float(max_range))[None]
     elif not _use_threads(parallel, p.shape[0] * a.shape[0]):
         # several poses, serial: each beam's first jump on the octant planes, then the isotropic field
-        out = _march_serial_poses(
+        out = _march_serial(
             arrays.field,
+            arrays.field.reshape(-1),
+            0,
             _start_octants(grid, arrays),
             arrays.resolution,
             arrays.ox,

@@ -379,70 +379,84 @@ def test_many_pose_casts_terminate_on_lattice_poses_along_cell_boundaries() -> N
     _assert_lattice_ranges(cast_scan(grid, lattice, angles, 8.0, parallel=False), exact)
 
 
-def _lane_and_pool_ranges(
-    occ: np.ndarray, poses: np.ndarray, angles: np.ndarray, max_range: float, octant_planes: bool
-) -> tuple[np.ndarray, np.ndarray]:
-    """Ranges of the scalar lane kernels and of the vector pool kernel, called directly on the same rays.
-
-    ``octant_planes``: one-pose scans' layout (every step on the beam's octant plane, lanes in lock-step when
-    there is one pose); otherwise the many-pose layout (first jump on the interleaved octant values, then the
-    isotropic field)."""
+def _pool_ranges(occ: np.ndarray, poses: np.ndarray, angles: np.ndarray, max_range: float) -> dict[str, np.ndarray]:
+    """Ranges of the pool kernel, called directly on the same rays in each of its layouts: the isotropic field,
+    the octant planes (one-pose scans), the isotropic field after a first jump on the interleaved octant values
+    (many poses), and that last one cut into pieces of 77 rays that start and end inside a pose's fan (as the
+    parallel kernel cuts the rays)."""
     field = march_field(occ)
+    flat = field.reshape(-1)
     planes = march_sector_field(occ, field).reshape(-1)
-    cp, sp = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-    cb, sb = np.cos(angles), np.sin(angles)
+    starts = np.ascontiguousarray(planes.reshape(8, -1).T).reshape(-1)
+    rays = (RES, 0.0, 0.0, poses, np.cos(poses[:, 2]), np.sin(poses[:, 2]), np.cos(angles), np.sin(angles))
     t_lim = max_range / RES
     total = poses.shape[0] * angles.shape[0]
-    lanes, pool = np.full(total, np.nan), np.full(total, np.nan)
-    if octant_planes:
-        lockstep = poses.shape[0] == 1
-        args = (field, planes, field.size, RES, 0.0, 0.0, poses, cp, sp, cb, sb, t_lim)
-        raycast._march_range(*args, 0, total, lanes, lockstep)
-        raycast._march_pool(field, planes, field.size, raycast._NO_STARTS, *args[3:], 0, total, pool)
-    else:
-        starts = np.ascontiguousarray(planes.reshape(8, -1).T).reshape(-1)
-        raycast._march_poses(field, starts, RES, 0.0, 0.0, poses, cp, sp, cb, sb, t_lim, lanes)
-        pool_args = (field, field.reshape(-1), 0, starts, RES, 0.0, 0.0, poses, cp, sp, cb, sb, t_lim)
-        raycast._march_pool(*pool_args, 0, total, pool)
-        # and in pieces that start and end inside a pose's fan, as the parallel kernel cuts them
-        pieces = np.full(total, np.nan)
-        for first in range(0, total, 77):
-            raycast._march_pool(*pool_args, first, min(first + 77, total), pieces)
-        np.testing.assert_array_equal(pieces, pool)
-    return lanes, pool
+    layouts = {"isotropic": (flat, 0, raycast._NO_STARTS), "octant planes": (planes, field.size, raycast._NO_STARTS)}
+    layouts["first jump"] = (flat, 0, starts)
+    out = {}
+    for name, (marched, plane_size, first) in layouts.items():
+        out[name] = np.full(total, np.nan)
+        raycast._march_pool(field, marched, plane_size, first, *rays, t_lim, 0, total, out[name])
+    out["pieces"] = np.full(total, np.nan)
+    for start in range(0, total, 77):
+        raycast._march_pool(field, flat, 0, starts, *rays, t_lim, start, min(start + 77, total), out["pieces"])
+    return out
 
 
 @pytest.mark.parametrize("seed", [0, 1])
-@pytest.mark.parametrize("octant_planes", [True, False])
-def test_vector_pool_kernel_equals_the_scalar_lane_kernels_bit_for_bit(seed: int, octant_planes: bool) -> None:
-    """The pool kernel (four beams per vector step) and the scalar kernels it replaces for poses inside the grid
-    give the same ranges bit for bit: random poses, poses on cell corners and in an occupied cell, beams along
-    the axes and diagonals, max ranges from 0 (every beam ends at once) to beyond the grid."""
+def test_pool_kernel_gives_the_same_ranges_in_every_layout(seed: int) -> None:
+    """The pool kernel's ranges are the same bit for bit on the isotropic field, on the octant planes and after a
+    first jump, whole or in pieces: random poses, poses on cell corners, in an occupied cell and outside the
+    grid (beams that enter it, miss it or enter it past max range), beams along the axes and diagonals, max
+    ranges from 0 (every beam ends at once) to beyond the grid, one pose and fans of fewer beams than lanes."""
     occ = random_boxes_grid(seed)
     rng = np.random.default_rng(500 + seed)
     occupied_cell = np.argwhere(occ)[11]
-    corners = [[5.0, 5.0, 0.0], [7.5, 2.5, math.pi / 2], [0.05, 0.05, math.pi / 4]]
-    poses = np.vstack(
-        [random_poses(occ, 40, rng), corners, [[(occupied_cell[1] + 0.5) * RES, (occupied_cell[0] + 0.5) * RES, 1.0]]]
-    )
+    special = [
+        [5.0, 5.0, 0.0],  # on cell corners
+        [7.5, 2.5, math.pi / 2],
+        [0.05, 0.05, math.pi / 4],
+        [(occupied_cell[1] + 0.5) * RES, (occupied_cell[0] + 0.5) * RES, 1.0],  # in an occupied cell
+        [-0.7, 3.3, 0.2],  # outside the grid
+        [25.0, -1.0, 2.5],
+        [-50.0, -50.0, math.pi / 4],
+        [10.0, 30.0, 0.0],
+    ]
+    poses = np.vstack([random_poses(occ, 40, rng), special])
     angles = np.concatenate([np.linspace(-math.pi, math.pi, 60, endpoint=False), [math.pi / 4, -3 * math.pi / 4]])
-    assert raycast._poolable(poses, 0.0, 0.0, 1.0 / RES, *occ.shape, occ.size * 8)
+    dda = cast_rays(occ, RES, (0.0, 0.0), poses, angles, 30.0, method="dda").reshape(-1)
     for max_range in (0.0, 0.3, 4.0, 30.0):
-        lanes, pool = _lane_and_pool_ranges(occ, poses, angles, max_range, octant_planes)
-        np.testing.assert_array_equal(pool, lanes)
-        # one pose at a time (a scan; lock-step lanes on the octant planes), and fewer beams than lanes
-        for k in (0, poses.shape[0] - 1):
+        ranges = _pool_ranges(occ, poses, angles, max_range)
+        for name in ("octant planes", "first jump", "pieces"):
+            np.testing.assert_array_equal(ranges[name], ranges["isotropic"], err_msg=name)
+        for k in (0, 40, poses.shape[0] - 4):  # one pose (a scan), and fewer beams than lanes
             for beams in (angles, angles[:3]):
-                lanes, pool = _lane_and_pool_ranges(occ, poses[k : k + 1], beams, max_range, octant_planes)
-                np.testing.assert_array_equal(pool, lanes)
-    assert np.mean(np.isfinite(lanes)) > 0.5  # hits, not only misses
+                one = _pool_ranges(occ, poses[k : k + 1], beams, max_range)
+                for name in ("octant planes", "first jump", "pieces"):
+                    np.testing.assert_array_equal(one[name], one["isotropic"], err_msg=name)
+    # and they are the exact traversal's, but for beams through a cell corner
+    with np.errstate(invalid="ignore"):  # inf - inf
+        same = (ranges["isotropic"] == dda) | (np.abs(ranges["isotropic"] - dda) <= 1e-9)
+    assert np.mean(same) > 0.999
+    assert np.mean(np.isfinite(dda)) > 0.5  # hits, not only misses
 
 
-def test_pool_kernel_is_used_only_for_poses_inside_the_grid() -> None:
+def test_grids_beyond_the_march_offsets_scan_on_the_isotropic_field_or_take_the_traversal(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The pool's int32 offsets bound the grids it marches: with the bound lowered to this test's grid, one-pose
+    scans march on the isotropic field (same ranges), and grids at the bound raise for ``march`` and take
+    ``dda`` under ``auto``."""
     occ = random_boxes_grid(0)
-    inside = random_poses(occ, 5, np.random.default_rng(0))
-    assert raycast._poolable(inside, 0.0, 0.0, 1.0 / RES, *occ.shape, occ.size)
-    for outside in ([-0.01, 3.0, 0.0], [3.0, 20.0, 0.0], [np.nan, 1.0, 0.0]):
-        assert not raycast._poolable(np.vstack([inside, outside]), 0.0, 0.0, 1.0 / RES, *occ.shape, occ.size)
-    # offsets that do not fit the int32 lanes
-    assert not raycast._poolable(inside, 0.0, 0.0, 1.0 / RES, *occ.shape, 2**31)
+    pose = np.array([6.0, 7.0, 0.3])
+    angles = np.linspace(-2.0, 2.0, 101)
+    expected = cast_scan(OccupancyGrid(occupancy=occ.astype(float), resolution=RES), pose, angles, 12.0)
+    monkeypatch.setattr(raycast, "MARCH_MAX_CELLS", 4 * occ.size)
+    grid = OccupancyGrid(occupancy=occ.astype(float), resolution=RES)
+    np.testing.assert_array_equal(cast_scan(grid, pose, angles, 12.0), expected)
+    assert grid not in raycast._SECTOR_CACHE  # the octant planes were not built
+    monkeypatch.setattr(raycast, "MARCH_MAX_CELLS", occ.size)
+    with pytest.raises(ValueError, match="method='dda'"):
+        cast_rays(occ, RES, (0.0, 0.0), pose, angles, 12.0, method="march")
+    auto = cast_rays(occ, RES, (0.0, 0.0), np.tile(pose, (1000, 1)), angles, 12.0, method="auto")
+    np.testing.assert_array_equal(auto[0], cast_rays(occ, RES, (0.0, 0.0), pose, angles, 12.0, method="dda")[0])

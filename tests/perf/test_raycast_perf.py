@@ -10,11 +10,11 @@ rooms and 60 boxes of clutter), max range 10 m, serial kernels (``parallel=False
 - ``scan``: one pose x 683 beams over 240 deg (a Hokuyo URG-04LX scan), a new pose every call;
 - ``particles``: 1000 poses x 60 beams over 360 deg (a particle filter's expected scans).
 
-``march`` is :func:`cast_scan`'s default (distance-field jumps, fields cached with the grid: the scan
-marches on the per-octant planes, the particles on the isotropic field, both in the vector pool kernel
-since every pose is inside the grid); ``dda`` is the plain exact traversal, kept for comparison. The
-issue's target is 10 M rays/s on one core for both ``march`` workloads; the module docstring of
-:mod:`locbench.raycast` has the measured rates and their conditions.
+``march`` is :func:`cast_scan`'s default (distance-field jumps, fields cached with the grid: the scan marches
+on the per-octant planes, the particles on the isotropic field, both in the vector pool kernel); ``dda`` is
+the plain exact traversal, kept for comparison. The issue's target is 10 M rays/s on one core for both
+``march`` workloads; the module docstring of :mod:`locbench.raycast` has the measured rates and their
+conditions.
 """
 
 from __future__ import annotations
