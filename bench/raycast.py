@@ -52,8 +52,10 @@ step ends with range inf) the rest. Pools of 8-128 lanes measured the same (nois
 poses inside the grid only and the scalar lane kernels below the rest; with the slab clip in the pool's set-up
 (every beam; a branch on the pose's side instead measured x 0.83-0.88) one kernel serves every pose, the same
 ranges bit for bit (also from outside the grid, in parallel and with an origin offset), at x 0.94-0.98 against
-that split (paired, 12-16 rounds). The lane kernels (``_march_range``, ``_march_poses``) are in the history up
-to commit 835edea.
+that split (paired, 12-16 rounds; the 20 sessions above measured the split). With it, ``pytest tests/perf
+--benchmark-only`` in 8 sessions at load 0.9-1.2 (the plain traversal read 3.2-3.6 M rays/s): scan 10.5-14.7 M
+rays/s, median 11.9 M; particles 11.2-12.4 M, median 11.9 M; every session at 10 M or more. The lane kernels
+(``_march_range``, ``_march_poses``) are in the history up to commit 835edea.
 
 Scalar lane kernels, measured single-threaded (``tests/perf/test_raycast_perf.py``: 400 x 400 grid at 0.05 m
 with walls, doors and 60 boxes, 10 m max range; 1 pose x 683 beams over 240 deg, a new pose per call, and 1000
