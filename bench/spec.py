@@ -46,6 +46,56 @@ def parse_spec(text: str) -> tuple[str, dict[str, str]]:
     return ident, params
 
 
+@dataclasses.dataclass(frozen=True, order=True)
+class Spec:
+    """A filter or dataset name parsed once: its id and its parameters as canonical strings.
+
+    Every consumer after the edge (CLI argument, CSV column, folder) reads ``ident`` and :meth:`get`
+    instead of re-splitting the text; ``str(spec)`` is the canonical spelling (keys sorted).
+
+    Attributes
+    ----------
+    ident : str
+        The registry id (``pf``).
+    params : tuple of (str, str)
+        ``(key, value)`` pairs sorted by key, values as written in the canonical name.
+    """
+
+    ident: str
+    params: tuple[tuple[str, str], ...] = ()
+
+    @classmethod
+    def parse(cls, text: str) -> Spec:
+        """Parse ``"pf[particles=5000]"``; raises :class:`ConfigError` on a malformed spec."""
+        ident, raw = parse_spec(text)
+        return cls(ident, tuple(sorted(raw.items())))
+
+    @property
+    def name(self) -> str:
+        """The canonical spelling ``id[k1=v1,...]``."""
+        return format_spec(self.ident, dict(self.params))
+
+    def __str__(self) -> str:
+        return self.name
+
+    def as_dict(self) -> dict[str, str]:
+        """The parameters as a dict of strings."""
+        return dict(self.params)
+
+    def get(self, key: str, default: str | None = None) -> str | None:
+        """The string value of parameter ``key``, or ``default`` when it is not set."""
+        return dict(self.params).get(key, default)
+
+    def get_float(self, key: str, default: float) -> float:
+        """Parameter ``key`` as a number (``default`` when not set)."""
+        value = self.get(key)
+        return default if value is None else float(value)
+
+    def without(self, *keys: str) -> Spec:
+        """The same spec with ``keys`` removed (``office[kidnap_m=2]`` -> ``office``)."""
+        return Spec(self.ident, tuple(kv for kv in self.params if kv[0] not in keys))
+
+
 def format_spec(ident: str, params: dict[str, Any]) -> str:
     """The canonical spelling ``id[k1=v1,k2=v2]`` with keys sorted; ``id`` alone without parameters."""
     if not params:
