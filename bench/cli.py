@@ -3,7 +3,7 @@
 locbench list
 locbench run [--suite NAME|FILE.toml | --filter SPEC ... --dataset SPEC ...]
              [--seeds N] [--results DIR] [--jobs N] [--force]
-locbench report [--results DIR]
+locbench report [--results DIR] [--suite NAME] [--out DIR]
 locbench check [ID ...]
 locbench fetch SPEC [SPEC ...]
 locbench export [--results DIR] [--out DIR] [--dataset SPEC ...] [--filter SPEC ...] [--smoothed]
@@ -15,6 +15,7 @@ import argparse
 import logging
 import os
 import sys
+from pathlib import Path
 from collections import Counter
 from collections.abc import Sequence
 
@@ -96,14 +97,17 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    from locbench.report import write_report
+    from locbench.report import suite_filter, summary_text, write_report
     from locbench.store import Store
 
     store = Store(args.results)
     if not store.runs.is_dir():
         raise ConfigError(f"{store.runs}: no stored runs; run 'locbench run' first")
-    path = write_report(store)
-    print(f"report written to {path}")
+    keep = suite_filter(args.suite) if args.suite else None
+    out = Path(args.out) if args.out else None
+    paths = write_report(store, keep=keep, out=out)
+    print(summary_text(paths.summary), end="")
+    print(f"report written to {paths.markdown} and {paths.html}")
     return 0
 
 
@@ -185,6 +189,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     rep = sub.add_parser("report", help="write summary/metrics.csv, REPORT.md and figures from stored runs")
     rep.add_argument("--results", default=_results_default(), help="results folder (default: results/)")
+    rep.add_argument(
+        "--suite", default=None, help="report only the runs of this suite (a name or a TOML file), not every stored run"
+    )
+    rep.add_argument("--out", default=None, help="write the summary here instead of RESULTS/summary")
     rep.set_defaults(func=_cmd_report)
 
     c = sub.add_parser("check", help="conformance checks for filters and datasets")

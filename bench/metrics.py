@@ -701,6 +701,46 @@ def acceptance_metrics(diagnostics: dict[str, FloatArray]) -> dict[str, float]:
     return {"accepted_fraction": float(np.nansum(acc)) / total} if total > 0 else {}
 
 
+# --- metric metadata: what the report's tables print ------------------------------------------------
+
+
+class MetricInfo(NamedTuple):
+    """How a metric is shown: header, display unit and the factor from its SI value, and which way is better.
+
+    ``better`` is ``"lower"``, ``"higher"`` or ``"closer"`` (to ``target``, in ratio: the ANEES against
+    the pose dimension) or ``""`` (no best value).
+    """
+
+    header: str
+    unit: str
+    scale: float = 1.0
+    better: str = "lower"
+    target: float = float("nan")
+    digits: int = 3
+
+
+#: Display metadata of the metric ids the report tables show; errors in cm, headings in deg, times in us.
+METRICS: dict[str, MetricInfo] = {
+    "ate_m": MetricInfo("ATE", "cm", 100.0),
+    "smoothed_ate_m": MetricInfo("smoothed ATE", "cm", 100.0),
+    "waypoint_rmse_mean_m": MetricInfo("mean waypoint RMSE", "cm", 100.0),
+    "heading_rmse_rad": MetricInfo("heading RMSE", "deg", float(np.degrees(1.0))),
+    "rpe_m_per_m": MetricInfo("RPE", "%", 100.0),
+    "final_error_m": MetricInfo("final error", "cm", 100.0),
+    "anees": MetricInfo("ANEES", "", 1.0, "closer", float(POSE_DOF)),
+    "nees_in_band_fraction": MetricInfo("NEES in 95 % band", "%", 100.0, "higher"),
+    "nll": MetricInfo("NLL", "", 1.0),
+    "predict_us_median": MetricInfo("predict median", "us", 1.0),
+    "update_us_median": MetricInfo("update median", "us", 1.0),
+    "realtime_factor": MetricInfo("real-time factor", "x", 1.0, "higher"),
+    "kidnap_recovered": MetricInfo("kidnap recovery", "%", 100.0, "higher"),
+    "relation_error_m": MetricInfo("relation error", "cm", 100.0),
+    "relation_error_rad": MetricInfo("relation error", "deg", float(np.degrees(1.0))),
+    "accepted_fraction": MetricInfo("accepted", "%", 100.0, "higher"),
+    "recorded_ate_median_m": MetricInfo("recorded median ATE", "cm", 100.0),
+}
+
+
 # --- aggregations over seeds --------------------------------------------------------------------
 
 

@@ -72,6 +72,17 @@ class Filter(abc.ABC):
     Config: ClassVar[type[FilterConfig]] = FilterConfig
     version: ClassVar[int] = 1
     source: ClassVar[str] = ""
+    #: The baseline every comparison starts with (dead reckoning): listed first, never marked best.
+    baseline: ClassVar[bool] = False
+
+    @classmethod
+    def starts_without_pose(cls, config: FilterConfig) -> bool:
+        """Whether this configuration ignores the initial belief (global localization from a uniform prior).
+
+        Such runs are scored in the report's global-localization table, not beside the filters that start
+        from the initial belief.
+        """
+        return False
 
     def __init__(self, config: FilterConfig | None = None) -> None:
         # Store only: no RNG, no I/O, no work (scikit-learn's rule), so a filter is cheap to make.

@@ -437,6 +437,11 @@ class ParticleFilter(Filter):
     source: ClassVar[str] = "003_e5c93f9be776ee5e.txt sec. 4.2; Thrun, Burgard & Fox, Probabilistic Robotics ch. 6, 8"
     config: ParticleFilterConfig
 
+    @classmethod
+    def starts_without_pose(cls, config: FilterConfig) -> bool:
+        """``init="uniform"`` ignores the initial belief (global localization)."""
+        return isinstance(config, ParticleFilterConfig) and config.init == "uniform"
+
     @property
     def logdet_tolerance(self) -> float:
         """How far log det of the sample covariance may fall in one predict by sampling noise alone.

@@ -1,10 +1,17 @@
-"""Claims of the source reports that the report checks against the tidy metrics.
+"""Experiments, source reports and their claims, which the report reads through one registration hook.
 
-Each :class:`Claim` names the dataset id it concerns, its source report, the claim text, the report's
-own numbers as text, and a check: a function from the tidy metrics rows of one dataset
-(``dataset, filter, seed, metric, value``) to a :class:`ClaimResult` (verdict and measured values).
-Filters are matched by id (the part of the name before ``[``): the plain ``id`` when it has runs,
-otherwise the first parameterised variant in sorted order, named in the measured text.
+The modules of this package register, at import:
+
+- :class:`Source`: a source report, cited by title and authors;
+- :class:`Experiment`: a dataset id with its title and role in the report (a summary dataset with an
+  accuracy-runtime figure, a per-experiment section, variants folded into one table);
+- :class:`Claim`: one checkable claim of a source report: a function from the tidy metrics rows
+  (``dataset, filter, seed, metric, value``) of the experiment it concerns to a :class:`ClaimResult`;
+- report sections (:func:`register_section`): extra tables and figures of an experiment, built as
+  :mod:`locbench.report.doc` blocks.
+
+The report itself knows no dataset or filter by name. Filters are matched by id: the plain ``id`` when
+it has runs, otherwise the first parameterised variant in sorted order, named in the measured text.
 
 Waypoint statistics here follow the DESIGN protocol: RMSE_j = sqrt(mean_i e_ij^2) over the ok runs
 (report 003 fig. 5) and the distance between waypoint j and the mean estimated position over runs
@@ -19,13 +26,17 @@ import pkgutil
 import re
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Literal, NamedTuple
+from functools import lru_cache
+from typing import TYPE_CHECKING, Literal, NamedTuple
 
 import numpy as np
 import pandas as pd
 
 from locbench.metrics import mean_estimate_distance, waypoint_rmse
+from locbench.spec import Spec
+
+if TYPE_CHECKING:
+    from locbench.report.doc import Block
 
 log = logging.getLogger(__name__)
 
@@ -43,6 +54,50 @@ class ClaimResult(NamedTuple):
 
 
 @dataclass(frozen=True)
+class Source:
+    """A source report, cited by its title and authors as printed at its head."""
+
+    key: str
+    title: str
+    authors: str
+
+    @property
+    def citation(self) -> str:
+        return f"{self.authors}, *{self.title}*"
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """A dataset id's place in the report.
+
+    Attributes
+    ----------
+    dataset : str
+        The dataset id (``office``); its plain name is the experiment's base dataset.
+    title : str
+        Section heading.
+    text : str
+        One paragraph: what the experiment tests.
+    source : Source or None
+        The source report whose experiment it replays.
+    summary : bool
+        The experiment is a main comparison: a summary table and an accuracy-runtime figure.
+    fold_variants : bool
+        Its variants are shown folded (by its registered sections) instead of one table each.
+    order : int
+        Position among the experiment sections (and summary tables), ascending.
+    """
+
+    dataset: str
+    title: str
+    text: str = ""
+    source: Source | None = None
+    summary: bool = False
+    fold_variants: bool = False
+    order: int = 100
+
+
+@dataclass(frozen=True)
 class Claim:
     """One checkable claim of a source report.
 
@@ -51,9 +106,10 @@ class Claim:
     id : str
         Stable short name (``room_odometry_grows``).
     dataset : str
-        Dataset id the claim concerns (``room``); it is checked on every stored variant of that id.
-    source : str
-        The source report's file name.
+        Dataset id the claim concerns (``room``): checked on the rows of its plain name, or with
+        ``across_variants`` on the rows of every stored variant of that id.
+    source : Source
+        The source report.
     text : str
         The claim, with the concrete test we apply.
     reported : str
@@ -68,7 +124,7 @@ class Claim:
 
     id: str
     dataset: str
-    source: str
+    source: Source
     text: str
     reported: str
     check: Callable[[pd.DataFrame], ClaimResult]
@@ -86,9 +142,15 @@ class Claim:
 # --- tidy-frame helpers -------------------------------------------------------------------------
 
 
+@lru_cache(maxsize=4096)
+def spec_of(name: str) -> Spec:
+    """The typed :class:`~locbench.spec.Spec` of a stored filter or dataset name, parsed once per name."""
+    return Spec.parse(name)
+
+
 def spec_id(name: str) -> str:
-    """The id of a filter or dataset name: the part before ``[`` (``pf[particles=10]`` -> ``pf``)."""
-    return name.split("[", 1)[0].strip()
+    """The id of a filter or dataset name (``pf[particles=10]`` -> ``pf``)."""
+    return spec_of(name).ident
 
 
 def pick_filter(df: pd.DataFrame, filter_id: str) -> str | None:
@@ -149,11 +211,31 @@ def fmt_cm(values: np.ndarray | tuple[float, ...]) -> str:
 
 # --- the registry: report modules in this package register their claims and report sections ------
 
-SectionFn = Callable[[pd.DataFrame, Path, str], tuple[list[str], list[str]]]
+SectionFn = Callable[[pd.DataFrame, str], "list[Block]"]
 
 _CLAIMS: list[Claim] = []
-_SECTIONS: list[tuple[str, SectionFn, bool]] = []
+_SECTIONS: list[tuple[str, SectionFn]] = []
+_EXPERIMENTS: dict[str, Experiment] = {}
 _loaded = False
+
+
+def register_experiment(experiment: Experiment) -> None:
+    """Add an experiment (one per dataset id)."""
+    if experiment.dataset in _EXPERIMENTS:
+        raise ValueError(f"experiment {experiment.dataset!r} registered twice")
+    _EXPERIMENTS[experiment.dataset] = experiment
+
+
+def experiments() -> tuple[Experiment, ...]:
+    """Every registered experiment, by ``order`` then dataset id."""
+    _load()
+    return tuple(sorted(_EXPERIMENTS.values(), key=lambda e: (e.order, e.dataset)))
+
+
+def experiment_of(dataset_id: str) -> Experiment | None:
+    """The experiment registered for a dataset id, if any."""
+    _load()
+    return _EXPERIMENTS.get(dataset_id)
 
 
 def register(*claims: Claim) -> None:
@@ -166,15 +248,14 @@ def register(*claims: Claim) -> None:
         known.add(c.id)
 
 
-def register_section(dataset_id: str, fn: SectionFn, across_variants: bool = False) -> None:
-    """Add an extra report section for a dataset id.
+def register_section(dataset_id: str, fn: SectionFn) -> None:
+    """Add an extra block of an experiment's report section.
 
-    ``fn(rows, figdir, slug)`` gets the tidy metrics rows of one dataset name (with ``across_variants``:
-    of every stored variant of the dataset id), the figures folder and a file-name slug; it writes its
-    figures (named ``<slug>_*.png``) and returns the Markdown lines of its section (starting with a
-    ``###`` heading) and the names of the figures it wrote.
+    ``fn(rows, slug)`` gets the tidy metrics rows of every stored variant of the dataset id and a
+    file-name slug for its figures (``<slug>_*``) and returns :mod:`locbench.report.doc` blocks (text,
+    tables, plots); it does no I/O.
     """
-    _SECTIONS.append((dataset_id, fn, across_variants))
+    _SECTIONS.append((dataset_id, fn))
 
 
 def _load() -> None:
@@ -183,7 +264,7 @@ def _load() -> None:
     if _loaded:
         return
     _loaded = True
-    for mod in sorted(m.name for m in pkgutil.iter_modules(__path__) if m.name.startswith("report_")):
+    for mod in sorted(m.name for m in pkgutil.iter_modules(__path__) if not m.name.startswith("_")):
         importlib.import_module(f"{__name__}.{mod}")
 
 
@@ -198,7 +279,7 @@ def claims_for(dataset_id: str, across_variants: bool = False) -> tuple[Claim, .
     return tuple(c for c in all_claims() if c.dataset == dataset_id and c.across_variants == across_variants)
 
 
-def sections_for(dataset_id: str, across_variants: bool = False) -> tuple[SectionFn, ...]:
+def sections_for(dataset_id: str) -> tuple[SectionFn, ...]:
     """The extra report sections registered for a dataset id."""
     _load()
-    return tuple(fn for ds, fn, av in _SECTIONS if ds == dataset_id and av == across_variants)
+    return tuple(fn for ds, fn in _SECTIONS if ds == dataset_id)

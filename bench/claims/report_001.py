@@ -27,25 +27,39 @@ The concrete tests, fixed before any run:
 
 from __future__ import annotations
 
-import io
 import logging
 from dataclasses import fields
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from locbench.claims import Claim, ClaimResult, pick_filter, register, register_section, spec_id
+from locbench.claims import (
+    Claim,
+    ClaimResult,
+    Experiment,
+    Source,
+    pick_filter,
+    register,
+    register_experiment,
+    register_section,
+    spec_id,
+    spec_of,
+)
 from locbench.errors import LocbenchError
 from locbench.metrics import mean_ci
-from locbench.spec import build_params, parse_spec
+from locbench.report.doc import Block, Plot, Table, Text
+from locbench.report.style import PALETTE
+from locbench.spec import build_params
 
 log = logging.getLogger(__name__)
 
-SOURCE_001 = "001_71e01b0c4f2511a1.txt"
+SOURCE_001 = Source(
+    "001",
+    "Aerial localization using the Extended Kalman Filter",
+    "Arwed Gadau, Natan Viana, Rodrigo Contreiras and Rui Anjo",
+)
 DATASET = "landmark_geometry"
 LAYOUT_ORDER = ("1", "2", "3", "4", "8")
 PATH_ORDER = ("circle", "star", "pentagon", "random")
@@ -81,10 +95,10 @@ def _params_class() -> type:
 def _parse(name: str) -> Any | None:
     """The typed parameters of a ``landmark_geometry[...]`` name, or None when it does not parse."""
     try:
-        ident, raw = parse_spec(name)
-        if ident != DATASET:
+        spec = spec_of(name)
+        if spec.ident != DATASET:
             return None
-        return build_params(_params_class(), raw, ident)
+        return build_params(_params_class(), spec.as_dict(), spec.ident)
     except LocbenchError as exc:
         log.warning("left out %s: %s", name, exc)
         return None
@@ -135,10 +149,10 @@ def _n_failed(rows: pd.DataFrame) -> int:
 def _filter_flag(name: str, key: str) -> bool:
     """True when a filter name sets boolean ``key`` true (``ekf_landmarks[use_pose_fixes=true]``)."""
     try:
-        _, raw = parse_spec(name)
+        value = spec_of(name).get(key, "false")
     except LocbenchError:
         return False
-    return str(raw.get(key, "false")).strip().lower() in ("1", "true", "yes", "on")
+    return str(value).strip().lower() in ("1", "true", "yes", "on")
 
 
 def _cm(x: float) -> str:
@@ -338,7 +352,7 @@ def _mean_pm(values: np.ndarray) -> str:
     return f"{_cm(ci.mean)} ± {_cm(ci.mean - ci.low)}"
 
 
-def layout_section(df: pd.DataFrame, figdir: Path, slug: str) -> tuple[list[str], list[str]]:
+def layout_section(df: pd.DataFrame, slug: str) -> list[Block]:
     """ATE per landmark layout on the base variants: a table (cm, mean ± 95 % CI) and a figure.
 
     Rows are (filter, path); columns the layouts 1, 2, 3, 4, 8. The figure has one line per path and
@@ -346,13 +360,12 @@ def layout_section(df: pd.DataFrame, figdir: Path, slug: str) -> tuple[list[str]
     """
     v = variants(df)
     base = v[v["base"] & (v["metric"] == "ate_m")] if len(v) else v
-    lines = ["### ATE per landmark layout (base variants, cm, mean ± 95 % interval over seeds)", ""]
+    caption = "ATE per landmark layout (base variants, cm, mean ± 95 % interval over seeds)"
     if not len(base):
-        return [*lines, "No runs of the base variants.", ""], []
+        return [Text("No runs of the base variants.")]
     filters = sorted({str(f) for f in base["filter"].unique()}, key=lambda f: (f != "odometry", f))
     paths = [p for p in PATH_ORDER if p in set(base["path"])]
-    header = "| filter | path | " + " | ".join(f"{lay}" for lay in LAYOUT_ORDER) + " |"
-    lines += [header, "|" + "---|" * (2 + len(LAYOUT_ORDER))]
+    rows: list[tuple[str, ...]] = []
     series: list[tuple[str, str, list[float]]] = []
     for f in filters:
         for p in paths:
@@ -364,33 +377,43 @@ def layout_section(df: pd.DataFrame, figdir: Path, slug: str) -> tuple[list[str]
                 vals = sub.loc[sub["landmarks"] == lay, "value"].to_numpy(dtype=np.float64)
                 cells.append(_mean_pm(vals))
                 means.append(float(np.mean(vals)) if vals.size else float("nan"))
-            lines.append(f"| `{f}` | {p} | " + " | ".join(cells) + " |")
+            rows.append((f"`{f}`", p, *cells))
             series.append((f, p, means))
-    lines.append("")
-    fig = Figure(figsize=(6.4, 4.0), dpi=100, layout="constrained")
-    FigureCanvasAgg(fig)
-    ax = fig.add_subplot()
-    x = np.arange(len(LAYOUT_ORDER))
-    markers = {"circle": "o", "star": "*", "pentagon": "p", "random": "s"}
-    for f, p, means in series:
-        y = np.asarray(means) * 100.0
-        ls = "--" if spec_id(f) == "odometry" else "-"
-        ax.plot(x, y, linestyle=ls, marker=markers.get(p, "o"), label=f"{f}, {p}")
-    ax.set_xticks(x, ["1", "2", "3\ntriangle", "4\nsquare near", "8\nsquare far"])
-    ax.set_yscale("log")
-    ax.set_xlabel("landmark layout")
-    ax.set_ylabel("ATE (cm)")
-    ax.set_title("landmark_geometry: ATE per layout (mean over seeds)")
-    ax.legend(fontsize="x-small", ncols=2)
-    name = f"{slug}_ate_per_layout.png"
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=100, metadata={"Software": None})
-    path = figdir / name
-    data = buf.getvalue()
-    if not (path.exists() and path.read_bytes() == data):
-        path.write_bytes(data)
-    lines += [f"![ATE per landmark layout](figures/{name})", ""]
-    return lines, [name]
+
+    def draw(fig: Figure) -> None:
+        ax = fig.add_subplot()
+        x = np.arange(len(LAYOUT_ORDER))
+        colors = {f: PALETTE[i % len(PALETTE)] for i, f in enumerate(filters)}
+        markers = {"circle": "o", "star": "*", "pentagon": "p", "random": "s"}
+        for f, p, means in series:
+            ls = "--" if spec_id(f) == "odometry" else "-"
+            ax.plot(x, np.asarray(means) * 100.0, linestyle=ls, marker=markers.get(p, "o"), color=colors[f],
+                    label=f"{f}, {p}")
+        ax.set_xticks(x, ["1", "2", "3\ntriangle", "4\nsquare near", "8\nsquare far"])
+        ax.set_yscale("log")
+        ax.set_xlabel("landmark layout")
+        ax.set_ylabel("ATE (cm)")
+        ax.set_title("landmark_geometry: ATE per layout (mean over seeds)")
+        ax.legend(fontsize="x-small", ncols=2, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+
+    header = ("filter", "path", *LAYOUT_ORDER)
+    return [
+        Table(header, tuple(rows), caption=caption),
+        Plot(f"{slug}_ate_per_layout", "landmark_geometry: ATE per landmark layout and path", draw, size=(8.0, 4.2)),
+    ]
 
 
-register_section(DATASET, layout_section, across_variants=True)
+register_section(DATASET, layout_section)
+register_experiment(
+    Experiment(
+        DATASET,
+        "Landmark geometry (report 001)",
+        "Report 001's study: circle, star, pentagon and random paths driven twice in a 14 m arena, with 1, 2, "
+        "3 (triangle), 4 (square near) or 8 (square far) disc landmarks detected in a 151-beam laser; a GPS "
+        "variant from a wrong start and kidnaps. Its 25 variants are folded into one table and one figure.",
+        source=SOURCE_001,
+        fold_variants=True,
+        order=50,
+    )
+)
+

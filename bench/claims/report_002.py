@@ -13,23 +13,22 @@ run's updates of the ``accepted`` diagnostic divided by the sum of ``accepted`` 
 
 from __future__ import annotations
 
-import io
 import logging
 import math
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from locbench.claims import Claim, ClaimResult, register, register_section, spec_id
+from locbench.claims import Claim, ClaimResult, Experiment, Source, register, register_experiment, register_section, spec_id
+from locbench.report.doc import Block, Plot, Table, Text
+from locbench.report.style import PALETTE
 from locbench.errors import LocbenchError
 from locbench.metrics import mean_ci
 
 log = logging.getLogger(__name__)
 
-SOURCE_002 = "002_f01b2dfd20d46b8b.txt"
+SOURCE_002 = Source("002", "Lab4 - EKF Map Based Localization", "Songyou Peng (2016)")
 DATASET = "line_room"
 FILTER = "ekf_lines"
 #: Metric id of the per-run accepted fraction of extracted lines (see the module docstring).
@@ -216,16 +215,16 @@ register(
 # --- section: ATE (and accepted fraction) against the threshold --------------------------------------------
 
 
-def _gate_section(rows: pd.DataFrame, figdir: Path, slug: str) -> tuple[list[str], list[str]]:
+def _gate_section(rows: pd.DataFrame, slug: str) -> list[Block]:
+    """ATE (and the accepted fraction) of ekf_lines against the chi-square threshold: a table and a figure."""
     tab = sweep_table(rows)
-    lines = ["### ekf_lines: chi-square threshold sweep (report 002)", ""]
     if tab.empty:
-        return [*lines, f"No {FILTER} runs stored.", ""], []
+        return [Text(f"No {FILTER} runs stored.")]
     has_acc = not tab["accepted"].isna().all()
-    header = ["dataset", "length check", "chi2 threshold", "runs", "ATE (cm)"] + (
-        ["accepted lines (%)"] if has_acc else []
+    header = ("dataset", "length check", "chi2 threshold", "runs", "ATE (cm)") + (
+        ("accepted lines (%)",) if has_acc else ()
     )
-    lines += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    out: list[tuple[str, ...]] = []
     for (ds, flag, chi2), g in tab.groupby(["dataset", "reject_longer", "chi2"], sort=True):
         ci = mean_ci(100.0 * g["ate_m"].to_numpy())
         cell = f"{ci.mean:.2f}" + (f" [{ci.low:.2f}, {ci.high:.2f}]" if ci.n > 1 else "")
@@ -233,46 +232,48 @@ def _gate_section(rows: pd.DataFrame, figdir: Path, slug: str) -> tuple[list[str
         if has_acc:
             acc = g["accepted"].dropna().to_numpy()
             row.append(f"{100.0 * float(np.mean(acc)):.1f}" if acc.size else "")
-        lines.append("| " + " | ".join(row) + " |")
-    lines.append("")
-    if not has_acc:
-        lines += [f"(The accepted fraction appears here once metrics.csv has `{ACCEPTED_METRIC}`.)", ""]
-
+        out.append(tuple(row))
     datasets = sorted(tab["dataset"].unique())
-    ncols = 2 if has_acc else 1
-    fig = Figure(figsize=(5.0 * ncols, 3.6))
-    FigureCanvasAgg(fig)
-    axes = [fig.add_subplot(1, ncols, k + 1) for k in range(ncols)]
-    styles = {True: "-", False: "--"}
-    for d_i, ds in enumerate(datasets):
-        sub = tab[tab["dataset"] == ds]
-        for flag in (True, False):
-            g = sub[sub["reject_longer"] == flag]
-            if g.empty:
-                continue
-            m = g.groupby("chi2", sort=True)[["ate_m", "accepted"]].mean()
-            label = f"{ds}, {_setting(flag)}"
-            color = f"C{d_i}"
-            axes[0].plot(m.index, 100.0 * m["ate_m"], styles[flag], marker="o", color=color, label=label)
-            if has_acc:
-                axes[1].plot(m.index, 100.0 * m["accepted"], styles[flag], marker="o", color=color, label=label)
-    axes[0].set_xlabel("chi-square threshold")
-    axes[0].set_ylabel("ATE, mean over seeds (cm)")
-    axes[0].set_yscale("log")
-    axes[0].legend(fontsize="small")
-    if has_acc:
-        axes[1].set_xlabel("chi-square threshold")
-        axes[1].set_ylabel("accepted lines (%)")
-    fig.tight_layout()
-    name = f"{slug}_chi2_sweep.png"
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=100, metadata={"Software": None})
-    path = figdir / name
-    data = buf.getvalue()
-    if not path.exists() or path.read_bytes() != data:
-        path.write_bytes(data)
-    lines += [f"![ATE against the chi-square threshold](figures/{name})", ""]
-    return lines, [name]
+
+    def draw(fig: Figure) -> None:
+        ncols = 2 if has_acc else 1
+        axes = [fig.add_subplot(1, ncols, k + 1) for k in range(ncols)]
+        for d_i, ds in enumerate(datasets):
+            sub = tab[tab["dataset"] == ds]
+            for flag in (True, False):
+                g = sub[sub["reject_longer"] == flag]
+                if g.empty:
+                    continue
+                m = g.groupby("chi2", sort=True)[["ate_m", "accepted"]].mean()
+                style = {"color": PALETTE[d_i % len(PALETTE)], "linestyle": "-" if flag else "--", "marker": "o"}
+                label = f"{ds}, {_setting(flag)}"
+                axes[0].plot(m.index, 100.0 * m["ate_m"], label=label, **style)
+                if has_acc:
+                    axes[1].plot(m.index, 100.0 * m["accepted"], label=label, **style)
+        axes[0].set_xlabel("chi-square threshold")
+        axes[0].set_ylabel("ATE, mean over seeds (cm)")
+        axes[0].set_yscale("log")
+        axes[0].legend(fontsize="small")
+        if has_acc:
+            axes[1].set_xlabel("chi-square threshold")
+            axes[1].set_ylabel("accepted lines (%)")
+
+    return [
+        Table(header, tuple(out), caption="ekf_lines: chi-square threshold sweep (report 002)"),
+        Plot(f"{slug}_chi2_sweep", "ekf_lines: ATE and accepted lines against the chi-square threshold", draw,
+             size=(9.0, 3.6) if has_acc else (5.0, 3.6)),
+    ]
 
 
-register_section(DATASET, _gate_section, across_variants=True)
+register_section(DATASET, _gate_section)
+register_experiment(
+    Experiment(
+        DATASET,
+        "Line room (report 002)",
+        "Report 002's setting: two polygonal rooms whose walls are the line map; ekf_lines extracts lines from "
+        "a 181-beam scan and gates them with a chi-square threshold, swept here, with the length check on and off.",
+        source=SOURCE_002,
+        order=30,
+    )
+)
+

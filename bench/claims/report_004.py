@@ -9,14 +9,24 @@ commands that translate and rotate at once (``scan_grid[mixed_commands=true]``).
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pandas as pd
 
-from locbench.claims import Claim, ClaimResult, pick_filter, register, register_section
+from locbench.claims import (
+    Claim,
+    ClaimResult,
+    Experiment,
+    Source,
+    pick_filter,
+    register,
+    register_experiment,
+    register_section,
+)
+from locbench.report.doc import Block, Table
 
-SOURCE_004 = "004_2a620520509b0112.txt"
+SOURCE_004 = Source(
+    "004", "Kalman Filtering with STDR Simulator and ROS", "Luc Alexandre Bettaieb (Case Western Reserve University)"
+)
 LINEAR = "scan_grid"
 MIXED = "scan_grid[mixed_commands=true]"
 
@@ -80,20 +90,33 @@ register(
 )
 
 
-def _section(df: pd.DataFrame, figdir: Path, slug: str) -> tuple[list[str], list[str]]:
+def _section(df: pd.DataFrame, slug: str) -> list[Block]:
     """Mean ATE and ANEES of every filter on every stored scan_grid variant."""
-    lines = [
-        "### scan_grid: translate-or-rotate against mixed commands (report 004)",
-        "",
-        "| dataset | filter | runs | mean ATE (cm) | mean ANEES |",
-        "|---|---|---|---|---|",
-    ]
+    rows = []
     for (dname, fname), _ in df.groupby(["dataset", "filter"], sort=True):
         ate, n = _mean_metric(df, str(dname), str(fname), "ate_m")
         anees, _ = _mean_metric(df, str(dname), str(fname), "anees")
-        lines.append(f"| `{dname}` | `{fname}` | {n} | {100 * ate:.2f} | {anees:.2f} |")
-    lines.append("")
-    return lines, []
+        rows.append((f"`{dname}`", f"`{fname}`", str(n), f"{100 * ate:.2f}", f"{anees:.2f}"))
+    if not rows:
+        return []
+    return [
+        Table(
+            ("dataset", "filter", "runs", "mean ATE (cm)", "mean ANEES"),
+            tuple(rows),
+            caption="scan_grid: translate-or-rotate against mixed commands (report 004)",
+        )
+    ]
 
 
-register_section("scan_grid", _section, across_variants=True)
+register_section("scan_grid", _section)
+register_experiment(
+    Experiment(
+        "scan_grid",
+        "Scan grid (report 004)",
+        "Report 004's setting: scans recorded at grid poses form the linear KF's database; the robot sends 1 s "
+        "commands that either translate or rotate (the KF's linear model holds) or, with mixed_commands=true, "
+        "do both.",
+        source=SOURCE_004,
+        order=40,
+    )
+)

@@ -21,6 +21,9 @@ class RecordedDataset(DatasetBuilder):
 
     #: The sub-folder of the data root that holds this dataset (for messages and ``locbench list``).
     folder: ClassVar[str] = ""
+    #: Parameters that say which recording a name means; the report always spells them out
+    #: (``mrclam[dataset=6,robot=1]``, never a bare default).
+    identity_keys: ClassVar[tuple[str, ...]] = ()
 
     @classmethod
     @abc.abstractmethod

@@ -818,6 +818,7 @@ class MrclamDataset(RecordedDataset):
         "UTIAS MRCLAM: one of 5 robots, twist odometry, camera range-bearing to 15 landmarks, Vicon truth"
     )
     folder: ClassVar[str] = FOLDER
+    identity_keys: ClassVar[tuple[str, ...]] = ("dataset", "robot")
 
     @classmethod
     def files(cls, params: Any) -> list[RemoteFile]:

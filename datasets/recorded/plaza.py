@@ -460,6 +460,7 @@ class PlazaDataset(RecordedDataset):
     version: ClassVar[int] = 1
     description: ClassVar[str] = "CMU Plaza: odometry and radio ranges to 4 beacons, GPS truth (Djugash 2009)"
     folder: ClassVar[str] = FOLDER
+    identity_keys: ClassVar[tuple[str, ...]] = ("run",)
 
     @classmethod
     def files(cls, params: PlazaParams) -> list[RemoteFile]:

@@ -1,0 +1,98 @@
+"""From stored runs to ``<results>/summary/``: ``metrics.csv``, ``REPORT.md`` with its figures, ``index.html``.
+
+The package is split by job: :mod:`~locbench.report.collect` reads the store (the only I/O on runs),
+:mod:`~locbench.report.tables` and :mod:`~locbench.report.figures` turn arrays into tables and drawings,
+:mod:`~locbench.report.build` orders them into sections from the experiments and claims registered in
+:mod:`locbench.claims`, and :mod:`~locbench.report.render` writes Markdown, PNG and HTML. Regenerating
+from the same runs gives identical bytes.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+from locbench.report.collect import Keep, collect, collect_metrics, write_if_changed, write_metrics_csv
+from locbench.report.doc import Table
+from locbench.report.tables import wilson_interval
+from locbench.store import Store
+
+__all__ = ["ReportPaths", "collect_metrics", "suite_filter", "summary_text", "wilson_interval", "write_metrics_csv",
+           "write_report"]
+
+log = logging.getLogger(__name__)
+
+TITLE = "locbench: which localization filter?"
+
+
+@dataclass(frozen=True)
+class ReportPaths:
+    """What :func:`write_report` wrote, and the summary tables for the terminal."""
+
+    markdown: Path
+    html: Path
+    metrics: Path
+    summary: tuple[Table, ...]
+
+
+def write_report(store: Store, keep: Keep | None = None, out: Path | None = None) -> ReportPaths:
+    """Write ``metrics.csv``, ``REPORT.md``, ``figures/*.png`` and ``index.html``.
+
+    Parameters
+    ----------
+    store : Store
+        The results folder.
+    keep : callable, optional
+        ``keep(dataset, filter)`` restricts the report to some cells (a suite's, see :func:`suite_filter`).
+    out : Path, optional
+        The folder to write; default ``store.summary``. Stale figures there are removed.
+    """
+    from locbench.report.build import Report
+    from locbench.report.render import to_html, to_markdown, write_figures
+
+    col = collect(store, keep)
+    summary = out if out is not None else store.summary
+    summary.mkdir(parents=True, exist_ok=True)
+    metrics = write_metrics_csv(col.metrics, summary / "metrics.csv")
+    report = Report(col)
+    sections = report.sections()
+    intro = report.how_to_read()
+    pngs = write_figures(sections, summary / "figures")
+    md = summary / "REPORT.md"
+    write_if_changed(md, to_markdown(TITLE, intro, sections).encode())
+    page = summary / "index.html"
+    write_if_changed(page, to_html(TITLE, intro, sections, pngs).encode())
+    tables = tuple(b for s in sections if s.anchor == "summary" for c in s.children for b in c.blocks
+                   if isinstance(b, Table))
+    log.info("wrote %s (%d metric rows, %d figures)", md, len(col.metrics), len(pngs))
+    return ReportPaths(md, page, metrics, tables)
+
+
+def summary_text(tables: tuple[Table, ...]) -> str:
+    """The summary tables as aligned plain text for the terminal."""
+    out: list[str] = []
+    for t in tables:
+        cells = [list(t.header), *[[c.replace("**", "").replace("`", "") for c in r] for r in t.rows]]
+        widths = [max(len(r[i]) for r in cells) for i in range(len(t.header))]
+        out.append(t.caption.replace("`", ""))
+        for k, r in enumerate(cells):
+            out.append("  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip())
+            if k == 0:
+                out.append("  ".join("-" * w for w in widths))
+        out.append("")
+    return "\n".join(out)
+
+
+def suite_filter(suite_name: str) -> Keep:
+    """``keep(dataset, filter)`` for the cells of a named suite or suite file (canonical names)."""
+    from locbench.registry import resolve_dataset, resolve_filter
+    from locbench.suites import get_suite
+
+    suite = get_suite(suite_name)
+    cells: set[tuple[str, str]] = set()
+    for block in suite.blocks:
+        fnames = [resolve_filter(f).name for f in block.filters]
+        dnames = [resolve_dataset(d).name for d in block.datasets]
+        cells.update((d, f) for d in dnames for f in fnames)
+    return lambda dataset, filt: (dataset, filt) in cells

@@ -1,0 +1,777 @@
+"""The report's sections, in reading order, built from the collected runs and the registered experiments.
+
+Order: how to read this, summary tables (one per summary experiment), claims, accuracy against runtime,
+consistency, kidnap and global localization, recorded data, one section per experiment, appendix (detail
+tables, failed and skipped runs, provenance). Which datasets are main comparisons, which sections and
+claims an experiment has, comes from :mod:`locbench.claims`; the report names no dataset or filter.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+import numpy as np
+import pandas as pd
+from matplotlib.figure import Figure
+
+import locbench
+from locbench.claims import Experiment, all_claims, experiments, sections_for, waypoint_stats
+from locbench.metrics import CONFIDENCE, METRICS, POSE_DOF, chi2_band, estimate_at, mean_over_runs
+from locbench.report import figures as fg
+from locbench.report import tables as tb
+from locbench.report.collect import Collected
+from locbench.report.doc import Bullets, Plot, Section, Table, Text
+from locbench.report.style import LineStyle, style_for
+
+#: The kidnap protocol's dataset parameter (DESIGN "Kidnap recovery"): variants differing only in it form one
+#: recovery-against-distance curve.
+KIDNAP_PARAM = "kidnap_m"
+#: The kidnap distance whose recovery rate the summary table shows, m.
+SUMMARY_KIDNAP_M = 2.0
+#: Most panels of one trajectory figure.
+MAX_TRACK_PANELS = 12
+#: Ellipses drawn along each track.
+ELLIPSES_PER_TRACK = 10
+NAN = float("nan")
+
+
+class Report:
+    """Builds the sections from one :class:`Collected`; styles are fixed per filter for every figure."""
+
+    def __init__(self, col: Collected) -> None:
+        self.col = col
+        self.df = col.metrics
+        names = col.filter_order({r.filter for r in col.runs})
+        self.styles: dict[str, LineStyle] = {n: style_for(i) for i, n in enumerate(names)}
+        ids = sorted({col.filters[n].spec.ident for n in names if n in col.filters})
+        self.id_styles: dict[str, LineStyle] = {g: style_for(i) for i, g in enumerate(ids)}
+        self.by_ds: dict[str, pd.DataFrame] = {str(d): g for d, g in self.df.groupby("dataset")} if len(self.df) else {}
+        self.exps = [e for e in experiments() if self._has(e.dataset)]
+
+    # --- helpers ------------------------------------------------------------------------------------
+
+    def _has(self, dataset_id: str) -> bool:
+        return any(info.spec.ident == dataset_id for info in self.col.datasets.values())
+
+    def rows(self, dataset: str) -> pd.DataFrame:
+        return self.by_ds.get(dataset, self.df.iloc[0:0])
+
+    def filters_on(self, dataset: str, global_start: bool = False) -> list[str]:
+        sub = self.rows(dataset)
+        names = {str(f) for f in sub["filter"].unique()} if len(sub) else set()
+        return self.col.filter_order({f for f in names if self.col.is_global(f) == global_start})
+
+    def variants_of(self, dataset_id: str) -> list[str]:
+        return sorted(n for n, info in self.col.datasets.items() if info.spec.ident == dataset_id)
+
+    def kidnap_distance(self, dataset: str) -> float:
+        v = tb.values(self.rows(dataset), "kidnap_distance_m")
+        return float(np.median(v)) if v.size else NAN
+
+    def recorded(self) -> list[str]:
+        return [n for n, info in sorted(self.col.datasets.items()) if info.recorded]
+
+    def ground_truth(self, dataset: str) -> bool:
+        return all(tr.truth_label == "ground truth" for (d, _), tr in self.col.truths.items() if d == dataset)
+
+    # --- sections -------------------------------------------------------------------------------------
+
+    def sections(self) -> list[Section]:
+        out = [
+            self.summary(),
+            self.claims(),
+            self.pareto(),
+            self.consistency(),
+            self.kidnap_and_global(),
+            self.recorded_data(),
+            *[self.experiment(e) for e in self.exps],
+            self.appendix(),
+        ]
+        return [s for s in out if s.blocks or s.children]
+
+    def how_to_read(self) -> list[str]:
+        return [
+            "locbench runs every localization filter on the same synthetic worlds and recorded datasets and "
+            "measures them the same way. Start with the **summary** tables: one row per filter configuration on "
+            "each main comparison, errors in cm, times in us, the best value of each column in bold (the dead-reckoning "
+            "baseline is never marked). Then the **claims** of the five source reports, "
+            "each with its verdict and the measured value; the **accuracy against runtime** fronts (lower and "
+            "further right is better); **consistency** (does a filter's covariance describe its error?); kidnap "
+            "recovery; the recorded data; and one section per experiment. Values are means over seeds; the "
+            f"appendix gives every dataset's table with {100 * CONFIDENCE:.0f} % Student-t intervals. What every "
+            "metric means: `docs/protocols.md` in the repository.",
+        ]
+
+    def summary(self) -> Section:
+        sec = Section("Summary", "summary")
+        for e in self.exps:
+            if e.summary and e.dataset in self.col.datasets:
+                sec.children.append(
+                    Section(f"{e.title}", f"summary-{e.dataset}", [self.summary_table(e.dataset)])
+                )
+        return sec
+
+    def _kidnap_variant(self, dataset: str) -> str | None:
+        base = self.col.datasets[dataset].spec
+        for n in self.variants_of(base.ident):
+            spec = self.col.datasets[n].spec
+            if spec.without(KIDNAP_PARAM) == base and self.kidnap_distance(n) == SUMMARY_KIDNAP_M:
+                return n
+        return None
+
+    def _recorded_ate(self, filter_name: str) -> tuple[float, int]:
+        per = []
+        for ds in self.recorded():
+            if not self.ground_truth(ds):
+                continue
+            sub = self.rows(ds)
+            v = tb.values(sub[sub["filter"] == filter_name], "ate_m")
+            if v.size:
+                per.append(float(np.mean(v)))
+        return (100.0 * float(np.median(per)), len(per)) if per else (NAN, 0)
+
+    def summary_table(self, dataset: str) -> Table:
+        df = self.rows(dataset)
+        filters = self.filters_on(dataset)
+        wp = tb.waypoint_rmse_mean(df)
+        kid = self._kidnap_variant(dataset)
+        kdf = self.rows(kid) if kid else df.iloc[0:0]
+        kfilters = self.filters_on(kid) if kid else []
+        rows: list[list[str]] = []
+        keys: list[list[float]] = []
+        notes: list[str] = []
+        substituted: dict[str, str] = {}
+        for f in filters:
+            sub = df[df["filter"] == f]
+            runs = int(tb.values(sub, "failed").size)
+            ate = tb.mean_of(sub, "ate_m") * 100.0
+            wpm = wp.get(f, NAN) * 100.0
+            head = tb.mean_of(sub, "heading_rmse_rad") * METRICS["heading_rmse_rad"].scale
+            an_text, an_key, _, _ = tb.consistency_cell(sub)
+            upd = tb.mean_of(sub, "update_us_median")
+            rtf = tb.mean_of(sub, "realtime_factor")
+            # the kidnap runs of this configuration, or of its filter's one kidnap configuration
+            kname = f if f in kfilters else None
+            if kname is None:
+                same = [k for k in kfilters if self.col.filters[k].spec.ident == self.col.filters[f].spec.ident]
+                if len(same) == 1 and f == self.col.filters[f].spec.ident:
+                    kname = same[0]
+                    substituted[f] = kname
+            if kname is not None:
+                _, n_k, r_k, _, _ = tb.rate(kdf[kdf["filter"] == kname], "kidnap_recovered")
+                k_text = f"{100 * r_k:.0f} ({n_k})" + ("²" if kname != f else "") if n_k else "n/a"
+                k_key = 100 * r_k if n_k else NAN
+            else:
+                k_text, k_key = "-", NAN
+            rec, n_rec = self._recorded_ate(f)
+            rows.append(
+                [
+                    f"`{f}`",
+                    str(runs),
+                    tb.num(ate),
+                    tb.num(wpm),
+                    tb.num(head),
+                    an_text,
+                    tb.num(upd) if not np.isnan(upd) else "-",
+                    tb.num(rtf),
+                    k_text,
+                    f"{tb.num(rec)} ({n_rec})" if n_rec else "-",
+                ]
+            )
+            keys.append([NAN, float(runs), ate, wpm, head, an_key, upd, rtf, k_key, rec])
+        eligible = [not self.col.is_baseline(f) for f in filters]
+        tb.bold_best(
+            rows,
+            keys,
+            [
+                (2, METRICS["ate_m"]),
+                (3, METRICS["waypoint_rmse_mean_m"]),
+                (4, METRICS["heading_rmse_rad"]),
+                (5, METRICS["anees"]),
+                (6, METRICS["update_us_median"]),
+                (7, METRICS["realtime_factor"]),
+                (8, METRICS["kidnap_recovered"]),
+                (9, METRICS["recorded_ate_median_m"]),
+            ],
+            eligible,
+        )
+        runs_all = [int(tb.values(df[df["filter"] == f], "failed").size) for f in filters]
+        n_typ = max(set(runs_all), key=runs_all.count) if runs_all else 0
+        notes.append(
+            f"ANEES: mean over runs of each run's average NEES (heading wrapped), against the two-sided 95 % "
+            f"chi-square band for the run count ({band_for(n_typ)} for {n_typ} runs); closest to "
+            f"{POSE_DOF} is marked best."
+        )
+        if any("¹" in r[5] for r in rows):
+            notes.append(tb.COLLAPSE_FOOTNOTE)
+        if kid:
+            notes.append(
+                f"Kidnap recovery: percentage of the runs of `{kid}` that recovered (run count in brackets)."
+                + (
+                    " ² The filter's kidnap configuration: "
+                    + ", ".join(f"`{a}` -> `{b}`" for a, b in sorted(substituted.items()))
+                    + "."
+                    if substituted
+                    else ""
+                )
+            )
+        notes.append(
+            "Recorded median ATE: median over the recorded datasets with ground truth that this configuration "
+            "ran on (their number in brackets) of its mean ATE there."
+        )
+        head = (
+            "filter",
+            "runs",
+            "ATE (cm)",
+            "mean waypoint RMSE (cm)",
+            "heading RMSE (deg)",
+            "ANEES (verdict)",
+            "update median (us)",
+            "real-time factor (x)",
+            f"kidnap recovery at {SUMMARY_KIDNAP_M:g} m (%)",
+            "recorded median ATE (cm)",
+        )
+        return Table(
+            head,
+            tuple(tuple(r) for r in rows),
+            caption=f"`{dataset}`: mean over seeds",
+            footnotes=tuple(notes),
+            sort_keys=tuple(tuple(k) for k in keys),
+        )
+
+    def claims(self) -> Section:
+        sec = Section("Claims of the source reports", "claims")
+        rows: list[tuple[str, ...]] = []
+        counts: dict[str, int] = defaultdict(int)
+        for c in all_claims():
+            if not self._has(c.dataset):
+                continue
+            if c.across_variants:
+                df = self.df[self.df["dataset"].isin(self.variants_of(c.dataset))]
+            else:
+                df = self.rows(c.dataset)
+            res = c.evaluate(df)
+            counts[res.verdict] += 1
+            rows.append((c.source.citation, c.text, f"**{res.verdict}**", res.measured, c.reported))
+        if not rows:
+            return sec
+        sec.add(
+            Text(
+                "Every claim of the five source reports that locbench checks, once, on the experiment it concerns. "
+                "A claim that does not reproduce is reported with the measured value; no filter was tuned to make "
+                "one pass. " + ", ".join(f"{n} {v}" for v, n in sorted(counts.items())) + "."
+            ),
+            Table(("report", "claim", "verdict", "measured", "the report's value"), tuple(rows)),
+        )
+        return sec
+
+    # --- accuracy against runtime --------------------------------------------------------------------------
+
+    def _pareto_points(self, dataset: str, metric: str) -> list[fg.ParetoPoint]:
+        df = self.rows(dataset)
+        pts = []
+        for f in self.filters_on(dataset):
+            sub = df[df["filter"] == f]
+            x, y = tb.mean_of(sub, "realtime_factor"), tb.mean_of(sub, metric) * METRICS[metric].scale
+            if np.isfinite(x) and np.isfinite(y) and x > 0 and y > 0:
+                pts.append(fg.ParetoPoint(f, self.col.filters[f].spec.ident, x, y))
+        return pts
+
+    def pareto(self) -> Section:
+        sec = Section("Accuracy against runtime", "pareto")
+        sec.add(
+            Text(
+                "Each marker is one filter configuration (mean over seeds): x is the real-time factor (dataset "
+                "duration over compute time, higher is faster), y the ATE (lower is better), both logarithmic. "
+                "A line joins each filter's own non-dominated configurations (a parameter sweep draws its "
+                "curve); the dotted step is the front over all of them. Runs started without a pose are left out."
+            )
+        )
+        for e in self.exps:
+            if not e.summary or e.dataset not in self.col.datasets:
+                continue
+            pts = self._pareto_points(e.dataset, "ate_m")
+            if pts:
+                sec.add(self._pareto_plot(f"{slug(e.dataset)}_pareto", e.dataset, [(e.dataset, pts)]))
+        rec = [(self.col.display(d), self._pareto_points(d, self._recorded_metric(d))) for d in self.recorded()]
+        rec = [(d, p) for d, p in rec if p]
+        if rec:
+            sec.add(self._pareto_plot("recorded_pareto", "recorded data", rec))
+        return sec
+
+    def _pareto_plot(self, name: str, title: str, panels: list[tuple[str, list[fg.ParetoPoint]]]) -> Plot:
+        styles = self.id_styles
+
+        def draw(fig: Figure) -> None:
+            n = len(panels)
+            ncols = 1 if n == 1 else 3
+            nrows = int(np.ceil(n / ncols))
+            axes = fig.subplots(nrows, ncols, squeeze=False)
+            for k, ax in enumerate(axes.flat):
+                if k >= n:
+                    ax.set_axis_off()
+                    continue
+                label, pts = panels[k]
+                fg.draw_pareto(ax, pts, styles, "real-time factor (x)", "ATE (cm)", label)
+                if n > 1:
+                    leg = ax.get_legend()
+                    if leg is not None:
+                        leg.remove()
+                    ax.legend(fontsize=5.5, loc="best")
+
+        size = (7.0, 4.2) if len(panels) == 1 else (11.0, 3.2 * int(np.ceil(len(panels) / 3)))
+        interactive = _plotly_pareto(title, panels) if len(panels) == 1 else None
+        return Plot(name, f"{title}: ATE against real-time factor", draw, size=size, interactive=interactive)
+
+    def _recorded_metric(self, dataset: str) -> str:
+        if (self.rows(dataset)["metric"] == "relation_error_m").any():
+            return "relation_error_m"
+        return "ate_m"
+
+    # --- consistency ---------------------------------------------------------------------------------
+
+    def consistency(self) -> Section:
+        sec = Section("Consistency", "consistency")
+        names = [e.dataset for e in self.exps if not e.fold_variants and e.dataset in self.col.datasets]
+        names += self.recorded()
+        rows: list[tuple[str, ...]] = []
+        keys: list[tuple[float, ...]] = []
+        collapsed = False
+        for ds in names:
+            df = self.rows(ds)
+            for f in self.filters_on(ds):
+                sub = df[df["filter"] == f]
+                text, key, inf, n = tb.consistency_cell(sub)
+                if n == 0:
+                    continue
+                collapsed |= inf > 0
+                inband = tb.mean_of(sub, "nees_in_band_fraction") * 100.0
+                rows.append((f"`{self.col.display(ds)}`", f"`{f}`", str(n), tb.band_text(n), text, tb.num(inband)))
+                keys.append((NAN, NAN, float(n), NAN, key, inband))
+        if not rows:
+            return sec
+        sec.add(
+            Text(
+                "Is a filter's covariance an honest description of its error? The NEES (heading wrapped) at every "
+                "ground-truth time, averaged over a run (ANEES) and over the runs, against the two-sided 95 % "
+                "chi-square(3N)/N band for N runs; the time inside the single-run 95 % band [0.216, 9.35]. Above "
+                "the band a filter is over-confident, below it under-confident. The synthetic worlds carry a "
+                "systematic wheel-encoder error no filter is told of, so Gaussian filters tend to be over-confident "
+                "there; global-localization runs are left out."
+            ),
+            Table(
+                ("dataset", "filter", "runs", "95 % band", "ANEES", "time in 95 % band (%)"),
+                tuple(rows),
+                footnotes=(tb.COLLAPSE_FOOTNOTE,) if collapsed else (),
+                sort_keys=tuple(keys),
+            ),
+        )
+        return sec
+
+    # --- kidnap and global -----------------------------------------------------------------------------
+
+    def kidnap_and_global(self) -> Section:
+        sec = Section("Kidnap and global localization", "kidnap")
+        kid = [n for n in self.col.datasets if not np.isnan(self.kidnap_distance(n))]
+        if kid:
+            sec.add(
+                Text(
+                    "After the first kidnap of a run (a silent jump of the truth by D), a filter has recovered when "
+                    "its position error is <= 0.25 m and its heading error <= 0.25 rad at every ground-truth time "
+                    "for 2 s, starting within 30 s of the kidnap. Each cell: recovered runs / runs (a failed run "
+                    "counts as not recovered); the figures draw the rate with its 95 % Wilson interval. False "
+                    "confidence: the share of the time before recovery with the NEES above its 99.9 % "
+                    "chi-square(3) quantile, mean over runs and distances."
+                )
+            )
+            for ident in sorted({self.col.datasets[n].spec.ident for n in kid}):
+                sec.children.append(self._kidnap_family_section(ident, [n for n in kid if self.col.datasets[n].spec.ident == ident]))
+        glob = sorted({f for r in self.col.runs for f in [r.filter] if self.col.is_global(f)})
+        if glob:
+            rows: list[tuple[str, ...]] = []
+            for ds in sorted(self.col.datasets):
+                df = self.rows(ds)
+                for f in self.filters_on(ds, global_start=True):
+                    sub = df[df["filter"] == f]
+                    k, n, r, lo, hi = tb.rate(sub, "converged")
+                    rows.append(
+                        (
+                            f"`{ds}`",
+                            f"`{f}`",
+                            str(n),
+                            f"{k}/{n} = {r:.2f} [{lo:.2f}, {hi:.2f}]" if n else "n/a",
+                            tb.median_text(tb.values(sub, "time_to_converge_s")),
+                        )
+                    )
+            sec.children.append(
+                Section(
+                    "Global localization",
+                    "global",
+                    [
+                        Text(
+                            "Filters started without knowing their pose. A run has converged at the first time at "
+                            "which the recovery criterion above holds; success rate with its 95 % Wilson interval "
+                            "and median time over the converged runs."
+                        ),
+                        Table(("dataset", "filter", "runs", "converged (95 % Wilson)", "median time (s)"),
+                              tuple(rows)),
+                    ],
+                )
+            )
+        return sec
+
+    def _kidnap_family_section(self, ident: str, names: list[str]) -> Section:
+        fam_of = {n: self.col.datasets[n].spec.without(KIDNAP_PARAM).name for n in names}
+        dists = sorted({self.kidnap_distance(n) for n in names})
+        rows: list[tuple[str, ...]] = []
+        curves: list[fg.RateCurve] = []
+        families = sorted(set(fam_of.values()))
+        for fam in families:
+            members = sorted((n for n in names if fam_of[n] == fam), key=self.kidnap_distance)
+            filters = self.col.filter_order({f for n in members for f in self.filters_on(n)})
+            for f in filters:
+                cells, pts = [], []
+                fc = []
+                for d in dists:
+                    n = next((m for m in members if self.kidnap_distance(m) == d), None)
+                    if n is None:
+                        cells.append("")
+                        continue
+                    sub = self.rows(n)
+                    sub = sub[sub["filter"] == f]
+                    k, cnt, r, lo, hi = tb.rate(sub, "kidnap_recovered")
+                    cells.append(f"{k}/{cnt}" if cnt else "")
+                    if cnt:
+                        pts.append((d, r, lo, hi))
+                    fc.extend(tb.values(sub, "kidnap_false_confidence_fraction"))
+                label = f if len(families) == 1 else f"{f} on {fam}"
+                rows.append((f"`{f}`", f"`{fam}`", *cells, tb.num(float(np.mean(fc))) if fc else "n/a"))
+                if pts:
+                    a = np.array(pts)
+                    curves.append(fg.RateCurve(label, f, a[:, 0], a[:, 1], a[:, 2], a[:, 3]))
+        styles = dict(self.styles)
+        title = f"{ident}: recovery within 30 s, 95 % Wilson intervals"
+
+        def draw(fig: Figure) -> None:
+            fg.draw_recovery(fig.add_subplot(), curves, styles, title)
+
+        blocks: list = [
+            Table(
+                ("filter", "dataset", *(f"D = {d:g} m" for d in dists), "false confidence"),
+                tuple(rows),
+                caption=f"{ident}: recovered runs / runs at each kidnap distance",
+            )
+        ]
+        if curves:
+            blocks.append(Plot(f"kidnap_{slug(ident)}", title, draw, size=(7.5, 4.2)))
+        return Section(f"Kidnap: {ident}", f"kidnap-{slug(ident)}", blocks)
+
+    # --- recorded data --------------------------------------------------------------------------------
+
+    def recorded_data(self) -> Section:
+        sec = Section("Recorded data", "recorded")
+        names = self.recorded()
+        if not names:
+            return sec
+        status: dict[tuple[str, str], set[str]] = defaultdict(set)
+        for r in self.col.runs:
+            if r.dataset in names:
+                status[(r.filter, r.dataset)].add(r.status)
+        filters = self.col.filter_order({f for f, _ in status})
+
+        def cell(f: str, ds: str, metric: str) -> tuple[str, float]:
+            sub = self.rows(ds)
+            v = tb.values(sub[sub["filter"] == f], metric) * METRICS[metric].scale
+            if v.size:
+                return tb.num(float(np.mean(v))) + (f" (n={v.size})" if v.size > 1 else ""), float(np.mean(v))
+            st = status.get((f, ds), set())
+            if "skipped" in st:
+                return "skipped", NAN
+            if st - {"ok"}:
+                return "failed", NAN
+            return "-", NAN
+
+        head = ("filter", *(f"`{self.col.display(d)}`" for d in names))
+        acc = [[cell(f, d, self._recorded_metric(d)) for d in names] for f in filters]
+        rtf = [[cell(f, d, "realtime_factor") for d in names] for f in filters]
+        metrics_text = "; ".join(
+            f"`{self.col.display(d)}` {tb.header(self._recorded_metric(d))}"
+            + ("" if self.ground_truth(d) else " against a SLAM reference")
+            for d in names
+        )
+        sec.add(
+            Text(
+                "Every filter on the recorded datasets (one recording each; the mean over seeds where a randomised "
+                f"filter ran several). Accuracy: {metrics_text}. A SLAM reference is another estimator's output, "
+                "so there the relation error (Kuemmerle et al. 2009) is the metric. Skipped: the filter needs a "
+                "map kind or sensor the dataset lacks (the appendix lists the reasons)."
+            ),
+            Table(head, tuple((f"`{f}`", *(c[0] for c in r)) for f, r in zip(filters, acc, strict=True)),
+                  caption="Accuracy (cm)", sort_keys=tuple((NAN, *(c[1] for c in r)) for r in acc)),
+            Table(head, tuple((f"`{f}`", *(c[0] for c in r)) for f, r in zip(filters, rtf, strict=True)),
+                  caption="Real-time factor (x)", sort_keys=tuple((NAN, *(c[1] for c in r)) for r in rtf)),
+        )
+        return sec
+
+    # --- experiments ---------------------------------------------------------------------------------
+
+    def experiment(self, e: Experiment) -> Section:
+        sec = Section(e.title, f"exp-{slug(e.dataset)}")
+        text = e.text + (f" Source: {e.source.citation}." if e.source else "")
+        sec.add(Text(text))
+        base = e.dataset
+        if not e.fold_variants and base in self.col.datasets:
+            filters = self.filters_on(base)
+            sec.add(tb.comparison_table(self.rows(base), filters, f"`{base}`: mean ± 95 % interval over seeds"))
+            wt = tb.waypoint_table(self.rows(base), filters, f"`{base}`: RMSE at each waypoint over runs (cm)")
+            if wt is not None:
+                sec.add(wt)
+            for plot in (self.trajectory_plot(base), self.waypoint_plot(base), self.nees_plot(base)):
+                if plot is not None:
+                    sec.add(plot)
+        rows = self.df[self.df["dataset"].isin(self.variants_of(e.dataset))]
+        for fn in sections_for(e.dataset):
+            sec.add(*fn(rows, slug(e.dataset)))
+        return sec
+
+    def trajectory_plot(self, dataset: str) -> Plot | None:
+        keys = [k for k in self.col.ok_dirs if k[0] == dataset and not self.col.is_global(k[1])]
+        if not keys:
+            return None
+        seed = min(k[2] for k in keys)
+        truth = self.col.truths[(dataset, seed)]
+        filters = self.col.filter_order({k[1] for k in keys if k[2] == seed})
+        shown = filters[:MAX_TRACK_PANELS]
+        gt = truth.ground_truth
+        world = fg.World(
+            truth.map_segments,
+            truth.map_landmarks,
+            gt.xy,
+            truth.truth_label,
+            truth.waypoints.xy if truth.waypoints is not None else np.zeros((0, 2)),
+        )
+        t_marks = np.linspace(gt.t[0], gt.t[-1], ELLIPSES_PER_TRACK + 2)[1:-1]
+        tracks = []
+        for f in shown:
+            run = self.col.read_run(dataset, f, seed)
+            tracks.append(
+                fg.Track(f, run.mean[:, :2], estimate_at(run.t, run.mean, t_marks)[:, :2],
+                         estimate_at(run.t, run.cov, t_marks)[:, :2, :2])
+            )
+        styles = self.styles
+        nrows = int(np.ceil(len(tracks) / 3))
+        more = len(filters) - len(shown)
+        caption = (
+            f"`{dataset}`, seed {seed}: each filter's estimate (colour) with 95 % position ellipses, the "
+            f"{truth.truth_label} (black), the map (grey) and the waypoints (x)"
+            + (f"; {more} more configurations are in the appendix tables" if more > 0 else "")
+        )
+
+        def draw(fig: Figure) -> None:
+            fg.draw_trajectories(fig, world, tracks, styles)
+
+        (x0, x1), (y0, y1) = fg.world_limits(world)
+        aspect = (y1 - y0) / max(x1 - x0, 1e-9)
+        panel_w = 3.4
+        size = (panel_w * min(3, len(tracks)), max(1.6, panel_w * aspect * 0.95 + 0.35) * nrows)
+        return Plot(f"{slug(dataset)}_trajectories", caption, draw, size=size,
+                    interactive=_plotly_tracks(dataset, world, tracks, styles))
+
+    def waypoint_plot(self, dataset: str) -> Plot | None:
+        ws = waypoint_stats(self.rows(dataset))
+        if not len(ws):
+            return None
+        filters = [f for f in self.filters_on(dataset) if (ws["filter"] == f).any()]
+        labels = filters
+        series = [ws[ws["filter"] == f].sort_values("waypoint")["rmse_m"].to_numpy(dtype=np.float64) * 100.0
+                  for f in filters]
+        styles = self.styles
+        title = f"{dataset}: position RMSE at each waypoint over runs (log scale)"
+
+        def draw(fig: Figure) -> None:
+            fg.draw_waypoint_rmse(fig.add_subplot(), labels, series, styles, title)
+
+        return Plot(f"{slug(dataset)}_waypoint_rmse", title, draw)
+
+    def nees_plot(self, dataset: str) -> Plot | None:
+        entries = sorted((f, s) for (d, f), s in self.col.nees.items() if d == dataset and not self.col.is_global(f))
+        if not entries:
+            return None
+        seed = min(k[2] for k in self.col.ok_dirs if k[0] == dataset)
+        grid = self.col.truths[(dataset, seed)].ground_truth.t
+        order = self.col.filter_order({f for f, _ in entries})
+        by = dict(entries)
+        series = [fg.NeesSeries(f, mean_over_runs(grid, by[f])[0], len(by[f])) for f in order]
+        bands = {n: chi2_band(POSE_DOF, n, CONFIDENCE) for n in sorted({s.runs for s in series})}
+        styles = self.styles
+        title = f"{dataset}: mean NEES over runs (pose, heading wrapped; runs from a uniform prior left out)"
+
+        def draw(fig: Figure) -> None:
+            fg.draw_nees(fig.add_subplot(), grid, series, bands, styles, title)
+
+        return Plot(f"{slug(dataset)}_nees", title, draw, size=(7.5, 4.2))
+
+    # --- appendix --------------------------------------------------------------------------------------
+
+    def appendix(self) -> Section:
+        sec = Section("Appendix", "appendix")
+        shown = {e.dataset for e in self.exps if not e.fold_variants}
+        folded = {e.dataset for e in self.exps if e.fold_variants}
+        detail = Section("Every dataset", "appendix-datasets")
+        for ds in sorted(self.col.datasets):
+            info = self.col.datasets[ds]
+            if ds in shown or info.spec.ident in folded:
+                continue
+            filters = self.filters_on(ds) + self.filters_on(ds, global_start=True)
+            if not filters:
+                continue
+            detail.add(tb.comparison_table(self.rows(ds), filters, f"`{info.display}`: mean ± 95 % interval"))
+        if detail.blocks:
+            sec.children.append(detail)
+        sec.children.append(self.failures())
+        sec.children.append(self.provenance())
+        return sec
+
+    def failures(self) -> Section:
+        sec = Section("Failed and skipped runs", "failures")
+        groups: dict[tuple[str, str, str, str], list[int]] = defaultdict(list)
+        for r in self.col.runs:
+            if r.status != "ok":
+                groups[(r.status, r.filter, r.dataset, r.message)].append(r.seed)
+        if not groups and not self.col.broken:
+            return sec.add(Text("None."))
+        rows = tuple(
+            (st, f"`{f}`", f"`{self.col.display(d)}`", str(len(seeds)), seed_ranges(seeds), msg)
+            for (st, f, d, msg), seeds in sorted(groups.items())
+        )
+        if rows:
+            sec.add(Table(("status", "filter", "dataset", "runs", "seeds", "reason"), rows))
+        if self.col.broken:
+            sec.add(
+                Text("Unreadable run folders (left out of every table):"),
+                Table(("folder", "error"), tuple((f"`{p}`", e) for p, e in sorted(self.col.broken))),
+            )
+        return sec
+
+    def provenance(self) -> Section:
+        commits: dict[str, bool] = {}
+        versions: dict[str, set[str]] = defaultdict(set)
+        for m in self.col.metas:
+            if m.get("git_commit"):
+                c = str(m["git_commit"])
+                commits[c] = commits.get(c, False) or bool(m.get("git_dirty", False))
+            for lib, ver in (m.get("versions") or {}).items():
+                versions[str(lib)].add(str(ver))
+        counts: dict[str, int] = defaultdict(int)
+        for r in self.col.runs:
+            counts[r.status] += 1
+        seeds: dict[str, set[int]] = defaultdict(set)
+        for r in self.col.runs:
+            seeds[r.dataset].add(r.seed)
+        by_range: dict[str, list[str]] = defaultdict(list)
+        for d, s in seeds.items():
+            by_range[seed_ranges(s)].append(d)
+        items = (
+            f"locbench {locbench.__version__}",
+            "git commit of the runs: "
+            + (", ".join(f"`{c}`" + (" (dirty)" if d else "") for c, d in sorted(commits.items())) or "unknown"),
+            "libraries: " + (", ".join(f"{lib} {' / '.join(sorted(v))}" for lib, v in sorted(versions.items()))
+                             or "unknown"),
+            "seeds: " + "; ".join(f"{rng} ({len(ds)} datasets)" for rng, ds in sorted(by_range.items())),
+            "runs: "
+            + ", ".join(f"{counts[s]} {s}" for s in ("ok", "diverged", "error", "skipped") if counts[s])
+            + (f", {len(self.col.broken)} unreadable" if self.col.broken else ""),
+        )
+        return Section("Provenance", "provenance", [Bullets(items)])
+
+
+def band_for(runs: int) -> str:
+    return tb.band_text(runs)
+
+
+def slug(name: str) -> str:
+    """A file-name-safe, bounded stem for a name; long or changed names get a short hash of the full name."""
+    import hashlib
+    import re
+
+    s = re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("_") or "x"
+    if s != name or len(s) > 80:
+        s = f"{s[:80]}-{hashlib.sha256(name.encode()).hexdigest()[:8]}"
+    return s
+
+
+def seed_ranges(seeds: list[int] | set[int]) -> str:
+    """``0-4, 7, 9-10`` for the seeds 0 1 2 3 4 7 9 10."""
+    s = sorted(set(seeds))
+    parts: list[str] = []
+    i = 0
+    while i < len(s):
+        j = i
+        while j + 1 < len(s) and s[j + 1] == s[j] + 1:
+            j += 1
+        parts.append(str(s[i]) if i == j else f"{s[i]}-{s[j]}")
+        i = j + 1
+    return ", ".join(parts) if parts else "none"
+
+
+# --- interactive figures (plotly figure dicts: data only, drawn by the HTML page) ------------------------------
+
+
+def _plotly_pareto(title: str, panels: list[tuple[str, list[fg.ParetoPoint]]]) -> dict:
+    _, pts = panels[0]
+    traces = []
+    for g in sorted({p.group for p in pts}):
+        sel = [p for p in pts if p.group == g]
+        traces.append(
+            {
+                "type": "scatter",
+                "mode": "markers",
+                "name": g,
+                "x": [p.x for p in sel],
+                "y": [p.y for p in sel],
+                "text": [p.label for p in sel],
+                "hovertemplate": "%{text}<br>real-time factor %{x:.3g}<br>ATE %{y:.3g} cm<extra></extra>",
+            }
+        )
+    return {
+        "data": traces,
+        "layout": {
+            "title": {"text": f"{title}: ATE against real-time factor"},
+            "xaxis": {"type": "log", "title": {"text": "real-time factor (x)"}},
+            "yaxis": {"type": "log", "title": {"text": "ATE (cm)"}},
+            "height": 460,
+        },
+    }
+
+
+def _plotly_tracks(dataset: str, world: fg.World, tracks: list[fg.Track], styles: dict[str, LineStyle]) -> dict:
+    traces: list[dict] = []
+    segx: list[float | None] = []
+    segy: list[float | None] = []
+    for x1, y1, x2, y2 in world.segments:
+        segx += [float(x1), float(x2), None]
+        segy += [float(y1), float(y2), None]
+    traces.append({"type": "scatter", "mode": "lines", "name": "map", "x": segx, "y": segy,
+                   "line": {"color": "#aaaaaa", "width": 1}, "hoverinfo": "skip"})
+    step = max(1, world.truth_xy.shape[0] // 2000)
+    traces.append({"type": "scatter", "mode": "lines", "name": world.truth_label,
+                   "x": _r(world.truth_xy[::step, 0]), "y": _r(world.truth_xy[::step, 1]),
+                   "line": {"color": "#000000", "width": 1.5}})
+    for tr in tracks:
+        s = max(1, tr.xy.shape[0] // 2000)
+        traces.append({"type": "scatter", "mode": "lines", "name": tr.label, "x": _r(tr.xy[::s, 0]),
+                       "y": _r(tr.xy[::s, 1]), "line": {"color": styles[tr.label].color, "width": 1}})
+    (x0, x1), (y0, y1) = fg.world_limits(world)
+    return {
+        "data": traces,
+        "layout": {
+            "title": {"text": f"{dataset}: trajectories (click a legend entry to hide it)"},
+            "xaxis": {"range": [x0, x1], "title": {"text": "x (m)"}},
+            "yaxis": {"range": [y0, y1], "title": {"text": "y (m)"}, "scaleanchor": "x"},
+            "height": 560,
+        },
+    }
+
+
+def _r(a: np.ndarray) -> list[float]:
+    return [round(float(v), 4) for v in a]
+

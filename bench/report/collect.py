@@ -1,0 +1,262 @@
+"""Reading the store once: the tidy metrics, each run's status, and what the figures need.
+
+This is the report's only I/O on stored runs. Every dataset and filter name is parsed here, once, into a
+:class:`~locbench.spec.Spec` and the facts the report needs about it (recorded or synthetic, the name to
+print, whether a filter configuration starts without a pose, which filter is the baseline), asked of the
+registry's classes, so the rest of the report never looks inside a name.
+"""
+
+from __future__ import annotations
+
+import io
+import logging
+from collections import defaultdict
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from locbench.metrics import nees_at_truth, run_metrics
+from locbench.spec import Spec, format_spec, params_to_dict
+from locbench.store import RunRecord, Store, TruthRecord
+
+log = logging.getLogger(__name__)
+
+COLUMNS = ("dataset", "filter", "seed", "metric", "value")
+#: ``value`` is written with 10 significant digits: stable, and far below any metric's noise.
+FLOAT_FORMAT = "%.10g"
+
+
+@dataclass(frozen=True)
+class RunInfo:
+    """Status of one stored run, for the failure list."""
+
+    dataset: str
+    filter: str
+    seed: int
+    status: str
+    message: str
+
+
+@dataclass(frozen=True)
+class DatasetInfo:
+    """What the report knows of a stored dataset name."""
+
+    name: str
+    spec: Spec
+    recorded: bool
+    #: The name as printed: recorded datasets with their identifying parameters spelled out.
+    display: str
+
+
+@dataclass(frozen=True)
+class FilterInfo:
+    """What the report knows of a stored filter name."""
+
+    name: str
+    spec: Spec
+    baseline: bool
+    global_start: bool
+
+
+@dataclass
+class Collected:
+    """Everything the report needs from one pass over the store."""
+
+    metrics: pd.DataFrame
+    runs: list[RunInfo] = field(default_factory=list)
+    broken: list[tuple[str, str]] = field(default_factory=list)
+    metas: list[dict[str, Any]] = field(default_factory=list)
+    #: (dataset, filter) -> one (t, nees) series per ok run
+    nees: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]] = field(default_factory=dict)
+    #: (dataset, filter, seed) -> run folder of ok runs
+    ok_dirs: dict[tuple[str, str, int], Path] = field(default_factory=dict)
+    truths: dict[tuple[str, int], TruthRecord] = field(default_factory=dict)
+    datasets: dict[str, DatasetInfo] = field(default_factory=dict)
+    filters: dict[str, FilterInfo] = field(default_factory=dict)
+    store: Store | None = None
+
+    def read_run(self, dataset: str, filter_name: str, seed: int) -> RunRecord:
+        """The stored ok run (estimates and covariances) of one cell, through the store's API."""
+        if self.store is None:
+            raise RuntimeError("no store behind these metrics")
+        return self.store.read_run(self.ok_dirs[(dataset, filter_name, seed)])
+
+    def filter_order(self, names: Sequence[str] | set[str]) -> list[str]:
+        """The baseline first (the row every table starts with), then by name."""
+        return sorted(set(names), key=lambda n: (not self._filter(n).baseline, n))
+
+    def _filter(self, name: str) -> FilterInfo:
+        if name not in self.filters:
+            self.filters[name] = describe_filter(name)
+        return self.filters[name]
+
+    def is_baseline(self, name: str) -> bool:
+        return self._filter(name).baseline
+
+    def is_global(self, name: str) -> bool:
+        return self._filter(name).global_start
+
+    def display(self, dataset: str) -> str:
+        info = self.datasets.get(dataset)
+        return info.display if info is not None else dataset
+
+
+# --- what a name means, asked of the registry -----------------------------------------------------------
+
+
+def describe_filter(name: str) -> FilterInfo:
+    """Parse a stored filter name and ask its class whether it is the baseline and starts without a pose.
+
+    A filter whose class cannot be loaded here (an optional dependency missing, a plug-in gone) is described
+    by its name alone: not the baseline, starting from the belief.
+    """
+    from locbench.registry import FILTERS, resolve_filter
+
+    spec = Spec.parse(name)
+    try:
+        cls: Any = FILTERS.load(spec.ident)
+        cfg = resolve_filter(name).params
+        return FilterInfo(name, spec, bool(cls.baseline), bool(cls.starts_without_pose(cfg)))
+    except Exception as exc:  # the report must still come out without the class
+        log.info("filter %s described by its name only: %s", name, exc)
+        return FilterInfo(name, spec, False, False)
+
+
+def describe_dataset(name: str) -> DatasetInfo:
+    """Parse a stored dataset name; recorded datasets get their identifying parameters spelled out."""
+    from locbench.datasets.recorded.base import RecordedDataset
+    from locbench.registry import DATASETS, resolve_dataset
+
+    spec = Spec.parse(name)
+    try:
+        cls: Any = DATASETS.load(spec.ident)
+    except Exception as exc:
+        log.info("dataset %s described by its name only: %s", name, exc)
+        return DatasetInfo(name, spec, False, name)
+    if not (isinstance(cls, type) and issubclass(cls, RecordedDataset)):
+        return DatasetInfo(name, spec, False, name)
+    try:
+        full = params_to_dict(resolve_dataset(name).params)
+    except Exception:
+        full = {}
+    shown = {k: full[k] for k in cls.identity_keys if k in full}
+    shown.update(spec.as_dict())
+    return DatasetInfo(name, spec, True, format_spec(spec.ident, shown))
+
+
+# --- collecting -----------------------------------------------------------------------------------------
+
+#: Selects the (dataset, filter) cells a report covers (``--suite``); None keeps every stored run.
+Keep = Callable[[str, str], bool]
+
+
+def collect(store: Store, keep: Keep | None = None) -> Collected:
+    """One pass over the stored runs: metrics of every run, statuses, NEES series and truths.
+
+    Parameters
+    ----------
+    store : Store
+        The results folder.
+    keep : callable, optional
+        ``keep(dataset, filter)`` selects the cells to report; None keeps all.
+    """
+    rows: list[tuple[str, str, int, str, float]] = []
+    out = Collected(metrics=pd.DataFrame(), store=store)
+    nees: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]] = defaultdict(list)
+    for run_dir in store.iter_runs():
+        rel = _relative(run_dir, store.root)
+        try:
+            run = store.read_run(run_dir)
+            meta = run.meta
+            dataset, filt, seed = str(meta["dataset"]), str(meta["filter"]), int(meta["seed"])
+            if keep is not None and not keep(dataset, filt):
+                continue
+            truth: TruthRecord | None = None
+            if run.status == "ok":
+                key = (dataset, seed)
+                if key not in out.truths:
+                    out.truths[key] = store.read_truth(dataset, seed)
+                truth = out.truths[key]
+                values = run_metrics(run, truth)
+                ne = nees_at_truth(run.t, run.mean, run.cov, truth.ground_truth.t, truth.ground_truth.poses)
+            else:
+                values, ne = run_metrics(run, _NO_TRUTH), None
+        except Exception as exc:
+            log.warning("skipping unreadable run %s: %s", rel, exc)
+            # Paths relative to the results folder keep the report independent of where it lives.
+            msg = str(exc).replace(f"{store.root.as_posix()}/", "")
+            out.broken.append((rel, f"{type(exc).__name__}: {msg}"))
+            continue
+        out.metas.append(meta)
+        out.runs.append(RunInfo(dataset, filt, seed, run.status, str(meta.get("message", "") or "")))
+        rows.extend((dataset, filt, seed, k, float(v)) for k, v in values.items())
+        if truth is not None and ne is not None:
+            nees[(dataset, filt)].append((truth.ground_truth.t, ne))
+            out.ok_dirs[(dataset, filt, seed)] = run_dir
+    out.nees = dict(nees)
+    out.metrics = frame(rows)
+    for name in sorted({r.dataset for r in out.runs}):
+        out.datasets[name] = describe_dataset(name)
+    for name in sorted({r.filter for r in out.runs}):
+        out.filters[name] = describe_filter(name)
+    return out
+
+
+class _NoTruth:
+    """Stands in for the truth of a run that is not ok (its metrics never look at it)."""
+
+
+_NO_TRUTH: Any = _NoTruth()
+
+
+def frame(rows: Sequence[tuple[str, str, int, str, float]]) -> pd.DataFrame:
+    """The tidy metrics frame, typed and sorted by dataset, filter, seed and metric."""
+    df = pd.DataFrame(list(rows), columns=list(COLUMNS))
+    df = df.astype({"dataset": "str", "filter": "str", "seed": "int64", "metric": "str", "value": "float64"})
+    return df.sort_values(list(COLUMNS[:4]), kind="stable").reset_index(drop=True)
+
+
+def _relative(path: Path, root: Path) -> str:
+    try:
+        return path.relative_to(root).as_posix()
+    except ValueError:
+        return path.as_posix()
+
+
+def collect_metrics(store: Store) -> pd.DataFrame:
+    """The tidy metrics of every stored run.
+
+    Returns
+    -------
+    DataFrame
+        Columns ``dataset, filter, seed, metric, value`` (names with their parameters), sorted by
+        dataset, filter, seed and metric. An ok run gives :func:`locbench.metrics.run_metrics`; a failed
+        or diverged run ``failed`` = 1; a skipped run nothing. A run folder that cannot be read (or whose
+        ground truth is missing) is logged and left out.
+    """
+    return collect(store).metrics
+
+
+def write_if_changed(path: Path, data: bytes) -> None:
+    """Leave an identical file untouched (its modification time too)."""
+    if path.is_file() and path.read_bytes() == data:
+        return
+    path.write_bytes(data)
+
+
+def write_metrics_csv(df: pd.DataFrame, path: str | Path) -> Path:
+    """Write the tidy metrics as CSV, sorted and with stable float formatting (identical bytes on rerun).
+
+    Values use ``%.10g``; infinities are written ``inf``, NaN ``nan``; line ends are ``\\n``.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tidy = frame(list(df[list(COLUMNS)].itertuples(index=False, name=None)))
+    buf = io.StringIO()
+    tidy.to_csv(buf, index=False, float_format=FLOAT_FORMAT, na_rep="nan", lineterminator="\n")
+    write_if_changed(path, buf.getvalue().encode())
+    return path

@@ -1,0 +1,254 @@
+"""Figure drawing: pure functions from arrays to a matplotlib axis or figure (no I/O, no store).
+
+Each function takes the axis (or figure, for small multiples), the arrays to draw and the
+:class:`~locbench.report.style.LineStyle` of each series; callers pick the styles from one stable order
+so that a filter keeps its colour and marker in every figure.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
+from matplotlib.patches import Ellipse
+from scipy import stats
+
+from locbench.report.style import LineStyle
+
+_CHI2_2D_95 = float(stats.chi2.ppf(0.95, 2))
+
+
+def pareto_front(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Indices of the points no other point beats on both axes (x higher is better, y lower is better).
+
+    Sorted by x descending; a point is on the front when its y is below every y of a point with a higher
+    or equal x (ties in x keep the lower y only).
+    """
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    ok = np.flatnonzero(np.isfinite(x) & np.isfinite(y))
+    order = ok[np.lexsort((y[ok], -x[ok]))]
+    front: list[int] = []
+    best = math.inf
+    for i in order:
+        if y[i] < best:
+            front.append(int(i))
+            best = float(y[i])
+    return np.asarray(front, dtype=np.intp)
+
+
+@dataclass(frozen=True)
+class ParetoPoint:
+    """One filter configuration: its label, the group (filter id) its curve joins, x and y."""
+
+    label: str
+    group: str
+    x: float
+    y: float
+
+
+def draw_pareto(
+    ax: Axes, points: Sequence[ParetoPoint], styles: Mapping[str, LineStyle], xlabel: str, ylabel: str, title: str
+) -> None:
+    """Accuracy against speed, ann-benchmarks style: a marker per configuration, each group's own front as a
+    line through its configurations, the overall front dashed; both axes logarithmic."""
+    groups = sorted({p.group for p in points})
+    for g in groups:
+        pts = [p for p in points if p.group == g]
+        x = np.array([p.x for p in pts])
+        y = np.array([p.y for p in pts])
+        st = styles[g]
+        ax.plot(x, y, ls="none", marker=st.marker, color=st.color, ms=5, label=g)
+        fr = pareto_front(x, y)
+        if fr.size > 1:
+            ax.plot(x[fr], y[fr], color=st.color, lw=0.8, ls=st.linestyle)
+    x_all = np.array([p.x for p in points])
+    y_all = np.array([p.y for p in points])
+    fr = pareto_front(x_all, y_all)
+    if fr.size:
+        ax.step(x_all[fr], y_all[fr], where="post", color="0.3", lw=0.8, ls=":", label="front (all)")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+
+
+@dataclass(frozen=True)
+class World:
+    """What every trajectory panel shows behind the estimate: walls, landmarks, the truth and the waypoints."""
+
+    segments: np.ndarray  # (n, 4) x1 y1 x2 y2, m
+    landmarks: np.ndarray  # (m, 2), m
+    truth_xy: np.ndarray  # (k, 2), m
+    truth_label: str = "ground truth"
+    waypoints_xy: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+
+
+@dataclass(frozen=True)
+class Track:
+    """One estimated trajectory with position covariances at a few times for the 95 % ellipses."""
+
+    label: str
+    xy: np.ndarray  # (n, 2), m
+    ellipse_xy: np.ndarray  # (e, 2), m
+    ellipse_cov: np.ndarray  # (e, 2, 2), m^2
+
+
+def world_limits(world: World, pad_fraction: float = 0.08) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Axis limits that frame the world (truth, map, waypoints), never a runaway estimate."""
+    pts = [world.truth_xy, world.segments.reshape(-1, 2), world.landmarks, world.waypoints_xy]
+    allp = np.vstack([p for p in pts if len(p)])
+    lo, hi = allp.min(axis=0), allp.max(axis=0)
+    pad = pad_fraction * float(np.max(hi - lo)) + 0.3
+    return (float(lo[0] - pad), float(hi[0] + pad)), (float(lo[1] - pad), float(hi[1] + pad))
+
+
+def _draw_world(ax: Axes, world: World) -> None:
+    for x1, y1, x2, y2 in world.segments:
+        ax.plot([x1, x2], [y1, y2], color="0.65", lw=1.0, solid_capstyle="butt")
+    if len(world.landmarks):
+        ax.plot(world.landmarks[:, 0], world.landmarks[:, 1], ls="none", marker="^", ms=3.5, color="0.5")
+    ax.plot(world.truth_xy[:, 0], world.truth_xy[:, 1], color="black", lw=0.8)
+    if len(world.waypoints_xy):
+        wp = world.waypoints_xy
+        ax.plot(wp[:, 0], wp[:, 1], ls="none", marker="x", ms=5, color="black")
+
+
+def draw_trajectories(fig: Figure, world: World, tracks: Sequence[Track], styles: Mapping[str, LineStyle]) -> None:
+    """Small multiples: one panel per filter with the world, the truth and the waypoints in each, axes fitted to
+    the world (what leaves it is clipped), the estimate and its 95 % position ellipses."""
+    n = max(len(tracks), 1)
+    ncols = min(3, n)
+    nrows = int(math.ceil(n / ncols))
+    (x0, x1), (y0, y1) = world_limits(world)
+    axes = fig.subplots(nrows, ncols, squeeze=False, sharex=True, sharey=True)
+    for k, ax in enumerate(axes.flat):
+        if k >= len(tracks):
+            ax.set_axis_off()
+            continue
+        tr = tracks[k]
+        st = styles[tr.label]
+        _draw_world(ax, world)
+        ax.plot(tr.xy[:, 0], tr.xy[:, 1], color=st.color, lw=0.9)
+        for m, cov in zip(tr.ellipse_xy, tr.ellipse_cov, strict=True):
+            w, v = np.linalg.eigh(0.5 * (cov + cov.T))
+            if not np.all(np.isfinite(w)):
+                continue
+            w = np.clip(w, 0.0, None)
+            angle = float(np.degrees(np.arctan2(v[1, 1], v[0, 1])))
+            ax.add_patch(
+                Ellipse(
+                    (m[0], m[1]),
+                    2.0 * np.sqrt(_CHI2_2D_95 * w[1]),
+                    2.0 * np.sqrt(_CHI2_2D_95 * w[0]),
+                    angle=angle,
+                    fill=False,
+                    color=st.color,
+                    lw=0.6,
+                )
+            )
+        ax.set_xlim(x0, x1)
+        ax.set_ylim(y0, y1)
+        ax.set_aspect("equal", adjustable="box")
+        ax.set_title(tr.label, fontsize=7.5)
+        ax.tick_params(labelsize=6.5)
+
+
+def draw_waypoint_rmse(
+    ax: Axes, labels: Sequence[str], rmse_cm: Sequence[np.ndarray], styles: Mapping[str, LineStyle], title: str
+) -> None:
+    """RMSE at each waypoint per filter, log scale (1-5 cm filters stay visible beside dead reckoning's metres)."""
+    for label, y in zip(labels, rmse_cm, strict=True):
+        st = styles[label]
+        x = np.arange(1, y.size + 1)
+        ax.plot(x, y, color=st.color, marker=st.marker, ls=st.linestyle, ms=4, label=label)
+    n = max((y.size for y in rmse_cm), default=0)
+    ax.set_xticks(np.arange(1, n + 1))
+    ax.set_yscale("log")
+    ax.set_xlabel("waypoint")
+    ax.set_ylabel("RMSE over runs (cm)")
+    ax.set_title(title)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+
+
+@dataclass(frozen=True)
+class NeesSeries:
+    """Mean NEES over a filter's runs on a common time grid."""
+
+    label: str
+    mean: np.ndarray
+    runs: int
+
+
+def draw_nees(
+    ax: Axes,
+    t: np.ndarray,
+    series: Sequence[NeesSeries],
+    bands: Mapping[int, tuple[float, float]],
+    styles: Mapping[str, LineStyle],
+    title: str,
+) -> None:
+    """Mean NEES against time, log y, with the chi-square(3N)/N band of each run count N in its own style."""
+    hatches = ("", "////", "\\\\\\\\", "xx", "..")
+    for k, (n, (lo, hi)) in enumerate(sorted(bands.items())):
+        ax.axhspan(
+            lo,
+            hi,
+            facecolor="0.5",
+            alpha=0.12 + 0.08 * (k % 2),
+            hatch=hatches[k % len(hatches)],
+            edgecolor="0.45",
+            lw=0.6,
+            label=f"95 % band, {n} runs",
+        )
+    for s in series:
+        st = styles[s.label]
+        y = np.where(np.isfinite(s.mean) & (s.mean > 0), s.mean, np.nan)
+        ax.plot(t, y, color=st.color, ls=st.linestyle, lw=0.9, label=f"{s.label} ({s.runs} runs)")
+    ax.axhline(3.0, color="black", lw=0.6, ls="--")
+    ax.set_yscale("log")
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("mean NEES")
+    ax.set_title(title)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+
+
+@dataclass(frozen=True)
+class RateCurve:
+    """Recovery rate against kidnap distance with its 95 % Wilson interval."""
+
+    label: str
+    style_key: str
+    d: np.ndarray
+    rate: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+
+
+def draw_recovery(ax: Axes, curves: Sequence[RateCurve], styles: Mapping[str, LineStyle], title: str) -> None:
+    """Recovery rate against kidnap distance, a line per filter, sideways offsets so equal rates stay apart."""
+    all_d = sorted({float(d) for c in curves for d in c.d})
+    log_x = bool(all_d) and all_d[0] > 0 and len(all_d) > 1
+    for i, c in enumerate(curves):
+        shift = (i - (len(curves) - 1) / 2.0) * 0.02
+        x = c.d * 2.0**shift if log_x else c.d + shift
+        # the Wilson bounds can land a rounding error inside a rate of exactly 0 or 1
+        err = np.clip(np.vstack([c.rate - c.low, c.high - c.rate]), 0.0, None)
+        st = styles[c.style_key]
+        ax.errorbar(x, c.rate, yerr=err, color=st.color, marker=st.marker, ls=st.linestyle, ms=4, capsize=3,
+                    label=c.label)
+    if log_x:
+        ax.set_xscale("log", base=2)
+    ax.set_xticks(all_d, [f"{d:g}" for d in all_d])
+    ax.minorticks_off()
+    ax.set_ylim(-0.05, 1.05)
+    ax.set_xlabel("kidnap distance D (m)")
+    ax.set_ylabel("recovery rate")
+    ax.set_title(title)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)

@@ -1,0 +1,227 @@
+"""Rendering the sections: ``REPORT.md`` with PNG figures, and one self-contained ``index.html``.
+
+Both are deterministic: PNGs are drawn with the Agg backend, a fixed style, size and dpi and no software
+metadata; the HTML inlines its style, its script, the PNGs (base64) and, for the interactive plots, the
+plotly.js bundle once, so it opens with no network access.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+import re
+from pathlib import Path
+
+import matplotlib.style
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from locbench.report.collect import write_if_changed
+from locbench.report.doc import Bullets, Plot, Section, Table, Text
+from locbench.report.style import FIG_DPI, MPL_STYLE
+
+_PNG_META = {"Software": None}
+
+
+def render_png(plot: Plot) -> bytes:
+    """Draw a plot into PNG bytes."""
+    with matplotlib.style.context(["default", MPL_STYLE]):
+        fig = Figure(figsize=plot.size, dpi=FIG_DPI, layout="constrained")
+        FigureCanvasAgg(fig)
+        plot.draw(fig)
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=FIG_DPI, metadata=_PNG_META)
+    return buf.getvalue()
+
+
+def _md_cell(text: str) -> str:
+    return text.replace("|", "\\|").replace("\n", " ").strip()
+
+
+def to_markdown(title: str, intro: list[str], sections: list[Section]) -> str:
+    """The whole report as Markdown: title, introduction, contents, then every section."""
+    lines = [f"# {title}", "", *[p for para in intro for p in (para, "")], "## Contents", ""]
+    for level, sec in (x for s in sections for x in s.walk()):
+        lines.append(f"{'  ' * (level - 2)}- [{sec.title}](#{sec.anchor})")
+    lines.append("")
+    for level, sec in (x for s in sections for x in s.walk()):
+        lines += [f'{"#" * level} <a id="{sec.anchor}"></a>{sec.title}', ""]
+        for b in sec.blocks:
+            if isinstance(b, Text):
+                lines += [b.text, ""]
+            elif isinstance(b, Bullets):
+                lines += [*(f"- {i}" for i in b.items), ""]
+            elif isinstance(b, Table):
+                if b.caption:
+                    lines += [f"*{b.caption}*", ""]
+                lines.append("| " + " | ".join(_md_cell(h) for h in b.header) + " |")
+                lines.append("|" + "|".join("---" for _ in b.header) + "|")
+                lines += ["| " + " | ".join(_md_cell(c) for c in r) + " |" for r in b.rows]
+                lines.append("")
+                for note in b.footnotes:
+                    lines += [note, ""]
+            elif isinstance(b, Plot):
+                lines += [f"![{_md_cell(b.caption)}](figures/{b.name}.png)", ""]
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def plots_of(sections: list[Section]) -> list[Plot]:
+    return [b for s in sections for _, sec in s.walk() for b in sec.blocks if isinstance(b, Plot)]
+
+
+def write_figures(sections: list[Section], figdir: Path) -> dict[str, bytes]:
+    """Draw every plot to ``figdir/<name>.png`` (unchanged files untouched), remove stale PNGs; name -> bytes."""
+    figdir.mkdir(parents=True, exist_ok=True)
+    out: dict[str, bytes] = {}
+    for plot in plots_of(sections):
+        if plot.name in out:
+            raise ValueError(f"two figures named {plot.name!r}")
+        data = render_png(plot)
+        write_if_changed(figdir / f"{plot.name}.png", data)
+        out[plot.name] = data
+    for stale in sorted(figdir.glob("*.png")):
+        if stale.stem not in out:
+            stale.unlink()
+    return out
+
+
+# --- HTML -------------------------------------------------------------------------------------------
+
+_INLINE = re.compile(r"(\*\*(.+?)\*\*)|(`([^`]+)`)|(\*([^*]+)\*)")
+
+
+def _inline(text: str) -> str:
+    """Markdown-flavoured cell text to HTML: ``code``, **bold** and *italic* spans, the rest escaped."""
+    out, pos = [], 0
+    for m in _INLINE.finditer(text):
+        out.append(html.escape(text[pos : m.start()]))
+        if m.group(1):
+            out.append(f"<strong>{_inline(m.group(2))}</strong>")
+        elif m.group(3):
+            out.append(f"<code>{html.escape(m.group(4))}</code>")
+        else:
+            out.append(f"<em>{html.escape(m.group(6))}</em>")
+        pos = m.end()
+    out.append(html.escape(text[pos:]))
+    return "".join(out)
+
+
+_CSS = """
+body{font-family:system-ui,-apple-system,"Segoe UI",sans-serif;max-width:1250px;margin:0 auto;padding:1em 2em;
+color:#1a1a1a;line-height:1.45}
+h1{border-bottom:2px solid #0072B2}h2{border-bottom:1px solid #ccc;margin-top:2em}
+table{border-collapse:collapse;margin:.6em 0 1.2em;font-size:.86em}
+th,td{border:1px solid #d0d0d0;padding:.25em .5em;vertical-align:top}
+th{background:#eef3f8;cursor:pointer;user-select:none;position:sticky;top:0}
+th.sorted-asc::after{content:" \\25B2"}th.sorted-desc::after{content:" \\25BC"}
+tr:nth-child(even) td{background:#fafafa}caption{text-align:left;font-style:italic;padding:.2em 0}
+code{font-size:.95em;background:#f3f3f3;padding:0 .2em}img{max-width:100%}
+figure{margin:1em 0}figcaption{font-size:.85em;color:#444}
+nav ul{columns:2}p.note{font-size:.85em;color:#333}
+"""
+
+# Sorting: a click on a header sorts its table by the cells' data-sort number (text where it has none);
+# a second click reverses. Written for this page; no library needed for ten lines.
+_JS = """
+document.querySelectorAll("table.sortable").forEach(function(tbl){
+  tbl.querySelectorAll("th").forEach(function(th, col){
+    th.addEventListener("click", function(){
+      var body = tbl.tBodies[0], rows = Array.prototype.slice.call(body.rows);
+      var asc = !th.classList.contains("sorted-asc");
+      tbl.querySelectorAll("th").forEach(function(h){h.classList.remove("sorted-asc","sorted-desc");});
+      th.classList.add(asc ? "sorted-asc" : "sorted-desc");
+      function key(r){var c=r.cells[col]; var k=c.getAttribute("data-sort");
+        return (k!==null && k!=="" && !isNaN(parseFloat(k))) ? [0, parseFloat(k)] : [1, c.textContent];}
+      rows.sort(function(a,b){var x=key(a), y=key(b);
+        if(x[0]!==y[0]) return x[0]-y[0];
+        var r = x[0]===0 ? x[1]-y[1] : String(x[1]).localeCompare(String(y[1]));
+        return asc ? r : -r;});
+      rows.forEach(function(r){body.appendChild(r);});
+    });
+  });
+});
+"""
+
+
+def _table_html(t: Table) -> str:
+    parts = ['<table class="sortable">']
+    if t.caption:
+        parts.append(f"<caption>{_inline(t.caption)}</caption>")
+    parts.append("<thead><tr>" + "".join(f"<th>{_inline(h)}</th>" for h in t.header) + "</tr></thead><tbody>")
+    for i, row in enumerate(t.rows):
+        keys = t.sort_keys[i] if i < len(t.sort_keys) else ()
+        cells = []
+        for j, c in enumerate(row):
+            k = keys[j] if j < len(keys) else float("nan")
+            attr = f' data-sort="{k!r}"' if k == k and abs(k) != float("inf") else (
+                ' data-sort="1e308"' if k == float("inf") else "")
+            cells.append(f"<td{attr}>{_inline(c)}</td>")
+        parts.append("<tr>" + "".join(cells) + "</tr>")
+    parts.append("</tbody></table>")
+    parts += [f'<p class="note">{_inline(n)}</p>' for n in t.footnotes]
+    return "\n".join(parts)
+
+
+def to_html(title: str, intro: list[str], sections: list[Section], pngs: dict[str, bytes]) -> str:
+    """One self-contained page: the same sections, sortable tables, PNGs inlined, plotly plots interactive."""
+    from plotly.offline import get_plotlyjs
+
+    body: list[str] = [f"<h1>{html.escape(title)}</h1>", *(f"<p>{_inline(p)}</p>" for p in intro)]
+    toc = ["<nav><h2>Contents</h2><ul>"]
+    for level, sec in (x for s in sections for x in s.walk()):
+        toc.append(f'<li style="margin-left:{(level - 2) * 1.2}em"><a href="#{sec.anchor}">{_inline(sec.title)}</a></li>')
+    toc.append("</ul></nav>")
+    body += toc
+    n_plot = 0
+    uses_plotly = False
+    for level, sec in (x for s in sections for x in s.walk()):
+        body.append(f'<h{level} id="{sec.anchor}">{_inline(sec.title)}</h{level}>')
+        for b in sec.blocks:
+            if isinstance(b, Text):
+                body.append(f"<p>{_inline(b.text)}</p>")
+            elif isinstance(b, Bullets):
+                body.append("<ul>" + "".join(f"<li>{_inline(i)}</li>" for i in b.items) + "</ul>")
+            elif isinstance(b, Table):
+                body.append(_table_html(b))
+            elif isinstance(b, Plot):
+                n_plot += 1
+                img = base64.b64encode(pngs[b.name]).decode()
+                body.append(f'<figure><img alt="{html.escape(b.caption)}" src="data:image/png;base64,{img}">'
+                            f"<figcaption>{_inline(b.caption)}</figcaption></figure>")
+                if b.interactive is not None:
+                    uses_plotly = True
+                    div = f"plot-{b.name}"
+                    spec = json.dumps(b.interactive, sort_keys=True, separators=(",", ":"))
+                    body.append(
+                        f'<details><summary>interactive version (zoom, hover, legend toggles)</summary>'
+                        f'<div id="{html.escape(div)}" class="plotly-div"></div>'
+                        f'<script type="application/json" data-target="{html.escape(div)}">{_script_safe(spec)}'
+                        "</script></details>"
+                    )
+    head = [
+        "<!DOCTYPE html>",
+        '<html lang="en"><head><meta charset="utf-8">',
+        f"<title>{html.escape(title)}</title>",
+        '<meta name="viewport" content="width=device-width, initial-scale=1">',
+        f"<style>{_CSS}</style>",
+    ]
+    if uses_plotly:
+        head.append(f"<script>{_script_safe(get_plotlyjs())}</script>")
+    tail = [f"<script>{_JS}</script>"]
+    if uses_plotly:
+        # Plots are drawn when their <details> opens (a hidden div has no size to lay out in).
+        tail.append(
+            "<script>document.querySelectorAll('script[data-target]').forEach(function(s){"
+            "var d=document.getElementById(s.getAttribute('data-target'));var spec=JSON.parse(s.textContent);"
+            "var box=d.closest('details');box.addEventListener('toggle',function(){"
+            "if(box.open&&!d.hasChildNodes()){Plotly.newPlot(d,spec.data,spec.layout,"
+            "{responsive:true,displaylogo:false});}});});</script>"
+        )
+    return "\n".join([*head, "</head><body>", *body, *tail, "</body></html>"]) + "\n"
+
+
+def _script_safe(text: str) -> str:
+    """Text that cannot close the <script> element it is inlined in."""
+    return text.replace("</", "<\\/")

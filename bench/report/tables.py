@@ -1,0 +1,230 @@
+"""Tables from the tidy metrics: pure functions from a metrics frame to :class:`~locbench.report.doc.Table`.
+
+Headers, units and which way is better come from :data:`locbench.metrics.METRICS`; no dataset or filter is
+named here.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+from locbench.claims import waypoint_stats
+from locbench.metrics import CONFIDENCE, METRICS, POSE_DOF, MetricInfo, chi2_band, mean_ci
+from locbench.report.doc import Table
+
+NAN = float("nan")
+
+
+def num(x: float, digits: int = 3) -> str:
+    """A number with ``digits`` significant digits; large values without an exponent."""
+    if np.isnan(x):
+        return "n/a"
+    if np.isinf(x):
+        return "inf" if x > 0 else "-inf"
+    if 100.0 <= abs(x) < 1e9:
+        return f"{x:.0f}"
+    return f"{x:.{digits}g}"
+
+
+def header(metric: str) -> str:
+    """``ATE (cm)``: the metric's header with its display unit."""
+    info = METRICS[metric]
+    return f"{info.header} ({info.unit})" if info.unit else info.header
+
+
+def values(df: pd.DataFrame, metric: str) -> np.ndarray:
+    """The finite-or-infinite (non-NaN) values of one metric in ``df``."""
+    v = df.loc[df["metric"] == metric, "value"].to_numpy(dtype=np.float64)
+    return v[~np.isnan(v)]
+
+
+def mean_of(df: pd.DataFrame, metric: str) -> float:
+    v = values(df, metric)
+    return float(np.mean(v)) if v.size else NAN
+
+
+def scaled(metric: str, x: float) -> float:
+    return x * METRICS[metric].scale
+
+
+def mean_pm(df: pd.DataFrame, metric: str) -> tuple[str, float]:
+    """``mean ± half-width`` of the 95 % t-interval over seeds, in display units, and the mean for sorting."""
+    info = METRICS.get(metric, MetricInfo(metric, ""))
+    ci = mean_ci(values(df, metric) * info.scale)
+    if ci.n == 0:
+        return "n/a", NAN
+    if np.isnan(ci.low):
+        return num(ci.mean), ci.mean
+    return f"{num(ci.mean)} ± {num(ci.half_width, 2)}", ci.mean
+
+
+def best_rows(keys: Sequence[float], info: MetricInfo, eligible: Sequence[bool]) -> set[int]:
+    """Rows holding the best value of a column (ties all marked); ``eligible`` leaves the baseline out."""
+    vals = np.array(keys, dtype=np.float64)
+    ok = np.isfinite(vals) & np.asarray(eligible, dtype=bool)
+    if not ok.any() or info.better == "":
+        return set()
+    if info.better == "lower":
+        score = vals
+    elif info.better == "higher":
+        score = -vals
+    else:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            score = np.abs(np.log(vals / info.target))
+    score = np.where(ok, score, np.inf)
+    best = float(np.min(score))
+    return {i for i in range(len(vals)) if score[i] == best and np.isfinite(best)}
+
+
+def bold_best(rows: list[list[str]], keys: list[list[float]], columns: Sequence[tuple[int, MetricInfo]],
+              eligible: Sequence[bool]) -> None:
+    """Mark the best cell of each listed column in bold, in place."""
+    for col, info in columns:
+        for i in best_rows([k[col] for k in keys], info, eligible):
+            rows[i][col] = f"**{rows[i][col]}**"
+
+
+def anees_verdict(anees: float, runs: int) -> tuple[str, tuple[float, float]]:
+    """The verdict of a mean ANEES over ``runs`` runs against the two-sided 95 % chi-square(3N)/N band."""
+    lo, hi = chi2_band(POSE_DOF, max(runs, 1), CONFIDENCE)
+    if np.isnan(anees):
+        return "n/a", (lo, hi)
+    if anees > hi:
+        return "over-confident", (lo, hi)
+    if anees < lo:
+        return "under-confident", (lo, hi)
+    return "consistent", (lo, hi)
+
+
+def consistency_cell(df: pd.DataFrame) -> tuple[str, float, int, int]:
+    """The ANEES cell of one (dataset, filter): ``text, sort key, collapsed runs, runs``.
+
+    A run whose covariance is singular to rounding at some ground-truth time has NEES +inf and so ANEES
+    +inf; such runs are counted ("collapsed in k/n runs") and the mean is taken over the others.
+    """
+    v = values(df, "anees")
+    n = int(v.size)
+    if n == 0:
+        return "n/a", NAN, 0, 0
+    inf = int(np.sum(np.isinf(v)))
+    finite = v[np.isfinite(v)]
+    if inf:
+        rest = f"; {num(float(np.mean(finite)))} over the other {finite.size}" if finite.size else ""
+        return f"collapsed in {inf}/{n} runs¹{rest}", np.inf, inf, n
+    m = float(np.mean(finite))
+    verdict, _ = anees_verdict(m, n)
+    return f"{num(m)} ({verdict})", m, 0, n
+
+
+COLLAPSE_FOOTNOTE = (
+    "¹ Collapsed: the filter's covariance became singular to rounding at some ground-truth time of those runs, "
+    "so its NEES there is +inf (it claimed certainty it did not have); the ANEES shown is over the other runs."
+)
+
+
+def band_text(runs: int) -> str:
+    lo, hi = chi2_band(POSE_DOF, max(runs, 1), CONFIDENCE)
+    return f"[{lo:.2f}, {hi:.2f}]"
+
+
+def waypoint_rmse_mean(df: pd.DataFrame) -> dict[str, float]:
+    """Mean over waypoints of RMSE_j per filter name (m)."""
+    ws = waypoint_stats(df)
+    if not len(ws):
+        return {}
+    return {str(f): float(np.nanmean(g["rmse_m"].to_numpy(dtype=np.float64))) for f, g in ws.groupby("filter")}
+
+
+def waypoint_table(df: pd.DataFrame, filters: Sequence[str], caption: str) -> Table | None:
+    """RMSE_j per filter and waypoint (cm) over the runs of one dataset name (report 003 fig. 5)."""
+    ws = waypoint_stats(df)
+    if not len(ws):
+        return None
+    n_wp = int(ws["waypoint"].max())
+    rows: list[tuple[str, ...]] = []
+    keys: list[tuple[float, ...]] = []
+    for f in filters:
+        sub = ws[ws["filter"] == f].set_index("waypoint")
+        if sub.empty:
+            continue
+        vals = [float(sub["rmse_m"].get(j, NAN)) * 100.0 for j in range(1, n_wp + 1)]
+        rows.append((f"`{f}`", str(int(sub["runs"].max())), *(num(v) for v in vals)))
+        keys.append((NAN, float(sub["runs"].max()), *vals))
+    head = ("filter", "runs", *(f"{j}" for j in range(1, n_wp + 1)))
+    return Table(head, tuple(rows), caption=caption, sort_keys=tuple(keys))
+
+
+#: Columns of a dataset's comparison table.
+COMPARISON = (
+    "ate_m",
+    "smoothed_ate_m",
+    "relation_error_m",
+    "heading_rmse_rad",
+    "rpe_m_per_m",
+    "final_error_m",
+    "anees",
+    "nees_in_band_fraction",
+    "update_us_median",
+    "realtime_factor",
+)
+
+
+def comparison_table(df: pd.DataFrame, filters: Sequence[str], caption: str) -> Table:
+    """Mean ± 95 % t-interval over seeds of every comparison metric present, a row per filter."""
+    present = [m for m in COMPARISON if (df["metric"] == m).any()]
+    rows: list[tuple[str, ...]] = []
+    keys: list[tuple[float, ...]] = []
+    for f in filters:
+        sub = df[df["filter"] == f]
+        failed = values(sub, "failed")
+        row = [f"`{f}`", str(failed.size), str(int(np.sum(failed > 0.5)))]
+        key = [NAN, float(failed.size), float(np.sum(failed > 0.5))]
+        for m in present:
+            text, k = mean_pm(sub, m)
+            row.append(text)
+            key.append(k)
+        rows.append(tuple(row))
+        keys.append(tuple(key))
+    head = ("filter", "runs", "failed", *(header(m) for m in present))
+    return Table(head, tuple(rows), caption=caption, sort_keys=tuple(keys))
+
+
+def wilson_interval(successes: int, n: int, confidence: float = CONFIDENCE) -> tuple[float, float]:
+    """Two-sided Wilson score interval of a binomial proportion (NaN, NaN for n = 0).
+
+    (p + z^2/2n -+ z sqrt(p(1-p)/n + z^2/4n^2)) / (1 + z^2/n) with p = successes / n and z the normal
+    quantile of (1 + confidence) / 2; unlike the Wald interval it stays inside [0, 1] and is not empty
+    at 0 or n successes.
+    """
+    if n <= 0:
+        return NAN, NAN
+    if not 0 <= successes <= n:
+        raise ValueError(f"successes must be in [0, {n}], got {successes}")
+    z = float(stats.norm.ppf(0.5 + confidence / 2.0))
+    p = successes / n
+    den = 1.0 + z * z / n
+    centre = (p + z * z / (2.0 * n)) / den
+    half = z * np.sqrt(p * (1.0 - p) / n + z * z / (4.0 * n * n)) / den
+    return max(0.0, float(centre - half)), min(1.0, float(centre + half))
+
+
+def rate(df: pd.DataFrame, metric: str) -> tuple[int, int, float, float, float]:
+    """``k, n, k/n, low, high`` of a 1/0 metric; n counts every run that was not skipped (a failed or
+    diverged run, which has no 1/0 value, counts as a failure)."""
+    v = values(df, metric)
+    k = int(np.sum(v > 0.5))
+    n = max(int(values(df, "failed").size), int(v.size))
+    if n == 0:
+        return 0, 0, NAN, NAN, NAN
+    lo, hi = wilson_interval(k, n)
+    return k, n, k / n, lo, hi
+
+
+def median_text(v: Iterable[float]) -> str:
+    a = np.asarray(list(v), dtype=np.float64)
+    a = a[~np.isnan(a)]
+    return num(float(np.median(a))) if a.size else "n/a"
