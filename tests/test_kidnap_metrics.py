@@ -10,7 +10,11 @@ import pytest
 
 from locbench import metrics as lm
 from locbench.datasets.base import Kidnap, Trajectory2D
-from locbench.report import _kidnap_section, collect_metrics, wilson_interval, write_report
+from locbench.report import collect_metrics, wilson_interval, write_report
+from locbench.report.build import Report
+from locbench.report.collect import collect
+from locbench.report.doc import Plot, Table
+from locbench.report.render import render_png
 from locbench.store import KIND_NAMES, RunRecord, Store, TruthRecord
 
 ODO = KIND_NAMES.index("Odometry")
@@ -296,44 +300,32 @@ def kidnap_store(tmp_path: Path) -> Store:
     return st
 
 
-def test_kidnap_section_table_and_figure_are_deterministic(kidnap_store: Store, tmp_path: Path) -> None:
-    df = collect_metrics(kidnap_store)
-    figdir = tmp_path / "figs"
-    figdir.mkdir()
-    written: set[str] = set()
-    lines = _kidnap_section(df, figdir, written)
-    assert written == {"kidnap_line.png"}
-    first = (figdir / "kidnap_line.png").read_bytes()
-    (figdir / "kidnap_line.png").unlink()
-    assert _kidnap_section(df, figdir, set()) == lines
-    assert (figdir / "kidnap_line.png").read_bytes() == first
-    row = "| `tracker` | 0.5 | `line[kidnap_m=0.5]` | 2 | 0 | 1/2 = 0.50 [0.09, 0.91] | 4 |"
-    assert any(line.startswith(row) for line in lines)
+def test_kidnap_section_table_and_figure_are_deterministic(kidnap_store: Store) -> None:
+    col = collect(kidnap_store)
+    first = Report(col).kidnap_and_global()
+    (line,) = [c for c in first.children if c.title == "Kidnap: line"]
+    table, plot = line.blocks
+    assert isinstance(table, Table) and isinstance(plot, Plot)
+    assert table.header == ("filter", "dataset", "D = 0.5 m", "D = 2 m", "false confidence")
+    rows = {r[0]: r for r in table.rows}
+    assert rows["`tracker`"][2:4] == ("1/2", "0/2")
+    assert rows["`odometry`"][2:4] == ("0/2", "0/2")
+    assert table.rows[0][0] == "`odometry`"  # the baseline first
+    assert render_png(plot) == render_png(Report(collect(kidnap_store)).kidnap_and_global().children[0].blocks[1])
+    (glob,) = [c for c in first.children if c.anchor == "global"]
+    (gt,) = [b for b in glob.blocks if isinstance(b, Table)]
+    assert [r[1] for r in gt.rows] == ["`pf[init=uniform]`", "`pf[init=uniform]`"]
+    assert gt.rows[1][3] == "2/2 = 1.00 [0.34, 1.00]" and gt.rows[1][4] == "5.5"
 
 
 @pytest.mark.slow
 def test_report_kidnap_and_global_sections_regenerate_identically(kidnap_store: Store) -> None:
-    path = write_report(kidnap_store)
-    text = path.read_text()
-    for needle in (
-        "## Kidnap recovery",
-        "### line",
-        "| `tracker` | 0.5 | `line[kidnap_m=0.5]` | 2 | 0 | 1/2 = 0.50 [0.09, 0.91] | 4 |",
-        "| `tracker` | 2 | `line[kidnap_m=2]` | 2 | 0 | 0/2 = 0.00 [0.00, 0.66] | n/a |",
-        "| `odometry` | 2 | `line[kidnap_m=2]` | 2 | 0 | 0/2 = 0.00 [0.00, 0.66] | n/a |",
-        "![kidnap_line](figures/kidnap_line.png)",
-        "## Global localization",
-        "| `line[kidnap_m=2]` | `pf[init=uniform]` | 2 | 0 | 2/2 = 1.00 [0.34, 1.00] | 5.5 |",
-        "smoothed ATE (m)",
-    ):
+    text = write_report(kidnap_store).markdown.read_text()
+    for needle in ("Kidnap: line", "![line: recovery within 30 s", "Global localization", "smoothed ATE (cm)"):
         assert needle in text, needle
-    # odometry first in the kidnap table, and the smoothed column sits beside ATE
-    assert text.index("| `odometry` | 0.5 |") < text.index("| `tracker` | 0.5 |")
-    assert "| ATE (m) | smoothed ATE (m) | heading RMSE (rad) |" in text
-    assert "`tracker` |" not in text.split("## Global localization")[1]  # only init=uniform filters
-    figdir = kidnap_store.summary / "figures"
-    assert (figdir / "kidnap_line.png").is_file()
-
+    # runs started from a uniform prior are scored apart, not in the NEES figure of their dataset
+    nees = Report(collect(kidnap_store)).nees_plot("line[kidnap_m=2]")
+    assert nees is not None and "uniform prior left out" in nees.caption
     files = sorted(p for p in kidnap_store.summary.rglob("*") if p.is_file())
     before = {p: p.read_bytes() for p in files}
     for p in files:
@@ -350,8 +342,8 @@ def test_report_without_kidnaps_or_smoother_has_no_such_sections(tmp_path: Path)
     truth = _truth(t_end=20.0, kidnaps=(), dataset="line")
     st.write_truth(truth)
     _write(st, "line", "odometry", 0, np.ones(truth.ground_truth.t.shape, dtype=bool), truth)
-    text = write_report(st).read_text()
-    assert "## Kidnap recovery" not in text
-    assert "## Global localization" not in text
+    text = write_report(st).markdown.read_text()
+    assert "Kidnap and global localization" not in text
+    assert "Global localization" not in text
     assert "smoothed ATE" not in text
     assert not list((st.summary / "figures").glob("kidnap_*.png"))

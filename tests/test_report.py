@@ -11,7 +11,7 @@ import pytest
 from locbench import claims
 from locbench.claims import report_003
 from locbench.datasets.base import Trajectory2D, Waypoints
-from locbench.report import collect_metrics, write_metrics_csv, write_report
+from locbench.report import collect_metrics, summary_text, write_metrics_csv, write_report
 from locbench.store import KIND_NAMES, RunRecord, Store, TruthRecord
 
 ODO = KIND_NAMES.index("Odometry")
@@ -224,38 +224,63 @@ def test_collect_metrics_is_tidy_and_sorted(store: Store) -> None:
 
 
 def test_write_report_end_to_end(store: Store) -> None:
-    path = write_report(store)
-    assert path == store.summary / "REPORT.md"
-    text = path.read_text()
+    paths = write_report(store)
+    assert paths.markdown == store.summary / "REPORT.md"
+    assert paths.html == store.summary / "index.html"
+    text = paths.markdown.read_text()
     for needle in (
-        "# locbench results",
+        "# locbench: which localization filter?",
+        "## Contents",
         "locbench 0.1.0",
         "`0123abcd`",
         "numpy 2.0.0",
-        "`room` 0-2",
-        "## room",
-        "### Comparison",
-        "ATE (m)",
-        "| `odometry` | 3 | 0 |",
+        "0-2 (1 datasets)",
+        "Summary",
+        "*`room`: mean over seeds*",
+        "| filter | runs | ATE (cm) | mean waypoint RMSE (cm) |",
+        "| `odometry` | 3 | ",
         "| `ekf_landmarks[gate=0.1]` | 1 | 1 |",
-        "### Waypoints (cm)",
-        "003 table 1: `odometry` | 20 | 7.4 | 5.7 | 18.7 | 34.9 | 60.7",
-        "Claims of 003_e5c93f9be776ee5e.txt",
+        "`room`: RMSE at each waypoint over runs (cm)",
+        "| `odometry` (003 table 1) | 7.4 | 5.7 | 18.7 | 34.9 | 60.7 |",
+        "*Mobile robot localization using odometry and Kinect sensor* (N. Ganganath and H. Leung)",
         "**not evaluated**",
-        "## Failed and skipped runs",
-        "| room | ekf_landmarks[gate=0.1] | 0 | error | ValueError: boom \\| bad gate |",
-        "| room | ekf_icp | 0 | skipped | needs an occupancy grid |",
+        "Failed and skipped runs",
+        "| error | `ekf_landmarks[gate=0.1]` | `room` | 1 | 0 | ValueError: boom \\| bad gate |",
+        "| skipped | `ekf_icp` | `room` | 1 | 0 | needs an occupancy grid |",
         "runs/room/pf/seed-0000",
         "figures/room_trajectories.png",
+        "figures/room_pareto.png",
     ):
         assert needle in text, needle
-    # odometry comes first in the comparison table
+    assert "003_e5c93f9be776ee5e" not in text and "the issue" not in text
+    # the reading order the issue asks for: contents, summary, claims, accuracy against runtime
+    order = [text.index(h) for h in ("## Contents", "a>Summary", "a>Claims of the source", "a>Accuracy against runtime")]
+    assert order == sorted(order)
+    # the baseline comes first in the tables
     assert text.index("| `odometry` |") < text.index("| `ekf_landmarks` |")
     figs = sorted(p.name for p in (store.summary / "figures").glob("*.png"))
-    assert figs == ["room_nees.png", "room_trajectories.png", "room_waypoint_rmse.png"]
+    assert figs == ["room_nees.png", "room_pareto.png", "room_trajectories.png", "room_waypoint_rmse.png"]
     csv = pd.read_csv(store.summary / "metrics.csv")
     assert list(csv.columns) == ["dataset", "filter", "seed", "metric", "value"]
     assert len(csv) == len(collect_metrics(store))
+    page = paths.html.read_text()
+    assert page.count("<table") >= 3 and "data:image/png;base64," in page and "http" not in page.split("<script")[0]
+
+
+def test_summary_marks_the_best_value_but_never_the_baseline(store: Store) -> None:
+    paths = write_report(store)
+    (table,) = paths.summary
+    rows = {r[0]: r for r in table.rows}
+    ate = table.header.index("ATE (cm)")
+    assert rows["`ekf_landmarks`"][ate].startswith("**")
+    assert not rows["`odometry`"][table.header.index("real-time factor (x)")].startswith("**")
+    assert "ATE (cm)" in summary_text(paths.summary)
+
+
+def test_report_suite_restricts_the_cells(store: Store) -> None:
+    paths = write_report(store, keep=lambda d, f: f == "odometry")
+    (table,) = paths.summary
+    assert [r[0] for r in table.rows] == ["`odometry`"]
 
 
 def test_report_regenerates_identical_bytes(store: Store) -> None:

@@ -63,7 +63,7 @@ class Source:
 
     @property
     def citation(self) -> str:
-        return f"{self.authors}, *{self.title}*"
+        return f"*{self.title}* ({self.authors})"
 
 
 @dataclass(frozen=True)

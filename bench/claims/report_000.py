@@ -29,7 +29,7 @@ from locbench.errors import ConfigError
 SOURCE_000 = Source(
     "000",
     "EKF-based localization with LRF",
-    "Gonçalo Castilho, Tiago Gomes, Pedro Sousa and Markus Kühlen (Instituto Superior Técnico)",
+    "Gonçalo Castilho, Tiago Gomes, Pedro Sousa and Markus Kühlen",
 )
 
 #: Report 000 sec. IV: odometry's and the EKF's distance from the start after one lap, m.

@@ -24,7 +24,7 @@ from locbench.report.doc import Block, Table, Text
 SOURCE_003 = Source(
     "003",
     "Mobile robot localization using odometry and Kinect sensor",
-    "N. Ganganath and H. Leung (University of Calgary)",
+    "N. Ganganath and H. Leung",
 )
 
 #: Report 003 table 1: distance between each waypoint and the mean estimated position over 20 runs, cm,

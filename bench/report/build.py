@@ -40,14 +40,15 @@ class Report:
     def __init__(self, col: Collected) -> None:
         self.col = col
         self.df = col.metrics
-        names = col.filter_order({r.filter for r in col.runs})
-        self.styles: dict[str, LineStyle] = {n: style_for(i) for i, n in enumerate(names)}
-        ids = sorted({col.filters[n].spec.ident for n in names if n in col.filters})
-        self.id_styles: dict[str, LineStyle] = {g: style_for(i) for i, g in enumerate(ids)}
         self.by_ds: dict[str, pd.DataFrame] = {str(d): g for d, g in self.df.groupby("dataset")} if len(self.df) else {}
         self.exps = [e for e in experiments() if self._has(e.dataset)]
 
     # --- helpers ------------------------------------------------------------------------------------
+
+    @staticmethod
+    def styles_for(names: list[str]) -> dict[str, LineStyle]:
+        """Styles in a figure's own order, so no two of its series share colour, marker and dash."""
+        return {n: style_for(i) for i, n in enumerate(names)}
 
     def _has(self, dataset_id: str) -> bool:
         return any(info.spec.ident == dataset_id for info in self.col.datasets.values())
@@ -299,7 +300,7 @@ class Report:
         return sec
 
     def _pareto_plot(self, name: str, title: str, panels: list[tuple[str, list[fg.ParetoPoint]]]) -> Plot:
-        styles = self.id_styles
+        styles = self.styles_for(sorted({p.group for _, pts in panels for p in pts}))
 
         def draw(fig: Figure) -> None:
             n = len(panels)
@@ -447,8 +448,8 @@ class Report:
                 rows.append((f"`{f}`", f"`{fam}`", *cells, tb.num(float(np.mean(fc))) if fc else "n/a"))
                 if pts:
                     a = np.array(pts)
-                    curves.append(fg.RateCurve(label, f, a[:, 0], a[:, 1], a[:, 2], a[:, 3]))
-        styles = dict(self.styles)
+                    curves.append(fg.RateCurve(label, label, a[:, 0], a[:, 1], a[:, 2], a[:, 3]))
+        styles = self.styles_for([c.style_key for c in curves])
         title = f"{ident}: recovery within 30 s, 95 % Wilson intervals"
 
         def draw(fig: Figure) -> None:
@@ -557,7 +558,7 @@ class Report:
                 fg.Track(f, run.mean[:, :2], estimate_at(run.t, run.mean, t_marks)[:, :2],
                          estimate_at(run.t, run.cov, t_marks)[:, :2, :2])
             )
-        styles = self.styles
+        styles = self.styles_for(shown)
         nrows = int(np.ceil(len(tracks) / 3))
         more = len(filters) - len(shown)
         caption = (
@@ -584,7 +585,7 @@ class Report:
         labels = filters
         series = [ws[ws["filter"] == f].sort_values("waypoint")["rmse_m"].to_numpy(dtype=np.float64) * 100.0
                   for f in filters]
-        styles = self.styles
+        styles = self.styles_for(labels)
         title = f"{dataset}: position RMSE at each waypoint over runs (log scale)"
 
         def draw(fig: Figure) -> None:
@@ -602,7 +603,7 @@ class Report:
         by = dict(entries)
         series = [fg.NeesSeries(f, mean_over_runs(grid, by[f])[0], len(by[f])) for f in order]
         bands = {n: chi2_band(POSE_DOF, n, CONFIDENCE) for n in sorted({s.runs for s in series})}
-        styles = self.styles
+        styles = self.styles_for(order)
         title = f"{dataset}: mean NEES over runs (pose, heading wrapped; runs from a uniform prior left out)"
 
         def draw(fig: Figure) -> None:
