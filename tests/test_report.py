@@ -2,15 +2,20 @@
 
 from __future__ import annotations
 
+import ast
+import os
+import shutil
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 
+import locbench.report
 from locbench import claims
 from locbench.claims import report_003
 from locbench.datasets.base import Trajectory2D, Waypoints
+from locbench.registry import DATASETS, FILTERS
 from locbench.report import collect_metrics, summary_text, write_metrics_csv, write_report
 from locbench.store import KIND_NAMES, RunRecord, Store, TruthRecord
 
@@ -307,3 +312,85 @@ def test_write_metrics_csv_is_stable(tmp_path: Path) -> None:
     assert p.read_text() == (
         "dataset,filter,seed,metric,value\na,f,2,anees,3\na,f,2,realtime_factor,inf\nb,f,1,ate_m,0.3\n"
     )
+
+
+# --- the HTML page in a real browser, and the report's independence from names ---------------------------
+# The browser test skips with its reason where Chromium or the playwright driver is absent; .ci/run installs
+# Debian's chromium so that CI runs it.
+
+REPORT_DIR = Path(locbench.report.__file__).parent
+
+
+
+def _chromium() -> str | None:
+    for name in ("chromium", "chromium-browser", "google-chrome"):
+        path = shutil.which(name)
+        if path:
+            return path
+    return None
+
+
+def test_report_code_names_no_dataset_or_filter() -> None:
+    """The report is driven by the registered experiments and claims: its code holds no dataset or filter id."""
+    ids = set(FILTERS.ids()) | set(DATASETS.ids())
+    found = []
+    for path in sorted(REPORT_DIR.glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Constant) and isinstance(node.value, str):
+                words = {w.strip("`'\".,;:()[]") for w in node.value.replace("_", "_").split()}
+                found += [f"{path.name}: {w!r}" for w in words & ids]
+    assert not found
+
+
+@pytest.mark.slow
+def test_html_page_renders_sorts_and_has_no_console_errors(store: Store) -> None:
+    chromium = _chromium()
+    if chromium is None:
+        pytest.skip("Chromium not installed (Debian: apt-get install chromium)")
+    sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright driver is not installed")
+    page_path = write_report(store).html
+    errors: list[str] = []
+    shots = Path(os.environ.get("LOCBENCH_SCREENSHOTS", store.summary))
+    with sync_api.sync_playwright() as pw:
+        browser = pw.chromium.launch(
+            executable_path=chromium,
+            args=["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
+                  "--no-first-run", "--disable-sync"],
+        )
+        try:
+            page = browser.new_page(viewport={"width": 1300, "height": 900})
+            page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            requests: list[str] = []
+            page.on("request", lambda r: requests.append(r.url) if not r.url.startswith(("file:", "data:")) else None)
+            page.goto(page_path.as_uri())
+            assert page.title().startswith("locbench")
+            assert page.locator("h2#summary").count() == 1
+            table = page.locator("#summary-room ~ table.sortable").first
+            col = [h.inner_text().strip() for h in table.locator("th").all()].index("ATE (cm)")
+
+            def column() -> list[str]:
+                return [r.locator("td").nth(col).inner_text() for r in table.locator("tbody tr").all()]
+
+            def as_num(cells: list[str]) -> list[float]:
+                # cells without a number ("n/a") sort after the numbers, in either direction
+                nums = [float(c.split()[0]) for c in cells if c[:1].isdigit()]
+                assert all(c[:1].isdigit() for c in cells[: len(nums)]), cells
+                return nums
+
+            table.locator("th").nth(col).click()
+            up = as_num(column())
+            assert up == sorted(up)
+            table.locator("th").nth(col).click()
+            down = as_num(column())
+            assert down == sorted(down, reverse=True) and len(down) >= 2
+            details = page.locator("details").first
+            if details.count():
+                details.locator("summary").click()
+                page.wait_for_selector(".plotly-div .main-svg", timeout=15000)
+            shots.mkdir(parents=True, exist_ok=True)
+            page.screenshot(path=str(shots / "index.png"), full_page=False)
+        finally:
+            browser.close()
+    assert not errors, errors
+    assert not requests, requests  # self-contained: nothing fetched from a network
