@@ -4,6 +4,7 @@ nox                 the tests (the default session)
 nox -s lint         ruff and mypy
 nox -s bench        run every experiment and write results/summary (posargs go to 'locbench run')
 nox -s report       regenerate results/summary from the stored runs, no re-run
+nox -s html         open results/summary/index.html in headless Chromium (renders, sorts; screenshot)
 nox -s perf         pytest-benchmark micro-benchmarks of each filter's predict and update
 """
 
@@ -62,18 +63,40 @@ def lint(session: nox.Session) -> None:
 
 @nox.session(python=PYTHON, default=False)
 def bench(session: nox.Session) -> None:
-    """Run every experiment (or 'locbench run' arguments given after --) and write the report."""
+    """Run suite 'all' and write results/summary; with 'locbench run' arguments after --, a sub-suite into
+    results/custom (never over the committed results/summary of suite 'all')."""
     _install(session, "all")
-    args = session.posargs or ["--suite", "all", "--jobs", "2"]
-    session.run("locbench", "run", "--results", "results", *args, env=_data_env())
-    session.run("locbench", "report", "--results", "results")
+    args = list(session.posargs) or ["--suite", "all", "--jobs", "2"]
+    results = "results" if not session.posargs else "results/custom"
+    if "--results" in args:
+        results = args[args.index("--results") + 1]
+        args = [a for i, a in enumerate(args) if a != "--results" and (i == 0 or args[i - 1] != "--results")]
+    if session.posargs and os.path.abspath(results) == os.path.abspath("results"):
+        session.error("a sub-suite must not overwrite results/summary (suite 'all'): pass another --results DIR")
+    session.run("locbench", "run", "--results", results, *args, env=_data_env())
+    suite = args[args.index("--suite") + 1] if "--suite" in args else None
+    session.run("locbench", "report", "--results", results, *(["--suite", suite] if suite else []))
 
 
 @nox.session(python=PYTHON, default=False)
 def report(session: nox.Session) -> None:
-    """Regenerate results/summary (tables, figures, metrics.csv) from the stored runs."""
+    """Regenerate results/summary (tables, figures, metrics.csv, index.html) from the stored runs of suite 'all'."""
     _install(session, "all")
-    session.run("locbench", "report", "--results", "results")
+    session.run("locbench", "report", "--results", "results", "--suite", "all")
+
+
+@nox.session(python=PYTHON, default=False)
+def html(session: nox.Session) -> None:
+    """Open results/summary/index.html in headless Chromium: renders, sorts, no console errors; screenshot
+    to results/summary/index.png."""
+    _install(session, "all,test")
+    env = {
+        "LOCBENCH_REPORT_PAGE": os.path.abspath("results/summary/index.html"),
+        "LOCBENCH_SCREENSHOTS": os.path.abspath("results/summary"),
+    }
+    session.run(
+        "pytest", "--benchmark-disable", "tests/test_report.py", "-k", "html", "-p", "no:cacheprovider", env=env
+    )
 
 
 @nox.session(python=PYTHON, default=False)

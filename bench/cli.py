@@ -15,9 +15,9 @@ import argparse
 import logging
 import os
 import sys
-from pathlib import Path
 from collections import Counter
 from collections.abc import Sequence
+from pathlib import Path
 
 from locbench import __version__
 from locbench.errors import ConfigError, LocbenchError

@@ -32,7 +32,14 @@ def test_every_experiment_with_claims_is_registered() -> None:
 
 
 def test_claim_that_cannot_run_is_not_evaluated() -> None:
-    c = claims.Claim("t", "room", claims.Source("x", "T", "A"), "text", "ref", lambda df: claims.ClaimResult("reproduced", str(df["nope"])))
+    c = claims.Claim(
+        "t",
+        "room",
+        claims.Source("x", "T", "A"),
+        "text",
+        "ref",
+        lambda df: claims.ClaimResult("reproduced", str(df["nope"])),
+    )
     assert c.evaluate(pd.DataFrame({"a": [1]})).verdict == "not evaluated"
 
 

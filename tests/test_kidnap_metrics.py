@@ -10,7 +10,7 @@ import pytest
 
 from locbench import metrics as lm
 from locbench.datasets.base import Kidnap, Trajectory2D
-from locbench.report import collect_metrics, wilson_interval, write_report
+from locbench.report import wilson_interval, write_report
 from locbench.report.build import Report
 from locbench.report.collect import collect
 from locbench.report.doc import Plot, Table

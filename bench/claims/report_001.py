@@ -387,8 +387,14 @@ def layout_section(df: pd.DataFrame, slug: str) -> list[Block]:
         markers = {"circle": "o", "star": "*", "pentagon": "p", "random": "s"}
         for f, p, means in series:
             ls = "--" if spec_id(f) == "odometry" else "-"
-            ax.plot(x, np.asarray(means) * 100.0, linestyle=ls, marker=markers.get(p, "o"), color=colors[f],
-                    label=f"{f}, {p}")
+            ax.plot(
+                x,
+                np.asarray(means) * 100.0,
+                linestyle=ls,
+                marker=markers.get(p, "o"),
+                color=colors[f],
+                label=f"{f}, {p}",
+            )
         ax.set_xticks(x, ["1", "2", "3\ntriangle", "4\nsquare near", "8\nsquare far"])
         ax.set_yscale("log")
         ax.set_xlabel("landmark layout")
@@ -416,4 +422,3 @@ register_experiment(
         order=50,
     )
 )
-

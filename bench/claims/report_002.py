@@ -20,11 +20,20 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from locbench.claims import Claim, ClaimResult, Experiment, Source, register, register_experiment, register_section, spec_id
-from locbench.report.doc import Block, Plot, Table, Text
-from locbench.report.style import PALETTE
+from locbench.claims import (
+    Claim,
+    ClaimResult,
+    Experiment,
+    Source,
+    register,
+    register_experiment,
+    register_section,
+    spec_id,
+)
 from locbench.errors import LocbenchError
 from locbench.metrics import mean_ci
+from locbench.report.doc import Block, Plot, Table, Text
+from locbench.report.style import PALETTE
 
 log = logging.getLogger(__name__)
 
@@ -245,11 +254,11 @@ def _gate_section(rows: pd.DataFrame, slug: str) -> list[Block]:
                 if g.empty:
                     continue
                 m = g.groupby("chi2", sort=True)[["ate_m", "accepted"]].mean()
-                style = {"color": PALETTE[d_i % len(PALETTE)], "linestyle": "-" if flag else "--", "marker": "o"}
+                color, ls = PALETTE[d_i % len(PALETTE)], "-" if flag else "--"
                 label = f"{ds}, {_setting(flag)}"
-                axes[0].plot(m.index, 100.0 * m["ate_m"], label=label, **style)
+                axes[0].plot(m.index, 100.0 * m["ate_m"], label=label, color=color, linestyle=ls, marker="o")
                 if has_acc:
-                    axes[1].plot(m.index, 100.0 * m["accepted"], label=label, **style)
+                    axes[1].plot(m.index, 100.0 * m["accepted"], label=label, color=color, linestyle=ls, marker="o")
         axes[0].set_xlabel("chi-square threshold")
         axes[0].set_ylabel("ATE, mean over seeds (cm)")
         axes[0].set_yscale("log")
@@ -260,8 +269,12 @@ def _gate_section(rows: pd.DataFrame, slug: str) -> list[Block]:
 
     return [
         Table(header, tuple(out), caption="ekf_lines: chi-square threshold sweep (report 002)"),
-        Plot(f"{slug}_chi2_sweep", "ekf_lines: ATE and accepted lines against the chi-square threshold", draw,
-             size=(9.0, 3.6) if has_acc else (5.0, 3.6)),
+        Plot(
+            f"{slug}_chi2_sweep",
+            "ekf_lines: ATE and accepted lines against the chi-square threshold",
+            draw,
+            size=(9.0, 3.6) if has_acc else (5.0, 3.6),
+        ),
     ]
 
 
@@ -276,4 +289,3 @@ register_experiment(
         order=30,
     )
 )
-

@@ -24,9 +24,7 @@ from locbench.claims import (
 )
 from locbench.report.doc import Block, Table
 
-SOURCE_004 = Source(
-    "004", "Kalman Filtering with STDR Simulator and ROS", "Luc Alexandre Bettaieb"
-)
+SOURCE_004 = Source("004", "Kalman Filtering with STDR Simulator and ROS", "Luc Alexandre Bettaieb")
 LINEAR = "scan_grid"
 MIXED = "scan_grid[mixed_commands=true]"
 

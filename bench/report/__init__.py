@@ -18,8 +18,15 @@ from locbench.report.doc import Table
 from locbench.report.tables import wilson_interval
 from locbench.store import Store
 
-__all__ = ["ReportPaths", "collect_metrics", "suite_filter", "summary_text", "wilson_interval", "write_metrics_csv",
-           "write_report"]
+__all__ = [
+    "ReportPaths",
+    "collect_metrics",
+    "suite_filter",
+    "summary_text",
+    "wilson_interval",
+    "write_metrics_csv",
+    "write_report",
+]
 
 log = logging.getLogger(__name__)
 
@@ -63,8 +70,9 @@ def write_report(store: Store, keep: Keep | None = None, out: Path | None = None
     write_if_changed(md, to_markdown(TITLE, intro, sections).encode())
     page = summary / "index.html"
     write_if_changed(page, to_html(TITLE, intro, sections, pngs).encode())
-    tables = tuple(b for s in sections if s.anchor == "summary" for c in s.children for b in c.blocks
-                   if isinstance(b, Table))
+    tables = tuple(
+        b for s in sections if s.anchor == "summary" for c in s.children for b in c.blocks if isinstance(b, Table)
+    )
     log.info("wrote %s (%d metric rows, %d figures)", md, len(col.metrics), len(pngs))
     return ReportPaths(md, page, metrics, tables)
 

@@ -9,6 +9,7 @@ claims an experiment has, comes from :mod:`locbench.claims`; the report names no
 from __future__ import annotations
 
 from collections import defaultdict
+
 import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
@@ -93,8 +94,8 @@ class Report:
         return [
             "locbench runs every localization filter on the same synthetic worlds and recorded datasets and "
             "measures them the same way. Start with the **summary** tables: one row per filter configuration on "
-            "each main comparison, errors in cm, times in us, the best value of each column in bold (the dead-reckoning "
-            "baseline is never marked). Then the **claims** of the five source reports, "
+            "each main comparison, errors in cm, times in us, the best value of each column in bold (the "
+            "dead-reckoning baseline is never marked). Then the **claims** of the five source reports, "
             "each with its verdict and the measured value; the **accuracy against runtime** fronts (lower and "
             "further right is better); **consistency** (does a filter's covariance describe its error?); kidnap "
             "recovery; the recorded data; and one section per experiment. Values are means over seeds; the "
@@ -106,9 +107,7 @@ class Report:
         sec = Section("Summary", "summary")
         for e in self.exps:
             if e.summary and e.dataset in self.col.datasets:
-                sec.children.append(
-                    Section(f"{e.title}", f"summary-{e.dataset}", [self.summary_table(e.dataset)])
-                )
+                sec.children.append(Section(f"{e.title}", f"summary-{e.dataset}", [self.summary_table(e.dataset)]))
         return sec
 
     def _kidnap_variant(self, dataset: str) -> str | None:
@@ -219,7 +218,7 @@ class Report:
             "Recorded median ATE: median over the recorded datasets with ground truth that this configuration "
             "ran on (their number in brackets) of its mean ATE there."
         )
-        head = (
+        columns = (
             "filter",
             "runs",
             "ATE (cm)",
@@ -232,7 +231,7 @@ class Report:
             "recorded median ATE (cm)",
         )
         return Table(
-            head,
+            columns,
             tuple(tuple(r) for r in rows),
             caption=f"`{dataset}`: mean over seeds",
             footnotes=tuple(notes),
@@ -385,7 +384,9 @@ class Report:
                 )
             )
             for ident in sorted({self.col.datasets[n].spec.ident for n in kid}):
-                sec.children.append(self._kidnap_family_section(ident, [n for n in kid if self.col.datasets[n].spec.ident == ident]))
+                sec.children.append(
+                    self._kidnap_family_section(ident, [n for n in kid if self.col.datasets[n].spec.ident == ident])
+                )
         glob = sorted({f for r in self.col.runs for f in [r.filter] if self.col.is_global(f)})
         if glob:
             rows: list[tuple[str, ...]] = []
@@ -413,8 +414,7 @@ class Report:
                             "which the recovery criterion above holds; success rate with its 95 % Wilson interval "
                             "and median time over the converged runs."
                         ),
-                        Table(("dataset", "filter", "runs", "converged (95 % Wilson)", "median time (s)"),
-                              tuple(rows)),
+                        Table(("dataset", "filter", "runs", "converged (95 % Wilson)", "median time (s)"), tuple(rows)),
                     ],
                 )
             )
@@ -431,7 +431,7 @@ class Report:
             filters = self.col.filter_order({f for n in members for f in self.filters_on(n)})
             for f in filters:
                 cells, pts = [], []
-                fc = []
+                fc: list[float] = []
                 for d in dists:
                     n = next((m for m in members if self.kidnap_distance(m) == d), None)
                     if n is None:
@@ -506,10 +506,18 @@ class Report:
                 "so there the relation error (Kuemmerle et al. 2009) is the metric. Skipped: the filter needs a "
                 "map kind or sensor the dataset lacks (the appendix lists the reasons)."
             ),
-            Table(head, tuple((f"`{f}`", *(c[0] for c in r)) for f, r in zip(filters, acc, strict=True)),
-                  caption="Accuracy (cm)", sort_keys=tuple((NAN, *(c[1] for c in r)) for r in acc)),
-            Table(head, tuple((f"`{f}`", *(c[0] for c in r)) for f, r in zip(filters, rtf, strict=True)),
-                  caption="Real-time factor (x)", sort_keys=tuple((NAN, *(c[1] for c in r)) for r in rtf)),
+            Table(
+                head,
+                tuple((f"`{f}`", *(c[0] for c in r)) for f, r in zip(filters, acc, strict=True)),
+                caption="Accuracy (cm)",
+                sort_keys=tuple((NAN, *(c[1] for c in r)) for r in acc),
+            ),
+            Table(
+                head,
+                tuple((f"`{f}`", *(c[0] for c in r)) for f, r in zip(filters, rtf, strict=True)),
+                caption="Real-time factor (x)",
+                sort_keys=tuple((NAN, *(c[1] for c in r)) for r in rtf),
+            ),
         )
         return sec
 
@@ -555,8 +563,12 @@ class Report:
         for f in shown:
             run = self.col.read_run(dataset, f, seed)
             tracks.append(
-                fg.Track(f, run.mean[:, :2], estimate_at(run.t, run.mean, t_marks)[:, :2],
-                         estimate_at(run.t, run.cov, t_marks)[:, :2, :2])
+                fg.Track(
+                    f,
+                    run.mean[:, :2],
+                    estimate_at(run.t, run.mean, t_marks)[:, :2],
+                    estimate_at(run.t, run.cov, t_marks)[:, :2, :2],
+                )
             )
         styles = self.styles_for(shown)
         nrows = int(np.ceil(len(tracks) / 3))
@@ -574,8 +586,13 @@ class Report:
         aspect = (y1 - y0) / max(x1 - x0, 1e-9)
         panel_w = 3.4
         size = (panel_w * min(3, len(tracks)), max(1.6, panel_w * aspect * 0.95 + 0.35) * nrows)
-        return Plot(f"{slug(dataset)}_trajectories", caption, draw, size=size,
-                    interactive=_plotly_tracks(dataset, world, tracks, styles))
+        return Plot(
+            f"{slug(dataset)}_trajectories",
+            caption,
+            draw,
+            size=size,
+            interactive=_plotly_tracks(dataset, world, tracks, styles),
+        )
 
     def waypoint_plot(self, dataset: str) -> Plot | None:
         ws = waypoint_stats(self.rows(dataset))
@@ -583,8 +600,9 @@ class Report:
             return None
         filters = [f for f in self.filters_on(dataset) if (ws["filter"] == f).any()]
         labels = filters
-        series = [ws[ws["filter"] == f].sort_values("waypoint")["rmse_m"].to_numpy(dtype=np.float64) * 100.0
-                  for f in filters]
+        series = [
+            ws[ws["filter"] == f].sort_values("waypoint")["rmse_m"].to_numpy(dtype=np.float64) * 100.0 for f in filters
+        ]
         styles = self.styles_for(labels)
         title = f"{dataset}: position RMSE at each waypoint over runs (log scale)"
 
@@ -675,8 +693,8 @@ class Report:
             f"locbench {locbench.__version__}",
             "git commit of the runs: "
             + (", ".join(f"`{c}`" + (" (dirty)" if d else "") for c, d in sorted(commits.items())) or "unknown"),
-            "libraries: " + (", ".join(f"{lib} {' / '.join(sorted(v))}" for lib, v in sorted(versions.items()))
-                             or "unknown"),
+            "libraries: "
+            + (", ".join(f"{lib} {' / '.join(sorted(v))}" for lib, v in sorted(versions.items())) or "unknown"),
             "seeds: " + "; ".join(f"{rng} ({len(ds)} datasets)" for rng, ds in sorted(by_range.items())),
             "runs: "
             + ", ".join(f"{counts[s]} {s}" for s in ("ok", "diverged", "error", "skipped") if counts[s])
@@ -751,16 +769,40 @@ def _plotly_tracks(dataset: str, world: fg.World, tracks: list[fg.Track], styles
     for x1, y1, x2, y2 in world.segments:
         segx += [float(x1), float(x2), None]
         segy += [float(y1), float(y2), None]
-    traces.append({"type": "scatter", "mode": "lines", "name": "map", "x": segx, "y": segy,
-                   "line": {"color": "#aaaaaa", "width": 1}, "hoverinfo": "skip"})
+    traces.append(
+        {
+            "type": "scatter",
+            "mode": "lines",
+            "name": "map",
+            "x": segx,
+            "y": segy,
+            "line": {"color": "#aaaaaa", "width": 1},
+            "hoverinfo": "skip",
+        }
+    )
     step = max(1, world.truth_xy.shape[0] // 2000)
-    traces.append({"type": "scatter", "mode": "lines", "name": world.truth_label,
-                   "x": _r(world.truth_xy[::step, 0]), "y": _r(world.truth_xy[::step, 1]),
-                   "line": {"color": "#000000", "width": 1.5}})
+    traces.append(
+        {
+            "type": "scatter",
+            "mode": "lines",
+            "name": world.truth_label,
+            "x": _r(world.truth_xy[::step, 0]),
+            "y": _r(world.truth_xy[::step, 1]),
+            "line": {"color": "#000000", "width": 1.5},
+        }
+    )
     for tr in tracks:
         s = max(1, tr.xy.shape[0] // 2000)
-        traces.append({"type": "scatter", "mode": "lines", "name": tr.label, "x": _r(tr.xy[::s, 0]),
-                       "y": _r(tr.xy[::s, 1]), "line": {"color": styles[tr.label].color, "width": 1}})
+        traces.append(
+            {
+                "type": "scatter",
+                "mode": "lines",
+                "name": tr.label,
+                "x": _r(tr.xy[::s, 0]),
+                "y": _r(tr.xy[::s, 1]),
+                "line": {"color": styles[tr.label].color, "width": 1},
+            }
+        )
     (x0, x1), (y0, y1) = fg.world_limits(world)
     return {
         "data": traces,
@@ -775,4 +817,3 @@ def _plotly_tracks(dataset: str, world: fg.World, tracks: list[fg.Track], styles
 
 def _r(a: np.ndarray) -> list[float]:
     return [round(float(v), 4) for v in a]
-

@@ -125,7 +125,7 @@ def draw_trajectories(fig: Figure, world: World, tracks: Sequence[Track], styles
     the world (what leaves it is clipped), the estimate and its 95 % position ellipses."""
     n = max(len(tracks), 1)
     ncols = min(3, n)
-    nrows = int(math.ceil(n / ncols))
+    nrows = math.ceil(n / ncols)
     (x0, x1), (y0, y1) = world_limits(world)
     axes = fig.subplots(nrows, ncols, squeeze=False, sharex=True, sharey=True)
     for k, ax in enumerate(axes.flat):
@@ -241,8 +241,9 @@ def draw_recovery(ax: Axes, curves: Sequence[RateCurve], styles: Mapping[str, Li
         # the Wilson bounds can land a rounding error inside a rate of exactly 0 or 1
         err = np.clip(np.vstack([c.rate - c.low, c.high - c.rate]), 0.0, None)
         st = styles[c.style_key]
-        ax.errorbar(x, c.rate, yerr=err, color=st.color, marker=st.marker, ls=st.linestyle, ms=4, capsize=3,
-                    label=c.label)
+        ax.errorbar(
+            x, c.rate, yerr=err, color=st.color, marker=st.marker, ls=st.linestyle, ms=4, capsize=3, label=c.label
+        )
     if log_x:
         ax.set_xscale("log", base=2)
     ax.set_xticks(all_d, [f"{d:g}" for d in all_d])

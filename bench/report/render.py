@@ -155,8 +155,11 @@ def _table_html(t: Table) -> str:
         cells = []
         for j, c in enumerate(row):
             k = keys[j] if j < len(keys) else float("nan")
-            attr = f' data-sort="{k!r}"' if k == k and abs(k) != float("inf") else (
-                ' data-sort="1e308"' if k == float("inf") else "")
+            attr = (
+                f' data-sort="{k!r}"'
+                if k == k and abs(k) != float("inf")
+                else (' data-sort="1e308"' if k == float("inf") else "")
+            )
             cells.append(f"<td{attr}>{_inline(c)}</td>")
         parts.append("<tr>" + "".join(cells) + "</tr>")
     parts.append("</tbody></table>")
@@ -171,7 +174,9 @@ def to_html(title: str, intro: list[str], sections: list[Section], pngs: dict[st
     body: list[str] = [f"<h1>{html.escape(title)}</h1>", *(f"<p>{_inline(p)}</p>" for p in intro)]
     toc = ["<nav><h2>Contents</h2><ul>"]
     for level, sec in (x for s in sections for x in s.walk()):
-        toc.append(f'<li style="margin-left:{(level - 2) * 1.2}em"><a href="#{sec.anchor}">{_inline(sec.title)}</a></li>')
+        toc.append(
+            f'<li style="margin-left:{(level - 2) * 1.2}em"><a href="#{sec.anchor}">{_inline(sec.title)}</a></li>'
+        )
     toc.append("</ul></nav>")
     body += toc
     n_plot = 0
@@ -188,14 +193,16 @@ def to_html(title: str, intro: list[str], sections: list[Section], pngs: dict[st
             elif isinstance(b, Plot):
                 n_plot += 1
                 img = base64.b64encode(pngs[b.name]).decode()
-                body.append(f'<figure><img alt="{html.escape(b.caption)}" src="data:image/png;base64,{img}">'
-                            f"<figcaption>{_inline(b.caption)}</figcaption></figure>")
+                body.append(
+                    f'<figure><img alt="{html.escape(b.caption)}" src="data:image/png;base64,{img}">'
+                    f"<figcaption>{_inline(b.caption)}</figcaption></figure>"
+                )
                 if b.interactive is not None:
                     uses_plotly = True
                     div = f"plot-{b.name}"
                     spec = json.dumps(b.interactive, sort_keys=True, separators=(",", ":"))
                     body.append(
-                        f'<details><summary>interactive version (zoom, hover, legend toggles)</summary>'
+                        f"<details><summary>interactive version (zoom, hover, legend toggles)</summary>"
                         f'<div id="{html.escape(div)}" class="plotly-div"></div>'
                         f'<script type="application/json" data-target="{html.escape(div)}">{_script_safe(spec)}'
                         "</script></details>"

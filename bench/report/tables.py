@@ -80,8 +80,9 @@ def best_rows(keys: Sequence[float], info: MetricInfo, eligible: Sequence[bool])
     return {i for i in range(len(vals)) if score[i] == best and np.isfinite(best)}
 
 
-def bold_best(rows: list[list[str]], keys: list[list[float]], columns: Sequence[tuple[int, MetricInfo]],
-              eligible: Sequence[bool]) -> None:
+def bold_best(
+    rows: list[list[str]], keys: list[list[float]], columns: Sequence[tuple[int, MetricInfo]], eligible: Sequence[bool]
+) -> None:
     """Mark the best cell of each listed column in bold, in place."""
     for col, info in columns:
         for i in best_rows([k[col] for k in keys], info, eligible):
