@@ -37,7 +37,7 @@ from locbench.report.style import PALETTE
 
 log = logging.getLogger(__name__)
 
-SOURCE_002 = Source("002", "Lab4 - EKF Map Based Localization", "Songyou Peng (2016)")
+SOURCE_002 = Source("002", "Lab4 - EKF Map Based Localization", "Songyou Peng")
 DATASET = "line_room"
 FILTER = "ekf_lines"
 #: Metric id of the per-run accepted fraction of extracted lines (see the module docstring).

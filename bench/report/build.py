@@ -291,15 +291,18 @@ class Report:
                 continue
             pts = self._pareto_points(e.dataset, "ate_m")
             if pts:
-                sec.add(self._pareto_plot(f"{slug(e.dataset)}_pareto", e.dataset, [(e.dataset, pts)]))
-        rec = [(self.col.display(d), self._pareto_points(d, self._recorded_metric(d))) for d in self.recorded()]
-        rec = [(d, p) for d, p in rec if p]
+                sec.add(self._pareto_plot(f"{slug(e.dataset)}_pareto", e.dataset, [(e.dataset, "ATE (cm)", pts)]))
+        rec = [
+            (self.col.display(d), tb.header(self._recorded_metric(d)), self._pareto_points(d, self._recorded_metric(d)))
+            for d in self.recorded()
+        ]
+        rec = [r for r in rec if r[2]]
         if rec:
             sec.add(self._pareto_plot("recorded_pareto", "recorded data", rec))
         return sec
 
-    def _pareto_plot(self, name: str, title: str, panels: list[tuple[str, list[fg.ParetoPoint]]]) -> Plot:
-        styles = self.styles_for(sorted({p.group for _, pts in panels for p in pts}))
+    def _pareto_plot(self, name: str, title: str, panels: list[tuple[str, str, list[fg.ParetoPoint]]]) -> Plot:
+        styles = self.styles_for(sorted({p.group for _, _, pts in panels for p in pts}))
 
         def draw(fig: Figure) -> None:
             n = len(panels)
@@ -310,8 +313,8 @@ class Report:
                 if k >= n:
                     ax.set_axis_off()
                     continue
-                label, pts = panels[k]
-                fg.draw_pareto(ax, pts, styles, "real-time factor (x)", "ATE (cm)", label)
+                label, ylabel, pts = panels[k]
+                fg.draw_pareto(ax, pts, styles, "real-time factor (x)", ylabel, label)
                 if n > 1:
                     leg = ax.get_legend()
                     if leg is not None:
@@ -320,7 +323,8 @@ class Report:
 
         size = (7.0, 4.2) if len(panels) == 1 else (11.0, 3.2 * int(np.ceil(len(panels) / 3)))
         interactive = _plotly_pareto(title, panels) if len(panels) == 1 else None
-        return Plot(name, f"{title}: ATE against real-time factor", draw, size=size, interactive=interactive)
+        what = "accuracy" if len(panels) > 1 else "ATE"
+        return Plot(name, f"{title}: {what} against real-time factor", draw, size=size, interactive=interactive)
 
     def _recorded_metric(self, dataset: str) -> str:
         if (self.rows(dataset)["metric"] == "relation_error_m").any():
@@ -735,8 +739,8 @@ def seed_ranges(seeds: list[int] | set[int]) -> str:
 # --- interactive figures (plotly figure dicts: data only, drawn by the HTML page) ------------------------------
 
 
-def _plotly_pareto(title: str, panels: list[tuple[str, list[fg.ParetoPoint]]]) -> dict:
-    _, pts = panels[0]
+def _plotly_pareto(title: str, panels: list[tuple[str, str, list[fg.ParetoPoint]]]) -> dict:
+    _, _, pts = panels[0]
     traces = []
     for g in sorted({p.group for p in pts}):
         sel = [p for p in pts if p.group == g]
