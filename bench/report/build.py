@@ -114,7 +114,7 @@ class Report:
         base = self.col.datasets[dataset].spec
         for n in self.variants_of(base.ident):
             spec = self.col.datasets[n].spec
-            if spec.without(KIDNAP_PARAM) == base and self.kidnap_distance(n) == SUMMARY_KIDNAP_M:
+            if spec.without(KIDNAP_PARAM) == base and np.isclose(self.kidnap_distance(n), SUMMARY_KIDNAP_M):
                 return n
         return None
 
