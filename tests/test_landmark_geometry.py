@@ -14,6 +14,8 @@ from locbench.datasets.synthetic import landmark_geometry as lg
 from locbench.errors import ConfigError
 from locbench.events import UNKNOWN_ID, LandmarkObservations, LaserScan, PoseFix
 from locbench.registry import make_dataset
+from locbench.report.doc import Plot, Table
+from locbench.report.render import render_png
 
 CIRCLE = "landmark_geometry[circuits=1]"
 
@@ -168,7 +170,9 @@ def _ate_rows(ate_by_layout: dict[str, float], paths: tuple[str, ...] = ("circle
 def test_claims_are_registered_across_variants() -> None:
     ids = {c.id for c in claims.claims_for("landmark_geometry", across_variants=True)}
     assert ids == {"lg_error_falls_with_landmarks", "lg_path_independent", "lg_gps_converges", "lg_kidnap_no_recovery"}
-    assert report_001.layout_section in claims.sections_for("landmark_geometry", across_variants=True)
+    assert report_001.layout_section in claims.sections_for("landmark_geometry")
+    exp = claims.experiment_of("landmark_geometry")
+    assert exp is not None and exp.fold_variants and exp.source == report_001.SOURCE_001
 
 
 def _claim(cid: str) -> claims.Claim:
@@ -217,10 +221,11 @@ def test_kidnap_claim() -> None:
     assert _claim("lg_kidnap_no_recovery").evaluate(found).verdict == "not reproduced"
 
 
-def test_layout_section_writes_a_table_and_a_figure(tmp_path: object) -> None:
+def test_layout_section_gives_a_table_and_a_figure() -> None:
     df = _frame(_ate_rows({"1": 0.3, "4": 0.015}))
-    lines, figs = report_001.layout_section(df, tmp_path, "landmark_geometry")  # type: ignore[arg-type]
-    assert lines[0].startswith("### ")
-    assert any(line.startswith("| `ekf_landmarks` | circle | 30.") for line in lines)
-    assert figs == ["landmark_geometry_ate_per_layout.png"]
-    assert (tmp_path / figs[0]).stat().st_size > 0  # type: ignore[operator]
+    table, plot = report_001.layout_section(df, "landmark_geometry")
+    assert isinstance(table, Table) and isinstance(plot, Plot)
+    assert table.header == ("filter", "path", "1", "2", "3", "4", "8")
+    assert any(r[:2] == ("`ekf_landmarks`", "circle") and r[2].startswith("30.") for r in table.rows)
+    assert plot.name == "landmark_geometry_ate_per_layout"
+    assert render_png(plot)[:4] == b"\x89PNG"
