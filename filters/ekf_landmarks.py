@@ -53,7 +53,6 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass, field
-from statistics import NormalDist
 from typing import ClassVar, Literal
 
 import numpy as np
@@ -62,67 +61,23 @@ import numpy.typing as npt
 from locbench.datasets.base import Gaussian2, MapKind, SensorSpec, WorldMap
 from locbench.errors import ConfigError, FilterDiverged
 from locbench.events import UNKNOWN_ID, LandmarkObservations, Observation, Odometry, PoseFix, RangeObservations
+from locbench.filters._kalman import chi2_1dof_quantile, chi2_2dof_quantile
 from locbench.filters._motion import (
-    RUN_KEY_OMIT_IF_DEFAULT,
     MotionKind,
     MotionModel,
     MotionNoiseConfig,
     propagate_covariance,
 )
+from locbench.filters._noise import landmark_noise, range_only_noise
 from locbench.filters.base import Estimate, Filter, FilterConfig
 from locbench.geometry import wrap_angle, wrap_scalar
+from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
 
 FloatArray = npt.NDArray[np.float64]
 logger = logging.getLogger(__name__)
 
-#: Range-bearing noise used when neither the config nor the dataset gives one (logged at reset).
-DEFAULT_SIGMA_RANGE_M = 0.05
-DEFAULT_SIGMA_BEARING_RAD = 0.02
-
 # Maps with at least this many landmarks are searched with numpy; smaller ones in plain floats (faster there).
 _VECTOR_NN_MIN = 48
-
-
-def chi2_2dof_quantile(p: float) -> float:
-    """The ``p`` quantile of the chi-square distribution with 2 degrees of freedom: -2 ln(1 - p)."""
-    return -2.0 * math.log1p(-p)
-
-
-def chi2_1dof_quantile(p: float) -> float:
-    """The ``p`` quantile of the chi-square distribution with 1 degree of freedom, Phi^-1((1 + p) / 2)^2; inf at 1."""
-    if p >= 1.0:
-        return math.inf
-    return NormalDist().inv_cdf(0.5 * (1.0 + p)) ** 2
-
-
-def range_only_noise(range_only_sigma_m: float | None, sensors: SensorSpec, warn: bool = True) -> float:
-    """Standard deviation of a range-only (beacon) measurement, m: the config override, else the dataset's
-    ``SensorSpec.range_sigma_m``, else :data:`DEFAULT_SIGMA_RANGE_M` (logged when ``warn``)."""
-    sr = range_only_sigma_m if range_only_sigma_m is not None else sensors.range_sigma_m
-    if sr is None:
-        if warn:
-            logger.warning("no nominal range-only noise in the config or dataset; using %g m", DEFAULT_SIGMA_RANGE_M)
-        return DEFAULT_SIGMA_RANGE_M
-    return float(sr)
-
-
-def landmark_noise(
-    sigma_range_m: float | None, sigma_bearing_rad: float | None, sensors: SensorSpec, warn: bool = True
-) -> tuple[float, float]:
-    """Range and bearing standard deviations (m, rad): the config override, else the dataset's nominal
-    value, else :data:`DEFAULT_SIGMA_RANGE_M` / :data:`DEFAULT_SIGMA_BEARING_RAD` (logged when ``warn``)."""
-    sr = sigma_range_m if sigma_range_m is not None else sensors.landmark_sigma_range_m
-    sb = sigma_bearing_rad if sigma_bearing_rad is not None else sensors.landmark_sigma_bearing_rad
-    if warn and (sr is None or sb is None):
-        logger.warning(
-            "no nominal landmark noise in the config or dataset; using sigma_range_m=%g, sigma_bearing_rad=%g",
-            DEFAULT_SIGMA_RANGE_M,
-            DEFAULT_SIGMA_BEARING_RAD,
-        )
-    return (
-        DEFAULT_SIGMA_RANGE_M if sr is None else float(sr),
-        DEFAULT_SIGMA_BEARING_RAD if sb is None else float(sb),
-    )
 
 
 def range_bearing(pose: npt.ArrayLike, landmarks_xy: npt.ArrayLike) -> FloatArray:
@@ -144,23 +99,6 @@ def range_bearing_jacobian(pose: npt.ArrayLike, landmark_xy: npt.ArrayLike) -> F
     q = dx * dx + dy * dy
     d = math.sqrt(q)
     return np.array([[-dx / d, -dy / d, 0.0], [dy / q, -dx / q, -1.0]])
-
-
-def joseph_update(
-    x: FloatArray, P: FloatArray, H: FloatArray, R: FloatArray, nu: FloatArray
-) -> tuple[FloatArray, FloatArray, float]:
-    """One EKF correction in numpy with the Joseph form; returns (x, P, NIS).
-
-    ``nu`` is the innovation z - h(x) (angles already wrapped by the caller). The heading of the returned
-    state is not wrapped. Used for pose fixes and as the reference of the scalar landmark update.
-    """
-    PHt = P @ H.T
-    S = H @ PHt + R
-    Sinv = np.linalg.inv(S)
-    K = PHt @ Sinv
-    A = np.eye(P.shape[0]) - K @ H
-    P_new = A @ P @ A.T + K @ R @ K.T
-    return x + K @ nu, 0.5 * (P_new + P_new.T), float(nu @ Sinv @ nu)
 
 
 def _inverse_small(S: list[list[float]]) -> list[list[float]] | None:

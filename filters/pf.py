@@ -96,7 +96,6 @@ from locbench.filters._likelihood_field import (
     scan_endpoints_robot_frame,
 )
 from locbench.filters._motion import (
-    RUN_KEY_OMIT_IF_DEFAULT,
     MotionKind,
     MotionNoiseConfig,
     increment_variances,
@@ -105,9 +104,10 @@ from locbench.filters._motion import (
     sample_wheel_motion,
     wheel_variances,
 )
+from locbench.filters._noise import landmark_noise, range_only_noise
 from locbench.filters.base import Estimate, Filter, FilterConfig
-from locbench.filters.ekf_landmarks import landmark_noise, range_only_noise
 from locbench.geometry import wrap_angle
+from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
