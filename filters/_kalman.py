@@ -27,7 +27,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.stats import chi2
 
-from locbench.geometry import wrap_angle
+from locbench.geometry import wrap_scalar
 
 FloatArray = npt.NDArray[np.float64]
 #: residual(z, h) -> y, the innovation (filterpy's ``residual`` argument).
@@ -73,12 +73,13 @@ def subtract(z: FloatArray, h: FloatArray) -> FloatArray:
 
 
 def wrapped_residual(angles: Sequence[int]) -> Residual:
-    """A residual z - h whose components ``angles`` (indices, rad) are wrapped to (-pi, pi]."""
-    idx = list(angles)
+    """A residual z - h of 1-D vectors whose components ``angles`` (indices, rad) are wrapped to (-pi, pi]."""
+    idx = tuple(angles)
 
     def residual(z: FloatArray, h: FloatArray) -> FloatArray:
         y = np.asarray(z, dtype=np.float64) - h
-        y[idx] = wrap_angle(y[idx])
+        for i in idx:  # scalar wraps: sigma-point filters call this per point, where numpy indexing costs more
+            y[i] = wrap_scalar(float(y[i]))
         return y
 
     return residual
