@@ -105,7 +105,7 @@ from locbench.filters._motion import (
     wheel_variances,
 )
 from locbench.filters._noise import landmark_noise, range_only_noise
-from locbench.filters.base import Estimate, Filter, FilterConfig
+from locbench.filters.base import CheckTolerances, Estimate, Filter, FilterConfig
 from locbench.geometry import wrap_angle
 from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
 
@@ -437,15 +437,14 @@ class ParticleFilter(Filter):
     source: ClassVar[str] = "003_e5c93f9be776ee5e.txt sec. 4.2; Thrun, Burgard & Fox, Probabilistic Robotics ch. 6, 8"
     config: ParticleFilterConfig
 
-    @property
-    def logdet_tolerance(self) -> float:
-        """How far log det of the sample covariance may fall in one predict by sampling noise alone.
+    def check_tolerances(self) -> CheckTolerances:
+        """The checks' bounds; log det of the sample covariance may fall in one predict by sampling noise alone.
 
         Adding independent noise of covariance Q to N samples of covariance C changes log det C by
         a = tr(C^-1 Q) plus a cross term of standard deviation 2 sqrt(a / N); the change is negative only when
         that term beats a, and its worst value over a is k^2 / N at k standard deviations. 25 / N is 5 sigma.
         """
-        return 25.0 / self.config.particles
+        return CheckTolerances(logdet_drop=25.0 / self.config.particles)
 
     def routed_events(self) -> frozenset[type]:
         """Odometry, plus landmark sightings, beacon ranges and laser scans as switched on in the config."""
