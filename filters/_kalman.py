@@ -126,7 +126,15 @@ def joseph_update(
     Correction
         The new mean (angles not wrapped) and covariance, with y, S, K, NIS and log-likelihood.
     """
-    y = residual(z, hx)
+    return joseph_correct(x, P, residual(z, hx), H, R)
+
+
+def joseph_correct(x: FloatArray, P: FloatArray, y: FloatArray, H: FloatArray, R: FloatArray) -> Correction:
+    """The Joseph-form correction for an innovation ``y`` the caller formed itself (angles already wrapped).
+
+    Shapes as in :func:`joseph_update`. For H = I (a direct pose measurement) every product with H is exact, so
+    the result equals the same algebra written without H bit for bit.
+    """
     PHt = P @ H.T
     S = H @ PHt + R
     Sinv = np.linalg.inv(S)
