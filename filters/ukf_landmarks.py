@@ -126,7 +126,7 @@ class LandmarkUKF(LandmarkEKF):
         self._ukf: Any = None  # filterpy is untyped; a previous run's state must not be checked by the EKF's reset
         super().reset(initial, world, sensors, rng)
         cfg = self.config
-        points = MerweScaledSigmaPoints(3, alpha=cfg.alpha, beta=cfg.beta, kappa=cfg.kappa, subtract=self._residual_x)
+        points = MerweScaledSigmaPoints(3, alpha=cfg.alpha, beta=cfg.beta, kappa=cfg.kappa, subtract=_residual_heading)
         ukf = UnscentedKalmanFilter(
             dim_x=3,
             dim_z=2,
@@ -135,17 +135,13 @@ class LandmarkUKF(LandmarkEKF):
             fx=None,
             points=points,
             x_mean_fn=state_mean,
-            residual_x=self._residual_x,
+            residual_x=_residual_heading,
         )
         ukf.x = np.array(self._x)
         ukf.P = np.array(self._P)
         self._ukf = ukf
         self._R_lm = np.diag([self._rr, self._rb])
         self._check_finite(math.nan)
-
-    @staticmethod
-    def _residual_x(a: FloatArray, b: FloatArray) -> FloatArray:
-        return _residual_heading(a, b)
 
     # --- predict ---------------------------------------------------------------------------------------------
 
