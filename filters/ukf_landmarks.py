@@ -28,7 +28,8 @@ neighbours, exactly as in the EKF; the sigma points are redrawn from the current
 measurement, so each one sees the state corrected by the previous. The nearest-neighbour gate uses the unscented
 predicted measurement and S = sum Wc (z_i - z)(z_i - z)^T + R of every candidate landmark at once. Range-only
 beacons and pose fixes use the same gates as the EKF (1 dof, and none for fixes). A gated-out measurement
-leaves the state unchanged. filterpy's update forms P - K S K^T; the result is symmetrised.
+leaves the state unchanged. The gain step is the Kalman core's sigma-point form (K = P_xz S^-1,
+P - K S K^T, symmetrised), fed by filterpy's unscented transform and cross covariance.
 """
 
 from __future__ import annotations
@@ -39,12 +40,12 @@ from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
-from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
+from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter, unscented_transform
 
 from locbench.datasets.base import Gaussian2, SensorSpec, WorldMap
 from locbench.errors import ConfigError, FilterDiverged
 from locbench.events import Odometry, PoseFix
-from locbench.filters._kalman import subtract, wrapped_residual
+from locbench.filters._kalman import gain_update, subtract, wrapped_residual
 from locbench.filters.base import Estimate, FilterConfig
 from locbench.filters.ekf_landmarks import LandmarkEKF, LandmarkEKFConfig, range_bearing
 from locbench.geometry import wrap_angle, wrap_scalar
@@ -174,18 +175,24 @@ class LandmarkUKF(LandmarkEKF):
     def _correct(
         self, z: FloatArray, R: FloatArray, hx: Any, z_mean: Any, residual: Any, gate: float, **hx_args: Any
     ) -> float | None:
-        """One unscented correction with filterpy; its NIS, or None (state unchanged) when outside ``gate``."""
+        """One unscented correction; its NIS, or None (state unchanged) when outside ``gate``.
+
+        filterpy's update in its parts: the sigma points are redrawn at the state the previous measurement left,
+        filterpy's unscented transform gives the predicted measurement and S (R included) and its
+        ``cross_variance`` P_xz; the gain step is the core's :func:`~locbench.filters._kalman.gain_update`
+        (K = P_xz S^-1, P - K S K^T, as filterpy's), which also gives the NIS for the gate.
+        """
         ukf = self._ukf
-        x0, P0 = ukf.x.copy(), ukf.P.copy()
-        ukf.sigmas_f = ukf.points_fn.sigma_points(x0, P0)  # redraw at the state the previous measurement left
-        ukf.z_mean, ukf.residual_z = z_mean, residual
-        ukf.update(z, R=R, hx=hx, **hx_args)
-        nis = float(ukf.y @ ukf.SI @ ukf.y)
-        if not nis <= gate:
-            ukf.x, ukf.P = x0, P0
+        x, P = ukf.x, ukf.P
+        sigmas = ukf.points_fn.sigma_points(x, P)
+        sigmas_h = np.array([hx(s, **hx_args) for s in sigmas])
+        zp, S = unscented_transform(sigmas_h, ukf.Wm, ukf.Wc, R, z_mean, residual)
+        ukf.residual_z = residual  # read by cross_variance
+        c = gain_update(x, P, residual(z, zp), S, ukf.cross_variance(x, zp, sigmas, sigmas_h))
+        if not c.nis <= gate:
             return None
-        self._finish(ukf.x, ukf.P)
-        return nis
+        self._finish(c.x, c.P)
+        return c.nis
 
     def _correct_landmark(self, r: float, b: float, row: int, gate: float) -> float | None:
         """Fuse one (range, bearing) of landmark ``row``; its NIS, or None if gated out."""
