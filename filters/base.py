@@ -93,12 +93,12 @@ class Filter(abc.ABC):
     Hooks read by the conformance checks: ``expected_check_failures`` and :meth:`check_tolerances`.
     """
 
+    expected_check_failures: ClassVar[Mapping[str, str]] = MappingProxyType({})
     consumes: ClassVar[frozenset[type]] = frozenset()
     requires: ClassVar[frozenset[MapKind]] = frozenset()
     Config: ClassVar[type[FilterConfig]] = FilterConfig
     version: ClassVar[int] = 1
     source: ClassVar[str] = ""
-    expected_check_failures: ClassVar[Mapping[str, str]] = MappingProxyType({})
 
     def __init__(self, config: FilterConfig | None = None) -> None:
         # Store only: no RNG, no I/O, no work (scikit-learn's rule), so a filter is cheap to make.

@@ -437,14 +437,19 @@ class ParticleFilter(Filter):
     source: ClassVar[str] = "003_e5c93f9be776ee5e.txt sec. 4.2; Thrun, Burgard & Fox, Probabilistic Robotics ch. 6, 8"
     config: ParticleFilterConfig
 
-    def check_tolerances(self) -> CheckTolerances:
-        """The checks' bounds; log det of the sample covariance may fall in one predict by sampling noise alone.
+    @property
+    def logdet_tolerance(self) -> float:
+        """How far log det of the sample covariance may fall in one predict by sampling noise alone.
 
         Adding independent noise of covariance Q to N samples of covariance C changes log det C by
         a = tr(C^-1 Q) plus a cross term of standard deviation 2 sqrt(a / N); the change is negative only when
         that term beats a, and its worst value over a is k^2 / N at k standard deviations. 25 / N is 5 sigma.
         """
-        return CheckTolerances(logdet_drop=25.0 / self.config.particles)
+        return 25.0 / self.config.particles
+
+    def check_tolerances(self) -> CheckTolerances:
+        """The conformance checks' bounds: the log det drop of :attr:`logdet_tolerance`, the rest the defaults."""
+        return CheckTolerances(logdet_drop=self.logdet_tolerance)
 
     def routed_events(self) -> frozenset[type]:
         """Odometry, plus landmark sightings, beacon ranges and laser scans as switched on in the config."""
