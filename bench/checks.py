@@ -1,9 +1,14 @@
-"""Conformance checks for filters and datasets.
+"""Conformance checks for filters and datasets, after scikit-learn's ``check_estimator``.
 
-Each check is a small named function, so that every (filter, check) pair is its own pytest id and its
-own line in ``locbench check``. A filter declares the checks it is expected to fail, with the reason,
-in its class attribute ``expected_check_failures = {"check_name": "why"}``; tests run those as strict
-xfail. Checks run on the tiny registered scenarios ``tiny_line`` and ``tiny_circle``.
+A filter check takes a filter class or instance (so a filter can be checked before it is registered), runs it
+through the runner's own loop (:func:`locbench.runner.run_filter`, which resets it, routes each event to
+``predict`` or ``update`` and reads ``estimate()`` after every call) and raises :class:`CheckFailed` when the
+filter breaks the contract. Each check declares when it applies, from the filter's declared capabilities
+(``consumes``, ``requires``, ``routed_events()``); :func:`yield_filter_checks` yields the ones that apply and
+:func:`check_filter` runs them. The hooks a check reads are declared on :class:`~locbench.filters.base.Filter`:
+``expected_check_failures`` (checks the filter fails by design, with the reason; run as strict xfail) and
+``check_tolerances()`` (the bounds it is held to). Checks run on the tiny registered scenarios ``tiny_line``
+and ``tiny_circle``; every check is shown to reject a deliberately broken filter in ``tests/test_checks.py``.
 """
 
 from __future__ import annotations
@@ -18,17 +23,19 @@ import numpy as np
 
 from locbench.datasets.base import Dataset, MapKind, check_dataset_contract
 from locbench.errors import DependencyNotInstalled, LocbenchError, UnknownIdError
-from locbench.events import EVENT_TYPES, OBSERVATION_TYPES, Odometry
+from locbench.events import EVENT_TYPES, OBSERVATION_TYPES, LandmarkObservations, Odometry, RangeObservations
 from locbench.filters.base import Filter, FilterConfig
 from locbench.geometry import is_symmetric_psd, pose_error
-from locbench.registry import DATASETS, FILTERS, make_dataset, resolve_dataset, resolve_filter
+from locbench.registry import DATASETS, FILTERS, make_dataset, make_filter, resolve_dataset, resolve_filter
 from locbench.runner import FilterTrace, incompatibility, run_filter
 from locbench.seeding import filter_rng
+from locbench.spec import Spec
 
-#: ATE tolerance on the noise-free tiny circle, m: exact data must give an almost exact track.
-NOISE_FREE_ATE_TOL_M = 0.05
-#: Bound on the position error anywhere on the noisy circle crossing +-pi, m.
-WRAP_ERROR_BOUND_M = 1.0
+#: What a filter check accepts: a filter instance, or a class (checked with its default config).
+FilterLike = Filter | type[Filter]
+
+#: The scenarios every run-based check uses; a filter must be able to run on them for those checks to apply.
+CHECK_SCENARIOS = ("tiny_line", "tiny_circle")
 
 
 class CheckFailed(AssertionError):
@@ -43,6 +50,21 @@ class CheckResult:
     message: str = ""
 
 
+@dataclass(frozen=True)
+class FilterCheck:
+    """A named check and the capability rule that selects it.
+
+    ``applies(flt)`` returns None when the check applies to ``flt``, else why it does not.
+    """
+
+    name: str
+    run: Callable[[Filter], None]
+    applies: Callable[[Filter], str | None]
+
+    def __call__(self, target: FilterLike) -> None:
+        self.run(as_filter(target))
+
+
 _DATA_CACHE: dict[tuple[str, int], Dataset] = {}
 
 
@@ -53,13 +75,22 @@ def _tiny(spec: str, seed: int = 0) -> Dataset:
     return _DATA_CACHE[key]
 
 
-def _run(filter_spec: str, ds: Dataset, seed: int = 0) -> FilterTrace:
-    fr = resolve_filter(filter_spec)
-    flt = FILTERS.load(fr.id)(fr.params)
+def as_filter(target: FilterLike) -> Filter:
+    """An instance of ``target``: the instance itself, or the class with its default config."""
+    return target() if isinstance(target, type) else target
+
+
+def _fresh(flt: Filter) -> Filter:
+    """A new, un-reset instance of the same class and config."""
+    return type(flt)(flt.config)
+
+
+def _run(flt: Filter, ds: Dataset, seed: int = 0) -> FilterTrace:
+    """One pass of the runner's loop; the trace must end with status ok."""
     reason = incompatibility(flt, ds)
     if reason is not None:
         raise CheckFailed(f"cannot run on the check scenario {ds.name}: {reason}")
-    trace = run_filter(flt, ds, filter_rng(fr.name, ds.name, seed))
+    trace = run_filter(flt, ds, filter_rng(type(flt).__name__, ds.name, seed))
     if trace.status != "ok":
         raise CheckFailed(f"run on {ds.name} ended with status {trace.status}: {trace.message}")
     return trace
@@ -71,14 +102,49 @@ def _truth_at(ds: Dataset, t: np.ndarray) -> np.ndarray:
     return gt.poses[idx]
 
 
-# --- filter checks ------------------------------------------------------------------------------
+# --- capability rules -----------------------------------------------------------------------------------
 
 
-def check_contract(filter_spec: str) -> None:
-    """consumes is non-empty and known and includes Odometry; requires holds MapKinds; __init__ does no work;
-    an observation type the filter does not consume raises TypeError."""
-    fr = resolve_filter(filter_spec)
-    cls: type[Filter] = FILTERS.load(fr.id)
+def _always(flt: Filter) -> str | None:
+    return None
+
+
+def _runs_on_check_scenarios(flt: Filter) -> str | None:
+    """The filter's required map kinds and routed observations exist in the check scenarios."""
+    for spec in CHECK_SCENARIOS:
+        reason = incompatibility(flt, _tiny(spec))
+        if reason is not None:
+            return f"not applicable: {reason}"
+    return None
+
+
+def _foreign_observation(flt: Filter) -> Any | None:
+    """An observation of a type the filter does not consume, from ``tiny_line``; None if there is none."""
+    cls = type(flt)
+    foreign = {t for t in OBSERVATION_TYPES if t not in cls.consumes}
+    return next((e for e in _tiny("tiny_line").events if type(e) in foreign), None)
+
+
+def _has_foreign_observation(flt: Filter) -> str | None:
+    if _foreign_observation(flt) is None:
+        return "not applicable: the filter consumes every observation type of the check scenarios"
+    return None
+
+
+def _consumes_point_observations(flt: Filter) -> str | None:
+    routed = flt.routed_events()
+    if not routed & {LandmarkObservations, RangeObservations}:
+        return "not applicable: routes neither LandmarkObservations nor RangeObservations"
+    return _runs_on_check_scenarios(flt)
+
+
+# --- filter checks ------------------------------------------------------------------------------------------
+
+
+def check_contract(flt: Filter) -> None:
+    """consumes is non-empty and known and includes Odometry; requires holds MapKinds; Config is a frozen
+    FilterConfig dataclass; __init__ does no work; routed_events() is a subset of consumes."""
+    cls = type(flt)
     if not cls.consumes or Odometry not in cls.consumes or not set(cls.consumes) <= set(EVENT_TYPES):
         raise CheckFailed(f"consumes must be a non-empty set of event types including Odometry, got {cls.consumes}")
     if not all(isinstance(k, MapKind) for k in cls.requires):
@@ -87,119 +153,174 @@ def check_contract(filter_spec: str) -> None:
         raise CheckFailed("Config must be a FilterConfig dataclass")
     if not cls.Config.__dataclass_params__.frozen:  # type: ignore[attr-defined]
         raise CheckFailed("Config must be frozen")
+    if not isinstance(flt.config, cls.Config):
+        raise CheckFailed(f"config must be a {cls.Config.__name__}, got {type(flt.config).__name__}")
     start = time.perf_counter()
-    flt = cls(fr.params)
-    if time.perf_counter() - start > 0.05 or set(vars(flt)) - {"config"}:
-        raise CheckFailed(f"__init__ must only store the config; it set {sorted(vars(flt))}")
-    if not flt.routed_events() <= cls.consumes:
+    new = cls(flt.config)
+    if time.perf_counter() - start > 0.05 or set(vars(new)) - {"config"}:
+        raise CheckFailed(f"__init__ must only store the config; it set {sorted(vars(new))}")
+    if not new.routed_events() <= cls.consumes:
         raise CheckFailed("routed_events() must be a subset of consumes")
+
+
+def check_rejects_unconsumed(flt: Filter) -> None:
+    """update() with an observation type the filter does not consume raises TypeError."""
+    sample = _foreign_observation(flt)
+    assert sample is not None  # guaranteed by the rule that selects this check
+    new = _fresh(flt)
     ds = _tiny("tiny_line")
-    flt.reset(ds.initial, ds.world, ds.sensors, np.random.default_rng(0))
-    foreign = [t for t in OBSERVATION_TYPES if t not in cls.consumes]
-    if foreign:
-        sample = next((e for e in ds.events if type(e) is foreign[0]), None)
-        if sample is not None:
-            try:
-                flt.update(sample)  # type: ignore[arg-type]
-            except TypeError:
-                pass
-            else:
-                raise CheckFailed(f"update({foreign[0].__name__}) must raise TypeError: it is not in consumes")
+    new.reset(ds.initial, ds.world, ds.sensors, np.random.default_rng(0))
+    try:
+        new.update(sample)
+    except TypeError:
+        return
+    raise CheckFailed(f"update({type(sample).__name__}) must raise TypeError: it is not in consumes")
 
 
-def check_determinism(filter_spec: str) -> None:
+def check_determinism(flt: Filter) -> None:
     """The same seed gives an identical trajectory; a reused instance after reset equals a fresh one."""
     ds = _tiny("tiny_circle")
-    a, b = _run(filter_spec, ds), _run(filter_spec, ds)
+    a, b = _run(_fresh(flt), ds), _run(_fresh(flt), ds)
     for name in ("t", "mean", "cov"):
         if not np.array_equal(getattr(a, name), getattr(b, name), equal_nan=True):
             raise CheckFailed(f"two runs with the same seed differ in {name}")
-    fr = resolve_filter(filter_spec)
-    flt = FILTERS.load(fr.id)(fr.params)
-    run_filter(flt, _tiny("tiny_line"), filter_rng(fr.name, "tiny_line", 1))
-    c = run_filter(flt, ds, filter_rng(fr.name, ds.name, 0))
+    reused = _fresh(flt)
+    _run(reused, _tiny("tiny_line"), seed=1)
+    c = _run(reused, ds)
     if not np.array_equal(a.mean, c.mean, equal_nan=True):
         raise CheckFailed("a reused instance after reset differs from a fresh one")
 
 
-def check_estimate_sanity(filter_spec: str) -> None:
+def check_estimate_sanity(flt: Filter) -> None:
     """Every estimate has mean (3,), cov (3, 3), finite values, theta in (-pi, pi], symmetric PSD cov."""
-    ds = _tiny("tiny_line")
-    fr = resolve_filter(filter_spec)
-    flt = FILTERS.load(fr.id)(fr.params)
-    flt.reset(ds.initial, ds.world, ds.sensors, filter_rng(fr.name, ds.name, 0))
-    routed = flt.routed_events()
-    for ev in ds.events:
-        if isinstance(ev, Odometry):
-            flt.predict(ev)
-        elif type(ev) in routed:
-            flt.update(ev)
-        else:
-            continue
-        est = flt.estimate()
-        where = f"after {type(ev).__name__} at t={ev.t:.3f}"
-        if np.shape(est.mean) != (3,) or np.shape(est.cov) != (3, 3):
-            raise CheckFailed(f"{where}: mean {np.shape(est.mean)} / cov {np.shape(est.cov)}, expected (3,) / (3, 3)")
-        if not (np.all(np.isfinite(est.mean)) and np.all(np.isfinite(est.cov))):
+    tr = _run(_fresh(flt), _tiny("tiny_line"))
+    for k in range(tr.t.shape[0]):
+        mean, cov = tr.mean[k], tr.cov[k]
+        where = f"at row {k} (t={tr.t[k]:.3f})"
+        if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(cov))):
             raise CheckFailed(f"{where}: non-finite estimate")
-        if not (-np.pi < est.mean[2] <= np.pi):
-            raise CheckFailed(f"{where}: heading {est.mean[2]} not wrapped to (-pi, pi]")
-        if not is_symmetric_psd(est.cov, atol=1e-9):
-            raise CheckFailed(f"{where}: covariance not symmetric PSD:\n{est.cov}")
+        if not (-np.pi < mean[2] <= np.pi):
+            raise CheckFailed(f"{where}: heading {mean[2]} not wrapped to (-pi, pi]")
+        if not is_symmetric_psd(cov, atol=1e-9):
+            raise CheckFailed(f"{where}: covariance not symmetric PSD:\n{cov}")
 
 
-def check_heading_wrap(filter_spec: str) -> None:
+def check_heading_wrap(flt: Filter) -> None:
     """On a circle whose heading crosses +-pi the estimate stays wrapped and its error bounded."""
+    tol = flt.check_tolerances()
     ds = _tiny("tiny_circle")
-    tr = _run(filter_spec, ds)
+    tr = _run(_fresh(flt), ds)
     if np.any(tr.mean[:, 2] <= -np.pi) or np.any(tr.mean[:, 2] > np.pi):
         raise CheckFailed("heading left (-pi, pi]")
     err = pose_error(tr.mean, _truth_at(ds, tr.t))
     worst = float(np.max(np.hypot(err[:, 0], err[:, 1])))
-    if worst > WRAP_ERROR_BOUND_M or float(np.max(np.abs(err[:, 2]))) > 0.5:
+    worst_heading = float(np.max(np.abs(err[:, 2])))
+    if worst > tol.wrap_position_m or worst_heading > tol.wrap_heading_rad:
+        raise CheckFailed(f"error while crossing +-pi: position {worst:.3f} m, heading {worst_heading:.3f} rad")
+
+
+def check_noise_free(flt: Filter) -> None:
+    """On exact data (tiny_circle[noise_free=true]) the position RMSE stays under the filter's tolerance."""
+    tol = flt.check_tolerances().noise_free_ate_m
+    ds = _tiny("tiny_circle[noise_free=true]")
+    tr = _run(_fresh(flt), ds)
+    err = pose_error(tr.mean, _truth_at(ds, tr.t))
+    ate = float(np.sqrt(np.mean(err[:, 0] ** 2 + err[:, 1] ** 2)))
+    if ate > tol:
+        raise CheckFailed(f"noise-free ATE {ate:.4f} m > {tol} m")
+
+
+def check_predict_grows_uncertainty(flt: Filter) -> None:
+    """A predict-only run (tiny_line's odometry alone) never lowers log det P beyond the filter's tolerance."""
+    tol = flt.check_tolerances().logdet_drop
+    full = _tiny("tiny_line")
+    ds = dataclasses.replace(full, events=tuple(e for e in full.events if isinstance(e, Odometry)))
+    tr = run_filter(_fresh(flt), ds, filter_rng(type(flt).__name__, full.name, 0))
+    if tr.status != "ok":
+        raise CheckFailed(f"predict-only run ended with status {tr.status}: {tr.message}")
+    logdet = np.linalg.slogdet(tr.cov)[1]
+    drops = np.diff(logdet)
+    k = int(np.argmin(drops)) if drops.size else 0
+    if drops.size and drops[k] < -tol:
         raise CheckFailed(
-            f"error while crossing +-pi: position {worst:.3f} m, heading {np.max(np.abs(err[:, 2])):.3f} rad"
+            f"log det P fell from {logdet[k]:.4f} to {logdet[k + 1]:.4f} on a predict at t={tr.t[k + 1]:.3f}"
         )
 
 
-def check_noise_free(filter_spec: str) -> None:
-    """On exact data (tiny_circle[noise_free=true]) the position RMSE stays under NOISE_FREE_ATE_TOL_M."""
-    ds = _tiny("tiny_circle[noise_free=true]")
-    tr = _run(filter_spec, ds)
-    err = pose_error(tr.mean, _truth_at(ds, tr.t))
-    ate = float(np.sqrt(np.mean(err[:, 0] ** 2 + err[:, 1] ** 2)))
-    if ate > NOISE_FREE_ATE_TOL_M:
-        raise CheckFailed(f"noise-free ATE {ate:.4f} m > {NOISE_FREE_ATE_TOL_M} m")
+def check_empty_observation(flt: Filter) -> None:
+    """An observation event with no sightings (or ranges) leaves the estimate unchanged."""
+    full = _tiny("tiny_line")
+    cut = len(full.events) // 3
+    new = _fresh(flt)
+    # The runner's loop over the first third of the run, so that the belief is not the initial one.
+    tr = run_filter(
+        new, dataclasses.replace(full, events=full.events[:cut]), filter_rng(type(flt).__name__, full.name, 0)
+    )
+    if tr.status != "ok":
+        raise CheckFailed(f"run on {full.name} ended with status {tr.status}: {tr.message}")
+    routed = new.routed_events()
+    empty_ids, empty = np.zeros(0, dtype=np.int64), np.zeros(0)
+    t = full.events[cut].t
+    for z in (LandmarkObservations(t, empty_ids, empty, empty), RangeObservations(t, empty_ids, empty)):
+        if type(z) not in routed:
+            continue
+        before = new.estimate()
+        new.update(z)
+        after = new.estimate()
+        if not (np.array_equal(before.mean, after.mean) and np.array_equal(before.cov, after.cov)):
+            raise CheckFailed(f"an empty {type(z).__name__} changed the estimate from {before.mean} to {after.mean}")
 
 
-def check_predict_grows_uncertainty(filter_spec: str) -> None:
-    """A predict-only run never lowers log det P (beyond a small tolerance for sampled filters)."""
-    ds = _tiny("tiny_line")
-    fr = resolve_filter(filter_spec)
-    flt = FILTERS.load(fr.id)(fr.params)
-    flt.reset(ds.initial, ds.world, ds.sensors, filter_rng(fr.name, ds.name, 0))
-    prev = np.linalg.slogdet(flt.estimate().cov)[1]
-    tol = float(getattr(flt, "logdet_tolerance", 1e-9))
-    for ev in ds.events:
-        if isinstance(ev, Odometry):
-            flt.predict(ev)
-            cur = np.linalg.slogdet(flt.estimate().cov)[1]
-            if cur < prev - tol:
-                raise CheckFailed(f"log det P fell from {prev:.4f} to {cur:.4f} on a predict at t={ev.t:.3f}")
-            prev = cur
-
-
-FILTER_CHECKS: dict[str, Callable[[str], None]] = {
-    f.__name__: f
-    for f in (
-        check_contract,
-        check_determinism,
-        check_estimate_sanity,
-        check_heading_wrap,
-        check_noise_free,
-        check_predict_grows_uncertainty,
+FILTER_CHECKS: dict[str, FilterCheck] = {
+    c.name: c
+    for c in (
+        FilterCheck("check_contract", check_contract, _always),
+        FilterCheck("check_rejects_unconsumed", check_rejects_unconsumed, _has_foreign_observation),
+        FilterCheck("check_determinism", check_determinism, _runs_on_check_scenarios),
+        FilterCheck("check_estimate_sanity", check_estimate_sanity, _runs_on_check_scenarios),
+        FilterCheck("check_heading_wrap", check_heading_wrap, _runs_on_check_scenarios),
+        FilterCheck("check_noise_free", check_noise_free, _runs_on_check_scenarios),
+        FilterCheck("check_predict_grows_uncertainty", check_predict_grows_uncertainty, _always),
+        FilterCheck("check_empty_observation", check_empty_observation, _consumes_point_observations),
     )
 }
+
+
+def yield_filter_checks(target: FilterLike) -> Iterator[tuple[FilterCheck, str | None]]:
+    """Every filter check with None when it applies to ``target``, else why not (scikit-learn's
+    ``_yield_all_checks``, chosen by the filter's declared capabilities)."""
+    flt = as_filter(target)
+    for check in FILTER_CHECKS.values():
+        yield check, check.applies(flt)
+
+
+def check_filter(target: FilterLike, name: str | None = None) -> Iterator[CheckResult]:
+    """Run every check that applies to ``target`` (a class or an instance, registered or not).
+
+    A check the filter declares in ``expected_check_failures`` is xfailed when it fails and xpassed (a failure
+    of the declaration) when it passes.
+    """
+    flt = as_filter(target)
+    label = name or type(flt).__name__
+    xfail = dict(type(flt).expected_check_failures)
+    for check, reason in yield_filter_checks(flt):
+        if reason is not None:
+            yield CheckResult(label, check.name, "skipped", reason)
+            continue
+        try:
+            check.run(flt)
+        except (CheckFailed, LocbenchError, AssertionError, TypeError, ValueError) as exc:
+            if isinstance(exc, DependencyNotInstalled):
+                yield CheckResult(label, check.name, "skipped", str(exc))
+            elif check.name in xfail:
+                yield CheckResult(label, check.name, "xfailed", xfail[check.name])
+            else:
+                yield CheckResult(label, check.name, "failed", f"{type(exc).__name__}: {exc}")
+        else:
+            if check.name in xfail:
+                yield CheckResult(label, check.name, "xpassed", f"declared to fail ({xfail[check.name]}) but passed")
+            else:
+                yield CheckResult(label, check.name, "passed")
 
 
 # --- dataset checks -----------------------------------------------------------------------------
@@ -241,20 +362,34 @@ DATASET_CHECKS: dict[str, Callable[[str], None]] = {
 
 
 def expected_failures(filter_id: str) -> dict[str, str]:
-    """The checks a filter declares it fails, with reasons."""
-    return dict(getattr(FILTERS.load(filter_id), "expected_check_failures", {}))
+    """The checks a registered filter declares it fails, with reasons."""
+    cls: type[Filter] = FILTERS.load(filter_id)
+    return dict(cls.expected_check_failures)
+
+
+def _dataset_results(spec: str) -> Iterator[CheckResult]:
+    resolve_dataset(spec)  # a malformed spec is a clear error, not a failed check
+    for name, fn in DATASET_CHECKS.items():
+        try:
+            fn(spec)
+        except (CheckFailed, LocbenchError, AssertionError, TypeError, ValueError) as exc:
+            outcome = "skipped" if isinstance(exc, DependencyNotInstalled) else "failed"
+            yield CheckResult(spec, name, outcome, f"{type(exc).__name__}: {exc}")
+        else:
+            yield CheckResult(spec, name, "passed")
 
 
 def run_checks(ids: list[str] | None = None) -> Iterator[CheckResult]:
-    """Run every check for the given filter/dataset ids (all registered ones when None)."""
+    """Run the checks of the given registered filter/dataset specs (all registered ones when None)."""
     if not ids:
         ids = FILTERS.ids() + DATASETS.ids()
     for spec in ids:
-        ident = spec.split("[", 1)[0]
+        ident = Spec.parse(spec).ident
         if ident in FILTERS:
-            checks, registry = FILTER_CHECKS, FILTERS
+            checks: list[str] = list(FILTER_CHECKS)
+            registry = FILTERS
         elif ident in DATASETS:
-            checks, registry = DATASET_CHECKS, DATASETS
+            checks, registry = list(DATASET_CHECKS), DATASETS
         else:
             valid = ", ".join(FILTERS.ids() + DATASETS.ids())
             raise UnknownIdError(f"unknown filter or dataset {ident!r}; valid: {valid}")
@@ -262,22 +397,7 @@ def run_checks(ids: list[str] | None = None) -> Iterator[CheckResult]:
         if reason is not None:
             for name in checks:
                 yield CheckResult(spec, name, "skipped", reason)
-            continue
-        # resolve now so a malformed spec is a clear error, not a failed check
-        (resolve_filter if registry is FILTERS else resolve_dataset)(spec)
-        xfail = expected_failures(ident) if registry is FILTERS else {}
-        for name, fn in checks.items():
-            try:
-                fn(spec)
-            except (CheckFailed, LocbenchError, AssertionError, TypeError, ValueError) as exc:
-                if isinstance(exc, DependencyNotInstalled):
-                    yield CheckResult(spec, name, "skipped", str(exc))
-                elif name in xfail:
-                    yield CheckResult(spec, name, "xfailed", xfail[name])
-                else:
-                    yield CheckResult(spec, name, "failed", f"{type(exc).__name__}: {exc}")
-            else:
-                if name in xfail:
-                    yield CheckResult(spec, name, "xpassed", f"declared to fail ({xfail[name]}) but passed")
-                else:
-                    yield CheckResult(spec, name, "passed")
+        elif registry is FILTERS:
+            yield from check_filter(make_filter(resolve_filter(spec)), name=spec)
+        else:
+            yield from _dataset_results(spec)

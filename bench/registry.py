@@ -168,6 +168,13 @@ FILTERS.register(
     install_hint="pip install 'locbench[filterpy]'",
 )
 FILTERS.register(
+    "ukf_landmarks",
+    "locbench.filters.ukf_landmarks:LandmarkUKF",
+    "unscented KF (filterpy, Merwe sigma points) with ekf_landmarks' motion, landmark, range and fix models",
+    requires_modules=("filterpy",),
+    install_hint="pip install 'locbench[filterpy]'",
+)
+FILTERS.register(
     "pf",
     "locbench.filters.pf:ParticleFilter",
     "Monte Carlo localization: encoder motion model, landmark and laser likelihood-field models, augmented MCL",

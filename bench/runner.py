@@ -11,7 +11,6 @@ and the sweep goes on.
 from __future__ import annotations
 
 import concurrent.futures as cf
-import dataclasses
 import logging
 import math
 import time
@@ -28,8 +27,9 @@ from locbench.errors import DataNotFound, FilterDiverged
 from locbench.events import EVENT_TYPES, Odometry
 from locbench.filters.base import Filter
 from locbench.registry import DATASETS, FILTERS, Resolved, make_dataset, resolve_dataset, resolve_filter
+from locbench.runkey import key_params
 from locbench.seeding import filter_rng
-from locbench.spec import params_to_dict, stable_hash
+from locbench.spec import stable_hash
 from locbench.store import KIND_NAMES, RunRecord, Store, TruthRecord
 
 log = logging.getLogger(__name__)
@@ -148,19 +148,6 @@ def run_filter(flt: Filter, ds: Dataset, rng: np.random.Generator) -> FilterTrac
     )
 
 
-def _key_params(params: Any) -> dict[str, Any]:
-    """A config as hashed into the run key.
-
-    A field declared with ``metadata={"run_key_omit_if_default": True}`` (one added later whose default keeps the
-    old behaviour exactly) is left out while it has its default, so adding it does not invalidate stored runs.
-    """
-    out = params_to_dict(params)
-    for f in dataclasses.fields(params):
-        if f.metadata.get("run_key_omit_if_default") and getattr(params, f.name) == f.default:
-            out.pop(f.name, None)
-    return out
-
-
 def run_key(fr: Resolved, dr: Resolved, seed: int) -> str:
     """The cache key of a run: everything that determines its result."""
     fcls, dcls = FILTERS.load(fr.id), DATASETS.load(dr.id)
@@ -168,10 +155,10 @@ def run_key(fr: Resolved, dr: Resolved, seed: int) -> str:
         {
             "format": STORE_FORMAT,
             "filter": fr.id,
-            "filter_config": _key_params(fr.params),
+            "filter_config": key_params(fr.params),
             "filter_version": getattr(fcls, "version", 1),
             "dataset": dr.id,
-            "dataset_params": _key_params(dr.params),
+            "dataset_params": key_params(dr.params),
             "dataset_version": getattr(dcls, "version", 1),
             "seed": seed,
         }

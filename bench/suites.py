@@ -51,10 +51,19 @@ class Suite:
 
 
 #: Every registered filter with its default config: the rows of the main comparison.
-ALL_FILTERS = ("odometry", "ekf_landmarks", "ekf_lines", "ekf_icp", "kf_linear", "pf", "gtsam_fls")
+ALL_FILTERS = ("odometry", "ekf_landmarks", "ukf_landmarks", "ekf_lines", "ekf_icp", "kf_linear", "pf", "gtsam_fls")
 #: Each filter with its own source's kidnap policy: 000's inflation rule is built into ekf_icp; pf's
 #: augmented MCL is switched on (003's PF, the default, only resamples); the others have none.
-KIDNAP_FILTERS = ("odometry", "ekf_landmarks", "ekf_lines", "ekf_icp", "kf_linear", "pf[augmented=true]", "gtsam_fls")
+KIDNAP_FILTERS = (
+    "odometry",
+    "ekf_landmarks",
+    "ukf_landmarks",
+    "ekf_lines",
+    "ekf_icp",
+    "kf_linear",
+    "pf[augmented=true]",
+    "gtsam_fls",
+)
 KIDNAP_DISTANCES_M = (0.5, 1, 2, 4)
 
 #: The recorded datasets of the recorded-data table (MRCLAM Dataset 6, all five robots; Dataset 6 is the default).

@@ -49,8 +49,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass, field
-from types import MappingProxyType
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -58,6 +57,7 @@ import numpy.typing as npt
 from locbench.datasets.base import SensorSpec
 from locbench.events import Odometry
 from locbench.geometry import wrap_angle, wrap_scalar
+from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
 
 FloatArray = npt.NDArray[np.float64]
 InputNoise = Literal["per_step", "cumulative"]
@@ -72,10 +72,6 @@ DEFAULT_ENCODER_K = 0.01
 DEFAULT_SIGMA_XY_PER_M = 0.02
 DEFAULT_SIGMA_THETA_PER_M = 0.02
 DEFAULT_SIGMA_THETA_PER_RAD = 0.02
-
-#: Field metadata of config fields added after runs were stored: a run key may leave such a field out while it
-#: holds its default (which reproduces the earlier behaviour), so that adding it does not invalidate stored runs.
-RUN_KEY_OMIT_IF_DEFAULT: MappingProxyType[str, Any] = MappingProxyType({"run_key_omit_if_default": True})
 
 # --- the encoder model (report 003 eq. 1-5, 10) -----------------------------------------------------------
 

@@ -9,7 +9,9 @@ calls ``predict`` for each odometry event and ``update`` for each observation it
 from __future__ import annotations
 
 import abc
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import Any, ClassVar
 
 import numpy as np
@@ -49,6 +51,26 @@ class Estimate:
     diagnostics: dict[str, float] = field(default_factory=dict)
 
 
+@dataclass(frozen=True, kw_only=True)
+class CheckTolerances:
+    """The bounds the conformance checks (:mod:`locbench.checks`) hold a filter to; a filter may widen one.
+
+    Attributes
+    ----------
+    logdet_drop : float
+        How far log det P may fall in one predict (0 for an exact Gaussian filter; sampling noise for particles).
+    noise_free_ate_m : float
+        Position RMSE allowed on exact data (``tiny_circle[noise_free=true]``), m.
+    wrap_position_m, wrap_heading_rad : float
+        Largest position (m) and heading (rad) error allowed on the noisy circle whose heading crosses +-pi.
+    """
+
+    logdet_drop: float = 1e-9
+    noise_free_ate_m: float = 0.05
+    wrap_position_m: float = 1.0
+    wrap_heading_rad: float = 0.5
+
+
 class Filter(abc.ABC):
     """Base class of every estimator.
 
@@ -65,8 +87,13 @@ class Filter(abc.ABC):
         Bump on any change of behaviour; it is part of the run key, so stored runs are redone.
     source : str
         The report or reference the filter follows (for the README and report).
+    expected_check_failures : mapping of str to str
+        Conformance checks the filter fails by design, each with the reason; they run as strict xfail.
+
+    Hooks read by the conformance checks: ``expected_check_failures`` and :meth:`check_tolerances`.
     """
 
+    expected_check_failures: ClassVar[Mapping[str, str]] = MappingProxyType({})
     consumes: ClassVar[frozenset[type]] = frozenset()
     requires: ClassVar[frozenset[MapKind]] = frozenset()
     Config: ClassVar[type[FilterConfig]] = FilterConfig
@@ -95,6 +122,10 @@ class Filter(abc.ABC):
         unused events neither cost time nor appear in update timings.
         """
         return self.consumes
+
+    def check_tolerances(self) -> CheckTolerances:
+        """The bounds of the conformance checks under this config (defaults unless a filter widens one)."""
+        return CheckTolerances()
 
     def check_consumes(self, z: Event) -> None:
         """Raise ``TypeError`` when ``z`` is not an observation type this filter consumes."""

@@ -73,6 +73,7 @@ from locbench.datasets.base import Gaussian2, MapKind, SensorSpec, WorldMap
 from locbench.errors import ConfigError, FilterDiverged
 from locbench.events import LaserScan, Observation, Odometry
 from locbench.filters._icp import MIN_PAIRS, IcpResult, icp_2d
+from locbench.filters._kalman import joseph_correct
 from locbench.filters.base import Estimate, Filter, FilterConfig
 from locbench.geometry import wrap_scalar
 from locbench.raycast import cast_scan
@@ -82,6 +83,8 @@ logger = logging.getLogger(__name__)
 
 #: Laser range noise used when neither the config nor the dataset gives one, m (a Hokuyo URG-04LX is +-3 cm).
 DEFAULT_LASER_SIGMA_M = 0.01
+#: The ICP correction measures the pose itself (eq. 14).
+_H_POSE = np.eye(3)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -348,18 +351,14 @@ class IcpEKF(Filter):
         c, s = math.cos(th), math.sin(th)
         # V = Z - Z^ with Z = X (+) M (eq. 2-3): the ICP translation rotated into the world frame.
         V = np.array([c * tx - s * ty, s * tx + c * ty, wrap_scalar(tth)])
-        P = self._P
-        S = P + self._R
-        Sinv = np.linalg.inv(S)
-        K = P @ Sinv  # eq. 15
-        x = self._x + K @ V  # eq. 17
-        A = np.eye(3) - K
-        P_new = A @ P @ A.T + K @ self._R @ K.T  # eq. 18 in Joseph form
-        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P_new))):
+        # eq. 15-18 with H = I: K = P (P + R)^-1, x + K V, Joseph form (the Kalman core).
+        kc = joseph_correct(self._x, self._P, V, _H_POSE, self._R)
+        x = kc.x
+        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(kc.P))):
             raise FilterDiverged(f"non-finite state after the scan update at t={z.t:.3f}")
         x[2] = wrap_scalar(float(x[2]))
         self._x = x
-        self._P = 0.5 * (P_new + P_new.T)
+        self._P = kc.P
         self._consecutive = 0
         self._tightened = False  # the report's tighter threshold holds until the filter matches again
         self._diag = {
@@ -367,7 +366,7 @@ class IcpEKF(Filter):
             "accepted": 1.0,
             "iterations": float(res.iterations),
             "matched_points": float(res.matched),
-            "nis": float(V @ Sinv @ V),
+            "nis": kc.nis,
         }
 
     def _mismatch(self, t: float, res: IcpResult | None) -> None:

@@ -53,7 +53,6 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass, field
-from statistics import NormalDist
 from typing import ClassVar, Literal
 
 import numpy as np
@@ -62,67 +61,32 @@ import numpy.typing as npt
 from locbench.datasets.base import Gaussian2, MapKind, SensorSpec, WorldMap
 from locbench.errors import ConfigError, FilterDiverged
 from locbench.events import UNKNOWN_ID, LandmarkObservations, Observation, Odometry, PoseFix, RangeObservations
+from locbench.filters._kalman import (
+    chi2_1dof_quantile,
+    chi2_2dof_quantile,
+    inside_gate,
+    joseph_update,
+    subtract,
+    wrapped_residual,
+)
 from locbench.filters._motion import (
-    RUN_KEY_OMIT_IF_DEFAULT,
     MotionKind,
     MotionModel,
     MotionNoiseConfig,
     propagate_covariance,
 )
+from locbench.filters._noise import landmark_noise, range_only_noise
 from locbench.filters.base import Estimate, Filter, FilterConfig
 from locbench.geometry import wrap_angle, wrap_scalar
+from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
 
 FloatArray = npt.NDArray[np.float64]
 logger = logging.getLogger(__name__)
 
-#: Range-bearing noise used when neither the config nor the dataset gives one (logged at reset).
-DEFAULT_SIGMA_RANGE_M = 0.05
-DEFAULT_SIGMA_BEARING_RAD = 0.02
+_RESIDUAL_HEADING = wrapped_residual([2])
 
 # Maps with at least this many landmarks are searched with numpy; smaller ones in plain floats (faster there).
 _VECTOR_NN_MIN = 48
-
-
-def chi2_2dof_quantile(p: float) -> float:
-    """The ``p`` quantile of the chi-square distribution with 2 degrees of freedom: -2 ln(1 - p)."""
-    return -2.0 * math.log1p(-p)
-
-
-def chi2_1dof_quantile(p: float) -> float:
-    """The ``p`` quantile of the chi-square distribution with 1 degree of freedom, Phi^-1((1 + p) / 2)^2; inf at 1."""
-    if p >= 1.0:
-        return math.inf
-    return NormalDist().inv_cdf(0.5 * (1.0 + p)) ** 2
-
-
-def range_only_noise(range_only_sigma_m: float | None, sensors: SensorSpec, warn: bool = True) -> float:
-    """Standard deviation of a range-only (beacon) measurement, m: the config override, else the dataset's
-    ``SensorSpec.range_sigma_m``, else :data:`DEFAULT_SIGMA_RANGE_M` (logged when ``warn``)."""
-    sr = range_only_sigma_m if range_only_sigma_m is not None else sensors.range_sigma_m
-    if sr is None:
-        if warn:
-            logger.warning("no nominal range-only noise in the config or dataset; using %g m", DEFAULT_SIGMA_RANGE_M)
-        return DEFAULT_SIGMA_RANGE_M
-    return float(sr)
-
-
-def landmark_noise(
-    sigma_range_m: float | None, sigma_bearing_rad: float | None, sensors: SensorSpec, warn: bool = True
-) -> tuple[float, float]:
-    """Range and bearing standard deviations (m, rad): the config override, else the dataset's nominal
-    value, else :data:`DEFAULT_SIGMA_RANGE_M` / :data:`DEFAULT_SIGMA_BEARING_RAD` (logged when ``warn``)."""
-    sr = sigma_range_m if sigma_range_m is not None else sensors.landmark_sigma_range_m
-    sb = sigma_bearing_rad if sigma_bearing_rad is not None else sensors.landmark_sigma_bearing_rad
-    if warn and (sr is None or sb is None):
-        logger.warning(
-            "no nominal landmark noise in the config or dataset; using sigma_range_m=%g, sigma_bearing_rad=%g",
-            DEFAULT_SIGMA_RANGE_M,
-            DEFAULT_SIGMA_BEARING_RAD,
-        )
-    return (
-        DEFAULT_SIGMA_RANGE_M if sr is None else float(sr),
-        DEFAULT_SIGMA_BEARING_RAD if sb is None else float(sb),
-    )
 
 
 def range_bearing(pose: npt.ArrayLike, landmarks_xy: npt.ArrayLike) -> FloatArray:
@@ -144,38 +108,6 @@ def range_bearing_jacobian(pose: npt.ArrayLike, landmark_xy: npt.ArrayLike) -> F
     q = dx * dx + dy * dy
     d = math.sqrt(q)
     return np.array([[-dx / d, -dy / d, 0.0], [dy / q, -dx / q, -1.0]])
-
-
-def joseph_update(
-    x: FloatArray, P: FloatArray, H: FloatArray, R: FloatArray, nu: FloatArray
-) -> tuple[FloatArray, FloatArray, float]:
-    """One EKF correction in numpy with the Joseph form; returns (x, P, NIS).
-
-    ``nu`` is the innovation z - h(x) (angles already wrapped by the caller). The heading of the returned
-    state is not wrapped. Used for pose fixes and as the reference of the scalar landmark update.
-    """
-    PHt = P @ H.T
-    S = H @ PHt + R
-    Sinv = np.linalg.inv(S)
-    K = PHt @ Sinv
-    A = np.eye(P.shape[0]) - K @ H
-    P_new = A @ P @ A.T + K @ R @ K.T
-    return x + K @ nu, 0.5 * (P_new + P_new.T), float(nu @ Sinv @ nu)
-
-
-def _inverse_small(S: list[list[float]]) -> list[list[float]] | None:
-    """Inverse of a symmetric 2x2 or 3x3 matrix in plain floats (adjugate / determinant); None if singular."""
-    if len(S) == 2:
-        (a, b), (_, d) = S
-        det = a * d - b * b
-        return [[d / det, -b / det], [-b / det, a / det]] if det > 0.0 else None
-    (a, b, c), (_, d, e), (_, _, f) = S
-    c00, c01, c02 = d * f - e * e, c * e - b * f, b * e - c * d
-    det = a * c00 + b * c01 + c * c02
-    if not det > 0.0:
-        return None
-    c11, c12, c22 = a * f - c * c, b * c - a * e, a * d - b * b
-    return [[c00 / det, c01 / det, c02 / det], [c01 / det, c11 / det, c12 / det], [c02 / det, c12 / det, c22 / det]]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -270,7 +202,7 @@ class LandmarkEKF(Filter):
     consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LandmarkObservations, PoseFix, RangeObservations})
     requires: ClassVar[frozenset[MapKind]] = frozenset({MapKind.LANDMARKS})
     Config: ClassVar[type[FilterConfig]] = LandmarkEKFConfig
-    version: ClassVar[int] = 1
+    version: ClassVar[int] = 2
     source: ClassVar[str] = "003_e5c93f9be776ee5e (EKF, eq. 1-10); 001_71e01b0c4f2511a1 (sensor Jacobian, GPS)"
 
     config: LandmarkEKFConfig
@@ -457,7 +389,13 @@ class LandmarkEKF(Filter):
         vr = r - d
         vb = wrap_angle(b - pb)
         d2 = (s11 * vr * vr - 2.0 * s01 * vr * vb + s00 * vb * vb) / (s00 * s11 - s01 * s01)
-        bad = ~(q > 1e-12)
+        return self._exclude(d2, ~(q > 1e-12), d, pb, used)
+
+    def _exclude(
+        self, d2: FloatArray, bad: npt.NDArray[np.bool_], d: FloatArray, pb: FloatArray, used: set[int]
+    ) -> FloatArray:
+        """``d2`` with inf where a landmark is no candidate: ``bad``, already ``used``, or (when pruning) predicted
+        at a range ``d`` or bearing ``pb`` outside the sensor limits."""
         if self._limits is not None:
             lo, hi, half = self._limits
             bad |= (d < lo) | (d > hi) | (np.abs(pb) > half)
@@ -547,92 +485,52 @@ class LandmarkEKF(Filter):
         return d2
 
     def _update_ranges(self, z: RangeObservations) -> None:
-        """Fuse beacon ranges one at a time (module docstring): scalar Joseph update, chi-square (1 dof) gate."""
+        """Fuse beacon ranges one at a time (module docstring), each under the chi-square (1 dof) gate."""
         if self._range_warn:
             range_only_noise(None, SensorSpec(), warn=True)
             self._range_warn = False
         nis, acc, rej = 0.0, 0, 0
-        rr = self._range_sigma * self._range_sigma
-        gate = self._range_gate
         for ident, r in zip(z.ids.tolist(), z.ranges.tolist(), strict=True):
             row = self._lm_row.get(ident) if ident != UNKNOWN_ID else None
-            if row is None or not (math.isfinite(r) and r >= 0.0):
+            d2 = None if row is None or not (math.isfinite(r) and r >= 0.0) else self._correct_range(r, row)
+            if d2 is None:
                 rej += 1
-                continue
-            lx, ly = self._lm_list[row]
-            x, y, th = self._x
-            dx, dy = lx - x, ly - y
-            d = math.hypot(dx, dy)
-            if d < 1e-9:
-                rej += 1  # on the beacon: the range's gradient is undefined
-                continue
-            h0, h1 = -dx / d, -dy / d
-            P = self._P
-            p00, p01, p02 = P[0]
-            p11, p12 = P[1][1], P[1][2]
-            # P H^T (H = [h0, h1, 0]) and S = H P H^T + R.
-            u0, u1, u2 = p00 * h0 + p01 * h1, p01 * h0 + p11 * h1, p02 * h0 + p12 * h1
-            S = h0 * u0 + h1 * u1 + rr
-            nu = r - d
-            d2 = nu * nu / S
-            if not d2 <= gate:
-                rej += 1
-                continue
-            k0, k1, k2 = u0 / S, u1 / S, u2 / S
-            self._x = [x + k0 * nu, y + k1 * nu, wrap_scalar(th + k2 * nu)]
-            # Joseph form A P A^T + K R K^T with A = I - K H.
-            A = (
-                (1.0 - k0 * h0, -k0 * h1, 0.0),
-                (-k1 * h0, 1.0 - k1 * h1, 0.0),
-                (-k2 * h0, -k2 * h1, 1.0),
-            )
-            AP = [[A[i][0] * P[0][j] + A[i][1] * P[1][j] + A[i][2] * P[2][j] for j in range(3)] for i in range(3)]
-            K = (k0, k1, k2)
-            out = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
-            for i in range(3):
-                for j in range(i, 3):
-                    v = AP[i][0] * A[j][0] + AP[i][1] * A[j][1] + AP[i][2] * A[j][2] + K[i] * K[j] * rr
-                    out[i][j] = out[j][i] = v
-            self._P = out
-            nis += d2
-            acc += 1
+            else:
+                nis += d2
+                acc += 1
         self._nis = nis if acc else math.nan
         self._nis_dof, self._accepted, self._rejected = acc, acc, rej
 
-    def _update_pose_fix(self, z: PoseFix) -> None:
-        """GPS-like fix (report 001): H = [I_2 0] or I_3; the fix's own covariance; heading innovation wrapped.
+    def _correct_range(self, r: float, row: int) -> float | None:
+        """Fuse one range to beacon ``row`` with the Joseph update of the core; its NIS, or None if gated out."""
+        x, P = np.array(self._x), np.array(self._P)
+        lx, ly = self._lm_list[row]
+        dx, dy = lx - x[0], ly - x[1]
+        d = math.hypot(dx, dy)
+        if d < 1e-9:
+            return None  # on the beacon: the range's gradient is undefined
+        H = np.array([[-dx / d, -dy / d, 0.0]])
+        R = np.array([[self._range_sigma * self._range_sigma]])
+        c = joseph_update(x, P, np.array([r]), np.array([d]), H, R)
+        if not inside_gate(c.nis, self._range_gate):
+            return None
+        self._x = [float(c.x[0]), float(c.x[1]), wrap_scalar(float(c.x[2]))]
+        self._P = c.P.tolist()
+        return c.nis
 
-        H selects the first m state components, so S = P[:m, :m] + R, K = P[:, :m] S^-1 and A = I - K H
-        differs from I only in its first m columns; plain floats, Joseph form as for landmarks.
-        """
-        zz = z.z.tolist()
-        m = len(zz)
+    def _update_pose_fix(self, z: PoseFix) -> None:
+        """GPS-like fix (report 001): H = [I_2 0] or I_3; the fix's own covariance; heading innovation wrapped."""
+        m = int(z.z.shape[0])
         if m not in (2, 3) or z.cov.shape != (m, m):
             raise ValueError(f"PoseFix at t={z.t} must have z (2,) or (3,) and a matching cov, got {z.cov.shape}")
-        c = z.cov.tolist()
-        R = [[0.5 * (c[i][j] + c[j][i]) for j in range(m)] for i in range(m)]
-        x, P = self._x, self._P
-        nu = [zz[i] - x[i] for i in range(m)]
-        if m == 3:
-            nu[2] = wrap_scalar(nu[2])
-        Si = _inverse_small([[P[i][j] + R[i][j] for j in range(m)] for i in range(m)])
-        if Si is None:
+        x, P, R = np.array(self._x), np.array(self._P), 0.5 * (z.cov + z.cov.T)
+        if not np.linalg.det(P[:m, :m] + R) > 0.0:
             raise ValueError(f"PoseFix at t={z.t}: innovation covariance is singular; check the fix covariance")
-        K = [[sum(P[i][k] * Si[k][j] for k in range(m)) for j in range(m)] for i in range(3)]
-        self._x = [x[i] + sum(K[i][j] * nu[j] for j in range(m)) for i in range(3)]
-        self._x[2] = wrap_scalar(self._x[2])
-        A = [[(1.0 if i == j else 0.0) - (K[i][j] if j < m else 0.0) for j in range(3)] for i in range(3)]
-        AP = [[A[i][0] * P[0][j] + A[i][1] * P[1][j] + A[i][2] * P[2][j] for j in range(3)] for i in range(3)]
-        KR = [[sum(K[i][k] * R[k][j] for k in range(m)) for j in range(m)] for i in range(3)]
-        out = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
-        for i in range(3):
-            for j in range(i, 3):
-                v = AP[i][0] * A[j][0] + AP[i][1] * A[j][1] + AP[i][2] * A[j][2]
-                v += sum(KR[i][k] * K[j][k] for k in range(m))
-                out[i][j] = out[j][i] = v
-        self._P = out
-        nis = sum(nu[i] * Si[i][j] * nu[j] for i in range(m) for j in range(m))
-        self._nis, self._nis_dof, self._accepted, self._rejected = nis, m, 1, 0
+        residual = _RESIDUAL_HEADING if m == 3 else subtract
+        c = joseph_update(x, P, np.asarray(z.z, dtype=np.float64), x[:m], np.eye(3)[:m], R, residual)
+        self._x = [float(c.x[0]), float(c.x[1]), wrap_scalar(float(c.x[2]))]
+        self._P = c.P.tolist()
+        self._nis, self._nis_dof, self._accepted, self._rejected = c.nis, m, 1, 0
 
     # --- output --------------------------------------------------------------------------------------------
 
@@ -645,14 +543,12 @@ class LandmarkEKF(Filter):
 
     def estimate(self) -> Estimate:
         """The current mean (3,), covariance (3, 3) and the diagnostics of the last call."""
-        return Estimate(
-            t=self._t,
-            mean=np.array(self._x),
-            cov=np.array(self._P),
-            diagnostics={
-                "nis": self._nis,
-                "nis_dof": float(self._nis_dof),
-                "accepted": float(self._accepted),
-                "rejected": float(self._rejected),
-            },
-        )
+        return Estimate(t=self._t, mean=np.array(self._x), cov=np.array(self._P), diagnostics=self._diagnostics())
+
+    def _diagnostics(self) -> dict[str, float]:
+        return {
+            "nis": self._nis,
+            "nis_dof": float(self._nis_dof),
+            "accepted": float(self._accepted),
+            "rejected": float(self._rejected),
+        }

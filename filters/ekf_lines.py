@@ -54,6 +54,7 @@ import numpy.typing as npt
 from locbench.datasets.base import Gaussian2, MapKind, SensorSpec, WorldMap
 from locbench.errors import ConfigError, FilterDiverged
 from locbench.events import LaserScan, Observation, Odometry
+from locbench.filters._kalman import joseph_correct
 from locbench.filters._line_extraction import ExtractedLines, ExtractionParams, extract_lines
 from locbench.filters._motion import MotionModel, propagate_covariance, resolve_motion_noise
 from locbench.filters.base import Estimate, Filter, FilterConfig
@@ -172,7 +173,7 @@ class LineEKF(Filter):
     consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LaserScan})
     requires: ClassVar[frozenset[MapKind]] = frozenset({MapKind.LINES})
     Config: ClassVar[type[FilterConfig]] = LineEKFConfig
-    version: ClassVar[int] = 1
+    version: ClassVar[int] = 2
     source: ClassVar[str] = "002_f01b2dfd20d46b8b (EKF map-based localization with lines, eq. 1-8)"
 
     config: LineEKFConfig
@@ -316,18 +317,13 @@ class LineEKF(Filter):
             v[2 * r] = lines.rho_psi[j, 0] - sg * float(rho_p[i])  # eq. 4
             v[2 * r + 1] = wrap_scalar(lines.rho_psi[j, 1] - h_psi)
             R[2 * r : 2 * r + 2, 2 * r : 2 * r + 2] = lines.cov[j] + self._R0
-        PHt = P @ H.T
-        S = H @ PHt + R  # eq. 5
-        S = 0.5 * (S + S.T)
-        Sinv_v = np.linalg.solve(S, v)
-        K = np.linalg.solve(S, PHt.T).T  # eq. 6: P H^T S^-1 (S symmetric)
-        x_new = x + K @ v  # eq. 7
+        # S = H P H^T + R (eq. 5), K = P H^T S^-1 (eq. 6), x + K v (eq. 7), Joseph form (eq. 8): the Kalman core.
+        c = joseph_correct(x, P, v, H, R)
+        x_new = c.x
         x_new[2] = wrap_scalar(float(x_new[2]))
-        A = np.eye(3) - K @ H
-        P_new = A @ P @ A.T + K @ R @ K.T  # eq. 8, Joseph form
         self._x = x_new
-        self._P = 0.5 * (P_new + P_new.T)
-        self._nis = float(v @ Sinv_v)
+        self._P = c.P
+        self._nis = c.nis
         self._nis_dof = 2 * k
         self._accepted = k
 

@@ -73,16 +73,17 @@ import numpy.typing as npt
 from locbench.datasets.base import Gaussian2, MapKind, SensorSpec, WorldMap
 from locbench.errors import ConfigError, DependencyNotInstalled, FilterDiverged
 from locbench.events import UNKNOWN_ID, LandmarkObservations, Observation, Odometry, PoseFix, RangeObservations
+from locbench.filters._kalman import chi2_1dof_quantile, chi2_2dof_quantile
 from locbench.filters._motion import (
-    RUN_KEY_OMIT_IF_DEFAULT,
     MotionKind,
     MotionModel,
     MotionNoiseConfig,
     propagate_covariance,
 )
+from locbench.filters._noise import landmark_noise, range_only_noise
 from locbench.filters.base import Estimate, Filter, FilterConfig
-from locbench.filters.ekf_landmarks import chi2_1dof_quantile, chi2_2dof_quantile, landmark_noise, range_only_noise
 from locbench.geometry import wrap_angle, wrap_scalar
+from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
 
 try:
     import gtsam

@@ -96,7 +96,6 @@ from locbench.filters._likelihood_field import (
     scan_endpoints_robot_frame,
 )
 from locbench.filters._motion import (
-    RUN_KEY_OMIT_IF_DEFAULT,
     MotionKind,
     MotionNoiseConfig,
     increment_variances,
@@ -105,9 +104,10 @@ from locbench.filters._motion import (
     sample_wheel_motion,
     wheel_variances,
 )
-from locbench.filters.base import Estimate, Filter, FilterConfig
-from locbench.filters.ekf_landmarks import landmark_noise, range_only_noise
+from locbench.filters._noise import landmark_noise, range_only_noise
+from locbench.filters.base import CheckTolerances, Estimate, Filter, FilterConfig
 from locbench.geometry import wrap_angle
+from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -451,6 +451,10 @@ class ParticleFilter(Filter):
         that term beats a, and its worst value over a is k^2 / N at k standard deviations. 25 / N is 5 sigma.
         """
         return 25.0 / self.config.particles
+
+    def check_tolerances(self) -> CheckTolerances:
+        """The conformance checks' bounds: the log det drop of :attr:`logdet_tolerance`, the rest the defaults."""
+        return CheckTolerances(logdet_drop=self.logdet_tolerance)
 
     def routed_events(self) -> frozenset[type]:
         """Odometry, plus landmark sightings, beacon ranges and laser scans as switched on in the config."""

@@ -1,7 +1,8 @@
 """Conformance checks parametrised over every registered filter and dataset.
 
 A filter or dataset is tested the moment it is registered; one whose optional dependency is missing
-is skipped with the install hint; a check a filter declares it fails runs as strict xfail.
+is skipped with the install hint; a check that does not apply to a filter's declared capabilities is skipped
+with the reason; a check a filter declares it fails runs as strict xfail.
 """
 
 from __future__ import annotations
@@ -9,15 +10,11 @@ from __future__ import annotations
 import pytest
 
 from locbench.checks import DATASET_CHECKS, FILTER_CHECKS, expected_failures
-from locbench.registry import DATASETS, FILTERS
+from locbench.registry import DATASETS, FILTERS, make_filter
 
 
 def _filter_cases() -> list[object]:
-    cases = []
-    for fid in FILTERS.ids():
-        for name in FILTER_CHECKS:
-            cases.append(pytest.param(fid, name, id=f"{fid}-{name}"))
-    return cases
+    return [pytest.param(fid, name, id=f"{fid}-{name}") for fid in FILTERS.ids() for name in FILTER_CHECKS]
 
 
 def _dataset_cases() -> list[object]:
@@ -29,11 +26,15 @@ def test_filter_conformance(filter_id: str, check: str, request: pytest.FixtureR
     reason = FILTERS.unavailable_reason(filter_id)
     if reason is not None:
         pytest.skip(f"{filter_id} {reason}")
+    flt = make_filter(filter_id)
+    not_applicable = FILTER_CHECKS[check].applies(flt)
+    if not_applicable is not None:
+        pytest.skip(not_applicable)
     xfail = expected_failures(filter_id)
     if check in xfail:
         # declared failure: the check still runs, and passing it anyway fails the test (strict)
         request.applymarker(pytest.mark.xfail(reason=xfail[check], strict=True))
-    FILTER_CHECKS[check](filter_id)
+    FILTER_CHECKS[check](flt)
 
 
 @pytest.mark.parametrize(("dataset_id", "check"), _dataset_cases())

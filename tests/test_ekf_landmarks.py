@@ -12,16 +12,9 @@ from numpy.testing import assert_allclose
 from locbench.datasets.base import Gaussian2, Landmarks, MapKind, SensorSpec, WorldMap
 from locbench.errors import ConfigError, FilterDiverged
 from locbench.events import UNKNOWN_ID, LandmarkObservations, LaserScan, Odometry, PoseFix, RangeObservations
+from locbench.filters._kalman import chi2_1dof_quantile, chi2_2dof_quantile, joseph_update, wrapped_residual
 from locbench.filters._motion import predict_midpoint
-from locbench.filters.ekf_landmarks import (
-    LandmarkEKF,
-    LandmarkEKFConfig,
-    chi2_1dof_quantile,
-    chi2_2dof_quantile,
-    joseph_update,
-    range_bearing,
-    range_bearing_jacobian,
-)
+from locbench.filters.ekf_landmarks import LandmarkEKF, LandmarkEKFConfig, range_bearing, range_bearing_jacobian
 from locbench.geometry import between, is_symmetric_psd, pose_error, wrap_angle
 from locbench.registry import make_filter
 
@@ -124,13 +117,11 @@ def test_scalar_update_matches_numpy_joseph_reference() -> None:
     ekf.update(LandmarkObservations(0.0, np.array([12]), z[:1], z[1:]))
     lm = LANDMARKS.xy[2]
     H = range_bearing_jacobian(x0, lm)
-    nu = z - range_bearing(x0, lm)
-    nu[1] = wrap_angle(nu[1])
-    x_ref, P_ref, nis_ref = joseph_update(x0, P0, H, np.diag([0.05**2, 0.02**2]), nu)
+    ref = joseph_update(x0, P0, z, range_bearing(x0, lm), H, np.diag([0.05**2, 0.02**2]), wrapped_residual([1]))
     est = ekf.estimate()
-    assert_allclose(est.mean, [x_ref[0], x_ref[1], wrap_angle(x_ref[2])], atol=1e-12)
-    assert_allclose(est.cov, P_ref, atol=1e-14)
-    assert est.diagnostics["nis"] == pytest.approx(nis_ref)
+    assert_allclose(est.mean, [ref.x[0], ref.x[1], wrap_angle(ref.x[2])], atol=1e-12)
+    assert_allclose(est.cov, ref.P, atol=1e-14)
+    assert est.diagnostics["nis"] == pytest.approx(ref.nis)
     assert est.diagnostics["accepted"] == 1.0
 
 
@@ -383,11 +374,11 @@ def test_range_update_equals_the_numpy_joseph_form_with_a_numeric_jacobian() -> 
 
     eps = 1e-7
     H = np.array([[(h(x0 + eps * e) - h(x0 - eps * e)) / (2 * eps) for e in np.eye(3)]])
-    x1, P1, nis = joseph_update(x0, P0, H, np.array([[0.1**2]]), np.array([r - h(x0)]))
+    ref = joseph_update(x0, P0, np.array([r]), np.array([h(x0)]), H, np.array([[0.1**2]]))
     est = f.estimate()
-    assert_allclose(est.mean, x1, atol=1e-9)
-    assert_allclose(est.cov, P1, atol=1e-10)
-    assert est.diagnostics["nis"] == pytest.approx(nis, rel=1e-6)
+    assert_allclose(est.mean, ref.x, atol=1e-9)
+    assert_allclose(est.cov, ref.P, atol=1e-10)
+    assert est.diagnostics["nis"] == pytest.approx(ref.nis, rel=1e-6)
     assert (est.diagnostics["accepted"], est.diagnostics["nis_dof"]) == (1.0, 1.0)
 
 

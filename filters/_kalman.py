@@ -1,0 +1,188 @@
+"""The Kalman correction shared by the Gaussian filters, and the chi-square gates around it.
+
+One measurement update in the Joseph form, after filterpy's ``ExtendedKalmanFilter.update``:
+
+    y = residual(z, h(x))                  innovation (a hook, so that angles are wrapped)
+    S = H P H^T + R                        innovation covariance
+    K = P H^T S^-1                         gain
+    x+ = x + K y
+    P+ = (I - K H) P (I - K H)^T + K R K^T     Joseph form: symmetric and PSD for any K (report 002 eq. 8)
+
+with the innovation, S, the normalised innovation squared NIS = y^T S^-1 y and the Gaussian log-likelihood
+log N(y; 0, S) returned beside the new state. A sigma-point filter has no H; it forms y, S and the cross
+covariance P_xz itself and calls :func:`gain_update` (K = P_xz S^-1, P+ = P - K S K^T).
+
+Gates: a measurement of dimension m is accepted when its NIS is inside the chi-square quantile with m
+degrees of freedom of the gate probability (:func:`chi2_quantile`; closed forms for 1 and 2 dof).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from statistics import NormalDist
+
+import numpy as np
+import numpy.typing as npt
+from scipy.stats import chi2
+
+from locbench.geometry import wrap_scalar
+
+FloatArray = npt.NDArray[np.float64]
+#: residual(z, h) -> y, the innovation (filterpy's ``residual`` argument).
+Residual = Callable[[FloatArray, FloatArray], FloatArray]
+
+_LOG_2PI = math.log(2.0 * math.pi)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Correction:
+    """One Kalman correction: the new state and what the update saw.
+
+    Attributes
+    ----------
+    x : ndarray, shape (n,)
+        Corrected mean; angles are *not* wrapped (the caller knows which components are angles).
+    P : ndarray, shape (n, n)
+        Corrected covariance, symmetrised.
+    y : ndarray, shape (m,)
+        Innovation residual(z, h(x)).
+    S : ndarray, shape (m, m)
+        Innovation covariance.
+    K : ndarray, shape (n, m)
+        Gain.
+    nis : float
+        Normalised innovation squared y^T S^-1 y (chi-square with m dof for a consistent filter).
+    log_likelihood : float
+        log N(y; 0, S) = -(m log 2 pi + log det S + NIS) / 2.
+    """
+
+    x: FloatArray
+    P: FloatArray
+    y: FloatArray
+    S: FloatArray
+    K: FloatArray
+    nis: float
+    log_likelihood: float
+
+
+def subtract(z: FloatArray, h: FloatArray) -> FloatArray:
+    """The plain residual z - h."""
+    return z - h
+
+
+def wrapped_residual(angles: Sequence[int]) -> Residual:
+    """A residual z - h of 1-D vectors whose components ``angles`` (indices, rad) are wrapped to (-pi, pi]."""
+    idx = tuple(angles)
+
+    def residual(z: FloatArray, h: FloatArray) -> FloatArray:
+        y = np.asarray(z, dtype=np.float64) - h
+        for i in idx:  # scalar wraps: sigma-point filters call this per point, where numpy indexing costs more
+            y[i] = wrap_scalar(float(y[i]))
+        return y
+
+    return residual
+
+
+def log_likelihood(nis: float, S: FloatArray) -> float:
+    """log N(y; 0, S) given NIS = y^T S^-1 y; -inf when S is not positive definite."""
+    sign, logdet = np.linalg.slogdet(S)
+    if sign <= 0.0:
+        return -math.inf
+    return -0.5 * (S.shape[0] * _LOG_2PI + float(logdet) + nis)
+
+
+def joseph_update(
+    x: FloatArray,
+    P: FloatArray,
+    z: FloatArray,
+    hx: FloatArray,
+    H: FloatArray,
+    R: FloatArray,
+    residual: Residual = subtract,
+) -> Correction:
+    """One EKF correction in the Joseph form (module docstring).
+
+    Parameters
+    ----------
+    x : ndarray, shape (n,)
+        Prior mean.
+    P : ndarray, shape (n, n)
+        Prior covariance.
+    z : ndarray, shape (m,)
+        Measurement.
+    hx : ndarray, shape (m,)
+        Predicted measurement h(x).
+    H : ndarray, shape (m, n)
+        Jacobian of h at x.
+    R : ndarray, shape (m, m)
+        Measurement noise covariance.
+    residual : callable
+        residual(z, hx) -> y; :func:`wrapped_residual` for components that are angles.
+
+    Returns
+    -------
+    Correction
+        The new mean (angles not wrapped) and covariance, with y, S, K, NIS and log-likelihood.
+    """
+    return joseph_correct(x, P, residual(z, hx), H, R)
+
+
+def joseph_correct(x: FloatArray, P: FloatArray, y: FloatArray, H: FloatArray, R: FloatArray) -> Correction:
+    """The Joseph-form correction for an innovation ``y`` the caller formed itself (angles already wrapped).
+
+    Shapes as in :func:`joseph_update`. For H = I (a direct pose measurement) every product with H is exact, so
+    the result equals the same algebra written without H bit for bit.
+    """
+    PHt = P @ H.T
+    S = H @ PHt + R
+    Sinv = np.linalg.inv(S)
+    K = PHt @ Sinv
+    A = np.eye(P.shape[0]) - K @ H
+    P_new = A @ P @ A.T + K @ R @ K.T
+    nis = float(y @ Sinv @ y)
+    return Correction(x + K @ y, 0.5 * (P_new + P_new.T), y, S, K, nis, log_likelihood(nis, S))
+
+
+def gain_update(x: FloatArray, P: FloatArray, y: FloatArray, S: FloatArray, Pxz: FloatArray) -> Correction:
+    """A correction from the cross covariance (sigma-point filters): K = P_xz S^-1, P+ = P - K S K^T.
+
+    ``y`` and ``S`` are the innovation and its covariance as the caller formed them (R included).
+    """
+    Sinv = np.linalg.inv(S)
+    K = Pxz @ Sinv
+    P_new = P - K @ S @ K.T
+    nis = float(y @ Sinv @ y)
+    return Correction(x + K @ y, 0.5 * (P_new + P_new.T), y, S, K, nis, log_likelihood(nis, S))
+
+
+# --- chi-square gates ------------------------------------------------------------------------------------
+
+
+def chi2_2dof_quantile(p: float) -> float:
+    """The ``p`` quantile of the chi-square distribution with 2 degrees of freedom: -2 ln(1 - p)."""
+    return -2.0 * math.log1p(-p)
+
+
+def chi2_1dof_quantile(p: float) -> float:
+    """The ``p`` quantile of the chi-square distribution with 1 degree of freedom, Phi^-1((1 + p) / 2)^2; inf at 1."""
+    if p >= 1.0:
+        return math.inf
+    return NormalDist().inv_cdf(0.5 * (1.0 + p)) ** 2
+
+
+def chi2_quantile(p: float, dof: int) -> float:
+    """The ``p`` quantile of the chi-square distribution with ``dof`` degrees of freedom; inf at ``p`` = 1."""
+    if p >= 1.0:
+        return math.inf
+    if dof == 1:
+        return chi2_1dof_quantile(p)
+    if dof == 2:
+        return chi2_2dof_quantile(p)
+    return float(chi2.ppf(p, dof))
+
+
+def inside_gate(nis: float, threshold: float) -> bool:
+    """Whether a measurement with this NIS passes a gate (NaN never does)."""
+    return nis <= threshold

@@ -1,0 +1,283 @@
+"""Unscented Kalman filter with the landmark EKF's models: the filter users compare an EKF against.
+
+The state, the motion model, the measurement models and the association are those of
+:mod:`locbench.filters.ekf_landmarks` (reports 003 and 001); only the way the Gaussian is carried through the
+nonlinear functions differs. filterpy's ``UnscentedKalmanFilter`` with ``MerweScaledSigmaPoints`` (van der
+Merwe 2004; the scaled unscented transform of Julier 2002) does the algebra:
+
+    sigma points  chi_0 = x,  chi_i = x +- (sqrt((n + lambda) P))_i,   lambda = alpha^2 (n + kappa) - n,
+    weights       Wm_0 = lambda / (n + lambda),  Wc_0 = Wm_0 + 1 - alpha^2 + beta,  Wm_i = Wc_i = 1 / (2 (n + lambda)).
+
+Defaults alpha = 1, beta = 2, kappa = 0 (n = 3): kappa = 3 - n is Julier's rule for a Gaussian prior, and
+alpha = 1 keeps the points at sqrt(3) standard deviations, so that they sample the nonlinearity over the
+belief's own extent (a tiny alpha, robot_localization's 0.001, makes the transform a numerical linearisation
+with weights near -1e6).
+
+Prediction: each sigma point is moved by the EKF's mean motion (the midpoint chord of report 003 eq. 5 when the
+encoder model applies, else the composed increment), and the motion noise G U G^T + Q that the EKF adds
+(:class:`~locbench.filters._motion.MotionModel`, evaluated at the mean) is added to the transformed covariance
+(additive-noise UKF).
+
+Headings are angles: the mean of sigma points takes the circular mean of their headings,
+atan2(sum Wm sin theta, sum Wm cos theta), and every state residual wraps its heading to (-pi, pi]; the
+predicted bearing of a landmark is averaged and wrapped the same way, and the bearing innovation is wrapped
+(:func:`locbench.filters._kalman.wrapped_residual`).
+
+Correction: the sightings of one event are fused one at a time, known identities first, then nearest
+neighbours, exactly as in the EKF; the sigma points are redrawn from the current (x, P) before each
+measurement, so each one sees the state corrected by the previous. The nearest-neighbour gate uses the unscented
+predicted measurement and S = sum Wc (z_i - z)(z_i - z)^T + R of every candidate landmark at once. Range-only
+beacons and pose fixes use the same gates as the EKF (1 dof, and none for fixes). A gated-out measurement
+leaves the state unchanged. The gain step is the Kalman core's sigma-point form (K = P_xz S^-1,
+P - K S K^T, symmetrised), fed by filterpy's unscented transform and cross covariance.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+import numpy.typing as npt
+from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter, unscented_transform
+
+from locbench.datasets.base import Gaussian2, SensorSpec, WorldMap
+from locbench.errors import ConfigError, FilterDiverged
+from locbench.events import Odometry, PoseFix
+from locbench.filters._kalman import gain_update, subtract, wrapped_residual
+from locbench.filters.base import Estimate, FilterConfig
+from locbench.filters.ekf_landmarks import LandmarkEKF, LandmarkEKFConfig, range_bearing
+from locbench.geometry import wrap_angle, wrap_scalar
+
+FloatArray = npt.NDArray[np.float64]
+
+_residual_bearing = wrapped_residual([1])
+_residual_heading = wrapped_residual([2])
+
+
+def circular_mean(angles: FloatArray, weights: FloatArray) -> float:
+    """Weighted circular mean atan2(sum w sin a, sum w cos a) of angles (rad), in (-pi, pi]."""
+    return wrap_scalar(math.atan2(float(weights @ np.sin(angles)), float(weights @ np.cos(angles))))
+
+
+def state_mean(sigmas: FloatArray, weights: FloatArray) -> FloatArray:
+    """Weighted mean of poses (n, 3): arithmetic in x and y, circular in the heading."""
+    return np.array([weights @ sigmas[:, 0], weights @ sigmas[:, 1], circular_mean(sigmas[:, 2], weights)])
+
+
+def range_bearing_mean(sigmas: FloatArray, weights: FloatArray) -> FloatArray:
+    """Weighted mean of (range, bearing) measurements (n, 2): arithmetic range, circular bearing."""
+    return np.array([weights @ sigmas[:, 0], circular_mean(sigmas[:, 1], weights)])
+
+
+def _fix_mean(sigmas: FloatArray, weights: FloatArray) -> FloatArray:
+    if sigmas.shape[1] == 3:
+        return state_mean(sigmas, weights)
+    return np.asarray(weights @ sigmas, dtype=np.float64)
+
+
+@dataclass(frozen=True, kw_only=True)
+class LandmarkUKFConfig(LandmarkEKFConfig):
+    """Configuration of :class:`LandmarkUKF`: every field of :class:`LandmarkEKFConfig`, and the sigma points.
+
+    Attributes
+    ----------
+    alpha : float
+        Spread of the sigma points (Merwe's scaling), in (0, 1]; 1 puts them at sqrt(n + kappa) sigma.
+    beta : float
+        Prior-knowledge term of the zeroth covariance weight; 2 is optimal for a Gaussian.
+    kappa : float
+        Secondary scaling; 3 - n = 0 for the 3-dof pose (Julier's rule).
+    """
+
+    alpha: float = 1.0
+    beta: float = 2.0
+    kappa: float = 0.0
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not 0.0 < self.alpha <= 1.0:
+            raise ConfigError(f"alpha must be in (0, 1], got {self.alpha}")
+        if self.beta < 0.0:
+            raise ConfigError(f"beta must be >= 0, got {self.beta}")
+        if self.alpha**2 * (3.0 + self.kappa) <= 0.0:
+            raise ConfigError(f"kappa must be > -3 (n + lambda > 0 for the 3-dof pose), got {self.kappa}")
+
+
+class LandmarkUKF(LandmarkEKF):
+    """Unscented Kalman filter on (x, y, theta) with the models and association of :class:`LandmarkEKF`.
+
+    It inherits the EKF's configuration, event routing, sensor-limit pruning and the order in which one event's
+    sightings are associated and fused; it replaces the state (a filterpy ``UnscentedKalmanFilter``), the
+    prediction and every correction (module docstring). Diagnostics as the EKF's.
+    """
+
+    Config: ClassVar[type[FilterConfig]] = LandmarkUKFConfig
+    version: ClassVar[int] = 1
+    source: ClassVar[str] = (
+        "Julier & Uhlmann 2004; van der Merwe 2004 (scaled sigma points, filterpy); models of 003_e5c93f9be776ee5e "
+        "and 001_71e01b0c4f2511a1"
+    )
+
+    config: LandmarkUKFConfig
+
+    def reset(self, initial: Gaussian2, world: WorldMap, sensors: SensorSpec, rng: np.random.Generator) -> None:
+        """Start from ``initial`` with the landmarks of ``world``; ``rng`` is unused (the UKF is deterministic)."""
+        self._ukf: Any = None  # filterpy is untyped; a previous run's state must not be checked by the EKF's reset
+        super().reset(initial, world, sensors, rng)
+        cfg = self.config
+        points = MerweScaledSigmaPoints(3, alpha=cfg.alpha, beta=cfg.beta, kappa=cfg.kappa, subtract=_residual_heading)
+        ukf = UnscentedKalmanFilter(
+            dim_x=3,
+            dim_z=2,
+            dt=0.0,
+            hx=None,
+            fx=None,
+            points=points,
+            x_mean_fn=state_mean,
+            residual_x=_residual_heading,
+        )
+        ukf.x = np.array(self._x)
+        ukf.P = np.array(self._P)
+        self._ukf = ukf
+        self._R_lm = np.diag([self._rr, self._rb])
+        self._check_finite(math.nan)
+
+    # --- predict ---------------------------------------------------------------------------------------------
+
+    def predict(self, u: Odometry) -> None:
+        """Move every sigma point with the mean motion; add the EKF's motion noise (module docstring)."""
+        ukf = self._ukf
+        step = self._motion.step(ukf.x.tolist(), u)  # noise and model choice at the mean (and the travel count)
+        n00, n01, n02, n11, n12, n22 = step.noise
+        q0, q1, q2 = self._q
+        ukf.Q = np.array([[n00 + q0, n01, n02], [n01, n11 + q1, n12], [n02, n12, n22 + q2]])
+        if step.encoder:
+            W = self._motion.noise.wheelbase_m
+            assert W is not None and u.d_left is not None and u.d_right is not None  # guaranteed by step.encoder
+            dd, dth = 0.5 * (u.d_left + u.d_right), (u.d_right - u.d_left) / W  # eq. 1-2
+            ukf.predict(fx=_move_midpoint, dd=dd, dth=dth)
+        else:
+            ukf.predict(fx=_move_increment, dx=u.dx, dy=u.dy, dth=u.dtheta)
+        self._finish(ukf.x, ukf.P)
+        self._t = u.t
+        self._nis, self._nis_dof, self._accepted, self._rejected = math.nan, 0, 0, 0
+        self._check_finite(u.t)
+
+    # --- corrections ------------------------------------------------------------------------------------------
+
+    def _finish(self, x: FloatArray, P: FloatArray) -> None:
+        x[2] = wrap_scalar(float(x[2]))
+        self._ukf.x = x
+        self._ukf.P = 0.5 * (P + P.T)
+
+    def _correct(
+        self, z: FloatArray, R: FloatArray, hx: Any, z_mean: Any, residual: Any, gate: float, **hx_args: Any
+    ) -> float | None:
+        """One unscented correction; its NIS, or None (state unchanged) when outside ``gate``.
+
+        filterpy's update in its parts: the sigma points are redrawn at the state the previous measurement left,
+        filterpy's unscented transform gives the predicted measurement and S (R included) and its
+        ``cross_variance`` P_xz; the gain step is the core's :func:`~locbench.filters._kalman.gain_update`
+        (K = P_xz S^-1, P - K S K^T, as filterpy's), which also gives the NIS for the gate.
+        """
+        ukf = self._ukf
+        x, P = ukf.x, ukf.P
+        sigmas = ukf.points_fn.sigma_points(x, P)
+        sigmas_h = np.array([hx(s, **hx_args) for s in sigmas])
+        zp, S = unscented_transform(sigmas_h, ukf.Wm, ukf.Wc, R, z_mean, residual)
+        ukf.residual_z = residual  # read by cross_variance
+        c = gain_update(x, P, residual(z, zp), S, ukf.cross_variance(x, zp, sigmas, sigmas_h))
+        if not c.nis <= gate:
+            return None
+        self._finish(c.x, c.P)
+        return c.nis
+
+    def _correct_landmark(self, r: float, b: float, row: int, gate: float) -> float | None:
+        """Fuse one (range, bearing) of landmark ``row``; its NIS, or None if gated out."""
+        lm = self._lm_xy[row]
+        if float(np.hypot(*(lm - self._ukf.x[:2]))) < 1e-6:
+            return None  # on top of the landmark: the bearing is undefined
+        return self._correct(
+            np.array([r, b]), self._R_lm, range_bearing, range_bearing_mean, _residual_bearing, gate, landmarks_xy=lm
+        )
+
+    def _nearest(self, r: float, b: float, used: set[int]) -> int | None:
+        """Row of the landmark nearest to (r, b) in the unscented Mahalanobis distance, inside the gate; else None."""
+        d2 = self._mahalanobis_all(r, b, used)
+        best = int(np.argmin(d2))
+        return best if d2[best] <= self._gate else None
+
+    def _mahalanobis_all(self, r: float, b: float, used: set[int]) -> FloatArray:
+        """Squared Mahalanobis distance of (r, b) to every map landmark through the unscented transform."""
+        ukf = self._ukf
+        sig = ukf.points_fn.sigma_points(ukf.x, ukf.P)  # (7, 3)
+        Wm, Wc = ukf.Wm, ukf.Wc
+        lx = self._lm_xy[None, :, 0] - sig[:, None, 0]
+        ly = self._lm_xy[None, :, 1] - sig[:, None, 1]
+        rng = np.hypot(lx, ly)  # (7, L)
+        brg = np.arctan2(ly, lx) - sig[:, None, 2]
+        r_hat = Wm @ rng
+        b_hat = np.arctan2(Wm @ np.sin(brg), Wm @ np.cos(brg))
+        er, eb = rng - r_hat, wrap_angle(brg - b_hat)
+        s00 = Wc @ (er * er) + self._rr
+        s01 = Wc @ (er * eb)
+        s11 = Wc @ (eb * eb) + self._rb
+        vr, vb = r - r_hat, wrap_angle(b - b_hat)
+        det = s00 * s11 - s01 * s01
+        with np.errstate(divide="ignore", invalid="ignore"):
+            d2 = (s11 * vr * vr - 2.0 * s01 * vr * vb + s00 * vb * vb) / det
+        return self._exclude(d2, ~(det > 0.0) | ~(np.min(rng, axis=0) > 1e-6), r_hat, b_hat, used)
+
+    def _correct_range(self, r: float, row: int) -> float | None:
+        """Fuse one range to beacon ``row`` through the unscented transform; its NIS, or None if gated out."""
+        R = np.array([[self._range_sigma * self._range_sigma]])
+        lm = self._lm_xy[row]
+        return self._correct(np.array([r]), R, _beacon_range, None, subtract, self._range_gate, beacon=lm)
+
+    def _update_pose_fix(self, z: PoseFix) -> None:
+        """GPS-like fix (report 001): h(x) = (x, y) or (x, y, theta) with the fix's covariance, heading wrapped."""
+        m = int(z.z.shape[0])
+        if m not in (2, 3) or z.cov.shape != (m, m):
+            raise ValueError(f"PoseFix at t={z.t} must have z (2,) or (3,) and a matching cov, got {z.cov.shape}")
+        R = 0.5 * (z.cov + z.cov.T)
+        residual = _residual_heading if m == 3 else subtract
+        nis = self._correct(np.asarray(z.z, dtype=np.float64), R, _first_components, _fix_mean, residual, math.inf, m=m)
+        assert nis is not None  # no gate on fixes
+        self._nis, self._nis_dof, self._accepted, self._rejected = nis, m, 1, 0
+
+    # --- output -----------------------------------------------------------------------------------------------
+
+    def _check_finite(self, t: float) -> None:
+        ukf = self._ukf
+        if ukf is None:
+            return  # called by the EKF's reset before the UKF exists; checked again at the end of reset
+        if not (np.all(np.isfinite(ukf.x)) and np.all(np.isfinite(ukf.P))):
+            raise FilterDiverged(f"LandmarkUKF state became non-finite at t={t:.3f} s")
+
+    def estimate(self) -> Estimate:
+        """The current mean (3,), covariance (3, 3) and the diagnostics of the last call."""
+        return Estimate(t=self._t, mean=self._ukf.x.copy(), cov=self._ukf.P.copy(), diagnostics=self._diagnostics())
+
+
+def _move_midpoint(s: FloatArray, dt: float, dd: float, dth: float) -> FloatArray:
+    """One sigma point moved along the chord at the midpoint heading (report 003 eq. 5; heading not wrapped)."""
+    h = float(s[2]) + 0.5 * dth
+    return np.array([s[0] + dd * math.cos(h), s[1] + dd * math.sin(h), s[2] + dth])
+
+
+def _move_increment(s: FloatArray, dt: float, dx: float, dy: float, dth: float) -> FloatArray:
+    """One sigma point with the odometry increment (robot frame) composed on it (heading not wrapped)."""
+    c, sn = math.cos(float(s[2])), math.sin(float(s[2]))
+    return np.array([s[0] + c * dx - sn * dy, s[1] + sn * dx + c * dy, s[2] + dth])
+
+
+def _beacon_range(s: FloatArray, beacon: FloatArray) -> FloatArray:
+    """Range from the pose ``s`` to a beacon, shape (1,)."""
+    return np.array([math.hypot(float(beacon[0] - s[0]), float(beacon[1] - s[1]))])
+
+
+def _first_components(s: FloatArray, m: int) -> FloatArray:
+    """The pose's first ``m`` components (a pose fix of (x, y) or (x, y, theta))."""
+    return s[:m]
