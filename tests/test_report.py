@@ -16,7 +16,7 @@ from locbench import claims
 from locbench.claims import report_003
 from locbench.datasets.base import Trajectory2D, Waypoints
 from locbench.registry import DATASETS, FILTERS
-from locbench.report import collect_metrics, summary_text, write_metrics_csv, write_report
+from locbench.report import collect_metrics, suite_filter, summary_text, write_metrics_csv, write_report
 from locbench.store import KIND_NAMES, RunRecord, Store, TruthRecord
 
 ODO = KIND_NAMES.index("Odometry")
@@ -404,3 +404,9 @@ def test_html_page_renders_sorts_and_has_no_console_errors(store: Store) -> None
             browser.close()
     assert not errors, errors
     assert not requests, requests  # self-contained: nothing fetched from a network
+
+
+def test_suite_filter_keeps_the_suites_cells_only() -> None:
+    keep = suite_filter("room")
+    assert keep("room", "odometry") and keep("room", "ekf_landmarks[association=nearest]")
+    assert not keep("office", "odometry") and not keep("room", "ekf_icp")
