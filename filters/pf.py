@@ -47,9 +47,17 @@ Correction
 
 Resampling
     Systematic ("low-variance", linear-time) resampling, PR table 4.4 and report 003's ref. [8]: one
-    uniform offset u ~ U[0, 1/N) and the points u + k/N located in the cumulative weights by
-    ``numpy.searchsorted``; done when the effective sample size 1 / sum w_i^2 falls below
-    ``resample_ess_fraction * N`` (Liu & Chen's criterion) rather than at every step.
+    uniform offset u ~ U[0, 1/N) and the points u + k/N located in the cumulative weights in one merge pass;
+    done when the effective sample size 1 / sum w_i^2 falls below ``resample_ess_fraction * N`` (Liu &
+    Chen's criterion) rather than at every step. Roughening (Gordon et al.) follows every resampling; the
+    heading's spread is measured about the heading of the heaviest particle before it.
+
+Compiled kernels
+    Prediction, weighting, resampling, roughening and the estimate each run as one numba loop over the
+    particles that draws its noise from the run's ``numpy.random.Generator`` (numba shares the generator's
+    state), so a run stays reproducible from its seed. The headings' sines and cosines are taken through
+    the angle sum about one particle's heading with a series for the small difference
+    (:func:`_sincos_near`), libm's only for particles far from it.
 
 Augmented MCL (PR table 8.3)
     Short- and long-term averages of the measurement likelihood, w_fast and w_slow, updated with
@@ -100,9 +108,7 @@ from locbench.filters._motion import (
     MotionKind,
     MotionNoiseConfig,
     increment_variances,
-    sample_increment_motion,
     sample_twist_motion,
-    sample_wheel_motion,
     wheel_variances,
 )
 from locbench.filters.base import Estimate, Filter, FilterConfig
@@ -250,6 +256,44 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
 # --- compiled kernels --------------------------------------------------------------------------------------
 
 
+@njit(cache=True, inline="always")
+def _wrap(a: float) -> float:
+    """``a`` wrapped to (-pi, pi]; one step covers a heading plus a turn, the modulo only larger values."""
+    if -math.pi < a <= math.pi:
+        return a
+    if math.pi < a <= 3.0 * math.pi:
+        return a - 2.0 * math.pi
+    if -3.0 * math.pi < a <= -math.pi:
+        return a + 2.0 * math.pi
+    return math.pi - ((math.pi - a) % (2.0 * math.pi))
+
+
+#: Below this |angle| (rad) :func:`_sincos_near` uses its series: the first omitted terms, d^17 / 17! and
+#: d^18 / 18!, are below 1e-19 there, under a quarter of an ulp of the result.
+_SERIES_MAX_RAD = 0.5
+_SIN_C = (1.0, -1.0 / 6.0, 1.0 / 120.0, -1.0 / 5040.0, 1.0 / 362880.0, -1.0 / 39916800.0, 1.0 / 6227020800.0)
+_COS_C = (1.0, -0.5, 1.0 / 24.0, -1.0 / 720.0, 1.0 / 40320.0, -1.0 / 3628800.0, 1.0 / 479001600.0)
+
+
+@njit(cache=True, inline="always")
+def _sincos_near(a: float, ref: float, sin_ref: float, cos_ref: float) -> tuple[float, float]:
+    """(sin a, cos a) through the angle sum about ``ref`` (whose sine and cosine are given): a Taylor series
+    of the small difference d = a - ref and one rotation, a third of the cost of libm's sin and cos for a
+    particle cloud (a spread of less than ``_SERIES_MAX_RAD`` about ``ref``); libm for the other angles."""
+    d = a - ref
+    if abs(d) > _SERIES_MAX_RAD:
+        return math.sin(a), math.cos(a)
+    d2 = d * d
+    # Horner in d^2 up to d^15 (sine) and d^16 (cosine) with the factorials' reciprocals
+    sd = -1.0 / 1307674368000.0  # -1 / 15!
+    cd = 1.0 / 20922789888000.0  # 1 / 16!
+    for k in range(6, -1, -1):
+        sd = sd * d2 + _SIN_C[k]
+        cd = cd * d2 + _COS_C[k]
+    sd *= d
+    return sin_ref * cd + cos_ref * sd, cos_ref * cd - sin_ref * sd
+
+
 @njit(cache=True)
 def _sightings_loglik(
     poses: FloatArray,
@@ -292,8 +336,7 @@ def _sightings_loglik(
                 dy = lm_xy[j, 1] - y
                 vr = ranges[k] - math.sqrt(dx * dx + dy * dy)
                 if with_bearing:
-                    vb = bearings[k] - math.atan2(dy, dx) + th
-                    vb = vb - 2.0 * math.pi * math.floor((vb + math.pi) / (2.0 * math.pi))  # wrap to [-pi, pi)
+                    vb = _wrap(bearings[k] - math.atan2(dy, dx) + th)
                     ll = log_a - 0.5 * (vr * vr * inv_var_r + vb * vb * inv_var_b)
                 else:
                     a = log_a - 0.5 * vr * vr * inv_var_r
@@ -314,6 +357,138 @@ def _sightings_loglik(
 
 
 @njit(cache=True)
+def _move(
+    x: FloatArray,
+    wheels: bool,
+    u: FloatArray,
+    sd: FloatArray,
+    wheelbase: float,
+    q_std: FloatArray,
+    rng: np.random.Generator,
+) -> None:
+    """Draw every particle's successor in place, then add the world-frame noise N(0, diag(q_std^2)) (eq. 8).
+
+    ``wheels``: the encoder model, u = (d_left, d_right) m with standard deviations sd = (sd_left,
+    sd_right): per particle delta_l ~ N(d_left, sd_left^2), delta_r ~ N(d_right, sd_right^2) moved along the
+    chord at the midpoint heading (report 003 eq. 1-2, 5). Otherwise the increment model, u = (dx, dy,
+    dtheta) in the previous robot frame with sd = (sd_xy, sd_theta): pose (+) (u + e), e ~ N(0, diag(sd_xy^2,
+    sd_xy^2, sd_theta^2)).
+    """
+    q0, q1, q2 = q_std[0], q_std[1], q_std[2]
+    ref = x[0, 2]
+    sr, cr = math.sin(ref), math.cos(ref)
+    for i in range(x.shape[0]):
+        if wheels:
+            dl = u[0] + sd[0] * rng.standard_normal()
+            dr = u[1] + sd[1] * rng.standard_normal()
+            dd = 0.5 * (dl + dr)
+            turn = (dr - dl) / wheelbase
+            s, c = _sincos_near(x[i, 2] + 0.5 * turn, ref, sr, cr)
+            mx, my = dd * c, dd * s
+        else:
+            ix = u[0] + sd[0] * rng.standard_normal()
+            iy = u[1] + sd[0] * rng.standard_normal()
+            turn = u[2] + sd[1] * rng.standard_normal()
+            s, c = _sincos_near(x[i, 2], ref, sr, cr)
+            mx, my = c * ix - s * iy, s * ix + c * iy
+        x[i, 0] += mx + q0 * rng.standard_normal()
+        x[i, 1] += my + q1 * rng.standard_normal()
+        x[i, 2] = _wrap(x[i, 2] + turn + q2 * rng.standard_normal())
+
+
+@njit(cache=True)
+def _jitter(x: FloatArray, sd: FloatArray, rng: np.random.Generator) -> None:
+    """Add N(0, diag(sd^2)) to every particle in place and wrap the heading."""
+    s0, s1, s2 = sd[0], sd[1], sd[2]
+    for i in range(x.shape[0]):
+        x[i, 0] += s0 * rng.standard_normal()
+        x[i, 1] += s1 * rng.standard_normal()
+        x[i, 2] = _wrap(x[i, 2] + s2 * rng.standard_normal())
+
+
+@njit(cache=True)
+def _reweigh(logw: FloatArray, ll: FloatArray, w: FloatArray) -> tuple[float, float]:
+    """Bayes' rule on normalised log-weights in place: logw <- logw + ll - log_pred; ``w`` <- exp(logw).
+
+    Returns log_pred = log sum_i w_i p(z | x_i) (the predictive likelihood; -inf or NaN when no particle
+    explains z, the weights then left unnormalised) and the effective sample size 1 / sum w_i^2.
+    """
+    n = logw.shape[0]
+    top = -math.inf
+    for i in range(n):
+        logw[i] += ll[i]
+        if logw[i] > top:
+            top = logw[i]
+    if not math.isfinite(top):
+        return top, math.nan
+    acc = 0.0
+    for i in range(n):
+        e = math.exp(logw[i] - top)
+        w[i] = e
+        acc += e
+    log_pred = top + math.log(acc)
+    sq = 0.0
+    for i in range(n):
+        logw[i] -= log_pred
+        wi = w[i] / acc
+        w[i] = wi
+        sq += wi * wi
+    return log_pred, 1.0 / sq
+
+
+@njit(cache=True)
+def _systematic_indices(w: FloatArray, n: int, u: float) -> IntArray:
+    """Systematic resampling: for the points (u + k) / n, k = 0..n-1, the index of the first cumulative
+    weight (normalised here) above each point (PR table 4.4), O(N + n)."""
+    total = 0.0
+    for i in range(w.shape[0]):
+        total += w[i]
+    step = total / n  # the points scaled by the total instead of the weights by 1 / total
+    out = np.empty(n, dtype=np.int64)
+    last = w.shape[0] - 1
+    j = 0
+    cum = w[0]
+    for k in range(n):
+        point = (u + k) * step
+        while cum <= point and j < last:
+            j += 1
+            cum += w[j]
+        out[k] = j
+    return out
+
+
+@njit(cache=True)
+def _gather(x: FloatArray, idx: IntArray) -> FloatArray:
+    """The rows ``idx`` of the particles (a copy)."""
+    out = np.empty((idx.shape[0], 3))
+    for k in range(idx.shape[0]):
+        j = idx[k]
+        out[k, 0] = x[j, 0]
+        out[k, 1] = x[j, 1]
+        out[k, 2] = x[j, 2]
+    return out
+
+
+@njit(cache=True)
+def _roughen(x: FloatArray, k: float, ref_heading: float, rng: np.random.Generator) -> None:
+    """Gordon, Salmond & Smith (1993) roughening in place: jitter of std K E N^(-1/3) per dimension, E the
+    spread (max - min); the heading's spread is that of the residuals wrapped about ``ref_heading`` (a heading
+    of the cloud), so that a cloud straddling +-pi is not seen as 2 pi wide."""
+    n = x.shape[0]
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for i in range(n):
+        r2 = _wrap(x[i, 2] - ref_heading)
+        lo[0] = min(lo[0], x[i, 0])
+        hi[0] = max(hi[0], x[i, 0])
+        lo[1] = min(lo[1], x[i, 1])
+        hi[1] = max(hi[1], x[i, 1])
+        lo[2] = min(lo[2], r2)
+        hi[2] = max(hi[2], r2)
+    _jitter(x, k * (hi - lo) * n ** (-1.0 / 3.0), rng)
+
+
+@njit(cache=True)
 def _weighted_stats(poses: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Weighted mean (circular for the heading) and weighted covariance (heading residuals wrapped)."""
     n = poses.shape[0]
@@ -321,11 +496,14 @@ def _weighted_stats(poses: FloatArray, w: FloatArray) -> tuple[FloatArray, Float
     my = 0.0
     sc = 0.0
     ss = 0.0
+    ref = poses[0, 2]
+    sr, cr = math.sin(ref), math.cos(ref)
     for i in range(n):
         mx += w[i] * poses[i, 0]
         my += w[i] * poses[i, 1]
-        sc += w[i] * math.cos(poses[i, 2])
-        ss += w[i] * math.sin(poses[i, 2])
+        si, ci = _sincos_near(poses[i, 2], ref, sr, cr)
+        sc += w[i] * ci
+        ss += w[i] * si
     mth = math.atan2(ss, sc)
     if mth <= -math.pi:
         mth = math.pi
@@ -360,19 +538,8 @@ def systematic_resample(weights: npt.ArrayLike, n: int, rng: np.random.Generator
 
     ``weights`` (N,) non-negative, normalised here; one uniform u ~ U[0, 1) places the points (u + k) / n.
     """
-    w = np.asarray(weights, dtype=np.float64)
-    cdf = np.cumsum(w)
-    cdf /= cdf[-1]
-    points = (rng.random() + np.arange(n, dtype=np.float64)) / n
-    idx = np.searchsorted(cdf, points, side="right")
-    return np.minimum(idx, w.shape[0] - 1).astype(np.int64)
-
-
-def _logsumexp(a: FloatArray) -> float:
-    m = float(np.max(a))
-    if not math.isfinite(m):
-        return m
-    return m + math.log(float(np.sum(np.exp(a - m))))
+    w = np.ascontiguousarray(weights, dtype=np.float64)
+    return _systematic_indices(w, int(n), float(rng.random()))
 
 
 class FreeSpaceSampler:
@@ -433,7 +600,7 @@ class ParticleFilter(Filter):
     consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LandmarkObservations, LaserScan, RangeObservations})
     requires: ClassVar[frozenset[MapKind]] = frozenset()
     Config: ClassVar[type[FilterConfig]] = ParticleFilterConfig
-    version: ClassVar[int] = 1
+    version: ClassVar[int] = 2  # 2: compiled kernels, so other random streams
     source: ClassVar[str] = "003_e5c93f9be776ee5e.txt sec. 4.2; Thrun, Burgard & Fox, Probabilistic Robotics ch. 6, 8"
     config: ParticleFilterConfig
 
@@ -536,7 +703,7 @@ class ParticleFilter(Filter):
             self._x = _sample_gaussian(
                 np.asarray(initial.mean, dtype=np.float64), np.asarray(initial.cov, dtype=np.float64), self._n, rng
             )
-        self._logw = np.full(self._n, -math.log(self._n))
+        self._set_uniform_weights(self._n)
         # augmented MCL: per sensor [w_slow, w_fast], started at the first w_avg
         self._w_avg: dict[type, list[float]] = {}
         self._t = math.nan
@@ -568,18 +735,18 @@ class ParticleFilter(Filter):
             )
             self._travelled[0] += abs(u.d_left)
             self._travelled[1] += abs(u.d_right)
-            x = sample_wheel_motion(self._x, u.d_left, u.d_right, W, vl, vr, rng)
+            sd = np.array([math.sqrt(vl), math.sqrt(vr)])
+            _move(self._x, True, np.array([u.d_left, u.d_right]), sd, W, self._q_std, rng)
         elif (tw := nz.twist_sigmas(u)) is not None:
-            x = sample_twist_motion(self._x, u, tw[0], tw[1], rng)
+            self._x = sample_twist_motion(self._x, u, tw[0], tw[1], rng)
+            if self._q_std.any():
+                _jitter(self._x, self._q_std, rng)
         else:
             vxy, vth = increment_variances(
                 u.dx, u.dy, u.dtheta, nz.sigma_xy_per_m, nz.sigma_theta_per_m, nz.sigma_theta_per_rad
             )
-            x = sample_increment_motion(self._x, u.dx, u.dy, u.dtheta, vxy, vth, rng)
-        if self._q_std.any():
-            x += rng.standard_normal((self._n, 3)) * self._q_std
-            x[:, 2] = wrap_angle(x[:, 2])
-        self._x = x
+            sd = np.array([math.sqrt(vxy), math.sqrt(vth)])
+            _move(self._x, False, np.array([u.dx, u.dy, u.dtheta]), sd, 1.0, self._q_std, rng)
         self._t = u.t
         self._diag = self._fresh_diag()
         self._est = None
@@ -724,18 +891,15 @@ class ParticleFilter(Filter):
             if injected:
                 # resample from the mixture (1 - p) belief + p uniform over free space (PR table 8.3)
                 assert self._space is not None
-                keep = systematic_resample(np.exp(self._logw), n - injected, rng)
-                self._x = np.concatenate([self._x[keep], self._space.sample(injected, rng)])
-                self._logw = np.full(n, -math.log(n))
+                keep = systematic_resample(self._weights(), n - injected, rng)
+                self._x = np.concatenate([_gather(self._x, keep), self._space.sample(injected, rng)])
+                self._set_uniform_weights(n)
                 resampled = True
-        ll = self._loglik(kind, data)
-        post = self._logw + ll
-        log_pred = _logsumexp(post)  # log sum_i w_i p(z | x_i): the predictive likelihood of z
+        w = np.empty(self._x.shape[0])
+        log_pred, n_eff = _reweigh(self._logw, self._loglik(kind, data), w)
+        self._w, self._w_of = w, self._logw
         if not math.isfinite(log_pred):
             raise FilterDiverged(f"ParticleFilter: every particle has zero likelihood at t={self._t:.3f} s")
-        self._logw = post - log_pred
-        w = np.exp(self._logw)
-        n_eff = 1.0 / float(np.dot(w, w))
         self._diag["n_eff"] = n_eff
         if cfg.augmented:
             # geometric mean per sighting or beam, so that the average neither underflows nor depends on m
@@ -745,29 +909,28 @@ class ParticleFilter(Filter):
             else:
                 avg[0] += cfg.alpha_slow * (w_avg - avg[0])
                 avg[1] += cfg.alpha_fast * (w_avg - avg[1])
+        # roughening measures the heading spread about the best particle's heading (the cloud's own)
+        ref_heading = float(self._x[int(np.argmax(w)), 2])
         if n_eff < cfg.resample_ess_fraction * n:
-            idx = systematic_resample(w, n, rng)
-            self._x = self._x[idx]
-            self._logw = np.full(n, -math.log(n))
+            self._x = _gather(self._x, systematic_resample(w, n, rng))
+            self._set_uniform_weights(n)
             resampled = True
         if resampled and cfg.roughening_k > 0.0:
-            self._roughen()
+            _roughen(self._x, cfg.roughening_k, ref_heading, rng)
         self._diag["resampled"] = 1.0 if resampled else 0.0
         self._diag["injected"] = float(injected)
 
-    def _roughen(self) -> None:
-        """Gordon, Salmond & Smith (1993) roughening: jitter of std K E N^(-1/3) per dimension (E: the spread)."""
-        x = self._x
-        th = x[:, 2]
-        # heading spread about the circular mean, so that a cloud straddling +-pi is not seen as 2 pi wide
-        mth = math.atan2(float(np.mean(np.sin(th))), float(np.mean(np.cos(th))))
-        rth = wrap_angle(th - mth)
-        spread = np.array([np.ptp(x[:, 0]), np.ptp(x[:, 1]), np.ptp(rth)])
-        sd = self.config.roughening_k * spread * self._n ** (-1.0 / 3.0)
-        x += self._rng.standard_normal((self._n, 3)) * sd
-        x[:, 2] = wrap_angle(x[:, 2])
-
     # --- output ------------------------------------------------------------------------------------------
+
+    def _set_uniform_weights(self, n: int) -> None:
+        self._logw = np.full(n, -math.log(n))
+        self._w, self._w_of = np.full(n, 1.0 / n), self._logw
+
+    def _weights(self) -> FloatArray:
+        """exp(log-weights), kept from the last weighting while the log-weights are the same array."""
+        if self._w_of is not self._logw:
+            self._w, self._w_of = np.exp(self._logw), self._logw
+        return self._w
 
     def _check_finite(self, t: float) -> None:
         if not (np.all(np.isfinite(self._x)) and np.all(np.isfinite(self._logw))):
@@ -775,12 +938,12 @@ class ParticleFilter(Filter):
 
     def particles(self) -> tuple[FloatArray, FloatArray]:
         """Copies of the particles (N, 3) (x m, y m, theta rad) and their normalised weights (N,)."""
-        return self._x.copy(), np.exp(self._logw)
+        return self._x.copy(), self._weights().copy()
 
     def estimate(self) -> Estimate:
         """Weighted mean (circular heading), weighted covariance (wrapped residuals) and diagnostics."""
         if self._est is None:
-            mean, cov = _weighted_stats(self._x, np.exp(self._logw))
+            mean, cov = _weighted_stats(self._x, self._weights())
             self._est = Estimate(t=self._t, mean=mean, cov=cov, diagnostics=dict(self._diag))
         return Estimate(
             t=self._est.t, mean=self._est.mean.copy(), cov=self._est.cov.copy(), diagnostics=dict(self._diag)

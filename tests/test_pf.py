@@ -358,3 +358,24 @@ def test_predict_draws_the_twist_noise_when_the_dataset_gives_it() -> None:
     expected = G @ twist_increment_covariance(v, w, dt, 0.04, 0.03) @ G.T
     scale = np.sqrt(np.outer(np.diag(expected), np.diag(expected)))
     assert np.all(np.abs(np.cov(x.T) - expected) <= 0.03 * scale)
+
+
+def test_sincos_near_matches_libm_near_and_far_from_the_reference() -> None:
+    from numba import njit
+
+    from locbench.filters.pf import _sincos_near
+
+    @njit
+    def table(a: np.ndarray, ref: float) -> np.ndarray:
+        out = np.empty((a.shape[0], 2))
+        sr, cr = math.sin(ref), math.cos(ref)
+        for i in range(a.shape[0]):
+            out[i, 0], out[i, 1] = _sincos_near(a[i], ref, sr, cr)
+        return out
+
+    rng = np.random.default_rng(5)
+    for ref in (0.0, 1.2, math.pi - 0.1, -math.pi + 0.05):
+        a = ref + rng.uniform(-2.0, 2.0, 5000)  # both the series (|a - ref| <= 0.5) and libm
+        got = table(a, ref)
+        np.testing.assert_allclose(got[:, 0], np.sin(a), rtol=0, atol=2e-15)
+        np.testing.assert_allclose(got[:, 1], np.cos(a), rtol=0, atol=2e-15)
