@@ -375,20 +375,22 @@ def _move(
     sd_xy^2, sd_theta^2)).
     """
     q0, q1, q2 = q_std[0], q_std[1], q_std[2]
+    u0, u1, u2 = u[0], u[1], u[u.shape[0] - 1]
+    s0, s1 = sd[0], sd[1]
     ref = x[0, 2]
     sr, cr = math.sin(ref), math.cos(ref)
     for i in range(x.shape[0]):
         if wheels:
-            dl = u[0] + sd[0] * rng.standard_normal()
-            dr = u[1] + sd[1] * rng.standard_normal()
+            dl = u0 + s0 * rng.standard_normal()
+            dr = u1 + s1 * rng.standard_normal()
             dd = 0.5 * (dl + dr)
             turn = (dr - dl) / wheelbase
             s, c = _sincos_near(x[i, 2] + 0.5 * turn, ref, sr, cr)
             mx, my = dd * c, dd * s
         else:
-            ix = u[0] + sd[0] * rng.standard_normal()
-            iy = u[1] + sd[0] * rng.standard_normal()
-            turn = u[2] + sd[1] * rng.standard_normal()
+            ix = u0 + s0 * rng.standard_normal()
+            iy = u1 + s0 * rng.standard_normal()
+            turn = u2 + s1 * rng.standard_normal()
             s, c = _sincos_near(x[i, 2], ref, sr, cr)
             mx, my = c * ix - s * iy, s * ix + c * iy
         x[i, 0] += mx + q0 * rng.standard_normal()
