@@ -52,6 +52,21 @@ Resampling
     Chen's criterion) rather than at every step. Roughening (Gordon et al.) follows every resampling; the
     heading's spread is measured about the heading of the heaviest particle before it.
 
+KLD sampling (``adaptive="kld"``; Fox, "Adapting the sample size in particle filters through
+KLD-sampling", IJRR 2003)
+    The particle count adapts at every correction: after the weighting, particles are drawn one at a time in
+    proportion to their weights (multinomial, as in ROS AMCL's resampling), each falls in a bin of a
+    (x, y, theta) histogram, and drawing stops once the count n reaches
+
+        n = (k - 1) / (2 eps) * (1 - 2 / (9 (k - 1)) + sqrt(2 / (9 (k - 1))) z)^3       (Fox 2003, eq. 13)
+
+    for the k bins occupied so far, kept within [min_particles, max_particles] (the filter starts at the
+    maximum). The parameters are ROS AMCL's defaults: eps = kld_err = 0.01, z = kld_z = 0.99 (AMCL, and
+    this filter, use the value as the quantile itself), 100 and 5000 particles, bins of 0.5 m x 0.5 m x
+    10 deg. Where AMCL keeps the maximum for a single occupied bin (k = 1), Fox's bound gives 0 and the
+    count falls to the minimum. The count after every event is the diagnostic ``particles`` (stored with
+    the run as ``diag_particles``).
+
 Compiled kernels
     Prediction, weighting, resampling, roughening and the estimate each run as one numba loop over the
     particles that draws its noise from the run's ``numpy.random.Generator`` (numba shares the generator's
@@ -79,8 +94,8 @@ Augmented MCL (PR table 8.3)
 Estimate
     Weighted mean of x and y, circular weighted mean of the heading, and the weighted covariance with the
     heading residuals wrapped (symmetric PSD by construction). Diagnostics: ``n_eff`` (effective sample
-    size after the last weighting), ``resampled`` (0/1), ``injected`` (particles injected),
-    ``p_inject`` and ``w_fast_over_w_slow`` of the sensor of the last update.
+    size after the last weighting), ``resampled`` (0/1), ``injected`` (particles injected), ``particles``
+    (the particle count), ``p_inject`` and ``w_fast_over_w_slow`` of the sensor of the last update.
 """
 
 from __future__ import annotations
@@ -92,7 +107,8 @@ from typing import Any, ClassVar, Literal
 
 import numpy as np
 import numpy.typing as npt
-from numba import njit
+from numba import njit, types
+from numba.typed import Dict
 
 from locbench.datasets.base import Gaussian2, MapKind, OccupancyGrid, SensorSpec, WorldMap
 from locbench.errors import ConfigError, FilterDiverged
@@ -150,6 +166,18 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
         spread (max - min) of the resampled particles in that dimension; K = 0.2 is their value, 0 switches it
         off. It keeps resampled duplicates apart (sample impoverishment), which an accurate sensor and a
         motion model without the robot's systematic error would otherwise cause.
+    adaptive : {"none", "kld"}
+        ``"kld"``: KLD sampling (Fox 2003, module docstring): the particle count adapts at every correction
+        between ``min_particles`` and ``max_particles`` (``particles`` is then unused; the filter starts with
+        ``max_particles``, as ROS AMCL does).
+    kld_err, kld_z : float
+        Fox's epsilon (the bound on the KL divergence between the sample-based and the true posterior) and
+        the upper standard normal quantile z_(1-delta); ROS AMCL's defaults 0.01 and 0.99 (AMCL passes its
+        ``kld_z`` to the bound as the quantile itself).
+    min_particles, max_particles : int
+        Bounds of the adaptive count; ROS AMCL's defaults 100 and 5000.
+    kld_bin_xy_m, kld_bin_theta_deg : float
+        Histogram bin size of KLD sampling, m and deg; ROS AMCL's 0.5 m x 0.5 m x 10 deg.
     init : {"belief", "uniform"}
         ``"belief"``: particles from the dataset's initial Gaussian; ``"uniform"``: global localization from a
         uniform prior over free space (the free grid cells, else the landmarks' bounding box).
@@ -200,6 +228,13 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
     alpha_slow: float = 0.001
     alpha_fast: float = 0.1
     roughening_k: float = 0.2
+    adaptive: Literal["none", "kld"] = field(default="none", metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    kld_err: float = field(default=0.01, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    kld_z: float = field(default=0.99, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    min_particles: int = field(default=100, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    max_particles: int = field(default=5000, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    kld_bin_xy_m: float = field(default=0.5, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    kld_bin_theta_deg: float = field(default=10.0, metadata=RUN_KEY_OMIT_IF_DEFAULT)
     init: Literal["belief", "uniform"] = "belief"
     use_landmarks: bool = True
     use_ranges: bool = field(default=True, metadata=RUN_KEY_OMIT_IF_DEFAULT)
@@ -220,6 +255,18 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
     sigma_bearing_rad: float | None = None
 
     def __post_init__(self) -> None:
+        if self.adaptive not in ("none", "kld"):
+            raise ConfigError(f"adaptive must be 'none' or 'kld', got {self.adaptive!r}")
+        if not 2 <= self.min_particles <= self.max_particles:
+            raise ConfigError(
+                "need 2 <= min_particles <= max_particles, "
+                f"got min_particles={self.min_particles}, max_particles={self.max_particles}"
+            )
+        if not (self.kld_err > 0.0 and math.isfinite(self.kld_z)):
+            raise ConfigError(f"kld_err must be > 0 and kld_z finite, got {self.kld_err}, {self.kld_z}")
+        for name in ("kld_bin_xy_m", "kld_bin_theta_deg"):
+            if not getattr(self, name) > 0.0:
+                raise ConfigError(f"{name} must be > 0, got {getattr(self, name)}")
         if self.particles < 2:
             raise ConfigError(f"particles must be an integer >= 2, got {self.particles}")
         if not 0.0 <= self.resample_ess_fraction <= 1.0:
@@ -472,6 +519,65 @@ def _gather(x: FloatArray, idx: IntArray) -> FloatArray:
 
 
 @njit(cache=True)
+def _kld_bound(k: int, err: float, z: float) -> float:
+    """Fox (2003) eq. 13: the samples needed so that, with probability 1 - delta (z its upper standard normal
+    quantile), the KL divergence between the sample-based and the true posterior over k occupied bins stays
+    below ``err`` (the Wilson-Hilferty approximation of the chi-square quantile); 0 for k <= 1."""
+    if k <= 1:
+        return 0.0
+    b = 2.0 / (9.0 * (k - 1))
+    c = 1.0 - b + math.sqrt(b) * z
+    return (k - 1) / (2.0 * err) * c * c * c
+
+
+@njit(cache=True)
+def _kld_resample(
+    x: FloatArray,
+    w: FloatArray,
+    rng: np.random.Generator,
+    err: float,
+    z: float,
+    n_min: int,
+    n_max: int,
+    bin_xy: float,
+    bin_theta: float,
+) -> FloatArray:
+    """KLD sampling (Fox 2003, table 1, the resampling step as ROS AMCL does it): draw particles one at a time
+    in proportion to ``w``, count the occupied (x, y, theta) bins k as they come, and stop once the count
+    reaches the bound of :func:`_kld_bound` for k, kept within [n_min, n_max]. Returns the new set."""
+    n = x.shape[0]
+    cdf = np.empty(n)
+    acc = 0.0
+    for i in range(n):
+        acc += w[i]
+        cdf[i] = acc
+    out = np.empty((n_max, 3))
+    seen = Dict.empty(key_type=types.int64, value_type=types.int64)
+    bins = 0
+    need = float(n_min)
+    count = 0
+    offset = 1 << 20  # bin indices from -2^20 to 2^20 - 1 pack into 21 bits each
+    while count < n_max:
+        j = min(np.searchsorted(cdf, rng.random() * acc, side="right"), n - 1)
+        out[count, 0] = x[j, 0]
+        out[count, 1] = x[j, 1]
+        out[count, 2] = x[j, 2]
+        count += 1
+        key = (
+            ((math.floor(x[j, 0] / bin_xy) + offset) << 42)
+            | ((math.floor(x[j, 1] / bin_xy) + offset) << 21)
+            | (math.floor(x[j, 2] / bin_theta) + offset)
+        )
+        if key not in seen:
+            seen[key] = 1
+            bins += 1
+            need = max(float(n_min), _kld_bound(bins, err, z))
+        if count >= need:
+            break
+    return out[:count].copy()
+
+
+@njit(cache=True)
 def _roughen(x: FloatArray, k: float, ref_heading: float, rng: np.random.Generator) -> None:
     """Gordon, Salmond & Smith (1993) roughening in place: jitter of std K E N^(-1/3) per dimension, E the
     spread (max - min); the heading's spread is that of the residuals wrapped about ``ref_heading`` (a heading
@@ -614,7 +720,8 @@ class ParticleFilter(Filter):
         a = tr(C^-1 Q) plus a cross term of standard deviation 2 sqrt(a / N); the change is negative only when
         that term beats a, and its worst value over a is k^2 / N at k standard deviations. 25 / N is 5 sigma.
         """
-        return 25.0 / self.config.particles
+        cfg = self.config
+        return 25.0 / (cfg.min_particles if cfg.adaptive == "kld" else cfg.particles)
 
     def routed_events(self) -> frozenset[type]:
         """Odometry, plus landmark sightings, beacon ranges and laser scans as switched on in the config."""
@@ -640,7 +747,7 @@ class ParticleFilter(Filter):
         """
         cfg = self.config
         self._rng = rng
-        self._n = int(cfg.particles)
+        self._n = int(cfg.max_particles if cfg.adaptive == "kld" else cfg.particles)
         self._noise = cfg.motion_noise(sensors)
         nz = self._noise
         self._use_encoder = nz.wheelbase_m is not None and (
@@ -913,7 +1020,23 @@ class ParticleFilter(Filter):
                 avg[1] += cfg.alpha_fast * (w_avg - avg[1])
         # roughening measures the heading spread about the best particle's heading (the cloud's own)
         ref_heading = float(self._x[int(np.argmax(w)), 2])
-        if n_eff < cfg.resample_ess_fraction * n:
+        if cfg.adaptive == "kld":
+            # KLD sampling draws the new set, and its size, at every correction (Fox 2003, table 1)
+            self._x = _kld_resample(
+                self._x,
+                w,
+                rng,
+                cfg.kld_err,
+                cfg.kld_z,
+                cfg.min_particles,
+                cfg.max_particles,
+                cfg.kld_bin_xy_m,
+                math.radians(cfg.kld_bin_theta_deg),
+            )
+            self._n = n = int(self._x.shape[0])
+            self._set_uniform_weights(n)
+            resampled = True
+        elif n_eff < cfg.resample_ess_fraction * n:
             self._x = _gather(self._x, systematic_resample(w, n, rng))
             self._set_uniform_weights(n)
             resampled = True
@@ -938,6 +1061,9 @@ class ParticleFilter(Filter):
         if not (np.all(np.isfinite(self._x)) and np.all(np.isfinite(self._logw))):
             raise FilterDiverged(f"ParticleFilter particles became non-finite at t={t:.3f} s")
 
+    def _diagnostics(self) -> dict[str, float]:
+        return {**self._diag, "particles": float(self._n)}
+
     def particles(self) -> tuple[FloatArray, FloatArray]:
         """Copies of the particles (N, 3) (x m, y m, theta rad) and their normalised weights (N,)."""
         return self._x.copy(), self._weights().copy()
@@ -946,7 +1072,7 @@ class ParticleFilter(Filter):
         """Weighted mean (circular heading), weighted covariance (wrapped residuals) and diagnostics."""
         if self._est is None:
             mean, cov = _weighted_stats(self._x, self._weights())
-            self._est = Estimate(t=self._t, mean=mean, cov=cov, diagnostics=dict(self._diag))
+            self._est = Estimate(t=self._t, mean=mean, cov=cov, diagnostics={})
         return Estimate(
-            t=self._est.t, mean=self._est.mean.copy(), cov=self._est.cov.copy(), diagnostics=dict(self._diag)
+            t=self._est.t, mean=self._est.mean.copy(), cov=self._est.cov.copy(), diagnostics=self._diagnostics()
         )
