@@ -167,9 +167,10 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
         off. It keeps resampled duplicates apart (sample impoverishment), which an accurate sensor and a
         motion model without the robot's systematic error would otherwise cause.
     adaptive : {"none", "kld"}
-        ``"kld"``: KLD sampling (Fox 2003, module docstring): the particle count adapts at every correction
-        between ``min_particles`` and ``max_particles`` (``particles`` is then unused; the filter starts with
-        ``max_particles``, as ROS AMCL does).
+        ``"kld"``: KLD sampling (Fox 2003, module docstring): every correction resamples and the particle
+        count adapts between ``min_particles`` and ``max_particles`` (``particles`` and
+        ``resample_ess_fraction`` are then unused; the filter starts with ``max_particles``, as ROS AMCL
+        does).
     kld_err, kld_z : float
         Fox's epsilon (the bound on the KL divergence between the sample-based and the true posterior) and
         the upper standard normal quantile z_(1-delta); ROS AMCL's defaults 0.01 and 0.99 (AMCL passes its
