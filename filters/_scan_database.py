@@ -23,7 +23,9 @@ Matching
     (report 004's average difference), m. Entries whose score is at most ``tolerance_m`` match. Optionally
     (the filter's default) only entries inside a chi-square validation region around the predicted pose
     are kept: a room with symmetries (a rectangle seen at 8 bearings looks the same turned by 180 deg)
-    otherwise matches poses far from the robot equally well.
+    otherwise matches poses far from the robot equally well. The region is applied first and only the
+    entries inside it are scored (a compiled loop that returns the matches directly), so a gated match
+    costs in proportion to the region, not to the database.
 
 Pose measurement and its covariance
     With d_i the scores of the n matches and weights w_i = 1 - d_i / tolerance (a triangular kernel: the
@@ -45,6 +47,7 @@ the robot origin; every locbench dataset mounts its laser there).
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from dataclasses import dataclass
@@ -71,26 +74,87 @@ N_BEARINGS = 8
 BEARING_STEP_RAD = 2.0 * math.pi / N_BEARINGS
 
 
+#: Relative slack of the compiled gate pre-test: an entry the exact numpy gate of :func:`match_scan` keeps must
+#: never be dropped by the compiled test's different rounding.
+_GATE_SLACK = 1e-9
+
+
 @njit(cache=True)
-def _scores(db: FloatArray, offsets: IntArray, r: FloatArray, tol: float) -> FloatArray:
-    """Mean |db[i, (h + o_b) mod M] - r_b| over b for every (i, h); inf once the partial sum exceeds k * tol."""
+def _matches(
+    db: FloatArray,
+    offsets: IntArray,
+    r: FloatArray,
+    tol: float,
+    cap: float,
+    positions: FloatArray,
+    gated: bool,
+    centre: FloatArray,
+    info: FloatArray,
+    gate: float,
+    heading_step: float,
+) -> tuple[IntArray, IntArray, FloatArray]:
+    """The entries (i, h) whose score, the mean |min(db[i, (h + o_b) mod M], cap) - r_b| over b, is at most
+    ``tol``, in row-major order, and their scores.
+
+    With ``gated``, an entry is scored only when it may lie inside the validation region
+    e^T info e <= gate, e = (x_i - cx, y_i - cy, wrap(h * heading_step - ctheta)): a position is skipped when
+    its (x, y) alone is outside (the smallest value over the heading is the Mahalanobis distance under the
+    (x, y) block of the covariance, whose inverse is the Schur complement of ``info``), then each heading is
+    tested. Both tests carry a relative slack of ``_GATE_SLACK``; the caller applies the exact gate.
+    """
     n, m = db.shape
     k = offsets.shape[0]
     limit = tol * k
-    out = np.full((n, m), np.inf)
+    g = gate * (1.0 + _GATE_SLACK)
+    # inverse of the (x, y) covariance block: info_xy - info_xt info_tt^-1 info_tx (Schur complement)
+    a = info[0, 0] - info[0, 2] * info[2, 0] / info[2, 2]
+    b = info[0, 1] - info[0, 2] * info[2, 1] / info[2, 2]
+    c = info[1, 1] - info[1, 2] * info[2, 1] / info[2, 2]
+    size = 64
+    out_i = np.empty(size, dtype=np.int64)
+    out_h = np.empty(size, dtype=np.int64)
+    out_s = np.empty(size)
+    count = 0
+    two_pi = 2.0 * math.pi
     for i in range(n):
+        dx = positions[i, 0] - centre[0]
+        dy = positions[i, 1] - centre[1]
+        if gated and a * dx * dx + 2.0 * b * dx * dy + c * dy * dy > g:
+            continue
         for h in range(m):
+            if gated:
+                dt = h * heading_step - centre[2]
+                dt = math.pi - ((math.pi - dt) % two_pi)
+                d2 = (
+                    info[0, 0] * dx * dx
+                    + info[1, 1] * dy * dy
+                    + info[2, 2] * dt * dt
+                    + 2.0 * (info[0, 1] * dx * dy + info[0, 2] * dx * dt + info[1, 2] * dy * dt)
+                )
+                if d2 > g:
+                    continue
             s = 0.0
-            for b in range(k):
-                c = h + offsets[b]
-                if c >= m:
-                    c -= m
-                s += abs(db[i, c] - r[b])
+            for q in range(k):
+                col = h + offsets[q]
+                if col >= m:
+                    col -= m
+                v = db[i, col]
+                if v > cap:
+                    v = cap
+                s += abs(v - r[q])
                 if s > limit:  # most entries are rejected after one or two bearings
                     break
-            if s <= limit:
-                out[i, h] = s / k
-    return out
+            if s <= limit and s / k <= tol:
+                if count == size:
+                    size *= 2
+                    out_i = np.concatenate((out_i, np.empty(size - count, dtype=np.int64)))
+                    out_h = np.concatenate((out_h, np.empty(size - count, dtype=np.int64)))
+                    out_s = np.concatenate((out_s, np.empty(size - count)))
+                out_i[count] = i
+                out_h[count] = h
+                out_s[count] = s / k
+                count += 1
+    return out_i[:count], out_h[:count], out_s[:count]
 
 
 @dataclass(frozen=True, eq=False)
@@ -254,18 +318,29 @@ def scan_bearing_ranges(scan: LaserScan) -> tuple[IntArray, FloatArray]:
     ranges : ndarray, shape (k,)
         The range of the beam closest to each, m (inf = no return).
     """
-    n = scan.ranges.shape[0]
+    idx, beams = _bearing_beams(
+        int(scan.ranges.shape[0]), float(scan.angle_min), float(scan.angle_increment), float(scan.sensor_pose[2])
+    )
+    return idx, scan.ranges[beams].astype(np.float64)
+
+
+@functools.lru_cache(maxsize=64)
+def _bearing_beams(n: int, angle_min: float, angle_increment: float, heading: float) -> tuple[IntArray, IntArray]:
+    """The covered bearings and the beam nearest each, for a scan geometry (a recording has one or two)."""
     if n == 0:
-        return np.zeros(0, dtype=np.int64), np.zeros(0)
-    beam_robot = scan.sensor_pose[2] + scan.angles  # beam bearings in the robot frame
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    beam_robot = heading + (angle_min + angle_increment * np.arange(n, dtype=np.float64))  # robot frame
     target = np.arange(N_BEARINGS) * BEARING_STEP_RAD
     diff = np.abs(wrap_angle(beam_robot[None, :] - target[:, None]))  # (8, n)
     nearest = np.argmin(diff, axis=1)
     near = diff[np.arange(N_BEARINGS), nearest]
-    half = 0.5 * abs(scan.angle_increment) if n > 1 else 0.0
+    half = 0.5 * abs(angle_increment) if n > 1 else 0.0
     ok = near <= half + 1e-9
     idx = np.flatnonzero(ok).astype(np.int64)
-    return idx, scan.ranges[nearest[idx]].astype(np.float64)
+    beams = nearest[idx]
+    idx.flags.writeable = False  # shared by every call with this geometry
+    beams.flags.writeable = False
+    return idx, beams
 
 
 def match_scan(
@@ -306,20 +381,36 @@ def match_scan(
         return None, k
     cap = min(float(scan.range_max), db.max_range_m)
     rc = np.minimum(np.where(np.isfinite(r), r, cap), cap)  # no return: beyond the cap
-    table = db.ranges if cap >= db.max_range_m else np.minimum(db.ranges, cap)
     m = db.n_headings // N_BEARINGS
-    scores = _scores(table, (b_idx * m).astype(np.int64), rc, float(tolerance_m))
-    ii, hh = np.nonzero(scores <= tolerance_m)
     hs = db.heading_step_rad
     quant = np.diag([db.step_m**2 / 12.0, db.step_m**2 / 12.0, hs**2 / 12.0])
-    if prior is not None and math.isfinite(gate) and ii.size:
-        e = np.column_stack([db.positions[ii] - prior[0][:2], wrap_angle(hh * hs - prior[0][2])])
-        d2 = np.einsum("ij,ij->i", e @ np.linalg.inv(prior[1] + quant), e)
-        inside = d2 <= gate
-        ii, hh = ii[inside], hh[inside]
+    gated = prior is not None and math.isfinite(gate)
+    # Gate first, then score only the entries inside the validation region (the database is tens of
+    # thousands of entries, the region a few dozen).
+    info = np.eye(3)
+    if prior is not None and gated:
+        info = np.asarray(np.linalg.inv(prior[1] + quant), dtype=np.float64)
+    centre = np.asarray(prior[0], dtype=np.float64) if prior is not None and gated else np.zeros(3)
+    ii, hh, d = _matches(
+        db.ranges,
+        (b_idx * m).astype(np.int64),
+        rc,
+        float(tolerance_m),
+        cap,
+        db.positions,
+        gated,
+        centre,
+        info,
+        float(gate) if gated else 0.0,
+        hs,
+    )
+    if gated and ii.size:
+        # the exact gate (the compiled pre-test only has to keep everything this keeps)
+        e = np.column_stack([db.positions[ii] - centre[:2], wrap_angle(hh * hs - centre[2])])
+        inside = np.einsum("ij,ij->i", e @ info, e) <= gate
+        ii, hh, d = ii[inside], hh[inside], d[inside]
     if ii.size == 0:
         return None, k
-    d = scores[ii, hh]
     best = int(np.argmin(d))
     w = 1.0 - d / tolerance_m if tolerance_m > 0 else np.ones_like(d)
     if not np.sum(w) > 0:

@@ -21,8 +21,9 @@ Observation (sec. III-A.2, eq. 2-3, 14). At each LaserScan a scan is ray-cast fr
 traversal, whose ranges differ only by rounding) at the predicted sensor pose with the real scan's geometry
 (angle_min, angle_increment, beam count, range_max, sensor_pose). Both scans become points in the robot
 frame, and point-to-point ICP (:mod:`locbench.filters._icp`) aligns the real points (source) onto the
-ray-cast points (target). If the world point w is seen at p_real = T^-1 w from the true pose T and at
-p_pred = X^-1 w from the predicted pose X, the ICP transform is M = X^-1 T: the true pose in the
+ray-cast points (target); version 3 runs it compiled (the same neighbours and iterations as version 2's
+kd-tree loop, the transform equal to rounding). If the world point w is seen at p_real = T^-1 w from the
+true pose T and at p_pred = X^-1 w from the predicted pose X, the ICP transform is M = X^-1 T: the true pose in the
 predicted robot frame. The observation is Z = X (+) M (eq. 2), the predicted observation is Z^ = X
 (h(X) = X, H = I, eq. 14), and V = Z - Z^ = (R(theta) t_M, theta_M) (eq. 3, heading wrapped).
 
@@ -67,7 +68,6 @@ from typing import ClassVar
 
 import numpy as np
 import numpy.typing as npt
-from scipy.spatial import cKDTree
 
 from locbench.datasets.base import Gaussian2, MapKind, SensorSpec, WorldMap
 from locbench.errors import ConfigError, FilterDiverged
@@ -211,7 +211,7 @@ class IcpEKF(Filter):
     consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LaserScan})
     requires: ClassVar[frozenset[MapKind]] = frozenset({MapKind.OCCUPANCY})
     Config: ClassVar[type[FilterConfig]] = IcpEKFConfig
-    version: ClassVar[int] = 2
+    version: ClassVar[int] = 3
     source: ClassVar[str] = "000_2af74c528ee7b17b (EKF with LRF: eq. 11-18, sec. III-B, IV-B, appendix A)"
 
     config: IcpEKFConfig
@@ -331,7 +331,6 @@ class IcpEKF(Filter):
             min_correspondence_m=d_min,
             max_iterations=cfg.max_iterations,
             transformation_epsilon=cfg.transformation_epsilon,
-            tree=cKDTree(dst),
         )
         return res, n_real, n_pred
 

@@ -445,7 +445,7 @@ class GtsamFixedLagSmoother(Filter):
                 else:
                     rej += 1
             for k, row in matches:
-                nis += float(self._mahalanobis(ranges[k], bearings[k], rows=[row])[0])
+                nis += self._nis_one(ranges[k], bearings[k], row)
                 lkey = self._landmark_key(row, z.t, factors)
                 factors.add(
                     gtsam.BearingRangeFactor2D(key, lkey, gtsam.Rot2.fromAngle(bearings[k]), ranges[k], self._br_noise)
@@ -504,6 +504,26 @@ class GtsamFixedLagSmoother(Filter):
             factors.add(gtsam.PriorFactorPoint2(key, self._lm_xy[row], self._lm_noise[row]))
         self._lm_stamp[row] = t
         return key
+
+    def _nis_one(self, r: float, b: float, row: int) -> float:
+        """:meth:`_mahalanobis` for one landmark in scalar arithmetic (a diagnostic on the hot path; equal to
+        rounding): nu^T S^-1 nu with S = H P H^T + R, the 2 x 2 inverse in closed form."""
+        x, y, th = (float(v) for v in self._mean)
+        lx, ly = float(self._lm_xy[row, 0]) - x, float(self._lm_xy[row, 1]) - y
+        q = max(lx * lx + ly * ly, 1e-12)
+        d = math.sqrt(q)
+        P = self._cov.tolist()
+        # H rows: a = (-lx/d, -ly/d, 0), c = (ly/q, -lx/q, -1)
+        a0, a1 = -lx / d, -ly / d
+        c0, c1 = ly / q, -lx / q
+        pa = [P[i][0] * a0 + P[i][1] * a1 for i in range(3)]
+        pc = [P[i][0] * c0 + P[i][1] * c1 - P[i][2] for i in range(3)]
+        s00 = a0 * pa[0] + a1 * pa[1] + float(self._R[0, 0])
+        s01 = a0 * pc[0] + a1 * pc[1]
+        s11 = c0 * pc[0] + c1 * pc[1] - pc[2] + float(self._R[1, 1])
+        n0, n1 = r - d, wrap_scalar(b - (math.atan2(ly, lx) - th))
+        det = s00 * s11 - s01 * s01
+        return (s11 * n0 * n0 - 2.0 * s01 * n0 * n1 + s00 * n1 * n1) / det
 
     def _mahalanobis(self, r: float, b: float, rows: list[int] | None = None) -> FloatArray:
         """Squared Mahalanobis distance of (r, b) to map landmarks from the current belief (inf outside the limits).

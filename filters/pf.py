@@ -47,9 +47,32 @@ Correction
 
 Resampling
     Systematic ("low-variance", linear-time) resampling, PR table 4.4 and report 003's ref. [8]: one
-    uniform offset u ~ U[0, 1/N) and the points u + k/N located in the cumulative weights by
-    ``numpy.searchsorted``; done when the effective sample size 1 / sum w_i^2 falls below
-    ``resample_ess_fraction * N`` (Liu & Chen's criterion) rather than at every step.
+    uniform offset u ~ U[0, 1/N) and the points u + k/N located in the cumulative weights in one merge pass;
+    done when the effective sample size 1 / sum w_i^2 falls below ``resample_ess_fraction * N`` (Liu &
+    Chen's criterion) rather than at every step. Roughening (Gordon et al.) follows every resampling; the
+    heading's spread is measured about the heading of the heaviest particle before it.
+
+KLD sampling (``adaptive="kld"``; Fox, "Adapting the sample size in particle filters through
+KLD-sampling", IJRR 2003)
+    The particle count adapts at every correction: after the weighting, particles are drawn one at a time in
+    proportion to their weights (multinomial, as in ROS AMCL's resampling), each falls in a bin of a
+    (x, y, theta) histogram, and drawing stops once the count n reaches
+
+        n = (k - 1) / (2 eps) * (1 - 2 / (9 (k - 1)) + sqrt(2 / (9 (k - 1))) z)^3       (Fox 2003, eq. 13)
+
+    for the k bins occupied so far, kept within [min_particles, max_particles] (the filter starts at the
+    maximum). The parameters are ROS AMCL's defaults: eps = kld_err = 0.01, z = kld_z = 0.99 (AMCL, and
+    this filter, use the value as the quantile itself), 100 and 5000 particles, bins of 0.5 m x 0.5 m x
+    10 deg. Where AMCL keeps the maximum for a single occupied bin (k = 1), Fox's bound gives 0 and the
+    count falls to the minimum. The count after every event is the diagnostic ``particles`` (stored with
+    the run as ``diag_particles``).
+
+Compiled kernels
+    Prediction, weighting, resampling, roughening and the estimate each run as one numba loop over the
+    particles that draws its noise from the run's ``numpy.random.Generator`` (numba shares the generator's
+    state), so a run stays reproducible from its seed. The headings' sines and cosines are taken through
+    the angle sum about one particle's heading with a series for the small difference
+    (:func:`_sincos_near`), libm's only for particles far from it.
 
 Augmented MCL (PR table 8.3)
     Short- and long-term averages of the measurement likelihood, w_fast and w_slow, updated with
@@ -71,8 +94,8 @@ Augmented MCL (PR table 8.3)
 Estimate
     Weighted mean of x and y, circular weighted mean of the heading, and the weighted covariance with the
     heading residuals wrapped (symmetric PSD by construction). Diagnostics: ``n_eff`` (effective sample
-    size after the last weighting), ``resampled`` (0/1), ``injected`` (particles injected),
-    ``p_inject`` and ``w_fast_over_w_slow`` of the sensor of the last update.
+    size after the last weighting), ``resampled`` (0/1), ``injected`` (particles injected), ``particles``
+    (the particle count), ``p_inject`` and ``w_fast_over_w_slow`` of the sensor of the last update.
 """
 
 from __future__ import annotations
@@ -84,7 +107,8 @@ from typing import Any, ClassVar, Literal
 
 import numpy as np
 import numpy.typing as npt
-from numba import njit
+from numba import njit, types
+from numba.typed import Dict
 
 from locbench.datasets.base import Gaussian2, MapKind, OccupancyGrid, SensorSpec, WorldMap
 from locbench.errors import ConfigError, FilterDiverged
@@ -99,9 +123,7 @@ from locbench.filters._motion import (
     MotionKind,
     MotionNoiseConfig,
     increment_variances,
-    sample_increment_motion,
     sample_twist_motion,
-    sample_wheel_motion,
     wheel_variances,
 )
 from locbench.filters._noise import landmark_noise, range_only_noise
@@ -144,6 +166,19 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
         spread (max - min) of the resampled particles in that dimension; K = 0.2 is their value, 0 switches it
         off. It keeps resampled duplicates apart (sample impoverishment), which an accurate sensor and a
         motion model without the robot's systematic error would otherwise cause.
+    adaptive : {"none", "kld"}
+        ``"kld"``: KLD sampling (Fox 2003, module docstring): every correction resamples and the particle
+        count adapts between ``min_particles`` and ``max_particles`` (``particles`` and
+        ``resample_ess_fraction`` are then unused; the filter starts with ``max_particles``, as ROS AMCL
+        does).
+    kld_err, kld_z : float
+        Fox's epsilon (the bound on the KL divergence between the sample-based and the true posterior) and
+        the upper standard normal quantile z_(1-delta); ROS AMCL's defaults 0.01 and 0.99 (AMCL passes its
+        ``kld_z`` to the bound as the quantile itself).
+    min_particles, max_particles : int
+        Bounds of the adaptive count; ROS AMCL's defaults 100 and 5000.
+    kld_bin_xy_m, kld_bin_theta_deg : float
+        Histogram bin size of KLD sampling, m and deg; ROS AMCL's 0.5 m x 0.5 m x 10 deg.
     init : {"belief", "uniform"}
         ``"belief"``: particles from the dataset's initial Gaussian; ``"uniform"``: global localization from a
         uniform prior over free space (the free grid cells, else the landmarks' bounding box).
@@ -194,6 +229,13 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
     alpha_slow: float = 0.001
     alpha_fast: float = 0.1
     roughening_k: float = 0.2
+    adaptive: Literal["none", "kld"] = field(default="none", metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    kld_err: float = field(default=0.01, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    kld_z: float = field(default=0.99, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    min_particles: int = field(default=100, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    max_particles: int = field(default=5000, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    kld_bin_xy_m: float = field(default=0.5, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    kld_bin_theta_deg: float = field(default=10.0, metadata=RUN_KEY_OMIT_IF_DEFAULT)
     init: Literal["belief", "uniform"] = "belief"
     use_landmarks: bool = True
     use_ranges: bool = field(default=True, metadata=RUN_KEY_OMIT_IF_DEFAULT)
@@ -214,6 +256,18 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
     sigma_bearing_rad: float | None = None
 
     def __post_init__(self) -> None:
+        if self.adaptive not in ("none", "kld"):
+            raise ConfigError(f"adaptive must be 'none' or 'kld', got {self.adaptive!r}")
+        if not 2 <= self.min_particles <= self.max_particles:
+            raise ConfigError(
+                "need 2 <= min_particles <= max_particles, "
+                f"got min_particles={self.min_particles}, max_particles={self.max_particles}"
+            )
+        if not (self.kld_err > 0.0 and math.isfinite(self.kld_z)):
+            raise ConfigError(f"kld_err must be > 0 and kld_z finite, got {self.kld_err}, {self.kld_z}")
+        for name in ("kld_bin_xy_m", "kld_bin_theta_deg"):
+            if not getattr(self, name) > 0.0:
+                raise ConfigError(f"{name} must be > 0, got {getattr(self, name)}")
         if self.particles < 2:
             raise ConfigError(f"particles must be an integer >= 2, got {self.particles}")
         if not 0.0 <= self.resample_ess_fraction <= 1.0:
@@ -248,6 +302,44 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
 
 
 # --- compiled kernels --------------------------------------------------------------------------------------
+
+
+@njit(cache=True, inline="always")
+def _wrap(a: float) -> float:
+    """``a`` wrapped to (-pi, pi]; one step covers a heading plus a turn, the modulo only larger values."""
+    if -math.pi < a <= math.pi:
+        return a
+    if math.pi < a <= 3.0 * math.pi:
+        return a - 2.0 * math.pi
+    if -3.0 * math.pi < a <= -math.pi:
+        return a + 2.0 * math.pi
+    return math.pi - ((math.pi - a) % (2.0 * math.pi))
+
+
+#: Below this |angle| (rad) :func:`_sincos_near` uses its series: the first omitted terms, d^17 / 17! and
+#: d^18 / 18!, are below 1e-19 there, under a quarter of an ulp of the result.
+_SERIES_MAX_RAD = 0.5
+_SIN_C = (1.0, -1.0 / 6.0, 1.0 / 120.0, -1.0 / 5040.0, 1.0 / 362880.0, -1.0 / 39916800.0, 1.0 / 6227020800.0)
+_COS_C = (1.0, -0.5, 1.0 / 24.0, -1.0 / 720.0, 1.0 / 40320.0, -1.0 / 3628800.0, 1.0 / 479001600.0)
+
+
+@njit(cache=True, inline="always")
+def _sincos_near(a: float, ref: float, sin_ref: float, cos_ref: float) -> tuple[float, float]:
+    """(sin a, cos a) through the angle sum about ``ref`` (whose sine and cosine are given): a Taylor series
+    of the small difference d = a - ref and one rotation, a third of the cost of libm's sin and cos for a
+    particle cloud (a spread of less than ``_SERIES_MAX_RAD`` about ``ref``); libm for the other angles."""
+    d = a - ref
+    if abs(d) > _SERIES_MAX_RAD:
+        return math.sin(a), math.cos(a)
+    d2 = d * d
+    # Horner in d^2 up to d^15 (sine) and d^16 (cosine) with the factorials' reciprocals
+    sd = -1.0 / 1307674368000.0  # -1 / 15!
+    cd = 1.0 / 20922789888000.0  # 1 / 16!
+    for k in range(6, -1, -1):
+        sd = sd * d2 + _SIN_C[k]
+        cd = cd * d2 + _COS_C[k]
+    sd *= d
+    return sin_ref * cd + cos_ref * sd, cos_ref * cd - sin_ref * sd
 
 
 @njit(cache=True)
@@ -292,8 +384,7 @@ def _sightings_loglik(
                 dy = lm_xy[j, 1] - y
                 vr = ranges[k] - math.sqrt(dx * dx + dy * dy)
                 if with_bearing:
-                    vb = bearings[k] - math.atan2(dy, dx) + th
-                    vb = vb - 2.0 * math.pi * math.floor((vb + math.pi) / (2.0 * math.pi))  # wrap to [-pi, pi)
+                    vb = _wrap(bearings[k] - math.atan2(dy, dx) + th)
                     ll = log_a - 0.5 * (vr * vr * inv_var_r + vb * vb * inv_var_b)
                 else:
                     a = log_a - 0.5 * vr * vr * inv_var_r
@@ -314,6 +405,199 @@ def _sightings_loglik(
 
 
 @njit(cache=True)
+def _move(
+    x: FloatArray,
+    wheels: bool,
+    u: FloatArray,
+    sd: FloatArray,
+    wheelbase: float,
+    q_std: FloatArray,
+    rng: np.random.Generator,
+) -> None:
+    """Draw every particle's successor in place, then add the world-frame noise N(0, diag(q_std^2)) (eq. 8).
+
+    ``wheels``: the encoder model, u = (d_left, d_right) m with standard deviations sd = (sd_left,
+    sd_right): per particle delta_l ~ N(d_left, sd_left^2), delta_r ~ N(d_right, sd_right^2) moved along the
+    chord at the midpoint heading (report 003 eq. 1-2, 5). Otherwise the increment model, u = (dx, dy,
+    dtheta) in the previous robot frame with sd = (sd_xy, sd_theta): pose (+) (u + e), e ~ N(0, diag(sd_xy^2,
+    sd_xy^2, sd_theta^2)).
+    """
+    q0, q1, q2 = q_std[0], q_std[1], q_std[2]
+    u0, u1, u2 = u[0], u[1], u[u.shape[0] - 1]
+    s0, s1 = sd[0], sd[1]
+    ref = x[0, 2]
+    sr, cr = math.sin(ref), math.cos(ref)
+    for i in range(x.shape[0]):
+        if wheels:
+            dl = u0 + s0 * rng.standard_normal()
+            dr = u1 + s1 * rng.standard_normal()
+            dd = 0.5 * (dl + dr)
+            turn = (dr - dl) / wheelbase
+            s, c = _sincos_near(x[i, 2] + 0.5 * turn, ref, sr, cr)
+            mx, my = dd * c, dd * s
+        else:
+            ix = u0 + s0 * rng.standard_normal()
+            iy = u1 + s0 * rng.standard_normal()
+            turn = u2 + s1 * rng.standard_normal()
+            s, c = _sincos_near(x[i, 2], ref, sr, cr)
+            mx, my = c * ix - s * iy, s * ix + c * iy
+        x[i, 0] += mx + q0 * rng.standard_normal()
+        x[i, 1] += my + q1 * rng.standard_normal()
+        x[i, 2] = _wrap(x[i, 2] + turn + q2 * rng.standard_normal())
+
+
+@njit(cache=True)
+def _jitter(x: FloatArray, sd: FloatArray, rng: np.random.Generator) -> None:
+    """Add N(0, diag(sd^2)) to every particle in place and wrap the heading."""
+    s0, s1, s2 = sd[0], sd[1], sd[2]
+    for i in range(x.shape[0]):
+        x[i, 0] += s0 * rng.standard_normal()
+        x[i, 1] += s1 * rng.standard_normal()
+        x[i, 2] = _wrap(x[i, 2] + s2 * rng.standard_normal())
+
+
+@njit(cache=True)
+def _reweigh(logw: FloatArray, ll: FloatArray, w: FloatArray) -> tuple[float, float]:
+    """Bayes' rule on normalised log-weights in place: logw <- logw + ll - log_pred; ``w`` <- exp(logw).
+
+    Returns log_pred = log sum_i w_i p(z | x_i) (the predictive likelihood; -inf or NaN when no particle
+    explains z, the weights then left unnormalised) and the effective sample size 1 / sum w_i^2.
+    """
+    n = logw.shape[0]
+    top = -math.inf
+    for i in range(n):
+        logw[i] += ll[i]
+        if logw[i] > top:
+            top = logw[i]
+    if not math.isfinite(top):
+        return top, math.nan
+    acc = 0.0
+    for i in range(n):
+        e = math.exp(logw[i] - top)
+        w[i] = e
+        acc += e
+    log_pred = top + math.log(acc)
+    sq = 0.0
+    for i in range(n):
+        logw[i] -= log_pred
+        wi = w[i] / acc
+        w[i] = wi
+        sq += wi * wi
+    return log_pred, 1.0 / sq
+
+
+@njit(cache=True)
+def _systematic_indices(w: FloatArray, n: int, u: float) -> IntArray:
+    """Systematic resampling: for the points (u + k) / n, k = 0..n-1, the index of the first cumulative
+    weight (normalised here) above each point (PR table 4.4), O(N + n)."""
+    total = 0.0
+    for i in range(w.shape[0]):
+        total += w[i]
+    step = total / n  # the points scaled by the total instead of the weights by 1 / total
+    out = np.empty(n, dtype=np.int64)
+    last = w.shape[0] - 1
+    j = 0
+    cum = w[0]
+    for k in range(n):
+        point = (u + k) * step
+        while cum <= point and j < last:
+            j += 1
+            cum += w[j]
+        out[k] = j
+    return out
+
+
+@njit(cache=True)
+def _gather(x: FloatArray, idx: IntArray) -> FloatArray:
+    """The rows ``idx`` of the particles (a copy)."""
+    out = np.empty((idx.shape[0], 3))
+    for k in range(idx.shape[0]):
+        j = idx[k]
+        out[k, 0] = x[j, 0]
+        out[k, 1] = x[j, 1]
+        out[k, 2] = x[j, 2]
+    return out
+
+
+@njit(cache=True)
+def _kld_bound(k: int, err: float, z: float) -> float:
+    """Fox (2003) eq. 13: the samples needed so that, with probability 1 - delta (z its upper standard normal
+    quantile), the KL divergence between the sample-based and the true posterior over k occupied bins stays
+    below ``err`` (the Wilson-Hilferty approximation of the chi-square quantile); 0 for k <= 1."""
+    if k <= 1:
+        return 0.0
+    b = 2.0 / (9.0 * (k - 1))
+    c = 1.0 - b + math.sqrt(b) * z
+    return (k - 1) / (2.0 * err) * c * c * c
+
+
+@njit(cache=True)
+def _kld_resample(
+    x: FloatArray,
+    w: FloatArray,
+    rng: np.random.Generator,
+    err: float,
+    z: float,
+    n_min: int,
+    n_max: int,
+    bin_xy: float,
+    bin_theta: float,
+) -> FloatArray:
+    """KLD sampling (Fox 2003, table 1, the resampling step as ROS AMCL does it): draw particles one at a time
+    in proportion to ``w``, count the occupied (x, y, theta) bins k as they come, and stop once the count
+    reaches the bound of :func:`_kld_bound` for k, kept within [n_min, n_max]. Returns the new set."""
+    n = x.shape[0]
+    cdf = np.empty(n)
+    acc = 0.0
+    for i in range(n):
+        acc += w[i]
+        cdf[i] = acc
+    out = np.empty((n_max, 3))
+    seen = Dict.empty(key_type=types.int64, value_type=types.int64)
+    bins = 0
+    need = float(n_min)
+    count = 0
+    offset = 1 << 20  # bin indices from -2^20 to 2^20 - 1 pack into 21 bits each
+    while count < n_max:
+        j = min(np.searchsorted(cdf, rng.random() * acc, side="right"), n - 1)
+        out[count, 0] = x[j, 0]
+        out[count, 1] = x[j, 1]
+        out[count, 2] = x[j, 2]
+        count += 1
+        key = (
+            ((math.floor(x[j, 0] / bin_xy) + offset) << 42)
+            | ((math.floor(x[j, 1] / bin_xy) + offset) << 21)
+            | (math.floor(x[j, 2] / bin_theta) + offset)
+        )
+        if key not in seen:
+            seen[key] = 1
+            bins += 1
+            need = max(float(n_min), _kld_bound(bins, err, z))
+        if count >= need:
+            break
+    return out[:count].copy()
+
+
+@njit(cache=True)
+def _roughen(x: FloatArray, k: float, ref_heading: float, rng: np.random.Generator) -> None:
+    """Gordon, Salmond & Smith (1993) roughening in place: jitter of std K E N^(-1/3) per dimension, E the
+    spread (max - min); the heading's spread is that of the residuals wrapped about ``ref_heading`` (a heading
+    of the cloud), so that a cloud straddling +-pi is not seen as 2 pi wide."""
+    n = x.shape[0]
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for i in range(n):
+        r2 = _wrap(x[i, 2] - ref_heading)
+        lo[0] = min(lo[0], x[i, 0])
+        hi[0] = max(hi[0], x[i, 0])
+        lo[1] = min(lo[1], x[i, 1])
+        hi[1] = max(hi[1], x[i, 1])
+        lo[2] = min(lo[2], r2)
+        hi[2] = max(hi[2], r2)
+    _jitter(x, k * (hi - lo) * n ** (-1.0 / 3.0), rng)
+
+
+@njit(cache=True)
 def _weighted_stats(poses: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Weighted mean (circular for the heading) and weighted covariance (heading residuals wrapped)."""
     n = poses.shape[0]
@@ -321,11 +605,14 @@ def _weighted_stats(poses: FloatArray, w: FloatArray) -> tuple[FloatArray, Float
     my = 0.0
     sc = 0.0
     ss = 0.0
+    ref = poses[0, 2]
+    sr, cr = math.sin(ref), math.cos(ref)
     for i in range(n):
         mx += w[i] * poses[i, 0]
         my += w[i] * poses[i, 1]
-        sc += w[i] * math.cos(poses[i, 2])
-        ss += w[i] * math.sin(poses[i, 2])
+        si, ci = _sincos_near(poses[i, 2], ref, sr, cr)
+        sc += w[i] * ci
+        ss += w[i] * si
     mth = math.atan2(ss, sc)
     if mth <= -math.pi:
         mth = math.pi
@@ -360,19 +647,8 @@ def systematic_resample(weights: npt.ArrayLike, n: int, rng: np.random.Generator
 
     ``weights`` (N,) non-negative, normalised here; one uniform u ~ U[0, 1) places the points (u + k) / n.
     """
-    w = np.asarray(weights, dtype=np.float64)
-    cdf = np.cumsum(w)
-    cdf /= cdf[-1]
-    points = (rng.random() + np.arange(n, dtype=np.float64)) / n
-    idx = np.searchsorted(cdf, points, side="right")
-    return np.minimum(idx, w.shape[0] - 1).astype(np.int64)
-
-
-def _logsumexp(a: FloatArray) -> float:
-    m = float(np.max(a))
-    if not math.isfinite(m):
-        return m
-    return m + math.log(float(np.sum(np.exp(a - m))))
+    w = np.ascontiguousarray(weights, dtype=np.float64)
+    return _systematic_indices(w, int(n), float(rng.random()))
 
 
 class FreeSpaceSampler:
@@ -433,7 +709,7 @@ class ParticleFilter(Filter):
     consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LandmarkObservations, LaserScan, RangeObservations})
     requires: ClassVar[frozenset[MapKind]] = frozenset()
     Config: ClassVar[type[FilterConfig]] = ParticleFilterConfig
-    version: ClassVar[int] = 1
+    version: ClassVar[int] = 2  # 2: compiled kernels, so other random streams
     source: ClassVar[str] = "003_e5c93f9be776ee5e.txt sec. 4.2; Thrun, Burgard & Fox, Probabilistic Robotics ch. 6, 8"
     config: ParticleFilterConfig
 
@@ -450,7 +726,8 @@ class ParticleFilter(Filter):
         a = tr(C^-1 Q) plus a cross term of standard deviation 2 sqrt(a / N); the change is negative only when
         that term beats a, and its worst value over a is k^2 / N at k standard deviations. 25 / N is 5 sigma.
         """
-        return 25.0 / self.config.particles
+        cfg = self.config
+        return 25.0 / (cfg.min_particles if cfg.adaptive == "kld" else cfg.particles)
 
     def check_tolerances(self) -> CheckTolerances:
         """The conformance checks' bounds: the log det drop of :attr:`logdet_tolerance`, the rest the defaults."""
@@ -480,7 +757,7 @@ class ParticleFilter(Filter):
         """
         cfg = self.config
         self._rng = rng
-        self._n = int(cfg.particles)
+        self._n = int(cfg.max_particles if cfg.adaptive == "kld" else cfg.particles)
         self._noise = cfg.motion_noise(sensors)
         nz = self._noise
         self._use_encoder = nz.wheelbase_m is not None and (
@@ -545,7 +822,7 @@ class ParticleFilter(Filter):
             self._x = _sample_gaussian(
                 np.asarray(initial.mean, dtype=np.float64), np.asarray(initial.cov, dtype=np.float64), self._n, rng
             )
-        self._logw = np.full(self._n, -math.log(self._n))
+        self._set_uniform_weights(self._n)
         # augmented MCL: per sensor [w_slow, w_fast], started at the first w_avg
         self._w_avg: dict[type, list[float]] = {}
         self._t = math.nan
@@ -577,18 +854,18 @@ class ParticleFilter(Filter):
             )
             self._travelled[0] += abs(u.d_left)
             self._travelled[1] += abs(u.d_right)
-            x = sample_wheel_motion(self._x, u.d_left, u.d_right, W, vl, vr, rng)
+            sd = np.array([math.sqrt(vl), math.sqrt(vr)])
+            _move(self._x, True, np.array([u.d_left, u.d_right]), sd, W, self._q_std, rng)
         elif (tw := nz.twist_sigmas(u)) is not None:
-            x = sample_twist_motion(self._x, u, tw[0], tw[1], rng)
+            self._x = sample_twist_motion(self._x, u, tw[0], tw[1], rng)
+            if self._q_std.any():
+                _jitter(self._x, self._q_std, rng)
         else:
             vxy, vth = increment_variances(
                 u.dx, u.dy, u.dtheta, nz.sigma_xy_per_m, nz.sigma_theta_per_m, nz.sigma_theta_per_rad
             )
-            x = sample_increment_motion(self._x, u.dx, u.dy, u.dtheta, vxy, vth, rng)
-        if self._q_std.any():
-            x += rng.standard_normal((self._n, 3)) * self._q_std
-            x[:, 2] = wrap_angle(x[:, 2])
-        self._x = x
+            sd = np.array([math.sqrt(vxy), math.sqrt(vth)])
+            _move(self._x, False, np.array([u.dx, u.dy, u.dtheta]), sd, 1.0, self._q_std, rng)
         self._t = u.t
         self._diag = self._fresh_diag()
         self._est = None
@@ -733,18 +1010,15 @@ class ParticleFilter(Filter):
             if injected:
                 # resample from the mixture (1 - p) belief + p uniform over free space (PR table 8.3)
                 assert self._space is not None
-                keep = systematic_resample(np.exp(self._logw), n - injected, rng)
-                self._x = np.concatenate([self._x[keep], self._space.sample(injected, rng)])
-                self._logw = np.full(n, -math.log(n))
+                keep = systematic_resample(self._weights(), n - injected, rng)
+                self._x = np.concatenate([_gather(self._x, keep), self._space.sample(injected, rng)])
+                self._set_uniform_weights(n)
                 resampled = True
-        ll = self._loglik(kind, data)
-        post = self._logw + ll
-        log_pred = _logsumexp(post)  # log sum_i w_i p(z | x_i): the predictive likelihood of z
+        w = np.empty(self._x.shape[0])
+        log_pred, n_eff = _reweigh(self._logw, self._loglik(kind, data), w)
+        self._w, self._w_of = w, self._logw
         if not math.isfinite(log_pred):
             raise FilterDiverged(f"ParticleFilter: every particle has zero likelihood at t={self._t:.3f} s")
-        self._logw = post - log_pred
-        w = np.exp(self._logw)
-        n_eff = 1.0 / float(np.dot(w, w))
         self._diag["n_eff"] = n_eff
         if cfg.augmented:
             # geometric mean per sighting or beam, so that the average neither underflows nor depends on m
@@ -754,43 +1028,61 @@ class ParticleFilter(Filter):
             else:
                 avg[0] += cfg.alpha_slow * (w_avg - avg[0])
                 avg[1] += cfg.alpha_fast * (w_avg - avg[1])
-        if n_eff < cfg.resample_ess_fraction * n:
-            idx = systematic_resample(w, n, rng)
-            self._x = self._x[idx]
-            self._logw = np.full(n, -math.log(n))
+        # roughening measures the heading spread about the best particle's heading (the cloud's own)
+        ref_heading = float(self._x[int(np.argmax(w)), 2])
+        if cfg.adaptive == "kld":
+            # KLD sampling draws the new set, and its size, at every correction (Fox 2003, table 1)
+            self._x = _kld_resample(
+                self._x,
+                w,
+                rng,
+                cfg.kld_err,
+                cfg.kld_z,
+                cfg.min_particles,
+                cfg.max_particles,
+                cfg.kld_bin_xy_m,
+                math.radians(cfg.kld_bin_theta_deg),
+            )
+            self._n = n = int(self._x.shape[0])
+            self._set_uniform_weights(n)
+            resampled = True
+        elif n_eff < cfg.resample_ess_fraction * n:
+            self._x = _gather(self._x, systematic_resample(w, n, rng))
+            self._set_uniform_weights(n)
             resampled = True
         if resampled and cfg.roughening_k > 0.0:
-            self._roughen()
+            _roughen(self._x, cfg.roughening_k, ref_heading, rng)
         self._diag["resampled"] = 1.0 if resampled else 0.0
         self._diag["injected"] = float(injected)
 
-    def _roughen(self) -> None:
-        """Gordon, Salmond & Smith (1993) roughening: jitter of std K E N^(-1/3) per dimension (E: the spread)."""
-        x = self._x
-        th = x[:, 2]
-        # heading spread about the circular mean, so that a cloud straddling +-pi is not seen as 2 pi wide
-        mth = math.atan2(float(np.mean(np.sin(th))), float(np.mean(np.cos(th))))
-        rth = wrap_angle(th - mth)
-        spread = np.array([np.ptp(x[:, 0]), np.ptp(x[:, 1]), np.ptp(rth)])
-        sd = self.config.roughening_k * spread * self._n ** (-1.0 / 3.0)
-        x += self._rng.standard_normal((self._n, 3)) * sd
-        x[:, 2] = wrap_angle(x[:, 2])
-
     # --- output ------------------------------------------------------------------------------------------
+
+    def _set_uniform_weights(self, n: int) -> None:
+        self._logw = np.full(n, -math.log(n))
+        self._w, self._w_of = np.full(n, 1.0 / n), self._logw
+
+    def _weights(self) -> FloatArray:
+        """exp(log-weights), kept from the last weighting while the log-weights are the same array."""
+        if self._w_of is not self._logw:
+            self._w, self._w_of = np.exp(self._logw), self._logw
+        return self._w
 
     def _check_finite(self, t: float) -> None:
         if not (np.all(np.isfinite(self._x)) and np.all(np.isfinite(self._logw))):
             raise FilterDiverged(f"ParticleFilter particles became non-finite at t={t:.3f} s")
 
+    def _diagnostics(self) -> dict[str, float]:
+        return {**self._diag, "particles": float(self._n)}
+
     def particles(self) -> tuple[FloatArray, FloatArray]:
         """Copies of the particles (N, 3) (x m, y m, theta rad) and their normalised weights (N,)."""
-        return self._x.copy(), np.exp(self._logw)
+        return self._x.copy(), self._weights().copy()
 
     def estimate(self) -> Estimate:
         """Weighted mean (circular heading), weighted covariance (wrapped residuals) and diagnostics."""
         if self._est is None:
-            mean, cov = _weighted_stats(self._x, np.exp(self._logw))
-            self._est = Estimate(t=self._t, mean=mean, cov=cov, diagnostics=dict(self._diag))
+            mean, cov = _weighted_stats(self._x, self._weights())
+            self._est = Estimate(t=self._t, mean=mean, cov=cov, diagnostics={})
         return Estimate(
-            t=self._est.t, mean=self._est.mean.copy(), cov=self._est.cov.copy(), diagnostics=dict(self._diag)
+            t=self._est.t, mean=self._est.mean.copy(), cov=self._est.cov.copy(), diagnostics=self._diagnostics()
         )

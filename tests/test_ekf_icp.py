@@ -146,3 +146,37 @@ def test_scan_far_from_the_prediction_is_a_mismatch(world_map) -> None:  # type:
 def test_config_errors_name_the_field(field: str, value: float) -> None:
     with pytest.raises(ConfigError, match=field):
         IcpEKFConfig(**{field: value})
+
+
+def test_bucket_nearest_neighbour_is_the_kd_tree_neighbour() -> None:
+    from numba import njit
+    from scipy.spatial import cKDTree
+
+    from locbench.filters._icp import _buckets, _nearest_within
+
+    @njit
+    def query(pts: np.ndarray, q: np.ndarray, gate: float, bound: float) -> tuple[np.ndarray, np.ndarray]:
+        grid = _buckets(pts, gate)
+        d = np.empty(q.shape[0])
+        j = np.empty(q.shape[0], dtype=np.int64)
+        for i in range(q.shape[0]):
+            d[i], j[i] = _nearest_within(q[i, 0], q[i, 1], pts, grid, bound)
+        return d, j
+
+    rng = np.random.default_rng(4)
+    # a scan-like cloud: points along three walls plus scatter, queried near and far from it
+    t = rng.uniform(0.0, 1.0, 300)
+    walls = np.concatenate(
+        [np.column_stack([4 * t[:100], np.full(100, 3.0)]), np.column_stack([np.full(100, 4.0), 3 * t[100:200]])]
+    )
+    pts = np.concatenate([walls, rng.uniform(-1.0, 5.0, (100, 2))])
+    q = np.concatenate([pts + rng.normal(0.0, 0.05, pts.shape), rng.uniform(-3.0, 7.0, (300, 2))])
+    tree = cKDTree(pts)
+    for gate, bound in [(0.5, 0.5), (0.5, 0.08), (0.01, 0.01), (3.0, 3.0)]:
+        d, j = query(pts, q, gate, bound)
+        dk, jk = tree.query(q, k=1, distance_upper_bound=bound)
+        within = dk < bound
+        np.testing.assert_array_equal(j >= 0, within)
+        np.testing.assert_array_equal(j[within], jk[within])
+        np.testing.assert_allclose(d[within], dk[within], rtol=1e-15, atol=0)
+        assert np.all(np.isinf(d[~within]))

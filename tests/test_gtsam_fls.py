@@ -275,3 +275,14 @@ def test_range_config_is_checked() -> None:
         _ro(range_gate_probability=1.5)
     with pytest.raises(ConfigError, match="range_huber_k"):
         _ro(range_huber_k=0.0)
+
+
+def test_scalar_nis_equals_the_batched_mahalanobis_distance() -> None:
+    f = _new()
+    f.predict(_odo(0.1, 0.3))
+    f.update(_sight(0.2, (0.3, 0.0), [7, 8], noise=0.01))
+    f.predict(Odometry(t=0.3, dx=0.2, dy=0.05, dtheta=0.4, d_left=0.15, d_right=0.25, dt=0.1))
+    for r, b in [(2.5, 0.3), (3.0, -0.5), (2.0, 3.1)]:  # the last bearing wraps
+        for row in (0, 1):
+            batched = float(f._mahalanobis(r, b, rows=[row])[0])
+            assert f._nis_one(r, b, row) == pytest.approx(batched, rel=1e-10)

@@ -358,3 +358,73 @@ def test_predict_draws_the_twist_noise_when_the_dataset_gives_it() -> None:
     expected = G @ twist_increment_covariance(v, w, dt, 0.04, 0.03) @ G.T
     scale = np.sqrt(np.outer(np.diag(expected), np.diag(expected)))
     assert np.all(np.abs(np.cov(x.T) - expected) <= 0.03 * scale)
+
+
+def test_sincos_near_matches_libm_near_and_far_from_the_reference() -> None:
+    from numba import njit
+
+    from locbench.filters.pf import _sincos_near
+
+    @njit
+    def table(a: np.ndarray, ref: float) -> np.ndarray:
+        out = np.empty((a.shape[0], 2))
+        sr, cr = math.sin(ref), math.cos(ref)
+        for i in range(a.shape[0]):
+            out[i, 0], out[i, 1] = _sincos_near(a[i], ref, sr, cr)
+        return out
+
+    rng = np.random.default_rng(5)
+    for ref in (0.0, 1.2, math.pi - 0.1, -math.pi + 0.05):
+        a = ref + rng.uniform(-2.0, 2.0, 5000)  # both the series (|a - ref| <= 0.5) and libm
+        got = table(a, ref)
+        np.testing.assert_allclose(got[:, 0], np.sin(a), rtol=0, atol=2e-15)
+        np.testing.assert_allclose(got[:, 1], np.cos(a), rtol=0, atol=2e-15)
+
+
+# --- KLD sampling -------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("k", [2, 5, 20, 100])
+def test_kld_bound_is_the_chi_square_quantile_over_twice_the_error(k: int) -> None:
+    from scipy.stats import chi2, norm
+
+    from locbench.filters.pf import _kld_bound
+
+    # Fox (2003) eq. 13 approximates chi2_(k-1, 1-delta) / (2 eps) (Wilson-Hilferty); within 2 % from k = 5
+    exact = chi2.ppf(0.99, k - 1) / (2 * 0.05)
+    assert _kld_bound(k, 0.05, float(norm.ppf(0.99))) == pytest.approx(exact, rel=0.02 if k >= 5 else 0.1)
+    assert _kld_bound(1, 0.05, 2.0) == 0.0
+
+
+def test_kld_count_is_large_when_uncertain_and_small_when_converged() -> None:
+    # global: uniform over the 4 m x 3 m box; a 1 m-sigma range to one beacon leaves a thick ring of
+    # positions with every heading, hundreds of 0.5 m x 0.5 m x 10 deg bins
+    f = _pf(adaptive="kld", init="uniform", range_only_sigma_m=1.0)
+    f.reset(_initial(), _world(), SENSORS, np.random.default_rng(2))
+    assert f.estimate().diagnostics["particles"] == 5000  # AMCL starts at max_particles
+    f.predict(Odometry(t=0.1, dx=0.0, dy=0.0, dtheta=0.0))
+    f.update(RangeObservations(t=0.1, ids=np.array([0]), ranges=np.array([2.0])))
+    uncertain = f.estimate().diagnostics["particles"]
+    # tracking: a tight cloud well inside one bin, four precise sightings per step
+    pose = np.array([2.2, 1.2, 0.3])
+    g = _pf(adaptive="kld")
+    g.reset(_initial(mean=(2.2, 1.2, 0.3), sigma=0.01), _world(), SENSORS, np.random.default_rng(2))
+    for k in range(5):
+        g.predict(Odometry(t=0.1 * k, dx=0.0, dy=0.0, dtheta=0.0, d_left=0.0, d_right=0.0))
+        g.update(_sightings(pose, [0, 1, 2, 3], t=0.1 * k))
+    converged = g.estimate().diagnostics["particles"]
+    assert uncertain == 5000
+    assert converged == 100
+    assert np.hypot(*(g.estimate().mean[:2] - pose[:2])) < 0.05
+
+
+def test_kld_count_is_stored_with_the_run_and_fixed_counts_stay_fixed() -> None:
+    ds = make_dataset("room", 0)
+    fr = resolve_filter("pf[adaptive=kld]")
+    trace = run_filter(ParticleFilter(fr.params), ds, np.random.default_rng(3))
+    assert trace.status == "ok"
+    n = trace.diagnostics["particles"]
+    assert np.all(np.isfinite(n)) and np.all((n >= 100) & (n <= 5000))
+    assert n[0] == 5000 and np.median(n) < 1000  # starts at the maximum (the reset row), shrinks once tracking
+    fixed = run_filter(_pf(particles=300), ds, np.random.default_rng(3))
+    assert np.all(fixed.diagnostics["particles"] == 300)

@@ -108,3 +108,44 @@ def test_no_match_beyond_tolerance() -> None:
 def test_bad_database_parameters(step: float, hstep: float) -> None:
     with pytest.raises(ConfigError, match=r"grid_step_m|heading_step_deg"):
         build_database(_room(), step, hstep, 8.0, 0.2)
+
+
+def _reference_match(db, scan, tol, prior, gate):  # type: ignore[no-untyped-def]
+    """Score every entry in plain numpy, then gate: the matched entries (i, h) and their scores."""
+    b_idx, r = scan_bearing_ranges(scan)
+    cap = min(float(scan.range_max), db.max_range_m)
+    rc = np.minimum(np.where(np.isfinite(r), r, cap), cap)
+    m = db.n_headings // N_BEARINGS
+    cols = (np.arange(db.n_headings)[:, None] + (b_idx * m)[None, :]) % db.n_headings  # (M, k)
+    scores = np.abs(np.minimum(db.ranges, cap)[:, cols] - rc).mean(axis=2)  # (N, M)
+    ii, hh = np.nonzero(scores <= tol)
+    hs = db.heading_step_rad
+    quant = np.diag([db.step_m**2 / 12.0, db.step_m**2 / 12.0, hs**2 / 12.0])
+    e = np.column_stack(
+        [db.positions[ii] - prior[0][:2], np.remainder(hh * hs - prior[0][2] + np.pi, 2 * np.pi) - np.pi]
+    )
+    inside = np.einsum("ij,ij->i", e @ np.linalg.inv(prior[1] + quant), e) <= gate
+    return ii[inside], hh[inside], scores[ii[inside], hh[inside]]
+
+
+@pytest.mark.parametrize("spread", [0.05, 0.3, 1.5])
+def test_gate_first_matching_equals_scoring_everything_then_gating(spread: float) -> None:
+    grid = _room()
+    db = build_database(grid, 0.25, 5.0, 8.0, 0.2)
+    rng = np.random.default_rng(3)
+    for _ in range(6):
+        pose = np.array([rng.uniform(0.4, 3.2), rng.uniform(0.4, 2.2), rng.uniform(-math.pi, math.pi)])
+        mean = pose + rng.normal(0.0, [spread, spread, spread / 2])
+        a = rng.normal(size=(3, 3)) * spread
+        prior = (mean, a @ a.T + np.diag([spread**2, spread**2, (spread / 2) ** 2]))
+        scan = _scan(grid, pose)
+        ii, _hh, d = _reference_match(db, scan, 0.15, prior, 16.27)
+        m, _ = match_scan(db, scan, tolerance_m=0.15, prior=prior, gate=16.27)
+        if ii.size == 0:
+            assert m is None
+            continue
+        assert m is not None and m.n_matches == ii.size
+        assert m.best_score_m == pytest.approx(float(d.min()), abs=1e-12)
+        w = 1.0 - d / 0.15
+        z_xy = (w / w.sum()) @ db.positions[ii]
+        np.testing.assert_allclose(m.z[:2], z_xy, atol=1e-9)

@@ -57,6 +57,10 @@ def test_predict(benchmark: Any, fid: str) -> None:
 
 @pytest.mark.parametrize("fid", _cases("update"))
 def test_update(benchmark: Any, fid: str) -> None:
+    if fid == "gtsam_fls":
+        # every replayed observation would add to one smoother's graph, so the median would depend on the
+        # round count: test_gtsam_perf.py times it on a real event stream with a fresh smoother per round
+        pytest.skip("gtsam_fls updates are benchmarked on an event stream in test_gtsam_perf.py")
     flt, ds = _warm_filter(fid)
     routed = flt.routed_events() - {Odometry}
     if not routed:

@@ -1,7 +1,8 @@
 """pytest-benchmark: particle throughput of one predict + update step of ``pf`` on the office world.
 
 ``nox -s perf`` (``pytest tests/perf --benchmark-only``) measures 1e3, 1e4 and 1e5 particles with the
-landmark model and with the 60-beam likelihood field, stores particles/s in ``benchmark.extra_info`` and
+landmark model and with the 60-beam likelihood field, stores particles/s (from the median step time) in
+``benchmark.extra_info`` and
 prints one summary line per case. In the normal test run (``--benchmark-disable``) each case runs once as a
 smoke test and the 1e5 cases are skipped.
 """
@@ -50,10 +51,11 @@ def test_pf_step_throughput(benchmark: Any, request: pytest.FixtureRequest, n: i
     step()  # compile the numba kernels and build the likelihood field outside the timing
     benchmark(step)
     if not benchmark.disabled:
-        mean_s = float(benchmark.stats.stats.mean)
-        rate = n / mean_s
+        # the median: one descheduled round on a shared machine must not move the rate
+        median_s = float(benchmark.stats.stats.median)
+        rate = n / median_s
         benchmark.extra_info["particles_per_s"] = rate
-        benchmark.extra_info["step_ms"] = 1e3 * mean_s
+        benchmark.extra_info["step_ms"] = 1e3 * median_s
         with request.config.pluginmanager.get_plugin("capturemanager").global_and_fixture_disabled():
             # a summary line in the nox -s perf output (pytest-benchmark's table has no throughput column)
-            print(f"\npf {sensor:9s} N={n:>6d}: {1e3 * mean_s:8.2f} ms/step, {rate:12.0f} particles/s")
+            print(f"\npf {sensor:9s} N={n:>6d}: {1e3 * median_s:8.2f} ms/step (median), {rate:12.0f} particles/s")

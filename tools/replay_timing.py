@@ -1,0 +1,57 @@
+"""Replay one dataset realisation through one filter and print the median update time.
+
+The before/after figures of docs/performance.md: run it once with each checkout's interpreter (for a
+paired whole-process comparison, alternate the two commands under a process timer such as
+``/usr/bin/time -v``)::
+
+    python tools/replay_timing.py kf_linear office
+    python tools/replay_timing.py 'pf[particles=10000]' office --repeat 3
+
+Every event is fed as the runner feeds it (predict for odometry, update for the routed observations, an
+estimate after each), with the runner's seed; each update call is timed with ``perf_counter_ns``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+
+from locbench.events import Odometry
+from locbench.registry import FILTERS, make_dataset, resolve_filter
+from locbench.seeding import filter_rng
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("filter", help="filter spec, e.g. 'pf[particles=10000]'")
+    parser.add_argument("dataset", help="dataset spec, e.g. office")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--repeat", type=int, default=1, help="replays of the whole run (a fresh filter each)")
+    args = parser.parse_args(argv)
+    ds = make_dataset(args.dataset, args.seed)
+    fr = resolve_filter(args.filter)
+    cls = FILTERS.load(fr.id)
+    times: list[int] = []
+    for _ in range(args.repeat):
+        flt = cls(fr.params)
+        flt.reset(ds.initial, ds.world, ds.sensors, filter_rng(fr.name, ds.name, args.seed))
+        routed = flt.routed_events()
+        for ev in ds.events:
+            if isinstance(ev, Odometry):
+                flt.predict(ev)
+            elif type(ev) in routed:
+                t0 = time.perf_counter_ns()
+                flt.update(ev)
+                times.append(time.perf_counter_ns() - t0)
+            flt.estimate()
+    if not times:
+        print(f"{args.filter} on {args.dataset}: no update calls", file=sys.stderr)
+        return 1
+    print(f"{args.filter} on {args.dataset}: {len(times)} updates, median {statistics.median(times) / 1e3:.1f} us")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
