@@ -43,6 +43,8 @@ Metric ids added on top of the DESIGN list (each documented here, none changes a
   trajectory (``smoothed_t`` (n,), s, and ``smoothed_mean`` (n, 3), world frame), its ATE and wrapped
   heading RMSE, defined exactly as ``ate_m`` and ``heading_rmse_rad`` (zero-order hold of the
   smoothed poses at the ground-truth times).
+- ``particles_mean``: the mean particle count over the run's steps, from the ``particles`` diagnostic
+  (particle filters; with KLD sampling the count adapts).
 - ``accepted_fraction``: measurements fused over measurements offered, over the run, from the
   ``accepted``/``rejected`` diagnostics (gated landmark sightings, extracted lines, ICP matches).
 - ``relation_error_m``, ``relation_error_rad``: when the dataset has reference relations (Intel), the
@@ -678,6 +680,7 @@ def run_metrics(run: RunRecord, truth: TruthRecord, rpe_delta_m: float = RPE_DEL
     out.update(kidnap_metrics(run.t, run.mean, run.cov, gt.t, gt_poses, truth.kidnaps))
     out.update(smoothed_metrics(run.extra, gt.t, gt_poses))
     out.update(acceptance_metrics(run.diagnostics))
+    out.update(particle_count_metrics(run.diagnostics))
     if truth.relations is not None and len(truth.relations):
         trans, rot = relation_errors(run.t, run.mean, truth.relations.t1, truth.relations.t2, truth.relations.delta)
         out["relation_count"] = float(trans.shape[0])
@@ -685,6 +688,20 @@ def run_metrics(run: RunRecord, truth: TruthRecord, rpe_delta_m: float = RPE_DEL
             out["relation_error_m"] = float(np.mean(trans))
             out["relation_error_rad"] = float(np.mean(rot))
     return {k: v for k, v in out.items() if not np.isnan(v)}
+
+
+def particle_count_metrics(diagnostics: dict[str, FloatArray]) -> dict[str, float]:
+    """``particles_mean``: the mean particle count over a run's steps, from the ``particles`` diagnostic.
+
+    Only filters that report a count (the particle filter; with ``adaptive=kld`` it varies) have it; rows
+    without a count (NaN) are ignored.
+    """
+    count = diagnostics.get("particles")
+    if count is None:
+        return {}
+    c = np.asarray(count, dtype=np.float64)
+    c = c[np.isfinite(c)]
+    return {"particles_mean": float(np.mean(c))} if c.size else {}
 
 
 def acceptance_metrics(diagnostics: dict[str, FloatArray]) -> dict[str, float]:
@@ -737,6 +754,7 @@ METRICS: dict[str, MetricInfo] = {
     "relation_error_m": MetricInfo("relation error", "cm", 100.0),
     "relation_error_rad": MetricInfo("relation error", "deg", float(np.degrees(1.0))),
     "accepted_fraction": MetricInfo("accepted", "%", 100.0, "higher"),
+    "particles_mean": MetricInfo("mean particles", "", 1.0, ""),
     "recorded_ate_median_m": MetricInfo("recorded median ATE", "cm", 100.0),
 }
 

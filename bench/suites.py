@@ -86,7 +86,8 @@ def _kidnap_datasets(base: str) -> tuple[str, ...]:
 _SUITES: tuple[Suite, ...] = (
     Suite(
         "default",
-        (Block((*ALL_FILTERS, "ekf_landmarks[association=nearest]"), ("room", "office"), 20),),
+        # KLD-adaptive MCL (Fox 2003) beside the fixed 1000 particles: does adaptive sampling pay?
+        (Block((*ALL_FILTERS, "ekf_landmarks[association=nearest]", "pf[adaptive=kld]"), ("room", "office"), 20),),
         "the main comparison: every registered filter on report 003's room and the common office",
     ),
     Suite(

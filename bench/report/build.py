@@ -538,7 +538,8 @@ class Report:
             wt = tb.waypoint_table(self.rows(base), filters, f"`{base}`: RMSE at each waypoint over runs (cm)")
             if wt is not None:
                 sec.add(wt)
-            for plot in (self.trajectory_plot(base), self.waypoint_plot(base), self.nees_plot(base)):
+            plots = (self.trajectory_plot(base), self.waypoint_plot(base), self.nees_plot(base), self.count_plot(base))
+            for plot in plots:
                 if plot is not None:
                     sec.add(plot)
         rows = self.df[self.df["dataset"].isin(self.variants_of(e.dataset))]
@@ -597,6 +598,44 @@ class Report:
             size=size,
             interactive=_plotly_tracks(dataset, world, tracks, styles),
         )
+
+    def count_plot(self, dataset: str) -> Plot | None:
+        """The particle count over time of the filters whose count adapts (KLD sampling), first seed."""
+        keys = sorted(k for k in self.col.ok_dirs if k[0] == dataset and not self.col.is_global(k[1]))
+        if not keys or not (self.rows(dataset)["metric"] == "particles_mean").any():
+            return None
+        seed = keys[0][2]
+        series: list[tuple[str, np.ndarray, np.ndarray]] = []
+        for f in self.filters_on(dataset):
+            sub = self.rows(dataset)
+            if (dataset, f, seed) not in self.col.ok_dirs or not len(
+                tb.values(sub[sub["filter"] == f], "particles_mean")
+            ):
+                continue
+            run = self.col.read_run(dataset, f, seed)
+            count = run.diagnostics.get("particles")
+            if count is None or not np.isfinite(count).any():
+                continue
+            ok = np.isfinite(count)
+            if np.nanmax(count) > np.nanmin(count):
+                series.append((f, run.t[ok], count[ok]))
+        if not series:
+            return None
+        styles = self.styles_for([f for f, _, _ in series])
+        title = f"{dataset}, seed {seed}: particle count after each step (adaptive filters)"
+
+        def draw(fig: Figure) -> None:
+            ax = fig.add_subplot()
+            for f, t, c in series:
+                st = styles[f]
+                ax.step(t, c, where="post", color=st.color, ls=st.linestyle, lw=0.9, label=f)
+            ax.set_yscale("log")
+            ax.set_xlabel("t (s)")
+            ax.set_ylabel("particles")
+            ax.set_title(title)
+            ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+
+        return Plot(f"{slug(dataset)}_particle_count", title, draw)
 
     def waypoint_plot(self, dataset: str) -> Plot | None:
         ws = waypoint_stats(self.rows(dataset))

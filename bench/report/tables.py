@@ -171,6 +171,7 @@ COMPARISON = (
     "nees_in_band_fraction",
     "update_us_median",
     "realtime_factor",
+    "particles_mean",
 )
 
 
