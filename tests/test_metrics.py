@@ -262,3 +262,12 @@ def test_accepted_fraction_from_diagnostics() -> None:
     assert acceptance_metrics(diag) == {"accepted_fraction": 0.5}
     assert acceptance_metrics({"accepted": np.zeros(3), "rejected": np.zeros(3)}) == {}
     assert acceptance_metrics({"nis": np.ones(2)}) == {}
+
+
+def test_particle_count_metric_is_the_mean_reported_count() -> None:
+    from locbench.metrics import particle_count_metrics
+
+    assert particle_count_metrics({}) == {}
+    out = particle_count_metrics({"particles": np.array([np.nan, 5000.0, 100.0, 300.0])})
+    assert out == {"particles_mean": pytest.approx(1800.0)}
+    assert particle_count_metrics({"particles": np.array([np.nan])}) == {}
