@@ -366,7 +366,8 @@ def read_groundtruth(path: str | os.PathLike[str]) -> Trajectory2D:
         k = int(jump[0]) + 1
         raise tab.fail(
             k,
-            f"the truth jumps {float(step[k - 1]):.4g} m from the previous sample, expected at most {MAX_TRUTH_STEP_M} m",
+            f"the truth jumps {float(step[k - 1]):.4g} m from the previous sample, "
+            f"expected at most {MAX_TRUTH_STEP_M} m",
         )
     return Trajectory2D(t=tab.rows[:, 0].copy(), xy=tab.rows[:, 1:3].copy(), theta=wrap_angle(tab.rows[:, 3]))
 
