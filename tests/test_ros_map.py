@@ -140,7 +140,7 @@ def test_missing_field(tmp_path: Path, field: str) -> None:
     ("line", "bad", "match"),
     [
         (2, "resolution: fine", r"m\.yaml:2: field 'resolution': expected a finite number, got 'fine'"),
-        (2, "resolution: -0.1", r"m\.yaml:2: field 'resolution': expected > 0"),
+        (2, "resolution: -0.1", r"m\.yaml:2: field 'resolution': expected 0.001 to 1.0 m per pixel"),
         (3, "origin: [1.0, 2.0]", r"m\.yaml:3: field 'origin': expected a list \[x, y, yaw\] of 3 numbers"),
         (3, "origin: [1.0, 2.0, 0.3]", r"m\.yaml:3: field 'origin': yaw is 0\.3 rad; expected 0"),
         (4, "negate: maybe", r"m\.yaml:4: field 'negate': expected 0, 1, true or false"),
