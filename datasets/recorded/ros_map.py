@@ -56,7 +56,6 @@ from locbench.datasets.base import OccupancyGrid
 from locbench.datasets.recorded.files import (
     MAX_GRID_CELLS,
     MAX_POSITION_M,
-    MissingDataFile,
     RecordedDataError,
     check_cells,
     quote,
@@ -116,7 +115,7 @@ def _read_yaml(path: Path) -> tuple[dict[str, Any], dict[str, int]]:
             raise RecordedDataError(path, f"{size} bytes, expected a map_server YAML file of at most {MAX_YAML_BYTES}")
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
-        raise MissingDataFile(path, "missing map YAML file") from None
+        raise RecordedDataError(path, "missing map YAML file") from None
     except UnicodeDecodeError as exc:
         raise RecordedDataError(path, f"not UTF-8 text ({exc.reason}); expected a map_server YAML file") from None
     _refuse_aliases(path, text)
@@ -208,7 +207,7 @@ def read_pgm(path: str | os.PathLike[str], max_cells: int = MAX_GRID_CELLS) -> t
     try:
         raw = p.read_bytes()
     except FileNotFoundError:
-        raise MissingDataFile(p, "missing map image") from None
+        raise RecordedDataError(p, "missing map image") from None
     if raw[:2] != b"P5":
         what = raw[:2].decode("latin-1") if raw else "an empty file"
         raise RecordedDataError(p, f"bad PGM header: magic is {what!r}, expected 'P5' (binary greymap)", 1)
@@ -276,7 +275,7 @@ def _read_other_image(
             path, "not a PGM image, and Pillow (needed for other image types) is not installed: pip install pillow"
         ) from None
     if not path.is_file():
-        raise MissingDataFile(path, "missing map image")
+        raise RecordedDataError(path, "missing map image")
     try:
         with Image.open(path) as im:
             width, height = im.size
@@ -343,7 +342,7 @@ def load_map_server_map(yaml_path: str | os.PathLike[str], max_cells: int = MAX_
     if not img_path.is_absolute():
         img_path = path.parent / img_path
     if not img_path.is_file():
-        raise MissingDataFile(
+        raise RecordedDataError(
             img_path, f"map image not found (field 'image' = {image!r} at {path}:{lines.get('image', '?')})"
         )
     transparent: npt.NDArray[np.bool_] | None = None
