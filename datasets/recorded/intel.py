@@ -653,6 +653,8 @@ def _assemble(
         metadata=metadata,
         relations=relations,
         truth_label="SLAM reference",
+        sources=(str(clf_path), str(gfs_path), str(rel_path)),
+        declared=frozenset({LaserScan}),
     )
 
 

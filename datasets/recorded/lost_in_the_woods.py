@@ -514,6 +514,8 @@ def load_lost_in_the_woods(
         name=dataset_id,
         metadata=metadata,
         truth_label="ground truth",
+        sources=(str(data.path),),
+        declared=frozenset({LandmarkObservations}),
     )
 
 

@@ -602,8 +602,10 @@ def parse_robot_run(paths: dict[str, Path]) -> RobotRun:
     return RobotRun(truth, events, lms, robots, unknown, world)
 
 
-def dataset_from_run(run: RobotRun, *, waypoint_spacing_m: float, metadata: dict[str, Any]) -> Dataset:
-    """Assemble the :class:`Dataset` of one parsed robot run (see the module docstring)."""
+def dataset_from_run(
+    run: RobotRun, *, waypoint_spacing_m: float, metadata: dict[str, Any], sources: Sequence[str] = ()
+) -> Dataset:
+    """Assemble the :class:`Dataset` of one parsed robot run (see the module docstring); ``sources`` are its files."""
     if not (math.isfinite(waypoint_spacing_m) and waypoint_spacing_m > 0):
         raise ConfigError(f"waypoint_spacing_m must be a distance > 0 m, got {waypoint_spacing_m}")
     truth = run.truth
@@ -636,6 +638,8 @@ def dataset_from_run(run: RobotRun, *, waypoint_spacing_m: float, metadata: dict
         sensors=nominal_sensors(),
         waypoints=waypoints_by_distance(truth, waypoint_spacing_m),
         metadata=meta,
+        sources=tuple(sources),
+        declared=frozenset({LandmarkObservations}),
     )
 
 
@@ -680,7 +684,9 @@ def load_mrclam(
     _verify_folder(paths, dataset if verify else None)
     run = parse_robot_run(paths)
     meta = {"dataset": dataset, "robot": robot, "folder": str(Path(folder)), "verified": verify and dataset == 6}
-    return dataset_from_run(run, waypoint_spacing_m=waypoint_spacing_m, metadata=meta)
+    return dataset_from_run(
+        run, waypoint_spacing_m=waypoint_spacing_m, metadata=meta, sources=[str(p) for p in paths.values()]
+    )
 
 
 def read_robot_sightings(folder: str | os.PathLike[str], robot: int) -> Sightings:
@@ -892,7 +898,9 @@ class MrclamDataset(RecordedDataset):
             "files": {k: str(v) for k, v in paths.items()},
             "verified": params.dataset in KNOWN_SHA256,
         }
-        return dataset_from_run(run, waypoint_spacing_m=params.waypoint_spacing_m, metadata=meta)
+        return dataset_from_run(
+            run, waypoint_spacing_m=params.waypoint_spacing_m, metadata=meta, sources=[str(p) for p in paths.values()]
+        )
 
     def fetch(self, params: Any) -> list[str]:
         """Download the official zip with pooch (unverified: its hash is unknown), unpack it into the cache and

@@ -452,6 +452,8 @@ def load_plaza(
         sensors=sensors,
         metadata=metadata,
         truth_label="ground truth",
+        sources=(str(arrays.path),),
+        declared=frozenset({RangeObservations}),
     )
 
 

@@ -556,6 +556,8 @@ def build_rosbag_dataset(params: RosbagParams) -> Dataset:
             "map": params.map,
         },
         truth_label=params.truth_label,
+        sources=(str(bag),) + ((params.map,) if params.map else ()),
+        declared=frozenset({LaserScan}) if params.scan_topic and streams.scans else frozenset(),
     )
     check_dataset_contract(ds)
     return ds
