@@ -66,7 +66,7 @@ class LineBuilder(DatasetBuilder):
 @dataclass(frozen=True, kw_only=True)
 class BadConfig(FilterConfig):
     fail_at_s: float = 1.0
-    mode: str = "raise"  # raise, nan, diverge
+    mode: str = "raise"  # raise, nan, diverge, far (a finite but absurd 1e300 m)
 
 
 class BadFilter(Filter):
@@ -88,6 +88,9 @@ class BadFilter(Filter):
                 raise RuntimeError("boom")
             if mode == "diverge":
                 raise FilterDiverged("covariance exploded")
+            if mode == "far":
+                self._x[:2] = -1.0e300
+                return
             self._x[:] = np.nan
 
     def update(self, z: Any) -> None:
