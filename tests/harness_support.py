@@ -29,6 +29,7 @@ from locbench.filters.base import Estimate, Filter, FilterConfig
 class LineParams:
     steps: int = 50
     noise_m: float = 0.0
+    label: str = ""  # free text, only in the name (long and non-ASCII names for the store and export tests)
 
 
 class LineBuilder(DatasetBuilder):

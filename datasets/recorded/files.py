@@ -388,10 +388,10 @@ def read_table(
     except FileNotFoundError:
         raise MissingDataFile(p, "missing file") from None
     try:
-        text = raw.decode("ascii")
+        text = raw.decode("utf-8")  # comments may be any text (a TUM header names a run); numbers are ASCII
     except UnicodeDecodeError as exc:
         bad_line = raw[: exc.start].count(b"\n") + 1
-        what = f"non-ASCII byte {raw[exc.start]:#04x} (expected a numeric text table)"
+        what = f"byte {raw[exc.start]:#04x} is not UTF-8 text (expected a numeric text table)"
         raise RecordedDataError(p, what, bad_line) from None
     ncol = len(columns)
     lines = text.split("\n")
@@ -420,6 +420,8 @@ def read_table(
         values = []
         for j, f in enumerate(fields):
             try:
+                if not f.isascii():  # float() would take other scripts' digits
+                    raise ValueError(f)
                 v = float(f)
             except ValueError:
                 raise RecordedDataError(
