@@ -44,6 +44,7 @@ from __future__ import annotations
 import math
 import os
 import tempfile
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Literal
@@ -277,7 +278,11 @@ def _read_other_image(
     if not path.is_file():
         raise RecordedDataError(path, "missing map image")
     try:
-        with Image.open(path) as im:
+        with warnings.catch_warnings():
+            # Pillow's guard warns between MAX_IMAGE_PIXELS and twice that: refuse there too, not just warn
+            warnings.simplefilter("error", Image.DecompressionBombWarning)
+            im = Image.open(path)
+        with im:
             width, height = im.size
             check_cells(path, height, width, max_cells, "the map's max_cells limits the image's pixels")
             im.load()
