@@ -451,7 +451,7 @@ def test_mrclam_vicon_rate_is_about_65_hz_not_100() -> None:
     if reason is not None:
         pytest.skip(reason)
     paths = MrclamDataset().paths(MrclamParams(robot=1))
-    gt = read_groundtruth(next(p for rel, p in paths.items() if rel.endswith("Groundtruth.dat")))
+    gt = read_groundtruth(next(p for rel, p in paths.items() if rel.endswith("Robot1_Groundtruth.dat")))
     dt = np.diff(gt.t)
     assert np.median(dt) == pytest.approx(0.016, abs=0.0005)  # the docstring's "median interval 16.0 ms"
     assert 60.0 < len(gt) / (gt.t[-1] - gt.t[0]) < 70.0  # "63-69 samples/s per robot"
