@@ -5,6 +5,7 @@ nox -s lint         ruff and mypy
 nox -s bench        run every experiment and write results/summary (posargs go to 'locbench run')
 nox -s report       regenerate results/summary from the stored runs, no re-run
 nox -s perf         pytest-benchmark micro-benchmarks of each filter's predict and update
+nox -s fuzz         the loader fuzzing with the long hypothesis profile (posargs go to pytest)
 """
 
 from __future__ import annotations
@@ -88,3 +89,11 @@ def perf(session: nox.Session) -> None:
         "--benchmark-sort=name",
         *session.posargs,
     )
+
+
+@nox.session(python=PYTHON, default=False)
+def fuzz(session: nox.Session) -> None:
+    """Fuzz every recorded-data loader with the long hypothesis profile (the tests session runs the short one)."""
+    _install(session, "all,test")
+    args = session.posargs or ["--hypothesis-profile=fuzz", "--hypothesis-show-statistics"]
+    session.run("pytest", "--benchmark-disable", "-p", "no:cacheprovider", "tests/test_fuzz_loaders.py", *args)

@@ -14,7 +14,7 @@ from typing import Any, ClassVar
 import numpy as np
 import numpy.typing as npt
 
-from locbench.errors import ConfigError
+from locbench.errors import ConfigError, one_line
 from locbench.events import (
     EVENT_TYPES,
     Event,
@@ -352,9 +352,25 @@ class Dataset:
         check_dataset_contract(self)
 
 
+def _sources(paths: tuple[str, ...]) -> str:
+    """The files as ``folder/{a, b}`` when they share a folder, else listed."""
+    parents = {p.rsplit("/", 1)[0] for p in paths if "/" in p}
+    if len(parents) == 1 and all("/" in p for p in paths):
+        return f"{parents.pop()}/{{{', '.join(p.rsplit('/', 1)[1] for p in paths)}}}"
+    return ", ".join(paths)
+
+
 def check_dataset_contract(ds: Dataset) -> None:
-    """Raise ``ConfigError`` naming the first field of ``ds`` that breaks the dataset contract."""
-    where = f"dataset {ds.name or ds.id!r}" + (f" (from {', '.join(ds.sources)})" if ds.sources else "")
+    """Raise ``ConfigError`` naming the first field of ``ds`` that breaks the dataset contract (and, for recorded
+    data, its files), in one line of bounded length."""
+    try:
+        _check_contract(ds)
+    except ConfigError as exc:
+        raise ConfigError(one_line(str(exc))) from None
+
+
+def _check_contract(ds: Dataset) -> None:
+    where = f"dataset {ds.name or ds.id!r}" + (f" (from {_sources(ds.sources)})" if ds.sources else "")
     if not ds.events:
         raise ConfigError(f"{where}: no events")
     keys = [event_order(e) for e in ds.events]

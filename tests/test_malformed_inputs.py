@@ -23,13 +23,13 @@ from test_recorded_mrclam import _small_folder
 from test_recorded_plaza import _tiny
 
 from locbench.datasets.base import OccupancyGrid
-from locbench.datasets.recorded.files import MAX_MESSAGE_CHARS, RecordedDataError
+from locbench.datasets.recorded.files import RecordedDataError
 from locbench.datasets.recorded.intel import IntelParams, load_intel
 from locbench.datasets.recorded.lost_in_the_woods import load_lost_in_the_woods
 from locbench.datasets.recorded.mrclam import MrclamParams, load_mrclam
 from locbench.datasets.recorded.plaza import load_plaza
 from locbench.datasets.recorded.ros_map import load_map_server_map, save_map_server_map
-from locbench.errors import ConfigError, DataNotFound
+from locbench.errors import MAX_MESSAGE_CHARS, ConfigError, DataNotFound
 
 
 def clean(info: pytest.ExceptionInfo[BaseException], path: Path | str, *words: str) -> str:

@@ -12,8 +12,8 @@ was edited or truncated after it was published is reported as a checksum mismatc
 
 Errors are :class:`RecordedDataError` (a :class:`~locbench.errors.ConfigError`): the message names the
 file, the line (1-based, counting every line of the file) or the variable and index where there is one, the
-field, what was found and what was expected, on one line of at most :data:`MAX_MESSAGE_CHARS` characters (a
-quoted value is cut by :func:`quote`).
+field, what was found and what was expected, on one line of at most
+:data:`~locbench.errors.MAX_MESSAGE_CHARS` characters (a quoted value is cut by :func:`quote`).
 
 The shared checks of every loader live here: :func:`read_table` (text tables: field count, numbers, integers,
 finiteness, a last record cut inside a field), :meth:`Table.check_range` and :meth:`Table.check_time_increasing`
@@ -36,12 +36,10 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from locbench.errors import ConfigError, DataNotFound, DependencyNotInstalled
+from locbench.errors import ConfigError, DataNotFound, DependencyNotInstalled, one_line
 
 FloatArray = npt.NDArray[np.float64]
 
-#: Longest message of a :class:`RecordedDataError`, characters (the rest is cut with a marker).
-MAX_MESSAGE_CHARS = 1000
 #: Longest quoted value inside a message, characters.
 MAX_QUOTE_CHARS = 200
 #: Largest occupancy grid a loader builds, cells (int32 ray-cast offsets, and 8 bytes a cell: 400 MB).
@@ -62,12 +60,6 @@ def quote(value: Any, limit: int = MAX_QUOTE_CHARS) -> str:
     if len(text) <= limit:
         return text
     return f"{text[: max(limit - 30, 10)]}... [{len(text)} chars]"
-
-
-def one_line(message: str, limit: int = MAX_MESSAGE_CHARS) -> str:
-    """``message`` with line breaks flattened and cut to ``limit`` characters."""
-    flat = " ".join(message.split())
-    return flat if len(flat) <= limit else flat[: limit - 20] + " ... [cut]"
 
 
 #: Environment variable naming the folder that holds the recorded datasets (SOURCES.md layout).
