@@ -355,7 +355,7 @@ class Dataset:
 def _sources(paths: tuple[str, ...]) -> str:
     """The files as ``folder/{a, b}`` when they share a folder, else listed."""
     parents = {p.rsplit("/", 1)[0] for p in paths if "/" in p}
-    if len(parents) == 1 and all("/" in p for p in paths):
+    if len(paths) > 1 and len(parents) == 1 and all("/" in p for p in paths):
         return f"{parents.pop()}/{{{', '.join(p.rsplit('/', 1)[1] for p in paths)}}}"
     return ", ".join(paths)
 

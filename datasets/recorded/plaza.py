@@ -314,6 +314,8 @@ def estimate_nominal_noise(arrays: PlazaArrays) -> tuple[NominalNoise, float]:
     gt = arrays.GT
     # ranges against the interpolated truth
     td = arrays.TD
+    if td.shape[0] == 0:
+        raise RecordedDataError(arrays.path, "variable 'TD' has no range, expected ranges to estimate their noise from")
     bxy = {int(r[0]): r[1:3] for r in arrays.TL}
     px = np.interp(td[:, 0], gt[:, 0], gt[:, 1])
     py = np.interp(td[:, 0], gt[:, 0], gt[:, 2])
@@ -349,6 +351,12 @@ def estimate_nominal_noise(arrays: PlazaArrays) -> tuple[NominalNoise, float]:
         e_xy2.append(((o[0] - g[0]) ** 2 + (o[1] - g[1]) ** 2) / length)
         e_th2.append(float(wrap_angle((odo_th[i1] - odo_th[i0]) - (tth[i1] - tth[i0]))) ** 2 / length)
         lengths.append(length)
+    if not lengths:
+        raise RecordedDataError(
+            arrays.path,
+            f"variable 'DR': {dr.shape[0]} row(s) travelling {float(dist[-1])!r} m, expected odometry that moves "
+            "(the odometry noise is estimated per metre)",
+        )
     sxy = math.sqrt(float(np.median(e_xy2)) / _CHI2_2_MEDIAN)
     sth = math.sqrt(float(np.median(e_th2)) / _CHI2_1_MEDIAN)
     return NominalNoise(range_sigma, sxy, sth), float(np.median(res))
