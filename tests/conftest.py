@@ -15,6 +15,7 @@ _FUZZ_SETTINGS = {
     "deadline": None,  # the first load of a format compiles numba kernels
     "suppress_health_check": [HealthCheck.too_slow, HealthCheck.data_too_large],
     "derandomize": True,  # CI runs the same examples every time; the fuzz profile explores
+    "database": None,  # no .hypothesis folder in the checkout; a failure prints its reproducing example
 }
 settings.register_profile("ci", max_examples=25, **_FUZZ_SETTINGS)
 settings.register_profile("fuzz", max_examples=1000, **{**_FUZZ_SETTINGS, "derandomize": False})

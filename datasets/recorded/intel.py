@@ -114,6 +114,7 @@ from locbench.datasets.recorded.files import (
     RemoteFile,
     check_cells,
     locate,
+    quote,
     read_table,
 )
 from locbench.errors import ConfigError
@@ -594,7 +595,7 @@ def _assemble(
             f"{float(ot[-1])!r} s), expected odometry during the reference",
         )
     las = clf.flaser
-    offset = float(clf.params.get("robot_frontlaser_offset", "0.0"))
+    offset = _laser_offset(clf_path, clf.params.get("robot_frontlaser_offset", "0.0"))
     ranges = np.where(las.ranges >= NO_RETURN_M, np.inf, las.ranges)
     for k in np.flatnonzero((las.ipc_t >= t0) & (las.ipc_t <= t1)):
         events.append(
@@ -656,6 +657,19 @@ def _assemble(
         sources=(str(clf_path), str(gfs_path), str(rel_path)),
         declared=frozenset({LaserScan}),
     )
+
+
+def _laser_offset(path: Path, text: str) -> float:
+    """The ``PARAM robot_frontlaser_offset`` value, m: a finite number within 10 m of the robot centre."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and abs(value) <= 10.0):
+        raise RecordedDataError(
+            path, f"PARAM robot_frontlaser_offset is {quote(text)}, expected the laser's offset in m (within 10 m)"
+        )
+    return value
 
 
 class IntelDataset(RecordedDataset):
