@@ -554,6 +554,7 @@ def build_rosbag_dataset(params: RosbagParams) -> Dataset:
             "truth_type": streams.truth_type,
             "stamps": params.stamps,
             "map": params.map,
+            "scans_outside_truth_span": len(streams.scans) - len(scans_in),
         },
         truth_label=params.truth_label,
         sources=(str(bag),) + ((params.map,) if params.map else ()),
