@@ -39,6 +39,14 @@ What is read, and how it becomes the dataset:
 Message types are taken from the bag's own definitions (ROS 1 always, ROS 2 from Iron on); older ROS 2 bags
 without definitions are decoded with rosbags' latest standard types. A bag that lacks a requested topic raises an
 error listing the topics it has. Parsed streams are cached per (bag, size, mtime, topics).
+
+Validation: a bag or map path that does not exist is an error (the user typed it; never a "data not found"
+skip); any failure to open or decode the bag is a clean error naming it; header stamps must be set (> 0) and
+non-decreasing per topic; poses finite and within :data:`~locbench.datasets.recorded.files.MAX_POSITION_M`;
+twists finite and within :data:`MAX_TWIST`; each scan needs a non-zero ``angle_increment`` with its beams
+spanning at most 2 pi and 0 <= ``range_min`` < ``range_max`` <= :data:`MAX_SCAN_RANGE_M`. Scans outside the truth
+span are counted in ``metadata["scans_outside_truth_span"]``; when a scan topic is read and has messages, at least
+one scan must fall inside the truth span (the dataset contract's declared stream).
 """
 
 from __future__ import annotations
@@ -256,11 +264,10 @@ def read_bag_streams(
 
     Raises
     ------
-    MissingDataFile
-        The bag is not there.
     RecordedDataError
-        The bag cannot be read, a topic is missing (the message lists the bag's topics) or has the wrong message
-        type, or a topic's time stamps go backwards.
+        The bag is not there (an error, not a skip), cannot be opened or decoded, a topic is missing (the message
+        lists the bag's topics) or has the wrong message type, a stamp is unset (0) or goes backwards, a pose or
+        twist is non-finite or out of bounds, or a scan's geometry is unusable.
     DependencyNotInstalled
         rosbags is not installed.
     """
