@@ -19,8 +19,10 @@ message; a consumer gives it once per log).
 
 Checks (each a :class:`~locbench.datasets.recorded.files.RecordedDataError` naming the file and the
 1-based line): a missing file; a non-ASCII byte; a wrong field count (for FLASER: a count that does not
-match its own ``n``; a last line without its newline is reported as truncated); a non-integer beam
-count; a field that is not a finite number (named by its position and meaning); the time going backwards
+match its own ``n``; a last line without its newline is reported as truncated, even with a full field
+count, since its last field may be cut); a non-integer beam count; a field that is not a finite number
+(named by its position and meaning); a position (ODOM x, y; FLASER pose and odometry pose) beyond
+:data:`~locbench.datasets.recorded.files.MAX_POSITION_M` or a negative range; the time going backwards
 within a message stream by more than ``max_backstep_s`` (default 0: strictly non-decreasing).
 
 Time stamps that go backwards in real logs: in ``intel.clf`` 631 FLASER and 602 ODOM messages carry an

@@ -59,6 +59,13 @@ Bresenham line crosses from the laser cell to it (the inverse sensor model of oc
 S. Thrun, W. Burgard, D. Fox, "Probabilistic Robotics", MIT Press 2005, ch. 9); no-return beams add
 nothing. Cells never crossed are unknown (-1); the others hold p = 1 / (1 + exp(-l)) with ROS thresholds
 (occupied above 0.65, free below 0.196). Default cell 0.05 m. Built once per (file, size, mtime, resolution).
+The grid's size is computed from the scans' extent before anything is allocated and refused above
+``max_grid_cells`` (:data:`~locbench.datasets.recorded.files.MAX_GRID_CELLS`, 4096 x 4096 cells, by default);
+``map_resolution_m`` lies in [:data:`MIN_RESOLUTION_M`, :data:`MAX_RESOLUTION_M`].
+
+Validation beyond the CARMEN parser's: each of ``intel.clf`` and ``intel.gfs.log`` must hold FLASER messages of
+180 beams (the message names the file that does not); ``intel.clf`` needs ODOM messages at more than one time and
+inside the reference's span; ``PARAM robot_frontlaser_offset`` must be a number within 10 m.
 
 Map lines (for ``ekf_lines``): a Hough transform of the occupied cells (1 deg x one cell), taken greedily:
 at the strongest bin, the cells within one cell of its line are fitted by total least squares, the cells
