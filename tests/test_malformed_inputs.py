@@ -468,3 +468,15 @@ def test_make_dataset_runs_the_contract_for_every_dataset(tmp_path: Path) -> Non
     # the runner stores it as a failed build, never as an ok run
     out = run_group("line[steps=0]", ["odometry"], 0, str(tmp_path))
     assert [o.status for o in out] == ["error"] and "no events" in out[0].message
+
+
+def test_map_line_extraction_is_bounded_before_allocation(monkeypatch: pytest.MonkeyPatch) -> None:
+    from locbench.datasets.recorded import intel
+
+    occ = np.zeros((20, 20))
+    occ[5, :] = 1.0  # 20 occupied cells x 180 angles = 3600 votes
+    grid = OccupancyGrid(occ, 0.05)
+    assert len(intel.extract_map_lines(grid)[0]) == 1
+    monkeypatch.setattr(intel, "MAX_HOUGH_VOTES", 3000)
+    with pytest.raises(ConfigError, match=r"map lines: 20 occupied cells x 180 angles = 3600 Hough votes"):
+        intel.extract_map_lines(grid)

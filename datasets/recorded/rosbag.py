@@ -478,7 +478,10 @@ def _map_cached(path: str, size: int, mtime_ns: int, with_lines: bool) -> tuple[
     grid.occupancy.setflags(write=False)
     if not with_lines:
         return grid, None
-    lines, _ = extract_map_lines(grid)
+    try:
+        lines, _ = extract_map_lines(grid)
+    except ConfigError as exc:
+        raise RecordedDataError(path, f"{exc}; give map_lines=false to skip the line map") from None
     lines.segments.setflags(write=False)
     return grid, lines
 
