@@ -6,6 +6,7 @@ nox -s bench        run every experiment and write results/summary (posargs go t
 nox -s report       regenerate results/summary from the stored runs, no re-run
 nox -s html         open results/summary/index.html in headless Chromium (renders, sorts; screenshot)
 nox -s perf         pytest-benchmark micro-benchmarks of each filter's predict and update
+nox -s fuzz         the loader fuzzing with the long hypothesis profile (posargs go to pytest)
 """
 
 from __future__ import annotations
@@ -111,3 +112,11 @@ def perf(session: nox.Session) -> None:
         "--benchmark-sort=name",
         *session.posargs,
     )
+
+
+@nox.session(python=PYTHON, default=False)
+def fuzz(session: nox.Session) -> None:
+    """Fuzz every recorded-data loader with the long hypothesis profile (the tests session runs the short one)."""
+    _install(session, "all,test")
+    args = session.posargs or ["--hypothesis-profile=fuzz", "--hypothesis-show-statistics"]
+    session.run("pytest", "--benchmark-disable", "-p", "no:cacheprovider", "tests/test_fuzz_loaders.py", *args)

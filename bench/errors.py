@@ -32,3 +32,13 @@ class FilterDiverged(LocbenchError):
 
 class DataNotFound(ConfigError):
     """A recorded dataset's files are not on this machine; runs on it are recorded as skipped with this reason."""
+
+
+#: Longest message of an input error, characters (the rest is cut with a marker).
+MAX_MESSAGE_CHARS = 1000
+
+
+def one_line(message: str, limit: int = MAX_MESSAGE_CHARS) -> str:
+    """``message`` with line breaks flattened and cut to ``limit`` characters (input errors stay one short line)."""
+    flat = " ".join(message.split())
+    return flat if len(flat) <= limit else flat[: limit - 20] + " ... [cut]"

@@ -301,9 +301,18 @@ def make_dataset(spec: str | Resolved, seed: int | np.random.Generator = 0) -> A
 
     With an integer ``seed`` the randomness comes from :func:`locbench.seeding.dataset_rng`, exactly as in
     the runner, so ``make_dataset("room", 3)`` is the data every filter saw for seed 3.
+
+    Raises
+    ------
+    ConfigError
+        The built dataset breaks the contract (:meth:`locbench.datasets.base.Dataset.check`: no odometry, events
+        out of order, truth not spanning the events, a declared sensor stream empty ...); the message names the
+        dataset and, for recorded data, its files.
     """
     r = resolve_dataset(spec) if isinstance(spec, str) else spec
     gen = seed if isinstance(seed, np.random.Generator) else dataset_rng(r.name, seed)
     builder = DATASETS.load(r.id)()
     ds = builder.build(r.params, gen)
-    return dataclasses.replace(ds, id=r.id, name=r.name, params=r.params_dict())
+    ds = dataclasses.replace(ds, id=r.id, name=r.name, params=r.params_dict())
+    ds.check()  # every dataset, synthetic or recorded: a broken one is an error naming its files, never a run
+    return ds

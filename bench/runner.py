@@ -23,6 +23,7 @@ import numpy as np
 
 from locbench import provenance
 from locbench.datasets.base import Dataset
+from locbench.divergence import left_world, world_box
 from locbench.errors import DataNotFound, FilterDiverged
 from locbench.events import EVENT_TYPES, Odometry
 from locbench.filters.base import Filter
@@ -100,6 +101,7 @@ def run_filter(flt: Filter, ds: Dataset, rng: np.random.Generator) -> FilterTrac
         row += 1
 
     t0 = ds.events[0].t if ds.events else 0.0
+    box = world_box(ds)
     try:
         flt.reset(ds.initial, ds.world, ds.sensors, rng)
         record(float(min(t0, ds.ground_truth.t[0])), _RESET, 0)
@@ -120,6 +122,8 @@ def run_filter(flt: Filter, ds: Dataset, rng: np.random.Generator) -> FilterTrac
             m, c = mean[row - 1], cov[row - 1]
             if not (np.all(np.isfinite(m)) and np.all(np.isfinite(c))):
                 raise FilterDiverged(f"non-finite estimate at t={ev.t:.3f} s")
+            if not box.contains(m[0], m[1]):
+                raise FilterDiverged(f"{left_world(m, box)} at t={ev.t:.3f} s")
     except FilterDiverged as exc:
         status, message = "diverged", str(exc)
         diverged_t = float(t[row - 1]) if row else float(t0)

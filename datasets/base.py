@@ -14,7 +14,7 @@ from typing import Any, ClassVar
 import numpy as np
 import numpy.typing as npt
 
-from locbench.errors import ConfigError
+from locbench.errors import ConfigError, one_line
 from locbench.events import (
     EVENT_TYPES,
     Event,
@@ -313,6 +313,12 @@ class Dataset:
     truth_label : str
         ``"ground truth"`` for a measured truth (simulator, Vicon, GPS) or ``"SLAM reference"`` when the
         trajectory is another estimator's output (Intel's GMapping poses); the report labels it.
+    sources : tuple of str
+        The files a recorded dataset was read from; contract violations name them.
+    declared : frozenset of type
+        The observation event types the dataset says it provides (a recorded format's sensors); the contract
+        requires at least one event of each, so a stream lost to trimming or a bad file is an error, not a
+        silently sensor-less run.
     """
 
     id: str
@@ -328,6 +334,8 @@ class Dataset:
     metadata: dict[str, Any] = field(default_factory=dict)
     relations: Relations | None = None
     truth_label: str = "ground truth"
+    sources: tuple[str, ...] = ()
+    declared: frozenset[type] = frozenset()
 
     @property
     def duration(self) -> float:
@@ -344,9 +352,25 @@ class Dataset:
         check_dataset_contract(self)
 
 
+def _sources(paths: tuple[str, ...]) -> str:
+    """The files as ``folder/{a, b}`` when they share a folder, else listed."""
+    parents = {p.rsplit("/", 1)[0] for p in paths if "/" in p}
+    if len(paths) > 1 and len(parents) == 1 and all("/" in p for p in paths):
+        return f"{parents.pop()}/{{{', '.join(p.rsplit('/', 1)[1] for p in paths)}}}"
+    return ", ".join(paths)
+
+
 def check_dataset_contract(ds: Dataset) -> None:
-    """Raise ``ConfigError`` naming the first field of ``ds`` that breaks the dataset contract."""
-    where = f"dataset {ds.name or ds.id!r}"
+    """Raise ``ConfigError`` naming the first field of ``ds`` that breaks the dataset contract (and, for recorded
+    data, its files), in one line of bounded length."""
+    try:
+        _check_contract(ds)
+    except ConfigError as exc:
+        raise ConfigError(one_line(str(exc))) from None
+
+
+def _check_contract(ds: Dataset) -> None:
+    where = f"dataset {ds.name or ds.id!r}" + (f" (from {_sources(ds.sources)})" if ds.sources else "")
     if not ds.events:
         raise ConfigError(f"{where}: no events")
     keys = [event_order(e) for e in ds.events]
@@ -380,6 +404,9 @@ def check_dataset_contract(ds: Dataset) -> None:
         raise ConfigError(f"{where}: has laser scans but neither an occupancy grid nor a line map")
     if Odometry not in present:
         raise ConfigError(f"{where}: has no odometry events")
+    missing = sorted(t.__name__ for t in ds.declared - present)
+    if missing:
+        raise ConfigError(f"{where}: no {', '.join(missing)} event, expected the declared sensor streams")
     if PoseFix in present:
         for k, e in enumerate(ds.events):
             if isinstance(e, PoseFix) and e.cov.shape != (e.z.shape[0], e.z.shape[0]):

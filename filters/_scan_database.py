@@ -229,6 +229,10 @@ class ScanDatabase:
         return np.array([self.positions[i, 0], self.positions[i, 1], float(wrap_angle(h * self.heading_step_rad))])
 
 
+#: Largest lattice of recorded positions (each holds 360 / heading_step_deg ranges per bearing).
+MAX_LATTICE_POSITIONS = 200_000
+
+
 def build_database(
     grid: OccupancyGrid,
     step_m: float,
@@ -269,6 +273,13 @@ def build_database(
     rows, cols = grid.shape
     res = grid.resolution
     ox, oy = grid.origin[0], grid.origin[1]
+    # Refuse a lattice too large to hold before allocating it (a huge map or a tiny step): MAX_LATTICE_POSITIONS.
+    n_lattice = ((cols * res) / step_m + 1.0) * ((rows * res) / step_m + 1.0)
+    if not n_lattice <= MAX_LATTICE_POSITIONS:
+        raise ConfigError(
+            f"scan database: a {cols * res:.4g} m x {rows * res:.4g} m map on a {step_m} m lattice has "
+            f"{n_lattice:.4g} positions, expected at most {MAX_LATTICE_POSITIONS} (raise grid_step_m)"
+        )
     # The lattice holds the world points (i * step, j * step) inside the grid: "grid poses" of the world.
     xs = step_m * np.arange(math.ceil(ox / step_m), math.floor((ox + cols * res) / step_m) + 1)
     ys = step_m * np.arange(math.ceil(oy / step_m), math.floor((oy + rows * res) / step_m) + 1)

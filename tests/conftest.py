@@ -5,8 +5,22 @@ from __future__ import annotations
 from collections.abc import Iterator
 
 import pytest
+from hypothesis import HealthCheck, settings
 
 from locbench.registry import DATASETS, FILTERS
+
+# Hypothesis profiles of the loader fuzzing (tests/test_fuzz_loaders.py): "ci" (the default) keeps the module near
+# a minute on 2 cores (100 examples a test, about 15 s measured); "fuzz" (nox -s fuzz, or pytest
+# --hypothesis-profile=fuzz) runs 10 000 a test, random each time (11 min measured on the shared 2 cores).
+_FUZZ_SETTINGS = {
+    "deadline": None,  # the first load of a format compiles numba kernels
+    "suppress_health_check": [HealthCheck.too_slow, HealthCheck.data_too_large],
+    "derandomize": True,  # CI runs the same examples every time; the fuzz profile explores
+    "database": None,  # no .hypothesis folder in the checkout; a failure prints its reproducing example
+}
+settings.register_profile("ci", max_examples=100, **_FUZZ_SETTINGS)
+settings.register_profile("fuzz", max_examples=10_000, **{**_FUZZ_SETTINGS, "derandomize": False})
+settings.load_profile("ci")
 
 
 @pytest.fixture

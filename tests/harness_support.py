@@ -29,6 +29,7 @@ from locbench.filters.base import Estimate, Filter, FilterConfig
 class LineParams:
     steps: int = 50
     noise_m: float = 0.0
+    label: str = ""  # free text, only in the name (long and non-ASCII names for the store and export tests)
 
 
 class LineBuilder(DatasetBuilder):
@@ -66,7 +67,7 @@ class LineBuilder(DatasetBuilder):
 @dataclass(frozen=True, kw_only=True)
 class BadConfig(FilterConfig):
     fail_at_s: float = 1.0
-    mode: str = "raise"  # raise, nan, diverge
+    mode: str = "raise"  # raise, nan, diverge, far (a finite but absurd 1e300 m)
 
 
 class BadFilter(Filter):
@@ -88,6 +89,9 @@ class BadFilter(Filter):
                 raise RuntimeError("boom")
             if mode == "diverge":
                 raise FilterDiverged("covariance exploded")
+            if mode == "far":
+                self._x[:2] = -1.0e300
+                return
             self._x[:] = np.nan
 
     def update(self, z: Any) -> None:

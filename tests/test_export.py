@@ -183,3 +183,18 @@ def test_export_a_whole_results_folder(results: Path, tmp_path: Path) -> None:
     only = export_results(results, tmp_path / "only", filters=["odometry"])
     assert [p.name for p in only] == ["seed-0000.tum", "seed-0000.tum"]
     assert export_results(results, tmp_path / "none", smoothed=True) == []
+
+
+def test_export_long_non_ascii_names(tmp_path: Path, harness_registry: None) -> None:
+    # every name the store accepts can be exported: the TUM comment is UTF-8, the folders are cut and hashed
+    label = "Küche-Straße-東京-" * 30
+    spec = f"line[label={label}]"
+    root = tmp_path / "results"
+    assert [o.status for o in run_group(spec, ["odometry"], 0, str(root))] == ["ok"]
+    written = export_results(root, tmp_path / "tum")
+    assert len(written) == 2
+    for path in written:
+        assert all(len(part.encode()) <= 255 for part in path.parts)
+        text = path.read_text(encoding="utf-8")
+        assert "東京" in text.splitlines()[1]
+        assert read_tum(path).t.size > 0

@@ -263,7 +263,7 @@ def _broken(name: str) -> tuple[dict[str, Any], str, str]:
     if name == "negative range":
         mat["r"] = mat["r"].copy()
         mat["r"][2, 0] = -1.0
-        return mat, "r", "expected a range >= 0"
+        return mat, "r", "at (3, 1) is -1.0, expected in [0.0, 100.0]"
     if name == "zero variance":
         mat["b_var"] = np.array([[0.0]])
         return mat, "b_var", "expected bearing variance in rad^2 > 0"

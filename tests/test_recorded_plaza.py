@@ -184,10 +184,10 @@ def test_tiny_file_events_truth_and_odometry_model(tmp_path: Path) -> None:
         (lambda d: d.pop("TD"), r"variable 'TD': missing variable, expected a real \(n, 4\) matrix \[t s sender_id"),
         (lambda d: d.__setitem__("DR", d["DR"][:, :2]), r"variable 'DR' has shape \(4, 2\).*expected a real \(n, 3\)"),
         (lambda d: d["GT"].__setitem__((2, 1), np.nan), r"variable 'GT': non-finite value nan at \(3, 2\) \(1-based\)"),
-        (lambda d: d["DR"].__setitem__((2, 0), 0.2), r"variable 'DR' row 3: time goes backwards"),
-        (lambda d: d["GT"].__setitem__((1, 0), 1.7), r"variable 'GT' row 3: time goes backwards"),
+        (lambda d: d["DR"].__setitem__((2, 0), 0.2), r"variable 'DR' column 1 \(t s\): time goes backwards at row 3"),
+        (lambda d: d["GT"].__setitem__((1, 0), 1.7), r"variable 'GT' column 1 \(t s\): time goes backwards at row 3"),
         (lambda d: d["TD"].__setitem__((1, 2), 9.0), r"variable 'TD' row 2: beacon_id 9.0 is not in TL"),
-        (lambda d: d["TD"].__setitem__((0, 3), -1.0), r"variable 'TD' row 1: range -1.0 m, expected >= 0"),
+        (lambda d: d["TD"].__setitem__((0, 3), -1.0), r"variable 'TD' column 4 \(range m\) at \(1\) is -1.0"),
         (lambda d: d.__setitem__("TL", np.array([[4.0, 0.0, 5.0], [4.0, 3.0, -2.0]])), r"'TL' column 1 \(id\)"),
     ],
 )

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from locbench.datasets.base import OccupancyGrid
-from locbench.datasets.recorded.files import MissingDataFile, RecordedDataError
+from locbench.datasets.recorded.files import RecordedDataError
 from locbench.datasets.recorded.ros_map import load_map_server_map, read_pgm, save_map_server_map
 from locbench.datasets.synthetic.scenarios import TinyCircleScenario
 from locbench.errors import DataNotFound
@@ -140,7 +140,7 @@ def test_missing_field(tmp_path: Path, field: str) -> None:
     ("line", "bad", "match"),
     [
         (2, "resolution: fine", r"m\.yaml:2: field 'resolution': expected a finite number, got 'fine'"),
-        (2, "resolution: -0.1", r"m\.yaml:2: field 'resolution': expected > 0"),
+        (2, "resolution: -0.1", r"m\.yaml:2: field 'resolution': expected 0.001 to 1.0 m per pixel"),
         (3, "origin: [1.0, 2.0]", r"m\.yaml:3: field 'origin': expected a list \[x, y, yaw\] of 3 numbers"),
         (3, "origin: [1.0, 2.0, 0.3]", r"m\.yaml:3: field 'origin': yaw is 0\.3 rad; expected 0"),
         (4, "negate: maybe", r"m\.yaml:4: field 'negate': expected 0, 1, true or false"),
@@ -168,13 +168,18 @@ def test_malformed_yaml_names_the_line(tmp_path: Path) -> None:
         load_map_server_map(y)
 
 
-def test_missing_files(tmp_path: Path) -> None:
-    with pytest.raises(MissingDataFile, match=r"nowhere\.yaml: missing map YAML file"):
+def test_missing_files_are_errors_not_skips(tmp_path: Path) -> None:
+    # a map is a path the user typed: its absence is an error, never a "data not found" skip (issue 13)
+    with pytest.raises(RecordedDataError, match=r"nowhere\.yaml: missing map YAML file") as info:
         load_map_server_map(tmp_path / "nowhere.yaml")
+    assert not isinstance(info.value, DataNotFound)
     y = _write_map(tmp_path, np.zeros((2, 2)))
     (tmp_path / "m.pgm").unlink()
-    with pytest.raises(DataNotFound, match=r"m\.pgm: map image not found \(field 'image' = 'm\.pgm' at .*m\.yaml:1\)"):
+    with pytest.raises(
+        RecordedDataError, match=r"m\.pgm: map image not found \(field 'image' = 'm\.pgm' at .*m\.yaml:1\)"
+    ) as info:
         load_map_server_map(y)
+    assert not isinstance(info.value, DataNotFound)
 
 
 @pytest.mark.parametrize(

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from locbench.datasets.base import Dataset, WorldMap
-from locbench.datasets.recorded.files import MissingDataFile, RecordedDataError
+from locbench.datasets.recorded.files import RecordedDataError
 from locbench.datasets.recorded.ros_map import save_map_server_map
 from locbench.errors import ConfigError, DataNotFound
 from locbench.events import LaserScan, Odometry
@@ -354,10 +354,13 @@ def test_stamps_going_backwards(folder: Path, synthetic: Dataset) -> None:
 
 
 def test_missing_and_unreadable_bags(tmp_path: Path, folder: Path, bags: Callable[[str], Path]) -> None:
-    with pytest.raises(MissingDataFile, match=r"nothing\.bag: missing bag .*expected a ROS 1 \.bag file"):
+    # a path the user typed is an error, never a "data not found" skip (issue 13)
+    with pytest.raises(RecordedDataError, match=r"nothing\.bag: missing bag .*expected a ROS 1 \.bag file") as info:
         load_rosbag(tmp_path / "nothing.bag")
-    with pytest.raises(DataNotFound, match=r"gone\.yaml: missing map"):
+    assert not isinstance(info.value, DataNotFound)
+    with pytest.raises(RecordedDataError, match=r"gone\.yaml: missing map") as info:
         load_rosbag(bags("ros1"), tmp_path / "gone.yaml")
+    assert not isinstance(info.value, DataNotFound)
     cut = tmp_path / "cut.bag"
     cut.write_bytes(bags("ros1").read_bytes()[:5000])
     with pytest.raises(RecordedDataError, match=r"cut\.bag: unreadable bag"):

@@ -19,8 +19,10 @@ message; a consumer gives it once per log).
 
 Checks (each a :class:`~locbench.datasets.recorded.files.RecordedDataError` naming the file and the
 1-based line): a missing file; a non-ASCII byte; a wrong field count (for FLASER: a count that does not
-match its own ``n``; a last line without its newline is reported as truncated); a non-integer beam
-count; a field that is not a finite number (named by its position and meaning); the time going backwards
+match its own ``n``; a last line without its newline is reported as truncated, even with a full field
+count, since its last field may be cut); a non-integer beam count; a field that is not a finite number
+(named by its position and meaning); a position (ODOM x, y; FLASER pose and odometry pose) beyond
+:data:`~locbench.datasets.recorded.files.MAX_POSITION_M` or a negative range; the time going backwards
 within a message stream by more than ``max_backstep_s`` (default 0: strictly non-decreasing).
 
 Time stamps that go backwards in real logs: in ``intel.clf`` 631 FLASER and 602 ODOM messages carry an
@@ -44,7 +46,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.recorded.files import MissingDataFile, RecordedDataError
+from locbench.datasets.recorded.files import MAX_POSITION_M, MissingDataFile, RecordedDataError, quote
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -214,6 +216,16 @@ def _parse(p: Path) -> CarmenLog:
         raise RecordedDataError(p, f"non-ASCII byte {raw[exc.start]:#04x} (expected a CARMEN text log)", bad) from None
     text_lines = text.split("\n")
     last = len(text_lines) - 1 if not text.endswith("\n") else -1
+    tail = text_lines[-1].split()
+    if last >= 0 and tail and tail[0] in ("ODOM", "FLASER"):
+        expected = 10 if tail[0] == "ODOM" else (int(tail[1]) + 11 if len(tail) > 1 and tail[1].isdigit() else -1)
+        if len(tail) == expected:  # a wrong count is reported below; a full count may hide a field cut short
+            raise RecordedDataError(
+                p,
+                f"truncated line: the last {tail[0]} message has no line end, so its last field may be cut "
+                "(expected a complete message ending in a newline)",
+                last + 1,
+            )
     odom_tok: list[str] = []
     odom_ln: list[int] = []
     las_tok: list[str] = []
@@ -240,7 +252,7 @@ def _parse(p: Path) -> CarmenLog:
                 n = int(parts[1])
             except ValueError:
                 raise RecordedDataError(
-                    p, f"field 2 (n, the number of ranges) is {parts[1]!r}, expected an integer", lineno
+                    p, f"field 2 (n, the number of ranges) is {quote(parts[1])}, expected an integer", lineno
                 ) from None
             if n <= 0:
                 raise RecordedDataError(p, f"field 2 (n, the number of ranges) is {n}, expected > 0", lineno)
@@ -285,7 +297,34 @@ def _parse(p: Path) -> CarmenLog:
         logger_t=_readonly(f[:, nb + 7].copy()),
         lines=_readonly(np.asarray(las_ln, dtype=np.int64)),
     )
+    _check_bounds(p, "ODOM", o[:, 0:2], odom_ln, 1, ("x", "y"), MAX_POSITION_M)
+    _check_bounds(p, "FLASER", f[:, nb : nb + 2], las_ln, nb + 2, ("x", "y"), MAX_POSITION_M)
+    _check_bounds(p, "FLASER", f[:, nb + 3 : nb + 5], las_ln, nb + 5, ("odom_x", "odom_y"), MAX_POSITION_M)
+    _check_bounds(p, "FLASER", f[:, :nb], las_ln, 2, tuple(f"r_{j + 1}" for j in range(nb)), MAX_POSITION_M, lo=0.0)
     return CarmenLog(p, odom, las, params, skipped)
+
+
+def _check_bounds(
+    p: Path,
+    kind: str,
+    block: FloatArray,
+    lines: list[int],
+    first_field: int,
+    names: tuple[str, ...],
+    bound: float,
+    lo: float | None = None,
+) -> None:
+    """Raise at the first value of ``block`` (rows = messages) outside [lo or -bound, bound], naming line and field."""
+    low = -bound if lo is None else lo
+    bad = np.argwhere((block < low) | (block > bound))
+    if bad.size:
+        r, c = (int(i) for i in bad[0])
+        raise RecordedDataError(
+            p,
+            f"{kind} field {first_field + c + 1} ({names[c]}) is {float(block[r, c])!r}, "
+            f"expected in [{low!r}, {bound!r}]",
+            lines[r],
+        )
 
 
 def _count_error(p: Path, lineno: int, is_last: bool, got: int, expected: int, layout: str) -> None:
@@ -318,6 +357,6 @@ def _to_floats(
                 # The field's position on the line: the host (a word) sits before logger_timestamp.
                 pos = c + offset + 1 + (1 if c == ncol - 1 else 0)
                 raise RecordedDataError(
-                    p, f"{kind} field {pos} ({cols[c]}) is {tok!r}, expected a finite number", lineno
+                    p, f"{kind} field {pos} ({cols[c]}) is {quote(tok)}, expected a finite number", lineno
                 )
     raise AssertionError("unreachable: a conversion failed but every field converts")

@@ -11,12 +11,21 @@ A file whose sha256 is known is verified once per (path, size, mtime) in a proce
 was edited or truncated after it was published is reported as a checksum mismatch rather than parsed.
 
 Errors are :class:`RecordedDataError` (a :class:`~locbench.errors.ConfigError`): the message names the
-file, the line (1-based, counting every line of the file) where there is one, and what was expected.
+file, the line (1-based, counting every line of the file) or the variable and index where there is one, the
+field, what was found and what was expected, on one line of at most
+:data:`~locbench.errors.MAX_MESSAGE_CHARS` characters (a quoted value is cut by :func:`quote`).
+
+The shared checks of every loader live here: :func:`read_table` (text tables: field count, numbers, integers,
+finiteness, a last record cut inside a field), :meth:`Table.check_range` and :meth:`Table.check_time_increasing`
+(physical ranges and time order of a column), :func:`mat_numbers` (MAT variables: dtype, finiteness) with
+:func:`check_range` and :func:`check_increasing` for arrays, and the resource bounds :func:`check_cells` (grid
+size in cells before it is allocated) and :func:`check_count` (how many items a value would make).
 """
 
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 import re
 from collections.abc import Callable, Mapping, Sequence
@@ -27,9 +36,32 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from locbench.errors import ConfigError, DataNotFound, DependencyNotInstalled
+from locbench.errors import ConfigError, DataNotFound, DependencyNotInstalled, one_line
 
 FloatArray = npt.NDArray[np.float64]
+
+#: Longest quoted value inside a message, characters.
+MAX_QUOTE_CHARS = 200
+#: Largest occupancy grid a loader builds, cells (4096 x 4096: 134 MB of float64 occupancy; a map read at this size
+#: stays under 1 GB in all, measured in tests/test_fuzz_loaders.py).
+MAX_GRID_CELLS = 1 << 24
+#: Largest count of derived items (waypoints, database poses ...) a single parameter may ask for.
+MAX_DERIVED_ITEMS = 1_000_000
+#: Largest id or count in an integer field of a text table (ids and barcodes are small; 2**31 - 1 keeps int64
+#: casts and dict keys exact).
+MAX_INTEGER_FIELD = 2**31 - 1
+#: Generous bound on any position in a recording, m: no indoor or campus dataset is 1000 km across.
+MAX_POSITION_M = 1.0e6
+
+
+def quote(value: Any, limit: int = MAX_QUOTE_CHARS) -> str:
+    """``repr(value)`` on one line, cut to ``limit`` characters (the cut is marked and says how long it was)."""
+    text = repr(value)
+    text = text.replace("\n", " ").replace("\r", " ")
+    if len(text) <= limit:
+        return text
+    return f"{text[: max(limit - 30, 10)]}... [{len(text)} chars]"
+
 
 #: Environment variable naming the folder that holds the recorded datasets (SOURCES.md layout).
 DATA_ENV = "LOCBENCH_DATA"
@@ -52,7 +84,7 @@ class RecordedDataError(ConfigError):
         self.path = Path(path)
         self.line = line
         where = f"{self.path}:{line}" if line is not None else f"{self.path}"
-        super().__init__(f"{where}: {message}")
+        super().__init__(one_line(f"{where}: {message}"))
 
 
 class MissingDataFile(RecordedDataError, DataNotFound):
@@ -238,6 +270,81 @@ class Table:
             now, before = float(t[k]), float(t[k - 1])
             raise self.fail(k, f"{name} goes backwards: {now!r} after {before!r} (expected non-decreasing)")
 
+    def check_range(self, col: int, name: str, lo: float = -math.inf, hi: float = math.inf) -> None:
+        """Raise at the first row whose ``col`` lies outside [``lo``, ``hi``] (``name`` carries the unit)."""
+        a = self.rows[:, col]
+        bad = np.flatnonzero((a < lo) | (a > hi))
+        if bad.size:
+            k = int(bad[0])
+            raise self.fail(k, f"field {col + 1} ({name}) is {float(a[k])!r}, expected {_interval(lo, hi)}")
+
+    def check_rows(self, name: str, minimum: int) -> None:
+        """Raise unless the table has at least ``minimum`` rows (``name`` says what a row is)."""
+        n = int(self.rows.shape[0])
+        if n < minimum:
+            raise RecordedDataError(self.path, f"{n} {name} row(s), expected at least {minimum}")
+
+
+def _interval(lo: float, hi: float) -> str:
+    if math.isinf(lo):
+        return f"<= {hi!r}"
+    if math.isinf(hi):
+        return f">= {lo!r}"
+    return f"in [{lo!r}, {hi!r}]"
+
+
+def check_range(
+    path: str | os.PathLike[str], name: str, a: npt.ArrayLike, lo: float = -math.inf, hi: float = math.inf
+) -> None:
+    """Raise :class:`RecordedDataError` at the first element of ``a`` outside [``lo``, ``hi``].
+
+    ``name`` names the variable or field (with its unit); the element's 1-based index is given.
+    """
+    arr = np.asarray(a, dtype=np.float64)
+    bad = np.flatnonzero(((arr < lo) | (arr > hi)).ravel())
+    if bad.size:
+        idx = np.unravel_index(int(bad[0]), arr.shape) if arr.ndim else ()
+        where = ", ".join(str(int(i) + 1) for i in idx)
+        value = float(arr[idx]) if arr.ndim else float(arr)
+        raise RecordedDataError(path, f"{name} at ({where}) is {value!r}, expected {_interval(lo, hi)}")
+
+
+def check_increasing(
+    path: str | os.PathLike[str], name: str, t: npt.ArrayLike, *, strict: bool = False, rows: str = "sample"
+) -> None:
+    """Raise at the first element of the 1-D time series ``t`` that goes backwards (or repeats, when ``strict``)."""
+    arr = np.asarray(t, dtype=np.float64)
+    d = np.diff(arr)
+    bad = np.flatnonzero(d <= 0 if strict else d < 0)
+    if bad.size:
+        k = int(bad[0]) + 1
+        expected = "strictly increasing" if strict else "non-decreasing"
+        what = "time repeats" if d[k - 1] == 0 else "time goes backwards"
+        raise RecordedDataError(
+            path,
+            f"{name}: {what} at {rows} {k + 1} (1-based): {float(arr[k])!r} after {float(arr[k - 1])!r}, "
+            f"expected {expected}",
+        )
+
+
+def check_cells(source: str | os.PathLike[str], rows: float, cols: float, limit: int, what: str) -> None:
+    """Refuse a grid of ``rows`` x ``cols`` cells above ``limit`` before anything is allocated.
+
+    ``what`` says which parameter raises the limit; the message names ``source`` (the file or parameter).
+    """
+    cells = float(rows) * float(cols)
+    if not (math.isfinite(cells) and cells <= limit):
+        raise RecordedDataError(
+            source,
+            f"grid of {rows:.4g} x {cols:.4g} = {cells:.4g} cells, expected at most {limit} cells ({what})",
+        )
+
+
+def check_count(source: str | os.PathLike[str], count: float, limit: int, what: str) -> None:
+    """Refuse a derived item count above ``limit`` (waypoints from a spacing, steps from a jump) before allocation."""
+    if not (math.isfinite(count) and count <= limit):
+        raise RecordedDataError(source, f"{what}: {count:.4g} items, expected at most {limit}")
+
 
 _SPLIT = re.compile(r"[ \t,]+")
 
@@ -274,14 +381,23 @@ def read_table(
     except FileNotFoundError:
         raise MissingDataFile(p, "missing file") from None
     try:
-        text = raw.decode("ascii")
+        text = raw.decode("utf-8")  # comments may be any text (a TUM header names a run); numbers are ASCII
     except UnicodeDecodeError as exc:
         bad_line = raw[: exc.start].count(b"\n") + 1
-        what = f"non-ASCII byte {raw[exc.start]:#04x} (expected a numeric text table)"
+        what = f"byte {raw[exc.start]:#04x} is not UTF-8 text (expected a numeric text table)"
         raise RecordedDataError(p, what, bad_line) from None
     ncol = len(columns)
     lines = text.split("\n")
     ends_with_newline = text.endswith("\n")
+    tail = lines[-1].strip()
+    if not ends_with_newline and tail and not tail.startswith(comment) and len(_SPLIT.split(tail)) == ncol:
+        # A record cut inside its last field still parses (12.345 -> 12.3): refuse any last line without its end.
+        raise RecordedDataError(
+            p,
+            f"truncated line: the last line {quote(tail)} has no line end, so its last field may be cut (expected a "
+            f"complete record of {ncol} fields ending in a newline)",
+            len(lines),
+        )
     rows: list[list[float]] = []
     numbers: list[int] = []
     for k, line in enumerate(lines):
@@ -297,20 +413,30 @@ def read_table(
         values = []
         for j, f in enumerate(fields):
             try:
+                if not f.isascii():  # float() would take other scripts' digits
+                    raise ValueError(f)
                 v = float(f)
             except ValueError:
                 raise RecordedDataError(
-                    p, f"field {j + 1} ({columns[j]}) is {f!r}, expected a number", lineno
+                    p, f"field {j + 1} ({columns[j]}) is {quote(f)}, expected a number", lineno
                 ) from None
-            if j in integer_columns and v != int(v):
-                raise RecordedDataError(p, f"field {j + 1} ({columns[j]}) is {f!r}, expected an integer", lineno)
+            if not math.isfinite(v):
+                raise RecordedDataError(
+                    p,
+                    f"field {j + 1} ({columns[j]}) is {quote(f)}, a non-finite value (expected a finite number)",
+                    lineno,
+                )
+            if j in integer_columns and (v != math.floor(v) or abs(v) > MAX_INTEGER_FIELD):
+                raise RecordedDataError(
+                    p,
+                    f"field {j + 1} ({columns[j]}) is {quote(f)}, expected an integer of magnitude at most "
+                    f"{MAX_INTEGER_FIELD}",
+                    lineno,
+                )
             values.append(v)
         rows.append(values)
         numbers.append(lineno)
     arr = np.array(rows, dtype=np.float64).reshape(-1, ncol)
-    if not np.all(np.isfinite(arr)):
-        r = int(np.flatnonzero(~np.all(np.isfinite(arr), axis=1))[0])
-        raise RecordedDataError(p, "non-finite value (expected finite numbers)", numbers[r])
     return Table(p, arr, np.array(numbers, dtype=np.int64))
 
 
@@ -328,19 +454,48 @@ def load_mat(path: str | os.PathLike[str], what: str = "MATLAB file") -> dict[st
     return mat
 
 
-def mat_numbers(path: str | os.PathLike[str], mat: Mapping[str, Any], name: str, expected: str) -> FloatArray:
+#: ``numpy.dtype.kind`` codes and their names, for :func:`mat_numbers` messages.
+_KIND_NAMES = {"f": "float", "i": "signed integer", "u": "unsigned integer", "b": "logical"}
+
+
+def mat_numbers(
+    path: str | os.PathLike[str], mat: Mapping[str, Any], name: str, expected: str, *, kinds: str = "f"
+) -> FloatArray:
     """Variable ``name`` of a loaded MATLAB file (``scipy.io.loadmat``'s dict) as float64.
 
-    Raises :class:`RecordedDataError` naming the file, the variable and ``expected`` (what the caller wants,
-    in words) when the variable is missing, is not real numbers (text, a struct, complex) or holds a
-    non-finite value (its 1-based index is given). The shape is the caller's to check.
+    Parameters
+    ----------
+    path : path-like
+        The file (for messages).
+    mat : mapping
+        ``scipy.io.loadmat``'s dict.
+    name : str
+        The variable.
+    expected : str
+        What the caller wants, in words (units, shape).
+    kinds : str
+        The ``numpy.dtype.kind`` codes the format allows: ``"f"`` (float, the default: an integer or logical
+        array where the format stores doubles means the file was written wrongly, and an int32 distance is
+        already truncated), ``"fiu"`` for counts and ids, ``"fiub"`` for 0/1 flags.
+
+    Raises
+    ------
+    RecordedDataError
+        Naming the file, the variable and ``expected``: the variable is missing, is not numbers of an allowed
+        dtype (text, a struct, complex, an integer where floats are expected) or holds a non-finite value (its
+        1-based index is given). The shape is the caller's to check.
     """
     if name not in mat:
         have = sorted(k for k in mat if not k.startswith("__"))
-        raise RecordedDataError(path, f"variable {name!r}: missing variable, expected {expected} (the file has {have})")
+        raise RecordedDataError(
+            path, f"variable {name!r}: missing variable, expected {expected} (the file has {quote(have)})"
+        )
     raw = np.asarray(mat[name])
-    if raw.dtype.kind not in "biuf":
-        raise RecordedDataError(path, f"variable {name!r}: {raw.dtype} array, expected {expected} of real numbers")
+    if raw.dtype.kind not in kinds:
+        allowed = " or ".join(_KIND_NAMES[k] for k in kinds)
+        raise RecordedDataError(
+            path, f"variable {name!r}: {raw.dtype} array, expected {expected} of real numbers (stored as {allowed})"
+        )
     arr = raw.astype(np.float64)
     bad = np.flatnonzero(~np.isfinite(arr.ravel()))
     if bad.size:

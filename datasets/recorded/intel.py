@@ -59,6 +59,13 @@ Bresenham line crosses from the laser cell to it (the inverse sensor model of oc
 S. Thrun, W. Burgard, D. Fox, "Probabilistic Robotics", MIT Press 2005, ch. 9); no-return beams add
 nothing. Cells never crossed are unknown (-1); the others hold p = 1 / (1 + exp(-l)) with ROS thresholds
 (occupied above 0.65, free below 0.196). Default cell 0.05 m. Built once per (file, size, mtime, resolution).
+The grid's size is computed from the scans' extent before anything is allocated and refused above
+``max_grid_cells`` (:data:`~locbench.datasets.recorded.files.MAX_GRID_CELLS`, 4096 x 4096 cells, by default);
+``map_resolution_m`` lies in [:data:`MIN_RESOLUTION_M`, :data:`MAX_RESOLUTION_M`].
+
+Validation beyond the CARMEN parser's: each of ``intel.clf`` and ``intel.gfs.log`` must hold FLASER messages of
+180 beams (the message names the file that does not); ``intel.clf`` needs ODOM messages at more than one time and
+inside the reference's span; ``PARAM robot_frontlaser_offset`` must be a number within 10 m.
 
 Map lines (for ``ekf_lines``): a Hough transform of the occupied cells (1 deg x one cell), taken greedily:
 at the strongest bin, the cells within one cell of its line are fitted by total least squares, the cells
@@ -108,7 +115,15 @@ from locbench.datasets.base import (
 )
 from locbench.datasets.recorded.base import RecordedDataset
 from locbench.datasets.recorded.carmen import CarmenLog, read_carmen
-from locbench.datasets.recorded.files import RecordedDataError, RemoteFile, locate, read_table
+from locbench.datasets.recorded.files import (
+    MAX_GRID_CELLS,
+    RecordedDataError,
+    RemoteFile,
+    check_cells,
+    locate,
+    quote,
+    read_table,
+)
 from locbench.errors import ConfigError
 from locbench.events import Event, LaserScan, Odometry
 from locbench.geometry import between, wrap_angle
@@ -140,6 +155,13 @@ RELATIONS = RemoteFile(
 
 #: CARMEN's no-return reading of this log's SICK laser, m.
 NO_RETURN_M = 81.83
+#: Largest Hough vote count of :func:`extract_map_lines` (occupied cells x angles; 24 bytes each: 432 MB). The Intel
+#: map has 14455 occupied cells (2.6 M votes at 1 deg).
+MAX_HOUGH_VOTES = 18_000_000
+#: Bounds of ``map_resolution_m``, m: below 1 mm a cell is finer than the laser by two orders, above 10 m there is
+#: no map.
+MIN_RESOLUTION_M = 0.001
+MAX_RESOLUTION_M = 10.0
 #: Beam geometry of the Intel FLASER messages: 180 beams, first at -90 deg, 1 deg apart.
 ANGLE_MIN_RAD = -math.pi / 2
 ANGLE_INCREMENT_RAD = math.pi / 180
@@ -164,11 +186,24 @@ class IntelParams:
     root : str
         Folder that holds ``freiburg_slam_benchmark/`` (empty: ``$LOCBENCH_DATA``, then the download cache).
     map_resolution_m : float
-        Cell side of the occupancy grid built from the reference, m.
+        Cell side of the occupancy grid built from the reference, m, in [MIN_RESOLUTION_M, MAX_RESOLUTION_M].
+    max_grid_cells : int
+        Largest occupancy grid built, cells (:data:`~locbench.datasets.recorded.files.MAX_GRID_CELLS` by default;
+        the Intel map at 0.05 m is about 0.3 M cells); raise it for a finer grid.
     """
 
     root: str = ""
     map_resolution_m: float = 0.05
+    max_grid_cells: int = MAX_GRID_CELLS
+
+    def __post_init__(self) -> None:
+        if not MIN_RESOLUTION_M <= self.map_resolution_m <= MAX_RESOLUTION_M:
+            raise ConfigError(
+                f"parameter 'map_resolution_m' must be a cell side in [{MIN_RESOLUTION_M}, {MAX_RESOLUTION_M}] m, "
+                f"got {self.map_resolution_m!r}"
+            )
+        if self.max_grid_cells < 1:
+            raise ConfigError(f"parameter 'max_grid_cells' must be >= 1, got {self.max_grid_cells!r}")
 
 
 # --- occupancy grid --------------------------------------------------------------------------------------
@@ -213,6 +248,9 @@ def build_occupancy_grid(
     resolution_m: float,
     max_range_m: float = NO_RETURN_M,
     margin_m: float = 1.0,
+    *,
+    max_cells: int = MAX_GRID_CELLS,
+    source: str | os.PathLike[str] = "occupancy grid",
 ) -> OccupancyGrid:
     """Occupancy grid of scans taken at known poses, by log-odds ray casting (see the module docstring).
 
@@ -230,6 +268,10 @@ def build_occupancy_grid(
         No-return reading, m.
     margin_m : float
         Unknown border around the scans' extent, m.
+    max_cells : int
+        Largest grid built, cells; a larger one is refused before it is allocated.
+    source : path-like
+        What the scans came from, for the message.
 
     Returns
     -------
@@ -247,6 +289,15 @@ def build_occupancy_grid(
     ey = (P[:, 1:2] + R * np.sin(bearing))[hit]
     sx = np.broadcast_to(P[:, 0:1], R.shape)[hit]
     sy = np.broadcast_to(P[:, 1:2], R.shape)[hit]
+    span_x = max(ex.max(initial=-np.inf), P[:, 0].max()) - min(ex.min(initial=np.inf), P[:, 0].min())
+    span_y = max(ey.max(initial=-np.inf), P[:, 1].max()) - min(ey.min(initial=np.inf), P[:, 1].min())
+    check_cells(
+        source,
+        (span_y + 2 * margin_m) / resolution_m + 1,
+        (span_x + 2 * margin_m) / resolution_m + 1,
+        max_cells,
+        f"at {resolution_m!r} m per cell; raise max_grid_cells or map_resolution_m",
+    )
     x_lo = math.floor((min(ex.min(initial=np.inf), P[:, 0].min()) - margin_m) / resolution_m) * resolution_m
     y_lo = math.floor((min(ey.min(initial=np.inf), P[:, 1].min()) - margin_m) / resolution_m) * resolution_m
     x_hi = max(ex.max(initial=-np.inf), P[:, 0].max()) + margin_m
@@ -289,6 +340,11 @@ def extract_map_lines(
     angle_step_deg : float
         Angular bin of the Hough accumulator, deg; the distance bin is one cell.
 
+    Raises
+    ------
+    ConfigError
+        More than :data:`MAX_HOUGH_VOTES` votes (occupied cells x angles), before they are allocated.
+
     Returns
     -------
     LineMap
@@ -298,6 +354,14 @@ def extract_map_lines(
         ``segments``, ``total_length_m``.
     """
     res = grid.resolution
+    n_occupied = int(np.count_nonzero(grid.occupied()))
+    n_angles = math.ceil(180.0 / angle_step_deg)
+    if n_occupied * n_angles > MAX_HOUGH_VOTES:
+        # the votes take 24 bytes each (rho, bin, flat index): refuse before allocating them
+        raise ConfigError(
+            f"map lines: {n_occupied} occupied cells x {n_angles} angles = {n_occupied * n_angles} Hough votes, "
+            f"expected at most {MAX_HOUGH_VOTES} (a coarser map, or no line extraction)"
+        )
     cells = np.argwhere(grid.occupied())
     pts = grid.cell_centers(cells)
     n = pts.shape[0]
@@ -452,11 +516,15 @@ def derive_odometry_noise(odom_poses: npt.ArrayLike, ref_poses: npt.ArrayLike) -
 
 
 @functools.lru_cache(maxsize=4)
-def _reference_map(gfs_path: str, size: int, mtime_ns: int, resolution_m: float) -> tuple[OccupancyGrid, LineMap, dict]:
+def _reference_map(
+    gfs_path: str, size: int, mtime_ns: int, resolution_m: float, max_cells: int
+) -> tuple[OccupancyGrid, LineMap, dict]:
     gfs = read_carmen(gfs_path, max_backstep_s=MAX_BACKSTEP_S, time_checked=("FLASER",))
     beams = gfs.flaser.ranges.shape[1]
     angles = ANGLE_MIN_RAD + ANGLE_INCREMENT_RAD * np.arange(beams)
-    grid = build_occupancy_grid(gfs.flaser.pose, gfs.flaser.ranges, angles, resolution_m)
+    grid = build_occupancy_grid(
+        gfs.flaser.pose, gfs.flaser.ranges, angles, resolution_m, max_cells=max_cells, source=gfs_path
+    )
     grid.occupancy.setflags(write=False)
     lines, stats = extract_map_lines(grid)
     lines.segments.setflags(write=False)
@@ -464,18 +532,25 @@ def _reference_map(gfs_path: str, size: int, mtime_ns: int, resolution_m: float)
     return grid, lines, stats
 
 
-def reference_map(gfs_path: str | os.PathLike[str], resolution_m: float = 0.05) -> tuple[OccupancyGrid, LineMap, dict]:
-    """The occupancy grid and map lines built from a corrected CARMEN log (cached per file and resolution)."""
+def reference_map(
+    gfs_path: str | os.PathLike[str], resolution_m: float = 0.05, max_cells: int = MAX_GRID_CELLS
+) -> tuple[OccupancyGrid, LineMap, dict]:
+    """The occupancy grid and map lines built from a corrected CARMEN log (cached per file and resolution);
+    a grid above ``max_cells`` cells is refused before it is allocated."""
     p = Path(gfs_path)
     st = p.stat()
-    return _reference_map(str(p.resolve()), st.st_size, st.st_mtime_ns, float(resolution_m))
+    return _reference_map(str(p.resolve()), st.st_size, st.st_mtime_ns, float(resolution_m), int(max_cells))
 
 
 # --- the dataset -----------------------------------------------------------------------------------------
 
 
 def load_intel(
-    folder: str | os.PathLike[str] | None = None, *, map_resolution_m: float = 0.05, verify: bool = True
+    folder: str | os.PathLike[str] | None = None,
+    *,
+    map_resolution_m: float = 0.05,
+    verify: bool = True,
+    max_grid_cells: int = MAX_GRID_CELLS,
 ) -> Dataset:
     """The Intel Research Lab dataset from a folder holding ``freiburg_slam_benchmark/`` (see the module docstring).
 
@@ -488,6 +563,8 @@ def load_intel(
         Cell side of the occupancy grid, m.
     verify : bool
         Check each file's sha256 against the published one (a copy that differs raises a checksum mismatch).
+    max_grid_cells : int
+        Largest occupancy grid built, cells.
 
     Raises
     ------
@@ -498,16 +575,26 @@ def load_intel(
     clf_path = locate(CLF, root, verify=verify)
     gfs_path = locate(GFS, root, verify=verify)
     rel_path = locate(RELATIONS, root, verify=verify)
-    return _assemble(clf_path, gfs_path, rel_path, map_resolution_m)
+    return _assemble(clf_path, gfs_path, rel_path, map_resolution_m, max_grid_cells)
 
 
-def _assemble(clf_path: Path, gfs_path: Path, rel_path: Path, map_resolution_m: float) -> Dataset:
+def _assemble(
+    clf_path: Path, gfs_path: Path, rel_path: Path, map_resolution_m: float, max_grid_cells: int = MAX_GRID_CELLS
+) -> Dataset:
     clf = read_carmen(clf_path, max_backstep_s=MAX_BACKSTEP_S)
     gfs = read_carmen(gfs_path, max_backstep_s=MAX_BACKSTEP_S, time_checked=("FLASER",))
-    if clf.flaser.ranges.shape[1] != 180 or gfs.flaser.ranges.shape[1] != 180:
-        raise RecordedDataError(clf_path, f"FLASER has {clf.flaser.ranges.shape[1]} ranges, expected 180 (Intel)")
+    for path, log in ((clf_path, clf), (gfs_path, gfs)):
+        if len(log.flaser) == 0:
+            raise RecordedDataError(path, "no FLASER message, expected 180-beam laser scans (Intel)")
+        if log.flaser.ranges.shape[1] != 180:
+            raise RecordedDataError(path, f"FLASER has {log.flaser.ranges.shape[1]} ranges, expected 180 (Intel)")
     if len(gfs.flaser) < 2:
         raise RecordedDataError(gfs_path, "fewer than 2 FLASER messages (expected the 910 corrected scans)")
+    if len(clf.odom) < 2 or float(np.ptp(clf.odom.ipc_t)) == 0.0:
+        stamp = f" all stamped {float(clf.odom.ipc_t[0])!r}" if len(clf.odom) else ""
+        raise RecordedDataError(
+            clf_path, f"{len(clf.odom)} ODOM message(s){stamp}, expected odometry at increasing times"
+        )
     match = match_reference(clf, gfs)
     ref_t_unsorted = clf.flaser.ipc_t[match]
     order = np.argsort(ref_t_unsorted, kind="stable")
@@ -524,8 +611,14 @@ def _assemble(clf_path: Path, gfs_path: Path, rel_path: Path, map_resolution_m: 
     inc = between(op[:-1], op[1:])
     for k in np.flatnonzero((ot[1:] >= t0) & (ot[1:] <= t1)):
         events.append(Odometry(float(ot[k + 1]), float(inc[k, 0]), float(inc[k, 1]), float(inc[k, 2])))
+    if not events:
+        raise RecordedDataError(
+            clf_path,
+            f"no ODOM message inside the reference span [{t0!r}, {t1!r}] s (ODOM spans {float(ot[0])!r} .. "
+            f"{float(ot[-1])!r} s), expected odometry during the reference",
+        )
     las = clf.flaser
-    offset = float(clf.params.get("robot_frontlaser_offset", "0.0"))
+    offset = _laser_offset(clf_path, clf.params.get("robot_frontlaser_offset", "0.0"))
     ranges = np.where(las.ranges >= NO_RETURN_M, np.inf, las.ranges)
     for k in np.flatnonzero((las.ipc_t >= t0) & (las.ipc_t <= t1)):
         events.append(
@@ -540,7 +633,7 @@ def _assemble(clf_path: Path, gfs_path: Path, rel_path: Path, map_resolution_m: 
             )
         )
 
-    grid, lines, map_stats = reference_map(gfs_path, map_resolution_m)
+    grid, lines, map_stats = reference_map(gfs_path, map_resolution_m, max_grid_cells)
     relations = read_relations(rel_path, las.ipc_t)
     odo_at_ref = np.asarray(las.odom_pose)[match][order]
     sxy, stm, str_ = derive_odometry_noise(odo_at_ref, ref_pose)
@@ -584,7 +677,22 @@ def _assemble(clf_path: Path, gfs_path: Path, rel_path: Path, map_resolution_m: 
         metadata=metadata,
         relations=relations,
         truth_label="SLAM reference",
+        sources=(str(clf_path), str(gfs_path), str(rel_path)),
+        declared=frozenset({LaserScan}),
     )
+
+
+def _laser_offset(path: Path, text: str) -> float:
+    """The ``PARAM robot_frontlaser_offset`` value, m: a finite number within 10 m of the robot centre."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and abs(value) <= 10.0):
+        raise RecordedDataError(
+            path, f"PARAM robot_frontlaser_offset is {quote(text)}, expected the laser's offset in m (within 10 m)"
+        )
+    return value
 
 
 class IntelDataset(RecordedDataset):
@@ -609,7 +717,7 @@ class IntelDataset(RecordedDataset):
 
     def build(self, params: IntelParams, rng: np.random.Generator) -> Dataset:
         """The dataset (the recording does not depend on ``rng``)."""
-        if not params.map_resolution_m > 0:
-            raise ConfigError(f"parameter 'map_resolution_m' must be > 0 m, got {params.map_resolution_m}")
         p = self.paths(params)
-        return _assemble(p[CLF.relpath], p[GFS.relpath], p[RELATIONS.relpath], params.map_resolution_m)
+        return _assemble(
+            p[CLF.relpath], p[GFS.relpath], p[RELATIONS.relpath], params.map_resolution_m, params.max_grid_cells
+        )

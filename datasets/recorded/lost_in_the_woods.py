@@ -30,6 +30,13 @@ variable       shape     meaning
 ``b_var``
 =============  ========  =====================================================================================
 
+Validation: every variable must be a real float array (``true_valid`` may also be integer or logical, holding 0
+or 1) of the shape above with finite values; ``t`` strictly increasing; positions (``l``, ``x_true``,
+``y_true``) within :data:`~locbench.datasets.recorded.files.MAX_POSITION_M`; ``v`` within :data:`MAX_SPEED_MPS`,
+``om`` within :data:`MAX_TURN_RATE_RADPS`, headings and bearings within +-2 pi; ranges in [0,
+:data:`MAX_RANGE_M`]; ``d`` in [0, :data:`MAX_RANGE_M`]; variances > 0. The robot must move and turn (the
+per-metre noise divides by the mean speed and turn rate) and see at least one tube.
+
 Frames and identities
 ---------------------
 World frame = the Vicon frame of ``l`` and of the true poses; robot frame x forward, y left. Landmark ids are
@@ -119,7 +126,16 @@ from locbench.datasets.base import (
     sort_events,
 )
 from locbench.datasets.recorded.base import RecordedDataset
-from locbench.datasets.recorded.files import MissingDataFile, RecordedDataError, RemoteFile, load_mat, mat_numbers
+from locbench.datasets.recorded.files import (
+    MAX_POSITION_M,
+    MissingDataFile,
+    RecordedDataError,
+    RemoteFile,
+    check_increasing,
+    check_range,
+    load_mat,
+    mat_numbers,
+)
 from locbench.errors import ConfigError
 from locbench.events import Event, LandmarkObservations, Odometry
 from locbench.geometry import twist_increment, wrap_angle
@@ -199,9 +215,18 @@ class LostInTheWoodsData:
     b_var: float
 
 
-def _vector(path: Path, mat: dict[str, Any], name: str, n: int | None, what: str) -> FloatArray:
+#: Bounds of the validation (generous: the robot drives below 0.6 m/s among tubes a few metres away).
+MAX_SPEED_MPS = 10.0
+MAX_TURN_RATE_RADPS = 50.0
+MAX_RANGE_M = 100.0
+
+
+def _vector(
+    path: Path, mat: dict[str, Any], name: str, n: int | None, what: str, *, kinds: str = "f", bound: float = math.inf
+) -> FloatArray:
     expected = f"{what}, an N x 1 column" + (f" with N = {n}" if n is not None else "")
-    arr = mat_numbers(path, mat, name, expected)
+    arr = mat_numbers(path, mat, name, expected, kinds=kinds)
+    check_range(path, f"variable {name!r}", arr, -bound, bound)
     if arr.ndim != 2 or 1 not in arr.shape or (n is not None and arr.size != n):
         raise RecordedDataError(path, f"variable {name!r}: shape {arr.shape}, expected {expected}")
     return arr.ravel()
@@ -252,20 +277,18 @@ def _read_cached(path_str: str, size: int, mtime_ns: int) -> LostInTheWoodsData:
     n = t.size
     if n < 2:
         raise RecordedDataError(path, f"variable 't': {n} sample(s), expected at least 2")
-    back = np.flatnonzero(np.diff(t) < 0.0)
-    if back.size:
-        k = int(back[0]) + 1
-        raise RecordedDataError(
-            path,
-            f"variable 't': time goes backwards at sample {k + 1} (1-based): {float(t[k])!r} after {float(t[k - 1])!r} "
-            "(expected non-decreasing)",
-        )
-    v = _vector(path, mat, "v", n, "speed in m/s")
-    om = _vector(path, mat, "om", n, "turn rate in rad/s")
-    x_true = _vector(path, mat, "x_true", n, "true x in m")
-    y_true = _vector(path, mat, "y_true", n, "true y in m")
-    th_true = _vector(path, mat, "th_true", n, "true heading in rad")
-    valid = _vector(path, mat, "true_valid", n, "validity flag 0/1")
+    check_increasing(path, "variable 't'", t, strict=True)
+    v = _vector(path, mat, "v", n, "speed in m/s", bound=MAX_SPEED_MPS)
+    om = _vector(path, mat, "om", n, "turn rate in rad/s", bound=MAX_TURN_RATE_RADPS)
+    x_true = _vector(path, mat, "x_true", n, "true x in m", bound=MAX_POSITION_M)
+    y_true = _vector(path, mat, "y_true", n, "true y in m", bound=MAX_POSITION_M)
+    th_true = _vector(path, mat, "th_true", n, "true heading in rad", bound=2 * math.pi)
+    valid = _vector(path, mat, "true_valid", n, "validity flag 0/1", kinds="fiub")
+    for name, arr, what in (("v", v, "speed"), ("om", om, "turn rate")):
+        if not np.any(arr[:-1] != 0.0):
+            raise RecordedDataError(
+                path, f"variable {name!r}: every {what} is 0, expected a robot that moves (the noise is per metre)"
+            )
     if not np.all((valid == 0.0) | (valid == 1.0)):
         k = int(np.flatnonzero((valid != 0.0) & (valid != 1.0))[0])
         raise RecordedDataError(path, f"variable 'true_valid': {float(valid[k])!r} at sample {k + 1}, expected 0 or 1")
@@ -273,6 +296,7 @@ def _read_cached(path_str: str, size: int, mtime_ns: int) -> LostInTheWoodsData:
     lm = mat_numbers(path, mat, "l", "landmark positions, an L x 2 array (x, y) in m")
     if lm.ndim != 2 or lm.shape[1] != 2 or lm.shape[0] < 1:
         raise RecordedDataError(path, f"variable 'l': shape {lm.shape}, expected an L x 2 array (x, y) in m")
+    check_range(path, "variable 'l'", lm, -MAX_POSITION_M, MAX_POSITION_M)
     n_lm = lm.shape[0]
     meas: dict[str, FloatArray] = {}
     for name, what in (("r", "ranges in m"), ("b", "bearings in rad")):
@@ -282,13 +306,12 @@ def _read_cached(path_str: str, size: int, mtime_ns: int) -> LostInTheWoodsData:
                 path, f"variable {name!r}: shape {arr.shape}, expected {what}, N x L = {n} x {n_lm} (t by l)"
             )
         meas[name] = arr
-    if np.any(meas["r"] < 0.0):
-        k, j = (int(i) for i in np.argwhere(meas["r"] < 0.0)[0])
-        raise RecordedDataError(
-            path,
-            f"variable 'r': {float(meas['r'][k, j])!r} at ({k + 1}, {j + 1}), expected a range >= 0 (0 = not seen)",
-        )
+    check_range(path, "variable 'r' (range in m, 0 = not seen)", meas["r"], 0.0, MAX_RANGE_M)
+    check_range(path, "variable 'b' (bearing in rad)", meas["b"], -2 * math.pi, 2 * math.pi)
+    if not np.any(meas["r"] > 0.0):
+        raise RecordedDataError(path, "variable 'r': no sighting (every range is 0), expected at least one")
     d = _scalar(path, mat, "d", "laser offset in m", positive=False)
+    check_range(path, "variable 'd' (laser offset in m)", d, 0.0, MAX_RANGE_M)
     variances = {
         name: _scalar(path, mat, name, what, positive=True)
         for name, what in (
@@ -491,6 +514,8 @@ def load_lost_in_the_woods(
         name=dataset_id,
         metadata=metadata,
         truth_label="ground truth",
+        sources=(str(data.path),),
+        declared=frozenset({LandmarkObservations}),
     )
 
 

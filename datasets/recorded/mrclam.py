@@ -29,10 +29,22 @@ file                        columns
 ==========================  ==========================================================================
 ``Barcodes.dat``            subject #, barcode #
 ``Landmark_Groundtruth``    subject #, x (m), y (m), x std-dev (m), y std-dev (m)
-``RobotR_Groundtruth.dat``  time (s), x (m), y (m), heading (rad): Vicon, about 100 Hz
+``RobotR_Groundtruth.dat``  time (s), x (m), y (m), heading (rad): Vicon, about 65 Hz (measured on Dataset 6)
 ``RobotR_Odometry.dat``     time (s), forward speed v (m/s), turn rate omega (rad/s): the velocity commands
 ``RobotR_Measurement.dat``  time (s), BARCODE # (despite the header's "Subject #"), range (m), bearing (rad)
 ==========================  ==========================================================================
+
+Rates measured on Dataset 6 (robots 1-5 pooled): the Vicon truth has a median interval of 16.0 ms and 65
+samples/s on average (63-69 per robot), not the 100 Hz sometimes quoted; the odometry a median interval of
+10 ms and 68 samples/s on average.
+
+Validation (besides the table checks of :func:`~locbench.datasets.recorded.files.read_table`: field count,
+numbers, integer ids, finite values, a last line without its line end refused as cut): truth, odometry and
+sighting times must not go backwards (repeated stamps are allowed: they move nothing); positions lie within
+:data:`~locbench.datasets.recorded.files.MAX_POSITION_M`; speeds within :data:`MAX_SPEED_MPS`, turn rates within
+:data:`MAX_TURN_RATE_RADPS`; ranges in [0, :data:`MAX_RANGE_M`]; bearings and headings within +-2 pi; a truth
+jump between two samples above :data:`MAX_TRUTH_STEP_M` is refused; the run needs at least one odometry
+interval with dt > 0 inside the truth span.
 
 Time is Unix seconds (NTP-synchronised between robots and Vicon); it is kept as is (no shift). The world frame is
 the Vicon frame; the robot frame has x forward; bearings are counter-clockwise from x, measured from the robot
@@ -53,7 +65,7 @@ How the dataset is derived
       dx = v dt sin(a) / a,   dy = v dt (1 - cos a) / a,   dtheta = a      (a -> 0: dx = v dt, dy = 0)
 
   (:func:`locbench.geometry.twist_increment`, through ``sinc`` so it is exact and stable at a = 0). The exact
-  arc is chosen over a first-order step because it is what the twist says happened; at 100 Hz the two differ
+  arc is chosen over a first-order step because it is what the twist says happened; at 10 ms steps the two differ
   by far less than the twist's own error. Samples with a repeated time stamp (dt = 0, 10 in Robot 4's file)
   move nothing and give no event.
 * **Observations.** The barcode column maps to a subject through ``Barcodes.dat``. Subjects 6-20 (landmarks)
@@ -73,8 +85,9 @@ How the dataset is derived
 * **Waypoints.** Every ``waypoint_spacing_m`` (default 5 m) of distance travelled along the truth, waypoint j is
   the first Vicon sample at which the travelled distance reaches j * spacing, marked at the truth position
   at that time. The distance is measured along the truth thinned to points at least
-  :data:`PATH_STEP_M` = 5 cm apart, because the raw 100 Hz Vicon jitter (about 1 mm per sample against
-  0.7 mm of travel) inflates the raw path length by 5-10 %.
+  :data:`PATH_STEP_M` = 5 cm apart, because the raw Vicon jitter (about 1 mm per sample against
+  about 1 mm of travel) inflates the raw path length by 5-10 %. The spacing must be at least that step and
+  may make at most :data:`~locbench.datasets.recorded.files.MAX_DERIVED_ITEMS` waypoints.
 
 Nominal noise: how the frozen constants were derived
 ----------------------------------------------------
@@ -134,6 +147,8 @@ from locbench.datasets.base import (
 )
 from locbench.datasets.recorded.base import RecordedDataset
 from locbench.datasets.recorded.files import (
+    MAX_DERIVED_ITEMS,
+    MAX_POSITION_M,
     RecordedDataError,
     RemoteFile,
     Table,
@@ -193,6 +208,12 @@ INITIAL_SIGMA_THETA_RAD = 0.02
 PATH_STEP_M = 0.05
 #: Default distance between waypoints, m.
 WAYPOINT_SPACING_M = 5.0
+#: Bounds of the validation (generous: the robots drive at most 0.6 m/s in a 15 m hall).
+MAX_SPEED_MPS = 10.0
+MAX_TURN_RATE_RADPS = 50.0
+MAX_RANGE_M = 100.0
+#: Largest truth displacement between two consecutive Vicon samples, m (the robots move about 1 cm).
+MAX_TRUTH_STEP_M = 10.0
 
 # --- the nominal noise: frozen output of derive_nominal_noise(Dataset 6, robots 1-5) -----------------------
 #: Window length of the twist comparison, s.
@@ -313,6 +334,8 @@ def read_barcodes(path: str | os.PathLike[str]) -> dict[int, int]:
 def read_landmarks(path: str | os.PathLike[str]) -> Landmarks:
     """The surveyed landmarks of ``Landmark_Groundtruth.dat``: ids = subjects, (x, y) m and their std-dev m."""
     tab = _table(path, _LANDMARK_COLUMNS, (0,))
+    for col in (1, 2):
+        tab.check_range(col, _LANDMARK_COLUMNS[col], -MAX_POSITION_M, MAX_POSITION_M)
     ids = tab.rows[:, 0].astype(np.int64)
     for k in range(ids.shape[0]):
         if ids[k] < FIRST_LANDMARK_SUBJECT:
@@ -332,18 +355,30 @@ def read_landmarks(path: str | os.PathLike[str]) -> Landmarks:
 def read_groundtruth(path: str | os.PathLike[str]) -> Trajectory2D:
     """The Vicon poses of one robot (headings wrapped to (-pi, pi]); time must not go backwards."""
     tab = _table(path, _GT_COLUMNS)
-    if tab.rows.shape[0] < 2:
-        raise RecordedDataError(path, f"{tab.rows.shape[0]} ground-truth rows (expected at least 2)")
+    tab.check_rows("ground-truth", 2)
     tab.check_time_non_decreasing(0, "time [s]")
+    for col in (1, 2):
+        tab.check_range(col, _GT_COLUMNS[col], -MAX_POSITION_M, MAX_POSITION_M)
+    tab.check_range(3, _GT_COLUMNS[3], -2 * math.pi, 2 * math.pi)
+    step = np.hypot(np.diff(tab.rows[:, 1]), np.diff(tab.rows[:, 2]))
+    jump = np.flatnonzero(step > MAX_TRUTH_STEP_M)
+    if jump.size:
+        k = int(jump[0]) + 1
+        raise tab.fail(
+            k,
+            f"the truth jumps {float(step[k - 1]):.4g} m from the previous sample, "
+            f"expected at most {MAX_TRUTH_STEP_M} m",
+        )
     return Trajectory2D(t=tab.rows[:, 0].copy(), xy=tab.rows[:, 1:3].copy(), theta=wrap_angle(tab.rows[:, 3]))
 
 
 def read_odometry(path: str | os.PathLike[str]) -> Table:
     """The velocity commands (t s, v m/s, omega rad/s); time must not go backwards."""
     tab = _table(path, _ODO_COLUMNS)
-    if tab.rows.shape[0] < 2:
-        raise RecordedDataError(path, f"{tab.rows.shape[0]} odometry rows (expected at least 2)")
+    tab.check_rows("odometry", 2)
     tab.check_time_non_decreasing(0, "time [s]")
+    tab.check_range(1, _ODO_COLUMNS[1], -MAX_SPEED_MPS, MAX_SPEED_MPS)
+    tab.check_range(2, _ODO_COLUMNS[2], -MAX_TURN_RATE_RADPS, MAX_TURN_RATE_RADPS)
     return tab
 
 
@@ -351,9 +386,8 @@ def read_measurements(path: str | os.PathLike[str]) -> Table:
     """The camera's barcode sightings (t s, barcode #, range m, bearing rad); time must not go backwards."""
     tab = _table(path, _MEAS_COLUMNS, (1,))
     tab.check_time_non_decreasing(0, "time [s]")
-    bad = np.flatnonzero(tab.rows[:, 2] < 0)
-    if bad.size:
-        raise tab.fail(int(bad[0]), f"range {tab.rows[bad[0], 2]!r} is negative (expected >= 0 m)")
+    tab.check_range(2, _MEAS_COLUMNS[2], 0.0, MAX_RANGE_M)
+    tab.check_range(3, _MEAS_COLUMNS[3], -2 * math.pi, 2 * math.pi)
     return tab
 
 
@@ -458,9 +492,19 @@ def distance_travelled(xy: FloatArray, step_m: float = PATH_STEP_M) -> FloatArra
 
 
 def waypoints_by_distance(truth: Trajectory2D, spacing_m: float, step_m: float = PATH_STEP_M) -> Waypoints:
-    """Waypoint j (from 1) at the first truth sample where the distance travelled reaches j * ``spacing_m``."""
+    """Waypoint j (from 1) at the first truth sample where the distance travelled reaches j * ``spacing_m``.
+
+    Raises :class:`ConfigError` (before allocating) when that would make more than ``MAX_DERIVED_ITEMS``
+    waypoints.
+    """
     s = distance_travelled(truth.xy, step_m)
-    n = int(s[-1] // spacing_m) if s.size else 0
+    count = float(s[-1]) / spacing_m if s.size else 0.0
+    if not (math.isfinite(count) and count <= MAX_DERIVED_ITEMS):
+        raise ConfigError(
+            f"waypoint_spacing_m={spacing_m!r}: {float(s[-1]):.4g} m travelled would make {count:.4g} waypoints, "
+            f"expected at most {MAX_DERIVED_ITEMS} (raise the spacing)"
+        )
+    n = int(count)
     idx = np.searchsorted(s, spacing_m * np.arange(1, n + 1), side="left")
     return Waypoints(t=truth.t[idx].copy(), xy=truth.xy[idx].copy())
 
@@ -538,6 +582,12 @@ def parse_robot_run(paths: dict[str, Path]) -> RobotRun:
         )
     t0 = float(t[inside[0]])
     events = odometry_events(t[inside], v[inside], om[inside])
+    if not events:
+        raise RecordedDataError(
+            paths["odometry"],
+            f"every odometry sample inside the ground truth span [{g0:.3f}, {g1:.3f}] s has the same time {t0!r}, "
+            "expected increasing times (at least one interval with dt > 0)",
+        )
     after = gt.t > t0
     first = interpolate_pose(gt, t0)[0]
     truth = Trajectory2D(
@@ -552,8 +602,10 @@ def parse_robot_run(paths: dict[str, Path]) -> RobotRun:
     return RobotRun(truth, events, lms, robots, unknown, world)
 
 
-def dataset_from_run(run: RobotRun, *, waypoint_spacing_m: float, metadata: dict[str, Any]) -> Dataset:
-    """Assemble the :class:`Dataset` of one parsed robot run (see the module docstring)."""
+def dataset_from_run(
+    run: RobotRun, *, waypoint_spacing_m: float, metadata: dict[str, Any], sources: Sequence[str] = ()
+) -> Dataset:
+    """Assemble the :class:`Dataset` of one parsed robot run (see the module docstring); ``sources`` are its files."""
     if not (math.isfinite(waypoint_spacing_m) and waypoint_spacing_m > 0):
         raise ConfigError(f"waypoint_spacing_m must be a distance > 0 m, got {waypoint_spacing_m}")
     truth = run.truth
@@ -586,6 +638,8 @@ def dataset_from_run(run: RobotRun, *, waypoint_spacing_m: float, metadata: dict
         sensors=nominal_sensors(),
         waypoints=waypoints_by_distance(truth, waypoint_spacing_m),
         metadata=meta,
+        sources=tuple(sources),
+        declared=frozenset({LandmarkObservations}),
     )
 
 
@@ -630,7 +684,9 @@ def load_mrclam(
     _verify_folder(paths, dataset if verify else None)
     run = parse_robot_run(paths)
     meta = {"dataset": dataset, "robot": robot, "folder": str(Path(folder)), "verified": verify and dataset == 6}
-    return dataset_from_run(run, waypoint_spacing_m=waypoint_spacing_m, metadata=meta)
+    return dataset_from_run(
+        run, waypoint_spacing_m=waypoint_spacing_m, metadata=meta, sources=[str(p) for p in paths.values()]
+    )
 
 
 def read_robot_sightings(folder: str | os.PathLike[str], robot: int) -> Sightings:
@@ -805,8 +861,11 @@ class MrclamParams:
 
     def __post_init__(self) -> None:
         _check_numbers(self.dataset, self.robot)
-        if not (math.isfinite(self.waypoint_spacing_m) and self.waypoint_spacing_m > 0):
-            raise ConfigError(f"waypoint_spacing_m must be a distance > 0 m, got {self.waypoint_spacing_m}")
+        if not (math.isfinite(self.waypoint_spacing_m) and self.waypoint_spacing_m >= PATH_STEP_M):
+            raise ConfigError(
+                f"waypoint_spacing_m must be a distance >= {PATH_STEP_M} m (the step of the thinned path), "
+                f"got {self.waypoint_spacing_m}"
+            )
 
 
 class MrclamDataset(RecordedDataset):
@@ -840,7 +899,9 @@ class MrclamDataset(RecordedDataset):
             "files": {k: str(v) for k, v in paths.items()},
             "verified": params.dataset in KNOWN_SHA256,
         }
-        return dataset_from_run(run, waypoint_spacing_m=params.waypoint_spacing_m, metadata=meta)
+        return dataset_from_run(
+            run, waypoint_spacing_m=params.waypoint_spacing_m, metadata=meta, sources=[str(p) for p in paths.values()]
+        )
 
     def fetch(self, params: Any) -> list[str]:
         """Download the official zip with pooch (unverified: its hash is unknown), unpack it into the cache and

@@ -65,9 +65,13 @@ What the dataset is made of, and why
     2 rad over the run, which no zero-mean per-segment noise describes; filters that trust the nominal
     odometry noise on long gaps between ranges will be over-confident there.
 
-Errors: a missing file, a file that is not MATLAB v5, a missing variable, a wrong shape, a non-finite value, time
-going backwards in ``GT``, ``DR`` or ``DRp``, a beacon id in ``TD`` that is not in ``TL``, a negative range and a
-checksum mismatch raise :class:`~locbench.datasets.recorded.files.RecordedDataError` naming the file, the
+Errors: a missing file, a file that is not MATLAB v5, a missing variable, a variable not stored as float (an
+int32 ``DR`` has already lost its centimetres), a wrong shape, a non-finite value, ``GT`` with fewer than 2 rows,
+time not strictly increasing in ``GT``, ``DR`` or ``DRp``, a position beyond
+:data:`~locbench.datasets.recorded.files.MAX_POSITION_M`, a ``DR`` step outside [0, :data:`MAX_STEP_M`] m or a
+turn beyond +-2 pi rad, a beacon id in ``TD`` that is not in ``TL``, a range outside [0, :data:`MAX_RANGE_M`] m
+(also after subtracting ``range_offset_m``), no ``DR`` row inside the ``GT`` span, and a checksum mismatch
+raise :class:`~locbench.datasets.recorded.files.RecordedDataError` naming the file, the
 variable (and row) and what was expected. Parsed files are cached per (path, size, mtime).
 """
 
@@ -95,9 +99,12 @@ from locbench.datasets.base import (
 )
 from locbench.datasets.recorded.base import RecordedDataset
 from locbench.datasets.recorded.files import (
+    MAX_POSITION_M,
     MissingDataFile,
     RecordedDataError,
     RemoteFile,
+    check_increasing,
+    check_range,
     load_mat,
     mat_numbers,
     verify_sha256,
@@ -127,6 +134,9 @@ COLUMNS: dict[str, tuple[str, ...]] = {
 }
 _REQUIRED = ("GT", "DR", "TL", "TD")
 
+#: Bounds of the validation: the largest odometry step between two DR rows (m) and the largest range (m).
+MAX_STEP_M = 100.0
+MAX_RANGE_M = 1000.0
 #: Path length of the chord whose direction is the ground-truth heading, m (half behind, half ahead).
 HEADING_CHORD_M = 2.0
 #: Initial belief standard deviations: position (m) and heading (rad).
@@ -191,14 +201,9 @@ def _variable(path: Path, mat: dict[str, Any], name: str) -> FloatArray:
 
 
 def _check_time(path: Path, name: str, a: FloatArray) -> None:
-    back = np.flatnonzero(np.diff(a[:, 0]) < 0)
-    if back.size:
-        r = int(back[0]) + 1
-        raise RecordedDataError(
-            path,
-            f"variable {name!r} row {r + 1}: time goes backwards ({float(a[r, 0])!r} s after {float(a[r - 1, 0])!r} s; "
-            "expected non-decreasing)",
-        )
+    check_increasing(path, f"variable {name!r} column 1 (t s)", a[:, 0], strict=True, rows="row")
+    if name != "DR":
+        check_range(path, f"variable {name!r} columns 2-3 (x m, y m)", a[:, 1:3], -MAX_POSITION_M, MAX_POSITION_M)
 
 
 @functools.lru_cache(maxsize=8)
@@ -211,6 +216,12 @@ def _read_cached(path: str, size: int, mtime_ns: int) -> PlazaArrays:
         _check_time(p, name, v[name])
     if drp is not None:
         _check_time(p, "DRp", drp)
+    if v["GT"].shape[0] < 2:
+        raise RecordedDataError(p, f"variable 'GT' has {v['GT'].shape[0]} row(s), expected at least 2 truth poses")
+    check_range(p, "variable 'DR' column 2 (d_dist m)", v["DR"][:, 1], 0.0, MAX_STEP_M)
+    check_range(p, "variable 'DR' column 3 (d_heading rad)", v["DR"][:, 2], -2 * math.pi, 2 * math.pi)
+    check_range(p, "variable 'TL' columns 2-3 (x m, y m)", v["TL"][:, 1:3], -MAX_POSITION_M, MAX_POSITION_M)
+    check_range(p, "variable 'TD' column 4 (range m)", v["TD"][:, 3], 0.0, MAX_RANGE_M)
     tl, td = v["TL"], v["TD"]
     ids = tl[:, 0]
     if np.any(ids != np.round(ids)) or len(np.unique(ids)) != len(ids):
@@ -303,6 +314,8 @@ def estimate_nominal_noise(arrays: PlazaArrays) -> tuple[NominalNoise, float]:
     gt = arrays.GT
     # ranges against the interpolated truth
     td = arrays.TD
+    if td.shape[0] == 0:
+        raise RecordedDataError(arrays.path, "variable 'TD' has no range, expected ranges to estimate their noise from")
     bxy = {int(r[0]): r[1:3] for r in arrays.TL}
     px = np.interp(td[:, 0], gt[:, 0], gt[:, 1])
     py = np.interp(td[:, 0], gt[:, 0], gt[:, 2])
@@ -338,6 +351,12 @@ def estimate_nominal_noise(arrays: PlazaArrays) -> tuple[NominalNoise, float]:
         e_xy2.append(((o[0] - g[0]) ** 2 + (o[1] - g[1]) ** 2) / length)
         e_th2.append(float(wrap_angle((odo_th[i1] - odo_th[i0]) - (tth[i1] - tth[i0]))) ** 2 / length)
         lengths.append(length)
+    if not lengths:
+        raise RecordedDataError(
+            arrays.path,
+            f"variable 'DR': {dr.shape[0]} row(s) travelling {float(dist[-1])!r} m, expected odometry that moves "
+            "(the odometry noise is estimated per metre)",
+        )
     sxy = math.sqrt(float(np.median(e_xy2)) / _CHI2_2_MEDIAN)
     sth = math.sqrt(float(np.median(e_th2)) / _CHI2_1_MEDIAN)
     return NominalNoise(range_sigma, sxy, sth), float(np.median(res))
@@ -381,9 +400,22 @@ def load_plaza(
     for (t, *_), (dx, dy, dth) in zip(arrays.DR.tolist(), inc.tolist(), strict=True):
         if t0 <= t <= t1:
             events.append(Odometry(t=t, dx=dx, dy=dy, dtheta=dth))
+    if not any(isinstance(e, Odometry) for e in events):
+        raise RecordedDataError(
+            arrays.path,
+            f"variable 'DR': no row inside the 'GT' span [{t0!r}, {t1!r}] s (DR spans {float(arrays.DR[0, 0])!r} .. "
+            f"{float(arrays.DR[-1, 0])!r} s), expected odometry during the truth",
+        )
     td = arrays.TD
     keep = (td[:, 0] >= t0) & (td[:, 0] <= t1)
     td = td[keep]
+    if np.any(td[:, 3] - range_offset_m < 0.0):
+        r = int(np.flatnonzero(td[:, 3] - range_offset_m < 0.0)[0])
+        raise RecordedDataError(
+            arrays.path,
+            f"range_offset_m={range_offset_m!r} makes the range {float(td[r, 3])!r} m at t = {float(td[r, 0])!r} s "
+            "negative, expected ranges >= 0 after the offset",
+        )
     if td.shape[0]:
         starts = np.flatnonzero(np.concatenate([[True], np.diff(td[:, 0]) > 0]))
         for a, b in zip(starts, np.concatenate([starts[1:], [td.shape[0]]]), strict=True):
@@ -428,6 +460,8 @@ def load_plaza(
         sensors=sensors,
         metadata=metadata,
         truth_label="ground truth",
+        sources=(str(arrays.path),),
+        declared=frozenset({RangeObservations}),
     )
 
 

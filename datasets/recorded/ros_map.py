@@ -29,6 +29,14 @@ our own; any other image type (PNG ...) through Pillow when it is installed, ave
 The YAML is read with ``yaml.safe_load`` semantics (no arbitrary objects); errors are
 :class:`~locbench.datasets.recorded.files.RecordedDataError` naming the file, the line of the field (YAML) or the
 header line / byte count (PGM) and what was expected.
+
+Limits, checked before anything large is allocated: the YAML file is at most :data:`MAX_YAML_BYTES` and may
+hold no alias (``*name``; a map_server file needs none, and nested aliases expand a few hundred bytes into
+gigabytes); ``resolution`` lies in [:data:`MIN_RESOLUTION_M`, :data:`MAX_RESOLUTION_M`] m; ``origin`` within
+:data:`~locbench.datasets.recorded.files.MAX_POSITION_M`; the image has at most ``max_cells`` pixels (default
+:data:`~locbench.datasets.recorded.files.MAX_GRID_CELLS`, read from the PGM header or the image header before
+its pixels are decoded; Pillow's own decompression-bomb guard stays on); and the map spans at most
+:data:`MAX_EXTENT_M` per side.
 """
 
 from __future__ import annotations
@@ -36,6 +44,7 @@ from __future__ import annotations
 import math
 import os
 import tempfile
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Literal
@@ -45,7 +54,13 @@ import numpy.typing as npt
 import yaml
 
 from locbench.datasets.base import OccupancyGrid
-from locbench.datasets.recorded.files import MissingDataFile, RecordedDataError
+from locbench.datasets.recorded.files import (
+    MAX_GRID_CELLS,
+    MAX_POSITION_M,
+    RecordedDataError,
+    check_cells,
+    quote,
+)
 
 FloatArray = npt.NDArray[np.float64]
 MapMode = Literal["trinary", "scale", "raw"]
@@ -55,6 +70,13 @@ MAP_MODES: tuple[str, ...] = ("trinary", "scale", "raw")
 _PIX_OCCUPIED, _PIX_FREE, _PIX_UNKNOWN = 0, 254, 205
 #: Raw-mode pixel value of an unknown cell (-1 as an unsigned byte).
 _RAW_UNKNOWN = 255
+#: Largest map YAML file, bytes (a map_server file is a few hundred).
+MAX_YAML_BYTES = 65536
+#: Bounds of ``resolution``, m per pixel (map_server maps use 0.01 to 0.2).
+MIN_RESOLUTION_M = 0.001
+MAX_RESOLUTION_M = 1.0
+#: Largest side of a map, m (a campus is a few hundred metres; the scan database and ray casts scale with it).
+MAX_EXTENT_M = 2000.0
 
 
 # --- YAML ----------------------------------------------------------------------------------------
@@ -71,20 +93,40 @@ def _key_lines(path: Path, text: str) -> dict[str, int]:
     return {str(k.value): int(k.start_mark.line) + 1 for k, _ in node.value if isinstance(k, yaml.ScalarNode)}
 
 
+def _refuse_aliases(path: Path, text: str) -> None:
+    """Raise at the first YAML alias (``*name``): a map needs none, and nested ones expand without bound."""
+    try:
+        for event in yaml.parse(text, Loader=yaml.SafeLoader):
+            if isinstance(event, yaml.AliasEvent):
+                line = int(event.start_mark.line) + 1 if event.start_mark is not None else None
+                raise RecordedDataError(
+                    path,
+                    f"YAML alias *{quote(event.anchor, 60)}: expected plain values (a map_server file uses no "
+                    "anchors or aliases)",
+                    line,
+                )
+    except yaml.YAMLError:
+        return  # reported with its line by safe_load below
+
+
 def _read_yaml(path: Path) -> tuple[dict[str, Any], dict[str, int]]:
     try:
+        size = path.stat().st_size
+        if size > MAX_YAML_BYTES:
+            raise RecordedDataError(path, f"{size} bytes, expected a map_server YAML file of at most {MAX_YAML_BYTES}")
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
-        raise MissingDataFile(path, "missing map YAML file") from None
+        raise RecordedDataError(path, "missing map YAML file") from None
     except UnicodeDecodeError as exc:
         raise RecordedDataError(path, f"not UTF-8 text ({exc.reason}); expected a map_server YAML file") from None
+    _refuse_aliases(path, text)
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         line = int(mark.line) + 1 if mark is not None else None
         problem = getattr(exc, "problem", None) or str(exc)
-        raise RecordedDataError(path, f"malformed YAML: {problem}", line) from None
+        raise RecordedDataError(path, f"malformed YAML: {quote(problem)}", line) from None
     if not isinstance(data, dict):
         raise RecordedDataError(path, f"expected a YAML mapping with map_server fields, got {type(data).__name__}")
     return data, _key_lines(path, text)
@@ -107,7 +149,7 @@ class _Fields:
     def number(self, key: str, default: float | None = None) -> float:
         v = self.required(key) if default is None or key in self.data else default
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
-            raise self.fail(key, f"expected a finite number, got {v!r}")
+            raise self.fail(key, f"expected a finite number, got {quote(v)}")
         return float(v)
 
     def flag(self, key: str, default: bool) -> bool:
@@ -116,35 +158,39 @@ class _Fields:
             return v
         if isinstance(v, int) and v in (0, 1):
             return bool(v)
-        raise self.fail(key, f"expected 0, 1, true or false, got {v!r}")
+        raise self.fail(key, f"expected 0, 1, true or false, got {quote(v)}")
 
 
 def _origin(f: _Fields) -> tuple[float, float, float]:
     v = f.required("origin")
     if not isinstance(v, list) or len(v) != 3:
-        raise f.fail("origin", f"expected a list [x, y, yaw] of 3 numbers, got {v!r}")
+        raise f.fail("origin", f"expected a list [x, y, yaw] of 3 numbers, got {quote(v)}")
     out = []
     for item in v:
         if isinstance(item, bool) or not isinstance(item, (int, float)) or not math.isfinite(float(item)):
-            raise f.fail("origin", f"expected a list [x, y, yaw] of 3 finite numbers, got {v!r}")
+            raise f.fail("origin", f"expected a list [x, y, yaw] of 3 finite numbers, got {quote(v)}")
         out.append(float(item))
     if out[2] != 0.0:
         raise f.fail(
             "origin", f"yaw is {out[2]!r} rad; expected 0 (locbench grids are axis-aligned: rotate the map image)"
         )
+    if max(abs(out[0]), abs(out[1])) > MAX_POSITION_M:
+        raise f.fail("origin", f"x, y = {out[0]!r}, {out[1]!r} m, expected within +-{MAX_POSITION_M} m")
     return (out[0], out[1], 0.0)
 
 
 # --- images --------------------------------------------------------------------------------------
 
 
-def read_pgm(path: str | os.PathLike[str]) -> tuple[npt.NDArray[np.int64], int]:
+def read_pgm(path: str | os.PathLike[str], max_cells: int = MAX_GRID_CELLS) -> tuple[npt.NDArray[np.int64], int]:
     """Read a binary PGM (P5) image.
 
     Parameters
     ----------
     path : path-like
         The file.
+    max_cells : int
+        Largest image read, pixels (refused from the header, before the pixels are converted).
 
     Returns
     -------
@@ -162,7 +208,7 @@ def read_pgm(path: str | os.PathLike[str]) -> tuple[npt.NDArray[np.int64], int]:
     try:
         raw = p.read_bytes()
     except FileNotFoundError:
-        raise MissingDataFile(p, "missing map image") from None
+        raise RecordedDataError(p, "missing map image") from None
     if raw[:2] != b"P5":
         what = raw[:2].decode("latin-1") if raw else "an empty file"
         raise RecordedDataError(p, f"bad PGM header: magic is {what!r}, expected 'P5' (binary greymap)", 1)
@@ -196,6 +242,7 @@ def read_pgm(path: str | os.PathLike[str]) -> tuple[npt.NDArray[np.int64], int]:
         raise RecordedDataError(p, f"bad PGM header: size {width} x {height}, expected positive", line)
     if not 0 < maxval < 65536:
         raise RecordedDataError(p, f"bad PGM header: maxval {maxval}, expected 1..65535", line)
+    check_cells(p, height, width, max_cells, "the map's max_cells limits the image's pixels")
     if pos >= len(raw) or raw[pos : pos + 1] not in (b" ", b"\t", b"\r", b"\n"):
         raise RecordedDataError(p, "bad PGM header: expected one whitespace byte before the pixel data", line)
     pos += 1  # exactly one whitespace byte separates the header from the data
@@ -214,8 +261,14 @@ def read_pgm(path: str | os.PathLike[str]) -> tuple[npt.NDArray[np.int64], int]:
     return pix, maxval
 
 
-def _read_other_image(path: Path) -> tuple[npt.NDArray[np.int64], int, npt.NDArray[np.bool_] | None]:
-    """Any Pillow-readable image as grey values 0..255 (channels averaged) and a transparency mask."""
+def _read_other_image(
+    path: Path, max_cells: int = MAX_GRID_CELLS
+) -> tuple[npt.NDArray[np.int64], int, npt.NDArray[np.bool_] | None]:
+    """Any Pillow-readable image as grey values 0..255 (channels averaged) and a transparency mask.
+
+    The size is read from the header and refused above ``max_cells`` before the pixels are decoded; Pillow's
+    decompression-bomb guard (``Image.MAX_IMAGE_PIXELS``) stays on.
+    """
     try:
         from PIL import Image
     except ImportError:
@@ -223,15 +276,23 @@ def _read_other_image(path: Path) -> tuple[npt.NDArray[np.int64], int, npt.NDArr
             path, "not a PGM image, and Pillow (needed for other image types) is not installed: pip install pillow"
         ) from None
     if not path.is_file():
-        raise MissingDataFile(path, "missing map image")
+        raise RecordedDataError(path, "missing map image")
     try:
-        with Image.open(path) as im:
+        with warnings.catch_warnings():
+            # Pillow's guard warns between MAX_IMAGE_PIXELS and twice that: refuse there too, not just warn
+            warnings.simplefilter("error", Image.DecompressionBombWarning)
+            im = Image.open(path)
+        with im:
+            width, height = im.size
+            check_cells(path, height, width, max_cells, "the map's max_cells limits the image's pixels")
             im.load()
-            rgba = np.asarray(im.convert("RGBA"), dtype=np.int64)
+            rgba = np.asarray(im.convert("RGBA"), dtype=np.uint8)
             has_alpha = "A" in im.getbands() or "transparency" in im.info
-    except Exception as exc:  # Pillow raises many types for unreadable files
-        raise RecordedDataError(path, f"unreadable image ({type(exc).__name__}: {exc})") from None
-    grey = np.rint(rgba[..., :3].mean(axis=-1)).astype(np.int64)
+    except RecordedDataError:
+        raise
+    except Exception as exc:  # Pillow raises many types for unreadable files (its bomb guard among them)
+        raise RecordedDataError(path, f"unreadable image ({type(exc).__name__}: {quote(str(exc))})") from None
+    grey = np.rint(rgba[..., :3].sum(axis=-1, dtype=np.uint16) / 3.0).astype(np.int64)
     transparent = rgba[..., 3] < 255 if has_alpha else None
     return grey, 255, transparent
 
@@ -239,13 +300,15 @@ def _read_other_image(path: Path) -> tuple[npt.NDArray[np.int64], int, npt.NDArr
 # --- loading -------------------------------------------------------------------------------------
 
 
-def load_map_server_map(yaml_path: str | os.PathLike[str]) -> OccupancyGrid:
+def load_map_server_map(yaml_path: str | os.PathLike[str], max_cells: int = MAX_GRID_CELLS) -> OccupancyGrid:
     """Read a ROS map_server map (YAML + image) as an occupancy grid.
 
     Parameters
     ----------
     yaml_path : path-like
         The map's YAML file; its ``image`` is relative to the YAML file's folder unless absolute.
+    max_cells : int
+        Largest map, cells (pixels); a larger image is refused before its pixels are decoded.
 
     Returns
     -------
@@ -266,8 +329,8 @@ def load_map_server_map(yaml_path: str | os.PathLike[str]) -> OccupancyGrid:
     if not isinstance(image, str) or not image.strip():
         raise f.fail("image", f"expected the image file name, got {image!r}")
     resolution = f.number("resolution")
-    if not resolution > 0:
-        raise f.fail("resolution", f"expected > 0 m per pixel, got {resolution!r}")
+    if not MIN_RESOLUTION_M <= resolution <= MAX_RESOLUTION_M:
+        raise f.fail("resolution", f"expected {MIN_RESOLUTION_M} to {MAX_RESOLUTION_M} m per pixel, got {resolution!r}")
     origin = _origin(f)
     negate = f.flag("negate", False)
     occ_th = f.number("occupied_thresh", 0.65)
@@ -284,16 +347,23 @@ def load_map_server_map(yaml_path: str | os.PathLike[str]) -> OccupancyGrid:
     if not img_path.is_absolute():
         img_path = path.parent / img_path
     if not img_path.is_file():
-        raise MissingDataFile(
+        raise RecordedDataError(
             img_path, f"map image not found (field 'image' = {image!r} at {path}:{lines.get('image', '?')})"
         )
     transparent: npt.NDArray[np.bool_] | None = None
     with open(img_path, "rb") as fh:
         magic = fh.read(2)
     if magic == b"P5" or img_path.suffix.lower() == ".pgm":
-        pix, maxval = read_pgm(img_path)
+        pix, maxval = read_pgm(img_path, max_cells)
     else:
-        pix, maxval, transparent = _read_other_image(img_path)
+        pix, maxval, transparent = _read_other_image(img_path, max_cells)
+    side = max(pix.shape) * resolution
+    if side > MAX_EXTENT_M:
+        raise f.fail(
+            "resolution",
+            f"{pix.shape[1]} x {pix.shape[0]} pixels at {resolution!r} m span {side:.4g} m, expected at most "
+            f"{MAX_EXTENT_M} m per side",
+        )
     occupancy = _pixels_to_occupancy(img_path, pix, maxval, negate, occ_th, free_th, mode, transparent)
     return OccupancyGrid(
         occupancy=np.ascontiguousarray(occupancy[::-1]),  # image top row -> grid's last row

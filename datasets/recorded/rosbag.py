@@ -39,6 +39,14 @@ What is read, and how it becomes the dataset:
 Message types are taken from the bag's own definitions (ROS 1 always, ROS 2 from Iron on); older ROS 2 bags
 without definitions are decoded with rosbags' latest standard types. A bag that lacks a requested topic raises an
 error listing the topics it has. Parsed streams are cached per (bag, size, mtime, topics).
+
+Validation: a bag or map path that does not exist is an error (the user typed it; never a "data not found"
+skip); any failure to open or decode the bag is a clean error naming it; header stamps must be set (> 0) and
+non-decreasing per topic; poses finite and within :data:`~locbench.datasets.recorded.files.MAX_POSITION_M`;
+twists finite and within :data:`MAX_TWIST`; each scan needs a non-zero ``angle_increment`` with its beams
+spanning at most 2 pi and 0 <= ``range_min`` < ``range_max`` <= :data:`MAX_SCAN_RANGE_M`. Scans outside the truth
+span are counted in ``metadata["scans_outside_truth_span"]``; when a scan topic is read and has messages, at least
+one scan must fall inside the truth span (the dataset contract's declared stream).
 """
 
 from __future__ import annotations
@@ -66,7 +74,7 @@ from locbench.datasets.base import (
     check_dataset_contract,
     sort_events,
 )
-from locbench.datasets.recorded.files import DATA_ENV, MissingDataFile, RecordedDataError
+from locbench.datasets.recorded.files import DATA_ENV, MAX_POSITION_M, RecordedDataError, quote
 from locbench.datasets.recorded.intel import extract_map_lines
 from locbench.datasets.recorded.ros_map import load_map_server_map
 from locbench.errors import ConfigError, DependencyNotInstalled
@@ -78,6 +86,9 @@ from locbench.spec import params_to_dict
 FloatArray = npt.NDArray[np.float64]
 
 ODOMETRY_TYPES = ("nav_msgs/msg/Odometry",)
+#: Bounds of the validation: the largest odometry twist component (m/s, rad/s) and scan range_max (m).
+MAX_TWIST = 100.0
+MAX_SCAN_RANGE_M = 1000.0
 SCAN_TYPES = ("sensor_msgs/msg/LaserScan",)
 TRUTH_TYPES = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped")
 _INSTALL = "reading ROS bags needs the rosbags package; install it with: pip install 'locbench[ros]'"
@@ -216,8 +227,8 @@ def resolve_bag_path(path: str | os.PathLike[str], what: str = "bag") -> Path:
 
     Raises
     ------
-    MissingDataFile
-        When it is in neither place.
+    RecordedDataError
+        When it is in neither place (an error, not a :class:`MissingDataFile` skip: the user named the path).
     """
     p = Path(path).expanduser()
     candidates = [p]
@@ -232,7 +243,8 @@ def resolve_bag_path(path: str | os.PathLike[str], what: str = "bag") -> Path:
             return c
     looked = " or ".join(str(c) for c in candidates)
     expected = "a ROS 1 .bag file or a ROS 2 bag folder" if what == "bag" else "a map_server YAML file"
-    raise MissingDataFile(p, f"missing {what} (looked for {looked}); expected {expected}")
+    # A path the user typed is an error, not a skip: the run must not be stored as "data not found".
+    raise RecordedDataError(p, f"missing {what} (looked for {looked}); expected {expected}")
 
 
 def _signature(path: Path) -> tuple[tuple[str, int, int], ...]:
@@ -252,11 +264,10 @@ def read_bag_streams(
 
     Raises
     ------
-    MissingDataFile
-        The bag is not there.
     RecordedDataError
-        The bag cannot be read, a topic is missing (the message lists the bag's topics) or has the wrong message
-        type, or a topic's time stamps go backwards.
+        The bag is not there (an error, not a skip), cannot be opened or decoded, a topic is missing (the message
+        lists the bag's topics) or has the wrong message type, a stamp is unset (0) or goes backwards, a pose or
+        twist is non-finite or out of bounds, or a scan's geometry is unusable.
     DependencyNotInstalled
         rosbags is not installed.
     """
@@ -275,7 +286,7 @@ def _read_streams_cached(
 ) -> BagStreams:
     del signature  # part of the cache key only
     try:
-        from rosbags.highlevel import AnyReader, AnyReaderError
+        from rosbags.highlevel import AnyReader
         from rosbags.typesys import Stores, get_typestore
     except ImportError:
         raise DependencyNotInstalled(_INSTALL) from None
@@ -283,9 +294,9 @@ def _read_streams_cached(
     try:
         reader = AnyReader([p], default_typestore=get_typestore(Stores.LATEST))
         reader.open()
-    except (AnyReaderError, OSError) as exc:
+    except Exception as exc:  # rosbags raises its own errors, OSError, UnicodeDecodeError ... on foreign bytes
         what = "expected a ROS 1 .bag file or a ROS 2 bag folder"
-        raise RecordedDataError(p, f"unreadable bag ({exc}); {what}") from None
+        raise RecordedDataError(p, f"unreadable bag ({type(exc).__name__}: {quote(str(exc))}); {what}") from None
     try:
         topics = {name: (info.msgtype or "?", int(info.msgcount)) for name, info in reader.topics.items()}
         listing = ", ".join(f"{n} ({t}, {c} messages)" for n, (t, c) in sorted(topics.items())) or "(none)"
@@ -302,18 +313,33 @@ def _read_streams_cached(
         truth_type = topics[truth_topic][0]
         by_topic: dict[str, list[tuple[float, Any]]] = {t: [] for t, _ in wanted.values()}
         conns = [c for c in reader.connections if c.topic in by_topic]
-        for conn, recorded_ns, raw in reader.messages(connections=conns):
-            try:
-                msg = reader.deserialize(raw, conn.msgtype)
-            except AnyReaderError as exc:
-                n = len(by_topic[conn.topic]) + 1
-                raise RecordedDataError(p, f"topic {conn.topic!r} message {n}: cannot decode ({exc})") from None
-            by_topic[conn.topic].append((_stamp(msg, recorded_ns, stamps), msg))
+        try:
+            for conn, recorded_ns, raw in reader.messages(connections=conns):
+                try:
+                    msg = reader.deserialize(raw, conn.msgtype)
+                except Exception as exc:  # a corrupt message body raises whatever its decoder meets
+                    n = len(by_topic[conn.topic]) + 1
+                    raise RecordedDataError(
+                        p, f"topic {conn.topic!r} message {n}: cannot decode ({type(exc).__name__}: {quote(str(exc))})"
+                    ) from None
+                by_topic[conn.topic].append((_stamp(msg, recorded_ns, stamps), msg))
+        except RecordedDataError:
+            raise
+        except Exception as exc:  # a corrupt chunk or index
+            raise RecordedDataError(p, f"unreadable bag ({type(exc).__name__}: {quote(str(exc))})") from None
     finally:
         reader.close()
 
     for topic, items in by_topic.items():
         ts = np.array([t for t, _ in items], dtype=np.float64)
+        unset = np.flatnonzero(~(ts > 0))
+        if unset.size:
+            k = int(unset[0])
+            raise RecordedDataError(
+                p,
+                f"topic {topic!r} message {k + 1} of {ts.size}: {stamps} stamp {float(ts[k])!r} s, expected a time > 0 "
+                + ("(an unset header stamp; stamps=bag uses the recording time)" if stamps == "header" else ""),
+            )
         back = np.flatnonzero(np.diff(ts) < 0)
         if back.size:
             k = int(back[0]) + 1
@@ -343,13 +369,32 @@ def _read_streams_cached(
         )
         for t, m in (by_topic[scan_topic] if scan_topic else [])
     )
-    for scan in scans:
+    for k, scan in enumerate(scans):
+        _check_scan(p, scan_topic, k, scan)
         scan.ranges.setflags(write=False)
     for name, arr in (("odometry", odom_pose), ("ground truth", truth_pose)):
+        topic = odom_topic if name == "odometry" else truth_topic
         bad = np.flatnonzero(~np.all(np.isfinite(arr), axis=1))
         if bad.size:
-            topic = odom_topic if name == "odometry" else truth_topic
             raise RecordedDataError(p, f"topic {topic!r} message {int(bad[0]) + 1}: non-finite {name} pose")
+        far = np.flatnonzero(np.any(np.abs(arr[:, :2]) > MAX_POSITION_M, axis=1))
+        if far.size:
+            k = int(far[0])
+            raise RecordedDataError(
+                p,
+                f"topic {topic!r} message {k + 1}: {name} position ({float(arr[k, 0])!r}, {float(arr[k, 1])!r}) m, "
+                f"expected within +-{MAX_POSITION_M} m",
+            )
+    bad_twist = np.flatnonzero(
+        ~np.all(np.isfinite(odom_twist), axis=1) | np.any(np.abs(odom_twist) > MAX_TWIST, axis=1)
+    )
+    if bad_twist.size:
+        k = int(bad_twist[0])
+        raise RecordedDataError(
+            p,
+            f"topic {odom_topic!r} message {k + 1}: twist (linear.x, angular.z) = ({float(odom_twist[k, 0])!r}, "
+            f"{float(odom_twist[k, 1])!r}), expected finite values within +-{MAX_TWIST} (m/s, rad/s)",
+        )
     for a in (odom_t, odom_pose, odom_twist, truth_t, truth_pose):
         a.setflags(write=False)  # shared through the cache
     return BagStreams(odom_t, odom_pose, odom_twist, scans, truth_t, truth_pose, truth_type, topics)
@@ -366,6 +411,26 @@ def odometry_increments(pose: FloatArray) -> FloatArray:
     d = np.diff(pose[:, :2], axis=0)
     c, s = np.cos(pose[:-1, 2]), np.sin(pose[:-1, 2])
     return np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], wrap_angle(np.diff(pose[:, 2]))])
+
+
+def _check_scan(p: Path, topic: str, k: int, scan: LaserScan) -> None:
+    """Raise naming message ``k`` (0-based) of ``topic`` unless the scan's geometry is usable."""
+    n = int(scan.ranges.shape[0])
+    inc, a0 = scan.angle_increment, scan.angle_min
+    problem = None
+    if n < 1:
+        problem = "no ranges, expected at least one beam"
+    elif not (math.isfinite(a0) and abs(a0) <= 2 * math.pi):
+        problem = f"angle_min {a0!r} rad, expected a finite angle within +-2 pi"
+    elif not (math.isfinite(inc) and inc != 0.0 and abs(inc) * (n - 1) <= 2 * math.pi + 1e-6):
+        problem = f"angle_increment {inc!r} rad over {n} beams, expected non-zero with the beams spanning at most 2 pi"
+    elif not (math.isfinite(scan.range_min) and 0.0 <= scan.range_min < scan.range_max <= MAX_SCAN_RANGE_M):
+        problem = (
+            f"range_min {scan.range_min!r}, range_max {scan.range_max!r} m, expected 0 <= range_min < range_max <= "
+            f"{MAX_SCAN_RANGE_M}"
+        )
+    if problem is not None:
+        raise RecordedDataError(p, f"topic {topic!r} message {k + 1}: {problem}")
 
 
 def clean_ranges(ranges: FloatArray, range_min: float, range_max: float) -> FloatArray:
@@ -413,7 +478,10 @@ def _map_cached(path: str, size: int, mtime_ns: int, with_lines: bool) -> tuple[
     grid.occupancy.setflags(write=False)
     if not with_lines:
         return grid, None
-    lines, _ = extract_map_lines(grid)
+    try:
+        lines, _ = extract_map_lines(grid)
+    except ConfigError as exc:
+        raise RecordedDataError(path, f"{exc}; give map_lines=false to skip the line map") from None
     lines.segments.setflags(write=False)
     return grid, lines
 
@@ -496,8 +564,11 @@ def build_rosbag_dataset(params: RosbagParams) -> Dataset:
             "truth_type": streams.truth_type,
             "stamps": params.stamps,
             "map": params.map,
+            "scans_outside_truth_span": len(streams.scans) - len(scans_in),
         },
         truth_label=params.truth_label,
+        sources=(str(bag),) + ((params.map,) if params.map else ()),
+        declared=frozenset({LaserScan}) if params.scan_topic and streams.scans else frozenset(),
     )
     check_dataset_contract(ds)
     return ds
