@@ -1,0 +1,373 @@
+"""The posterior Cramer-Rao bound (PCRB) of a synthetic world, from the simulator's true model.
+
+Tichavsky, Muravchik and Nehorai (1998), "Posterior Cramer-Rao bounds for discrete-time nonlinear
+filtering", IEEE Trans. Signal Processing 46(5): for x_{k+1} = f_k(x_k) + w_k, w_k ~ N(0, Q_k), and
+measurements z_k = h_k(x_k) + v_k, v_k ~ N(0, R_k), the Fisher information J_k of the state obeys
+
+    J_{k+1} = D22_k - D21_k (J_k + D11_k)^-1 D12_k                                   (TMN eq. 21)
+
+    D11_k = F_k' Q_k^-1 F_k,   D12_k = -F_k' Q_k^-1 = D21_k',
+    D22_k = Q_k^-1 + sum over the sensors at k+1 of H' R^-1 H                        (TMN eq. 34-36)
+
+with F_k and H the Jacobians of f_k and h (here evaluated along the true trajectory: the expectation over
+the state is taken at its one realised value, the usual practice for a bound "along the trajectory").
+Any estimate's error covariance satisfies E[e e'] >= J^-1. With the matrix inversion lemma the recursion
+is J_{k+1} = (Q_k + F_k J_k^-1 F_k')^-1 + J_z,k+1, which needs no Q_k^-1: a robot standing still has
+Q_k = 0 (its wheel noise is proportional to the travel), so :func:`information_step` uses that form;
+:func:`tmn_step` is the literal eq. 21 for a non-singular Q_k (a test checks that they agree).
+
+What the bound of a locbench world covers (docs/pcrb.md):
+
+* motion: the wheel odometry as the control input (x_{k+1} = pose composed with the increment of the true
+  wheel travel), each wheel's travel known from its encoder with the true random error of variance
+  k^2 |d| (report 003 eq. 10), mapped to the pose increment to first order in that error. The systematic
+  wheel-scale and wheelbase errors are deterministic, hence known to the true model: they move no
+  information (only the scale divides the variance by (1 + scale)^2, and the Jacobians use the true
+  wheelbase). The commanded twist is not used: the planner computes it from the true pose (feedback), so
+  it is not an independent input, and only ``kf_linear`` reads it;
+* range-bearing landmark sightings with the true noise (range, field-of-view limits, occlusion and
+  detection as realised in the dataset: the bound is conditioned on which landmarks were seen, which does
+  not depend on the estimate) and known association (withheld identities are associated at the truth);
+* range-only observations and GPS-like position fixes with their true noise;
+* NOT the laser scans: on the laser-only worlds (``lap``, ``line_room``, ``scan_grid``) the bound is the
+  odometry-only bound, valid but far from tight. On ``landmark_geometry`` the sightings come from a
+  laser detector whose error is not Gaussian by construction; the bound uses the detector's measured error
+  RMS (the dataset's nominal noise), so there it is approximate.
+
+Kidnapped runs have no bound (a jump is outside the motion model): :func:`pcrb_covariances` refuses them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from locbench.datasets.base import Dataset
+from locbench.errors import ConfigError
+from locbench.events import UNKNOWN_ID, LandmarkObservations, PoseFix, RangeObservations
+from locbench.geometry import wrap_angle
+
+FloatArray = npt.NDArray[np.float64]
+
+
+# --- the recursion: pure functions of arrays ---------------------------------------------------------------
+
+
+def tmn_step(j: FloatArray, f: FloatArray, q: FloatArray, j_meas: FloatArray) -> FloatArray:
+    """One step of Tichavsky et al. 1998 eq. 21 with additive Gaussian process noise.
+
+    Parameters
+    ----------
+    j : ndarray, shape (n, n)
+        Fisher information J_k of the state at step k (units: inverse of the state's squared units).
+    f : ndarray, shape (n, n)
+        Jacobian F_k of the transition at the true state.
+    q : ndarray, shape (n, n)
+        Process noise covariance Q_k; must be non-singular (see :func:`information_step` otherwise).
+    j_meas : ndarray, shape (n, n)
+        Measurement information at step k+1, the sum of H' R^-1 H over its sensors (eq. 36).
+
+    Returns
+    -------
+    ndarray, shape (n, n)
+        J_{k+1} = D22 - D21 (J_k + D11)^-1 D12.
+    """
+    qi = np.linalg.inv(q)
+    d11 = f.T @ qi @ f
+    d12 = -f.T @ qi
+    d22 = qi + j_meas
+    out: FloatArray = d22 - d12.T @ np.linalg.solve(j + d11, d12)
+    return 0.5 * (out + out.T)
+
+
+def information_step(j: FloatArray, f: FloatArray, q: FloatArray, j_meas: FloatArray) -> FloatArray:
+    """One step of the same recursion in the form J_{k+1} = (Q_k + F_k J_k^-1 F_k')^-1 + J_meas.
+
+    Equal to :func:`tmn_step` by the matrix inversion lemma when Q_k is non-singular, and defined for a
+    singular (even zero) Q_k as long as J_k is (a robot standing still). Arguments as in :func:`tmn_step`.
+    """
+    p = f @ np.linalg.solve(j, f.T) + q
+    out: FloatArray = np.linalg.inv(0.5 * (p + p.T)) + j_meas
+    return 0.5 * (out + out.T)
+
+
+def pcrb_recursion(j0: FloatArray, jacobians: FloatArray, process_cov: FloatArray, meas_info: FloatArray) -> FloatArray:
+    """Bound covariances J_k^-1 at steps 0..n.
+
+    Parameters
+    ----------
+    j0 : ndarray, shape (d, d)
+        Prior information J_0 plus the measurement information at step 0.
+    jacobians, process_cov : ndarray, shape (n, d, d)
+        F_k and Q_k of the transition from step k to k+1.
+    meas_info : ndarray, shape (n, d, d)
+        Measurement information at step k+1.
+
+    Returns
+    -------
+    ndarray, shape (n+1, d, d)
+        The bound's covariance J_k^-1 at every step.
+    """
+    n = jacobians.shape[0]
+    out = np.empty((n + 1, *j0.shape))
+    j = np.asarray(j0, dtype=np.float64)
+    out[0] = np.linalg.inv(j)
+    for k in range(n):
+        j = information_step(j, jacobians[k], process_cov[k], meas_info[k])
+        out[k + 1] = np.linalg.inv(j)
+    return out
+
+
+def odometry_step_terms(
+    poses: FloatArray, wheelbase_m: float, k_left: float, k_right: float, scale_left: float, scale_right: float
+) -> tuple[FloatArray, FloatArray]:
+    """Jacobians F_k and process covariances Q_k of wheel odometry along a true trajectory.
+
+    Parameters
+    ----------
+    poses : ndarray, shape (n+1, 3)
+        True poses (x m, y m, theta rad) at the odometry steps, world frame.
+    wheelbase_m : float
+        TRUE wheelbase W, m.
+    k_left, k_right : float
+        True random encoder constants, sqrt(m): a wheel's measured travel has variance k^2 |d| (report 003
+        eq. 10).
+    scale_left, scale_right : float
+        True systematic relative scale of each encoder (deterministic, so known to the true model: the
+        travel inferred from a reading has variance k^2 |d| / (1 + scale)^2).
+
+    Returns
+    -------
+    (F, Q) : ndarrays, shape (n, 3, 3)
+        The transition Jacobian w.r.t. the pose and the covariance of the world-frame pose increment
+        (first order in the wheel error) of each step. The true wheel travel of step k is recovered from the
+        true poses by inverting report 003 eq. 1, 2 and 5 (the mid-point arc).
+    """
+    poses = np.asarray(poses, dtype=np.float64)
+    th0 = poses[:-1, 2]
+    dth = wrap_angle(poses[1:, 2] - th0)
+    dxy = poses[1:, 0:2] - poses[:-1, 0:2]
+    half = 0.5 * dth
+    # Travel along the mid-point heading (signed: negative when driving backwards).
+    dd = np.cos(th0 + half) * dxy[:, 0] + np.sin(th0 + half) * dxy[:, 1]
+    d_left = dd - 0.5 * wheelbase_m * dth
+    d_right = dd + 0.5 * wheelbase_m * dth
+    n = dth.shape[0]
+    f = np.tile(np.eye(3), (n, 1, 1))
+    f[:, 0, 2] = -dxy[:, 1]
+    f[:, 1, 2] = dxy[:, 0]
+    c, s = np.cos(half), np.sin(half)
+    w2 = 2.0 * wheelbase_m
+    # d(dx, dy, dtheta)_robot / d(d_left, d_right), with dx = dd cos(dth/2), dy = dd sin(dth/2).
+    g = np.empty((n, 3, 2))
+    g[:, 0, 0] = 0.5 * c + dd * s / w2
+    g[:, 0, 1] = 0.5 * c - dd * s / w2
+    g[:, 1, 0] = 0.5 * s - dd * c / w2
+    g[:, 1, 1] = 0.5 * s + dd * c / w2
+    g[:, 2, 0] = -1.0 / wheelbase_m
+    g[:, 2, 1] = 1.0 / wheelbase_m
+    rot = np.zeros((n, 3, 3))
+    ct, st = np.cos(th0), np.sin(th0)
+    rot[:, 0, 0], rot[:, 0, 1], rot[:, 1, 0], rot[:, 1, 1], rot[:, 2, 2] = ct, -st, st, ct, 1.0
+    gw = rot @ g
+    var = np.column_stack(
+        [k_left**2 * np.abs(d_left) / (1.0 + scale_left) ** 2, k_right**2 * np.abs(d_right) / (1.0 + scale_right) ** 2]
+    )
+    q = np.einsum("nij,nj,nkj->nik", gw, var, gw)
+    return f, q
+
+
+def range_bearing_information(
+    pose: FloatArray, landmarks_xy: FloatArray, sigma_range_m: float, sigma_bearing_rad: float
+) -> FloatArray:
+    """Sum of H' R^-1 H of range-bearing sightings of ``landmarks_xy`` (m, shape (m, 2)) from ``pose``.
+
+    H is the Jacobian of (range m, bearing rad) w.r.t. (x, y, theta); R = diag(sigma_range^2,
+    sigma_bearing^2). Returns a (3, 3) information matrix.
+    """
+    d = np.asarray(landmarks_xy, dtype=np.float64).reshape(-1, 2) - pose[None, 0:2]
+    q = np.maximum(np.einsum("ij,ij->i", d, d), 1e-12)
+    r = np.sqrt(q)
+    hr = np.column_stack([-d[:, 0] / r, -d[:, 1] / r, np.zeros_like(r)])
+    hb = np.column_stack([d[:, 1] / q, -d[:, 0] / q, -np.ones_like(r)])
+    out: FloatArray = hr.T @ hr / sigma_range_m**2 + hb.T @ hb / sigma_bearing_rad**2
+    return out
+
+
+def range_information(pose: FloatArray, landmarks_xy: FloatArray, sigma_range_m: float) -> FloatArray:
+    """Sum of H' R^-1 H of range-only measurements to ``landmarks_xy`` (m, shape (m, 2)) from ``pose``."""
+    d = np.asarray(landmarks_xy, dtype=np.float64).reshape(-1, 2) - pose[None, 0:2]
+    r = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-6)
+    hr = np.column_stack([-d[:, 0] / r, -d[:, 1] / r, np.zeros_like(r)])
+    out: FloatArray = hr.T @ hr / sigma_range_m**2
+    return out
+
+
+def position_fix_information(sigma_xy_m: float) -> FloatArray:
+    """H' R^-1 H of an (x, y) fix with per-axis standard deviation ``sigma_xy_m`` (m), shape (3, 3)."""
+    out = np.zeros((3, 3))
+    out[0, 0] = out[1, 1] = 1.0 / sigma_xy_m**2
+    return out
+
+
+# --- a synthetic dataset's true model ---------------------------------------------------------------------
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrueNoise:
+    """The simulator's true random noise of a synthetic dataset (read from its metadata).
+
+    Attributes
+    ----------
+    wheelbase_m : float
+        True wheelbase, m.
+    k_left, k_right : float
+        True random encoder constants, sqrt(m).
+    scale_left, scale_right : float
+        True systematic encoder scales (deterministic).
+    landmark_sigma_range_m, landmark_sigma_bearing_rad : float or None
+        True range-bearing noise (None: no landmark sensor).
+    range_sigma_m : float or None
+        True range-only noise (None: none).
+    fix_sigma_xy_m : float or None
+        True per-axis noise of the position fixes (None: no fixes).
+    """
+
+    wheelbase_m: float
+    k_left: float
+    k_right: float
+    scale_left: float = 0.0
+    scale_right: float = 0.0
+    landmark_sigma_range_m: float | None = None
+    landmark_sigma_bearing_rad: float | None = None
+    range_sigma_m: float | None = None
+    fix_sigma_xy_m: float | None = None
+
+
+def true_noise(dataset: Dataset) -> TrueNoise:
+    """The true noise model of a synthetic ``dataset`` from its metadata (``true_odometry_error``,
+    ``sensors_true``); ConfigError naming the missing field for a dataset that does not record it."""
+    meta: dict[str, Any] = dict(dataset.metadata or {})
+    odo = meta.get("true_odometry_error")
+    if not isinstance(odo, dict):
+        raise ConfigError(
+            f"dataset {dataset.name!r}: metadata field 'true_odometry_error' missing; expected a synthetic world"
+        )
+    sensors = meta.get("sensors_true", {}) or {}
+    lm = sensors.get("landmarks")
+    fixes = sensors.get("fixes")
+    lm_r = lm_b = None
+    if lm is not None:
+        lm_r, lm_b = float(lm["sigma_range_m"]), float(lm["sigma_bearing_rad"])
+    elif any(isinstance(e, LandmarkObservations) for e in dataset.events):
+        # Sightings made by a detector (landmark_geometry): its measured error RMS, the nominal noise.
+        lm_r, lm_b = dataset.sensors.landmark_sigma_range_m, dataset.sensors.landmark_sigma_bearing_rad
+    return TrueNoise(
+        wheelbase_m=float(odo["wheelbase_true_m"]),
+        k_left=float(odo["k_left"]),
+        k_right=float(odo["k_right"]),
+        scale_left=float(odo.get("scale_left", 0.0)),
+        scale_right=float(odo.get("scale_right", 0.0)),
+        landmark_sigma_range_m=lm_r,
+        landmark_sigma_bearing_rad=lm_b,
+        range_sigma_m=None if sensors.get("ranges") is None else float(sensors["ranges"]["sigma_m"]),
+        fix_sigma_xy_m=None if fixes is None else float(fixes["sigma_xy_m"]),
+    )
+
+
+def _positive(name: str, value: float | None, dataset: Dataset) -> float:
+    if value is None or not value > 0:
+        raise ConfigError(f"dataset {dataset.name!r}: true {name} must be > 0 for a bound, got {value}")
+    return float(value)
+
+
+def _measurement_information(dataset: Dataset, noise: TrueNoise, gt_poses: FloatArray) -> FloatArray:
+    """Measurement information at every ground-truth time, shape (n_truth, 3, 3)."""
+    gt_t = dataset.ground_truth.t
+    info = np.zeros((gt_t.shape[0], 3, 3))
+    lm_map = dataset.world.landmarks
+    by_id: dict[int, int] = {} if lm_map is None else {int(i): r for r, i in enumerate(lm_map.ids.tolist())}
+    for e in dataset.events:
+        if not isinstance(e, LandmarkObservations | RangeObservations | PoseFix):
+            continue
+        k = int(np.argmin(np.abs(gt_t - e.t)))
+        if abs(gt_t[k] - e.t) > 1e-6:
+            raise ConfigError(f"dataset {dataset.name!r}: a measurement at t={e.t} s falls on no ground-truth time")
+        pose = gt_poses[k]
+        if isinstance(e, PoseFix):
+            info[k] += position_fix_information(_positive("fix sigma_xy_m", noise.fix_sigma_xy_m, dataset))
+            continue
+        assert lm_map is not None
+        if isinstance(e, LandmarkObservations):
+            sr = _positive("landmark sigma_range_m", noise.landmark_sigma_range_m, dataset)
+            sb = _positive("landmark sigma_bearing_rad", noise.landmark_sigma_bearing_rad, dataset)
+            rows = _associate(e, pose, lm_map.xy, by_id, sr, sb)
+            info[k] += range_bearing_information(pose, lm_map.xy[rows], sr, sb)
+        else:
+            sr = _positive("range sigma_m", noise.range_sigma_m, dataset)
+            info[k] += range_information(pose, lm_map.xy[[by_id[int(i)] for i in e.ids.tolist()]], sr)
+    return info
+
+
+def _associate(
+    e: LandmarkObservations, pose: FloatArray, xy: FloatArray, by_id: dict[int, int], sr: float, sb: float
+) -> list[int]:
+    """Map rows of the sighting to landmarks: by id, else (identity withheld) to the landmark whose true
+    range and bearing from the true pose is nearest in Mahalanobis distance (known association)."""
+    rows: list[int] = []
+    d = xy - pose[None, 0:2]
+    r_true = np.hypot(d[:, 0], d[:, 1])
+    b_true = wrap_angle(np.arctan2(d[:, 1], d[:, 0]) - pose[2])
+    for i, r, b in zip(e.ids.tolist(), e.ranges.tolist(), e.bearings.tolist(), strict=True):
+        if i != UNKNOWN_ID:
+            rows.append(by_id[int(i)])
+        else:
+            m2 = ((r_true - r) / sr) ** 2 + (wrap_angle(b_true - b) / sb) ** 2
+            rows.append(int(np.argmin(m2)))
+    return rows
+
+
+def pcrb_covariances(dataset: Dataset, noise: TrueNoise | None = None) -> FloatArray:
+    """The bound's pose covariance at every ground-truth time of a synthetic ``dataset``, shape (n, 3, 3).
+
+    Units: m^2 in the position block, rad^2 for the heading, world frame. ``noise`` defaults to
+    :func:`true_noise`. The odometry steps are the ground-truth steps (one Odometry event per step, as every
+    synthetic world simulates it); the prior is the dataset's initial belief.
+    """
+    if dataset.kidnaps:
+        raise ConfigError(f"dataset {dataset.name!r}: a kidnapped run has no bound (the jump is outside the model)")
+    noise = noise or true_noise(dataset)
+    gt = dataset.ground_truth
+    poses = np.column_stack([gt.xy, gt.theta])
+    f, q = odometry_step_terms(
+        poses, noise.wheelbase_m, noise.k_left, noise.k_right, noise.scale_left, noise.scale_right
+    )
+    info = _measurement_information(dataset, noise, poses)
+    j0 = np.linalg.inv(np.asarray(dataset.initial.cov, dtype=np.float64)) + info[0]
+    return pcrb_recursion(j0, f, q, info[1:])
+
+
+def pcrb_summary(t: FloatArray, cov: FloatArray, waypoint_t: FloatArray) -> dict[str, float]:
+    """Scalar metrics of bound covariances ``cov`` (n, 3, 3) at times ``t`` (s).
+
+    Returns ``ate_m`` = sqrt(mean_k trace of the position block) (m), ``heading_rmse_rad`` = sqrt(mean_k
+    P_k[2, 2]) (rad) and ``waypoint_<j>_error_m`` (j from 1) = sqrt(position trace) at the truth time nearest
+    waypoint j's time (m): the same definitions as the filters' ``ate_m``, ``heading_rmse_rad`` and waypoint
+    errors, with the squared error replaced by its lower bound.
+    """
+    pos = cov[:, 0, 0] + cov[:, 1, 1]
+    out = {"ate_m": math.sqrt(float(np.mean(pos))), "heading_rmse_rad": math.sqrt(float(np.mean(cov[:, 2, 2])))}
+    for j, tw in enumerate(np.asarray(waypoint_t, dtype=np.float64).tolist()):
+        k = int(np.argmin(np.abs(t - tw)))
+        out[f"waypoint_{j + 1}_error_m"] = math.sqrt(float(pos[k]))
+    return out
+
+
+def pcrb_metrics(dataset: Dataset) -> dict[str, float]:
+    """The bound's ``ate_m``, ``heading_rmse_rad`` and ``waypoint_<j>_error_m`` for a built synthetic
+    ``dataset`` under its true noise model (see :func:`pcrb_summary`, :func:`pcrb_covariances`)."""
+    return pcrb_summary(dataset.ground_truth.t, pcrb_covariances(dataset), dataset.waypoints.t)
