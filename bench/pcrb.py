@@ -122,6 +122,22 @@ def pcrb_recursion(j0: FloatArray, jacobians: FloatArray, process_cov: FloatArra
     return out
 
 
+def wheel_travel_from_poses(poses: FloatArray, wheelbase_m: float) -> tuple[FloatArray, FloatArray]:
+    """The wheel travel (d_left, d_right) of each step between consecutive poses, m, shape (n,) each.
+
+    Inverts report 003 eq. 1, 2 and 5 (the mid-point arc): dtheta = wrapped heading change, the travel dd is
+    the displacement projected on the mid-point heading (signed), d_left/right = dd -/+ W dtheta / 2. Exact
+    for poses the simulator produced with that model and wheelbase ``wheelbase_m`` (m).
+    """
+    poses = np.asarray(poses, dtype=np.float64)
+    th0 = poses[:-1, 2]
+    dth = wrap_angle(poses[1:, 2] - th0)
+    dxy = poses[1:, 0:2] - poses[:-1, 0:2]
+    mid = th0 + 0.5 * dth
+    dd = np.cos(mid) * dxy[:, 0] + np.sin(mid) * dxy[:, 1]
+    return dd - 0.5 * wheelbase_m * dth, dd + 0.5 * wheelbase_m * dth
+
+
 def odometry_step_terms(
     poses: FloatArray, wheelbase_m: float, k_left: float, k_right: float, scale_left: float, scale_right: float
 ) -> tuple[FloatArray, FloatArray]:
@@ -152,10 +168,8 @@ def odometry_step_terms(
     dth = wrap_angle(poses[1:, 2] - th0)
     dxy = poses[1:, 0:2] - poses[:-1, 0:2]
     half = 0.5 * dth
-    # Travel along the mid-point heading (signed: negative when driving backwards).
-    dd = np.cos(th0 + half) * dxy[:, 0] + np.sin(th0 + half) * dxy[:, 1]
-    d_left = dd - 0.5 * wheelbase_m * dth
-    d_right = dd + 0.5 * wheelbase_m * dth
+    d_left, d_right = wheel_travel_from_poses(poses, wheelbase_m)
+    dd = 0.5 * (d_left + d_right)
     n = dth.shape[0]
     f = np.tile(np.eye(3), (n, 1, 1))
     f[:, 0, 2] = -dxy[:, 1]
@@ -370,4 +384,5 @@ def pcrb_summary(t: FloatArray, cov: FloatArray, waypoint_t: FloatArray) -> dict
 def pcrb_metrics(dataset: Dataset) -> dict[str, float]:
     """The bound's ``ate_m``, ``heading_rmse_rad`` and ``waypoint_<j>_error_m`` for a built synthetic
     ``dataset`` under its true noise model (see :func:`pcrb_summary`, :func:`pcrb_covariances`)."""
-    return pcrb_summary(dataset.ground_truth.t, pcrb_covariances(dataset), dataset.waypoints.t)
+    waypoint_t = dataset.waypoints.t if dataset.waypoints is not None else np.zeros(0)
+    return pcrb_summary(dataset.ground_truth.t, pcrb_covariances(dataset), waypoint_t)

@@ -435,8 +435,8 @@ class LandmarkGeometryScenario(DatasetBuilder):
         matched_sightings = (
             LandmarkSensor(
                 rate_hz=LASER.rate_hz,
-                min_range_m=spec.landmark_min_range_m,
-                max_range_m=spec.landmark_max_range_m,
+                min_range_m=LASER.min_range_m + LANDMARK_RADIUS_M,
+                max_range_m=LASER.max_range_m + LANDMARK_RADIUS_M,
                 fov_rad=LASER.fov_rad,
                 sigma_range_m=NOMINAL_SIGMA_RANGE_M,
                 sigma_bearing_rad=NOMINAL_SIGMA_BEARING_RAD,
