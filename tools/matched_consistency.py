@@ -12,10 +12,10 @@ import sys
 
 import numpy as np
 
-from locbench.metrics import POSE_DOF, anees, chi2_band, nees_at_truth
+from locbench.metrics import POSE_DOF, anees, ate, chi2_band, nees_at_truth, nll_at_truth
 from locbench.pcrb import pcrb_metrics
 from locbench.registry import make_dataset, make_filter
-from locbench.runner import run_filter
+from locbench.runner import incompatibility, run_filter
 from locbench.seeding import filter_rng
 
 
@@ -25,20 +25,31 @@ def main() -> None:
         built = [make_dataset(dname, s) for s in range(n)]
         bound = [pcrb_metrics(ds)["ate_m"] for ds in built]
         for fname in filters:
-            aneess, ates = [], []
+            aneess, ates, nlls = [], [], []
             for s, ds in enumerate(built):
-                tr = run_filter(make_filter(fname), ds, filter_rng(fname, dname, s))
+                flt = make_filter(fname)
+                why = incompatibility(flt, ds)
+                if why:
+                    print(f"{dname} {fname}: skipped ({why})")
+                    break
+                tr = run_filter(flt, ds, filter_rng(fname, dname, s))
+                if tr.status != "ok":
+                    print(f"{dname} {fname} seed {s}: {tr.status} {tr.message}")
+                    continue
                 gt = ds.ground_truth
                 poses = np.column_stack([gt.xy, gt.theta])
                 aneess.append(anees(nees_at_truth(tr.t, tr.mean, tr.cov, gt.t, poses)))
-                from locbench.metrics import ate
-
+                nlls.append(float(np.mean(nll_at_truth(tr.t, tr.mean, tr.cov, gt.t, poses))))
                 ates.append(ate(tr.t, tr.mean, gt.t, gt.xy))
+            if not ates:
+                continue
+            n = len(ates)
             lo, hi = chi2_band(POSE_DOF, n)
             rms_ate = math.sqrt(float(np.mean(np.square(ates))))
             rms_bound = math.sqrt(float(np.mean(np.square(bound))))
             print(
-                f"{dname} {fname}: mean ANEES {np.mean(aneess):.3f} band [{lo:.3f}, {hi:.3f}]; "
+                f"{dname} {fname}: mean ANEES {np.mean(aneess):.3f} band [{lo:.3f}, {hi:.3f}] ({n} runs); "
+                f"mean NLL {np.mean(nlls):.2f}; "
                 f"RMS ATE {rms_ate * 100:.2f} cm, PCRB {rms_bound * 100:.2f} cm, ratio {rms_ate / rms_bound:.2f}",
                 flush=True,
             )
