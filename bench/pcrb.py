@@ -29,10 +29,12 @@ What the bound of a locbench world covers (docs/pcrb.md):
   detection as realised in the dataset: the bound is conditioned on which landmarks were seen, which does
   not depend on the estimate) and known association (withheld identities are associated at the truth);
 * range-only observations and GPS-like position fixes with their true noise;
-* NOT the laser scans: on the laser-only worlds (``lap``, ``line_room``, ``scan_grid``) the bound is the
-  odometry-only bound, valid but far from tight. On ``landmark_geometry`` the sightings come from a
-  laser detector whose error is not Gaussian by construction; the bound uses the detector's measured error
-  RMS (the dataset's nominal noise), so there it is approximate.
+* the laser scans: each returned beam with the true range noise, its range the simulator's exact ray
+  traversal of the occupancy grid, differentiated w.r.t. the pose by central differences
+  (:func:`laser_information`); beams that graze a cell corner (not differentiable), realised dropouts and
+  returns off the map (people) are left out, which can only loosen the bound. On ``landmark_geometry`` the
+  sightings are computed from the scans, so with the laser they are not counted again (without it,
+  ``laser=False``, the bound uses them with the detector's measured error RMS, the nominal noise).
 
 Kidnapped runs have no bound (a jump is outside the motion model): :func:`pcrb_covariances` refuses them.
 """
@@ -48,7 +50,7 @@ import numpy.typing as npt
 
 from locbench.datasets.base import Dataset
 from locbench.errors import ConfigError
-from locbench.events import UNKNOWN_ID, LandmarkObservations, PoseFix, RangeObservations
+from locbench.events import UNKNOWN_ID, LandmarkObservations, LaserScan, PoseFix, RangeObservations
 from locbench.geometry import wrap_angle
 
 FloatArray = npt.NDArray[np.float64]
@@ -221,6 +223,59 @@ def range_information(pose: FloatArray, landmarks_xy: FloatArray, sigma_range_m:
     return out
 
 
+def laser_information(
+    occupied: npt.NDArray[np.bool_],
+    resolution_m: float,
+    origin_xy: tuple[float, float],
+    robot_poses: FloatArray,
+    mount: tuple[float, float, float],
+    angles: FloatArray,
+    max_range_m: float,
+    min_range_m: float,
+    sigma_m: float,
+    measured: FloatArray,
+    eps: float = 1e-5,
+) -> FloatArray:
+    """Fisher information of laser scans about the robot pose, one (3, 3) matrix per scan.
+
+    The true range of a beam is the simulator's exact ray traversal of the occupancy grid
+    (:func:`locbench.raycast.cast_rays`, ``method="dda"``: the distance to the entry point of the first
+    occupied cell, a piecewise smooth function of the pose), plus Gaussian noise of ``sigma_m``. A beam's
+    information is g g' / sigma^2, g the gradient of its range w.r.t. the robot pose (x m, y m, theta rad)
+    by central differences of step ``eps``. A beam is left out (which can only loosen the bound) where the
+    range is not differentiable (the one-sided differences disagree: the beam grazes a cell corner), where
+    it has no finite return within [min_range_m, max_range_m], or where the ``measured`` range (S, B, m) is
+    missing (a realised dropout) or more than 5 sigma from the map's (a return off the map, e.g. from a
+    person). Returns shape (S, 3, 3).
+    """
+    from locbench.raycast import cast_rays
+
+    poses = np.asarray(robot_poses, dtype=np.float64)
+    mx, my, mth = mount
+
+    def cast(p: FloatArray) -> FloatArray:
+        c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
+        sensor = np.column_stack([p[:, 0] + c * mx - s * my, p[:, 1] + s * mx + c * my, p[:, 2] + mth])
+        return cast_rays(occupied, resolution_m, origin_xy, sensor, angles, max_range_m, method="dda")
+
+    r0 = cast(poses)
+    grads = np.empty((*r0.shape, 3))
+    with np.errstate(invalid="ignore"):
+        returned = np.isfinite(measured) & (np.abs(measured - r0) <= 5.0 * sigma_m)
+    ok = np.isfinite(r0) & (r0 >= min_range_m) & (r0 <= max_range_m) & returned
+    for i in range(3):
+        d = np.zeros(3)
+        d[i] = eps
+        rp, rm = cast(poses + d), cast(poses - d)
+        with np.errstate(invalid="ignore"):
+            fwd, bwd = (rp - r0) / eps, (r0 - rm) / eps
+            ok &= np.isfinite(fwd) & np.isfinite(bwd) & (np.abs(fwd - bwd) <= 1e-4 * (1.0 + np.abs(fwd)))
+            grads[..., i] = 0.5 * (fwd + bwd)
+    grads[~ok] = 0.0
+    out: FloatArray = np.einsum("sbi,sbj->sij", grads, grads) / sigma_m**2
+    return out
+
+
 def position_fix_information(sigma_xy_m: float) -> FloatArray:
     """H' R^-1 H of an (x, y) fix with per-axis standard deviation ``sigma_xy_m`` (m), shape (3, 3)."""
     out = np.zeros((3, 3))
@@ -249,6 +304,11 @@ class TrueNoise:
         True range-only noise (None: none).
     fix_sigma_xy_m : float or None
         True per-axis noise of the position fixes (None: no fixes).
+    laser_sigma_m : float or None
+        True laser range noise, m (None: no laser).
+    sightings_from_laser : bool
+        The landmark sightings are computed from the laser scans (``landmark_geometry`` unless matched):
+        they carry no information beyond the scans', so the bound uses the scans when it uses the laser.
     """
 
     wheelbase_m: float
@@ -260,6 +320,8 @@ class TrueNoise:
     landmark_sigma_bearing_rad: float | None = None
     range_sigma_m: float | None = None
     fix_sigma_xy_m: float | None = None
+    laser_sigma_m: float | None = None
+    sightings_from_laser: bool = False
 
 
 def true_noise(dataset: Dataset) -> TrueNoise:
@@ -275,9 +337,11 @@ def true_noise(dataset: Dataset) -> TrueNoise:
     lm = sensors.get("landmarks")
     fixes = sensors.get("fixes")
     lm_r = lm_b = None
+    from_laser = False
     if lm is not None:
         lm_r, lm_b = float(lm["sigma_range_m"]), float(lm["sigma_bearing_rad"])
     elif any(isinstance(e, LandmarkObservations) for e in dataset.events):
+        from_laser = True
         # Sightings made by a detector (landmark_geometry): its measured error RMS, the nominal noise.
         lm_r, lm_b = dataset.sensors.landmark_sigma_range_m, dataset.sensors.landmark_sigma_bearing_rad
     return TrueNoise(
@@ -290,6 +354,9 @@ def true_noise(dataset: Dataset) -> TrueNoise:
         landmark_sigma_bearing_rad=lm_b,
         range_sigma_m=None if sensors.get("ranges") is None else float(sensors["ranges"]["sigma_m"]),
         fix_sigma_xy_m=None if fixes is None else float(fixes["sigma_xy_m"]),
+        # scan_grid records no sensors_true: its laser's true noise is the nominal one.
+        laser_sigma_m=float(sensors["laser"]["sigma_m"]) if "laser" in sensors else dataset.sensors.laser_sigma_m,
+        sightings_from_laser=from_laser,
     )
 
 
@@ -299,18 +366,62 @@ def _positive(name: str, value: float | None, dataset: Dataset) -> float:
     return float(value)
 
 
-def _measurement_information(dataset: Dataset, noise: TrueNoise, gt_poses: FloatArray) -> FloatArray:
+def _truth_index(dataset: Dataset, t: float) -> int:
+    gt_t = dataset.ground_truth.t
+    k = int(np.searchsorted(gt_t, t - 1e-6))
+    if k >= gt_t.shape[0] or abs(gt_t[k] - t) > 1e-6:
+        raise ConfigError(f"dataset {dataset.name!r}: a measurement at t={t} s falls on no ground-truth time")
+    return k
+
+
+def _laser_information(dataset: Dataset, sigma_m: float, gt_poses: FloatArray) -> FloatArray:
+    """Laser information at every ground-truth time, shape (n_truth, 3, 3); one cast per beam layout."""
+    info = np.zeros((gt_poses.shape[0], 3, 3))
+    grid = dataset.world.occupancy
+    scans = [e for e in dataset.events if isinstance(e, LaserScan)]
+    if grid is None or not scans:
+        return info
+    groups: dict[tuple[float, ...], list[LaserScan]] = {}
+    for e in scans:
+        key = (*e.sensor_pose, e.angle_min, e.angle_increment, float(e.ranges.shape[0]), e.range_min, e.range_max)
+        groups.setdefault(key, []).append(e)
+    for group in groups.values():
+        e0 = group[0]
+        idx = np.array([_truth_index(dataset, e.t) for e in group])
+        per_scan = laser_information(
+            grid.occupied(),
+            grid.resolution,
+            (float(grid.origin[0]), float(grid.origin[1])),
+            gt_poses[idx],
+            e0.sensor_pose,
+            e0.angles,
+            e0.range_max,
+            e0.range_min,
+            sigma_m,
+            np.stack([e.ranges for e in group]),
+        )
+        np.add.at(info, idx, per_scan)
+    return info
+
+
+def _measurement_information(
+    dataset: Dataset, noise: TrueNoise, gt_poses: FloatArray, laser: bool = True
+) -> FloatArray:
     """Measurement information at every ground-truth time, shape (n_truth, 3, 3)."""
     gt_t = dataset.ground_truth.t
-    info = np.zeros((gt_t.shape[0], 3, 3))
+    use_laser = laser and noise.laser_sigma_m is not None and any(isinstance(e, LaserScan) for e in dataset.events)
+    if use_laser:
+        info = _laser_information(dataset, _positive("laser sigma_m", noise.laser_sigma_m, dataset), gt_poses)
+    else:
+        info = np.zeros((gt_t.shape[0], 3, 3))
     lm_map = dataset.world.landmarks
     by_id: dict[int, int] = {} if lm_map is None else {int(i): r for r, i in enumerate(lm_map.ids.tolist())}
     for e in dataset.events:
         if not isinstance(e, LandmarkObservations | RangeObservations | PoseFix):
             continue
-        k = int(np.argmin(np.abs(gt_t - e.t)))
-        if abs(gt_t[k] - e.t) > 1e-6:
-            raise ConfigError(f"dataset {dataset.name!r}: a measurement at t={e.t} s falls on no ground-truth time")
+        if isinstance(e, LandmarkObservations) and use_laser and noise.sightings_from_laser:
+            continue  # computed from the scans already counted
+        k = _truth_index(dataset, e.t)
         pose = gt_poses[k]
         if isinstance(e, PoseFix):
             info[k] += position_fix_information(_positive("fix sigma_xy_m", noise.fix_sigma_xy_m, dataset))
@@ -345,12 +456,13 @@ def _associate(
     return rows
 
 
-def pcrb_covariances(dataset: Dataset, noise: TrueNoise | None = None) -> FloatArray:
+def pcrb_covariances(dataset: Dataset, noise: TrueNoise | None = None, laser: bool = True) -> FloatArray:
     """The bound's pose covariance at every ground-truth time of a synthetic ``dataset``, shape (n, 3, 3).
 
     Units: m^2 in the position block, rad^2 for the heading, world frame. ``noise`` defaults to
     :func:`true_noise`. The odometry steps are the ground-truth steps (one Odometry event per step, as every
-    synthetic world simulates it); the prior is the dataset's initial belief.
+    synthetic world simulates it); the prior is the dataset's initial belief. ``laser`` = False leaves the
+    laser scans out (the bound of an estimator that does not use them).
     """
     if dataset.kidnaps:
         raise ConfigError(f"dataset {dataset.name!r}: a kidnapped run has no bound (the jump is outside the model)")
@@ -360,7 +472,7 @@ def pcrb_covariances(dataset: Dataset, noise: TrueNoise | None = None) -> FloatA
     f, q = odometry_step_terms(
         poses, noise.wheelbase_m, noise.k_left, noise.k_right, noise.scale_left, noise.scale_right
     )
-    info = _measurement_information(dataset, noise, poses)
+    info = _measurement_information(dataset, noise, poses, laser)
     j0 = np.linalg.inv(np.asarray(dataset.initial.cov, dtype=np.float64)) + info[0]
     return pcrb_recursion(j0, f, q, info[1:])
 
@@ -381,8 +493,8 @@ def pcrb_summary(t: FloatArray, cov: FloatArray, waypoint_t: FloatArray) -> dict
     return out
 
 
-def pcrb_metrics(dataset: Dataset) -> dict[str, float]:
+def pcrb_metrics(dataset: Dataset, laser: bool = True) -> dict[str, float]:
     """The bound's ``ate_m``, ``heading_rmse_rad`` and ``waypoint_<j>_error_m`` for a built synthetic
     ``dataset`` under its true noise model (see :func:`pcrb_summary`, :func:`pcrb_covariances`)."""
     waypoint_t = dataset.waypoints.t if dataset.waypoints is not None else np.zeros(0)
-    return pcrb_summary(dataset.ground_truth.t, pcrb_covariances(dataset), waypoint_t)
+    return pcrb_summary(dataset.ground_truth.t, pcrb_covariances(dataset, laser=laser), waypoint_t)

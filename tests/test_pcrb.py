@@ -158,3 +158,38 @@ def test_ekf_on_a_matched_world_approaches_the_bound() -> None:
         bounds.append(pcrb.pcrb_metrics(ds)["ate_m"])
     ratio = math.sqrt(np.mean(np.square(ates))) / math.sqrt(np.mean(np.square(bounds)))
     assert 0.9 < ratio < 1.25
+
+
+def test_laser_information_equals_the_analytic_wall_gradient() -> None:
+    # A wall of occupied cells from x = 3 m on; the exact traversal's range to it is (3 - x_s) / cos(phi)
+    # for a beam at world angle phi, so dr/dx = -1/cos(phi), dr/dy = 0 and dr/dtheta = r tan(phi); a mount
+    # offset along the robot's x axis moves the sensor with the heading.
+    res = 0.05
+    occ = np.zeros((80, 80), dtype=bool)
+    occ[:, 60:] = True
+    pose = np.array([[1.0, 2.0, 0.1]])
+    mount = (0.1, 0.0, 0.0)
+    angles = np.array([-0.4, -0.1, 0.2, 0.5])
+    sigma = 0.01
+    ok = np.ones((1, 4))
+    sx = pose[0, 0] + mount[0] * math.cos(pose[0, 2])
+    phi = pose[0, 2] + angles
+    r = (3.0 - sx) / np.cos(phi)
+    info = pcrb.laser_information(occ, res, (0.0, 0.0), pose, mount, angles, 10.0, 0.02, sigma, r[None] * ok)
+    dsx_dth = -mount[0] * math.sin(pose[0, 2])
+    g = np.column_stack([-1.0 / np.cos(phi), np.zeros(4), r * np.tan(phi) - dsx_dth / np.cos(phi)])
+    np.testing.assert_allclose(info[0], g.T @ g / sigma**2, rtol=1e-6)
+    # a missing return, or one far from the map's range (a person), carries nothing
+    meas = r.copy()
+    meas[0] = np.inf
+    meas[1] = r[1] - 0.5
+    g2 = g[2:]
+    part = pcrb.laser_information(occ, res, (0.0, 0.0), pose, mount, angles, 10.0, 0.02, sigma, meas[None])
+    np.testing.assert_allclose(part[0], g2.T @ g2 / sigma**2, rtol=1e-6)
+
+
+def test_the_laser_tightens_the_bound_of_the_laser_worlds() -> None:
+    ds = make_dataset("line_room", 0)
+    with_laser = pcrb.pcrb_metrics(ds)["ate_m"]
+    without = pcrb.pcrb_metrics(ds, laser=False)["ate_m"]
+    assert with_laser < 0.1 * without
