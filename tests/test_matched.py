@@ -96,6 +96,9 @@ def test_claim_is_reproduced_for_consistent_anees_and_not_for_overconfident() ->
     assert res.verdict == "reproduced", res.measured
     lo, hi = chi2_band(3, 50)
     assert f"[{lo:.2f}, {hi:.2f}]" in res.measured and "ekf_landmarks" in res.measured
+    with_pf = pd.concat([df, _anees_rows("room[matched=true]", {"pf": [15.0] * 50})])
+    res_pf = check_matched_consistency(with_pf)
+    assert res_pf.verdict == "reproduced" and "not judged: pf 15.00" in res_pf.measured
     over = _anees_rows("room[matched=true]", {"ekf_landmarks": [8.9] * 50, "gtsam_fls": good})
     bad = check_matched_consistency(over)
     assert bad.verdict == "not reproduced" and "8.90" in bad.measured

@@ -41,6 +41,8 @@ def matched_rows(df: pd.DataFrame) -> pd.DataFrame:
 def check_matched_consistency(df: pd.DataFrame, filters: tuple[str, ...] = CONSISTENT_FILTERS) -> ClaimResult:
     """Reproduced when every filter of ``filters`` has its mean ANEES over runs inside chi2_band(3, N).
 
+    The measured text gives each judged filter's value and band, then the other filters' mean ANEES.
+
     ``df`` holds tidy metrics rows (``dataset, filter, seed, metric, value``) of the variants of one dataset
     id; only the plain ``matched=true`` variant is read. A run with a non-finite ANEES (a singular
     covariance) makes the mean non-finite, hence outside the band.
@@ -62,6 +64,14 @@ def check_matched_consistency(df: pd.DataFrame, filters: tuple[str, ...] = CONSI
         inside = bool(np.isfinite(mean) and lo <= mean <= hi)
         ok = ok and inside
         parts.append(f"{f}: mean ANEES {mean:.2f} over {v.size} runs, band [{lo:.2f}, {hi:.2f}]")
+    # The other filters' values, reported and not judged (their models are not the simulator's).
+    others = []
+    for f in sorted({str(n) for n in rows["filter"].unique()} - {pick_filter(rows, fid) for fid in filters}):
+        v = rows.loc[(rows["filter"] == f) & (rows["metric"] == "anees"), "value"].to_numpy(dtype=np.float64)
+        if v.size:
+            others.append(f"{f} {float(np.mean(v)):.2f}")
+    if others:
+        parts.append("not judged: " + ", ".join(others))
     return ClaimResult("reproduced" if ok else "not reproduced", "; ".join(parts))
 
 
