@@ -315,10 +315,78 @@ def nees_at_truth(
     t_est: npt.ArrayLike, mean: npt.ArrayLike, cov: npt.ArrayLike, gt_t: npt.ArrayLike, gt_poses: npt.ArrayLike
 ) -> FloatArray:
     """NEES of the pose (x, y, theta) at every ground-truth time, heading error wrapped, shape (k,)."""
+    return nees(*_errors_at_truth(t_est, mean, cov, gt_t, gt_poses))
+
+
+def _errors_at_truth(
+    t_est: npt.ArrayLike, mean: npt.ArrayLike, cov: npt.ArrayLike, gt_t: npt.ArrayLike, gt_poses: npt.ArrayLike
+) -> tuple[FloatArray, FloatArray]:
+    """Pose error (heading wrapped) and the held covariance at every ground-truth time, (k, 3), (k, 3, 3)."""
     idx = hold_indices(t_est, gt_t)
     m = np.asarray(mean, dtype=np.float64)[idx]
     P = np.asarray(cov, dtype=np.float64)[idx]
-    return nees(pose_error(m, gt_poses), P)
+    return pose_error(m, gt_poses), P
+
+
+def nll(errors: npt.ArrayLike, cov: npt.ArrayLike) -> FloatArray:
+    """Negative log-likelihood of the truth under the filter's Gaussian, per row.
+
+    NLL = 0.5 (e^T P^-1 e + log det(2 pi P)), with e the estimate minus the truth (angles already wrapped,
+    :func:`locbench.geometry.pose_error`) and P the filter's covariance: the negative log of the Gaussian
+    density N(truth; estimate, P). Dimensionless for the density in the state's SI units (m, m, rad); lower
+    is better, and unlike the NEES it also penalises a covariance much larger than the error.
+
+    Parameters
+    ----------
+    errors : array-like, shape (n, d)
+        Estimate minus truth.
+    cov : array-like, shape (n, d, d)
+        The filter's covariance at the same rows.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        NLL per row; +inf where P is singular or not positive definite (to rounding), the rows whose NEES
+        is +inf (:func:`nees`).
+    """
+    e = np.asarray(errors, dtype=np.float64)
+    P = np.asarray(cov, dtype=np.float64)
+    maha = nees(e, P)
+    sign, logdet = np.linalg.slogdet(P)
+    out = 0.5 * (maha + e.shape[1] * np.log(2.0 * np.pi) + logdet)
+    out[(sign <= 0) | ~np.isfinite(maha)] = np.inf
+    return out
+
+
+def nll_at_truth(
+    t_est: npt.ArrayLike, mean: npt.ArrayLike, cov: npt.ArrayLike, gt_t: npt.ArrayLike, gt_poses: npt.ArrayLike
+) -> FloatArray:
+    """NLL of the pose (x, y, theta) at every ground-truth time, heading error wrapped, shape (k,)."""
+    return nll(*_errors_at_truth(t_est, mean, cov, gt_t, gt_poses))
+
+
+def ate_over_pcrb(ate_m: npt.ArrayLike, pcrb_ate_m: float) -> float:
+    """Efficiency of a filter against the posterior Cramer-Rao bound: sqrt(mean over runs of ate_m^2) / bound.
+
+    Parameters
+    ----------
+    ate_m : array-like, shape (n_runs,)
+        The filter's ATE of each run (seed) on one dataset, m.
+    pcrb_ate_m : float
+        The bound's ATE on the same dataset (RMS over the same seeds, :func:`locbench.pcrb.pcrb_metrics`), m.
+
+    Returns
+    -------
+    float
+        Dimensionless, >= 1 up to sampling noise for any estimator the bound covers (1 = efficient); nan for
+        no runs.
+    """
+    a = np.asarray(ate_m, dtype=np.float64)
+    if a.size == 0:
+        return float("nan")
+    if not pcrb_ate_m > 0:
+        raise ValueError(f"pcrb_ate_m must be > 0 m, got {pcrb_ate_m}")
+    return float(np.sqrt(np.mean(a * a)) / pcrb_ate_m)
 
 
 def chi2_band(dof: int = POSE_DOF, n_runs: int = 1, confidence: float = CONFIDENCE) -> tuple[float, float]:
@@ -639,7 +707,8 @@ def run_metrics(run: RunRecord, truth: TruthRecord, rpe_delta_m: float = RPE_DEL
         ``waypoint_<j>_est_y_m``, ``waypoint_<j>_marked_x_m``, ``waypoint_<j>_marked_y_m`` (j from 1,
         when the dataset has waypoints), ``ate_m``, ``heading_rmse_rad``, ``rpe_m_per_m``,
         ``final_error_m``, ``anees``, ``nees_in_band_fraction`` (single-run two-sided 95 %
-        chi-square(3) band), ``predict_us_{mean,median,p95}``, ``update_us_{mean,median,p95}``,
+        chi-square(3) band), ``nll`` (mean over the truth times of :func:`nll`, +inf if any is),
+        ``predict_us_{mean,median,p95}``, ``update_us_{mean,median,p95}``,
         ``realtime_factor``, ``converged`` and ``time_to_converge_s``; with kidnaps in the truth
         ``kidnap_distance_m``, ``kidnap_recovered``, ``kidnap_time_to_recover_s`` and
         ``kidnap_false_confidence_fraction`` (first kidnap); with a smoothed trajectory in
@@ -672,6 +741,8 @@ def run_metrics(run: RunRecord, truth: TruthRecord, rpe_delta_m: float = RPE_DEL
     ne = nees_at_truth(run.t, run.mean, run.cov, gt.t, gt_poses)
     out["anees"] = anees(ne)
     out["nees_in_band_fraction"] = fraction_in_band(ne, chi2_band(POSE_DOF, 1))
+    # +inf when any time's covariance is singular, as the ANEES.
+    out["nll"] = float(np.mean(nll_at_truth(run.t, run.mean, run.cov, gt.t, gt_poses)))
     for call in ("predict", "update"):
         for stat, value in runtime_stats(run.step_times_us(call)).items():
             out[f"{call}_us_{stat}"] = value
@@ -747,6 +818,7 @@ METRICS: dict[str, MetricInfo] = {
     "anees": MetricInfo("ANEES", "", 1.0, "closer", float(POSE_DOF)),
     "nees_in_band_fraction": MetricInfo("NEES in 95 % band", "%", 100.0, "higher"),
     "nll": MetricInfo("NLL", "", 1.0),
+    "ate_over_pcrb": MetricInfo("ATE / PCRB", "x", 1.0),
     "predict_us_median": MetricInfo("predict median", "us", 1.0),
     "update_us_median": MetricInfo("update median", "us", 1.0),
     "realtime_factor": MetricInfo("real-time factor", "x", 1.0, "higher"),

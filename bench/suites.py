@@ -75,6 +75,9 @@ RECORDED_LANDMARK_DATASETS = (
 )
 RECORDED_LASER_DATASETS = ("intel",)
 
+#: The model-matched worlds of the consistency suite (the simulator's noise is the nominal noise).
+MATCHED_DATASETS = ("room[matched=true]", "office[matched=true]")
+
 _LG_PATHS = ("circle", "star", "pentagon", "random")
 _LG_LAYOUTS = ("1", "2", "3", "4", "8")
 
@@ -173,6 +176,12 @@ _SUITES: tuple[Suite, ...] = (
         ),
         "every filter on the recorded datasets (skips where data or a map kind is missing): MRCLAM 6 robots 1-5, "
         "Lost in the Woods, Intel, CMU Plaza 1 and 2",
+    ),
+    Suite(
+        "consistency",
+        (Block(ALL_FILTERS, MATCHED_DATASETS, 50),),
+        "consistency on the model-matched worlds (simulator noise = the filters' nominal noise): every filter, "
+        "50 seeds (not part of 'all')",
     ),
     Suite(
         "smoke",

@@ -17,7 +17,7 @@ from locbench.cli import main
         (["run", "--filter", "ekf_landmarks[gate_probability=high]", "--dataset", "room"], "expected a number"),
         (["run", "--filter", "ekf_landmarks[no_such_key=1]", "--dataset", "room"], "valid: "),
         (["run", "--filter", "odometry[", "--dataset", "room"], "malformed spec"),
-        (["run", "--suite", "nosuch"], "unknown suite 'nosuch'; valid: all, default"),
+        (["run", "--suite", "nosuch"], "unknown suite 'nosuch'; valid: all, consistency, default"),
         (["run", "--filter", "odometry"], "--filter and --dataset go together"),
         (["check", "nope"], "unknown filter or dataset 'nope'; valid: "),
     ],

@@ -271,3 +271,41 @@ def test_particle_count_metric_is_the_mean_reported_count() -> None:
     out = particle_count_metrics({"particles": np.array([np.nan, 5000.0, 100.0, 300.0])})
     assert out == {"particles_mean": pytest.approx(1800.0)}
     assert particle_count_metrics({"particles": np.array([np.nan])}) == {}
+
+
+def test_nll_equals_scipy_logpdf_and_wraps_the_heading() -> None:
+    rng = np.random.default_rng(5)
+    a = rng.standard_normal((4, 3, 3))
+    P = a @ a.transpose(0, 2, 1) + 0.1 * np.eye(3)
+    e = rng.standard_normal((4, 3))
+    got = lm.nll(e, P)
+    want = [-stats.multivariate_normal(mean=np.zeros(3), cov=P[k]).logpdf(e[k]) for k in range(4)]
+    np.testing.assert_allclose(got, want, rtol=1e-12)
+    # A heading error just across +-pi is small, not 2 pi: pose_error wraps it before the NLL.
+    gt = np.array([[0.0, 0.0, np.pi - 0.01]])
+    est = np.array([[0.0, 0.0, -np.pi + 0.01]])
+    t = np.array([0.0])
+    v = lm.nll_at_truth(t, est, np.eye(3)[None] * 0.01, t, gt)[0]
+    assert v == pytest.approx(0.5 * (0.02**2 / 0.01 + 3 * np.log(2 * np.pi) + np.log(1e-6)))
+
+
+def test_nll_ranks_an_overcautious_covariance_below_a_matched_one() -> None:
+    # Both have a NEES near 3 or below; only the NLL tells the 100-times-too-large covariance apart.
+    e = np.random.default_rng(1).standard_normal((2000, 3)) * 0.01
+    matched = lm.nll(e, np.broadcast_to(np.eye(3) * 1e-4, (2000, 3, 3))).mean()
+    cautious = lm.nll(e, np.broadcast_to(np.eye(3) * 1e-2, (2000, 3, 3))).mean()
+    assert matched < cautious
+
+
+def test_nll_is_inf_for_a_singular_covariance() -> None:
+    P = np.stack([np.diag([1.0, 1.0, 0.0]), np.eye(3)])
+    e = np.zeros((2, 3))
+    out = lm.nll(e, P)
+    assert out[0] == np.inf and np.isfinite(out[1])
+
+
+def test_ate_over_pcrb_is_rms_over_runs_divided_by_the_bound() -> None:
+    assert lm.ate_over_pcrb([0.03, 0.04], 0.01) == pytest.approx(np.sqrt((0.03**2 + 0.04**2) / 2) / 0.01)
+    assert np.isnan(lm.ate_over_pcrb([], 0.01))
+    with pytest.raises(ValueError, match="pcrb_ate_m"):
+        lm.ate_over_pcrb([0.1], 0.0)

@@ -209,6 +209,7 @@ def test_collect_metrics_is_tidy_and_sorted(store: Store) -> None:
         "final_error_m",
         "anees",
         "nees_in_band_fraction",
+        "nll",
         "predict_us_mean",
         "predict_us_median",
         "predict_us_p95",

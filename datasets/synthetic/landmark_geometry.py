@@ -65,7 +65,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal
 
 import numpy as np
@@ -78,15 +78,16 @@ from locbench.datasets.synthetic.scenarios import (
     SensorSuite,
     assemble,
     check_kidnap_params,
+    encoder_model,
     nominal_odometry_spec,
-    robot_encoder_model,
     true_wheelbase,
 )
-from locbench.datasets.synthetic.sensors import LaserSensor, PoseFixSensor, laser_scans
+from locbench.datasets.synthetic.sensors import LandmarkSensor, LaserSensor, PoseFixSensor, laser_scans
 from locbench.datasets.synthetic.world import World
 from locbench.errors import ConfigError
 from locbench.events import UNKNOWN_ID, Event, LandmarkObservations, LaserScan
 from locbench.geometry import wrap_angle, wrap_scalar
+from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
 
 logger = logging.getLogger(__name__)
 
@@ -374,6 +375,11 @@ class LandmarkGeometryParams:
         Kidnap rotation magnitude, rad (sign drawn at random).
     circuits : int
         How many times the path is driven.
+    matched : bool
+        Model-matched world: the simulator's noise is the nominal noise handed to the filters (no systematic
+        odometry error, encoder k at its nominal value, the initial belief's mean drawn from the belief) and
+        the sightings come from a Gaussian range-bearing sensor with the nominal noise, range limits and field
+        of view instead of the laser detector (no occlusion between discs); needs ``initial_offset_m`` = 0.
     """
 
     path: PathName = "circle"
@@ -385,6 +391,7 @@ class LandmarkGeometryParams:
     kidnap_m: float = 0.0
     kidnap_rad: float = 0.5
     circuits: int = 2
+    matched: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)
 
 
 #: Independent noise streams, in a fixed order (adding one at the end leaves the others unchanged).
@@ -404,7 +411,7 @@ class LandmarkGeometryScenario(DatasetBuilder):
         _check_params(params)
         streams = dict(zip(STREAMS, rng.spawn(len(STREAMS)), strict=True))
         world = geometry_world(params.landmarks)
-        limits = dataclasses.replace(LIMITS, wheelbase_m=true_wheelbase())
+        limits = dataclasses.replace(LIMITS, wheelbase_m=true_wheelbase(params.matched))
         legs = path_legs(params.path, params.circuits, streams["route"])
         motion = simulate_route(START, legs, limits, slip_k=SLIP_K_TRUE, slip_rng=streams["execution"])
         if params.kidnap_m > 0:
@@ -424,8 +431,22 @@ class LandmarkGeometryScenario(DatasetBuilder):
             laser_sigma_m=LASER.sigma_m,
             pose_fix_sigma_xy_m=fixes.reported_sigma_xy_m if fixes else None,
         )
-        # The landmark stream is not used by assemble (landmarks come from the scans below).
-        suite = SensorSuite(encoder=robot_encoder_model(), fixes=fixes)
+        # Unless matched, the landmark stream is not used by assemble (landmarks come from the scans below).
+        matched_sightings = (
+            LandmarkSensor(
+                rate_hz=LASER.rate_hz,
+                min_range_m=LASER.min_range_m + LANDMARK_RADIUS_M,
+                max_range_m=LASER.max_range_m + LANDMARK_RADIUS_M,
+                fov_rad=LASER.fov_rad,
+                sigma_range_m=NOMINAL_SIGMA_RANGE_M,
+                sigma_bearing_rad=NOMINAL_SIGMA_BEARING_RAD,
+                known_ids=params.known_ids,
+                occlusion=False,
+            )
+            if params.matched
+            else None
+        )
+        suite = SensorSuite(encoder=encoder_model(params.matched), landmarks=matched_sightings, fixes=fixes)
         off = _initial_offset(params.initial_offset_m, streams["initial"])
         meta: dict[str, Any] = {
             "layout": params.landmarks,
@@ -445,12 +466,22 @@ class LandmarkGeometryScenario(DatasetBuilder):
             initial_sigma=(0.02, 0.02, math.radians(1.0)),
             resolution_m=RESOLUTION_M,
             metadata=meta,
+            initial_rng=streams["initial"] if params.matched else None,
         )
         assert ds.world.occupancy is not None
         scans = laser_scans(motion, ds.world.occupancy, LASER, streams["laser"])
         scan_steps = np.round(np.array([s.t for s in scans]) / motion.dt).astype(np.int64)
-        sightings = detect_landmarks(
-            scans, motion.poses[scan_steps], world.landmarks, LANDMARK_RADIUS_M, params.known_ids, streams["landmarks"]
+        sightings = (
+            []
+            if params.matched
+            else detect_landmarks(
+                scans,
+                motion.poses[scan_steps],
+                world.landmarks,
+                LANDMARK_RADIUS_M,
+                params.known_ids,
+                streams["landmarks"],
+            )
         )
         events: list[Event] = [*ds.events, *scans, *sightings]
         initial = ds.initial
@@ -482,6 +513,11 @@ def _check_params(p: LandmarkGeometryParams) -> None:
         raise ConfigError(f"parameter 'initial_offset_m' must be a distance >= 0 m, got {p.initial_offset_m}")
     if not p.pose_fix_sigma_m > 0:
         raise ConfigError(f"parameter 'pose_fix_sigma_m' must be > 0 m, got {p.pose_fix_sigma_m}")
+    if p.matched and p.initial_offset_m > 0:
+        raise ConfigError(
+            f"parameter 'initial_offset_m' must be 0 with matched=true (the initial error is drawn from the belief), "
+            f"got {p.initial_offset_m}"
+        )
     if not 1 <= p.circuits <= 10:
         raise ConfigError(f"parameter 'circuits' must be an integer in 1..10, got {p.circuits}")
 

@@ -41,7 +41,7 @@ import dataclasses
 import logging
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
@@ -62,6 +62,8 @@ from locbench.datasets.synthetic.scenarios import (
     check_kidnap_params,
     drive,
     execution_stream,
+    matched_encoder_model,
+    matched_stream,
     nominal_odometry_spec,
     office_world,
     split_streams,
@@ -79,6 +81,7 @@ from locbench.datasets.synthetic.world import World
 from locbench.errors import ConfigError
 from locbench.events import Event, LaserScan
 from locbench.raycast import cast_rays
+from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
 
 logger = logging.getLogger(__name__)
 
@@ -321,12 +324,17 @@ class LapParams:
         Kidnap rotation magnitude, rad (sign drawn at random).
     laser_beams : int
         Beams of the 240 deg, 5.6 m laser (683 as the Hokuyo URG-04LX).
+    matched : bool
+        Model-matched world: the simulator's noise is the nominal noise handed to the filters (no systematic
+        odometry error, encoder k at its nominal value, the initial belief's mean drawn from the belief, and
+        no people: the map is the world).
     """
 
     people: int = 4
     kidnap_m: float = 0.0
     kidnap_rad: float = 0.5
     laser_beams: int = 683
+    matched: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)
 
 
 class LapScenario(DatasetBuilder):
@@ -346,8 +354,10 @@ class LapScenario(DatasetBuilder):
         # The five standard streams first, then the people's, then the execution noise's (added last so that
         # the older ones kept their draws); the same as calibrate_lap_odometry() uses.
         streams, people_rng, slip_rng = lap_streams(rng)
+        initial_rng = matched_stream(rng) if params.matched else None
         world = dataclasses.replace(office_world(), name="lap")
-        limits = dataclasses.replace(LAP_LIMITS, wheelbase_m=lap_wheelbase())
+        systematic = 0.0 if params.matched else LAP_SYSTEMATIC_SCALE
+        limits = dataclasses.replace(LAP_LIMITS, wheelbase_m=lap_wheelbase(systematic))
         motion = drive(
             world,
             LAP_START,
@@ -367,7 +377,7 @@ class LapScenario(DatasetBuilder):
             sigma_m=0.01,
             dropout_prob=0.01,
         )
-        people = draw_people(world, params.people, people_rng, PEOPLE_REGION)
+        people = draw_people(world, 0 if params.matched else params.people, people_rng, PEOPLE_REGION)
         spec = SensorSpec(**nominal_odometry_spec(), laser_sigma_m=laser.sigma_m)
         meta = {
             "generator_version": LAP_GENERATOR_VERSION,
@@ -385,11 +395,12 @@ class LapScenario(DatasetBuilder):
             params=params,
             world=world,
             motion=motion,
-            suite=SensorSuite(encoder=lap_encoder_model()),
+            suite=SensorSuite(encoder=matched_encoder_model() if params.matched else lap_encoder_model()),
             streams=streams,
             spec=spec,
             initial_sigma=(0.02, 0.02, math.radians(1.0)),
             metadata=meta,
+            initial_rng=initial_rng,
         )
         assert ds.world.occupancy is not None
         scans: list[Event] = list(laser_scans_with_people(motion, ds.world.occupancy, laser, people, streams["laser"]))

@@ -26,7 +26,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
@@ -38,15 +38,17 @@ from locbench.datasets.synthetic.scenarios import (
     assemble,
     check_kidnap_params,
     drive,
+    encoder_model,
     execution_stream,
+    matched_stream,
     nominal_odometry_spec,
-    robot_encoder_model,
     split_streams,
     true_wheelbase,
 )
 from locbench.datasets.synthetic.sensors import LaserSensor
 from locbench.datasets.synthetic.world import World, wall_with_doors
 from locbench.errors import ConfigError
+from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
 
 logger = logging.getLogger(__name__)
 
@@ -107,12 +109,16 @@ class LineRoomParams:
         Kidnap distance at 50 % of the run, m (0 = no kidnap).
     kidnap_rad : float
         Kidnap rotation magnitude, rad (sign drawn at random).
+    matched : bool
+        Model-matched world: the simulator's noise is the nominal noise handed to the filters (no systematic
+        odometry error, encoder k at its nominal value, the initial belief's mean drawn from the belief).
     """
 
     laser_sigma_m: float = 0.01
     laser_beams: int = 181
     kidnap_m: float = 0.0
     kidnap_rad: float = 0.5
+    matched: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)
 
 
 class LineRoomScenario(DatasetBuilder):
@@ -130,8 +136,9 @@ class LineRoomScenario(DatasetBuilder):
             raise ConfigError(f"parameter 'laser_sigma_m' must be a range noise > 0 m, got {params.laser_sigma_m}")
         streams = split_streams(rng)
         slip_rng = execution_stream(rng)
+        initial_rng = matched_stream(rng) if params.matched else None
         world = line_room_world()
-        limits = dataclasses.replace(LINE_ROOM_LIMITS, wheelbase_m=true_wheelbase())
+        limits = dataclasses.replace(LINE_ROOM_LIMITS, wheelbase_m=true_wheelbase(params.matched))
         motion = drive(
             world,
             LINE_ROOM_START,
@@ -150,7 +157,7 @@ class LineRoomScenario(DatasetBuilder):
             max_range_m=5.6,
             sigma_m=params.laser_sigma_m,
         )
-        suite = SensorSuite(encoder=robot_encoder_model(), laser=laser)
+        suite = SensorSuite(encoder=encoder_model(params.matched), laser=laser)
         spec = SensorSpec(**nominal_odometry_spec(), laser_sigma_m=laser.sigma_m)
         return assemble(
             dataset_id="line_room",
@@ -162,4 +169,5 @@ class LineRoomScenario(DatasetBuilder):
             spec=spec,
             initial_sigma=(0.02, 0.02, math.radians(1.0)),
             resolution_m=LINE_ROOM_RESOLUTION_M,
+            initial_rng=initial_rng,
         )

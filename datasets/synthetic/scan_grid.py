@@ -31,9 +31,10 @@ and by ``kidnap_rad`` at the first command boundary after half the tour; the pla
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
@@ -55,9 +56,11 @@ from locbench.datasets.synthetic.scenarios import (
     GENERATOR_VERSION,
     WHEELBASE_NOMINAL_M,
     check_kidnap_params,
+    encoder_model,
     kidnap_chooser,
+    matched_initial_mean,
+    matched_stream,
     nominal_odometry_spec,
-    robot_encoder_model,
     split_streams,
     true_wheelbase,
 )
@@ -67,6 +70,7 @@ from locbench.errors import ConfigError
 from locbench.events import Event, LaserScan, Odometry
 from locbench.geometry import wrap_angle, wrap_scalar
 from locbench.raycast import cast_rays
+from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
 from locbench.spec import params_to_dict
 
 logger = logging.getLogger(__name__)
@@ -148,12 +152,16 @@ class ScanGridParams:
         Kidnap distance after half the tour, m (0 = none).
     kidnap_rad : float
         Kidnap rotation magnitude, rad (sign drawn at random).
+    matched : bool
+        Model-matched world: no systematic odometry error, encoder k at its nominal value, the initial belief's
+        mean drawn from the belief (the slip of the command execution is unchanged).
     """
 
     grid_step_m: float = 0.25
     mixed_commands: bool = False
     kidnap_m: float = 0.0
     kidnap_rad: float = 0.5
+    matched: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)
 
 
 @dataclass
@@ -178,13 +186,15 @@ def drive_commands(
     rng: np.random.Generator,
     kidnap: tuple[float, object] | None = None,
     max_commands: int = 2000,
+    wheelbase_m: float | None = None,
 ) -> _Commands:
     """Plan and execute 1 s commands along ``tour``; see the module docstring.
 
     ``kidnap`` is (time s, chooser) with a chooser as :func:`~locbench.datasets.synthetic.scenarios.kidnap_chooser`
     returns. Each command draws ``2 * SUBSTEPS`` normals from ``rng`` (slip of each wheel per sub-step).
+    ``wheelbase_m`` is the true wheelbase (default: the shared robot's, :func:`true_wheelbase`).
     """
-    b_true = true_wheelbase()
+    b_true = true_wheelbase() if wheelbase_m is None else wheelbase_m
     x, y, th = start
     out = _Commands([(x, y, th)], [], [], [], [], [], [], [])
     dt = COMMAND_S / SUBSTEPS
@@ -273,7 +283,10 @@ class ScanGridScenario(DatasetBuilder):
             t_k = math.floor(0.5 * len(probe.v)) * COMMAND_S
             kidnap = (t_k, kidnap_chooser(world, params.kidnap_m, params.kidnap_rad, 0.4, streams["kidnap"]))
         slip_rng, encoder_rng = streams["odometry"].spawn(2)
-        cmds = drive_commands(SCAN_GRID_START, SCAN_GRID_TOUR, v_max, params.mixed_commands, slip_rng, kidnap=kidnap)
+        b_true = true_wheelbase(params.matched)
+        cmds = drive_commands(
+            SCAN_GRID_START, SCAN_GRID_TOUR, v_max, params.mixed_commands, slip_rng, kidnap=kidnap, wheelbase_m=b_true
+        )
         if params.kidnap_m > 0 and not cmds.kidnaps:
             raise ConfigError(
                 f"kidnap_m={params.kidnap_m}: no free landing that far was found; expected a smaller kidnap distance"
@@ -282,7 +295,7 @@ class ScanGridScenario(DatasetBuilder):
         n = len(cmds.v)
         t = np.arange(n + 1, dtype=np.float64) * COMMAND_S
         # Encoders: measured = true x (1 + scale) + k sqrt|d| noise (report 003 eq. 10), nominal wheelbase.
-        enc = robot_encoder_model()
+        enc = encoder_model(params.matched)
         d_left, d_right = np.asarray(cmds.d_left), np.asarray(cmds.d_right)
         zo = encoder_rng.standard_normal((n, 2))
         ml = d_left * (1.0 + enc.scale_left) + enc.k_left * np.sqrt(np.abs(d_left)) * zo[:, 0]
@@ -326,13 +339,20 @@ class ScanGridScenario(DatasetBuilder):
             for k in range(n + 1)
         ]
         spec = SensorSpec(**nominal_odometry_spec(), laser_sigma_m=laser.sigma_m)
+        initial_sigma = (0.02, 0.02, math.radians(1.0))
+        start = poses[0].copy()
+        if params.matched:
+            start = matched_initial_mean(start, initial_sigma, matched_stream(rng))
         path = float(np.sum(np.hypot(*np.diff(poses[:, 0:2], axis=0).T)))
         ds = Dataset(
             id="scan_grid",
             params=params_to_dict(params),
             events=sort_events(events),
             ground_truth=Trajectory2D(t=t, xy=poses[:, 0:2].copy(), theta=wrap_angle(poses[:, 2])),
-            initial=Gaussian2(mean=poses[0].copy(), cov=np.diag(np.square([0.02, 0.02, math.radians(1.0)]))),
+            initial=Gaussian2(
+                mean=start,
+                cov=np.diag(np.square(initial_sigma)),
+            ),
             world=world_map,
             sensors=spec,
             waypoints=Waypoints(
@@ -351,6 +371,8 @@ class ScanGridScenario(DatasetBuilder):
                 ),
                 "odometry_rate_hz": 1.0 / COMMAND_S,
                 "grid_step_m": params.grid_step_m,
+                "true_odometry_error": {**dataclasses.asdict(enc), "wheelbase_true_m": b_true},
+                "matched": params.matched,
             },
         )
         ds.check()

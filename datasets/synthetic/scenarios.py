@@ -19,7 +19,7 @@ import dataclasses
 import logging
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
@@ -51,6 +51,7 @@ from locbench.datasets.synthetic.sensors import (
 from locbench.datasets.synthetic.world import World, wall_with_doors
 from locbench.errors import ConfigError
 from locbench.events import Event
+from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
 from locbench.spec import params_to_dict
 
 logger = logging.getLogger(__name__)
@@ -114,8 +115,34 @@ def robot_encoder_model(noise_free: bool = False) -> EncoderModel:
     )
 
 
+def matched_encoder_model(k: float = ENCODER_K_NOMINAL) -> EncoderModel:
+    """The odometry error of a model-matched world: no systematic error, random constant ``k`` (sqrt(m)) on
+    both wheels, the value :func:`nominal_odometry_spec` hands to the filters."""
+    return EncoderModel(wheelbase_nominal_m=WHEELBASE_NOMINAL_M, k_left=k, k_right=k)
+
+
+def matched_initial_mean(
+    start: Sequence[float], initial_sigma: tuple[float, float, float], rng: np.random.Generator
+) -> FloatArray:
+    """Initial belief mean of a model-matched world: the true start plus a draw from the initial belief
+    N(0, diag(initial_sigma^2)) (m, m, rad), so that the initial error is what the belief says."""
+    z = rng.standard_normal(3)
+    return np.asarray(start, dtype=np.float64)[:3] + np.asarray(initial_sigma) * z
+
+
+def matched_stream(rng: np.random.Generator) -> np.random.Generator:
+    """The child generator of a model-matched world's initial draw, spawned after every other stream (only
+    when ``matched``, so that the default realisation is unchanged)."""
+    return rng.spawn(1)[0]
+
+
+def encoder_model(matched: bool) -> EncoderModel:
+    """The shared robot's odometry error, or a model-matched world's (:func:`matched_encoder_model`)."""
+    return matched_encoder_model() if matched else robot_encoder_model()
+
+
 def true_wheelbase(noise_free: bool = False) -> float:
-    """The robot's true wheelbase, m (the nominal one when ``noise_free``)."""
+    """The robot's true wheelbase, m (the nominal one when ``noise_free`` or in a model-matched world)."""
     return WHEELBASE_NOMINAL_M if noise_free else WHEELBASE_NOMINAL_M * WHEELBASE_TRUE_RATIO
 
 
@@ -249,8 +276,13 @@ def assemble(
     initial_sigma: tuple[float, float, float],
     resolution_m: float = 0.05,
     metadata: dict[str, Any] | None = None,
+    initial_rng: np.random.Generator | None = None,
 ) -> Dataset:
-    """Turn a motion and a sensor suite into a checked :class:`Dataset`."""
+    """Turn a motion and a sensor suite into a checked :class:`Dataset`.
+
+    With ``initial_rng`` (model-matched worlds) the initial belief's mean is drawn from the belief around the
+    true start (:func:`matched_initial_mean`); otherwise it is the true start.
+    """
     world_map = world.world_map(resolution_m)
     events: list[Event] = []
     events.extend(wheel_odometry(motion, suite.encoder, streams["odometry"]))
@@ -273,6 +305,7 @@ def assemble(
             "wheelbase_true_m": motion.wheelbase_m,
         },
         "execution_noise": execution_metadata(motion),
+        "matched": initial_rng is not None,
         "calibration": {
             "procedure": "locbench.datasets.synthetic.scenarios.calibrate_room_odometry",
             "target_cm": list(ROOM_TABLE1_ODOMETRY_CM),
@@ -290,7 +323,10 @@ def assemble(
         params=params_to_dict(params),
         events=sort_events(events),
         ground_truth=Trajectory2D(t=motion.t.copy(), xy=motion.poses[:, 0:2].copy(), theta=motion.poses[:, 2].copy()),
-        initial=Gaussian2(mean=start.copy(), cov=np.diag(np.square(initial_sigma))),
+        initial=Gaussian2(
+            mean=start.copy() if initial_rng is None else matched_initial_mean(start, initial_sigma, initial_rng),
+            cov=np.diag(np.square(initial_sigma)),
+        ),
         world=world_map,
         sensors=spec,
         waypoints=Waypoints(t=motion.waypoint_t.copy(), xy=motion.waypoint_xy.copy()),
@@ -355,12 +391,16 @@ class RoomParams:
         Kidnap rotation magnitude, rad (sign drawn at random).
     laser_beams : int
         0 = no laser (as in report 003); otherwise a 240 deg, 5.6 m laser with this many beams.
+    matched : bool
+        Model-matched world: the simulator's noise is the nominal noise handed to the filters (no systematic
+        odometry error, encoder k at its nominal value, the initial belief's mean drawn from the belief).
     """
 
     known_ids: bool = True
     kidnap_m: float = 0.0
     kidnap_rad: float = 0.5
     laser_beams: int = 0
+    matched: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)
 
 
 class RoomScenario(DatasetBuilder):
@@ -387,8 +427,9 @@ class RoomScenario(DatasetBuilder):
         _check_beams("laser_beams", params.laser_beams, allow_zero=True)
         streams = split_streams(rng)
         slip_rng = execution_stream(rng)
+        initial_rng = matched_stream(rng) if params.matched else None
         world = room_world()
-        limits = dataclasses.replace(ROOM_LIMITS, wheelbase_m=true_wheelbase())
+        limits = dataclasses.replace(ROOM_LIMITS, wheelbase_m=true_wheelbase(params.matched))
         legs = [GoTo(w) for w in ROOM_WAYPOINTS]
         motion = drive(
             world,
@@ -403,7 +444,7 @@ class RoomScenario(DatasetBuilder):
         )
         lm = dataclasses.replace(self.landmark_sensor, known_ids=params.known_ids)
         laser = LaserSensor(beams=params.laser_beams) if params.laser_beams else None
-        suite = SensorSuite(encoder=robot_encoder_model(), landmarks=lm, laser=laser)
+        suite = SensorSuite(encoder=encoder_model(params.matched), landmarks=lm, laser=laser)
         spec = SensorSpec(
             **nominal_odometry_spec(),
             landmark_sigma_range_m=lm.sigma_range_m,
@@ -422,6 +463,7 @@ class RoomScenario(DatasetBuilder):
             streams=streams,
             spec=spec,
             initial_sigma=(0.01, 0.01, math.radians(1.0)),
+            initial_rng=initial_rng,
         )
 
 
@@ -607,6 +649,8 @@ class OfficeParams:
         Beams of the 240 deg, 5.6 m laser.
     pose_fix_sigma_m : float
         Standard deviation of the 1 Hz GPS-like fixes per axis, m.
+    matched : bool
+        Model-matched world (see ``RoomParams.matched``).
     """
 
     known_ids: bool = True
@@ -614,6 +658,7 @@ class OfficeParams:
     kidnap_rad: float = 0.5
     laser_beams: int = 181
     pose_fix_sigma_m: float = 0.7
+    matched: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)
 
 
 class OfficeScenario(DatasetBuilder):
@@ -630,8 +675,9 @@ class OfficeScenario(DatasetBuilder):
             raise ConfigError(f"parameter 'pose_fix_sigma_m' must be > 0 m, got {params.pose_fix_sigma_m}")
         streams = split_streams(rng)
         slip_rng = execution_stream(rng)
+        initial_rng = matched_stream(rng) if params.matched else None
         world = office_world()
-        limits = dataclasses.replace(OFFICE_LIMITS, wheelbase_m=true_wheelbase())
+        limits = dataclasses.replace(OFFICE_LIMITS, wheelbase_m=true_wheelbase(params.matched))
         motion = drive(
             world,
             OFFICE_START,
@@ -659,7 +705,7 @@ class OfficeScenario(DatasetBuilder):
         fixes = PoseFixSensor(
             rate_hz=1.0, sigma_xy_m=params.pose_fix_sigma_m, reported_sigma_xy_m=params.pose_fix_sigma_m
         )
-        suite = SensorSuite(encoder=robot_encoder_model(), landmarks=lm, laser=laser, fixes=fixes)
+        suite = SensorSuite(encoder=encoder_model(params.matched), landmarks=lm, laser=laser, fixes=fixes)
         spec = SensorSpec(
             **nominal_odometry_spec(),
             landmark_sigma_range_m=lm.sigma_range_m,
@@ -679,6 +725,7 @@ class OfficeScenario(DatasetBuilder):
             streams=streams,
             spec=spec,
             initial_sigma=(0.02, 0.02, math.radians(1.0)),
+            initial_rng=initial_rng,
         )
 
 
