@@ -648,6 +648,8 @@ def systematic_resample(weights: npt.ArrayLike, n: int, rng: np.random.Generator
     ``weights`` (N,) non-negative, normalised here; one uniform u ~ U[0, 1) places the points (u + k) / n.
     """
     w = np.ascontiguousarray(weights, dtype=np.float64)
+    if n <= 0:  # augmented MCL may replace every particle by a random one
+        return np.empty(0, dtype=np.int64)
     return _systematic_indices(w, int(n), float(rng.random()))
 
 
@@ -709,7 +711,7 @@ class ParticleFilter(Filter):
     consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LandmarkObservations, LaserScan, RangeObservations})
     requires: ClassVar[frozenset[MapKind]] = frozenset()
     Config: ClassVar[type[FilterConfig]] = ParticleFilterConfig
-    version: ClassVar[int] = 2  # 2: compiled kernels, so other random streams
+    version: ClassVar[int] = 3  # 2: compiled kernels, so other random streams; 3: augmented MCL may inject every particle
     source: ClassVar[str] = "003_e5c93f9be776ee5e.txt sec. 4.2; Thrun, Burgard & Fox, Probabilistic Robotics ch. 6, 8"
     config: ParticleFilterConfig
 

@@ -428,3 +428,22 @@ def test_kld_count_is_stored_with_the_run_and_fixed_counts_stay_fixed() -> None:
     assert n[0] == 5000 and np.median(n) < 1000  # starts at the maximum (the reset row), shrinks once tracking
     fixed = run_filter(_pf(particles=300), ds, np.random.default_rng(3))
     assert np.all(fixed.diagnostics["particles"] == 300)
+
+
+def test_systematic_resample_of_no_particles_is_empty() -> None:
+    """Augmented MCL can draw every particle at random (p_inject = 1): then nothing is resampled."""
+    rng = np.random.default_rng(3)
+    idx = systematic_resample(np.array([0.2, 0.8]), 0, rng)
+    assert idx.shape == (0,) and idx.dtype == np.int64
+
+
+def test_augmented_pf_survives_injecting_every_particle() -> None:
+    """A seed on which the slow and fast averages made p_inject = 1 crashed the compiled resampler."""
+    from locbench.registry import make_dataset, make_filter
+    from locbench.runner import run_filter
+    from locbench.seeding import filter_rng
+
+    ds = make_dataset("room[kidnap_m=0.5]", 7)
+    name = "pf[augmented=true]"
+    trace = run_filter(make_filter(name), ds, filter_rng(name, "room[kidnap_m=0.5]", 7))
+    assert trace.status == "ok", trace.message
