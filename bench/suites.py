@@ -62,6 +62,8 @@ KIDNAP_FILTERS = (
     "ekf_icp",
     "kf_linear",
     "pf[augmented=true]",
+    # KLD-adaptive MCL (Fox 2003) with the same augmented recovery
+    "pf[adaptive=kld,augmented=true]",
     "gtsam_fls",
 )
 KIDNAP_DISTANCES_M = (0.5, 1, 2, 4)
@@ -170,7 +172,7 @@ _SUITES: tuple[Suite, ...] = (
     Suite(
         "recorded",
         (
-            Block(ALL_FILTERS, RECORDED_LANDMARK_DATASETS, 1),
+            Block((*ALL_FILTERS, "pf[adaptive=kld]"), RECORDED_LANDMARK_DATASETS, 1),
             # pf's laser model is off by default (003's PF uses landmarks); Intel has only the laser.
             Block((*ALL_FILTERS, "pf[use_laser=true]"), RECORDED_LASER_DATASETS, 1),
         ),
