@@ -19,7 +19,7 @@ import numpy as np
 
 from locbench.errors import DependencyNotInstalled, UnknownIdError
 from locbench.seeding import dataset_rng
-from locbench.spec import build_params, format_spec, non_default_params, params_to_dict, parse_spec
+from locbench.spec import Spec, build_params, format_spec, non_default_params, params_to_dict, parse_spec
 
 T = TypeVar("T")
 
@@ -265,6 +265,11 @@ class Resolved:
 
     def params_dict(self) -> dict[str, Any]:
         return params_to_dict(self.params)
+
+    @property
+    def spec(self) -> Spec:
+        """The canonical name as a typed :class:`Spec` (what the runner and the store carry)."""
+        return Spec.parse(self.name)
 
 
 def resolve_filter(spec: str) -> Resolved:

@@ -1,7 +1,8 @@
-"""Names users type: ``id[key=value,...]`` specs, and typed parameter dataclasses built from them.
+"""Names users type: ``id[key=value,...]`` specs, parameter grids, and typed parameter dataclasses built from them.
 
 A filter config or dataset parameter set is a frozen, keyword-only dataclass whose field names carry
-units (``sigma_range_m``). :func:`parse_spec` splits a spec; :func:`build_params` turns its string
+units (``sigma_range_m``). :func:`parse_spec` splits a spec; :func:`expand_grid` turns a grid
+``pf[particles=100|300,augmented=true]`` into its specs; :func:`build_params` turns its string
 values into the dataclass, with an error that lists the valid keys or says what type was expected.
 """
 
@@ -9,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import itertools
 import json
 import re
 import types
@@ -94,6 +96,32 @@ class Spec:
     def without(self, *keys: str) -> Spec:
         """The same spec with ``keys`` removed (``office[kidnap_m=2]`` -> ``office``)."""
         return Spec(self.ident, tuple(kv for kv in self.params if kv[0] not in keys))
+
+
+#: Separates the values of one parameter in a grid spec (``pf[particles=100|300]``).
+GRID_SEP = "|"
+
+
+def expand_grid(text: str) -> list[str]:
+    """The specs of a parameter grid: ``|`` separates a key's values and keys cross.
+
+    ``"pf[particles=100|300,augmented=true|false]"`` gives the four specs of the cross product, in the order
+    written (the first key varies slowest); a spec without ``|`` gives itself. Raises :class:`ConfigError`
+    for an empty value (``particles=100||300``) or a value repeated within one key.
+    """
+    ident, params = parse_spec(text)
+    axes: list[list[str]] = []
+    for key, value in params.items():
+        values = [v.strip() for v in value.split(GRID_SEP)]
+        if len(values) > 1 and (not all(values) or len(set(values)) != len(values)):
+            raise ConfigError(
+                f"grid parameter {key}={value!r} in spec {text!r}: expected distinct non-empty values separated by '|'"
+            )
+        axes.append(values)
+    if all(len(a) == 1 for a in axes):
+        return [text.strip()]
+    keys = list(params)
+    return [format_spec(ident, dict(zip(keys, combo, strict=True))) for combo in itertools.product(*axes)]
 
 
 def format_spec(ident: str, params: dict[str, Any]) -> str:
