@@ -2,7 +2,7 @@
 
 locbench list
 locbench run [--suite NAME|FILE.toml | --filter SPEC ... --dataset SPEC ...]
-             [--seeds N] [--results DIR] [--jobs N] [--force]
+             [--seeds N] [--results DIR] [--jobs N] [--executor local|dask [--scheduler ADDRESS]] [--force]
 locbench report [--results DIR]
 locbench check [ID ...]
 locbench fetch SPEC [SPEC ...]
@@ -17,6 +17,7 @@ import os
 import sys
 from collections import Counter
 from collections.abc import Sequence
+from typing import Any
 
 from locbench import __version__
 from locbench.errors import ConfigError, LocbenchError
@@ -49,8 +50,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
 def _cmd_run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from locbench.registry import resolve_dataset, resolve_filter
-    from locbench.runner import run_many
+    from locbench.runner import plan_sweep, run_sweep
     from locbench.suites import Block, get_suite
 
     if args.suite and (args.filter or args.dataset):
@@ -59,6 +59,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--seeds must be >= 1, got {args.seeds}")
     if args.jobs < 1:
         raise ConfigError(f"--jobs must be >= 1, got {args.jobs}")
+    if args.scheduler and args.executor != "dask":
+        raise ConfigError("--scheduler needs --executor dask")
     if args.filter or args.dataset:
         if not (args.filter and args.dataset):
             raise ConfigError("--filter and --dataset go together: name at least one of each (see 'locbench list')")
@@ -68,30 +70,45 @@ def _cmd_run(args: argparse.Namespace) -> int:
         for name in args.suite or ["default"]:
             suite = get_suite(name)
             blocks += list((suite.with_seeds(args.seeds) if args.seeds else suite).blocks)
-    # resolve every spec before running anything, so a typo fails at once
-    for b in blocks:
-        for spec in b.filters:
-            resolve_filter(spec)
-        for spec in b.datasets:
-            resolve_dataset(spec)
-    total = sum(b.runs for b in blocks)
-    outcomes = []
-    with tqdm(total=total, unit="run", desc="locbench run", disable=None if not args.no_progress else True) as bar:
-        for b in blocks:
-            outcomes += run_many(
-                list(b.filters),
-                list(b.datasets),
-                list(range(b.seeds)),
-                args.results,
-                jobs=args.jobs,
-                force=args.force,
-                progress=bar.update,
-            )
+    # every spec is resolved and validated here, before anything runs or is written
+    plan = plan_sweep([(b.filters, b.datasets, range(b.seeds)) for b in blocks], args.results, args.force)
+    with tqdm(total=plan.total, unit="run", desc="locbench run", disable=True if args.no_progress else None) as bar:
+        sweep = run_sweep(plan, args.executor, args.jobs, args.scheduler, progress=bar.update)
+    if sweep.interrupted:
+        print(f"interrupted: {sweep.stored} of {sweep.total} runs stored; run the same command to resume")
+        return 130
+    return _print_summary(sweep, args.results)
+
+
+def _print_summary(sweep: Any, results: str) -> int:
+    """Counts by status, then one line per (status, filter, dataset, reason) with a count; 1 if any run failed."""
+    from locbench.runner import NOT_STORED
+
+    outcomes = sweep.outcomes
     counts = Counter(o.status for o in outcomes)
-    print(f"{len(outcomes)} runs in {args.results}/runs: " + ", ".join(f"{n} {s}" for s, n in sorted(counts.items())))
+    print(f"{len(outcomes)} runs in {results}/runs: " + ", ".join(f"{n} {s}" for s, n in sorted(counts.items())))
+    if sweep.cleaned:
+        print(f"  removed {sweep.cleaned} leftover temporary entries of interrupted writes")
+    if sweep.retried:
+        print(f"  {sweep.retried} task(s) given to a fresh worker after theirs died")
+    reruns = [o for o in outcomes if o.note]
+    for o in reruns:
+        print(f"  {o.note}")
+    groups: Counter[tuple[str, str, str, str]] = Counter()
     for o in outcomes:
-        if o.status in ("error", "diverged", "skipped"):
-            print(f"  {o.status}: {o.filter} on {o.dataset} seed {o.seed}: {o.message}")
+        if o.status in ("error", "diverged", "skipped", NOT_STORED):
+            groups[(o.status, str(o.filter), str(o.dataset), o.message)] += 1
+    for (status, filt, dataset, message), n in groups.items():
+        times = f" x{n}" if n > 1 else ""
+        print(f"  {status}{times}: {filt} on {dataset}: {message}")
+    failed = counts.get("error", 0) + counts.get(NOT_STORED, 0)
+    if failed:
+        print(
+            f"{counts.get('error', 0)} run(s) failed and {counts.get(NOT_STORED, 0)} were not stored; "
+            f"each failed run's message is in {results}/runs/<dataset>/<filter>/seed-NNNN/meta.json",
+            file=sys.stderr,
+        )
+        return 1
     return 0
 
 
@@ -178,7 +195,21 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument(
         "--results", default=_results_default(), help="results folder (default: results/ or $LOCBENCH_RESULTS)"
     )
-    r.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
+    r.add_argument(
+        "--jobs", type=int, default=1, help="worker processes (default 1), or LocalCluster workers with --executor dask"
+    )
+    r.add_argument(
+        "--executor",
+        choices=("local", "dask"),
+        default="local",
+        help="local: this process or a pool of --jobs processes; dask: dask.distributed workers",
+    )
+    r.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="with --executor dask: a running scheduler (tcp://host:8786); default: a LocalCluster of --jobs workers",
+    )
     r.add_argument("--force", action="store_true", help="re-run runs that are already stored")
     r.add_argument("--no-progress", action="store_true", help="no progress bar")
     r.set_defaults(func=_cmd_run)

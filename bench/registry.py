@@ -301,7 +301,11 @@ def make_dataset(spec: str | Resolved, seed: int | np.random.Generator = 0) -> A
     the runner, so ``make_dataset("room", 3)`` is the data every filter saw for seed 3.
     """
     r = resolve_dataset(spec) if isinstance(spec, str) else spec
+    return build_dataset(DATASETS.load(r.id), r, seed)
+
+
+def build_dataset(builder_cls: type, r: Resolved, seed: int | np.random.Generator) -> Any:
+    """Build the dataset of ``r`` with its builder class given (a worker that has no registry entry for it)."""
     gen = seed if isinstance(seed, np.random.Generator) else dataset_rng(r.name, seed)
-    builder = DATASETS.load(r.id)()
-    ds = builder.build(r.params, gen)
+    ds = builder_cls().build(r.params, gen)
     return dataclasses.replace(ds, id=r.id, name=r.name, params=r.params_dict())
