@@ -228,7 +228,8 @@ def build_params(cls: type[P], values: dict[str, Any], owner: str) -> P:
     try:
         obj = cls(**kwargs)
     except (TypeError, ValueError) as exc:
-        raise ConfigError(f"{owner}: {exc}") from None
+        text = str(exc)
+        raise ConfigError(text if text.startswith(f"{owner}:") else f"{owner}: {text}") from None
     return obj
 
 
