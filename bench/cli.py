@@ -1,6 +1,6 @@
 """The ``locbench`` command line: a thin layer over the library API.
 
-locbench list
+locbench list [FILTER|DATASET ...]
 locbench run [--suite NAME|FILE.toml | --filter SPEC ... --dataset SPEC ...]
              [--seeds N] [--results DIR] [--jobs N] [--executor local|dask [--scheduler ADDRESS]] [--force]
 locbench report [--results DIR]
@@ -35,6 +35,8 @@ def _cmd_list(args: argparse.Namespace) -> int:
     from locbench.registry import DATASETS, FILTERS
     from locbench.suites import SUITES
 
+    if args.ids:
+        return _list_params(args.ids)
     for title, reg in (("filters", FILTERS), ("datasets", DATASETS)):
         print(f"{title}:")
         for ident in reg.ids():
@@ -44,6 +46,33 @@ def _cmd_list(args: argparse.Namespace) -> int:
     print("suites:")
     for s in SUITES.values():
         print(f"  {s.name:<18} {s.runs:>5} runs: {s.description}")
+    return 0
+
+
+def _list_params(ids: Sequence[str]) -> int:
+    """Each parameter of the named filters and datasets: type, default, unit and meaning."""
+    from locbench.errors import UnknownIdError
+    from locbench.registry import DATASETS, FILTERS
+    from locbench.spec import describe_params
+
+    for ident in ids:
+        if ident in FILTERS:
+            reg, kind, cls = FILTERS, "filter", FILTERS.load(ident).Config
+        elif ident in DATASETS:
+            reg, kind, cls = DATASETS, "dataset", DATASETS.load(ident).Params
+        else:
+            valid = ", ".join(FILTERS.ids() + DATASETS.ids())
+            raise UnknownIdError(f"unknown filter or dataset {ident!r}; valid: {valid}")
+        print(f"{kind} {ident}: {reg.entry(ident).summary}")
+        print(f"  written {ident}[key=value,...]; a grid: key=a|b|c")
+        rows = [(p.name, p.type, p.default, p.unit, p.meaning) for p in describe_params(cls)]
+        if not rows:
+            print("  (no parameters)")
+            continue
+        head = ("parameter", "type", "default", "unit", "meaning")
+        widths = [max(len(r[i]) for r in [*rows, head]) for i in range(4)]
+        for r in [head, *rows]:
+            print("  " + "  ".join(c.ljust(w) for c, w in zip(r[:4], widths, strict=True)) + "  " + r[4])
     return 0
 
 
@@ -173,7 +202,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-v", "--verbose", action="store_true", help="log progress details")
     sub = p.add_subparsers(dest="command", required=True)
 
-    sub.add_parser("list", help="registered filters, datasets and suites").set_defaults(func=_cmd_list)
+    lst = sub.add_parser("list", help="registered filters, datasets and suites; or the parameters of some")
+    lst.add_argument("ids", nargs="*", metavar="ID", help="a filter or dataset: print its parameters (e.g. pf)")
+    lst.set_defaults(func=_cmd_list)
 
     r = sub.add_parser("run", help="run filters over datasets and store the runs")
     r.add_argument(

@@ -261,3 +261,118 @@ def stable_hash(obj: Any) -> str:
     """sha256 hex digest of the canonical JSON of ``obj`` (never Python's salted ``hash()``)."""
     text = json.dumps(obj, sort_keys=True, separators=(",", ":"), default=str)
     return hashlib.sha256(text.encode()).hexdigest()
+
+
+@dataclasses.dataclass(frozen=True)
+class ParamDoc:
+    """One parameter of a filter config or dataset, as ``locbench list ID`` prints it."""
+
+    name: str
+    type: str
+    default: str
+    unit: str
+    meaning: str
+
+
+#: Unit of a parameter from the suffix of its name (the house rule: names carry units), longest suffix first.
+_UNIT_SUFFIXES = (
+    ("_rad2_per_rad", "rad^2/rad"),
+    ("_m2_per_m", "m^2/m"),
+    ("_sigma_theta_per_rad", "rad/sqrt(rad)"),
+    ("_sigma_theta_per_m", "rad/sqrt(m)"),
+    ("_sigma_xy_per_m", "m/sqrt(m)"),
+    ("_per_m", "1/m"),
+    ("_radps", "rad/s"),
+    ("_mps", "m/s"),
+    ("_rad2", "rad^2"),
+    ("_m2", "m^2"),
+    ("_deg", "deg"),
+    ("_rad", "rad"),
+    ("_hz", "Hz"),
+    ("_s", "s"),
+    ("_m", "m"),
+)
+_NUMPYDOC_ITEM = re.compile(r"^(\w[\w, ]*?)\s*:\s*(.+)$")
+
+
+def _attribute_docs(cls: type) -> dict[str, str]:
+    """Field name -> description from the numpydoc ``Attributes`` sections of ``cls`` and its bases."""
+    out: dict[str, str] = {}
+    for klass in cls.__mro__:
+        lines = [ln.rstrip() for ln in (klass.__doc__ or "").splitlines()]
+        for i, line in enumerate(lines[:-1]):
+            if line.strip() != "Attributes" or set(lines[i + 1].strip()) != {"-"}:
+                continue
+            base = len(line) - len(line.lstrip())
+            names: list[str] = []
+            for ln in lines[i + 2 :]:
+                indent = len(ln) - len(ln.lstrip())
+                if not ln.strip():
+                    continue
+                if indent < base or (indent == base and not _NUMPYDOC_ITEM.match(ln.strip())):
+                    break
+                m = _NUMPYDOC_ITEM.match(ln.strip()) if indent == base else None
+                if m:
+                    names = [n.strip() for n in m.group(1).split(",")]
+                    for n in names:
+                        out.setdefault(n, "")
+                else:
+                    for n in names:
+                        if out.get(n) is not None and not out[n].endswith("\x00"):
+                            out[n] = (out[n] + " " + ln.strip()).strip()
+            # descriptions found in a subclass win; mark them done for the bases
+            out = {k: v if v.endswith("\x00") else v + "\x00" for k, v in out.items()}
+    return {k: v.rstrip("\x00") for k, v in out.items()}
+
+
+def _type_name(tp: Any) -> str:
+    origin = get_origin(tp)
+    if origin is Literal:
+        return "{" + ", ".join(map(str, get_args(tp))) + "}"
+    if origin in (Union, types.UnionType):
+        args = get_args(tp)
+        named = " or ".join(_type_name(a) for a in args if a is not type(None))
+        return f"{named} or None" if type(None) in args else named
+    if origin is tuple:
+        return "tuple of " + ", ".join(_type_name(a) for a in get_args(tp) if a is not Ellipsis)
+    return getattr(tp, "__name__", str(tp))
+
+
+#: Abbreviations whose full stop does not end a sentence (``eq. 10``, ``sec. 4.2``, ``et al.``).
+_ABBREVIATIONS = ("eq", "eqs", "sec", "fig", "al", "ref", "refs", "e.g", "i.e", "cf", "vs", "approx")
+_MAX_MEANING = 160
+
+
+def _first_sentence(text: str) -> str:
+    """The first sentence of a description (a full stop then a capital, not after an abbreviation), shortened."""
+    for m in re.finditer(r"\.(?=\s+[A-Z`(\"]|\s*$)", text):
+        word = text[: m.start()].rsplit(None, 1)[-1].lower() if text[: m.start()].strip() else ""
+        if word.lstrip("(") not in _ABBREVIATIONS:
+            text = text[: m.start() + 1]
+            break
+    return text if len(text) <= _MAX_MEANING else text[: _MAX_MEANING - 3].rstrip() + "..."
+
+
+def describe_params(cls: type) -> list[ParamDoc]:
+    """Every parameter of the dataclass ``cls``: type, default, unit and meaning.
+
+    The meaning is the first sentence of the field's entry in the numpydoc ``Attributes`` section of the
+    class (or a base); the unit is the field's ``metadata["unit"]`` when given, else read from its name's
+    suffix (``_m`` metres, ``_rad`` radians, ``_s`` seconds, ``_m2`` square metres ...), else ``-``.
+    """
+    docs = _attribute_docs(cls)
+    hints = param_fields(cls)
+    out = []
+    for f in dataclasses.fields(cls):
+        if not f.init:
+            continue
+        if f.default is not dataclasses.MISSING:
+            default = _format_value(f.default) if f.default != "" else '""'
+        elif f.default_factory is not dataclasses.MISSING:
+            default = _format_value(f.default_factory())
+        else:
+            default = "(required)"
+        unit = str(f.metadata.get("unit", "")) or next((u for s, u in _UNIT_SUFFIXES if f.name.endswith(s)), "-")
+        meaning = str(f.metadata.get("doc", "")) or _first_sentence(docs.get(f.name, "")) or "(undocumented)"
+        out.append(ParamDoc(f.name, _type_name(hints[f.name]), default, unit, meaning))
+    return out
