@@ -12,6 +12,7 @@ locbench export [--results DIR] [--out DIR] [--dataset SPEC ...] [--filter SPEC 
 from __future__ import annotations
 
 import argparse
+import errno
 import logging
 import os
 import sys
@@ -156,21 +157,38 @@ def _cmd_report(args: argparse.Namespace) -> int:
 def _cmd_check(args: argparse.Namespace) -> int:
     from locbench.checks import run_checks
 
-    failed = 0
+    counts: Counter[str] = Counter()
     for r in run_checks(list(args.ids) or None):
         mark = {"passed": "ok", "failed": "FAIL", "xfailed": "xfail", "xpassed": "XPASS", "skipped": "skip"}[r.outcome]
         print(f"{mark:<5} {r.target:<32} {r.check}" + (f": {r.message}" if r.message else ""))
-        failed += r.outcome in ("failed", "xpassed")
-    print(f"{failed} check(s) failed" if failed else "all checks passed")
+        counts[r.outcome] += 1
+    failed = counts["failed"] + counts["xpassed"]
+    tally = ", ".join(f"{n} {o}" for o, n in sorted(counts.items()))
+    if failed:
+        print(f"{failed} check(s) failed ({tally})")
+    elif counts["skipped"]:
+        print(f"no check failed, but {counts['skipped']} were skipped (see 'skip' above): {tally}")
+    else:
+        print(f"all {counts['passed'] + counts['xfailed']} checks passed ({tally})")
     return 1 if failed else 0
 
 
 def _cmd_fetch(args: argparse.Namespace) -> int:
     from locbench.registry import DATASETS, resolve_dataset
 
+    if not args.verbose:
+        import pooch
+
+        pooch.get_logger().setLevel(logging.WARNING)  # its "Downloading ..." line; the paths are printed after
     for spec in args.specs:
         r = resolve_dataset(spec)
-        paths = DATASETS.load(r.id)().fetch(r.params)
+        try:
+            paths = DATASETS.load(r.id)().fetch(r.params)
+        except OSError as exc:
+            if exc.errno is not None:
+                raise  # a local file-system error: the generic one line
+            reason = os_error_line(exc).split(" (Caused by", 1)[0]
+            raise ConfigError(f"{r.name}: download failed (is the network reachable?): {reason}") from None
         if not paths:
             print(f"{r.name}: nothing to fetch (synthetic)")
         for path in paths:
@@ -192,6 +210,13 @@ def _cmd_export(args: argparse.Namespace) -> int:
         filters=[resolve_filter(s).name for s in args.filter],
         smoothed=args.smoothed,
     )
+    if not written:
+        what = " matching the --dataset/--filter given" if (args.dataset or args.filter) else ""
+        print(
+            f"locbench: error: no stored run with estimates{what} in {args.results}/runs; nothing written",
+            file=sys.stderr,
+        )
+        return 1
     print(f"{len(written)} TUM trajectory files written under {out}")
     return 0
 
@@ -282,6 +307,34 @@ def main(argv: Sequence[str] | None = None) -> int:
         # one line that says what is valid; the traceback would hide it
         print(f"locbench: error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:
+        print(f"locbench: error: {os_error_line(exc)}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+#: What to do about an operating-system error, by errno.
+_OS_HINTS = {
+    errno.EACCES: "choose a folder you may write, or fix its permissions",
+    errno.EPERM: "choose a folder you may write, or fix its permissions",
+    errno.EROFS: "the file system is read-only; choose a folder on a writable one",
+    errno.ENOSPC: "the disk is full; free space or choose another folder",
+    errno.EDQUOT: "the disk quota is exhausted; free space or choose another folder",
+    errno.ENOTDIR: "a file stands where a folder is needed; give a folder",
+    errno.EISDIR: "a folder stands where a file is needed; give a file",
+    errno.ENOENT: "it does not exist",
+}
+
+
+def os_error_line(exc: OSError) -> str:
+    """One line for an operating-system or network error: the path, the reason, and what to do."""
+    # requests' errors are OSErrors without errno; their text can hold a nested repr: keep the first line
+    reason = exc.strerror or (str(exc).splitlines() or [type(exc).__name__])[0]
+    where = f"{exc.filename}: " if exc.filename else ""
+    hint = _OS_HINTS.get(exc.errno or 0)
+    return f"{where}{reason}" + (f" ({hint})" if hint else "")
 
 
 if __name__ == "__main__":

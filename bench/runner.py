@@ -495,6 +495,8 @@ def run_sweep(
     from locbench import executors
 
     store = Store(plan.results)
+    if plan.tasks:
+        store.check_writable()  # a read-only or full results folder is one error before any run, not one per run
     cleaned = len(store.clean_leftovers())
     outcomes = list(plan.cached)
     if progress and plan.cached:

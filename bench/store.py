@@ -275,6 +275,13 @@ class Store:
         return removed
 
     # --- writing -------------------------------------------------------------------------------
+    def check_writable(self) -> None:
+        """Raise the ``OSError`` a write into ``runs/`` would meet (no permission, read-only, a file in the way)."""
+        _makedirs(self.runs)
+        fd, name = tempfile.mkstemp(prefix=".tmp-", dir=self.runs)
+        os.close(fd)
+        os.unlink(name)
+
     def write_truth(self, rec: TruthRecord) -> None:
         path = self.truth_path(rec.dataset, rec.seed)
         _makedirs(path.parent)
