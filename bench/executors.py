@@ -14,6 +14,7 @@ import concurrent.futures as cf
 import contextlib
 import dataclasses
 import logging
+import os
 import signal
 import threading
 import types
@@ -36,6 +37,14 @@ LOCAL_RETRIES = 1
 #: dask's ``distributed.scheduler.allowed-failures`` for a LocalCluster: a task whose worker dies is retried
 #: on another worker this many times, then it is a ``KilledWorker`` error (a remote scheduler keeps its own).
 DASK_ALLOWED_FAILURES = 1
+#: A LocalCluster's scheduler settings: the retries above, and one task per worker thread at a time, so that a
+#: worker's death is charged to the task it was running only (not to tasks queued behind it on that worker).
+_DASK_LOCAL_CONFIG = {
+    "distributed.scheduler.allowed-failures": DASK_ALLOWED_FAILURES,
+    "distributed.scheduler.worker-saturation": 1.0,
+}
+#: Times a one-filter task that dask gave up on (``KilledWorker``) is submitted again before it is an error run.
+DASK_RESUBMITS = 2
 #: How often a waiting executor looks at the stop flag, s.
 _POLL_S = 0.2
 
@@ -212,6 +221,15 @@ def _sigint_ignored() -> Iterator[None]:
         signal.signal(signal.SIGINT, old)
 
 
+def _kill_local_workers(cluster: Any) -> None:
+    """Kill a LocalCluster's worker processes: closing waits for a running task to finish, killing does not."""
+    for nanny in list(getattr(cluster, "workers", {}).values()):
+        pid = getattr(nanny, "pid", None)
+        if pid:
+            with contextlib.suppress(OSError):
+                os.kill(pid, signal.SIGKILL)
+
+
 def run_dask(
     tasks: Sequence[Task], handle: Handle, lost: Lost, jobs: int = 1, scheduler: str | None = None
 ) -> ExecStatus:
@@ -236,7 +254,7 @@ def run_dask(
         # distributed logs every connection at INFO; a sweep prints its own summary
         logging.getLogger("distributed").setLevel(logging.ERROR)
     with StopRequest(raise_now=False) as stop:
-        with _sigint_ignored(), dask.config.set({"distributed.scheduler.allowed-failures": DASK_ALLOWED_FAILURES}):
+        with _sigint_ignored(), dask.config.set(_DASK_LOCAL_CONFIG):
             try:
                 if scheduler is None:
                     cluster = distributed.LocalCluster(
@@ -266,6 +284,7 @@ def run_dask(
             futures[fut] = i
             return fut
 
+        resubmitted = [0] * len(todo)
         pending = {submit(i) for i in range(len(todo))}
         try:
             while pending and not stop.requested:
@@ -274,21 +293,38 @@ def run_dask(
                 for fut in [f for f in pending if f.done()]:
                     pending.discard(fut)
                     i = futures[fut]
+                    error: BaseException | None = None
+                    # retryable: the worker died (KilledWorker) or the result was lost with it, not the task failed
+                    retryable = fut.status != "error"
                     if fut.status == "finished":
-                        result = fut.result()
-                        with stop.shield():
-                            handle(todo[i], result)
-                        continue
-                    error = fut.exception() if fut.status == "error" else None
-                    if isinstance(error, distributed.KilledWorker) and len(todo[i].jobs) > 1:
-                        # dask retried it already; one task per filter finds the filter that kills its worker
+                        try:
+                            # a result held by a worker that died since is recomputed: wait for it in the next round
+                            result = fut.result(timeout=_POLL_S)
+                        except (TimeoutError, distributed.TimeoutError):
+                            pending.add(fut)
+                            continue
+                        except Exception as exc:
+                            error = exc
+                        else:
+                            with stop.shield():
+                                handle(todo[i], result)
+                            continue
+                    else:
+                        error = fut.exception() if fut.status == "error" else None
+                    killed = isinstance(error, distributed.KilledWorker)
+                    if (killed or retryable) and (len(todo[i].jobs) > 1 or resubmitted[i] < DASK_RESUBMITS):
+                        # A task with several filters is split, one per filter, to find the one that kills its
+                        # worker; a single one is submitted again, since a task whose worker was killed by
+                        # another task's crash (holding its result) can be charged that death too.
                         status.retried += 1
-                        for part in split(todo[i]):
+                        parts = split(todo[i]) if len(todo[i].jobs) > 1 else [todo[i]]
+                        for part in parts:
                             todo.append(part)
+                            resubmitted.append(resubmitted[i] + (len(parts) == 1))
                             pending.add(submit(len(todo) - 1))
                         continue
-                    if isinstance(error, distributed.KilledWorker):
-                        reason = f"its dask worker died on each of {DASK_ALLOWED_FAILURES + 1} tries (KilledWorker)"
+                    if killed:
+                        reason = "its dask worker died each time it ran (KilledWorker)"
                     elif error is not None:
                         reason = f"worker failed: {type(error).__name__}: {error}"
                     else:
@@ -302,6 +338,8 @@ def run_dask(
             with contextlib.suppress(Exception):
                 client.close(timeout=2)
             if cluster is not None:
+                if status.interrupted:
+                    _kill_local_workers(cluster)
                 with contextlib.suppress(Exception):
                     cluster.close(timeout=3)
     return status

@@ -147,19 +147,44 @@ def _stored(res: Path) -> int:
     return len(list(Store(res).iter_runs()))
 
 
-def _interrupt(tmp_path: Path, extra: list[str]) -> tuple[int, float, str, str, int]:
-    """Start a slow sweep, send SIGINT once a run is stored; returns (status, seconds to exit, out, err, stored)."""
+def _interrupt(
+    tmp_path: Path, extra: list[str], dataset: str = "line[steps=20]", after_s: float | None = None
+) -> tuple[int, float, str, str, int]:
+    """Start a slow sweep (0.05 s per step, 8 seeds) and send SIGINT once a run is stored, or after ``after_s``.
+
+    Returns (exit status, seconds from the signal to the exit, stdout, stderr, runs stored).
+    """
     res = tmp_path / "res"
-    argv = ["run", "--filter", "bad[mode=slow]", "--dataset", "line[steps=20]", "--seeds", "8", "--results", str(res)]
+    argv = ["run", "--filter", "bad[mode=slow]", "--dataset", dataset, "--seeds", "8", "--results", str(res)]
     proc = _child([*argv, "--no-progress", *extra], tmp_path)
-    deadline = time.monotonic() + 120
-    while _stored(res) < 1 and proc.poll() is None and time.monotonic() < deadline:
-        time.sleep(0.05)
+    if after_s is None:
+        deadline = time.monotonic() + 120
+        while _stored(res) < 1 and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+    else:
+        time.sleep(after_s)
     assert proc.poll() is None, proc.communicate()
     sent = time.monotonic()
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=60)
     return proc.returncode, time.monotonic() - sent, out, err, _stored(res)
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [["--jobs", "1"], ["--jobs", "2"], pytest.param(["--executor", "dask", "--jobs", "2"], marks=pytest.mark.slow)],
+    ids=["inline", "pool", "dask"],
+)
+def test_ctrl_c_abandons_long_runs_in_progress(tmp_path: Path, extra: list[str], harness_registry: None) -> None:
+    if "dask" in extra:
+        pytest.importorskip("distributed")
+    # every run takes 20 s: returning within seconds means the running ones were abandoned, not awaited
+    code, seconds, out, err, stored = _interrupt(tmp_path, extra, "line[steps=400]", after_s=3.0)
+    assert code == 130, err
+    assert seconds < 5
+    assert err.strip() == "", err
+    assert out.strip().splitlines() == ["interrupted: 0 of 8 runs stored; run the same command to resume"]
+    assert stored == 0 and [p.name for p in (tmp_path / "res").rglob(".tmp-*")] == []
 
 
 @pytest.mark.parametrize("extra", [["--jobs", "1"], ["--jobs", "2"]], ids=["inline", "pool"])
@@ -198,17 +223,7 @@ def test_dask_worker_killed_mid_sweep_is_an_error_run_and_the_sweep_goes_on(tmp_
     finally:
         sys.path.remove(str(TESTS))
     status = {(str(o.filter), o.seed): o for o in out}
-    assert [status[("bad[fail_at_s=100]", s)].status for s in (0, 1)] == ["ok", "ok"]
+    assert [status[("bad[fail_at_s=100]", s)].status for s in (0, 1)] == ["ok", "ok"], [o.message for o in out]
     for s in (0, 1):
         o = status[("bad[mode=exit]", s)]
         assert o.status == "error" and "KilledWorker" in o.message
-
-
-@pytest.mark.slow
-def test_ctrl_c_under_dask(tmp_path: Path, harness_registry: None) -> None:
-    pytest.importorskip("distributed")
-    code, seconds, out, err, stored = _interrupt(tmp_path, ["--executor", "dask", "--jobs", "2"])
-    assert code == 130, err
-    assert seconds < 5
-    assert "Traceback" not in err
-    assert out.strip().splitlines()[-1] == f"interrupted: {stored} of 8 runs stored; run the same command to resume"
