@@ -112,11 +112,11 @@ def run_local(
     if scheduler is not None:
         raise ConfigError("--scheduler needs --executor dask")
     if jobs <= 1:
-        return _run_inline(tasks, handle)
+        return _run_inline(tasks, handle, lost)
     return _run_pool(tasks, handle, lost, jobs)
 
 
-def _run_inline(tasks: Sequence[Task], handle: Handle) -> ExecStatus:
+def _run_inline(tasks: Sequence[Task], handle: Handle, lost: Lost) -> ExecStatus:
     with StopRequest(raise_now=True) as stop:
         for n, task in enumerate(tasks):
             if stop.requested:
@@ -125,6 +125,10 @@ def _run_inline(tasks: Sequence[Task], handle: Handle) -> ExecStatus:
                 result = execute_task(task)
             except KeyboardInterrupt:
                 return ExecStatus(interrupted=True)
+            except Exception as exc:  # execute_task records a filter's or a dataset's failure itself: a bug
+                with stop.shield():
+                    lost(task, f"task failed: {type(exc).__name__}: {exc}")
+                continue
             with stop.shield():
                 handle(task, result)
             if stop.requested and n + 1 < len(tasks):

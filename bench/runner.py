@@ -290,12 +290,20 @@ _COST_PER_DATA_S = {
 _DURATION_S = {"room": 60.0, "office": 231.0, "lap": 60.0, "line_room": 100.0, "scan_grid": 100.0}
 
 
-def _estimate_cost(store: Store, dr: Resolved, seed: int, jobs: Sequence[Job]) -> float:
-    """Estimated compute time of a task, s: stored wall times of the same (dataset, filter) where present."""
+def _estimate_cost(
+    store: Store, dr: Resolved, jobs: Sequence[Job], seen: dict[tuple[str, str], dict[str, Any] | None]
+) -> float:
+    """Estimated compute time of a task, s: stored wall times of the same (dataset, filter) where present.
+
+    ``seen`` caches one stored ``meta.json`` per (dataset, filter) across the tasks of a plan.
+    """
     duration = _DURATION_S.get(dr.id, 1000.0 if dr.id in ("mrclam", "intel", "plaza", "rosbag") else 100.0)
     total = 0.0
     for job in jobs:
-        stored = store.sample_meta(dr.name, job.filter.name)
+        pair = (dr.name, job.filter.name)
+        if pair not in seen:
+            seen[pair] = store.sample_meta(*pair)
+        stored = seen[pair]
         if stored is not None and isinstance(stored.get("wall_s"), (int, float)) and stored.get("status") == "ok":
             total += float(stored["wall_s"])
             continue
@@ -343,10 +351,11 @@ def plan_sweep(
                             continue
                         note = f"re-run: the stored run does not load ({bad})"
                     jobs[fr.name] = Job(fr, fclasses[fr.id], key, note)
+    seen: dict[tuple[str, str], dict[str, Any] | None] = {}
     for (_, seed), (dr, jobs) in groups.items():
         if jobs:
             todo = tuple(jobs.values())
-            plan.tasks.append(Task(dr, DATASETS.load(dr.id), seed, todo, _estimate_cost(store, dr, seed, todo)))
+            plan.tasks.append(Task(dr, DATASETS.load(dr.id), seed, todo, _estimate_cost(store, dr, todo, seen)))
     # Longest first (LPT): the last tasks to start are short, so the workers finish together.
     plan.tasks.sort(key=lambda t: -t.cost_s)
     return plan
