@@ -37,11 +37,16 @@ LOCAL_RETRIES = 1
 #: dask's ``distributed.scheduler.allowed-failures`` for a LocalCluster: a task whose worker dies is retried
 #: on another worker this many times, then it is a ``KilledWorker`` error (a remote scheduler keeps its own).
 DASK_ALLOWED_FAILURES = 1
-#: A LocalCluster's scheduler settings: the retries above, and one task per worker thread at a time, so that a
-#: worker's death is charged to the task it was running only (not to tasks queued behind it on that worker).
+#: A LocalCluster's settings: the retries above; one task per worker thread at a time, so that a worker's death
+#: is charged to the task it was running only (not to tasks queued behind it on that worker); no profiler.
 _DASK_LOCAL_CONFIG = {
     "distributed.scheduler.allowed-failures": DASK_ALLOWED_FAILURES,
     "distributed.scheduler.worker-saturation": 1.0,
+    # the statistical profiler samples every worker thread's stack every 10 ms: CPU a sweep does not need
+    "distributed.worker.profile.enabled": False,
+    # dask starts workers with MALLOC_TRIM_THRESHOLD_=65536, which makes glibc return memory after nearly every
+    # numpy temporary (measured: 5 s of system time on `default --seeds 1`); run them as the local pool's are
+    "distributed.nanny.pre-spawn-environ": {},
 }
 #: Times a one-filter task that dask gave up on (``KilledWorker``) is submitted again before it is an error run.
 DASK_RESUBMITS = 2
