@@ -1,8 +1,8 @@
 """The ``locbench`` command line: a thin layer over the library API.
 
-locbench list
+locbench list [FILTER|DATASET ...]
 locbench run [--suite NAME|FILE.toml | --filter SPEC ... --dataset SPEC ...]
-             [--seeds N] [--results DIR] [--jobs N] [--force]
+             [--seeds N] [--results DIR] [--jobs N] [--executor local|dask [--scheduler ADDRESS]] [--force]
 locbench report [--results DIR] [--suite NAME] [--out DIR]
 locbench check [ID ...]
 locbench fetch SPEC [SPEC ...]
@@ -12,12 +12,14 @@ locbench export [--results DIR] [--out DIR] [--dataset SPEC ...] [--filter SPEC 
 from __future__ import annotations
 
 import argparse
+import errno
 import logging
 import os
 import sys
 from collections import Counter
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from locbench import __version__
 from locbench.errors import ConfigError, LocbenchError
@@ -35,6 +37,8 @@ def _cmd_list(args: argparse.Namespace) -> int:
     from locbench.registry import DATASETS, FILTERS
     from locbench.suites import SUITES
 
+    if args.ids:
+        return _list_params(args.ids)
     for title, reg in (("filters", FILTERS), ("datasets", DATASETS)):
         print(f"{title}:")
         for ident in reg.ids():
@@ -47,11 +51,37 @@ def _cmd_list(args: argparse.Namespace) -> int:
     return 0
 
 
+def _list_params(ids: Sequence[str]) -> int:
+    """Each parameter of the named filters and datasets: type, default, unit and meaning."""
+    from locbench.errors import UnknownIdError
+    from locbench.registry import DATASETS, FILTERS
+    from locbench.spec import describe_params
+
+    for ident in ids:
+        if ident in FILTERS:
+            reg, kind, cls = FILTERS, "filter", FILTERS.load(ident).Config
+        elif ident in DATASETS:
+            reg, kind, cls = DATASETS, "dataset", DATASETS.load(ident).Params
+        else:
+            valid = ", ".join(FILTERS.ids() + DATASETS.ids())
+            raise UnknownIdError(f"unknown filter or dataset {ident!r}; valid: {valid}")
+        print(f"{kind} {ident}: {reg.entry(ident).summary}")
+        print(f"  written {ident}[key=value,...]; a grid: key=a|b|c")
+        rows = [(p.name, p.type, p.default, p.unit, p.meaning) for p in describe_params(cls)]
+        if not rows:
+            print("  (no parameters)")
+            continue
+        head = ("parameter", "type", "default", "unit", "meaning")
+        widths = [max(len(r[i]) for r in [*rows, head]) for i in range(4)]
+        for r in [head, *rows]:
+            print("  " + "  ".join(c.ljust(w) for c, w in zip(r[:4], widths, strict=True)) + "  " + r[4])
+    return 0
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from locbench.registry import resolve_dataset, resolve_filter
-    from locbench.runner import run_many
+    from locbench.runner import plan_sweep, run_sweep
     from locbench.suites import Block, get_suite
 
     if args.suite and (args.filter or args.dataset):
@@ -60,6 +90,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--seeds must be >= 1, got {args.seeds}")
     if args.jobs < 1:
         raise ConfigError(f"--jobs must be >= 1, got {args.jobs}")
+    if args.scheduler and args.executor != "dask":
+        raise ConfigError("--scheduler needs --executor dask")
     if args.filter or args.dataset:
         if not (args.filter and args.dataset):
             raise ConfigError("--filter and --dataset go together: name at least one of each (see 'locbench list')")
@@ -69,30 +101,45 @@ def _cmd_run(args: argparse.Namespace) -> int:
         for name in args.suite or ["default"]:
             suite = get_suite(name)
             blocks += list((suite.with_seeds(args.seeds) if args.seeds else suite).blocks)
-    # resolve every spec before running anything, so a typo fails at once
-    for b in blocks:
-        for spec in b.filters:
-            resolve_filter(spec)
-        for spec in b.datasets:
-            resolve_dataset(spec)
-    total = sum(b.runs for b in blocks)
-    outcomes = []
-    with tqdm(total=total, unit="run", desc="locbench run", disable=None if not args.no_progress else True) as bar:
-        for b in blocks:
-            outcomes += run_many(
-                list(b.filters),
-                list(b.datasets),
-                list(range(b.seeds)),
-                args.results,
-                jobs=args.jobs,
-                force=args.force,
-                progress=bar.update,
-            )
+    # every spec is resolved and validated here, before anything runs or is written
+    plan = plan_sweep([(b.filters, b.datasets, range(b.seeds)) for b in blocks], args.results, args.force)
+    with tqdm(total=plan.total, unit="run", desc="locbench run", disable=True if args.no_progress else None) as bar:
+        sweep = run_sweep(plan, args.executor, args.jobs, args.scheduler, progress=bar.update)
+    if sweep.interrupted:
+        print(f"interrupted: {sweep.stored} of {sweep.total} runs stored; run the same command to resume")
+        return 130
+    return _print_summary(sweep, args.results)
+
+
+def _print_summary(sweep: Any, results: str) -> int:
+    """Counts by status, then one line per (status, filter, dataset, reason) with a count; 1 if any run failed."""
+    from locbench.runner import NOT_STORED
+
+    outcomes = sweep.outcomes
     counts = Counter(o.status for o in outcomes)
-    print(f"{len(outcomes)} runs in {args.results}/runs: " + ", ".join(f"{n} {s}" for s, n in sorted(counts.items())))
+    print(f"{len(outcomes)} runs in {results}/runs: " + ", ".join(f"{n} {s}" for s, n in sorted(counts.items())))
+    if sweep.cleaned:
+        print(f"  removed {sweep.cleaned} leftover temporary entries of interrupted writes")
+    if sweep.retried:
+        print(f"  {sweep.retried} task(s) given to a fresh worker after theirs died")
+    reruns = [o for o in outcomes if o.note]
+    for o in reruns:
+        print(f"  {o.note}")
+    groups: Counter[tuple[str, str, str, str]] = Counter()
     for o in outcomes:
-        if o.status in ("error", "diverged", "skipped"):
-            print(f"  {o.status}: {o.filter} on {o.dataset} seed {o.seed}: {o.message}")
+        if o.status in ("error", "diverged", "skipped", NOT_STORED):
+            groups[(o.status, str(o.filter), str(o.dataset), o.message)] += 1
+    for (status, filt, dataset, message), n in groups.items():
+        times = f" x{n}" if n > 1 else ""
+        print(f"  {status}{times}: {filt} on {dataset}: {message}")
+    failed = counts.get("error", 0) + counts.get(NOT_STORED, 0)
+    if failed:
+        print(
+            f"{counts.get('error', 0)} run(s) failed and {counts.get(NOT_STORED, 0)} were not stored; "
+            f"each failed run's message is in {results}/runs/<dataset>/<filter>/seed-NNNN/meta.json",
+            file=sys.stderr,
+        )
+        return 1
     return 0
 
 
@@ -114,21 +161,38 @@ def _cmd_report(args: argparse.Namespace) -> int:
 def _cmd_check(args: argparse.Namespace) -> int:
     from locbench.checks import run_checks
 
-    failed = 0
+    counts: Counter[str] = Counter()
     for r in run_checks(list(args.ids) or None):
         mark = {"passed": "ok", "failed": "FAIL", "xfailed": "xfail", "xpassed": "XPASS", "skipped": "skip"}[r.outcome]
         print(f"{mark:<5} {r.target:<32} {r.check}" + (f": {r.message}" if r.message else ""))
-        failed += r.outcome in ("failed", "xpassed")
-    print(f"{failed} check(s) failed" if failed else "all checks passed")
+        counts[r.outcome] += 1
+    failed = counts["failed"] + counts["xpassed"]
+    tally = ", ".join(f"{n} {o}" for o, n in sorted(counts.items()))
+    if failed:
+        print(f"{failed} check(s) failed ({tally})")
+    elif counts["skipped"]:
+        print(f"no check failed, but {counts['skipped']} were skipped (see 'skip' above): {tally}")
+    else:
+        print(f"all {counts['passed'] + counts['xfailed']} checks passed ({tally})")
     return 1 if failed else 0
 
 
 def _cmd_fetch(args: argparse.Namespace) -> int:
     from locbench.registry import DATASETS, resolve_dataset
 
+    if not args.verbose:
+        import pooch
+
+        pooch.get_logger().setLevel(logging.WARNING)  # its "Downloading ..." line; the paths are printed after
     for spec in args.specs:
         r = resolve_dataset(spec)
-        paths = DATASETS.load(r.id)().fetch(r.params)
+        try:
+            paths = DATASETS.load(r.id)().fetch(r.params)
+        except OSError as exc:
+            if exc.errno is not None:
+                raise  # a local file-system error: the generic one line
+            reason = os_error_line(exc).split(" (Caused by", 1)[0]
+            raise ConfigError(f"{r.name}: download failed (is the network reachable?): {reason}") from None
         if not paths:
             print(f"{r.name}: nothing to fetch (synthetic)")
         for path in paths:
@@ -150,6 +214,13 @@ def _cmd_export(args: argparse.Namespace) -> int:
         filters=[resolve_filter(s).name for s in args.filter],
         smoothed=args.smoothed,
     )
+    if not written:
+        what = " matching the --dataset/--filter given" if (args.dataset or args.filter) else ""
+        print(
+            f"locbench: error: no stored run with estimates{what} in {args.results}/runs; nothing written",
+            file=sys.stderr,
+        )
+        return 1
     print(f"{len(written)} TUM trajectory files written under {out}")
     return 0
 
@@ -160,7 +231,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-v", "--verbose", action="store_true", help="log progress details")
     sub = p.add_subparsers(dest="command", required=True)
 
-    sub.add_parser("list", help="registered filters, datasets and suites").set_defaults(func=_cmd_list)
+    lst = sub.add_parser("list", help="registered filters, datasets and suites; or the parameters of some")
+    lst.add_argument("ids", nargs="*", metavar="ID", help="a filter or dataset: print its parameters (e.g. pf)")
+    lst.set_defaults(func=_cmd_list)
 
     r = sub.add_parser("run", help="run filters over datasets and store the runs")
     r.add_argument(
@@ -182,7 +255,21 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument(
         "--results", default=_results_default(), help="results folder (default: results/ or $LOCBENCH_RESULTS)"
     )
-    r.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
+    r.add_argument(
+        "--jobs", type=int, default=1, help="worker processes (default 1), or LocalCluster workers with --executor dask"
+    )
+    r.add_argument(
+        "--executor",
+        choices=("local", "dask"),
+        default="local",
+        help="local: this process or a pool of --jobs processes; dask: dask.distributed workers",
+    )
+    r.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="with --executor dask: a running scheduler (tcp://host:8786); default: a LocalCluster of --jobs workers",
+    )
     r.add_argument("--force", action="store_true", help="re-run runs that are already stored")
     r.add_argument("--no-progress", action="store_true", help="no progress bar")
     r.set_defaults(func=_cmd_run)
@@ -228,6 +315,34 @@ def main(argv: Sequence[str] | None = None) -> int:
         # one line that says what is valid; the traceback would hide it
         print(f"locbench: error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:
+        print(f"locbench: error: {os_error_line(exc)}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+#: What to do about an operating-system error, by errno.
+_OS_HINTS = {
+    errno.EACCES: "choose a folder you may write, or fix its permissions",
+    errno.EPERM: "choose a folder you may write, or fix its permissions",
+    errno.EROFS: "the file system is read-only; choose a folder on a writable one",
+    errno.ENOSPC: "the disk is full; free space or choose another folder",
+    errno.EDQUOT: "the disk quota is exhausted; free space or choose another folder",
+    errno.ENOTDIR: "a file stands where a folder is needed; give a folder",
+    errno.EISDIR: "a folder stands where a file is needed; give a file",
+    errno.ENOENT: "it does not exist",
+}
+
+
+def os_error_line(exc: OSError) -> str:
+    """One line for an operating-system or network error: the path, the reason, and what to do."""
+    # requests' errors are OSErrors without errno; their text can hold a nested repr: keep the first line
+    reason = exc.strerror or (str(exc).splitlines() or [type(exc).__name__])[0]
+    where = f"{exc.filename}: " if exc.filename else ""
+    hint = _OS_HINTS.get(exc.errno or 0)
+    return f"{where}{reason}" + (f" ({hint})" if hint else "")
 
 
 if __name__ == "__main__":

@@ -19,7 +19,7 @@ import numpy as np
 
 from locbench.errors import DependencyNotInstalled, UnknownIdError
 from locbench.seeding import dataset_rng
-from locbench.spec import build_params, format_spec, non_default_params, params_to_dict, parse_spec
+from locbench.spec import Spec, build_params, format_spec, non_default_params, params_to_dict, parse_spec
 
 T = TypeVar("T")
 
@@ -273,6 +273,11 @@ class Resolved:
     def params_dict(self) -> dict[str, Any]:
         return params_to_dict(self.params)
 
+    @property
+    def spec(self) -> Spec:
+        """The canonical name as a typed :class:`Spec` (what the runner and the store carry)."""
+        return Spec.parse(self.name)
+
 
 def resolve_filter(spec: str) -> Resolved:
     """Parse ``"ekf_landmarks[association=nearest]"`` into its class's typed config."""
@@ -310,9 +315,13 @@ def make_dataset(spec: str | Resolved, seed: int | np.random.Generator = 0) -> A
         dataset and, for recorded data, its files.
     """
     r = resolve_dataset(spec) if isinstance(spec, str) else spec
+    return build_dataset(DATASETS.load(r.id), r, seed)
+
+
+def build_dataset(builder_cls: type, r: Resolved, seed: int | np.random.Generator) -> Any:
+    """Build the dataset of ``r`` with its builder class given (a worker that has no registry entry for it)."""
     gen = seed if isinstance(seed, np.random.Generator) else dataset_rng(r.name, seed)
-    builder = DATASETS.load(r.id)()
-    ds = builder.build(r.params, gen)
+    ds = builder_cls().build(r.params, gen)
     ds = dataclasses.replace(ds, id=r.id, name=r.name, params=r.params_dict())
     ds.check()  # every dataset, synthetic or recorded: a broken one is an error naming its files, never a run
     return ds

@@ -1,18 +1,22 @@
-"""From (filter, dataset, seed) to stored runs.
+"""From (filter, dataset, seed) to stored runs: a plan, then its execution.
 
-For every (dataset, seed) the dataset is built once (its noise depends only on the dataset name and
-the seed, so every filter sees the same realisation) and each selected filter is run over its events:
-``predict`` for odometry, ``update`` for each observation type the filter routes, ``estimate()`` after
-every call, and the time of each call. A finished run whose key is unchanged is not run again unless
-forced. An exception inside a filter or a divergence is stored as a result with its status and message,
-and the sweep goes on.
+:func:`plan_sweep` decides the work: every spec resolved (a bad one fails before anything runs), each
+(dataset, seed) a :class:`Task` holding the filters that have no up-to-date stored run on it, the tasks
+sorted longest first (stored timings where present, else an estimate) so that no worker idles at the end.
+:func:`execute_task` does one task anywhere, a process of this machine or a dask worker on another: it
+builds the dataset once (its noise depends only on the dataset name and the seed, so every filter sees the
+same realisation) and runs each filter over its events (``predict`` for odometry, ``update`` for each
+observation type the filter routes, ``estimate()`` after every call, and the time of each call), returning
+the records without touching the results folder. :func:`run_sweep` hands the tasks to an executor
+(:mod:`locbench.executors`) and writes every returned record into the store as it arrives. An exception
+inside a filter or a divergence is stored as a result with its status and message; a failure of the
+machinery (a worker that died, a dataset that did not build) is recorded the same way for every run of
+its task, by :func:`failed_result`; and the sweep goes on.
 """
 
 from __future__ import annotations
 
-import concurrent.futures as cf
 import logging
-import math
 import time
 import traceback
 from collections.abc import Callable, Sequence
@@ -27,10 +31,10 @@ from locbench.divergence import left_world, world_box
 from locbench.errors import DataNotFound, FilterDiverged
 from locbench.events import EVENT_TYPES, Odometry
 from locbench.filters.base import Filter
-from locbench.registry import DATASETS, FILTERS, Resolved, make_dataset, resolve_dataset, resolve_filter
+from locbench.registry import DATASETS, FILTERS, Resolved, build_dataset, resolve_dataset, resolve_filter
 from locbench.runkey import key_params
 from locbench.seeding import filter_rng
-from locbench.spec import stable_hash
+from locbench.spec import Spec, stable_hash
 from locbench.store import KIND_NAMES, RunRecord, Store, TruthRecord
 
 log = logging.getLogger(__name__)
@@ -169,93 +173,257 @@ def run_key(fr: Resolved, dr: Resolved, seed: int) -> str:
     )
 
 
-@dataclass
+#: Statuses of a sweep's outcomes beyond a stored run's own (ok, skipped, diverged, error).
+CACHED, NOT_STORED = "cached", "not stored"
+
+
+@dataclass(frozen=True)
 class RunOutcome:
-    """One line of a sweep's summary."""
+    """One line of a sweep's summary.
 
-    filter: str
-    dataset: str
+    ``status`` is a stored run's status (ok, skipped, diverged, error), ``cached`` (stored before and up to date)
+    or ``not stored`` (the run finished but writing it failed: a full disk, a read-only folder); ``note`` says
+    why a stored run was run again (its files did not load).
+    """
+
+    filter: Spec
+    dataset: Spec
     seed: int
-    status: str  # ok, skipped, diverged, error, cached
+    status: str
     message: str = ""
+    note: str = ""
 
 
-def _meta(fr: Resolved, dr: Resolved, seed: int, key: str) -> dict[str, Any]:
+@dataclass(frozen=True)
+class Job:
+    """One filter to run on a task's dataset: its resolved config, class, run key and static provenance."""
+
+    filter: Resolved
+    filter_cls: type
+    key: str
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class Task:
+    """One dataset realisation and the filters to run on it: the unit an executor hands to a worker.
+
+    It carries the classes themselves (pickled by reference), so a worker needs the code installed but no
+    registry entry: test-only or plugin filters run on a dask worker as they run here.
+    """
+
+    dataset: Resolved
+    dataset_cls: type
+    seed: int
+    jobs: tuple[Job, ...]
+    #: Estimated compute time, s (the plan's order: longest first).
+    cost_s: float = 0.0
+
+    @property
+    def label(self) -> str:
+        return f"{self.dataset.name} seed {self.seed}"
+
+
+@dataclass
+class TaskResult:
+    """What a worker returns: the realisation's truth (None when the dataset did not build), one record per job."""
+
+    truth: TruthRecord | None
+    runs: list[RunRecord]
+
+
+@dataclass
+class Plan:
+    """The work of a sweep: tasks to execute, longest first, and the runs already stored."""
+
+    tasks: list[Task]
+    cached: list[RunOutcome]
+    results: str
+    #: (dataset name, seed, filter name) -> position in the order the specs were given, for the summary.
+    order: dict[tuple[str, int, str], int] = field(default_factory=dict)
+
+    @property
+    def total(self) -> int:
+        """Every run of the sweep, cached or to do."""
+        return len(self.cached) + sum(len(t.jobs) for t in self.tasks)
+
+
+@dataclass
+class SweepResult:
+    """The outcome of every run of a plan, and whether the sweep was interrupted."""
+
+    outcomes: list[RunOutcome]
+    total: int
+    interrupted: bool = False
+    #: Tasks handed to a fresh worker after the one running them died.
+    retried: int = 0
+    #: Leftover temporary entries of earlier interrupted writes that were removed.
+    cleaned: int = 0
+
+    @property
+    def stored(self) -> int:
+        """Runs present in the store at the end (cached ones included)."""
+        return sum(o.status != NOT_STORED for o in self.outcomes)
+
+
+#: Rough compute seconds per second of data of each filter with its default config, for ordering tasks
+#: before any timing is stored (measured order of magnitude on `office`; only the order of tasks depends on it).
+_COST_PER_DATA_S = {
+    "odometry": 0.002,
+    "ekf_landmarks": 0.02,
+    "ekf_lines": 0.15,
+    "ekf_icp": 0.3,
+    "kf_linear": 0.3,
+    "pf": 0.1,
+    "gtsam_fls": 0.1,
+}
+#: Rough duration of each synthetic dataset, s, for the same purpose (recorded ones default to 1000 s).
+_DURATION_S = {"room": 60.0, "office": 231.0, "lap": 60.0, "line_room": 100.0, "scan_grid": 100.0}
+
+
+def _estimate_cost(
+    store: Store, dr: Resolved, jobs: Sequence[Job], seen: dict[tuple[str, str], dict[str, Any] | None]
+) -> float:
+    """Estimated compute time of a task, s: stored wall times of the same (dataset, filter) where present.
+
+    ``seen`` caches one stored ``meta.json`` per (dataset, filter) across the tasks of a plan.
+    """
+    duration = _DURATION_S.get(dr.id, 1000.0 if dr.id in ("mrclam", "intel", "plaza", "rosbag") else 100.0)
+    total = 0.0
+    for job in jobs:
+        pair = (dr.name, job.filter.name)
+        if pair not in seen:
+            seen[pair] = store.sample_meta(*pair)
+        stored = seen[pair]
+        if stored is not None and isinstance(stored.get("wall_s"), (int, float)) and stored.get("status") == "ok":
+            total += float(stored["wall_s"])
+            continue
+        scale = getattr(job.filter.params, "particles", 1000) / 1000.0 if job.filter.id == "pf" else 1.0
+        total += duration * _COST_PER_DATA_S.get(job.filter.id, 0.1) * scale
+    return total
+
+
+def plan_sweep(
+    blocks: Sequence[tuple[Sequence[str], Sequence[str], Sequence[int]]], results: str, force: bool = False
+) -> Plan:
+    """Resolve every spec and decide which runs to do; nothing is run or written.
+
+    Parameters
+    ----------
+    blocks : sequence of (filter specs, dataset specs, seeds)
+        Every filter on every dataset for every seed, block after block (a run named twice is planned once).
+    results : str
+        The results folder; a run whose stored key is unchanged and whose files load is cached.
+    force : bool
+        Plan every run even when it is stored.
+    """
+    store = Store(results)
+    plan = Plan([], [], results)
+    groups: dict[tuple[str, int], tuple[Resolved, dict[str, Job]]] = {}
+    for fspecs, dspecs, seeds in blocks:
+        frs = [resolve_filter(s) for s in fspecs]
+        drs = [resolve_dataset(s) for s in dspecs]
+        fclasses = {fr.id: FILTERS.load(fr.id) for fr in frs}
+        for dr in drs:
+            for seed in seeds:
+                _, jobs = groups.setdefault((dr.name, seed), (dr, {}))
+                for fr in frs:
+                    if fr.name in jobs or (dr.name, seed, fr.name) in plan.order:
+                        continue
+                    plan.order[(dr.name, seed, fr.name)] = len(plan.order)
+                    key = run_key(fr, dr, seed)
+                    note = ""
+                    meta = None if force else store.existing_meta(dr.name, fr.name, seed)
+                    up_to_date = meta is not None and meta.get("run_key") == key and not meta.get("transient")
+                    if up_to_date and store.has_truth(dr.name, seed):
+                        bad = store.unreadable(dr.name, fr.name, seed)
+                        if bad is None:
+                            plan.cached.append(RunOutcome(fr.spec, dr.spec, seed, CACHED))
+                            continue
+                        note = f"re-run: the stored run does not load ({bad})"
+                    jobs[fr.name] = Job(fr, fclasses[fr.id], key, note)
+    seen: dict[tuple[str, str], dict[str, Any] | None] = {}
+    for (_, seed), (dr, jobs) in groups.items():
+        if jobs:
+            todo = tuple(jobs.values())
+            plan.tasks.append(Task(dr, DATASETS.load(dr.id), seed, todo, _estimate_cost(store, dr, todo, seen)))
+    # Longest first (LPT): the last tasks to start are short, so the workers finish together.
+    plan.tasks.sort(key=lambda t: -t.cost_s)
+    return plan
+
+
+def _meta(task: Task, job: Job) -> dict[str, Any]:
+    """The provenance of one run, taken where it runs (the worker's library versions and commit)."""
     git = provenance.git_state()
+    fr, dr = job.filter, task.dataset
     return {
         "filter": fr.name,
         "filter_id": fr.id,
         "filter_config": fr.params_dict(),
-        "filter_version": getattr(FILTERS.load(fr.id), "version", 1),
+        "filter_version": getattr(job.filter_cls, "version", 1),
         "dataset": dr.name,
         "dataset_id": dr.id,
         "dataset_params": dr.params_dict(),
-        "dataset_version": getattr(DATASETS.load(dr.id), "version", 1),
-        "seed": seed,
-        "run_key": key,
+        "dataset_version": getattr(task.dataset_cls, "version", 1),
+        "seed": task.seed,
+        "run_key": job.key,
         "versions": provenance.versions(),
         "git_commit": git["commit"],
         "git_dirty": git["dirty"],
     }
 
 
-def run_group(
-    dataset_spec: str, filter_specs: Sequence[str], seed: int, results: str, force: bool = False
-) -> list[RunOutcome]:
-    """Build one dataset realisation and run every filter that has no up-to-date stored run on it."""
-    store = Store(results)
-    dr = resolve_dataset(dataset_spec)
-    frs = [resolve_filter(s) for s in filter_specs]
-    todo: list[tuple[Resolved, str]] = []
-    outcomes: list[RunOutcome] = []
-    for fr in frs:
-        key = run_key(fr, dr, seed)
-        if not force and store.existing_key(dr.name, fr.name, seed) == key and store.has_truth(dr.name, seed):
-            outcomes.append(RunOutcome(fr.name, dr.name, seed, "cached"))
-        else:
-            todo.append((fr, key))
-    if not todo:
-        return outcomes
+def _empty_record(meta: dict[str, Any]) -> RunRecord:
+    return RunRecord(
+        meta, np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros(0, np.int8), np.zeros(0, np.int64)
+    )
+
+
+def failed_result(task: Task, status: str, message: str, transient: bool = False) -> TaskResult:
+    """The one way a failure outside a filter is recorded: a run with ``status`` and ``message`` for every job.
+
+    ``transient`` marks a failure of the machinery (a worker that died) rather than of the run itself, so the
+    next sweep runs it again instead of treating the stored error as up to date.
+    """
+    extra = {"status": status, "message": message, "wall_s": 0.0} | ({"transient": True} if transient else {})
+    return TaskResult(None, [_empty_record(_meta(task, job) | extra) for job in task.jobs])
+
+
+def execute_task(task: Task) -> TaskResult:
+    """Build the task's dataset and run each of its filters; touches no file (any worker can run it).
+
+    Never raises for a failure of a filter or of the dataset: those are records with their status.
+    """
+    dr = task.dataset
     t_build = time.perf_counter()
     try:
-        ds: Dataset = make_dataset(dr, seed)
+        ds: Dataset = build_dataset(task.dataset_cls, dr, task.seed)
     except DataNotFound as exc:
         # Recorded data that is not on this machine: a recorded skip with the reason, not a failure.
-        msg = f"data not found: {exc}"
-        for fr, key in todo:
-            meta = _meta(fr, dr, seed, key) | {"status": "skipped", "message": msg, "wall_s": 0.0}
-            store.write_run(_empty_record(meta))
-            outcomes.append(RunOutcome(fr.name, dr.name, seed, "skipped", msg))
-        return outcomes
+        return failed_result(task, "skipped", f"data not found: {exc}")
     except Exception as exc:
         msg = f"dataset build failed: {type(exc).__name__}: {exc}"
-        log.error("%s seed %d: %s", dr.name, seed, msg)
-        for fr, key in todo:
-            meta = _meta(fr, dr, seed, key) | {"status": "error", "message": msg, "wall_s": 0.0}
-            store.write_run(_empty_record(meta))
-            outcomes.append(RunOutcome(fr.name, dr.name, seed, "error", msg))
-        return outcomes
+        log.error("%s: %s", task.label, msg)
+        return failed_result(task, "error", msg)
     build_s = time.perf_counter() - t_build
     truth_meta = {
         "dataset_id": dr.id,
         "dataset_params": dr.params_dict(),
-        "dataset_version": getattr(DATASETS.load(dr.id), "version", 1),
+        "dataset_version": getattr(task.dataset_cls, "version", 1),
         "build_s": build_s,
         "metadata": ds.metadata,
         "versions": provenance.versions(),
     }
-    store.write_truth(TruthRecord.from_dataset(ds, seed, truth_meta))
-    for fr, key in todo:
-        meta = _meta(fr, dr, seed, key)
-        flt: Filter = FILTERS.load(fr.id)(fr.params)
+    runs: list[RunRecord] = []
+    for job in task.jobs:
+        meta = _meta(task, job)
+        flt: Filter = job.filter_cls(job.filter.params)
         reason = incompatibility(flt, ds)
         if reason is not None:
-            meta |= {"status": "skipped", "message": reason, "wall_s": 0.0}
-            store.write_run(_empty_record(meta))
-            outcomes.append(RunOutcome(fr.name, dr.name, seed, "skipped", reason))
+            runs.append(_empty_record(meta | {"status": "skipped", "message": reason, "wall_s": 0.0}))
             continue
         start = time.perf_counter()
-        trace = run_filter(flt, ds, filter_rng(fr.name, dr.name, seed))
+        trace = run_filter(flt, ds, filter_rng(job.filter.name, dr.name, task.seed))
         meta |= {
             "status": trace.status,
             "message": trace.message,
@@ -265,19 +433,96 @@ def run_group(
             "dataset_duration_s": ds.duration,
             "n_rows": int(trace.t.shape[0]),
         }
-        store.write_run(
+        if trace.status != "ok":
+            log.warning("%s on %s: %s: %s", job.filter.name, task.label, trace.status, trace.message)
+        runs.append(
             RunRecord(meta, trace.t, trace.mean, trace.cov, trace.kind, trace.step_ns, trace.diagnostics, trace.extra)
         )
-        if trace.status != "ok":
-            log.warning("%s on %s seed %d: %s: %s", fr.name, dr.name, seed, trace.status, trace.message)
-        outcomes.append(RunOutcome(fr.name, dr.name, seed, trace.status, trace.message))
+    return TaskResult(TruthRecord.from_dataset(ds, task.seed, truth_meta), runs)
+
+
+def store_result(store: Store, task: Task, result: TaskResult) -> list[RunOutcome]:
+    """Write a task's truth and runs; a write that fails (disk full, read-only) is a ``not stored`` outcome."""
+    notes = {job.filter.name: job for job in task.jobs}
+    truth_error = ""
+    if result.truth is not None:
+        try:
+            store.write_truth(result.truth)
+        except OSError as exc:
+            truth_error = f"{_os_message(exc)} (ground truth)"
+    outcomes = []
+    for rec in result.runs:
+        job = notes[rec.meta["filter"]]
+        fspec, dspec = job.filter.spec, task.dataset.spec
+        if truth_error:
+            outcomes.append(RunOutcome(fspec, dspec, task.seed, NOT_STORED, truth_error))
+            continue
+        try:
+            store.write_run(rec)
+        except OSError as exc:
+            outcomes.append(RunOutcome(fspec, dspec, task.seed, NOT_STORED, _os_message(exc)))
+            continue
+        outcomes.append(RunOutcome(fspec, dspec, task.seed, rec.status, str(rec.meta.get("message", "")), job.note))
     return outcomes
 
 
-def _empty_record(meta: dict[str, Any]) -> RunRecord:
-    return RunRecord(
-        meta, np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros(0, np.int8), np.zeros(0, np.int64)
-    )
+def _os_message(exc: OSError) -> str:
+    """``path: reason`` of an operating-system error, on one line."""
+    where = f"{exc.filename}: " if exc.filename else ""
+    return f"{where}{exc.strerror or exc}"
+
+
+def run_sweep(
+    plan: Plan,
+    executor: str = "local",
+    jobs: int = 1,
+    scheduler: str | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> SweepResult:
+    """Execute a plan and store every run as it arrives.
+
+    Parameters
+    ----------
+    executor : {"local", "dask"}
+        ``local``: this process (``jobs`` = 1) or a pool of ``jobs`` processes; ``dask``: a dask.distributed
+        client of the scheduler at ``scheduler``, else of a LocalCluster of ``jobs`` worker processes.
+    progress : callable, optional
+        Called with the number of runs each finished task stored (and once with the cached count).
+
+    SIGINT (Ctrl-C) and SIGTERM stop the sweep: tasks not started are cancelled, running ones abandoned, every
+    finished run is kept, and the result says ``interrupted``; rerunning the same plan resumes.
+    """
+    from locbench import executors
+
+    store = Store(plan.results)
+    if plan.tasks:
+        store.check_writable()  # a read-only or full results folder is one error before any run, not one per run
+    cleaned = len(store.clean_leftovers())
+    outcomes = list(plan.cached)
+    if progress and plan.cached:
+        progress(len(plan.cached))
+
+    def handle(task: Task, result: TaskResult) -> None:
+        res = store_result(store, task, result)
+        outcomes.extend(res)
+        if progress:
+            progress(len(res))
+
+    def lost(task: Task, message: str) -> None:
+        handle(task, failed_result(task, "error", message, transient=True))
+
+    run = executors.get(executor)
+    status = run(plan.tasks, handle, lost, jobs=jobs, scheduler=scheduler)
+    big = len(plan.order)
+    outcomes.sort(key=lambda o: plan.order.get((str(o.dataset), o.seed, str(o.filter)), big))
+    return SweepResult(outcomes, plan.total, status.interrupted, status.retried, cleaned)
+
+
+def run_group(
+    dataset_spec: str, filter_specs: Sequence[str], seed: int, results: str, force: bool = False
+) -> list[RunOutcome]:
+    """Build one dataset realisation and run, in this process, every filter that has no up-to-date stored run on it."""
+    return run_many(filter_specs, [dataset_spec], [seed], results, force=force)
 
 
 def run_many(
@@ -288,40 +533,12 @@ def run_many(
     jobs: int = 1,
     force: bool = False,
     progress: Callable[[int], None] | None = None,
+    executor: str = "local",
+    scheduler: str | None = None,
 ) -> list[RunOutcome]:
-    """Run every filter on every dataset for every seed; returns one outcome per run.
+    """Run every filter on every dataset for every seed; returns one outcome per run, in the order given.
 
-    Specs are resolved first, so an unknown id or parameter fails before anything runs. Work is split
-    into (dataset, seed) groups, run in ``jobs`` worker processes; ``progress(n)`` is called with the
-    number of runs finished by each group.
+    Specs are resolved first, so an unknown id or parameter fails before anything runs (see :func:`run_sweep`).
     """
-    frs = [resolve_filter(s) for s in filter_specs]
-    drs = [resolve_dataset(s) for s in dataset_specs]
-    fnames = [fr.name for fr in frs]
-    groups = [(dr.name, s) for dr in drs for s in seeds]
-    outcomes: list[RunOutcome] = []
-    if jobs <= 1 or len(groups) <= 1:
-        for dname, seed in groups:
-            res = run_group(dname, fnames, seed, results, force)
-            outcomes.extend(res)
-            if progress:
-                progress(len(res))
-        return outcomes
-    with cf.ProcessPoolExecutor(max_workers=jobs) as pool:
-        futures = {pool.submit(run_group, dname, fnames, seed, results, force): (dname, seed) for dname, seed in groups}
-        for fut in cf.as_completed(futures):
-            dname, seed = futures[fut]
-            try:
-                res = fut.result()
-            except Exception as exc:
-                res = [
-                    RunOutcome(f, dname, seed, "error", f"worker failed: {type(exc).__name__}: {exc}") for f in fnames
-                ]
-            outcomes.extend(res)
-            if progress:
-                progress(len(res))
-    order = {(d, s): i for i, (d, s) in enumerate(groups)}
-    outcomes.sort(
-        key=lambda o: (order.get((o.dataset, o.seed), math.inf), fnames.index(o.filter) if o.filter in fnames else 0)
-    )
-    return outcomes
+    plan = plan_sweep([(filter_specs, dataset_specs, seeds)], results, force)
+    return run_sweep(plan, executor, jobs, scheduler, progress).outcomes

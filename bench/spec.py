@@ -1,7 +1,8 @@
-"""Names users type: ``id[key=value,...]`` specs, and typed parameter dataclasses built from them.
+"""Names users type: ``id[key=value,...]`` specs, parameter grids, and typed parameter dataclasses built from them.
 
 A filter config or dataset parameter set is a frozen, keyword-only dataclass whose field names carry
-units (``sigma_range_m``). :func:`parse_spec` splits a spec; :func:`build_params` turns its string
+units (``sigma_range_m``). :func:`parse_spec` splits a spec; :func:`expand_grid` turns a grid
+``pf[particles=100|300,augmented=true]`` into its specs; :func:`build_params` turns its string
 values into the dataclass, with an error that lists the valid keys or says what type was expected.
 """
 
@@ -9,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import itertools
 import json
 import re
 import types
@@ -94,6 +96,32 @@ class Spec:
     def without(self, *keys: str) -> Spec:
         """The same spec with ``keys`` removed (``office[kidnap_m=2]`` -> ``office``)."""
         return Spec(self.ident, tuple(kv for kv in self.params if kv[0] not in keys))
+
+
+#: Separates the values of one parameter in a grid spec (``pf[particles=100|300]``).
+GRID_SEP = "|"
+
+
+def expand_grid(text: str) -> list[str]:
+    """The specs of a parameter grid: ``|`` separates a key's values and keys cross.
+
+    ``"pf[particles=100|300,augmented=true|false]"`` gives the four specs of the cross product, in the order
+    written (the first key varies slowest); a spec without ``|`` gives itself. Raises :class:`ConfigError`
+    for an empty value (``particles=100||300``) or a value repeated within one key.
+    """
+    ident, params = parse_spec(text)
+    axes: list[list[str]] = []
+    for key, value in params.items():
+        values = [v.strip() for v in value.split(GRID_SEP)]
+        if len(values) > 1 and (not all(values) or len(set(values)) != len(values)):
+            raise ConfigError(
+                f"grid parameter {key}={value!r} in spec {text!r}: expected distinct non-empty values separated by '|'"
+            )
+        axes.append(values)
+    if all(len(a) == 1 for a in axes):
+        return [text.strip()]
+    keys = list(params)
+    return [format_spec(ident, dict(zip(keys, combo, strict=True))) for combo in itertools.product(*axes)]
 
 
 def format_spec(ident: str, params: dict[str, Any]) -> str:
@@ -200,7 +228,8 @@ def build_params(cls: type[P], values: dict[str, Any], owner: str) -> P:
     try:
         obj = cls(**kwargs)
     except (TypeError, ValueError) as exc:
-        raise ConfigError(f"{owner}: {exc}") from None
+        text = str(exc)
+        raise ConfigError(text if text.startswith(f"{owner}:") else f"{owner}: {text}") from None
     return obj
 
 
@@ -232,3 +261,118 @@ def stable_hash(obj: Any) -> str:
     """sha256 hex digest of the canonical JSON of ``obj`` (never Python's salted ``hash()``)."""
     text = json.dumps(obj, sort_keys=True, separators=(",", ":"), default=str)
     return hashlib.sha256(text.encode()).hexdigest()
+
+
+@dataclasses.dataclass(frozen=True)
+class ParamDoc:
+    """One parameter of a filter config or dataset, as ``locbench list ID`` prints it."""
+
+    name: str
+    type: str
+    default: str
+    unit: str
+    meaning: str
+
+
+#: Unit of a parameter from the suffix of its name (the house rule: names carry units), longest suffix first.
+_UNIT_SUFFIXES = (
+    ("_rad2_per_rad", "rad^2/rad"),
+    ("_m2_per_m", "m^2/m"),
+    ("_sigma_theta_per_rad", "rad/sqrt(rad)"),
+    ("_sigma_theta_per_m", "rad/sqrt(m)"),
+    ("_sigma_xy_per_m", "m/sqrt(m)"),
+    ("_per_m", "1/m"),
+    ("_radps", "rad/s"),
+    ("_mps", "m/s"),
+    ("_rad2", "rad^2"),
+    ("_m2", "m^2"),
+    ("_deg", "deg"),
+    ("_rad", "rad"),
+    ("_hz", "Hz"),
+    ("_s", "s"),
+    ("_m", "m"),
+)
+_NUMPYDOC_ITEM = re.compile(r"^(\w[\w, ]*?)\s*:\s*(.+)$")
+
+
+def _attribute_docs(cls: type) -> dict[str, str]:
+    """Field name -> description from the numpydoc ``Attributes`` sections of ``cls`` and its bases."""
+    out: dict[str, str] = {}
+    for klass in cls.__mro__:
+        lines = [ln.rstrip() for ln in (klass.__doc__ or "").splitlines()]
+        for i, line in enumerate(lines[:-1]):
+            if line.strip() != "Attributes" or set(lines[i + 1].strip()) != {"-"}:
+                continue
+            base = len(line) - len(line.lstrip())
+            names: list[str] = []
+            for ln in lines[i + 2 :]:
+                indent = len(ln) - len(ln.lstrip())
+                if not ln.strip():
+                    continue
+                if indent < base or (indent == base and not _NUMPYDOC_ITEM.match(ln.strip())):
+                    break
+                m = _NUMPYDOC_ITEM.match(ln.strip()) if indent == base else None
+                if m:
+                    names = [n.strip() for n in m.group(1).split(",")]
+                    for n in names:
+                        out.setdefault(n, "")
+                else:
+                    for n in names:
+                        if out.get(n) is not None and not out[n].endswith("\x00"):
+                            out[n] = (out[n] + " " + ln.strip()).strip()
+            # descriptions found in a subclass win; mark them done for the bases
+            out = {k: v if v.endswith("\x00") else v + "\x00" for k, v in out.items()}
+    return {k: v.rstrip("\x00") for k, v in out.items()}
+
+
+def _type_name(tp: Any) -> str:
+    origin = get_origin(tp)
+    if origin is Literal:
+        return "{" + ", ".join(map(str, get_args(tp))) + "}"
+    if origin in (Union, types.UnionType):
+        args = get_args(tp)
+        named = " or ".join(_type_name(a) for a in args if a is not type(None))
+        return f"{named} or None" if type(None) in args else named
+    if origin is tuple:
+        return "tuple of " + ", ".join(_type_name(a) for a in get_args(tp) if a is not Ellipsis)
+    return getattr(tp, "__name__", str(tp))
+
+
+#: Abbreviations whose full stop does not end a sentence (``eq. 10``, ``sec. 4.2``, ``et al.``).
+_ABBREVIATIONS = ("eq", "eqs", "sec", "fig", "al", "ref", "refs", "e.g", "i.e", "cf", "vs", "approx")
+_MAX_MEANING = 160
+
+
+def _first_sentence(text: str) -> str:
+    """The first sentence of a description (a full stop then a capital, not after an abbreviation), shortened."""
+    for m in re.finditer(r"\.(?=\s+[A-Z`(\"]|\s*$)", text):
+        word = text[: m.start()].rsplit(None, 1)[-1].lower() if text[: m.start()].strip() else ""
+        if word.lstrip("(") not in _ABBREVIATIONS:
+            text = text[: m.start() + 1]
+            break
+    return text if len(text) <= _MAX_MEANING else text[: _MAX_MEANING - 3].rstrip() + "..."
+
+
+def describe_params(cls: type) -> list[ParamDoc]:
+    """Every parameter of the dataclass ``cls``: type, default, unit and meaning.
+
+    The meaning is the first sentence of the field's entry in the numpydoc ``Attributes`` section of the
+    class (or a base); the unit is the field's ``metadata["unit"]`` when given, else read from its name's
+    suffix (``_m`` metres, ``_rad`` radians, ``_s`` seconds, ``_m2`` square metres ...), else ``-``.
+    """
+    docs = _attribute_docs(cls)
+    hints = param_fields(cls)
+    out = []
+    for f in dataclasses.fields(cls):
+        if not f.init:
+            continue
+        if f.default is not dataclasses.MISSING:
+            default = _format_value(f.default) if f.default != "" else '""'
+        elif f.default_factory is not dataclasses.MISSING:
+            default = _format_value(f.default_factory())
+        else:
+            default = "(required)"
+        unit = str(f.metadata.get("unit", "")) or next((u for s, u in _UNIT_SUFFIXES if f.name.endswith(s)), "-")
+        meaning = str(f.metadata.get("doc", "")) or _first_sentence(docs.get(f.name, "")) or "(undocumented)"
+        out.append(ParamDoc(f.name, _type_name(hints[f.name]), default, unit, meaning))
+    return out

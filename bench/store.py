@@ -8,16 +8,23 @@ Layout (one folder per dataset name, then per filter name, then per seed)::
     runs/<dataset name>/<filter name>/seed-<seed>/estimates.npz   per-event estimates and timings
 
 Every folder is written to a temporary sibling and renamed into place, so a crash never leaves a
-half-written run behind. Names are the canonical specs (``room[kidnap_m=2]``).
+half-written run behind. Names are the canonical specs (``room[kidnap_m=2]``); a spec that is not a safe
+folder name is sanitised and given a hash of the full spec (:func:`_safe`), so two specs never share a folder.
 """
 
 from __future__ import annotations
 
+import errno
+import functools
 import hashlib
 import json
 import os
+import re
 import shutil
 import tempfile
+import time
+import uuid
+import zipfile
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,6 +35,7 @@ import numpy.typing as npt
 
 from locbench.datasets.base import Dataset, Kidnap, Relations, Trajectory2D, Waypoints
 from locbench.errors import ConfigError
+from locbench.spec import Spec
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -38,23 +46,50 @@ KIND_NAMES = ("Odometry", "LaserScan", "LandmarkObservations", "PoseFix", "reset
 STATUSES = ("ok", "skipped", "diverged", "error")
 
 
-#: Longest folder name written (POSIX allows 255 bytes; room is left for the ".old" and ".tmp-" variants).
+#: Longest folder name written (POSIX allows 255 bytes; room is left for the ".old-" and ".tmp-" variants).
 _MAX_NAME_BYTES = 200
+#: Characters a folder name cannot hold on POSIX or Windows, or that would make it hidden or relative.
+_UNSAFE = re.compile(r'[\x00-\x1f/\\:*?"<>|]')
+#: Hex digits of the sha256 suffix that keeps sanitised names apart (16, as long names always had).
+_HASH_CHARS = 16
+#: A run folder, exactly (``seed-0000.old`` or ``seed-0000.tmp`` are not runs).
+_SEED_DIR = re.compile(r"^seed-\d{4,}$")
+#: Leftovers of an interrupted write older than this are removed when a sweep starts, s (a write in
+#: progress lives for a fraction of a second, so another process's temporary folder is never taken).
+STALE_AFTER_S = 600.0
 
 
 def _safe(name: str) -> str:
-    """A file-system-safe folder name for a spec (only '/' and NUL can't appear in a POSIX name).
+    """The folder name of a spec: the spec itself when it is a safe name, else sanitised plus a hash.
 
-    A name longer than :data:`_MAX_NAME_BYTES` (a spec with long paths) is cut and given a sha256 suffix of the
-    whole name, so distinct specs keep distinct folders; ``meta.json`` keeps the full name.
+    A name that holds a character a file system reserves (``/``, ``\\``, ``:``, control characters ...),
+    or is longer than :data:`_MAX_NAME_BYTES`, is sanitised (each such character becomes ``_``, the name is
+    cut) and given ``~`` and the first :data:`_HASH_CHARS` hex digits of the sha256 of the full name, so
+    two specs never share a folder (``path=/x/y.bag`` and ``path=/x_y.bag``); a plain name such as
+    ``room[kidnap_m=2]`` is its own folder name, unchanged. ``meta.json`` keeps the full name.
     """
-    safe = name.replace("/", "_").replace("\\", "_").replace("\x00", "")
+    safe = _UNSAFE.sub("_", name)
+    if safe.startswith("."):
+        safe = "_" + safe[1:]
     raw = safe.encode()
-    if len(raw) <= _MAX_NAME_BYTES:
-        return safe
-    digest = hashlib.sha256(name.encode()).hexdigest()[:16]
-    head = raw[: _MAX_NAME_BYTES - 17].decode(errors="ignore")
+    if safe == name and len(raw) <= _MAX_NAME_BYTES:
+        return name
+    digest = hashlib.sha256(name.encode()).hexdigest()[:_HASH_CHARS]
+    head = raw[: _MAX_NAME_BYTES - _HASH_CHARS - 1].decode(errors="ignore")
     return f"{head}~{digest}"
+
+
+@functools.cache
+def _umask() -> int:
+    """The process's umask (read once: setting it is the only way to read it)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _follow_umask(path: Path, is_dir: bool) -> None:
+    """Give a file or folder made by ``mkstemp``/``mkdtemp`` (0600/0700) the mode the user's umask asks for."""
+    os.chmod(path, (0o777 if is_dir else 0o666) & ~_umask())
 
 
 @dataclass(eq=False)
@@ -154,38 +189,102 @@ class Store:
         self.summary = self.root / "summary"
 
     # --- paths ---------------------------------------------------------------------------------
-    def run_dir(self, dataset: str, filter_name: str, seed: int) -> Path:
-        return self.runs / _safe(dataset) / _safe(filter_name) / f"seed-{seed:04d}"
+    def run_dir(self, dataset: str | Spec, filter_name: str | Spec, seed: int) -> Path:
+        """The folder of one run; ``dataset`` and ``filter_name`` are canonical names or :class:`Spec` values."""
+        return self.runs / _safe(str(dataset)) / _safe(str(filter_name)) / f"seed-{seed:04d}"
 
-    def truth_path(self, dataset: str, seed: int) -> Path:
-        return self.runs / _safe(dataset) / TRUTH_DIR / f"seed-{seed:04d}.npz"
+    def truth_path(self, dataset: str | Spec, seed: int) -> Path:
+        return self.runs / _safe(str(dataset)) / TRUTH_DIR / f"seed-{seed:04d}.npz"
 
     # --- queries -------------------------------------------------------------------------------
-    def existing_key(self, dataset: str, filter_name: str, seed: int) -> str | None:
-        """The run key of a finished stored run, or None."""
+    def existing_meta(self, dataset: str | Spec, filter_name: str | Spec, seed: int) -> dict[str, Any] | None:
+        """The ``meta.json`` of a stored run, or None when there is none or it does not parse."""
         meta = self.run_dir(dataset, filter_name, seed) / "meta.json"
-        if not meta.is_file():
-            return None
         try:
-            return str(json.loads(meta.read_text())["run_key"])
-        except (json.JSONDecodeError, KeyError):
+            data = json.loads(meta.read_text(encoding="utf-8"))
+        except (OSError, json.JSONDecodeError, UnicodeDecodeError):
             return None
+        return data if isinstance(data, dict) else None
 
-    def has_truth(self, dataset: str, seed: int) -> bool:
+    def existing_key(self, dataset: str | Spec, filter_name: str | Spec, seed: int) -> str | None:
+        """The run key of a finished stored run, or None."""
+        meta = self.existing_meta(dataset, filter_name, seed)
+        return None if meta is None or "run_key" not in meta else str(meta["run_key"])
+
+    def sample_meta(self, dataset: str | Spec, filter_name: str | Spec) -> dict[str, Any] | None:
+        """The ``meta.json`` of one stored seed of (dataset, filter), the lowest, or None (for timing estimates)."""
+        folder = self.run_dir(dataset, filter_name, 0).parent
+        try:
+            seeds = sorted(p.name for p in folder.iterdir() if _SEED_DIR.match(p.name))
+        except OSError:
+            return None
+        for name in seeds:
+            meta = self.existing_meta(dataset, filter_name, int(name[5:]))
+            if meta is not None:
+                return meta
+        return None
+
+    def unreadable(self, dataset: str | Spec, filter_name: str | Spec, seed: int) -> str | None:
+        """Why a stored run's files do not load (it is then re-run), or None when they do.
+
+        Opens ``estimates.npz`` (its zip directory, which a truncated or overwritten file lacks) and checks
+        the arrays every run has are listed; ``meta.json`` was read by :meth:`existing_meta`.
+        """
+        est = self.run_dir(dataset, filter_name, seed) / "estimates.npz"
+        try:
+            with zipfile.ZipFile(est) as z:
+                names = set(z.namelist())
+        except (OSError, zipfile.BadZipFile, EOFError) as exc:
+            return f"{est}: {exc}"
+        missing = sorted({"t.npy", "mean.npy", "cov.npy", "kind.npy", "step_ns.npy"} - names)
+        return f"{est}: missing {', '.join(missing)}" if missing else None
+
+    def has_truth(self, dataset: str | Spec, seed: int) -> bool:
         return self.truth_path(dataset, seed).is_file()
 
     def iter_runs(self) -> Iterator[Path]:
-        """Every stored run folder, sorted."""
+        """Every stored run folder, sorted (leftover ``.tmp-*`` and ``*.old-*`` entries are not runs)."""
         if not self.runs.is_dir():
             return
         for meta in sorted(self.runs.glob("*/*/seed-*/meta.json")):
-            if meta.parent.parent.name != TRUTH_DIR:
-                yield meta.parent
+            run = meta.parent
+            if run.parent.name != TRUTH_DIR and _SEED_DIR.match(run.name) and not run.parent.name.startswith("."):
+                yield run
+
+    def clean_leftovers(self, older_than_s: float = STALE_AFTER_S) -> list[Path]:
+        """Remove temporary and replaced entries an interrupted write left behind; returns what was removed.
+
+        Only entries older than ``older_than_s`` go, so another process's write in progress is left alone.
+        """
+        removed: list[Path] = []
+        if not self.runs.is_dir():
+            return removed
+        now = time.time()
+        for pattern in ("*/*/.tmp-*", "*/*/*.old*"):
+            for p in self.runs.glob(pattern):
+                try:
+                    if now - p.lstat().st_mtime < older_than_s:
+                        continue
+                    if p.is_dir() and not p.is_symlink():
+                        shutil.rmtree(p)
+                    else:
+                        p.unlink()
+                except FileNotFoundError:
+                    continue  # another process cleaned it first
+                removed.append(p)
+        return removed
 
     # --- writing -------------------------------------------------------------------------------
+    def check_writable(self) -> None:
+        """Raise the ``OSError`` a write into ``runs/`` would meet (no permission, read-only, a file in the way)."""
+        _makedirs(self.runs)
+        fd, name = tempfile.mkstemp(prefix=".tmp-", dir=self.runs)
+        os.close(fd)
+        os.unlink(name)
+
     def write_truth(self, rec: TruthRecord) -> None:
         path = self.truth_path(rec.dataset, rec.seed)
-        path.parent.mkdir(parents=True, exist_ok=True)
+        _makedirs(path.parent)
         wp_t = rec.waypoints.t if rec.waypoints is not None else np.zeros(0)
         wp_xy = rec.waypoints.xy if rec.waypoints is not None else np.zeros((0, 2))
         arrays = {
@@ -208,11 +307,18 @@ class Store:
         _atomic_write(path.with_suffix(".json"), lambda p: p.write_text(json.dumps(meta, indent=2, default=str)))
 
     def write_run(self, rec: RunRecord) -> Path:
-        """Write a run folder atomically (temporary folder, then rename over any old one)."""
+        """Write a run folder atomically: a uniquely named temporary folder, then renamed into place.
+
+        Several processes may write the same run at once (two sweeps on one results folder): each moves the
+        folder in place aside under a unique ``.old-`` name before its rename and retries when another writer
+        got in between, so none fails and the folder always holds one complete run. An ``OSError`` (disk
+        full, read-only folder) propagates with nothing half-written left behind.
+        """
         final = self.run_dir(rec.meta["dataset"], rec.meta["filter"], int(rec.meta["seed"]))
-        final.parent.mkdir(parents=True, exist_ok=True)
+        _makedirs(final.parent)
         tmp = Path(tempfile.mkdtemp(prefix=".tmp-", dir=final.parent))
         try:
+            _follow_umask(tmp, is_dir=True)
             arrays: dict[str, np.ndarray] = {
                 "t": rec.t,
                 "mean": rec.mean,
@@ -224,14 +330,7 @@ class Store:
             arrays.update({f"extra_{k}": v for k, v in rec.extra.items()})
             np.savez_compressed(tmp / "estimates.npz", **arrays)  # type: ignore[arg-type]
             (tmp / "meta.json").write_text(json.dumps(rec.meta, indent=2, default=str))
-            if final.exists():
-                old = final.with_name(final.name + ".old")
-                shutil.rmtree(old, ignore_errors=True)
-                final.rename(old)
-                tmp.rename(final)
-                shutil.rmtree(old, ignore_errors=True)
-            else:
-                tmp.rename(final)
+            _swap_into_place(tmp, final)
         finally:
             if tmp.exists():
                 shutil.rmtree(tmp, ignore_errors=True)
@@ -275,12 +374,43 @@ class Store:
             return RunRecord(meta, z["t"], z["mean"], z["cov"], z["kind"], z["step_ns"], diag, extra)
 
 
+def _makedirs(path: Path) -> None:
+    """``mkdir -p`` that names the folder in its error (a file in the way, no permission)."""
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise NotADirectoryError(errno.ENOTDIR, "a file is in the way of a results folder", str(path)) from None
+
+
+#: Attempts of the move-aside-and-rename loop before giving up (each is a rename that another writer won).
+_SWAP_ATTEMPTS = 100
+
+
+def _swap_into_place(tmp: Path, final: Path) -> None:
+    """Rename folder ``tmp`` to ``final``, moving any folder already there aside (unique name) and removing it."""
+    for _ in range(_SWAP_ATTEMPTS):
+        try:
+            tmp.rename(final)
+            return
+        except OSError as exc:
+            if exc.errno not in (errno.ENOTEMPTY, errno.EEXIST, errno.EISDIR):
+                raise
+        old = final.with_name(f"{final.name}.old-{uuid.uuid4().hex[:12]}")
+        try:
+            final.rename(old)
+        except FileNotFoundError:
+            continue  # another writer moved it away first: try our rename again
+        shutil.rmtree(old, ignore_errors=True)
+    raise OSError(errno.EBUSY, f"could not replace the run folder after {_SWAP_ATTEMPTS} attempts", str(final))
+
+
 def _atomic_write(path: Path, writer: Any) -> None:
-    """Write via a temporary file in the same folder, then rename (no half-written files)."""
+    """Write via a uniquely named temporary file in the same folder, then rename (no half-written files)."""
     fd, tmp_name = tempfile.mkstemp(prefix=".tmp-", suffix=path.suffix, dir=path.parent)
     os.close(fd)
     tmp = Path(tmp_name)
     try:
+        _follow_umask(tmp, is_dir=False)
         writer(tmp)
         tmp.replace(path)
     finally:

@@ -18,15 +18,24 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from locbench.errors import ConfigError, UnknownIdError
+from locbench.spec import Spec, expand_grid
 
 
 @dataclass(frozen=True)
 class Block:
-    """Every filter on every dataset for seeds 0 .. seeds-1."""
+    """Every filter on every dataset for seeds 0 .. seeds-1.
+
+    Grid specs (``pf[particles=100|300]``, :func:`locbench.spec.expand_grid`) are expanded when the block is
+    made, so ``filters`` and ``datasets`` hold one spec per run configuration.
+    """
 
     filters: tuple[str, ...]
     datasets: tuple[str, ...]
     seeds: int
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "filters", tuple(x for f in self.filters for x in expand_grid(f)))
+        object.__setattr__(self, "datasets", tuple(x for d in self.datasets for x in expand_grid(d)))
 
     @property
     def runs(self) -> int:
@@ -186,13 +195,41 @@ _SUITES: tuple[Suite, ...] = (
         "50 seeds (not part of 'all')",
     ),
     Suite(
+        "pareto",
+        (
+            Block(
+                (
+                    "odometry",
+                    "pf[particles=100|300|1000|3000]",
+                    "ekf_icp[max_iterations=5|10|30|700]",
+                    "gtsam_fls[lag_s=0.5|1|2|4]",
+                    "ekf_landmarks[association=nearest,gate_probability=0.9|0.99|0.999|0.9999]",
+                ),
+                ("office",),
+                5,
+            ),
+        ),
+        "accuracy against runtime: the main cost knob of each filter on office (pf particles, ekf_icp ICP "
+        "iterations, gtsam_fls lag, ekf_landmarks' association gate)",
+    ),
+    Suite(
         "smoke",
         (Block(("odometry", "ekf_landmarks", "ekf_landmarks[association=nearest]"), ("tiny_line", "tiny_circle"), 2),),
         "seconds-long sanity run",
     ),
 )
 
-_EXPERIMENTS = ("default", "lap", "line_room", "scan_grid", "landmark_geometry", "kidnap", "global", "recorded")
+_EXPERIMENTS = (
+    "default",
+    "lap",
+    "line_room",
+    "scan_grid",
+    "landmark_geometry",
+    "kidnap",
+    "global",
+    "recorded",
+    "pareto",
+)
 
 SUITES: dict[str, Suite] = {s.name: s for s in _SUITES}
 SUITES["all"] = Suite(
@@ -203,8 +240,8 @@ SUITES["all"] = Suite(
 
 
 def get_suite(name: str) -> Suite:
-    """A named suite, or a suite read from a ``.toml`` file path."""
-    if name.endswith(".toml"):
+    """A named suite, or a suite read from a ``.toml`` file path (or any path that exists)."""
+    if name.endswith(".toml") or (name not in SUITES and Path(name).exists()):
         return load_suite_file(Path(name))
     try:
         return SUITES[name]
@@ -217,9 +254,15 @@ def get_suite(name: str) -> Suite:
 def load_suite_file(path: Path) -> Suite:
     """Read a one-block suite from TOML; errors name the file and the field."""
     try:
-        data = tomllib.loads(path.read_text())
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise ConfigError(f"{path}: suite file not found") from None
+    except IsADirectoryError:
+        raise ConfigError(f"{path}: is a folder; expected a suite name or a .toml suite file") from None
+    except PermissionError:
+        raise ConfigError(f"{path}: permission denied reading the suite file") from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{path}: not UTF-8 text (byte {exc.start}); a suite file is UTF-8 TOML") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML ({exc})") from None
     unknown = sorted(set(data) - {"filters", "datasets", "seeds", "description"})
@@ -238,3 +281,21 @@ def load_suite_file(path: Path) -> Suite:
         raise ConfigError(f"{path}: field 'seeds' must be a positive integer, got {seeds!r}")
     block = Block(tuple(data["filters"]), tuple(data["datasets"]), seeds)
     return Suite(path.stem, (block,), str(data.get("description", "")))
+
+
+def suite_pairs(name: str) -> list[tuple[Spec, Spec]]:
+    """The (filter, dataset) pairs a suite runs, grids expanded and names canonical, in suite order.
+
+    Canonical means as stored: parameters at their default are dropped (``room[kidnap_m=0]`` is ``room``),
+    so the pairs match the ``filter`` and ``dataset`` of stored runs (the report restricts itself to them).
+    """
+    from locbench.registry import resolve_dataset, resolve_filter
+
+    pairs: dict[tuple[Spec, Spec], None] = {}
+    for b in get_suite(name).blocks:
+        fspecs = [resolve_filter(f).spec for f in b.filters]
+        for d in b.datasets:
+            dspec = resolve_dataset(d).spec
+            for f in fspecs:
+                pairs[(f, dspec)] = None
+    return list(pairs)

@@ -711,7 +711,8 @@ class ParticleFilter(Filter):
     consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LandmarkObservations, LaserScan, RangeObservations})
     requires: ClassVar[frozenset[MapKind]] = frozenset()
     Config: ClassVar[type[FilterConfig]] = ParticleFilterConfig
-    version: ClassVar[int] = 3  # 2: compiled kernels, so other random streams; 3: augmented MCL may inject every particle
+    # 2: compiled kernels, so other random streams; 3: augmented MCL may inject every particle
+    version: ClassVar[int] = 3
     source: ClassVar[str] = "003_e5c93f9be776ee5e.txt sec. 4.2; Thrun, Burgard & Fox, Probabilistic Robotics ch. 6, 8"
     config: ParticleFilterConfig
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -67,7 +69,7 @@ class LineBuilder(DatasetBuilder):
 @dataclass(frozen=True, kw_only=True)
 class BadConfig(FilterConfig):
     fail_at_s: float = 1.0
-    mode: str = "raise"  # raise, nan, diverge, far (a finite but absurd 1e300 m)
+    mode: str = "raise"  # raise, nan, diverge, far (a finite but absurd 1e300 m), exit (the process dies), slow
 
 
 class BadFilter(Filter):
@@ -83,8 +85,13 @@ class BadFilter(Filter):
     def predict(self, u: Odometry) -> None:
         self._t = u.t
         self._x = self._x + u.delta
+        mode = self.config.mode  # type: ignore[attr-defined]
+        if mode == "slow":
+            time.sleep(0.05)
+            return
         if u.t >= self.config.fail_at_s:  # type: ignore[attr-defined]
-            mode = self.config.mode  # type: ignore[attr-defined]
+            if mode == "exit":
+                os._exit(3)  # a worker that dies (a crash, the OOM killer), not an exception
             if mode == "raise":
                 raise RuntimeError("boom")
             if mode == "diverge":

@@ -95,3 +95,27 @@ def test_fetch_without_an_official_download_is_a_one_line_error(
     assert main(["fetch", "lost_in_the_woods"]) == 2
     err = capsys.readouterr().err
     assert "no official download" in err and err.count("\n") == 1
+
+
+def test_list_filter_prints_every_parameter_with_type_default_unit_and_meaning(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    from locbench.filters.pf import ParticleFilterConfig
+    from locbench.spec import param_fields
+
+    assert main(["list", "pf"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    rows = {ln.split()[0]: ln for ln in lines[3:]}
+    assert set(rows) == set(param_fields(ParticleFilterConfig))
+    assert rows["particles"].split()[1:3] == ["int", "1000"] and "Number of particles" in rows["particles"]
+    assert rows["sigma_hit_m"].split()[1:4] == ["float", "0.2", "m"] and "hit Gaussian" in rows["sigma_hit_m"]
+    assert rows["init"].split()[1:4] == ["{belief,", "uniform}", "belief"]
+    assert "(undocumented)" not in "\n".join(lines)
+
+
+def test_list_dataset_and_unknown_id(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["list", "room", "office"]) == 0
+    out = capsys.readouterr().out
+    assert "kidnap_m" in out and "Kidnap distance" in out and "dataset office:" in out
+    assert main(["list", "nope"]) == 2
+    assert "unknown filter or dataset 'nope'; valid: " in capsys.readouterr().err

@@ -200,12 +200,13 @@ def locate(
             return path
     if download and spec.url:
         return _fetch(spec, cached)
-    looked = " or ".join(str(c) for c in candidates)
+    # the error names candidates[0]; the message names only the other places looked in
+    also = f" (nor in {', '.join(str(c) for c in candidates[1:])})" if len(candidates) > 1 else ""
     if spec.url:
-        how = f"set {DATA_ENV} to the folder that holds it, or download it ('locbench fetch' / download=true)"
+        how = f"set {DATA_ENV} to the folder that holds it, or download it with 'locbench fetch'"
     else:
         how = f"this dataset has no official download; set {DATA_ENV} to the folder that holds it"
-    raise MissingDataFile(candidates[0], f"missing file (looked for {looked}); {how}")
+    raise MissingDataFile(candidates[0], f"missing file{also}; {how}")
 
 
 def _fetch(spec: RemoteFile, target: Path) -> Path:
@@ -213,7 +214,7 @@ def _fetch(spec: RemoteFile, target: Path) -> Path:
         import pooch
     except ImportError:
         raise DependencyNotInstalled(
-            "downloading recorded datasets needs pooch; install it with: pip install 'locbench[data]'"
+            "downloading recorded datasets needs pooch (a dependency of locbench); install it with: pip install pooch"
         ) from None
     assert spec.url is not None
     target.parent.mkdir(parents=True, exist_ok=True)

@@ -917,7 +917,7 @@ class MrclamDataset(RecordedDataset):
             import pooch
         except ImportError:
             raise DependencyNotInstalled(
-                "downloading MRCLAM needs pooch; install it with: pip install 'locbench[data]'"
+                "downloading MRCLAM needs pooch (a dependency of locbench); install it with: pip install pooch"
             ) from None
         target = cache_root() / FOLDER / dataset_folder_name(p.dataset)
         target.mkdir(parents=True, exist_ok=True)

@@ -157,6 +157,10 @@ class RosbagParams:
                 raise ConfigError(f"rosbag: parameter {name!r} must be finite, got {getattr(self, name)!r}")
         if not self.odom_topic or not self.truth_topic:
             raise ConfigError("rosbag: 'odom_topic' and 'truth_topic' must name topics")
+        if not self.path:
+            raise ConfigError(
+                "rosbag: parameter 'path' is required: rosbag[path=<.bag file or ROS 2 folder>,map=<yaml>]"
+            )
 
 
 # --- reading the bag -----------------------------------------------------------------------------
@@ -488,8 +492,6 @@ def _map_cached(path: str, size: int, mtime_ns: int, with_lines: bool) -> tuple[
 
 def build_rosbag_dataset(params: RosbagParams) -> Dataset:
     """The dataset of ``params`` (what :class:`RosbagDataset` builds)."""
-    if not params.path:
-        raise ConfigError("rosbag: parameter 'path' is required: rosbag[path=<.bag file or ROS 2 folder>,map=<yaml>]")
     bag = resolve_bag_path(params.path)
     streams = read_bag_streams(bag, params.odom_topic, params.scan_topic, params.truth_topic, params.stamps)
     if streams.truth_t.size == 0:

@@ -393,6 +393,10 @@ class LandmarkGeometryParams:
     circuits: int = 2
     matched: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)
 
+    def __post_init__(self) -> None:
+        # checked when the spec is parsed, so a bad value is a one-line error before anything runs
+        _check_params(self)
+
 
 #: Independent noise streams, in a fixed order (adding one at the end leaves the others unchanged).
 STREAMS = ("odometry", "landmarks", "laser", "fixes", "kidnap", "route", "initial", "execution")
@@ -408,7 +412,6 @@ class LandmarkGeometryScenario(DatasetBuilder):
     )
 
     def build(self, params: LandmarkGeometryParams, rng: np.random.Generator) -> Dataset:
-        _check_params(params)
         streams = dict(zip(STREAMS, rng.spawn(len(STREAMS)), strict=True))
         world = geometry_world(params.landmarks)
         limits = dataclasses.replace(LIMITS, wheelbase_m=true_wheelbase(params.matched))

@@ -336,6 +336,13 @@ class LapParams:
     laser_beams: int = 683
     matched: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)
 
+    def __post_init__(self) -> None:
+        # checked when the spec is parsed, so a bad value is a one-line error before anything runs
+        check_kidnap_params(self.kidnap_m, self.kidnap_rad)
+        _check_beams("laser_beams", self.laser_beams, allow_zero=False)
+        if self.people < 0:
+            raise ConfigError(f"parameter 'people' must be a count >= 0, got {self.people}")
+
 
 class LapScenario(DatasetBuilder):
     """Report 000's lap: one rectangle on the office floor, Hokuyo-like laser, people not on the map."""
@@ -347,10 +354,6 @@ class LapScenario(DatasetBuilder):
     )
 
     def build(self, params: LapParams, rng: np.random.Generator) -> Dataset:
-        check_kidnap_params(params.kidnap_m, params.kidnap_rad)
-        _check_beams("laser_beams", params.laser_beams, allow_zero=False)
-        if params.people < 0:
-            raise ConfigError(f"parameter 'people' must be a count >= 0, got {params.people}")
         # The five standard streams first, then the people's, then the execution noise's (added last so that
         # the older ones kept their draws); the same as calibrate_lap_odometry() uses.
         streams, people_rng, slip_rng = lap_streams(rng)

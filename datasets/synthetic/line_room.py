@@ -120,6 +120,14 @@ class LineRoomParams:
     kidnap_rad: float = 0.5
     matched: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)
 
+    def __post_init__(self) -> None:
+        # checked when the spec is parsed, so a bad value is a one-line error before anything runs
+        check_kidnap_params(self.kidnap_m, self.kidnap_rad)
+        if self.laser_beams < 2:
+            raise ConfigError(f"parameter 'laser_beams' must be >= 2, got {self.laser_beams}")
+        if not (self.laser_sigma_m > 0 and math.isfinite(self.laser_sigma_m)):
+            raise ConfigError(f"parameter 'laser_sigma_m' must be a range noise > 0 m, got {self.laser_sigma_m}")
+
 
 class LineRoomScenario(DatasetBuilder):
     """Report 002's experiment: laser lines in two polygonal rooms; see the module docstring."""
@@ -129,11 +137,6 @@ class LineRoomScenario(DatasetBuilder):
     description: ClassVar[str] = "report 002's polygonal rooms: wall lines, a laser, 7 waypoints"
 
     def build(self, params: LineRoomParams, rng: np.random.Generator) -> Dataset:
-        check_kidnap_params(params.kidnap_m, params.kidnap_rad)
-        if params.laser_beams < 2:
-            raise ConfigError(f"parameter 'laser_beams' must be >= 2, got {params.laser_beams}")
-        if not (params.laser_sigma_m > 0 and math.isfinite(params.laser_sigma_m)):
-            raise ConfigError(f"parameter 'laser_sigma_m' must be a range noise > 0 m, got {params.laser_sigma_m}")
         streams = split_streams(rng)
         slip_rng = execution_stream(rng)
         initial_rng = matched_stream(rng) if params.matched else None

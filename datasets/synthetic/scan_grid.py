@@ -163,6 +163,12 @@ class ScanGridParams:
     kidnap_rad: float = 0.5
     matched: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)
 
+    def __post_init__(self) -> None:
+        # checked when the spec is parsed, so a bad value is a one-line error before anything runs
+        if not 0.05 <= self.grid_step_m <= 0.5:
+            raise ConfigError(f"parameter 'grid_step_m' must be in [0.05, 0.5] m, got {self.grid_step_m}")
+        check_kidnap_params(self.kidnap_m, self.kidnap_rad)
+
 
 @dataclass
 class _Commands:
@@ -268,9 +274,6 @@ class ScanGridScenario(DatasetBuilder):
     description: ClassVar[str] = "report 004's scan database at grid poses, translate-or-rotate commands of 1 s"
 
     def build(self, params: ScanGridParams, rng: np.random.Generator) -> Dataset:
-        if not 0.05 <= params.grid_step_m <= 0.5:
-            raise ConfigError(f"parameter 'grid_step_m' must be in [0.05, 0.5] m, got {params.grid_step_m}")
-        check_kidnap_params(params.kidnap_m, params.kidnap_rad)
         streams = split_streams(rng)
         world = scan_grid_world()
         v_max = params.grid_step_m / COMMAND_S

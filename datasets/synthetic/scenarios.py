@@ -402,6 +402,11 @@ class RoomParams:
     laser_beams: int = 0
     matched: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)
 
+    def __post_init__(self) -> None:
+        # checked when the spec is parsed, so a bad value is a one-line error before anything runs
+        check_kidnap_params(self.kidnap_m, self.kidnap_rad)
+        _check_beams("laser_beams", self.laser_beams, allow_zero=True)
+
 
 class RoomScenario(DatasetBuilder):
     """Report 003's experiment: a 7 m x 2 m room, 4 landmarks, a start and 5 marked waypoints, a
@@ -423,8 +428,6 @@ class RoomScenario(DatasetBuilder):
     )
 
     def build(self, params: RoomParams, rng: np.random.Generator) -> Dataset:
-        check_kidnap_params(params.kidnap_m, params.kidnap_rad)
-        _check_beams("laser_beams", params.laser_beams, allow_zero=True)
         streams = split_streams(rng)
         slip_rng = execution_stream(rng)
         initial_rng = matched_stream(rng) if params.matched else None
@@ -660,6 +663,13 @@ class OfficeParams:
     pose_fix_sigma_m: float = 0.7
     matched: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)
 
+    def __post_init__(self) -> None:
+        # checked when the spec is parsed, so a bad value is a one-line error before anything runs
+        check_kidnap_params(self.kidnap_m, self.kidnap_rad)
+        _check_beams("laser_beams", self.laser_beams, allow_zero=False)
+        if not self.pose_fix_sigma_m > 0:
+            raise ConfigError(f"parameter 'pose_fix_sigma_m' must be > 0 m, got {self.pose_fix_sigma_m}")
+
 
 class OfficeScenario(DatasetBuilder):
     """One office floor with walls, doors, 22 landmarks and a 9-waypoint tour; every sensor."""
@@ -669,10 +679,6 @@ class OfficeScenario(DatasetBuilder):
     description: ClassVar[str] = "one office floor with walls, doors, landmarks and a waypoint tour; every sensor"
 
     def build(self, params: OfficeParams, rng: np.random.Generator) -> Dataset:
-        check_kidnap_params(params.kidnap_m, params.kidnap_rad)
-        _check_beams("laser_beams", params.laser_beams, allow_zero=False)
-        if not params.pose_fix_sigma_m > 0:
-            raise ConfigError(f"parameter 'pose_fix_sigma_m' must be > 0 m, got {params.pose_fix_sigma_m}")
         streams = split_streams(rng)
         slip_rng = execution_stream(rng)
         initial_rng = matched_stream(rng) if params.matched else None

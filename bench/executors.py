@@ -1,0 +1,354 @@
+"""Where a sweep's tasks run: this process, a local process pool, or dask.distributed workers.
+
+Every executor takes the plan's tasks (longest first), runs :func:`locbench.runner.execute_task` on each
+somewhere, and hands each result back to the caller, which writes the store in this process; so a dask
+worker on another machine needs locbench installed but no shared folder. A task whose worker died or raised
+is handed to ``lost`` with the reason, which records an error run for each of its filters, and the sweep goes
+on. SIGINT (Ctrl-C) and SIGTERM stop an executor: tasks not started are cancelled, running ones abandoned
+(their workers killed), and the executor returns within a few seconds saying it was interrupted.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import contextlib
+import dataclasses
+import logging
+import os
+import signal
+import threading
+import types
+import uuid
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
+from typing import Any
+
+from locbench.errors import ConfigError, DependencyNotInstalled
+from locbench.runner import Task, TaskResult, execute_task
+
+log = logging.getLogger(__name__)
+
+Handle = Callable[[Task, TaskResult], None]
+Lost = Callable[[Task, str], None]
+
+#: Times a task is handed to a fresh local pool after the worker running it died (a crash, the OOM killer).
+LOCAL_RETRIES = 1
+#: dask's ``distributed.scheduler.allowed-failures`` for a LocalCluster: a task whose worker dies is retried
+#: on another worker this many times, then it is a ``KilledWorker`` error (a remote scheduler keeps its own).
+DASK_ALLOWED_FAILURES = 1
+#: A LocalCluster's settings: the retries above; one task per worker thread at a time, so that a worker's death
+#: is charged to the task it was running only (not to tasks queued behind it on that worker); no profiler.
+_DASK_LOCAL_CONFIG = {
+    "distributed.scheduler.allowed-failures": DASK_ALLOWED_FAILURES,
+    "distributed.scheduler.worker-saturation": 1.0,
+    # the statistical profiler samples every worker thread's stack every 10 ms: CPU a sweep does not need
+    "distributed.worker.profile.enabled": False,
+    # dask starts workers with MALLOC_TRIM_THRESHOLD_=65536, which makes glibc return memory after nearly every
+    # numpy temporary (measured: 5 s of system time on `default --seeds 1`); run them as the local pool's are
+    "distributed.nanny.pre-spawn-environ": {},
+}
+#: Times a one-filter task that dask gave up on (``KilledWorker``) is submitted again before it is an error run.
+DASK_RESUBMITS = 2
+#: How often a waiting executor looks at the stop flag, s.
+_POLL_S = 0.2
+
+
+@dataclass
+class ExecStatus:
+    """What an executor reports beyond the results: whether it was stopped early, and retries."""
+
+    interrupted: bool = False
+    retried: int = 0
+
+
+class StopRequest:
+    """SIGINT and SIGTERM, caught for the duration of a ``with`` block.
+
+    A signal sets :attr:`requested`; with ``raise_now`` (work done in this process) it also raises
+    ``KeyboardInterrupt`` to abandon the running task, except inside :meth:`shield` (a store write), which
+    finishes first. Outside the main thread signals cannot be caught, and the default behaviour stays.
+    """
+
+    def __init__(self, raise_now: bool) -> None:
+        self.raise_now = raise_now
+        self.requested = False
+        self._shielded = 0
+        self._old: dict[int, Any] = {}
+
+    def __enter__(self) -> StopRequest:
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self._old[sig] = signal.signal(sig, self._handle)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for sig, old in self._old.items():
+            signal.signal(sig, old)
+        self._old.clear()
+
+    def _handle(self, signum: int, frame: types.FrameType | None) -> None:
+        self.requested = True
+        if self.raise_now and not self._shielded:
+            raise KeyboardInterrupt
+
+    @contextlib.contextmanager
+    def shield(self) -> Iterator[None]:
+        """A block a signal does not interrupt (it only sets :attr:`requested`)."""
+        self._shielded += 1
+        try:
+            yield
+        finally:
+            self._shielded -= 1
+
+
+def get(name: str) -> Callable[..., ExecStatus]:
+    """The executor called ``name``: ``local`` or ``dask``."""
+    try:
+        return {"local": run_local, "dask": run_dask}[name]
+    except KeyError:
+        raise ConfigError(f"unknown executor {name!r}; valid: dask, local") from None
+
+
+def run_local(
+    tasks: Sequence[Task], handle: Handle, lost: Lost, jobs: int = 1, scheduler: str | None = None
+) -> ExecStatus:
+    """Run the tasks in this process (``jobs`` = 1) or in a pool of ``jobs`` worker processes."""
+    if scheduler is not None:
+        raise ConfigError("--scheduler needs --executor dask")
+    if jobs <= 1:
+        return _run_inline(tasks, handle, lost)
+    return _run_pool(tasks, handle, lost, jobs)
+
+
+def _run_inline(tasks: Sequence[Task], handle: Handle, lost: Lost) -> ExecStatus:
+    with StopRequest(raise_now=True) as stop:
+        for n, task in enumerate(tasks):
+            if stop.requested:
+                return ExecStatus(interrupted=True)
+            try:
+                result = execute_task(task)
+            except KeyboardInterrupt:
+                return ExecStatus(interrupted=True)
+            except Exception as exc:  # execute_task records a filter's or a dataset's failure itself: a bug
+                with stop.shield():
+                    lost(task, f"task failed: {type(exc).__name__}: {exc}")
+                continue
+            with stop.shield():
+                handle(task, result)
+            if stop.requested and n + 1 < len(tasks):
+                return ExecStatus(interrupted=True)
+    return ExecStatus()
+
+
+def _pool_worker_init() -> None:
+    # Ctrl-C reaches the whole process group: only the parent decides what stops, and it kills the workers.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+def _kill_pool(pool: cf.ProcessPoolExecutor) -> None:
+    """Kill the pool's worker processes (their tasks are abandoned; nothing of theirs is stored)."""
+    kill = getattr(pool, "kill_workers", None)  # Python >= 3.14
+    if callable(kill):
+        kill()
+        return
+    for proc in list(getattr(pool, "_processes", {}).values()):
+        with contextlib.suppress(Exception):
+            proc.kill()
+
+
+def split(task: Task) -> list[Task]:
+    """One task per filter of ``task``: after its worker died, so that only the filter that kills it fails."""
+    return [dataclasses.replace(task, jobs=(job,)) for job in task.jobs]
+
+
+def _run_pool(tasks: Sequence[Task], handle: Handle, lost: Lost, jobs: int) -> ExecStatus:
+    status = ExecStatus()
+    todo = list(tasks)
+    deaths = [0] * len(todo)
+    queue = list(range(len(todo)))
+    finished = 0
+    with StopRequest(raise_now=False) as stop:
+        while queue and not stop.requested:
+            pool = cf.ProcessPoolExecutor(max_workers=min(jobs, len(queue)), initializer=_pool_worker_init)
+            futures = {pool.submit(execute_task, todo[i]): i for i in queue}
+            queue = []
+            pending = set(futures)
+            try:
+                while pending and not stop.requested:
+                    running = {f for f in pending if f.running()}
+                    done, pending = cf.wait(pending, timeout=_POLL_S, return_when=cf.FIRST_COMPLETED)
+                    for fut in done:
+                        i = futures[fut]
+                        try:
+                            result = fut.result()
+                        except BrokenProcessPool:
+                            # The pool is broken for every queued task; only one that was running counts a death.
+                            deaths[i] += fut in running
+                            if deaths[i] <= LOCAL_RETRIES:
+                                status.retried += fut in running
+                                queue.append(i)
+                            elif len(todo[i].jobs) > 1:
+                                finished += 1
+                                for part in split(todo[i]):
+                                    queue.append(len(todo))
+                                    todo.append(part)
+                                    deaths.append(0)
+                            else:
+                                why = f"its worker process died {deaths[i]} times (killed, or out of memory)"
+                                with stop.shield():
+                                    lost(todo[i], why)
+                                finished += 1
+                            continue
+                        except Exception as exc:
+                            with stop.shield():
+                                lost(todo[i], f"worker failed: {type(exc).__name__}: {exc}")
+                        else:
+                            with stop.shield():
+                                handle(todo[i], result)
+                        finished += 1
+            finally:
+                if stop.requested:
+                    _kill_pool(pool)
+                pool.shutdown(wait=not stop.requested, cancel_futures=True)
+            queue.sort()
+    status.interrupted = stop.requested and finished < len(todo)
+    return status
+
+
+@contextlib.contextmanager
+def _sigint_ignored() -> Iterator[None]:
+    """Start child processes with SIGINT ignored (an ignored signal stays ignored across exec), then restore."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
+def _kill_local_workers(cluster: Any) -> None:
+    """Kill a LocalCluster's worker processes: closing waits for a running task to finish, killing does not."""
+    for nanny in list(getattr(cluster, "workers", {}).values()):
+        pid = getattr(nanny, "pid", None)
+        if pid:
+            with contextlib.suppress(OSError):
+                os.kill(pid, signal.SIGKILL)
+
+
+def run_dask(
+    tasks: Sequence[Task], handle: Handle, lost: Lost, jobs: int = 1, scheduler: str | None = None
+) -> ExecStatus:
+    """Run the tasks on dask.distributed workers: the scheduler at ``scheduler``, else a LocalCluster of ``jobs``.
+
+    Each task is one dask task (longest first by priority); the records come back to this process, which
+    writes them. A worker that dies is replaced and its task retried by dask (``allowed-failures`` times),
+    then the task is a ``KilledWorker`` error run; a task that raises is an error run.
+    """
+    try:
+        import dask
+        import distributed
+    except ImportError:
+        raise DependencyNotInstalled(
+            "--executor dask needs dask.distributed; install it with: pip install 'locbench[dask]'"
+        ) from None
+    status = ExecStatus()
+    if not tasks:
+        return status
+    cluster: Any = None
+    if not log.isEnabledFor(logging.INFO):
+        # distributed logs every connection at INFO; a sweep prints its own summary
+        logging.getLogger("distributed").setLevel(logging.ERROR)
+    with StopRequest(raise_now=False) as stop:
+        with _sigint_ignored(), dask.config.set(_DASK_LOCAL_CONFIG):
+            try:
+                if scheduler is None:
+                    cluster = distributed.LocalCluster(
+                        n_workers=jobs,
+                        threads_per_worker=1,
+                        processes=True,
+                        host="127.0.0.1",
+                        dashboard_address=None,
+                        scheduler_kwargs={"dashboard": False},
+                        silence_logs=logging.CRITICAL,
+                    )
+                    client = distributed.Client(cluster)
+                else:
+                    client = distributed.Client(scheduler, timeout="10s")
+            except (OSError, TimeoutError) as exc:
+                if cluster is not None:
+                    cluster.close()
+                where = scheduler or "a LocalCluster on 127.0.0.1"
+                raise ConfigError(f"cannot reach the dask scheduler at {where}: {exc}") from None
+        run_id = uuid.uuid4().hex[:8]
+        todo = list(tasks)
+        futures: dict[Any, int] = {}
+
+        def submit(i: int) -> Any:
+            key = f"locbench-{run_id}-{i}"
+            fut = client.submit(execute_task, todo[i], pure=False, priority=len(todo) - i, key=key)
+            futures[fut] = i
+            return fut
+
+        resubmitted = [0] * len(todo)
+        pending = {submit(i) for i in range(len(todo))}
+        try:
+            while pending and not stop.requested:
+                with contextlib.suppress(TimeoutError, distributed.TimeoutError):
+                    distributed.wait(list(pending), timeout=_POLL_S, return_when="FIRST_COMPLETED")
+                for fut in [f for f in pending if f.done()]:
+                    pending.discard(fut)
+                    i = futures[fut]
+                    error: BaseException | None = None
+                    # retryable: the worker died (KilledWorker) or the result was lost with it, not the task failed
+                    retryable = fut.status != "error"
+                    if fut.status == "finished":
+                        try:
+                            # a result held by a worker that died since is recomputed: wait for it in the next round
+                            result = fut.result(timeout=_POLL_S)
+                        except (TimeoutError, distributed.TimeoutError):
+                            pending.add(fut)
+                            continue
+                        except Exception as exc:
+                            error = exc
+                        else:
+                            with stop.shield():
+                                handle(todo[i], result)
+                            continue
+                    else:
+                        error = fut.exception() if fut.status == "error" else None
+                    killed = isinstance(error, distributed.KilledWorker)
+                    if (killed or retryable) and (len(todo[i].jobs) > 1 or resubmitted[i] < DASK_RESUBMITS):
+                        # A task with several filters is split, one per filter, to find the one that kills its
+                        # worker; a single one is submitted again, since a task whose worker was killed by
+                        # another task's crash (holding its result) can be charged that death too.
+                        status.retried += 1
+                        parts = split(todo[i]) if len(todo[i].jobs) > 1 else [todo[i]]
+                        for part in parts:
+                            todo.append(part)
+                            resubmitted.append(resubmitted[i] + (len(parts) == 1))
+                            pending.add(submit(len(todo) - 1))
+                        continue
+                    if killed:
+                        reason = "its dask worker died each time it ran (KilledWorker)"
+                    elif error is not None:
+                        reason = f"worker failed: {type(error).__name__}: {error}"
+                    else:
+                        reason = f"dask task {fut.status}"
+                    with stop.shield():
+                        lost(todo[i], reason)
+        finally:
+            status.interrupted = bool(pending) and stop.requested
+            with contextlib.suppress(Exception):
+                client.cancel(list(pending), force=True)
+            with contextlib.suppress(Exception):
+                client.close(timeout=2)
+            if cluster is not None:
+                if status.interrupted:
+                    _kill_local_workers(cluster)
+                with contextlib.suppress(Exception):
+                    cluster.close(timeout=3)
+    return status

@@ -1,0 +1,141 @@
+"""The store: one folder per canonical spec, concurrent writers, leftovers, umask and a full disk."""
+
+from __future__ import annotations
+
+import errno
+import multiprocessing
+import os
+import stat
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from locbench import store as store_mod
+from locbench.store import RunRecord, Store
+
+
+def _record(dataset: str, filt: str = "odometry", seed: int = 0, value: float = 1.0) -> RunRecord:
+    n = 4
+    meta = {"dataset": dataset, "filter": filt, "seed": seed, "run_key": f"k{value}", "status": "ok"}
+    return RunRecord(
+        meta,
+        np.arange(n, dtype=float),
+        np.full((n, 3), value),
+        np.tile(np.eye(3), (n, 1, 1)),
+        np.zeros(n, np.int8),
+        np.zeros(n, np.int64),
+    )
+
+
+@pytest.mark.parametrize(
+    ("a", "b"),
+    [
+        ("rosbag[map=m.yaml,path=/x/y.bag]", "rosbag[map=m.yaml,path=/x_y.bag]"),
+        ("rosbag[path=a\\b]", "rosbag[path=a/b]"),
+        ("rosbag[path=a/b]", "rosbag[path=a_b]"),
+        ("rosbag[path=" + "d/" * 120 + "]", "rosbag[path=" + "d/" * 120 + "x]"),
+    ],
+)
+def test_different_specs_never_share_a_folder(tmp_path: Path, a: str, b: str) -> None:
+    st = Store(tmp_path)
+    assert st.run_dir(a, "pf", 0) != st.run_dir(b, "pf", 0)
+    assert st.truth_path(a, 0) != st.truth_path(b, 0)
+    st.write_run(_record(a, value=1.0))
+    st.write_run(_record(b, value=2.0))
+    assert len(list(st.iter_runs())) == 2
+    assert st.read_run(st.run_dir(a, "odometry", 0)).meta["dataset"] == a
+    assert st.read_run(st.run_dir(b, "odometry", 0)).mean[0, 0] == 2.0
+    for d in (st.run_dir(a, "odometry", 0), st.run_dir(b, "odometry", 0)):
+        assert len(d.parent.parent.name.encode()) <= 255
+
+
+def test_plain_names_keep_their_folders(tmp_path: Path) -> None:
+    st = Store(tmp_path)
+    for name in ("room", "room[kidnap_m=2]", "landmark_geometry[gps=true,initial_offset_m=2]", "pf[augmented=true]"):
+        assert st.run_dir(name, name, 3) == tmp_path / "runs" / name / name / "seed-0003"
+
+
+def _write_many(args: tuple[str, int]) -> int:
+    root, worker = args
+    st = Store(root)
+    for i in range(30):
+        st.write_run(_record("room", f"f{i % 5}", seed=i % 2, value=float(worker)))
+        st.write_truth(_truth("room", i % 2))
+    return worker
+
+
+def _truth(dataset: str, seed: int) -> store_mod.TruthRecord:
+    from locbench.datasets.base import Trajectory2D
+
+    t = np.arange(3.0)
+    return store_mod.TruthRecord(dataset, seed, Trajectory2D(t, np.zeros((3, 2)), np.zeros(3)), None, (), 2.0)
+
+
+def test_six_concurrent_writers_neither_crash_nor_corrupt(tmp_path: Path) -> None:
+    ctx = multiprocessing.get_context("spawn")
+    with ctx.Pool(6) as pool:
+        assert sorted(pool.map(_write_many, [(str(tmp_path), w) for w in range(6)])) == list(range(6))
+    st = Store(tmp_path)
+    runs = list(st.iter_runs())
+    assert len(runs) == 10  # 5 filters x 2 seeds, each one complete run of one writer
+    for r in runs:
+        rec = st.read_run(r)
+        assert np.all(rec.mean == rec.mean[0, 0])
+        assert st.unreadable("room", r.parent.name, int(r.name[5:])) is None
+    assert st.read_truth("room", 1).duration_s == 2.0
+    assert [p.name for p in tmp_path.rglob("*") if ".tmp-" in p.name or ".old" in p.name] == []
+
+
+def test_leftovers_are_ignored_and_cleaned(tmp_path: Path) -> None:
+    st = Store(tmp_path)
+    final = st.write_run(_record("room"))
+    for name in ("seed-0000.old", ".tmp-abc123"):
+        leftover = final.parent / name
+        leftover.mkdir()
+        (leftover / "meta.json").write_text("{}")
+    (final.parent.parent / "_truth").mkdir()
+    (final.parent.parent / "_truth" / ".tmp-x.npz").write_bytes(b"")
+    assert list(st.iter_runs()) == [final]
+    assert st.clean_leftovers() == []  # fresh: could be another process's write in progress
+    removed = st.clean_leftovers(older_than_s=0.0)
+    assert sorted(p.name for p in removed) == [".tmp-abc123", ".tmp-x.npz", "seed-0000.old"]
+    assert sorted(p.name for p in final.parent.iterdir()) == ["seed-0000"]
+
+
+def test_unreadable_runs_are_detected(tmp_path: Path) -> None:
+    st = Store(tmp_path)
+    final = st.write_run(_record("room"))
+    assert st.unreadable("room", "odometry", 0) is None
+    data = (final / "estimates.npz").read_bytes()
+    (final / "estimates.npz").write_bytes(data[: len(data) // 2])
+    assert "estimates.npz" in str(st.unreadable("room", "odometry", 0))
+    (final / "estimates.npz").unlink()
+    assert st.unreadable("room", "odometry", 0) is not None
+
+
+@pytest.mark.parametrize("mask", [0o022, 0o002, 0o077])
+def test_files_follow_the_umask(tmp_path: Path, mask: int) -> None:
+    old = os.umask(mask)
+    store_mod._umask.cache_clear()
+    try:
+        st = Store(tmp_path)
+        final = st.write_run(_record("room"))
+        st.write_truth(_truth("room", 0))
+    finally:
+        os.umask(old)
+        store_mod._umask.cache_clear()
+    assert stat.S_IMODE(final.stat().st_mode) == 0o777 & ~mask
+    assert stat.S_IMODE((final / "meta.json").stat().st_mode) == 0o666 & ~mask
+    assert stat.S_IMODE(st.truth_path("room", 0).stat().st_mode) == 0o666 & ~mask
+
+
+def test_disk_full_raises_and_leaves_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    def full(*args: object, **kwargs: object) -> None:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(store_mod.np, "savez_compressed", full)
+    st = Store(tmp_path)
+    with pytest.raises(OSError, match="No space left"):
+        st.write_run(_record("room"))
+    assert [p.name for p in tmp_path.rglob("*") if p.is_file() or p.name.startswith(".tmp-")] == []

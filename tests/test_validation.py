@@ -1,0 +1,36 @@
+"""Every parameter is checked when the spec is parsed: a bad one is a one-line error and nothing is stored."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from locbench.cli import main
+
+
+@pytest.mark.parametrize(
+    ("filt", "dataset", "expected"),
+    [
+        ("odometry", "room[kidnap_m=-1]", "room: parameter 'kidnap_m' must be a distance >= 0 m, got -1.0"),
+        ("odometry", "office[kidnap_rad=4]", "kidnap_rad"),
+        ("odometry", "office[pose_fix_sigma_m=0]", "pose_fix_sigma_m"),
+        ("odometry", "lap[people=-1]", "lap: parameter 'people' must be a count >= 0"),
+        ("odometry", "line_room[laser_sigma_m=0]", "laser_sigma_m"),
+        ("odometry", "scan_grid[grid_step_m=2]", "grid_step_m"),
+        ("odometry", "landmark_geometry[initial_offset_m=-2]", "initial_offset_m"),
+        ("odometry", "rosbag[map=m.yaml]", "rosbag: parameter 'path' is required"),
+        ("pf[particles=1]", "room", "particles"),
+        ("gtsam_fls[lag_s=0]", "room", "lag_s must be > 0 s"),
+        ("ekf_landmarks[gate_probability=1.5]", "room", "gate_probability must be in (0, 1)"),
+        ("pf[particles=100|0]", "room", "particles"),  # every point of a grid is checked
+    ],
+)
+def test_bad_parameters_fail_before_anything_runs(
+    filt: str, dataset: str, expected: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    res = tmp_path / "res"
+    assert main(["run", "--filter", filt, "--dataset", dataset, "--results", str(res), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert expected in err and err.count("\n") == 1 and "rosbag: rosbag:" not in err
+    assert not res.exists()  # nothing stored, not even a folder
