@@ -8,7 +8,7 @@ import pytest
 
 from locbench.errors import ConfigError
 from locbench.spec import Spec, expand_grid
-from locbench.suites import SUITES, Block, load_suite_file, suite_pairs
+from locbench.suites import KIDNAP_FILTERS, SUITES, Block, load_suite_file, suite_pairs
 
 
 def test_grid_expands_to_the_cross_product() -> None:
@@ -57,4 +57,4 @@ def test_pareto_sweeps_each_filters_cost_knob_on_office() -> None:
 def test_suite_pairs_are_canonical_and_unique() -> None:
     pairs = suite_pairs("kidnap")
     assert (Spec.parse("pf[augmented=true]"), Spec.parse("room[kidnap_m=0.5]")) in pairs
-    assert len(pairs) == len(set(pairs)) == 7 * 8
+    assert len(pairs) == len(set(pairs)) == len(KIDNAP_FILTERS) * 8

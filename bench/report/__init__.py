@@ -93,14 +93,8 @@ def summary_text(tables: tuple[Table, ...]) -> str:
 
 
 def suite_filter(suite_name: str) -> Keep:
-    """``keep(dataset, filter)`` for the cells of a named suite or suite file (canonical names)."""
-    from locbench.registry import resolve_dataset, resolve_filter
-    from locbench.suites import get_suite
+    """``keep(dataset, filter)`` for the cells of a named suite or suite file (grids expanded, canonical names)."""
+    from locbench.suites import suite_pairs
 
-    suite = get_suite(suite_name)
-    cells: set[tuple[str, str]] = set()
-    for block in suite.blocks:
-        fnames = [resolve_filter(f).name for f in block.filters]
-        dnames = [resolve_dataset(d).name for d in block.datasets]
-        cells.update((d, f) for d in dnames for f in fnames)
+    cells = {(d.name, f.name) for f, d in suite_pairs(suite_name)}
     return lambda dataset, filt: (dataset, filt) in cells
