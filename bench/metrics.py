@@ -353,8 +353,11 @@ def nll(errors: npt.ArrayLike, cov: npt.ArrayLike) -> FloatArray:
     P = np.asarray(cov, dtype=np.float64)
     maha = nees(e, P)
     sign, logdet = np.linalg.slogdet(P)
-    out = 0.5 * (maha + e.shape[1] * np.log(2.0 * np.pi) + logdet)
-    out[(sign <= 0) | ~np.isfinite(maha)] = np.inf
+    bad = (sign <= 0) | ~np.isfinite(maha) | ~np.isfinite(logdet)
+    # a collapsed P gives +inf + (-inf): the row is +inf by definition, computed without a warning
+    with np.errstate(invalid="ignore", over="ignore"):
+        out = 0.5 * (maha + e.shape[1] * np.log(2.0 * np.pi) + logdet)
+    out[bad] = np.inf
     return out
 
 

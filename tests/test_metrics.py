@@ -309,3 +309,11 @@ def test_ate_over_pcrb_is_rms_over_runs_divided_by_the_bound() -> None:
     assert np.isnan(lm.ate_over_pcrb([], 0.01))
     with pytest.raises(ValueError, match="pcrb_ate_m"):
         lm.ate_over_pcrb([0.1], 0.0)
+
+
+def test_nll_of_a_collapsed_covariance_is_inf_without_a_warning() -> None:
+    # P exactly singular: NEES +inf and log det -inf; their sum must not warn (pytest turns warnings into errors)
+    P = np.zeros((1, 3, 3))
+    assert lm.nll(np.array([[0.1, 0.0, 0.0]]), P)[0] == np.inf
+    rank1 = np.outer([1.0, 0.0, 0.0], [1.0, 0.0, 0.0])[None]
+    assert lm.nll(np.array([[0.0, 1.0, 0.0]]), rank1)[0] == np.inf
