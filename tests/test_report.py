@@ -411,3 +411,16 @@ def test_suite_filter_keeps_the_suites_cells_only() -> None:
     keep = suite_filter("room")
     assert keep("room", "odometry") and keep("room", "ekf_landmarks[association=nearest]")
     assert not keep("office", "odometry") and not keep("room", "ekf_icp")
+
+
+def test_summary_takes_each_filters_own_kidnap_configuration() -> None:
+    from locbench.report.build import Report
+    from locbench.report.collect import Collected, describe_filter, frame
+
+    names = ["pf", "pf[adaptive=kld]", "pf[particles=100]", "pf[augmented=true]", "pf[adaptive=kld,augmented=true]"]
+    col = Collected(metrics=frame([]), filters={n: describe_filter(n) for n in names})
+    rep = Report(col)
+    kid = ["pf[augmented=true]", "pf[adaptive=kld,augmented=true]"]
+    assert rep._kidnap_config("pf", kid) == "pf[augmented=true]"
+    assert rep._kidnap_config("pf[adaptive=kld]", kid) == "pf[adaptive=kld,augmented=true]"
+    assert rep._kidnap_config("pf[particles=100]", kid) is None

@@ -121,6 +121,22 @@ class Report:
                 return n
         return None
 
+    def _kidnap_config(self, filter_name: str, candidates: list[str]) -> str | None:
+        """The filter's own kidnap configuration: its id with every parameter it sets and the fewest more
+        (``pf`` -> ``pf[augmented=true]``, ``pf[adaptive=kld]`` -> ``pf[adaptive=kld,augmented=true]``)."""
+        spec = self.col.filters[filter_name].spec
+        mine = set(spec.params)
+        fits = [
+            (len(self.col.filters[c].spec.params), c)
+            for c in candidates
+            if self.col.filters[c].spec.ident == spec.ident and mine <= set(self.col.filters[c].spec.params)
+        ]
+        if not fits:
+            return None
+        fewest = min(n for n, _ in fits)
+        best = [c for n, c in fits if n == fewest]
+        return best[0] if len(best) == 1 else None
+
     def _recorded_ate(self, filter_name: str) -> tuple[float, int]:
         per = []
         for ds in self.recorded():
@@ -153,12 +169,9 @@ class Report:
             upd = tb.mean_of(sub, "update_us_median")
             rtf = tb.mean_of(sub, "realtime_factor")
             # the kidnap runs of this configuration, or of its filter's one kidnap configuration
-            kname = f if f in kfilters else None
-            if kname is None:
-                same = [k for k in kfilters if self.col.filters[k].spec.ident == self.col.filters[f].spec.ident]
-                if len(same) == 1 and f == self.col.filters[f].spec.ident:
-                    kname = same[0]
-                    substituted[f] = kname
+            kname = f if f in kfilters else self._kidnap_config(f, kfilters)
+            if kname is not None and kname != f:
+                substituted[f] = kname
             if kname is not None:
                 _, n_k, r_k, _, _ = tb.rate(kdf[kdf["filter"] == kname], "kidnap_recovered")
                 k_text = f"{100 * r_k:.0f} ({n_k})" + ("²" if kname != f else "") if n_k else "n/a"
