@@ -42,3 +42,22 @@ def test_root_package_imports_no_filters_or_datasets() -> None:
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
     assert out == "False"
+
+
+def test_readme_and_docs_links_resolve_inside_the_clone() -> None:
+    """Every relative link of the README and docs/ names a file of the repository; nothing points outside it."""
+    import re
+
+    root = Path(__file__).resolve().parents[1]
+    pages = [root / "README.md", *sorted((root / "docs").glob("*.md"))]
+    bad = []
+    for page in pages:
+        text = page.read_text(encoding="utf-8")
+        for target in re.findall(r"\]\(([^)\s]+)\)", text):
+            if target.startswith(("http://", "https://", "#", "mailto:")):
+                continue
+            path = (page.parent / target.split("#", 1)[0]).resolve()
+            if not path.exists() or root not in path.parents:
+                bad.append(f"{page.name}: {target}")
+        bad += [f"{page.name}: mentions ../shared" for _ in re.findall(r"\.\./shared", text)]
+    assert not bad, bad

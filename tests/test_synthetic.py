@@ -376,3 +376,19 @@ def test_slip_needs_a_generator() -> None:
         simulate_route([0, 0, 0], [GoTo((1.0, 0.0))], DriveLimits(), slip_k=0.002)
     with pytest.raises(ConfigError, match="slip_k"):
         simulate_route([0, 0, 0], [GoTo((1.0, 0.0))], DriveLimits(), slip_k=-1.0, slip_rng=np.random.default_rng(0))
+
+
+def test_synthetic_worlds_declare_their_sensor_streams() -> None:
+    """The contract check covers synthetic worlds too: a world whose landmark stream is lost is an error."""
+    import dataclasses
+
+    from locbench.errors import ConfigError
+    from locbench.events import LandmarkObservations, LaserScan, PoseFix
+    from locbench.registry import make_dataset
+
+    office = make_dataset("office", 0)
+    assert office.declared == frozenset({LandmarkObservations, LaserScan, PoseFix})
+    assert make_dataset("scan_grid", 0).declared == frozenset({LaserScan})
+    blind = dataclasses.replace(office, events=tuple(e for e in office.events if not isinstance(e, LandmarkObservations)))
+    with pytest.raises(ConfigError, match="LandmarkObservations"):
+        blind.check()

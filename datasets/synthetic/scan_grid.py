@@ -377,6 +377,7 @@ class ScanGridScenario(DatasetBuilder):
                 "true_odometry_error": {**dataclasses.asdict(enc), "wheelbase_true_m": b_true},
                 "matched": params.matched,
             },
+            declared=frozenset({LaserScan}),
         )
         ds.check()
         return ds

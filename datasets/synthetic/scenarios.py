@@ -50,7 +50,7 @@ from locbench.datasets.synthetic.sensors import (
 )
 from locbench.datasets.synthetic.world import World, wall_with_doors
 from locbench.errors import ConfigError
-from locbench.events import Event
+from locbench.events import Event, LandmarkObservations, LaserScan, PoseFix
 from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
 from locbench.spec import params_to_dict
 
@@ -333,6 +333,16 @@ def assemble(
         kidnaps=motion.kidnaps,
         name=dataset_id,
         metadata=meta,
+        # the streams the world's sensors emit: the contract requires events of each
+        declared=frozenset(
+            kind
+            for kind, sensor in (
+                (LandmarkObservations, suite.landmarks),
+                (LaserScan, suite.laser),
+                (PoseFix, suite.fixes),
+            )
+            if sensor is not None
+        ),
     )
     ds.check()
     return ds
