@@ -167,13 +167,21 @@ def _run_pool(tasks: Sequence[Task], handle: Handle, lost: Lost, jobs: int) -> E
     status = ExecStatus()
     todo = list(tasks)
     deaths = [0] * len(todo)
+    # A broken pool fails every task it holds and does not say whose worker died: a task that was running
+    # beside others then runs again alone, where a death is its own, so a task is never blamed for a sibling's.
+    alone = [False] * len(todo)
     queue = list(range(len(todo)))
     finished = 0
     with StopRequest(raise_now=False) as stop:
         while queue and not stop.requested:
-            pool = cf.ProcessPoolExecutor(max_workers=min(jobs, len(queue)), initializer=_pool_worker_init)
-            futures = {pool.submit(execute_task, todo[i]): i for i in queue}
-            queue = []
+            first_alone = next((i for i in queue if alone[i]), None)
+            if first_alone is not None:
+                batch = [first_alone]
+                queue = [i for i in queue if i != first_alone]
+            else:
+                batch, queue = queue, []
+            pool = cf.ProcessPoolExecutor(max_workers=min(jobs, len(batch)), initializer=_pool_worker_init)
+            futures = {pool.submit(execute_task, todo[i]): i for i in batch}
             pending = set(futures)
             try:
                 while pending and not stop.requested:
@@ -184,10 +192,15 @@ def _run_pool(tasks: Sequence[Task], handle: Handle, lost: Lost, jobs: int) -> E
                         try:
                             result = fut.result()
                         except BrokenProcessPool:
-                            # The pool is broken for every queued task; only one that was running counts a death.
-                            deaths[i] += fut in running
+                            # Its own death only when it was alone in the pool or the only one running.
+                            own = len(batch) == 1 or (fut in running and len(running) == 1)
+                            if not own:
+                                alone[i] = alone[i] or fut in running
+                                queue.append(i)
+                                continue
+                            deaths[i] += 1
                             if deaths[i] <= LOCAL_RETRIES:
-                                status.retried += fut in running
+                                status.retried += 1
                                 queue.append(i)
                             elif len(todo[i].jobs) > 1:
                                 finished += 1
@@ -195,6 +208,7 @@ def _run_pool(tasks: Sequence[Task], handle: Handle, lost: Lost, jobs: int) -> E
                                     queue.append(len(todo))
                                     todo.append(part)
                                     deaths.append(0)
+                                    alone.append(False)
                             else:
                                 why = f"its worker process died {deaths[i]} times (killed, or out of memory)"
                                 with stop.shield():

@@ -122,8 +122,8 @@ class Report:
         return None
 
     def _kidnap_config(self, filter_name: str, candidates: list[str]) -> str | None:
-        """The filter's own kidnap configuration: its id with every parameter it sets and the fewest more
-        (``pf`` -> ``pf[augmented=true]``, ``pf[adaptive=kld]`` -> ``pf[adaptive=kld,augmented=true]``)."""
+        """The configuration's own kidnap configuration: its id with every parameter it sets and the fewest more
+        (``f`` -> ``f[recovery=on]``, ``f[a=1]`` -> ``f[a=1,recovery=on]``), if exactly one is that close."""
         spec = self.col.filters[filter_name].spec
         mine = set(spec.params)
         fits = [
