@@ -47,6 +47,13 @@ _DASK_LOCAL_CONFIG = {
     # dask starts workers with MALLOC_TRIM_THRESHOLD_=65536, which makes glibc return memory after nearly every
     # numpy temporary (measured: 5 s of system time on `default --seeds 1`); run them as the local pool's are
     "distributed.nanny.pre-spawn-environ": {},
+    # housekeeping that a sweep of second-long tasks on a few workers does not need at dask's default rates
+    # (an event-loop tick every 20 ms and a memory poll every 100 ms in every process, and work stealing)
+    "distributed.admin.tick.interval": "1s",
+    "distributed.worker.memory.monitor-interval": "1s",
+    "distributed.scheduler.work-stealing": False,
+    # results are gathered as they finish: no replicas for the active memory manager to balance
+    "distributed.scheduler.active-memory-manager.start": False,
 }
 #: Times a one-filter task that dask gave up on (``KilledWorker``) is submitted again before it is an error run.
 DASK_RESUBMITS = 2
