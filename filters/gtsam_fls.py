@@ -118,7 +118,13 @@ class GtsamFLSConfig(FilterConfig, MotionNoiseConfig):
     sigma_xy_m, sigma_theta_rad : float
         Additive process noise per odometry step (report 003 eq. 8), isotropic in x, y; the defaults of
         ``ekf_landmarks`` (1 mm, 0.5 mrad), which also keep a standstill increment from being singular.
-    input_noise, motion_model : see :class:`locbench.filters.ekf_landmarks.LandmarkEKFConfig`.
+    input_noise : {"per_step", "cumulative"}
+        Reading of report 003 eq. 10, as in ``ekf_landmarks``: per-step variance k^2 |delta l_k| (Chong and
+        Kleeman) or the literal accumulated sum.
+    motion_model : {"auto", "encoder", "increment"}
+        As in ``ekf_landmarks``: the encoder model (eq. 1-5) when the event has wheel travel and the dataset
+        gives the wheelbase and encoder constants (``"auto"``), always when wheel travel exists
+        (``"encoder"``), or the (dx, dy, dtheta) increment (``"increment"``).
     association : {"known", "nearest"}
         Use observation ids, or associate every observation by nearest neighbour (``UNKNOWN_ID`` always is).
     gate_probability : float
