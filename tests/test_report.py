@@ -424,3 +424,17 @@ def test_summary_takes_each_filters_own_kidnap_configuration() -> None:
     assert rep._kidnap_config("pf", kid) == "pf[augmented=true]"
     assert rep._kidnap_config("pf[adaptive=kld]", kid) == "pf[adaptive=kld,augmented=true]"
     assert rep._kidnap_config("pf[particles=100]", kid) is None
+
+
+def test_configurations_of_a_sweep_are_listed_in_numeric_order() -> None:
+    from locbench.report.collect import Collected, frame
+
+    col = Collected(metrics=frame([]))
+    names = ["pf[particles=3000]", "pf[particles=100]", "odometry", "pf[particles=300]", "gtsam_fls[lag_s=0.5]"]
+    assert col.filter_order(names) == [
+        "odometry",
+        "gtsam_fls[lag_s=0.5]",
+        "pf[particles=100]",
+        "pf[particles=300]",
+        "pf[particles=3000]",
+    ]

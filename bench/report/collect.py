@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import io
 import logging
+import re
 from collections import defaultdict
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -86,8 +87,9 @@ class Collected:
         return self.store.read_run(self.ok_dirs[(dataset, filter_name, seed)])
 
     def filter_order(self, names: Sequence[str] | set[str]) -> list[str]:
-        """The baseline first (the row every table starts with), then by name."""
-        return sorted(set(names), key=lambda n: (not self._filter(n).baseline, n))
+        """The baseline first (the row every table starts with), then by name with numbers in numeric order
+        (a sweep reads ``particles=100``, ``300``, ``1000``, ``3000``)."""
+        return sorted(set(names), key=lambda n: (not self._filter(n).baseline, natural_key(n)))
 
     def _filter(self, name: str) -> FilterInfo:
         if name not in self.filters:
@@ -103,6 +105,14 @@ class Collected:
     def display(self, dataset: str) -> str:
         info = self.datasets.get(dataset)
         return info.display if info is not None else dataset
+
+
+_NUMBER = re.compile(r"(\d+(?:\.\d+)?(?:e[-+]?\d+)?)")
+
+
+def natural_key(name: str) -> tuple[tuple[int, float, str], ...]:
+    """Sort key of a name whose numbers compare as numbers: ``f[n=300]`` before ``f[n=1000]``."""
+    return tuple((1, float(part), "") if i % 2 else (0, 0.0, part) for i, part in enumerate(_NUMBER.split(name)))
 
 
 # --- what a name means, asked of the registry -----------------------------------------------------------
