@@ -147,6 +147,7 @@ def test_fetch_without_network(
 
 
 def test_fetch_rosbag_without_a_path_names_the_parameter(capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("rosbags", reason="the rosbag loader needs the 'ros' extra")
     assert main(["fetch", "rosbag"]) == 2
     _one_line(capsys, "parameter 'path' is required")
 
