@@ -659,10 +659,7 @@ class Report:
                 st = styles[f]
                 ax.step(t, c, where="post", color=st.color, ls=st.linestyle, lw=0.9, label=f)
             ax.set_yscale("log")
-            ax.set_xlabel("t (s)")
-            ax.set_ylabel("particles")
-            ax.set_title(title)
-            ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+            fg.finish(ax, "t (s)", "particles", title)
 
         return Plot(f"{slug(dataset)}_particle_count", title, draw)
 

@@ -22,6 +22,14 @@ from locbench.report.style import LineStyle
 _CHI2_2D_95 = float(stats.chi2.ppf(0.95, 2))
 
 
+def finish(ax: Axes, xlabel: str, ylabel: str, title: str) -> None:
+    """Axis labels, the title, and the legend outside the axes on the right (every line figure's frame)."""
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+
+
 def pareto_front(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Indices of the points no other point beats on both axes (x higher is better, y lower is better).
 
@@ -73,10 +81,7 @@ def draw_pareto(
         ax.step(x_all[fr], y_all[fr], where="post", color="0.3", lw=0.8, ls=":", label="front (all)")
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel(ylabel)
-    ax.set_title(title)
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+    finish(ax, xlabel, ylabel, title)
 
 
 @dataclass(frozen=True)
@@ -171,10 +176,7 @@ def draw_waypoint_rmse(
     n = max((y.size for y in rmse_cm), default=0)
     ax.set_xticks(np.arange(1, n + 1))
     ax.set_yscale("log")
-    ax.set_xlabel("waypoint")
-    ax.set_ylabel("RMSE over runs (cm)")
-    ax.set_title(title)
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+    finish(ax, "waypoint", "RMSE over runs (cm)", title)
 
 
 @dataclass(frozen=True)
@@ -213,10 +215,7 @@ def draw_nees(
         ax.plot(t, y, color=st.color, ls=st.linestyle, lw=0.9, label=f"{s.label} ({s.runs} runs)")
     ax.axhline(3.0, color="black", lw=0.6, ls="--")
     ax.set_yscale("log")
-    ax.set_xlabel("t (s)")
-    ax.set_ylabel("mean NEES")
-    ax.set_title(title)
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+    finish(ax, "t (s)", "mean NEES", title)
 
 
 @dataclass(frozen=True)
@@ -249,7 +248,4 @@ def draw_recovery(ax: Axes, curves: Sequence[RateCurve], styles: Mapping[str, Li
     ax.set_xticks(all_d, [f"{d:g}" for d in all_d])
     ax.minorticks_off()
     ax.set_ylim(-0.05, 1.05)
-    ax.set_xlabel("kidnap distance D (m)")
-    ax.set_ylabel("recovery rate")
-    ax.set_title(title)
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+    finish(ax, "kidnap distance D (m)", "recovery rate", title)
