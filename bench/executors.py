@@ -167,7 +167,11 @@ def _kill_pool(pool: cf.ProcessPoolExecutor) -> None:
 
 def split(task: Task) -> list[Task]:
     """One task per filter of ``task``: after its worker died, so that only the filter that kills it fails."""
-    return [dataclasses.replace(task, jobs=(job,)) for job in task.jobs]
+    # the realisation's bound goes with the first part only
+    return [
+        dataclasses.replace(task, jobs=(job,), bound_key=task.bound_key if i == 0 else None)
+        for i, job in enumerate(task.jobs)
+    ]
 
 
 def _run_pool(tasks: Sequence[Task], handle: Handle, lost: Lost, jobs: int) -> ExecStatus:

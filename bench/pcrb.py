@@ -498,3 +498,34 @@ def pcrb_metrics(dataset: Dataset, laser: bool = True) -> dict[str, float]:
     ``dataset`` under its true noise model (see :func:`pcrb_summary`, :func:`pcrb_covariances`)."""
     waypoint_t = dataset.waypoints.t if dataset.waypoints is not None else np.zeros(0)
     return pcrb_summary(dataset.ground_truth.t, pcrb_covariances(dataset, laser=laser), waypoint_t)
+
+
+# --- the bound as rows of the benchmark ---------------------------------------------------------------------
+
+#: Bump when the bound of the same realisation changes: a stored bound of another version is recomputed.
+BOUND_VERSION = 1
+#: The row of the bound with every sensor the world provides (the accuracy limit of the issue's protocol).
+BOUND_ALL = "pcrb"
+#: The row of the bound without the laser scans: the limit of the estimators that use landmarks and fixes only.
+BOUND_NO_LASER = "pcrb[laser=false]"
+BOUND_ROWS = (BOUND_ALL, BOUND_NO_LASER)
+
+
+def is_bound_row(name: str) -> bool:
+    """True for the names of the bound's rows in the metrics (they are not filters)."""
+    return name in BOUND_ROWS
+
+
+def bound_covariances(dataset: Dataset) -> dict[str, FloatArray]:
+    """The bound's covariances at every ground-truth time of a synthetic, unkidnapped ``dataset``, by row name.
+
+    Returns
+    -------
+    dict of str to ndarray, shape (n, 3, 3)
+        :data:`BOUND_ALL` (every sensor) and, when the dataset has laser scans, :data:`BOUND_NO_LASER`
+        (m^2 and rad^2, world frame, at ``dataset.ground_truth.t``).
+    """
+    out = {BOUND_ALL: pcrb_covariances(dataset)}
+    if any(isinstance(e, LaserScan) for e in dataset.events):
+        out[BOUND_NO_LASER] = pcrb_covariances(dataset, laser=False)
+    return out

@@ -5,9 +5,10 @@
 sorted longest first (stored timings where present, else an estimate) so that no worker idles at the end.
 :func:`execute_task` does one task anywhere, a process of this machine or a dask worker on another: it
 builds the dataset once (its noise depends only on the dataset name and the seed, so every filter sees the
-same realisation) and runs each filter over its events (``predict`` for odometry, ``update`` for each
-observation type the filter routes, ``estimate()`` after every call, and the time of each call), returning
-the records without touching the results folder. :func:`run_sweep` hands the tasks to an executor
+same realisation), computes the realisation's posterior Cramer-Rao bound where the plan asks for it
+(synthetic worlds, :mod:`locbench.pcrb`), and runs each filter over its events (``predict`` for odometry,
+``update`` for each observation type the filter routes, ``estimate()`` after every call, and the time of
+each call), returning the records without touching the results folder. :func:`run_sweep` hands the tasks to an executor
 (:mod:`locbench.executors`) and writes every returned record into the store as it arrives. An exception
 inside a filter or a divergence is stored as a result with its status and message; a failure of the
 machinery (a worker that died, a dataset that did not build) is recorded the same way for every run of
@@ -35,7 +36,7 @@ from locbench.registry import DATASETS, FILTERS, Resolved, build_dataset, resolv
 from locbench.runkey import key_params
 from locbench.seeding import filter_rng
 from locbench.spec import Spec, stable_hash
-from locbench.store import KIND_NAMES, RunRecord, Store, TruthRecord
+from locbench.store import KIND_NAMES, BoundRecord, RunRecord, Store, TruthRecord
 
 log = logging.getLogger(__name__)
 
@@ -173,6 +174,24 @@ def run_key(fr: Resolved, dr: Resolved, seed: int) -> str:
     )
 
 
+def bound_key(dr: Resolved, seed: int) -> str | None:
+    """The cache key of a realisation's bound (what determines it), or None when the dataset has none."""
+    from locbench.pcrb import BOUND_VERSION
+
+    dcls = DATASETS.load(dr.id)
+    if not dcls.has_bound(dr.params):
+        return None
+    return stable_hash(
+        {
+            "bound_version": BOUND_VERSION,
+            "dataset": dr.id,
+            "dataset_params": key_params(dr.params),
+            "dataset_version": getattr(dcls, "version", 1),
+            "seed": seed,
+        }
+    )
+
+
 #: Statuses of a sweep's outcomes beyond a stored run's own (ok, skipped, diverged, error).
 CACHED, NOT_STORED = "cached", "not stored"
 
@@ -218,6 +237,8 @@ class Task:
     jobs: tuple[Job, ...]
     #: Estimated compute time, s (the plan's order: longest first).
     cost_s: float = 0.0
+    #: The key of the realisation's bound to compute and store, or None (recorded data, kidnaps, stored).
+    bound_key: str | None = None
 
     @property
     def label(self) -> str:
@@ -230,6 +251,7 @@ class TaskResult:
 
     truth: TruthRecord | None
     runs: list[RunRecord]
+    bound: BoundRecord | None = None
 
 
 @dataclass
@@ -279,6 +301,10 @@ _COST_PER_DATA_S = {
 }
 #: Rough duration of each synthetic dataset, s, for the same purpose (recorded ones default to 1000 s).
 _DURATION_S = {"room": 60.0, "office": 231.0, "lap": 60.0, "line_room": 100.0, "scan_grid": 100.0}
+
+
+#: Rough cost of a realisation's bound, s (0.03-0.5 s measured on the synthetic worlds).
+_BOUND_COST_S = 0.5
 
 
 def _estimate_cost(
@@ -344,9 +370,13 @@ def plan_sweep(
                     jobs[fr.name] = Job(fr, fclasses[fr.id], key, note)
     seen: dict[tuple[str, str], dict[str, Any] | None] = {}
     for (_, seed), (dr, jobs) in groups.items():
-        if jobs:
+        bkey = bound_key(dr, seed)
+        if bkey is not None and not force and store.bound_key(dr.name, seed) == bkey:
+            bkey = None  # stored and up to date
+        if jobs or bkey is not None:
             todo = tuple(jobs.values())
-            plan.tasks.append(Task(dr, DATASETS.load(dr.id), seed, todo, _estimate_cost(store, dr, todo, seen)))
+            cost = _estimate_cost(store, dr, todo, seen) + (_BOUND_COST_S if bkey is not None else 0.0)
+            plan.tasks.append(Task(dr, DATASETS.load(dr.id), seed, todo, cost, bkey))
     # Longest first (LPT): the last tasks to start are short, so the workers finish together.
     plan.tasks.sort(key=lambda t: -t.cost_s)
     return plan
@@ -414,6 +444,7 @@ def execute_task(task: Task) -> TaskResult:
         "metadata": ds.metadata,
         "versions": provenance.versions(),
     }
+    bound = _bound(task, ds)
     runs: list[RunRecord] = []
     for job in task.jobs:
         meta = _meta(task, job)
@@ -438,7 +469,24 @@ def execute_task(task: Task) -> TaskResult:
         runs.append(
             RunRecord(meta, trace.t, trace.mean, trace.cov, trace.kind, trace.step_ns, trace.diagnostics, trace.extra)
         )
-    return TaskResult(TruthRecord.from_dataset(ds, task.seed, truth_meta), runs)
+    return TaskResult(TruthRecord.from_dataset(ds, task.seed, truth_meta), runs, bound)
+
+
+def _bound(task: Task, ds: Dataset) -> BoundRecord | None:
+    """The realisation's bound when the plan asks for it; a failure is logged and leaves it uncomputed (the
+    next sweep tries again), never failing the task's runs."""
+    if task.bound_key is None:
+        return None
+    from locbench.pcrb import bound_covariances
+
+    start = time.perf_counter()
+    try:
+        covs = bound_covariances(ds)
+    except Exception as exc:
+        log.error("%s: posterior Cramer-Rao bound failed: %s: %s", task.label, type(exc).__name__, exc)
+        return None
+    meta = {"bound_key": task.bound_key, "compute_s": time.perf_counter() - start, "versions": provenance.versions()}
+    return BoundRecord(task.dataset.name, task.seed, ds.ground_truth.t, covs, meta)
 
 
 def store_result(store: Store, task: Task, result: TaskResult) -> list[RunOutcome]:
@@ -448,6 +496,8 @@ def store_result(store: Store, task: Task, result: TaskResult) -> list[RunOutcom
     if result.truth is not None:
         try:
             store.write_truth(result.truth)
+            if result.bound is not None:
+                store.write_bound(result.bound)
         except OSError as exc:
             truth_error = f"{_os_message(exc)} (ground truth)"
     outcomes = []

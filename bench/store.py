@@ -131,6 +131,29 @@ class TruthRecord:
 
 
 @dataclass(eq=False)
+class BoundRecord:
+    """The posterior Cramer-Rao bound of one synthetic realisation (:func:`locbench.pcrb.bound_covariances`).
+
+    Attributes
+    ----------
+    dataset, seed : str, int
+        The realisation.
+    t : ndarray, shape (n,)
+        Ground-truth times, s.
+    covs : dict of str to ndarray, shape (n, 3, 3)
+        The bound's pose covariance at each time by row name (m^2, rad^2; world frame).
+    meta : dict
+        ``bound_key`` (what the bound was computed from), ``compute_s``, ``versions``.
+    """
+
+    dataset: str
+    seed: int
+    t: FloatArray
+    covs: dict[str, FloatArray]
+    meta: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(eq=False)
 class RunRecord:
     """One (filter, dataset, seed) run.
 
@@ -196,6 +219,9 @@ class Store:
     def truth_path(self, dataset: str | Spec, seed: int) -> Path:
         return self.runs / _safe(str(dataset)) / TRUTH_DIR / f"seed-{seed:04d}.npz"
 
+    def bound_path(self, dataset: str | Spec, seed: int) -> Path:
+        return self.runs / _safe(str(dataset)) / TRUTH_DIR / f"seed-{seed:04d}.bound.npz"
+
     # --- queries -------------------------------------------------------------------------------
     def existing_meta(self, dataset: str | Spec, filter_name: str | Spec, seed: int) -> dict[str, Any] | None:
         """The ``meta.json`` of a stored run, or None when there is none or it does not parse."""
@@ -241,6 +267,15 @@ class Store:
 
     def has_truth(self, dataset: str | Spec, seed: int) -> bool:
         return self.truth_path(dataset, seed).is_file()
+
+    def bound_key(self, dataset: str | Spec, seed: int) -> str | None:
+        """The ``bound_key`` of a stored bound, or None when there is none or its record does not parse."""
+        try:
+            meta = json.loads(self.bound_path(dataset, seed).with_suffix(".json").read_text(encoding="utf-8"))
+        except (OSError, json.JSONDecodeError, UnicodeDecodeError):
+            return None
+        key = meta.get("bound_key") if isinstance(meta, dict) else None
+        return str(key) if key is not None and self.bound_path(dataset, seed).is_file() else None
 
     def iter_runs(self) -> Iterator[Path]:
         """Every stored run folder, sorted (leftover ``.tmp-*`` and ``*.old-*`` entries are not runs)."""
@@ -306,6 +341,16 @@ class Store:
         _atomic_write(path, lambda p: np.savez_compressed(p, **arrays))  # type: ignore[arg-type]
         _atomic_write(path.with_suffix(".json"), lambda p: p.write_text(json.dumps(meta, indent=2, default=str)))
 
+    def write_bound(self, rec: BoundRecord) -> None:
+        """Write a realisation's bound beside its truth (arrays first, then the record that names them)."""
+        path = self.bound_path(rec.dataset, rec.seed)
+        _makedirs(path.parent)
+        names = sorted(rec.covs)
+        arrays = {"t": rec.t} | {f"cov_{i}": rec.covs[n] for i, n in enumerate(names)}
+        meta = {"dataset": rec.dataset, "seed": rec.seed, "rows": names, **rec.meta}
+        _atomic_write(path, lambda p: np.savez_compressed(p, **arrays))  # type: ignore[arg-type]
+        _atomic_write(path.with_suffix(".json"), lambda p: p.write_text(json.dumps(meta, indent=2, default=str)))
+
     def write_run(self, rec: RunRecord) -> Path:
         """Write a run folder atomically: a uniquely named temporary folder, then renamed into place.
 
@@ -358,6 +403,21 @@ class Store:
         meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
         label = str(meta.get("truth_label", "ground truth"))
         return TruthRecord(dataset, seed, gt, wp, kid, duration, meta, segs, lms, rel, label)
+
+    def read_bound(self, dataset: str, seed: int) -> BoundRecord | None:
+        """The stored bound of a realisation, or None when it has none (recorded data, kidnaps, not computed)."""
+        path = self.bound_path(dataset, seed)
+        meta_path = path.with_suffix(".json")
+        if not (path.is_file() and meta_path.is_file()):
+            return None
+        try:
+            meta = json.loads(meta_path.read_text(encoding="utf-8"))
+            names = [str(n) for n in meta["rows"]]
+        except (OSError, json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError) as exc:
+            raise ConfigError(f"{meta_path}: unreadable bound record ({exc}); re-run 'locbench run'") from None
+        with np.load(path) as z:
+            covs = {n: z[f"cov_{i}"] for i, n in enumerate(names)}
+            return BoundRecord(dataset, seed, z["t"], covs, meta)
 
     def read_run(self, run_dir: str | os.PathLike[str]) -> RunRecord:
         d = Path(run_dir)

@@ -455,3 +455,18 @@ class DatasetBuilder(abc.ABC):
     def fetch(self, params: Any) -> list[str]:
         """Download (and verify) what ``params`` needs into the cache; the local paths. Synthetic data: nothing."""
         return []
+
+    @classmethod
+    def has_bound(cls, params: Any) -> bool:
+        """Whether a realisation of ``params`` has a posterior Cramer-Rao bound (:mod:`locbench.pcrb`), which
+        needs the simulator's true model: none for recorded data."""
+        return False
+
+
+class SyntheticBuilder(DatasetBuilder):
+    """Base of the synthetic worlds that record their true noise model, so each realisation has a bound."""
+
+    @classmethod
+    def has_bound(cls, params: Any) -> bool:
+        """True unless the run is kidnapped (a jump is outside the motion model the bound is built on)."""
+        return not getattr(params, "kidnap_m", 0.0) > 0.0

@@ -243,7 +243,7 @@ def test_write_report_end_to_end(store: Store) -> None:
         "0-2 (1 datasets)",
         "Summary",
         "*`room`: mean over seeds*",
-        "| filter | runs | ATE (cm) | mean waypoint RMSE (cm) |",
+        "| filter | runs | ATE (cm) | ATE / PCRB (x) | mean waypoint RMSE (cm) |",
         "| `odometry` | 3 | ",
         "| `ekf_landmarks[gate=0.1]` | 1 | 1 |",
         "`room`: RMSE at each waypoint over runs (cm)",

@@ -17,6 +17,7 @@ from matplotlib.figure import Figure
 import locbench
 from locbench.claims import Experiment, all_claims, experiments, sections_for, waypoint_stats
 from locbench.metrics import CONFIDENCE, METRICS, POSE_DOF, chi2_band, estimate_at, mean_over_runs
+from locbench.pcrb import BOUND_ROWS
 from locbench.report import figures as fg
 from locbench.report import tables as tb
 from locbench.report.collect import Collected
@@ -44,6 +45,8 @@ class Report:
     def __init__(self, col: Collected) -> None:
         self.col = col
         self.df = col.metrics
+        # claims and experiment sections read the filters' rows; the bound's rows are shown by the tables here
+        self.filter_df = self.df[~self.df["filter"].isin(BOUND_ROWS)] if len(self.df) else self.df
         self.by_ds: dict[str, pd.DataFrame] = {str(d): g for d, g in self.df.groupby("dataset")} if len(self.df) else {}
         self.exps = [e for e in experiments() if self._has(e.dataset)]
 
@@ -63,7 +66,23 @@ class Report:
     def filters_on(self, dataset: str, global_start: bool = False) -> list[str]:
         sub = self.rows(dataset)
         names = {str(f) for f in sub["filter"].unique()} if len(sub) else set()
-        return self.col.filter_order({f for f in names if self.col.is_global(f) == global_start})
+        return self.col.filter_order(
+            {f for f in names if self.col.is_global(f) == global_start and not self.col.is_bound(f)}
+        )
+
+    def bounds_on(self, dataset: str) -> list[str]:
+        """The bound's rows stored for a dataset name (synthetic, not kidnapped), in their fixed order."""
+        sub = self.rows(dataset)
+        present = {str(f) for f in sub["filter"].unique()} if len(sub) else set()
+        return [b for b in BOUND_ROWS if b in present]
+
+    def bound_styles(self, names: list[str]) -> dict[str, LineStyle]:
+        """Styles of a figure's series; the bound's rows in black, dashed, without markers."""
+        filters = [n for n in names if not self.col.is_bound(n)]
+        out = self.styles_for(filters)
+        for i, b in enumerate(n for n in names if self.col.is_bound(n)):
+            out[b] = LineStyle("#000000", "", ("--", ":")[i % 2])
+        return out
 
     def variants_of(self, dataset_id: str) -> list[str]:
         return sorted(n for n, info in self.col.datasets.items() if info.spec.ident == dataset_id)
@@ -179,11 +198,13 @@ class Report:
             else:
                 k_text, k_key = "-", NAN
             rec, n_rec = self._recorded_ate(f)
+            eff = tb.ate_over_bound(df, f)
             rows.append(
                 [
                     f"`{f}`",
                     str(runs),
                     tb.num(ate),
+                    tb.num(eff),
                     tb.num(wpm),
                     tb.num(head),
                     an_text,
@@ -193,20 +214,30 @@ class Report:
                     f"{tb.num(rec)} ({n_rec})" if n_rec else "-",
                 ]
             )
-            keys.append([NAN, float(runs), ate, wpm, head, an_key, upd, rtf, k_key, rec])
+            keys.append([NAN, float(runs), ate, eff, wpm, head, an_key, upd, rtf, k_key, rec])
         eligible = [not self.col.is_baseline(f) for f in filters]
+        for b in self.bounds_on(dataset):
+            sub = df[df["filter"] == b]
+            ate = tb.mean_of(sub, "ate_m") * 100.0
+            wpm = wp.get(b, NAN) * 100.0
+            head = tb.mean_of(sub, "heading_rmse_rad") * METRICS["heading_rmse_rad"].scale
+            runs = tb.run_count(sub)
+            rows.append([f"`{b}`", str(runs), tb.num(ate), "-", tb.num(wpm), tb.num(head), *["-"] * 5])
+            keys.append([NAN, float(runs), ate, NAN, wpm, head, *[NAN] * 5])
+            eligible.append(False)
         tb.bold_best(
             rows,
             keys,
             [
                 (2, METRICS["ate_m"]),
-                (3, METRICS["waypoint_rmse_mean_m"]),
-                (4, METRICS["heading_rmse_rad"]),
-                (5, METRICS["anees"]),
-                (6, METRICS["update_us_median"]),
-                (7, METRICS["realtime_factor"]),
-                (8, METRICS["kidnap_recovered"]),
-                (9, METRICS["recorded_ate_median_m"]),
+                (3, METRICS["ate_over_pcrb"]),
+                (4, METRICS["waypoint_rmse_mean_m"]),
+                (5, METRICS["heading_rmse_rad"]),
+                (6, METRICS["anees"]),
+                (7, METRICS["update_us_median"]),
+                (8, METRICS["realtime_factor"]),
+                (9, METRICS["kidnap_recovered"]),
+                (10, METRICS["recorded_ate_median_m"]),
             ],
             eligible,
         )
@@ -217,7 +248,9 @@ class Report:
             f"chi-square band for the run count ({band_for(n_typ)} for {n_typ} runs); closest to "
             f"{POSE_DOF} is marked best."
         )
-        if any("¹" in r[5] for r in rows):
+        if self.bounds_on(dataset):
+            notes.append(tb.BOUND_FOOTNOTE)
+        if any("¹" in r[6] for r in rows):
             notes.append(tb.COLLAPSE_FOOTNOTE)
         if kid:
             notes.append(
@@ -238,6 +271,7 @@ class Report:
             "filter",
             "runs",
             "ATE (cm)",
+            tb.header("ate_over_pcrb"),
             "mean waypoint RMSE (cm)",
             "heading RMSE (deg)",
             "ANEES (verdict)",
@@ -262,7 +296,7 @@ class Report:
             if not self._has(c.dataset):
                 continue
             if c.across_variants:
-                df = self.df[self.df["dataset"].isin(self.variants_of(c.dataset))]
+                df = self.filter_df[self.filter_df["dataset"].isin(self.variants_of(c.dataset))]
             else:
                 df = self.rows(c.dataset)
             res = c.evaluate(df)
@@ -563,15 +597,16 @@ class Report:
         base = e.dataset
         if not e.fold_variants and base in self.col.datasets:
             filters = self.filters_on(base)
-            sec.add(tb.comparison_table(self.rows(base), filters, f"`{base}`: mean ± 95 % interval over seeds"))
-            wt = tb.waypoint_table(self.rows(base), filters, f"`{base}`: RMSE at each waypoint over runs (cm)")
+            bounds = self.bounds_on(base)
+            sec.add(tb.comparison_table(self.rows(base), filters, f"`{base}`: mean ± 95 % interval over seeds", bounds))
+            wt = tb.waypoint_table(self.rows(base), filters + bounds, f"`{base}`: RMSE at each waypoint over runs (cm)")
             if wt is not None:
                 sec.add(wt)
             plots = (self.trajectory_plot(base), self.waypoint_plot(base), self.nees_plot(base), self.count_plot(base))
             for plot in plots:
                 if plot is not None:
                     sec.add(plot)
-        rows = self.df[self.df["dataset"].isin(self.variants_of(e.dataset))]
+        rows = self.filter_df[self.filter_df["dataset"].isin(self.variants_of(e.dataset))]
         for fn in sections_for(e.dataset):
             sec.add(*fn(rows, slug(e.dataset)))
         return sec
@@ -667,13 +702,13 @@ class Report:
         ws = waypoint_stats(self.rows(dataset))
         if not len(ws):
             return None
-        filters = [f for f in self.filters_on(dataset) if (ws["filter"] == f).any()]
-        labels = filters
+        names = self.filters_on(dataset) + self.bounds_on(dataset)
+        labels = [f for f in names if (ws["filter"] == f).any()]
         series = [
-            ws[ws["filter"] == f].sort_values("waypoint")["rmse_m"].to_numpy(dtype=np.float64) * 100.0 for f in filters
+            ws[ws["filter"] == f].sort_values("waypoint")["rmse_m"].to_numpy(dtype=np.float64) * 100.0 for f in labels
         ]
-        styles = self.styles_for(labels)
-        title = f"{dataset}: position RMSE at each waypoint over runs (log scale)"
+        styles = self.bound_styles(labels)
+        title = f"{dataset}: position RMSE at each waypoint over runs (log scale; black dashed: the bound)"
 
         def draw(fig: Figure) -> None:
             fg.draw_waypoint_rmse(fig.add_subplot(), labels, series, styles, title)
@@ -712,7 +747,11 @@ class Report:
             filters = self.filters_on(ds) + self.filters_on(ds, global_start=True)
             if not filters:
                 continue
-            detail.add(tb.comparison_table(self.rows(ds), filters, f"`{info.display}`: mean ± 95 % interval"))
+            detail.add(
+                tb.comparison_table(
+                    self.rows(ds), filters, f"`{info.display}`: mean ± 95 % interval", self.bounds_on(ds)
+                )
+            )
         if detail.blocks:
             sec.children.append(detail)
         sec.children.append(self.failures())

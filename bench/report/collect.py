@@ -21,6 +21,7 @@ import numpy as np
 import pandas as pd
 
 from locbench.metrics import nees_at_truth, run_metrics
+from locbench.pcrb import BOUND_ROWS, is_bound_row, pcrb_summary
 from locbench.spec import Spec, format_spec, params_to_dict
 from locbench.store import RunRecord, Store, TruthRecord
 
@@ -61,6 +62,8 @@ class FilterInfo:
     spec: Spec
     baseline: bool
     global_start: bool
+    #: A row of the posterior Cramer-Rao bound, not a filter (:mod:`locbench.pcrb`).
+    bound: bool = False
 
 
 @dataclass
@@ -88,8 +91,8 @@ class Collected:
 
     def filter_order(self, names: Sequence[str] | set[str]) -> list[str]:
         """The baseline first (the row every table starts with), then by name with numbers in numeric order
-        (a sweep reads ``particles=100``, ``300``, ``1000``, ``3000``)."""
-        return sorted(set(names), key=lambda n: (not self._filter(n).baseline, natural_key(n)))
+        (a sweep reads ``particles=100``, ``300``, ``1000``, ``3000``), the bound's rows last."""
+        return sorted(set(names), key=lambda n: (self._filter(n).bound, not self._filter(n).baseline, natural_key(n)))
 
     def _filter(self, name: str) -> FilterInfo:
         if name not in self.filters:
@@ -98,6 +101,9 @@ class Collected:
 
     def is_baseline(self, name: str) -> bool:
         return self._filter(name).baseline
+
+    def is_bound(self, name: str) -> bool:
+        return self._filter(name).bound
 
     def is_global(self, name: str) -> bool:
         return self._filter(name).global_start
@@ -127,6 +133,8 @@ def describe_filter(name: str) -> FilterInfo:
     from locbench.registry import FILTERS, resolve_filter
 
     spec = Spec.parse(name)
+    if is_bound_row(name):
+        return FilterInfo(name, spec, False, False, bound=True)
     try:
         cls: Any = FILTERS.load(spec.ident)
         cfg = resolve_filter(name).params
@@ -208,12 +216,36 @@ def collect(store: Store, keep: Keep | None = None) -> Collected:
             nees[(dataset, filt)].append((truth.ground_truth.t, ne))
             out.ok_dirs[(dataset, filt, seed)] = run_dir
     out.nees = dict(nees)
+    rows.extend(bound_rows(store, out))
     out.metrics = frame(rows)
     for name in sorted({r.dataset for r in out.runs}):
         out.datasets[name] = describe_dataset(name)
-    for name in sorted({r.filter for r in out.runs}):
+    for name in sorted({r.filter for r in out.runs} | set(BOUND_ROWS)):
         out.filters[name] = describe_filter(name)
     return out
+
+
+def bound_rows(store: Store, col: Collected) -> list[tuple[str, str, int, str, float]]:
+    """The metrics rows of the stored bounds of every realisation with an ok run (:func:`pcrb_summary`).
+
+    A realisation without a bound (recorded data, a kidnap, not computed yet) adds none; an unreadable one
+    is logged and listed with the broken records.
+    """
+    rows: list[tuple[str, str, int, str, float]] = []
+    for (dataset, seed), truth in sorted(col.truths.items()):
+        try:
+            bound = store.read_bound(dataset, seed)
+        except Exception as exc:
+            log.warning("skipping unreadable bound of %s seed %d: %s", dataset, seed, exc)
+            col.broken.append((f"{dataset} seed {seed} (bound)", f"{type(exc).__name__}: {exc}"))
+            continue
+        if bound is None:
+            continue
+        wp_t = truth.waypoints.t if truth.waypoints is not None else np.zeros(0)
+        for name, cov in sorted(bound.covs.items()):
+            values = pcrb_summary(bound.t, cov, wp_t)
+            rows.extend((dataset, name, seed, k, float(v)) for k, v in values.items())
+    return rows
 
 
 class _NoTruth:

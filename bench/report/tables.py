@@ -13,7 +13,8 @@ import pandas as pd
 from scipy import stats
 
 from locbench.claims import waypoint_stats
-from locbench.metrics import CONFIDENCE, METRICS, POSE_DOF, MetricInfo, chi2_band, mean_ci
+from locbench.metrics import CONFIDENCE, METRICS, POSE_DOF, MetricInfo, ate_over_pcrb, chi2_band, mean_ci
+from locbench.pcrb import BOUND_ALL
 from locbench.report.doc import Table
 
 NAN = float("nan")
@@ -175,24 +176,66 @@ COMPARISON = (
 )
 
 
-def comparison_table(df: pd.DataFrame, filters: Sequence[str], caption: str) -> Table:
-    """Mean ± 95 % t-interval over seeds of every comparison metric present, a row per filter."""
+def run_count(df: pd.DataFrame) -> int:
+    """Runs (seeds) of one (dataset, filter) with rows: ok and failed ones (a skipped run has none)."""
+    return int(df["seed"].nunique())
+
+
+def ate_over_bound(df: pd.DataFrame, filter_name: str) -> float:
+    """A filter's efficiency ``ate_over_pcrb`` on one dataset name: sqrt(mean over seeds of ate_m^2) divided
+    by the bound's, over the seeds where both have an ATE (:func:`locbench.metrics.ate_over_pcrb`); NaN
+    without a bound."""
+    ate = df[df["metric"] == "ate_m"]
+    bound = ate[ate["filter"] == BOUND_ALL].set_index("seed")["value"]
+    mine = ate[ate["filter"] == filter_name].set_index("seed")["value"]
+    seeds = mine.index.intersection(bound.index)
+    b = bound.loc[seeds].to_numpy(dtype=np.float64)
+    if not seeds.size or not np.all(b > 0):
+        return NAN
+    return ate_over_pcrb(mine.loc[seeds].to_numpy(dtype=np.float64), float(np.sqrt(np.mean(b * b))))
+
+
+BOUND_FOOTNOTE = (
+    "`pcrb`: the posterior Cramer-Rao bound of the simulator's true model with every sensor the world "
+    "provides (`pcrb[laser=false]`: without the laser scans), a lower bound on any estimator's error "
+    "(docs/pcrb.md); its cells are sqrt of the bound, not a filter's result. ATE / PCRB: sqrt(mean over seeds "
+    "of ATE^2) over the bound's, on the same seeds (1 = as accurate as any estimator can be)."
+)
+
+
+def comparison_table(df: pd.DataFrame, filters: Sequence[str], caption: str, bounds: Sequence[str] = ()) -> Table:
+    """Mean ± 95 % t-interval over seeds of every comparison metric present, a row per filter; with rows of
+    the bound (``bounds``, shown after the filters), the column ``ate_over_pcrb``."""
     present = [m for m in COMPARISON if (df["metric"] == m).any()]
+    with_bound = bool(bounds) and bool((df["filter"] == BOUND_ALL).any())
     rows: list[tuple[str, ...]] = []
     keys: list[tuple[float, ...]] = []
-    for f in filters:
+    for f in [*filters, *bounds]:
         sub = df[df["filter"] == f]
+        if f in bounds and sub.empty:
+            continue
         failed = values(sub, "failed")
-        row = [f"`{f}`", str(failed.size), str(int(np.sum(failed > 0.5)))]
-        key = [NAN, float(failed.size), float(np.sum(failed > 0.5))]
+        n = run_count(sub)
+        row = [f"`{f}`", str(n), str(int(np.sum(failed > 0.5)))]
+        key = [NAN, float(n), float(np.sum(failed > 0.5))]
         for m in present:
             text, k = mean_pm(sub, m)
-            row.append(text)
+            row.append("-" if f in bounds and np.isnan(k) else text)
             key.append(k)
+            if m == "ate_m" and with_bound:
+                eff = NAN if f in bounds else ate_over_bound(df, f)
+                row.append(num(eff) if f not in bounds else "-")
+                key.append(eff)
         rows.append(tuple(row))
         keys.append(tuple(key))
-    head = ("filter", "runs", "failed", *(header(m) for m in present))
-    return Table(head, tuple(rows), caption=caption, sort_keys=tuple(keys))
+    cols = [
+        h
+        for m in present
+        for h in ((header(m), header("ate_over_pcrb")) if m == "ate_m" and with_bound else (header(m),))
+    ]
+    head = ("filter", "runs", "failed", *cols)
+    notes = (BOUND_FOOTNOTE,) if with_bound else ()
+    return Table(head, tuple(rows), caption=caption, footnotes=notes, sort_keys=tuple(keys))
 
 
 def wilson_interval(successes: int, n: int, confidence: float = CONFIDENCE) -> tuple[float, float]:

@@ -71,7 +71,7 @@ from typing import Any, ClassVar, Literal
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import Dataset, DatasetBuilder, Gaussian2, Kidnap, SensorSpec, sort_events
+from locbench.datasets.base import Dataset, Gaussian2, Kidnap, SensorSpec, SyntheticBuilder, sort_events
 from locbench.datasets.synthetic.robot import Arc, DriveLimits, GoTo, Leg, Motion, simulate_route
 from locbench.datasets.synthetic.scenarios import (
     SLIP_K_TRUE,
@@ -402,7 +402,7 @@ class LandmarkGeometryParams:
 STREAMS = ("odometry", "landmarks", "laser", "fixes", "kidnap", "route", "initial", "execution")
 
 
-class LandmarkGeometryScenario(DatasetBuilder):
+class LandmarkGeometryScenario(SyntheticBuilder):
     """Report 001's micro-simulator: paths x landmark layouts, laser-detected disc landmarks, GPS variant."""
 
     Params: ClassVar[type] = LandmarkGeometryParams

@@ -47,7 +47,7 @@ from typing import Any, ClassVar
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import Dataset, DatasetBuilder, SensorSpec, sort_events
+from locbench.datasets.base import Dataset, SensorSpec, SyntheticBuilder, sort_events
 from locbench.datasets.synthetic.robot import DriveLimits, GoTo, Leg, Motion, simulate_route
 from locbench.datasets.synthetic.scenarios import (
     ENCODER_K_TRUE,
@@ -344,7 +344,7 @@ class LapParams:
             raise ConfigError(f"parameter 'people' must be a count >= 0, got {self.people}")
 
 
-class LapScenario(DatasetBuilder):
+class LapScenario(SyntheticBuilder):
     """Report 000's lap: one rectangle on the office floor, Hokuyo-like laser, people not on the map."""
 
     Params: ClassVar[type] = LapParams

@@ -31,7 +31,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from locbench.datasets.base import Dataset, DatasetBuilder, SensorSpec
+from locbench.datasets.base import Dataset, SensorSpec, SyntheticBuilder
 from locbench.datasets.synthetic.robot import DriveLimits, GoTo, Leg
 from locbench.datasets.synthetic.scenarios import (
     SensorSuite,
@@ -129,7 +129,7 @@ class LineRoomParams:
             raise ConfigError(f"parameter 'laser_sigma_m' must be a range noise > 0 m, got {self.laser_sigma_m}")
 
 
-class LineRoomScenario(DatasetBuilder):
+class LineRoomScenario(SyntheticBuilder):
     """Report 002's experiment: laser lines in two polygonal rooms; see the module docstring."""
 
     Params: ClassVar[type] = LineRoomParams

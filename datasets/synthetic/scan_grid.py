@@ -42,10 +42,10 @@ import numpy.typing as npt
 
 from locbench.datasets.base import (
     Dataset,
-    DatasetBuilder,
     Gaussian2,
     Kidnap,
     SensorSpec,
+    SyntheticBuilder,
     Trajectory2D,
     Waypoints,
     sort_events,
@@ -265,7 +265,7 @@ def drive_commands(
     return out
 
 
-class ScanGridScenario(DatasetBuilder):
+class ScanGridScenario(SyntheticBuilder):
     """Report 004's experiment: 1 s translate-or-rotate commands in a room, a 360 deg laser, odometry with
     the commanded twist (see the module docstring)."""
 

@@ -30,6 +30,7 @@ from locbench.datasets.base import (
     DatasetBuilder,
     Gaussian2,
     SensorSpec,
+    SyntheticBuilder,
     Trajectory2D,
     Waypoints,
     sort_events,
@@ -418,7 +419,7 @@ class RoomParams:
         _check_beams("laser_beams", self.laser_beams, allow_zero=True)
 
 
-class RoomScenario(DatasetBuilder):
+class RoomScenario(SyntheticBuilder):
     """Report 003's experiment: a 7 m x 2 m room, 4 landmarks, a start and 5 marked waypoints, a
     Kinect-like range-bearing sensor (0.8-3.5 m, 57 deg) and calibrated wheel-encoder odometry."""
 
@@ -681,7 +682,7 @@ class OfficeParams:
             raise ConfigError(f"parameter 'pose_fix_sigma_m' must be > 0 m, got {self.pose_fix_sigma_m}")
 
 
-class OfficeScenario(DatasetBuilder):
+class OfficeScenario(SyntheticBuilder):
     """One office floor with walls, doors, 22 landmarks and a 9-waypoint tour; every sensor."""
 
     Params: ClassVar[type] = OfficeParams
