@@ -192,7 +192,7 @@ _SUITES: tuple[Suite, ...] = (
         "consistency",
         (Block(ALL_FILTERS, MATCHED_DATASETS, 50),),
         "consistency on the model-matched worlds (simulator noise = the filters' nominal noise): every filter, "
-        "50 seeds (not part of 'all')",
+        "50 seeds",
     ),
     Suite(
         "pareto",
@@ -229,6 +229,7 @@ _EXPERIMENTS = (
     "global",
     "recorded",
     "pareto",
+    "consistency",
 )
 
 SUITES: dict[str, Suite] = {s.name: s for s in _SUITES}

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -14,7 +16,10 @@ from locbench.errors import ConfigError
 from locbench.metrics import chi2_band
 from locbench.pcrb import pcrb_covariances
 from locbench.registry import make_dataset
+from locbench.report import write_report
 from locbench.runkey import key_params
+from locbench.runner import run_many
+from locbench.store import Store
 from locbench.suites import ALL_FILTERS, SUITES
 
 WORLDS = ("room", "office", "lap", "line_room", "scan_grid", "landmark_geometry")
@@ -72,12 +77,12 @@ def test_landmark_geometry_matched_refuses_an_initial_offset() -> None:
         make_dataset("landmark_geometry[matched=true,initial_offset_m=2]", 0)
 
 
-def test_consistency_suite_is_every_filter_on_both_matched_worlds_and_not_in_all() -> None:
+def test_consistency_suite_is_every_filter_on_both_matched_worlds_and_part_of_all() -> None:
     s = SUITES["consistency"]
     assert [(b.filters, b.datasets, b.seeds) for b in s.blocks] == [
         (ALL_FILTERS, ("room[matched=true]", "office[matched=true]"), 50)
     ]
-    assert not any("matched" in d for b in SUITES["all"].blocks for d in b.datasets)
+    assert s.blocks[0] in SUITES["all"].blocks
 
 
 def _anees_rows(dataset: str, values: dict[str, list[float]]) -> pd.DataFrame:
@@ -115,3 +120,22 @@ def test_claim_without_matched_runs_is_not_evaluated() -> None:
     assert check_matched_consistency(only_ekf).verdict == "not evaluated"
     ids = {c.id: c for c in claims.all_claims()}
     assert ids["room_matched_consistent"].across_variants and ids["office_matched_consistent"].dataset == "office"
+
+
+def test_report_shows_each_filter_on_the_shipped_world_beside_its_matched_twin(tmp_path: Path) -> None:
+    run_many(["odometry", "ekf_landmarks"], ["room", "room[matched=true]"], [0, 1], str(tmp_path))
+    write_report(Store(tmp_path), out=tmp_path / "summary")
+    text = (tmp_path / "summary" / "REPORT.md").read_text()
+    section = text[text.index('id="consistency"') :]
+    assert "*`room` as shipped beside `room[matched=true]`" in section
+    assert "| filter | shipped: runs | shipped: ANEES | shipped: NLL | shipped: ATE / PCRB | matched: runs |" in section
+    df = pd.read_csv(tmp_path / "summary" / "metrics.csv")
+    sel = df[(df["filter"] == "ekf_landmarks") & (df["metric"] == "anees")]
+    shipped = sel[sel["dataset"] == "room"]["value"].mean()
+    matched = sel[sel["dataset"] == "room[matched=true]"]["value"].mean()
+    row = next(line for line in section.splitlines() if line.startswith("| `ekf_landmarks` |"))
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    assert cells[1] == "2" and cells[2].startswith(f"{shipped:.3g} (") and cells[5] == "2"
+    assert cells[6].startswith(f"{matched:.3g} (")
+    # the twin's bound is the matched world's own: the filter's efficiency there is finite
+    assert float(cells[8]) > 0.5
