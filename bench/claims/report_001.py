@@ -49,6 +49,7 @@ from locbench.claims import (
 )
 from locbench.errors import LocbenchError
 from locbench.metrics import mean_ci
+from locbench.pcrb import is_bound_row
 from locbench.report.doc import Block, Plot, Table, Text
 from locbench.report.style import PALETTE
 from locbench.spec import build_params
@@ -355,15 +356,15 @@ def _mean_pm(values: np.ndarray) -> str:
 def layout_section(df: pd.DataFrame, slug: str) -> list[Block]:
     """ATE per landmark layout on the base variants: a table (cm, mean ± 95 % CI) and a figure.
 
-    Rows are (filter, path); columns the layouts 1, 2, 3, 4, 8. The figure has one line per path and
-    filter (odometry dashed), ATE on a log scale.
+    Rows are (filter, path); columns the layouts 1, 2, 3, 4, 8; the bound's rows (``pcrb``, in black) last.
+    The figure has one line per path and filter (odometry dashed), ATE on a log scale.
     """
     v = variants(df)
     base = v[v["base"] & (v["metric"] == "ate_m")] if len(v) else v
     caption = "ATE per landmark layout (base variants, cm, mean ± 95 % interval over seeds)"
     if not len(base):
         return [Text("No runs of the base variants.")]
-    filters = sorted({str(f) for f in base["filter"].unique()}, key=lambda f: (f != "odometry", f))
+    filters = sorted({str(f) for f in base["filter"].unique()}, key=lambda f: (is_bound_row(f), f != "odometry", f))
     paths = [p for p in PATH_ORDER if p in set(base["path"])]
     rows: list[tuple[str, ...]] = []
     series: list[tuple[str, str, list[float]]] = []
@@ -383,10 +384,11 @@ def layout_section(df: pd.DataFrame, slug: str) -> list[Block]:
     def draw(fig: Figure) -> None:
         ax = fig.add_subplot()
         x = np.arange(len(LAYOUT_ORDER))
-        colors = {f: PALETTE[i % len(PALETTE)] for i, f in enumerate(filters)}
+        # black is the bound's (the palette's last colour)
+        colors = {f: "#000000" if is_bound_row(f) else PALETTE[i % (len(PALETTE) - 1)] for i, f in enumerate(filters)}
         markers = {"circle": "o", "star": "*", "pentagon": "p", "random": "s"}
         for f, p, means in series:
-            ls = "--" if spec_id(f) == "odometry" else "-"
+            ls = "--" if spec_id(f) == "odometry" else ":" if is_bound_row(f) else "-"
             ax.plot(
                 x,
                 np.asarray(means) * 100.0,

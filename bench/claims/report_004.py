@@ -94,7 +94,9 @@ def _section(df: pd.DataFrame, slug: str) -> list[Block]:
     for (dname, fname), _ in df.groupby(["dataset", "filter"], sort=True):
         ate, n = _mean_metric(df, str(dname), str(fname), "ate_m")
         anees, _ = _mean_metric(df, str(dname), str(fname), "anees")
-        rows.append((f"`{dname}`", f"`{fname}`", str(n), f"{100 * ate:.2f}", f"{anees:.2f}"))
+        rows.append(
+            (f"`{dname}`", f"`{fname}`", str(n), f"{100 * ate:.2f}", "-" if np.isnan(anees) else f"{anees:.2f}")
+        )
     if not rows:
         return []
     return [

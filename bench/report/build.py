@@ -45,7 +45,7 @@ class Report:
     def __init__(self, col: Collected) -> None:
         self.col = col
         self.df = col.metrics
-        # claims and experiment sections read the filters' rows; the bound's rows are shown by the tables here
+        # claims read the filters' rows only (a claim is about filters; the bound is no candidate)
         self.filter_df = self.df[~self.df["filter"].isin(BOUND_ROWS)] if len(self.df) else self.df
         self.by_ds: dict[str, pd.DataFrame] = {str(d): g for d, g in self.df.groupby("dataset")} if len(self.df) else {}
         self.exps = [e for e in experiments() if self._has(e.dataset)]
@@ -656,7 +656,8 @@ class Report:
             for plot in plots:
                 if plot is not None:
                     sec.add(plot)
-        rows = self.filter_df[self.filter_df["dataset"].isin(self.variants_of(e.dataset))]
+        # with the bound's rows: an experiment's own tables show the accuracy limit too
+        rows = self.df[self.df["dataset"].isin(self.variants_of(e.dataset))]
         for fn in sections_for(e.dataset):
             sec.add(*fn(rows, slug(e.dataset)))
         return sec
