@@ -122,6 +122,12 @@ def _print_summary(sweep: Any, results: str) -> int:
         print(f"  removed {sweep.cleaned} leftover temporary entries of interrupted writes")
     if sweep.retried:
         print(f"  {sweep.retried} task(s) given to a fresh worker after theirs died")
+    if sweep.bounds_planned:
+        missing = sweep.bounds_planned - sweep.bounds
+        print(
+            f"  posterior Cramer-Rao bound computed for {sweep.bounds} realisation(s)"
+            + (f"; {missing} failed or not stored (see the log; the next run tries again)" if missing else "")
+        )
     reruns = [o for o in outcomes if o.note]
     for o in reruns:
         print(f"  {o.note}")

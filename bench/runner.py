@@ -281,6 +281,9 @@ class SweepResult:
     retried: int = 0
     #: Leftover temporary entries of earlier interrupted writes that were removed.
     cleaned: int = 0
+    #: Realisations whose posterior Cramer-Rao bound was computed and stored, and those the plan asked for.
+    bounds: int = 0
+    bounds_planned: int = 0
 
     @property
     def stored(self) -> int:
@@ -549,11 +552,13 @@ def run_sweep(
         store.check_writable()  # a read-only or full results folder is one error before any run, not one per run
     cleaned = len(store.clean_leftovers())
     outcomes = list(plan.cached)
+    bounds = [0]
     if progress and plan.cached:
         progress(len(plan.cached))
 
     def handle(task: Task, result: TaskResult) -> None:
         res = store_result(store, task, result)
+        bounds[0] += result.bound is not None and store.bound_key(task.dataset.name, task.seed) == task.bound_key
         outcomes.extend(res)
         if progress:
             progress(len(res))
@@ -565,7 +570,8 @@ def run_sweep(
     status = run(plan.tasks, handle, lost, jobs=jobs, scheduler=scheduler)
     big = len(plan.order)
     outcomes.sort(key=lambda o: plan.order.get((str(o.dataset), o.seed, str(o.filter)), big))
-    return SweepResult(outcomes, plan.total, status.interrupted, status.retried, cleaned)
+    planned = sum(t.bound_key is not None for t in plan.tasks)
+    return SweepResult(outcomes, plan.total, status.interrupted, status.retried, cleaned, bounds[0], planned)
 
 
 def run_group(

@@ -82,7 +82,8 @@ def test_a_missing_bound_is_computed_alone_without_rerunning_the_filters(swept: 
     plan = plan_sweep([(["odometry", "ekf_landmarks"], ["room", "room[kidnap_m=1]"], [0, 1])], str(swept))
     assert [(t.dataset.name, t.seed, t.jobs) for t in plan.tasks] == [("room", 1, ())]
     assert len(plan.cached) == 8
-    run_sweep(plan)
+    result = run_sweep(plan)
+    assert (result.bounds, result.bounds_planned) == (1, 1)
     assert store.read_bound("room", 1) is not None
     again = plan_sweep([(["odometry"], ["room"], [0, 1])], str(swept))
     assert again.tasks == []
