@@ -341,7 +341,7 @@ class LandmarkUKF(LandmarkEKF):
         ukf = self._ukf
         if ukf is None:
             return  # called by the EKF's reset before the UKF exists; checked again at the end of reset
-        if not (np.all(np.isfinite(ukf.x)) and np.all(np.isfinite(ukf.P))):
+        if not (np.isfinite(ukf.x).all() and np.isfinite(ukf.P).all()):
             raise FilterDiverged(f"LandmarkUKF state became non-finite at t={t:.3f} s")
 
     def estimate(self) -> Estimate:
