@@ -295,13 +295,18 @@ class LineEKF(Filter):
         H = np.zeros((2 * k, 3))
         v = np.zeros(2 * k)
         R = np.zeros((2 * k, 2 * k))
-        rho_p, psi_p = expected_line(x, self._rho_w, self._psi_w)
+        px, py, pth = x.tolist()
+        z = lines.rho_psi.tolist()
+        R_lines = lines.cov + self._R0
         for r, (j, i, sg, _) in enumerate(matches):
-            H[2 * r : 2 * r + 2] = expected_line_jacobian(float(self._psi_w[i]), sg)
-            h_psi = float(psi_p[i]) + (math.pi if sg < 0 else 0.0)
-            v[2 * r] = lines.rho_psi[j, 0] - sg * float(rho_p[i])  # eq. 4
-            v[2 * r + 1] = wrap_scalar(lines.rho_psi[j, 1] - h_psi)
-            R[2 * r : 2 * r + 2, 2 * r : 2 * r + 2] = lines.cov[j] + self._R0
+            # eq. 3 and its Jacobian (expected_line, expected_line_jacobian) for map line i alone, in plain floats
+            psi_w = float(self._psi_w[i])
+            H[2 * r, 0], H[2 * r, 1], H[2 * r + 1, 2] = -sg * math.cos(psi_w), -sg * math.sin(psi_w), -1.0
+            rho_p = float(self._rho_w[i]) - (px * float(self._cos_w[i]) + py * float(self._sin_w[i]))
+            h_psi = wrap_scalar(psi_w - pth) + (math.pi if sg < 0 else 0.0)
+            v[2 * r] = z[j][0] - sg * rho_p  # eq. 4
+            v[2 * r + 1] = wrap_scalar(z[j][1] - h_psi)
+            R[2 * r : 2 * r + 2, 2 * r : 2 * r + 2] = R_lines[j]
         # S = H P H^T + R (eq. 5), K = P H^T S^-1 (eq. 6), x + K v (eq. 7), Joseph form (eq. 8): the Kalman core.
         c = joseph_correct(x, P, v, H, R)
         x_new = c.x
@@ -315,7 +320,7 @@ class LineEKF(Filter):
     # --- output ---------------------------------------------------------------------------------------------
 
     def _check_finite(self, t: float) -> None:
-        if not (np.all(np.isfinite(self._x)) and np.all(np.isfinite(self._P))):
+        if not (np.isfinite(self._x).all() and np.isfinite(self._P).all()):
             raise FilterDiverged(f"LineEKF state became non-finite at t={t:.3f} s")
 
     def estimate(self) -> Estimate:
