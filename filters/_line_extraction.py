@@ -18,7 +18,7 @@ Steps
 5. **Fit.** Each segment with at least ``min_points`` points and ``min_length_m`` length is fitted by total
    least squares (orthogonal regression) and gets the first-order covariance of that fit.
 
-Steps 3-5 run as one compiled (numba) function over all runs of a scan; the end points and lengths are then
+Steps 2-5 run as one compiled (numba) function over a scan's points; the end points and lengths are then
 formed for all segments at once with numpy.
 
 Line parameters: a line is {p : p . (cos psi, sin psi) = rho} in the robot frame with ``rho`` >= 0 (m) and
@@ -249,24 +249,36 @@ def _split_core(xs: FloatArray, ys: FloatArray, lo: int, hi: int, thr: float) ->
 def _segments(
     xs: FloatArray,
     ys: FloatArray,
-    starts: npt.NDArray[np.int64],
-    ends: npt.NDArray[np.int64],
+    rr: FloatArray,
+    beam: npt.NDArray[np.int64],
+    gap_min: float,
+    gap_factor: float,
+    beam_step: float,
     thr: float,
     var: float,
     min_points: int,
 ) -> tuple[npt.NDArray[np.int64], FloatArray]:
-    """Steps 3-5 of the module docstring on the runs [starts[j], ends[j]) of the points (xs, ys).
+    """Steps 2-5 of the module docstring on the points (xs, ys) at ranges ``rr`` of beams ``beam``.
 
-    Returns the (k, 2) point ranges [lo, hi) of the fitted segments with at least ``min_points`` points and their
-    (k, 5) fits (rho, psi, var rho, cov rho psi, var psi), before the length check.
+    ``beam_step`` is the absolute angle increment (rad). Returns the (k, 2) point ranges [lo, hi) of the fitted
+    segments with at least ``min_points`` points and their (k, 5) fits (rho, psi, var rho, cov rho psi, var psi),
+    before the length check.
     """
+    # 2. breakpoints: a missing beam or a gap wider than the local beam spacing allows
+    m = xs.shape[0]
+    run_start = [0]
+    for i in range(m - 1):
+        step = math.hypot(xs[i + 1] - xs[i], ys[i + 1] - ys[i])
+        allowed = max(gap_min, gap_factor * min(rr[i], rr[i + 1]) * beam_step)
+        if beam[i + 1] - beam[i] > 1 or step > allowed:
+            run_start.append(i + 1)
+    run_start.append(m)
     # 3. split every run of at least two points
-    n_runs = starts.shape[0]
     piece_lo = []
     piece_hi = []
-    for j in range(n_runs):
-        a = starts[j]
-        b = ends[j]
+    for j in range(len(run_start) - 1):
+        a = run_start[j]
+        b = run_start[j + 1]
         if b - a >= 2:
             pcs = _split_core(xs, ys, a, b, thr)
             for k in range(pcs.shape[0]):
@@ -333,16 +345,21 @@ def extract_lines(scan: LaserScan, params: ExtractionParams | None = None) -> Ex
     m = pts.shape[0]
     if m < prm.min_points:
         return empty
-    # 2. breakpoints: a missing beam or a gap wider than the local beam spacing allows
-    step = np.hypot(*np.diff(pts, axis=0).T)
-    allowed = np.maximum(prm.gap_min_m, prm.gap_factor * np.minimum(rr[:-1], rr[1:]) * abs(scan.angle_increment))
-    cut = (np.diff(beam) > 1) | (step > allowed)
-    starts = np.concatenate([[0], np.flatnonzero(cut) + 1])
-    ends = np.concatenate([np.flatnonzero(cut) + 1, [m]])
-    # 3-5. split, merge and fit (compiled)
+    # 2-5. breakpoints, split, merge and fit (compiled)
     thr = max(prm.split_threshold_m, 3.0 * prm.sigma_m)
     xs, ys = np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1])
-    ranges, fits = _segments(xs, ys, starts, ends, thr, prm.sigma_m * prm.sigma_m, prm.min_points)
+    ranges, fits = _segments(
+        xs,
+        ys,
+        rr,
+        beam,
+        prm.gap_min_m,
+        prm.gap_factor,
+        abs(scan.angle_increment),
+        thr,
+        prm.sigma_m * prm.sigma_m,
+        prm.min_points,
+    )
     if ranges.shape[0] == 0:
         return empty
     rho, psi = fits[:, 0], fits[:, 1]
