@@ -18,6 +18,9 @@ Steps
 5. **Fit.** Each segment with at least ``min_points`` points and ``min_length_m`` length is fitted by total
    least squares (orthogonal regression) and gets the first-order covariance of that fit.
 
+Steps 2-5 run as one compiled (numba) function over a scan's points; the end points and lengths are then
+formed for all segments at once with numpy.
+
 Line parameters: a line is {p : p . (cos psi, sin psi) = rho} in the robot frame with ``rho`` >= 0 (m) and
 ``psi`` in (-pi, pi] (rad), the convention of :meth:`locbench.datasets.base.LineMap.rho_psi`. For a line
 passing (nearly) through the robot, rho is near 0 and the sign of the normal, hence psi, may flip by pi
@@ -242,6 +245,83 @@ def _split_core(xs: FloatArray, ys: FloatArray, lo: int, hi: int, thr: float) ->
     return out[order]
 
 
+@njit(cache=True)
+def _segments(
+    xs: FloatArray,
+    ys: FloatArray,
+    rr: FloatArray,
+    beam: npt.NDArray[np.int64],
+    gap_min: float,
+    gap_factor: float,
+    beam_step: float,
+    thr: float,
+    var: float,
+    min_points: int,
+) -> tuple[npt.NDArray[np.int64], FloatArray]:
+    """Steps 2-5 of the module docstring on the points (xs, ys) at ranges ``rr`` of beams ``beam``.
+
+    ``beam_step`` is the absolute angle increment (rad). Returns the (k, 2) point ranges [lo, hi) of the fitted
+    segments with at least ``min_points`` points and their (k, 5) fits (rho, psi, var rho, cov rho psi, var psi),
+    before the length check.
+    """
+    # 2. breakpoints: a missing beam or a gap wider than the local beam spacing allows
+    m = xs.shape[0]
+    run_start = [0]
+    for i in range(m - 1):
+        step = math.hypot(xs[i + 1] - xs[i], ys[i + 1] - ys[i])
+        allowed = max(gap_min, gap_factor * min(rr[i], rr[i + 1]) * beam_step)
+        if beam[i + 1] - beam[i] > 1 or step > allowed:
+            run_start.append(i + 1)
+    run_start.append(m)
+    # 3. split every run of at least two points
+    piece_lo = []
+    piece_hi = []
+    for j in range(len(run_start) - 1):
+        a = run_start[j]
+        b = run_start[j + 1]
+        if b - a >= 2:
+            pcs = _split_core(xs, ys, a, b, thr)
+            for k in range(pcs.shape[0]):
+                piece_lo.append(pcs[k, 0])
+                piece_hi.append(pcs[k, 1])
+    # 4. merge neighbours of the same run: they share their corner point (previous end - 1 == this start)
+    m_lo: list[int] = []
+    m_hi: list[int] = []
+    for k in range(len(piece_lo)):
+        a = piece_lo[k]
+        b = piece_hi[k]
+        last = len(m_lo) - 1
+        if last >= 0 and m_hi[last] > a and b - m_lo[last] >= 3:
+            a0 = m_lo[last]
+            if _fit_core(xs[a0:b], ys[a0:b], var)[5] <= thr:
+                m_hi[last] = b
+                continue
+        m_lo.append(a)
+        m_hi.append(b)
+    # 5. fit; a corner point shared with a neighbouring piece is left out of both fits, so it bends neither
+    n = len(m_lo)
+    ranges = np.empty((n, 2), dtype=np.int64)
+    fits = np.empty((n, 5))
+    count = 0
+    for k in range(n):
+        a = m_lo[k]
+        b = m_hi[k]
+        lo = a + 1 if k > 0 and m_hi[k - 1] > a else a
+        hi = b - 1 if k + 1 < n and m_lo[k + 1] < b else b
+        if hi - lo < min_points:
+            continue
+        rho, psi, v_r, c_rp, v_p, _ = _fit_core(xs[lo:hi], ys[lo:hi], var)
+        ranges[count, 0] = lo
+        ranges[count, 1] = hi
+        fits[count, 0] = rho
+        fits[count, 1] = psi
+        fits[count, 2] = v_r
+        fits[count, 3] = c_rp
+        fits[count, 4] = v_p
+        count += 1
+    return ranges[:count], fits[:count]
+
+
 def extract_lines(scan: LaserScan, params: ExtractionParams | None = None) -> ExtractedLines:
     """Split-and-merge line extraction from one scan; see the module docstring.
 
@@ -265,59 +345,40 @@ def extract_lines(scan: LaserScan, params: ExtractionParams | None = None) -> Ex
     m = pts.shape[0]
     if m < prm.min_points:
         return empty
-    # 2. breakpoints: a missing beam or a gap wider than the local beam spacing allows
-    step = np.hypot(*np.diff(pts, axis=0).T)
-    allowed = np.maximum(prm.gap_min_m, prm.gap_factor * np.minimum(rr[:-1], rr[1:]) * abs(scan.angle_increment))
-    cut = (np.diff(beam) > 1) | (step > allowed)
-    starts = np.concatenate([[0], np.flatnonzero(cut) + 1])
-    ends = np.concatenate([np.flatnonzero(cut) + 1, [m]])
-    # 3. split
+    # 2-5. breakpoints, split, merge and fit (compiled)
     thr = max(prm.split_threshold_m, 3.0 * prm.sigma_m)
     xs, ys = np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1])
-    var = prm.sigma_m * prm.sigma_m
-    pieces: list[tuple[int, int]] = []
-    for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
-        if b - a >= 2:
-            pieces.extend((int(u), int(w)) for u, w in _split_core(xs, ys, a, b, thr))
-    # 4. merge neighbours of the same run (they share an end point after a split)
-    merged: list[tuple[int, int]] = []
-    for a, b in pieces:
-        # pieces of one run share their corner point (previous end - 1 == this start); runs do not
-        if merged and merged[-1][1] > a and b - merged[-1][0] >= 3:
-            a0 = merged[-1][0]
-            if _fit_core(xs[a0:b], ys[a0:b], var)[5] <= thr:
-                merged[-1] = (a0, b)
-                continue
-        merged.append((a, b))
-    # 5. fit
-    rows_rp, rows_cov, rows_end, rows_len, rows_n = [], [], [], [], []
-    for k, (a, b) in enumerate(merged):
-        # a corner point shared with a neighbouring piece is left out of both fits, so it bends neither
-        lo = a + 1 if k > 0 and merged[k - 1][1] > a else a
-        hi = b - 1 if k + 1 < len(merged) and merged[k + 1][0] < b else b
-        seg = pts[lo:hi]
-        if seg.shape[0] < prm.min_points:
-            continue
-        rho, psi, v_r, c_rp, v_p, _ = _fit_core(xs[lo:hi], ys[lo:hi], var)
-        cov = np.array([[v_r, c_rp], [c_rp, v_p]])
-        t = np.array([-math.sin(psi), math.cos(psi)])
-        nrm = np.array([math.cos(psi), math.sin(psi)])
-        s = seg @ t
-        e = np.array([rho * nrm + s[0] * t, rho * nrm + s[-1] * t])
-        length = abs(float(s[-1] - s[0]))
-        if length < prm.min_length_m:
-            continue
-        rows_rp.append((rho, psi))
-        rows_cov.append(cov)
-        rows_end.append(e)
-        rows_len.append(length)
-        rows_n.append(seg.shape[0])
-    if not rows_rp:
+    ranges, fits = _segments(
+        xs,
+        ys,
+        rr,
+        beam,
+        prm.gap_min_m,
+        prm.gap_factor,
+        abs(scan.angle_increment),
+        thr,
+        prm.sigma_m * prm.sigma_m,
+        prm.min_points,
+    )
+    if ranges.shape[0] == 0:
         return empty
+    rho, psi = fits[:, 0], fits[:, 1]
+    t = np.array([(-math.sin(p), math.cos(p)) for p in psi.tolist()])  # along the line
+    nrm = np.array([(math.cos(p), math.sin(p)) for p in psi.tolist()])
+    ends_xy = pts[np.column_stack([ranges[:, 0], ranges[:, 1] - 1])]  # (k, 2, 2): first and last point
+    # their coordinates along the line (one small product per segment, as over the whole segment, to the bit)
+    s = np.matmul(ends_xy, t[:, :, None])[:, :, 0]
+    lengths = np.abs(s[:, 1] - s[:, 0])
+    keep = ~(lengths < prm.min_length_m)
+    if not keep.any():
+        return empty
+    cov = np.empty((fits.shape[0], 2, 2))
+    cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 0], cov[:, 1, 1] = fits[:, 2], fits[:, 3], fits[:, 3], fits[:, 4]
+    endpoints = rho[:, None, None] * nrm[:, None, :] + s[:, :, None] * t[:, None, :]
     return ExtractedLines(
-        rho_psi=np.asarray(rows_rp, dtype=np.float64),
-        cov=np.asarray(rows_cov, dtype=np.float64),
-        endpoints=np.asarray(rows_end, dtype=np.float64),
-        lengths=np.asarray(rows_len, dtype=np.float64),
-        n_points=np.asarray(rows_n, dtype=np.int64),
+        rho_psi=fits[keep, :2],
+        cov=cov[keep],
+        endpoints=endpoints[keep],
+        lengths=lengths[keep],
+        n_points=(ranges[keep, 1] - ranges[keep, 0]).astype(np.int64),
     )

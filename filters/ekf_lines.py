@@ -50,6 +50,7 @@ from typing import ClassVar
 
 import numpy as np
 import numpy.typing as npt
+from numba import njit
 
 from locbench.datasets.base import Gaussian2, MapKind, SensorSpec, WorldMap
 from locbench.errors import ConfigError, FilterDiverged
@@ -58,7 +59,7 @@ from locbench.filters._kalman import joseph_correct
 from locbench.filters._line_extraction import ExtractedLines, ExtractionParams, extract_lines
 from locbench.filters._motion import MotionModel, propagate_covariance, resolve_motion_noise
 from locbench.filters.base import Estimate, Filter, FilterConfig
-from locbench.geometry import wrap_angle, wrap_scalar
+from locbench.geometry import TWO_PI, wrap_angle, wrap_scalar
 
 FloatArray = npt.NDArray[np.float64]
 logger = logging.getLogger(__name__)
@@ -271,34 +272,18 @@ class LineEKF(Filter):
             The rejection counts of the last update are set as a side effect.
         """
         cfg = self.config
-        rho_p, psi_p = expected_line(self._x, self._rho_w, self._psi_w)  # (n,)
-        z = lines.rho_psi
-        # choose per (observation, map line) the form of the map line whose psi lies within pi/2 of the observed psi
-        dpsi = wrap_angle(z[:, 1:2] - psi_p[None, :])  # (k, n)
-        flip = np.abs(dpsi) > 0.5 * math.pi
-        sign = np.where(flip, -1.0, 1.0)
-        v_rho = z[:, 0:1] - sign * rho_p[None, :]
-        v_psi = np.where(flip, wrap_angle(dpsi - math.pi), dpsi)
-        P = self._P
-        c, s = self._cos_w[None, :], self._sin_w[None, :]
-        R = lines.cov + self._R0  # (k, 2, 2)
-        # S = H P H^T + R with H = [[-sign c, -sign s, 0], [0, 0, -1]] (sign^2 = 1 in S00)
-        s00 = c * c * P[0, 0] + 2.0 * c * s * P[0, 1] + s * s * P[1, 1] + R[:, 0, 0:1]
-        s01 = sign * (c * P[0, 2] + s * P[1, 2]) + R[:, 0, 1:2]
-        s11 = P[2, 2] + R[:, 1, 1:2]
-        det = s00 * s11 - s01 * s01
-        d2 = (s11 * v_rho * v_rho - 2.0 * s01 * v_rho * v_psi + s00 * v_psi * v_psi) / det
-        d2 = np.where(det > 0.0, d2, np.inf)
-        best = np.argmin(d2, axis=1)
+        x, y, th = self._x.tolist()
+        best, sign, d2 = _nearest_lines(
+            x, y, th, self._rho_w, self._psi_w, self._cos_w, self._sin_w, lines.rho_psi, lines.cov, self._R0, self._P
+        )
         out: list[tuple[int, int, float, float]] = []
-        for j, i in enumerate(best.tolist()):
-            dist = float(d2[j, i])
+        for j, (i, sg, dist) in enumerate(zip(best.tolist(), sign.tolist(), d2.tolist(), strict=True)):
             if not dist <= cfg.chi2_threshold:
                 self._rej_gate += 1
             elif cfg.reject_longer and lines.lengths[j] > self._len_w[i] + cfg.length_margin_m:
                 self._rej_len += 1
             else:
-                out.append((j, i, float(sign[j, i]), dist))
+                out.append((j, i, sg, dist))
         return out
 
     def _correct(self, lines: ExtractedLines) -> None:
@@ -310,13 +295,18 @@ class LineEKF(Filter):
         H = np.zeros((2 * k, 3))
         v = np.zeros(2 * k)
         R = np.zeros((2 * k, 2 * k))
-        rho_p, psi_p = expected_line(x, self._rho_w, self._psi_w)
+        px, py, pth = x.tolist()
+        z = lines.rho_psi.tolist()
+        R_lines = lines.cov + self._R0
         for r, (j, i, sg, _) in enumerate(matches):
-            H[2 * r : 2 * r + 2] = expected_line_jacobian(float(self._psi_w[i]), sg)
-            h_psi = float(psi_p[i]) + (math.pi if sg < 0 else 0.0)
-            v[2 * r] = lines.rho_psi[j, 0] - sg * float(rho_p[i])  # eq. 4
-            v[2 * r + 1] = wrap_scalar(lines.rho_psi[j, 1] - h_psi)
-            R[2 * r : 2 * r + 2, 2 * r : 2 * r + 2] = lines.cov[j] + self._R0
+            # eq. 3 and its Jacobian (expected_line, expected_line_jacobian) for map line i alone, in plain floats
+            psi_w = float(self._psi_w[i])
+            H[2 * r, 0], H[2 * r, 1], H[2 * r + 1, 2] = -sg * math.cos(psi_w), -sg * math.sin(psi_w), -1.0
+            rho_p = float(self._rho_w[i]) - (px * float(self._cos_w[i]) + py * float(self._sin_w[i]))
+            h_psi = wrap_scalar(psi_w - pth) + (math.pi if sg < 0 else 0.0)
+            v[2 * r] = z[j][0] - sg * rho_p  # eq. 4
+            v[2 * r + 1] = wrap_scalar(z[j][1] - h_psi)
+            R[2 * r : 2 * r + 2, 2 * r : 2 * r + 2] = R_lines[j]
         # S = H P H^T + R (eq. 5), K = P H^T S^-1 (eq. 6), x + K v (eq. 7), Joseph form (eq. 8): the Kalman core.
         c = joseph_correct(x, P, v, H, R)
         x_new = c.x
@@ -330,7 +320,7 @@ class LineEKF(Filter):
     # --- output ---------------------------------------------------------------------------------------------
 
     def _check_finite(self, t: float) -> None:
-        if not (np.all(np.isfinite(self._x)) and np.all(np.isfinite(self._P))):
+        if not (np.isfinite(self._x).all() and np.isfinite(self._P).all()):
             raise FilterDiverged(f"LineEKF state became non-finite at t={t:.3f} s")
 
     def estimate(self) -> Estimate:
@@ -350,6 +340,67 @@ class LineEKF(Filter):
                 "rejected_length": float(self._rej_len),
             },
         )
+
+
+@njit(cache=True)
+def _nearest_lines(
+    x: float,
+    y: float,
+    th: float,
+    rho_w: FloatArray,
+    psi_w: FloatArray,
+    cos_w: FloatArray,
+    sin_w: FloatArray,
+    z: FloatArray,
+    cov: FloatArray,
+    R0: FloatArray,
+    P: FloatArray,
+) -> tuple[npt.NDArray[np.int64], FloatArray, FloatArray]:
+    """For each observed line (rho, psi) of ``z`` (k, 2) with fit covariance ``cov`` (k, 2, 2): the map line of
+    least squared Mahalanobis distance at the pose (x, y, th) with covariance ``P`` (eq. 3-5), the sign of the
+    form compared (-1: flipped) and that distance.
+
+    Element for element the arithmetic of the numpy expressions it replaces (same operations in the same order,
+    the first of equal distances, a NaN distance taken as numpy's argmin takes it), in one pass without the
+    (k, n) temporaries.
+    """
+    k = z.shape[0]
+    n = rho_w.shape[0]
+    half_pi = 0.5 * math.pi
+    p00, p01, p02, p11, p12, p22 = P[0, 0], P[0, 1], P[0, 2], P[1, 1], P[1, 2], P[2, 2]
+    best = np.zeros(k, dtype=np.int64)
+    best_sign = np.ones(k)
+    best_d2 = np.full(k, np.inf)
+    for j in range(k):
+        r00 = cov[j, 0, 0] + R0[0, 0]
+        r01 = cov[j, 0, 1] + R0[0, 1]
+        r11 = cov[j, 1, 1] + R0[1, 1]
+        s11 = p22 + r11
+        first = True
+        for i in range(n):
+            c = cos_w[i]
+            s = sin_w[i]
+            rho_p = rho_w[i] - (x * c + y * s)
+            psi_p = math.pi - ((math.pi - (psi_w[i] - th)) % TWO_PI)
+            dpsi = math.pi - ((math.pi - (z[j, 1] - psi_p)) % TWO_PI)
+            sg = 1.0
+            v_psi = dpsi
+            if abs(dpsi) > half_pi:
+                sg = -1.0
+                v_psi = math.pi - ((math.pi - (dpsi - math.pi)) % TWO_PI)
+            v_rho = z[j, 0] - sg * rho_p
+            s00 = c * c * p00 + 2.0 * c * s * p01 + s * s * p11 + r00
+            s01 = sg * (c * p02 + s * p12) + r01
+            det = s00 * s11 - s01 * s01
+            d2 = (s11 * v_rho * v_rho - 2.0 * s01 * v_rho * v_psi + s00 * v_psi * v_psi) / det
+            if not det > 0.0:
+                d2 = np.inf
+            if first or d2 < best_d2[j] or (math.isnan(d2) and not math.isnan(best_d2[j])):
+                best[j], best_sign[j], best_d2[j] = i, sg, d2
+                first = False
+            if math.isnan(d2):
+                break  # numpy's argmin returns the first NaN
+    return best, best_sign, best_d2
 
 
 def _collinear_max_length(rho_psi: FloatArray, lengths: FloatArray, tol_m: float = 1e-6) -> FloatArray:

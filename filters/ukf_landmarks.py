@@ -30,6 +30,12 @@ predicted measurement and S = sum Wc (z_i - z)(z_i - z)^T + R of every candidate
 beacons and pose fixes use the same gates as the EKF (1 dof, and none for fixes). A gated-out measurement
 leaves the state unchanged. The gain step is the Kalman core's sigma-point form (K = P_xz S^-1,
 P - K S K^T, symmetrised), fed by filterpy's unscented transform and cross covariance.
+
+Speed: filterpy calls its callbacks once per sigma point, so they are kept small. The matrix square root is
+LAPACK's Cholesky called directly (the factor scipy returns, without its checks), the unscented transform
+handed to ``predict`` and the sums of the correction wrap the angle residuals of all points at once, and the
+measurement functions map all points in one call; every sum keeps filterpy's order of terms, so the estimates
+are those of filterpy's own loops to the bit.
 """
 
 from __future__ import annotations
@@ -40,20 +46,67 @@ from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
-from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter, unscented_transform
+from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
+from scipy.linalg.lapack import dpotrf
 
 from locbench.datasets.base import Gaussian2, SensorSpec, WorldMap
 from locbench.errors import ConfigError, FilterDiverged
 from locbench.events import Odometry, PoseFix
-from locbench.filters._kalman import gain_update, subtract, wrapped_residual
+from locbench.filters._kalman import gain_update, subtract
 from locbench.filters.base import Estimate, FilterConfig
-from locbench.filters.ekf_landmarks import LandmarkEKF, LandmarkEKFConfig, range_bearing
-from locbench.geometry import wrap_angle, wrap_scalar
+from locbench.filters.ekf_landmarks import LandmarkEKF, LandmarkEKFConfig
+from locbench.geometry import TWO_PI, wrap_angle, wrap_scalar
 
 FloatArray = npt.NDArray[np.float64]
 
-_residual_bearing = wrapped_residual([1])
-_residual_heading = wrapped_residual([2])
+
+def _residual_heading(a: FloatArray, b: FloatArray) -> FloatArray:
+    """Pose difference a - b with the heading wrapped to (-pi, pi] (the sigma points' ``subtract``)."""
+    y = a - b
+    y[2] = math.pi - ((math.pi - float(y[2])) % TWO_PI)  # wrap_scalar, inlined: called six times per draw
+    return y
+
+
+def _residual_bearing(a: FloatArray, b: FloatArray) -> FloatArray:
+    """(range, bearing) difference a - b with the bearing wrapped to (-pi, pi]."""
+    y = np.asarray(a, dtype=np.float64) - b
+    y[1] = wrap_scalar(float(y[1]))
+    return y
+
+
+def upper_cholesky(A: FloatArray) -> FloatArray:
+    """Upper Cholesky factor U (U^T U = A) of a positive-definite matrix, the sigma points' matrix square root.
+
+    LAPACK's ``dpotrf`` called directly: the factor ``scipy.linalg.cholesky`` (filterpy's default) returns, bit
+    for bit, without that wrapper's argument checks, which cost some 40 times the factorisation of a 3x3.
+    """
+    U, info = dpotrf(A, lower=0, clean=1)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"covariance is not positive definite (dpotrf info {info})")
+    return np.asarray(U, dtype=np.float64)
+
+
+def _moments(
+    sigmas: FloatArray, Wc: FloatArray, mean: FloatArray, noise_cov: FloatArray | None, angle: int
+) -> FloatArray:
+    """sum_k Wc_k r_k r_k^T (+ noise) with r_k = sigmas_k - mean, component ``angle`` wrapped (none if -1).
+
+    The sum runs over the points in order, as filterpy's loop of outer products does, so the result is the same
+    to the bit; numpy does it in one pass.
+    """
+    r = sigmas - mean
+    if angle >= 0:
+        r[:, angle] = wrap_angle(r[:, angle])
+    return _weighted_outer_sum(Wc, r, r, noise_cov)
+
+
+def _weighted_outer_sum(Wc: FloatArray, a: FloatArray, b: FloatArray, start: FloatArray | None) -> FloatArray:
+    """sum_k Wc_k a_k b_k^T, accumulated over k in order (numpy reduces the leading axis one row at a time), plus
+    ``start`` if given."""
+    out: FloatArray = (Wc[:, None, None] * (a[:, :, None] * b[:, None, :])).sum(axis=0)
+    if start is not None:
+        out += start
+    return out
 
 
 def circular_mean(angles: FloatArray, weights: FloatArray) -> float:
@@ -75,6 +128,19 @@ def _fix_mean(sigmas: FloatArray, weights: FloatArray) -> FloatArray:
     if sigmas.shape[1] == 3:
         return state_mean(sigmas, weights)
     return np.asarray(weights @ sigmas, dtype=np.float64)
+
+
+def pose_transform(
+    sigmas: FloatArray, Wm: FloatArray, Wc: FloatArray, noise_cov: FloatArray | None, mean_fn: Any, residual_fn: Any
+) -> tuple[FloatArray, FloatArray]:
+    """filterpy's ``unscented_transform`` for poses (the ``UT`` argument of ``predict``): the same mean and
+    covariance, with the heading residuals wrapped for all points at once instead of one call per point.
+
+    ``mean_fn`` is the filter's ``x_mean_fn``; ``residual_fn`` (the heading-wrapping residual) is replaced by its
+    vectorised equivalent.
+    """
+    x = mean_fn(sigmas, Wm)
+    return x, _moments(sigmas, Wc, x, noise_cov, 2)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -127,7 +193,9 @@ class LandmarkUKF(LandmarkEKF):
         self._ukf: Any = None  # filterpy is untyped; a previous run's state must not be checked by the EKF's reset
         super().reset(initial, world, sensors, rng)
         cfg = self.config
-        points = MerweScaledSigmaPoints(3, alpha=cfg.alpha, beta=cfg.beta, kappa=cfg.kappa, subtract=_residual_heading)
+        points = MerweScaledSigmaPoints(
+            3, alpha=cfg.alpha, beta=cfg.beta, kappa=cfg.kappa, sqrt_method=upper_cholesky, subtract=_residual_heading
+        )
         ukf = UnscentedKalmanFilter(
             dim_x=3,
             dim_z=2,
@@ -157,9 +225,9 @@ class LandmarkUKF(LandmarkEKF):
             W = self._motion.noise.wheelbase_m
             assert W is not None and u.d_left is not None and u.d_right is not None  # guaranteed by step.encoder
             dd, dth = 0.5 * (u.d_left + u.d_right), (u.d_right - u.d_left) / W  # eq. 1-2
-            ukf.predict(fx=_move_midpoint, dd=dd, dth=dth)
+            ukf.predict(UT=pose_transform, fx=_move_midpoint, dd=dd, dth=dth)
         else:
-            ukf.predict(fx=_move_increment, dx=u.dx, dy=u.dy, dth=u.dtheta)
+            ukf.predict(UT=pose_transform, fx=_move_increment, dx=u.dx, dy=u.dy, dth=u.dtheta)
         self._finish(ukf.x, ukf.P)
         self._t = u.t
         self._nis, self._nis_dof, self._accepted, self._rejected = math.nan, 0, 0, 0
@@ -173,22 +241,29 @@ class LandmarkUKF(LandmarkEKF):
         self._ukf.P = 0.5 * (P + P.T)
 
     def _correct(
-        self, z: FloatArray, R: FloatArray, hx: Any, z_mean: Any, residual: Any, gate: float, **hx_args: Any
+        self, z: FloatArray, R: FloatArray, h_all: Any, z_mean: Any, residual: Any, angle: int, gate: float
     ) -> float | None:
         """One unscented correction; its NIS, or None (state unchanged) when outside ``gate``.
 
         filterpy's update in its parts: the sigma points are redrawn at the state the previous measurement left,
-        filterpy's unscented transform gives the predicted measurement and S (R included) and its
-        ``cross_variance`` P_xz; the gain step is the core's :func:`~locbench.filters._kalman.gain_update`
-        (K = P_xz S^-1, P - K S K^T, as filterpy's), which also gives the NIS for the gate.
+        ``h_all`` maps all of them at once to measurements (n_sigma, m), their weighted mean is ``z_mean`` (the
+        plain weighted sum if None), S (R included) and P_xz are filterpy's sums of outer products, with the
+        residuals' component ``angle`` wrapped (-1: none); the gain step is the core's
+        :func:`~locbench.filters._kalman.gain_update` (K = P_xz S^-1, P - K S K^T, as filterpy's), which also gives
+        the NIS for the gate. ``residual`` forms the innovation.
         """
         ukf = self._ukf
         x, P = ukf.x, ukf.P
         sigmas = ukf.points_fn.sigma_points(x, P)
-        sigmas_h = np.array([hx(s, **hx_args) for s in sigmas])
-        zp, S = unscented_transform(sigmas_h, ukf.Wm, ukf.Wc, R, z_mean, residual)
-        ukf.residual_z = residual  # read by cross_variance
-        c = gain_update(x, P, residual(z, zp), S, ukf.cross_variance(x, zp, sigmas, sigmas_h))
+        sigmas_h = h_all(sigmas)
+        zp = np.dot(ukf.Wm, sigmas_h) if z_mean is None else z_mean(sigmas_h, ukf.Wm)
+        S = _moments(sigmas_h, ukf.Wc, zp, R, angle)
+        dx = sigmas - x
+        dx[:, 2] = wrap_angle(dx[:, 2])
+        dz = sigmas_h - zp
+        if angle >= 0:
+            dz[:, angle] = wrap_angle(dz[:, angle])
+        c = gain_update(x, P, residual(z, zp), S, _weighted_outer_sum(ukf.Wc, dx, dz, None))
         if not c.nis <= gate:
             return None
         self._finish(c.x, c.P)
@@ -196,12 +271,15 @@ class LandmarkUKF(LandmarkEKF):
 
     def _correct_landmark(self, r: float, b: float, row: int, gate: float) -> float | None:
         """Fuse one (range, bearing) of landmark ``row``; its NIS, or None if gated out."""
-        lm = self._lm_xy[row]
-        if float(np.hypot(*(lm - self._ukf.x[:2]))) < 1e-6:
+        lx, ly = self._lm_list[row]
+        x = self._ukf.x
+        if math.hypot(lx - float(x[0]), ly - float(x[1])) < 1e-6:
             return None  # on top of the landmark: the bearing is undefined
-        return self._correct(
-            np.array([r, b]), self._R_lm, range_bearing, range_bearing_mean, _residual_bearing, gate, landmarks_xy=lm
-        )
+
+        def h_all(sigmas: FloatArray) -> FloatArray:
+            return _range_bearing_points(sigmas, lx, ly)
+
+        return self._correct(np.array([r, b]), self._R_lm, h_all, range_bearing_mean, _residual_bearing, 1, gate)
 
     def _nearest(self, r: float, b: float, used: set[int]) -> int | None:
         """Row of the landmark nearest to (r, b) in the unscented Mahalanobis distance, inside the gate; else None."""
@@ -233,8 +311,12 @@ class LandmarkUKF(LandmarkEKF):
     def _correct_range(self, r: float, row: int) -> float | None:
         """Fuse one range to beacon ``row`` through the unscented transform; its NIS, or None if gated out."""
         R = np.array([[self._range_sigma * self._range_sigma]])
-        lm = self._lm_xy[row]
-        return self._correct(np.array([r]), R, _beacon_range, None, subtract, self._range_gate, beacon=lm)
+        bx, by = self._lm_list[row]
+
+        def h_all(sigmas: FloatArray) -> FloatArray:
+            return np.array([[math.hypot(bx - sx, by - sy)] for sx, sy, _ in sigmas.tolist()])
+
+        return self._correct(np.array([r]), R, h_all, None, subtract, -1, self._range_gate)
 
     def _update_pose_fix(self, z: PoseFix) -> None:
         """GPS-like fix (report 001): h(x) = (x, y) or (x, y, theta) with the fix's covariance, heading wrapped."""
@@ -243,7 +325,13 @@ class LandmarkUKF(LandmarkEKF):
             raise ValueError(f"PoseFix at t={z.t} must have z (2,) or (3,) and a matching cov, got {z.cov.shape}")
         R = 0.5 * (z.cov + z.cov.T)
         residual = _residual_heading if m == 3 else subtract
-        nis = self._correct(np.asarray(z.z, dtype=np.float64), R, _first_components, _fix_mean, residual, math.inf, m=m)
+
+        def h_all(sigmas: FloatArray) -> FloatArray:
+            return sigmas[:, :m].copy()
+
+        nis = self._correct(
+            np.asarray(z.z, dtype=np.float64), R, h_all, _fix_mean, residual, 2 if m == 3 else -1, math.inf
+        )
         assert nis is not None  # no gate on fixes
         self._nis, self._nis_dof, self._accepted, self._rejected = nis, m, 1, 0
 
@@ -253,7 +341,7 @@ class LandmarkUKF(LandmarkEKF):
         ukf = self._ukf
         if ukf is None:
             return  # called by the EKF's reset before the UKF exists; checked again at the end of reset
-        if not (np.all(np.isfinite(ukf.x)) and np.all(np.isfinite(ukf.P))):
+        if not (np.isfinite(ukf.x).all() and np.isfinite(ukf.P).all()):
             raise FilterDiverged(f"LandmarkUKF state became non-finite at t={t:.3f} s")
 
     def estimate(self) -> Estimate:
@@ -261,23 +349,25 @@ class LandmarkUKF(LandmarkEKF):
         return Estimate(t=self._t, mean=self._ukf.x.copy(), cov=self._ukf.P.copy(), diagnostics=self._diagnostics())
 
 
-def _move_midpoint(s: FloatArray, dt: float, dd: float, dth: float) -> FloatArray:
+def _move_midpoint(s: FloatArray, dt: float, dd: float, dth: float) -> tuple[float, float, float]:
     """One sigma point moved along the chord at the midpoint heading (report 003 eq. 5; heading not wrapped)."""
-    h = float(s[2]) + 0.5 * dth
-    return np.array([s[0] + dd * math.cos(h), s[1] + dd * math.sin(h), s[2] + dth])
+    x, y, th = s.tolist()
+    h = th + 0.5 * dth
+    return (x + dd * math.cos(h), y + dd * math.sin(h), th + dth)
 
 
-def _move_increment(s: FloatArray, dt: float, dx: float, dy: float, dth: float) -> FloatArray:
+def _move_increment(s: FloatArray, dt: float, dx: float, dy: float, dth: float) -> tuple[float, float, float]:
     """One sigma point with the odometry increment (robot frame) composed on it (heading not wrapped)."""
-    c, sn = math.cos(float(s[2])), math.sin(float(s[2]))
-    return np.array([s[0] + c * dx - sn * dy, s[1] + sn * dx + c * dy, s[2] + dth])
+    x, y, th = s.tolist()
+    c, sn = math.cos(th), math.sin(th)
+    return (x + c * dx - sn * dy, y + sn * dx + c * dy, th + dth)
 
 
-def _beacon_range(s: FloatArray, beacon: FloatArray) -> FloatArray:
-    """Range from the pose ``s`` to a beacon, shape (1,)."""
-    return np.array([math.hypot(float(beacon[0] - s[0]), float(beacon[1] - s[1]))])
-
-
-def _first_components(s: FloatArray, m: int) -> FloatArray:
-    """The pose's first ``m`` components (a pose fix of (x, y) or (x, y, theta))."""
-    return s[:m]
+def _range_bearing_points(sigmas: FloatArray, lx: float, ly: float) -> FloatArray:
+    """(range, bearing) of the landmark at (lx, ly) from every pose of ``sigmas`` (n, 3), shape (n, 2)."""
+    dx = lx - sigmas[:, 0]
+    dy = ly - sigmas[:, 1]
+    out = np.empty((sigmas.shape[0], 2))
+    out[:, 0] = np.hypot(dx, dy)
+    out[:, 1] = wrap_angle(np.arctan2(dy, dx) - sigmas[:, 2])
+    return out

@@ -8,7 +8,9 @@ paired whole-process comparison, alternate the two commands under a process time
     python tools/replay_timing.py 'pf[particles=10000]' office --repeat 3
 
 Every event is fed as the runner feeds it (predict for odometry, update for the routed observations, an
-estimate after each), with the runner's seed; each update call is timed with ``perf_counter_ns``.
+estimate after each), with the runner's seed; each call is timed with ``perf_counter_ns``. The first line
+gives the update median; the second the predict median and the filter's own time over the run (every
+predict, update and estimate; the runner stores the same per-step times as ``step_ns``).
 """
 
 from __future__ import annotations
@@ -34,22 +36,30 @@ def main(argv: list[str] | None = None) -> int:
     fr = resolve_filter(args.filter)
     cls = FILTERS.load(fr.id)
     times: list[int] = []
+    predict_times: list[int] = []
+    total = 0
     for _ in range(args.repeat):
         flt = cls(fr.params)
         flt.reset(ds.initial, ds.world, ds.sensors, filter_rng(fr.name, ds.name, args.seed))
         routed = flt.routed_events()
         for ev in ds.events:
+            t0 = time.perf_counter_ns()
             if isinstance(ev, Odometry):
                 flt.predict(ev)
+                predict_times.append(time.perf_counter_ns() - t0)
             elif type(ev) in routed:
-                t0 = time.perf_counter_ns()
                 flt.update(ev)
                 times.append(time.perf_counter_ns() - t0)
             flt.estimate()
+            total += time.perf_counter_ns() - t0
     if not times:
         print(f"{args.filter} on {args.dataset}: no update calls", file=sys.stderr)
         return 1
     print(f"{args.filter} on {args.dataset}: {len(times)} updates, median {statistics.median(times) / 1e3:.1f} us")
+    p_med = statistics.median(predict_times) / 1e3 if predict_times else float("nan")
+    print(
+        f"  {len(predict_times)} predicts, median {p_med:.1f} us; filter time {total / 1e9 / args.repeat:.3f} s per run"
+    )
     return 0
 
 
