@@ -82,10 +82,12 @@ Augmented MCL (PR table 8.3)
     alpha_fast >> alpha_slow; with probability max(0, 1 - w_fast / w_slow) a particle is replaced by a
     random pose in free space. Choices made here, all documented in the config:
 
-    * w_avg is the predictive likelihood of the observation under the current weights,
-      sum_i w_i p(z | x_i), taken to the power 1/m for an observation of m sightings or beams (a geometric
-      mean per measurement). Without it a 60-beam scan's likelihood underflows and scans or events with
-      different numbers of sightings would not be comparable.
+    * w_avg is, by default (``recovery_likelihood="best"``), the product over the sightings of each
+      one's likelihood at the particle that explains it best, not PR's predictive likelihood
+      sum_i w_i p(z | x_i) (``"mean"``), which falls whenever the cloud has spread between sparse sightings
+      and so injected without a kidnap; either is taken to the power 1/m for an observation of m sightings
+      or beams (a geometric mean per measurement). Without it a 60-beam scan's likelihood underflows and
+      scans or events with different numbers of sightings would not be comparable.
     * Landmarks and laser keep separate (w_slow, w_fast) pairs: their densities have different units.
     * Both averages start at the first w_avg (PR starts them at 0, which leaves the ratio undefined).
     * Injection happens at the start of an update, as a resampling from the mixture (1 - p) belief +
@@ -181,10 +183,20 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
         Off by default: report 003 names neither; kept as the documented alternative.
     inject : {"uniform", "sensor"}
         Where augmented MCL's injected particles come from. ``"uniform"``: uniform poses over free space (PR
-        table 8.3). ``"sensor"``: sensor-resetting localization (Lenser & Veloso 2000): poses drawn from the
-        current observation's likelihood, a landmark sighting's (range, bearing) perturbed by its noise and
-        inverted through the landmark's position at a uniform direction around it (a range alone: heading
-        uniform); a laser scan, which this cannot invert, falls back to uniform poses.
+        table 8.3), injected before the weighting. ``"sensor"``: sensor-resetting localization (Lenser &
+        Veloso 2000): poses drawn from the current observation's likelihood, injected after its weighting
+        (weighted by it again they would count it twice). Candidates are drawn from each sighting's
+        (range, bearing), perturbed by its noise and inverted through the landmark's position at a uniform
+        direction around it (a range alone: heading uniform), 20 per injected pose, and the event's
+        likelihood chooses among them. Only an event of two or more sightings (three ranges) injects: one
+        sighting allows a circle of poses that go on seeing it alike. Laser scans do not inject.
+    recovery_likelihood : {"best", "mean"}
+        The w_avg that w_slow and w_fast average, per sighting or beam (geometric mean). ``"mean"``: PR's
+        predictive likelihood sum_i w_i p(z | x_i); it falls whenever the cloud has spread (a gap between
+        sightings, the odometry's unmodelled systematic error), so with sparse sightings w_fast sits below
+        w_slow and particles are injected without a kidnap. ``"best"`` (default): for each sighting the
+        likelihood at the particle that explains it best (for a scan, the best particle's), which stays
+        high while any particle explains the observation and falls when none does (a kidnap).
     adaptive : {"none", "kld"}
         ``"kld"``: KLD sampling (Fox 2003, module docstring): every correction resamples and the particle
         count adapts between ``min_particles`` and ``max_particles`` (``particles`` and
@@ -250,6 +262,7 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
     roughening_k: float = 0.2
     regularise: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)
     inject: Literal["uniform", "sensor"] = field(default="uniform", metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    recovery_likelihood: Literal["best", "mean"] = field(default="best", metadata=RUN_KEY_OMIT_IF_DEFAULT)
     adaptive: Literal["none", "kld"] = field(default="none", metadata=RUN_KEY_OMIT_IF_DEFAULT)
     kld_err: float = field(default=0.01, metadata=RUN_KEY_OMIT_IF_DEFAULT)
     kld_z: float = field(default=0.99, metadata=RUN_KEY_OMIT_IF_DEFAULT)
@@ -298,6 +311,8 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
                 "need 0 <= alpha_slow < alpha_fast <= 1, "
                 f"got alpha_slow={self.alpha_slow}, alpha_fast={self.alpha_fast}"
             )
+        if self.recovery_likelihood not in ("best", "mean"):
+            raise ConfigError(f"recovery_likelihood must be 'best' or 'mean', got {self.recovery_likelihood!r}")
         if self.inject not in ("uniform", "sensor"):
             raise ConfigError(f"inject must be 'uniform' or 'sensor', got {self.inject!r}")
         if self.roughening_k < 0.0:
@@ -688,6 +703,10 @@ def _regularisation_bandwidth(n: int, d: int = 3) -> float:
     """Optimal bandwidth of a Gaussian kernel for n samples in d dimensions, (4 / ((d + 2) n))^(1 / (d + 4))
     (Musso, Oudjane & Le Gland 2001, for a Gaussian density)."""
     return float((4.0 / ((d + 2.0) * n)) ** (1.0 / (d + 4.0)))
+
+
+#: Candidates drawn per injected pose in sensor resetting, among which the event's likelihood chooses.
+_SENSOR_DRAWS = 20
 
 
 def sightings_poses(
@@ -1082,22 +1101,36 @@ class ParticleFilter(Filter):
         ex, ey = data
         return log_likelihood(self._scan_field, self._x, ex, ey)
 
+    def _best_loglik(self, kind: type, data: tuple[FloatArray, ...], ll: FloatArray, n_pred: int) -> float:
+        """Sum over the sightings of the log-likelihood of each at the particle (of the first ``n_pred``) that
+        explains it best; for a scan, the best particle's log-likelihood of the whole scan (``ll``)."""
+        if kind is LaserScan:
+            return float(np.max(ll[:n_pred]))
+        x = self._x
+        self._x = x[:n_pred]
+        try:
+            total = 0.0
+            for k in range(data[0].shape[0]):
+                one = tuple(a[k : k + 1] for a in data)
+                total += float(np.max(self._loglik(kind, one)))
+        finally:
+            self._x = x
+        return total
+
     def _correct(self, kind: type, m: int, data: tuple[FloatArray, ...]) -> None:
-        """Augmented MCL step: inject, weight, update w_slow/w_fast, resample on low ESS."""
+        """Augmented MCL step: inject (uniform poses), weight, update w_slow/w_fast, resample on low ESS or
+        to inject (poses from the observation)."""
         cfg = self.config
         rng = self._rng
         n = self._n
         resampled = False
         injected = 0
         avg = self._w_avg.get(kind)
-        if cfg.augmented and avg is not None and avg[0] > 0.0:
-            ratio = avg[1] / avg[0]
-            p_inject = max(0.0, 1.0 - ratio)
-            self._diag["w_fast_over_w_slow"] = ratio
-            self._diag["p_inject"] = p_inject
-            injected = int(rng.binomial(n, p_inject)) if p_inject > 0.0 else 0
+        if cfg.augmented and cfg.inject == "uniform" and avg is not None and avg[0] > 0.0:
+            injected = self._injection_count(avg, n)
             if injected:
-                # resample from the mixture (1 - p) belief + p injected poses (PR table 8.3)
+                # resample from the mixture (1 - p) belief + p uniform poses (PR table 8.3), before the
+                # weighting so that the injected poses are weighted by this observation
                 keep = systematic_resample(self._weights(), n - injected, rng)
                 self._x = np.concatenate([_gather(self._x, keep), self._injected_poses(kind, data, injected)])
                 self._set_uniform_weights(n)
@@ -1109,34 +1142,41 @@ class ParticleFilter(Filter):
         if not math.isfinite(log_pred):
             raise FilterDiverged(f"ParticleFilter: every particle has zero likelihood at t={self._t:.3f} s")
         self._diag["n_eff"] = n_eff
+        n_pred = n - injected if n > injected else n  # the predicted (belief) particles come first
         if cfg.augmented:
             # The averages measure the belief, so the particles injected in this step are left out (they
             # had uniform weights, as the kept ones): counting them lowered w_avg by the injected share,
             # which lowered w_fast, which raised the share, until every particle was replaced at every
             # update (docs/pf_consistency_kidnap.md). With no particle kept the injected ones are the belief.
-            n_pred = n - injected
-            if injected and n_pred > 0:
+            if cfg.recovery_likelihood == "best":
+                log_avg = self._best_loglik(kind, data, ll, n_pred)
+            elif n_pred < n:
                 top = float(np.max(ll[:n_pred]))
-                log_pred = top + math.log(float(np.mean(np.exp(ll[:n_pred] - top)))) if top > -math.inf else top
+                log_avg = top + math.log(float(np.mean(np.exp(ll[:n_pred] - top)))) if top > -math.inf else top
+            else:
+                log_avg = log_pred
             # geometric mean per sighting or beam, so that the average neither underflows nor depends on m
-            w_avg = math.exp(log_pred / m)
+            w_avg = math.exp(log_avg / m)
             if avg is None:
-                self._w_avg[kind] = [w_avg, w_avg]
+                avg = self._w_avg[kind] = [w_avg, w_avg]
             else:
                 avg[0] += cfg.alpha_slow * (w_avg - avg[0])
                 avg[1] += cfg.alpha_fast * (w_avg - avg[1])
+        # poses drawn from this observation enter after its weighting (as in Lenser & Veloso's sensor
+        # resetting and PR table 8.3): weighted by it again they would count it twice
+        late = 0
+        if cfg.augmented and cfg.inject == "sensor" and avg and self._sensor_invertible(kind, m):
+            late = self._injection_count(avg, n)
         kld = cfg.adaptive == "kld"
-        by_ess = not kld and n_eff < cfg.resample_ess_fraction * n
+        by_ess = not kld and (late > 0 or n_eff < cfg.resample_ess_fraction * n)
         jitter: FloatArray | None = None
         if (resampled or kld or by_ess) and cfg.regularise:
             # Musso et al. 2001: the kernel's covariance is h^2 times the weighted covariance before resampling
             jitter = _regularisation_root(self._x, w)
-        elif (resampled or kld or by_ess) and cfg.roughening_k > 0.0:
+        elif (resampled or kld or by_ess) and cfg.roughening_k > 0.0 and n_pred > 1:
             # roughening measures the spread of the predicted particles (not of the injected ones), the
             # heading's about the best particle's heading (the cloud's own)
-            n_pred = self._x.shape[0] - injected
-            if n_pred > 1:
-                jitter = _spread(self._x, n_pred, float(self._x[int(np.argmax(w)), 2])) * cfg.roughening_k
+            jitter = _spread(self._x, n_pred, float(self._x[int(np.argmax(w)), 2])) * cfg.roughening_k
         if kld:
             # KLD sampling draws the new set, and its size, at every correction (Fox 2003, table 1)
             self._x = _kld_resample(
@@ -1151,30 +1191,62 @@ class ParticleFilter(Filter):
                 math.radians(cfg.kld_bin_theta_deg),
             )
             self._n = n = int(self._x.shape[0])
-            self._set_uniform_weights(n)
+            late = min(late, n)
+            self._x = self._x[: n - late]
             resampled = True
         elif by_ess:
-            self._x = _gather(self._x, systematic_resample(w, n, rng))
-            self._set_uniform_weights(n)
+            self._x = _gather(self._x, systematic_resample(w, n - late, rng))
             resampled = True
         if resampled and jitter is not None:
             if jitter.ndim == 2:
                 _jitter_correlated(self._x, _regularisation_bandwidth(n) * jitter, rng)
             else:
                 _jitter(self._x, jitter * n ** (-1.0 / 3.0), rng)
+        if late:
+            self._x = np.concatenate([self._x, self._injected_poses(kind, data, late)])
+        if kld or by_ess:
+            self._set_uniform_weights(n)
         self._diag["resampled"] = 1.0 if resampled else 0.0
-        self._diag["injected"] = float(injected)
+        self._diag["injected"] = float(injected + late)
+
+    @staticmethod
+    def _sensor_invertible(kind: type, m: int) -> bool:
+        """Whether an event pins the pose down enough to draw poses from it: two range-bearing sightings or
+        three ranges. One sighting allows a whole circle of poses, all of which go on seeing it alike while
+        only that landmark is in view: injected there they pull the weighted mean round the circle."""
+        return (kind is LandmarkObservations and m >= 2) or (kind is RangeObservations and m >= 3)
+
+    def _injection_count(self, avg: list[float], n: int) -> int:
+        """How many of ``n`` particles augmented MCL replaces: Binomial(n, max(0, 1 - w_fast / w_slow))."""
+        if not avg[0] > 0.0:
+            return 0
+        ratio = avg[1] / avg[0]
+        p_inject = max(0.0, 1.0 - ratio)
+        self._diag["w_fast_over_w_slow"] = ratio
+        self._diag["p_inject"] = p_inject
+        return int(self._rng.binomial(n, p_inject)) if p_inject > 0.0 else 0
 
     def _injected_poses(self, kind: type, data: tuple[FloatArray, ...], count: int) -> FloatArray:
         """``count`` poses for augmented MCL: from the observation's likelihood (``inject="sensor"``, landmark
         sightings and beacon ranges) or uniform over free space."""
         rng = self._rng
+        cand: FloatArray | None = None
         if self.config.inject == "sensor" and kind is LandmarkObservations:
             ranges, bearings, rows = data
-            return sightings_poses(ranges, bearings, rows, self._lm_xy, self._sr, self._sb, count, rng)  # type: ignore[arg-type]
-        if self.config.inject == "sensor" and kind is RangeObservations:
+            cand = sightings_poses(ranges, bearings, rows, self._lm_xy, self._sr, self._sb, _SENSOR_DRAWS * count, rng)  # type: ignore[arg-type]
+        elif self.config.inject == "sensor" and kind is RangeObservations:
             ranges, rows = data
-            return sightings_poses(ranges, None, rows, self._lm_xy, self._srange, 0.0, count, rng)  # type: ignore[arg-type]
+            cand = sightings_poses(ranges, None, rows, self._lm_xy, self._srange, 0.0, _SENSOR_DRAWS * count, rng)  # type: ignore[arg-type]
+        if cand is not None:
+            # the candidates cover each sighting's set; the event's likelihood picks those that fit them all
+            x = self._x
+            self._x = cand
+            try:
+                ll = self._loglik(kind, data)
+            finally:
+                self._x = x
+            cw = np.exp(ll - np.max(ll))
+            return _gather(cand, systematic_resample(cw, count, rng))
         assert self._space is not None
         return self._space.sample(count, rng)
 

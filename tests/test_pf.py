@@ -129,6 +129,7 @@ def test_systematic_resample_counts_are_within_one_of_n_w() -> None:
         ({"use_landmarks": False, "use_laser": False, "use_ranges": False}, "use_landmarks"),
         ({"roughening_k": -1.0}, "roughening_k"),
         ({"inject": "gaussian"}, "inject"),
+        ({"recovery_likelihood": "max"}, "recovery_likelihood"),
     ],
 )
 def test_config_errors_name_the_field(kw: dict[str, object], field: str) -> None:
