@@ -188,8 +188,9 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
         (weighted by it again they would count it twice). Candidates are drawn from each sighting's
         (range, bearing), perturbed by its noise and inverted through the landmark's position at a uniform
         direction around it (a range alone: heading uniform), 20 per injected pose, and the event's
-        likelihood chooses among them. Only an event of two or more sightings (three ranges) injects: one
-        sighting allows a circle of poses that go on seeing it alike. Laser scans do not inject.
+        likelihood chooses among them. Only an event of two or more sightings (three ranges) is inverted: one
+        sighting allows a circle of poses that go on seeing it alike; the other events (and scans) inject
+        uniform poses as ``"uniform"`` does.
     recovery_likelihood : {"best", "mean"}
         The w_avg that w_slow and w_fast average, per sighting or beam (geometric mean). ``"mean"``: PR's
         predictive likelihood sum_i w_i p(z | x_i); it falls whenever the cloud has spread (a gap between
@@ -1126,13 +1127,15 @@ class ParticleFilter(Filter):
         resampled = False
         injected = 0
         avg = self._w_avg.get(kind)
-        if cfg.augmented and cfg.inject == "uniform" and avg is not None and avg[0] > 0.0:
+        from_sensor = cfg.inject == "sensor" and self._sensor_invertible(kind, m)
+        if cfg.augmented and not from_sensor and avg is not None and avg[0] > 0.0:
             injected = self._injection_count(avg, n)
             if injected:
                 # resample from the mixture (1 - p) belief + p uniform poses (PR table 8.3), before the
                 # weighting so that the injected poses are weighted by this observation
                 keep = systematic_resample(self._weights(), n - injected, rng)
-                self._x = np.concatenate([_gather(self._x, keep), self._injected_poses(kind, data, injected)])
+                assert self._space is not None
+                self._x = np.concatenate([_gather(self._x, keep), self._space.sample(injected, rng)])
                 self._set_uniform_weights(n)
                 resampled = True
         w = np.empty(self._x.shape[0])
@@ -1164,9 +1167,7 @@ class ParticleFilter(Filter):
                 avg[1] += cfg.alpha_fast * (w_avg - avg[1])
         # poses drawn from this observation enter after its weighting (as in Lenser & Veloso's sensor
         # resetting and PR table 8.3): weighted by it again they would count it twice
-        late = 0
-        if cfg.augmented and cfg.inject == "sensor" and avg and self._sensor_invertible(kind, m):
-            late = self._injection_count(avg, n)
+        late = self._injection_count(avg, n) if cfg.augmented and from_sensor and avg else 0
         kld = cfg.adaptive == "kld"
         by_ess = not kld and (late > 0 or n_eff < cfg.resample_ess_fraction * n)
         jitter: FloatArray | None = None
@@ -1227,28 +1228,24 @@ class ParticleFilter(Filter):
         return int(self._rng.binomial(n, p_inject)) if p_inject > 0.0 else 0
 
     def _injected_poses(self, kind: type, data: tuple[FloatArray, ...], count: int) -> FloatArray:
-        """``count`` poses for augmented MCL: from the observation's likelihood (``inject="sensor"``, landmark
-        sightings and beacon ranges) or uniform over free space."""
+        """``count`` poses drawn from the likelihood of a landmark or beacon event (``inject="sensor"``): 20
+        candidates per pose from the single sightings (:func:`sightings_poses`), chosen among by the event's
+        likelihood."""
         rng = self._rng
-        cand: FloatArray | None = None
-        if self.config.inject == "sensor" and kind is LandmarkObservations:
+        if kind is LandmarkObservations:
             ranges, bearings, rows = data
             cand = sightings_poses(ranges, bearings, rows, self._lm_xy, self._sr, self._sb, _SENSOR_DRAWS * count, rng)  # type: ignore[arg-type]
-        elif self.config.inject == "sensor" and kind is RangeObservations:
+        else:
             ranges, rows = data
             cand = sightings_poses(ranges, None, rows, self._lm_xy, self._srange, 0.0, _SENSOR_DRAWS * count, rng)  # type: ignore[arg-type]
-        if cand is not None:
-            # the candidates cover each sighting's set; the event's likelihood picks those that fit them all
-            x = self._x
-            self._x = cand
-            try:
-                ll = self._loglik(kind, data)
-            finally:
-                self._x = x
-            cw = np.exp(ll - np.max(ll))
-            return _gather(cand, systematic_resample(cw, count, rng))
-        assert self._space is not None
-        return self._space.sample(count, rng)
+        x = self._x
+        self._x = cand
+        try:
+            ll = self._loglik(kind, data)
+        finally:
+            self._x = x
+        cw = np.exp(ll - np.max(ll))
+        return _gather(cand, systematic_resample(cw, count, rng))
 
     # --- output ------------------------------------------------------------------------------------------
 
