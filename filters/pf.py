@@ -191,6 +191,12 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
         likelihood chooses among them. Only an event of two or more sightings (three ranges) is inverted: one
         sighting allows a circle of poses that go on seeing it alike; the other events (and scans) inject
         uniform poses as ``"uniform"`` does.
+    inject_pairs : bool
+        With ``inject="sensor"``: a single sighting of a landmark that the previous landmark event did not
+        see is inverted together with that event: candidates from the previous event's sightings, moved by
+        the odometry composed since, chosen by this sighting's likelihood. For worlds that see one landmark
+        at a time (``room``); the odometry between the two events makes these poses less precise than
+        those of one event of two sightings (docs/pf_consistency_kidnap.md).
     recovery_likelihood : {"best", "mean"}
         The w_avg that w_slow and w_fast average, per sighting or beam (geometric mean). ``"mean"``: PR's
         predictive likelihood sum_i w_i p(z | x_i); it falls whenever the cloud has spread (a gap between
@@ -263,6 +269,7 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
     roughening_k: float = 0.2
     regularise: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)
     inject: Literal["uniform", "sensor"] = field(default="uniform", metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    inject_pairs: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)
     recovery_likelihood: Literal["best", "mean"] = field(default="best", metadata=RUN_KEY_OMIT_IF_DEFAULT)
     adaptive: Literal["none", "kld"] = field(default="none", metadata=RUN_KEY_OMIT_IF_DEFAULT)
     kld_err: float = field(default=0.01, metadata=RUN_KEY_OMIT_IF_DEFAULT)
@@ -692,6 +699,14 @@ def _weighted_stats(poses: FloatArray, w: FloatArray) -> tuple[FloatArray, Float
 # --- helpers ------------------------------------------------------------------------------------------------
 
 
+def _compose_into(delta: FloatArray, dx: float, dy: float, dtheta: float) -> None:
+    """delta <- delta (+) (dx, dy, dtheta), in place: an increment in the frame of delta's end pose appended."""
+    c, s = math.cos(delta[2]), math.sin(delta[2])
+    delta[0] += c * dx - s * dy
+    delta[1] += s * dx + c * dy
+    delta[2] = wrap_angle(delta[2] + dtheta)
+
+
 def _regularisation_root(x: FloatArray, w: FloatArray) -> FloatArray:
     """A symmetric square root of the weighted covariance of the particles (negative rounding clipped)."""
     _, cov = _weighted_stats(x, w)
@@ -934,6 +949,8 @@ class ParticleFilter(Filter):
         self._set_uniform_weights(self._n)
         # augmented MCL: per sensor [w_slow, w_fast], started at the first w_avg
         self._w_avg: dict[type, list[float]] = {}
+        # sensor resetting: the last landmark event's sightings and the odometry composed since (robot frame)
+        self._last_sightings: tuple[tuple[FloatArray, ...], FloatArray] | None = None
         self._t = math.nan
         self._diag = self._fresh_diag()
         self._est: Estimate | None = None
@@ -975,6 +992,8 @@ class ParticleFilter(Filter):
             )
             sd = np.array([math.sqrt(vxy), math.sqrt(vth)])
             _move(self._x, False, np.array([u.dx, u.dy, u.dtheta]), sd, 1.0, self._q_std, rng)
+        if self._last_sightings is not None:
+            _compose_into(self._last_sightings[1], u.dx, u.dy, u.dtheta)
         self._t = u.t
         self._diag = self._fresh_diag()
         self._est = None
@@ -1127,7 +1146,10 @@ class ParticleFilter(Filter):
         resampled = False
         injected = 0
         avg = self._w_avg.get(kind)
-        from_sensor = cfg.inject == "sensor" and self._sensor_invertible(kind, m)
+        pair = (
+            self._sighting_pair(kind, data) if cfg.augmented and cfg.inject == "sensor" and cfg.inject_pairs else None
+        )
+        from_sensor = cfg.inject == "sensor" and (self._sensor_invertible(kind, m) or pair is not None)
         if cfg.augmented and not from_sensor and avg is not None and avg[0] > 0.0:
             injected = self._injection_count(avg, n)
             if injected:
@@ -1204,7 +1226,9 @@ class ParticleFilter(Filter):
             else:
                 _jitter(self._x, jitter * n ** (-1.0 / 3.0), rng)
         if late:
-            self._x = np.concatenate([self._x, self._injected_poses(kind, data, late)])
+            self._x = np.concatenate([self._x, self._injected_poses(kind, data, late, pair)])
+        if cfg.augmented and cfg.inject == "sensor" and cfg.inject_pairs and kind is LandmarkObservations:
+            self._last_sightings = (data, np.zeros(3))
         if kld or by_ess:
             self._set_uniform_weights(n)
         self._diag["resampled"] = 1.0 if resampled else 0.0
@@ -1227,12 +1251,38 @@ class ParticleFilter(Filter):
         self._diag["p_inject"] = p_inject
         return int(self._rng.binomial(n, p_inject)) if p_inject > 0.0 else 0
 
-    def _injected_poses(self, kind: type, data: tuple[FloatArray, ...], count: int) -> FloatArray:
+    def _sighting_pair(
+        self, kind: type, data: tuple[FloatArray, ...]
+    ) -> tuple[tuple[FloatArray, ...], FloatArray] | None:
+        """The previous landmark event and the odometry since, when this event is a single sighting of a
+        landmark that the previous event did not see: the two together pin the pose down."""
+        last = self._last_sightings
+        if kind is not LandmarkObservations or last is None or data[0].shape[0] != 1:
+            return None
+        row = int(data[2][0])
+        prev = last[0][2]
+        return last if row >= 0 and bool(np.any((prev >= 0) & (prev != row))) else None
+
+    def _injected_poses(
+        self,
+        kind: type,
+        data: tuple[FloatArray, ...],
+        count: int,
+        pair: tuple[tuple[FloatArray, ...], FloatArray] | None = None,
+    ) -> FloatArray:
         """``count`` poses drawn from the likelihood of a landmark or beacon event (``inject="sensor"``): 20
         candidates per pose from the single sightings (:func:`sightings_poses`), chosen among by the event's
-        likelihood."""
+        likelihood. With ``pair`` (the previous landmark event and the odometry since) the candidates come
+        from the previous event's sightings, moved by that odometry, and this event chooses among them."""
         rng = self._rng
-        if kind is LandmarkObservations:
+        if pair is not None:
+            (ranges, bearings, rows), delta = pair
+            cand = sightings_poses(ranges, bearings, rows, self._lm_xy, self._sr, self._sb, _SENSOR_DRAWS * count, rng)  # type: ignore[arg-type]
+            c, sn = np.cos(cand[:, 2]), np.sin(cand[:, 2])
+            cand[:, 0] += c * delta[0] - sn * delta[1]
+            cand[:, 1] += sn * delta[0] + c * delta[1]
+            cand[:, 2] = wrap_angle(cand[:, 2] + delta[2])
+        elif kind is LandmarkObservations:
             ranges, bearings, rows = data
             cand = sightings_poses(ranges, bearings, rows, self._lm_xy, self._sr, self._sb, _SENSOR_DRAWS * count, rng)  # type: ignore[arg-type]
         else:

@@ -555,3 +555,20 @@ def test_sensor_reset_recovers_a_kidnap_faster_than_uniform_injection() -> None:
                 first.setdefault(inject, k)
     assert np.hypot(*(f.estimate().mean[:2] - kidnapped[:2])) < 0.1  # the sensor-reset filter, last run
     assert first["sensor"] < first.get("uniform", 60)
+
+
+def test_sighting_pairs_recover_a_kidnap_seen_one_landmark_at_a_time() -> None:
+    """One sighting per event, alternating landmarks: ``inject_pairs`` inverts each with the previous one
+    through the odometry between them (here none: the robot stands still)."""
+    pose = np.array([2.0, 1.5, 0.3])
+    kidnapped = np.array([1.0, 0.8, -1.0])
+    still = Odometry(t=0.0, dx=0.0, dy=0.0, dtheta=0.0, d_left=0.0, d_right=0.0)
+    f = _pf(particles=500, augmented=True, inject="sensor", inject_pairs=True)
+    f.reset(_initial(sigma=0.02), _world(), SENSORS, np.random.default_rng(7))
+    for k in range(10):
+        f.predict(still)
+        f.update(_sightings(pose, [2 * (k % 2)], t=0.2 * k))
+    for k in range(60):
+        f.predict(still)
+        f.update(_sightings(kidnapped, [2 * (k % 2)], t=2.0 + 0.2 * k))
+    assert np.hypot(*(f.estimate().mean[:2] - kidnapped[:2])) < 0.1
