@@ -74,6 +74,8 @@ KIDNAP_FILTERS = (
     "kf_linear",
     "pf[augmented=true]",
     "pf[augmented=true,inject=sensor]",
+    # sensor resetting also from pairs of single sightings: recovers on room, at a cost in tracking accuracy
+    "pf[augmented=true,inject=sensor,inject_pairs=true]",
     # KLD-adaptive MCL (Fox 2003) with the same augmented recovery
     "pf[adaptive=kld,augmented=true]",
     "pf[adaptive=kld,augmented=true,inject=sensor]",
