@@ -62,7 +62,9 @@ class Suite:
 #: Every registered filter with its default config: the rows of the main comparison.
 ALL_FILTERS = ("odometry", "ekf_landmarks", "ukf_landmarks", "ekf_lines", "ekf_icp", "kf_linear", "pf", "gtsam_fls")
 #: Each filter with its own source's kidnap policy: 000's inflation rule is built into ekf_icp; pf's
-#: augmented MCL is switched on (003's PF, the default, only resamples); the others have none.
+#: augmented MCL is switched on (003's PF, the default, only resamples), injecting uniform poses (PR
+#: table 8.3) or poses drawn from the sightings (sensor resetting, Lenser & Veloso 2000); the others
+#: have none.
 KIDNAP_FILTERS = (
     "odometry",
     "ekf_landmarks",
@@ -71,8 +73,12 @@ KIDNAP_FILTERS = (
     "ekf_icp",
     "kf_linear",
     "pf[augmented=true]",
+    "pf[augmented=true,inject=sensor]",
+    # sensor resetting also from pairs of single sightings: recovers on room, at a cost in tracking accuracy
+    "pf[augmented=true,inject=sensor,inject_pairs=true]",
     # KLD-adaptive MCL (Fox 2003) with the same augmented recovery
     "pf[adaptive=kld,augmented=true]",
+    "pf[adaptive=kld,augmented=true,inject=sensor]",
     "gtsam_fls",
 )
 KIDNAP_DISTANCES_M = (0.5, 1, 2, 4)

@@ -49,8 +49,11 @@ Resampling
     Systematic ("low-variance", linear-time) resampling, PR table 4.4 and report 003's ref. [8]: one
     uniform offset u ~ U[0, 1/N) and the points u + k/N located in the cumulative weights in one merge pass;
     done when the effective sample size 1 / sum w_i^2 falls below ``resample_ess_fraction * N`` (Liu &
-    Chen's criterion) rather than at every step. Roughening (Gordon et al.) follows every resampling; the
-    heading's spread is measured about the heading of the heaviest particle before it.
+    Chen's criterion) rather than at every step. Roughening (Gordon et al.) follows every resampling, with
+    the spread of the predicted particles (``roughening_k``; the heading's measured about the heading of the
+    heaviest particle), so that a weighting in which one particle takes nearly all the weight does not leave
+    N copies of it and a zero covariance. ``regularise=true`` replaces it by post-regularised resampling
+    (Musso, Oudjane & Le Gland 2001).
 
 KLD sampling (``adaptive="kld"``; Fox, "Adapting the sample size in particle filters through
 KLD-sampling", IJRR 2003)
@@ -79,15 +82,21 @@ Augmented MCL (PR table 8.3)
     alpha_fast >> alpha_slow; with probability max(0, 1 - w_fast / w_slow) a particle is replaced by a
     random pose in free space. Choices made here, all documented in the config:
 
-    * w_avg is the predictive likelihood of the observation under the current weights,
-      sum_i w_i p(z | x_i), taken to the power 1/m for an observation of m sightings or beams (a geometric
-      mean per measurement). Without it a 60-beam scan's likelihood underflows and scans or events with
-      different numbers of sightings would not be comparable.
+    * w_avg is, by default (``recovery_likelihood="best"``), the product over the sightings of each
+      one's likelihood at the particle that explains it best, not PR's predictive likelihood
+      sum_i w_i p(z | x_i) (``"mean"``), which falls whenever the cloud has spread between sparse sightings
+      and so injected without a kidnap; either is taken to the power 1/m for an observation of m sightings
+      or beams (a geometric mean per measurement). Without it a 60-beam scan's likelihood underflows and
+      scans or events with different numbers of sightings would not be comparable.
     * Landmarks and laser keep separate (w_slow, w_fast) pairs: their densities have different units.
     * Both averages start at the first w_avg (PR starts them at 0, which leaves the ratio undefined).
     * Injection happens at the start of an update, as a resampling from the mixture (1 - p) belief +
-      p uniform, so the injected particles are weighted by that observation before the estimate is read
-      (in PR they enter unweighted and would drag the weighted mean until the next observation).
+      p injected, so the injected particles are weighted by that observation before the estimate is read
+      (in PR they enter unweighted and would drag the weighted mean until the next observation). w_avg is
+      then taken over the kept (belief) particles only: taken over the mixture it fed the injected share
+      back into w_fast and ran away to replacing every particle at every update.
+    * The injected poses are uniform over free space (PR) or, with ``inject="sensor"``, drawn from the
+      observation's likelihood (sensor-resetting localization, Lenser & Veloso 2000; see the config).
     * alpha_slow = 0.001 and alpha_fast = 0.1, the values ROS AMCL's documentation suggests (PR only
       requires 0 <= alpha_slow << alpha_fast).
 
@@ -162,10 +171,39 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
         Decay rates of w_slow and w_fast (0 <= alpha_slow < alpha_fast <= 1); ROS AMCL's suggested 0.001, 0.1.
     roughening_k : float
         Roughening after each resampling (Gordon, Salmond & Smith 1993, sec. 4.1): every particle is jittered by
-        a zero-mean Gaussian whose standard deviation in each of the d = 3 dimensions is K E N^(-1/d), E the
-        spread (max - min) of the resampled particles in that dimension; K = 0.2 is their value, 0 switches it
-        off. It keeps resampled duplicates apart (sample impoverishment), which an accurate sensor and a
-        motion model without the robot's systematic error would otherwise cause.
+        a zero-mean Gaussian whose standard deviation in each of the d = 3 dimensions is K E N^(-1/d); K = 0.2
+        is their value, 0 switches it off. E is the spread (max - min) in that dimension of the predicted
+        particles that enter the correction (injected ones left out), not of the resampled set as in Gordon
+        et al.: when one particle takes nearly all the weight the resampled set is N copies of it, its spread
+        is 0, and roughening would leave a zero covariance (an infinite NEES; docs/pf_consistency_kidnap.md).
+    regularise : bool
+        Post-regularised resampling (Musso, Oudjane & Le Gland 2001) instead of roughening: after each
+        resampling every particle moves by h L e, e ~ N(0, I), L L^T the weighted covariance of the particles
+        before resampling and h = (4 / ((d + 2) N))^(1 / (d + 4)) the optimal bandwidth of a Gaussian kernel.
+        Off by default: report 003 names neither; kept as the documented alternative.
+    inject : {"uniform", "sensor"}
+        Where augmented MCL's injected particles come from. ``"uniform"``: uniform poses over free space (PR
+        table 8.3), injected before the weighting. ``"sensor"``: sensor-resetting localization (Lenser &
+        Veloso 2000): poses drawn from the current observation's likelihood, injected after its weighting
+        (weighted by it again they would count it twice). Candidates are drawn from each sighting's
+        (range, bearing), perturbed by its noise and inverted through the landmark's position at a uniform
+        direction around it (a range alone: heading uniform), 20 per injected pose, and the event's
+        likelihood chooses among them. Only an event of two or more sightings (three ranges) is inverted: one
+        sighting allows a circle of poses that go on seeing it alike; the other events (and scans) inject
+        uniform poses as ``"uniform"`` does.
+    inject_pairs : bool
+        With ``inject="sensor"``: a single sighting of a landmark that the previous landmark event did not
+        see is inverted together with that event: candidates from the previous event's sightings, moved by
+        the odometry composed since, chosen by this sighting's likelihood. For worlds that see one landmark
+        at a time (``room``); the odometry between the two events makes these poses less precise than
+        those of one event of two sightings (docs/pf_consistency_kidnap.md).
+    recovery_likelihood : {"best", "mean"}
+        The w_avg that w_slow and w_fast average, per sighting or beam (geometric mean). ``"mean"``: PR's
+        predictive likelihood sum_i w_i p(z | x_i); it falls whenever the cloud has spread (a gap between
+        sightings, the odometry's unmodelled systematic error), so with sparse sightings w_fast sits below
+        w_slow and particles are injected without a kidnap. ``"best"`` (default): for each sighting the
+        likelihood at the particle that explains it best (for a scan, the best particle's), which stays
+        high while any particle explains the observation and falls when none does (a kidnap).
     adaptive : {"none", "kld"}
         ``"kld"``: KLD sampling (Fox 2003, module docstring): every correction resamples and the particle
         count adapts between ``min_particles`` and ``max_particles`` (``particles`` and
@@ -229,6 +267,10 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
     alpha_slow: float = 0.001
     alpha_fast: float = 0.1
     roughening_k: float = 0.2
+    regularise: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    inject: Literal["uniform", "sensor"] = field(default="uniform", metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    inject_pairs: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    recovery_likelihood: Literal["best", "mean"] = field(default="best", metadata=RUN_KEY_OMIT_IF_DEFAULT)
     adaptive: Literal["none", "kld"] = field(default="none", metadata=RUN_KEY_OMIT_IF_DEFAULT)
     kld_err: float = field(default=0.01, metadata=RUN_KEY_OMIT_IF_DEFAULT)
     kld_z: float = field(default=0.99, metadata=RUN_KEY_OMIT_IF_DEFAULT)
@@ -277,6 +319,10 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
                 "need 0 <= alpha_slow < alpha_fast <= 1, "
                 f"got alpha_slow={self.alpha_slow}, alpha_fast={self.alpha_fast}"
             )
+        if self.recovery_likelihood not in ("best", "mean"):
+            raise ConfigError(f"recovery_likelihood must be 'best' or 'mean', got {self.recovery_likelihood!r}")
+        if self.inject not in ("uniform", "sensor"):
+            raise ConfigError(f"inject must be 'uniform' or 'sensor', got {self.inject!r}")
         if self.roughening_k < 0.0:
             raise ConfigError(f"roughening_k must be >= 0, got {self.roughening_k}")
         if self.laser_beams < 1:
@@ -579,11 +625,9 @@ def _kld_resample(
 
 
 @njit(cache=True)
-def _roughen(x: FloatArray, k: float, ref_heading: float, rng: np.random.Generator) -> None:
-    """Gordon, Salmond & Smith (1993) roughening in place: jitter of std K E N^(-1/3) per dimension, E the
-    spread (max - min); the heading's spread is that of the residuals wrapped about ``ref_heading`` (a heading
-    of the cloud), so that a cloud straddling +-pi is not seen as 2 pi wide."""
-    n = x.shape[0]
+def _spread(x: FloatArray, n: int, ref_heading: float) -> FloatArray:
+    """max - min of each coordinate over the first ``n`` particles, the heading's taken over the residuals
+    wrapped about ``ref_heading`` (a heading of the cloud), so that a cloud straddling +-pi is not 2 pi wide."""
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     for i in range(n):
@@ -594,7 +638,20 @@ def _roughen(x: FloatArray, k: float, ref_heading: float, rng: np.random.Generat
         hi[1] = max(hi[1], x[i, 1])
         lo[2] = min(lo[2], r2)
         hi[2] = max(hi[2], r2)
-    _jitter(x, k * (hi - lo) * n ** (-1.0 / 3.0), rng)
+    return hi - lo
+
+
+@njit(cache=True)
+def _jitter_correlated(x: FloatArray, root: FloatArray, rng: np.random.Generator) -> None:
+    """Add ``root`` e, e ~ N(0, I_3), to every particle in place (``root`` (3, 3), any square root of the
+    jitter's covariance) and wrap the heading."""
+    for i in range(x.shape[0]):
+        e0 = rng.standard_normal()
+        e1 = rng.standard_normal()
+        e2 = rng.standard_normal()
+        x[i, 0] += root[0, 0] * e0 + root[0, 1] * e1 + root[0, 2] * e2
+        x[i, 1] += root[1, 0] * e0 + root[1, 1] * e1 + root[1, 2] * e2
+        x[i, 2] = _wrap(x[i, 2] + root[2, 0] * e0 + root[2, 1] * e1 + root[2, 2] * e2)
 
 
 @njit(cache=True)
@@ -640,6 +697,67 @@ def _weighted_stats(poses: FloatArray, w: FloatArray) -> tuple[FloatArray, Float
 
 
 # --- helpers ------------------------------------------------------------------------------------------------
+
+
+def _compose_into(delta: FloatArray, dx: float, dy: float, dtheta: float) -> None:
+    """delta <- delta (+) (dx, dy, dtheta), in place: an increment in the frame of delta's end pose appended."""
+    c, s = math.cos(delta[2]), math.sin(delta[2])
+    delta[0] += c * dx - s * dy
+    delta[1] += s * dx + c * dy
+    delta[2] = wrap_angle(delta[2] + dtheta)
+
+
+def _regularisation_root(x: FloatArray, w: FloatArray) -> FloatArray:
+    """A symmetric square root of the weighted covariance of the particles (negative rounding clipped)."""
+    _, cov = _weighted_stats(x, w)
+    vals, vecs = np.linalg.eigh(cov)
+    out: FloatArray = (vecs * np.sqrt(np.clip(vals, 0.0, None))) @ vecs.T
+    return out
+
+
+def _regularisation_bandwidth(n: int, d: int = 3) -> float:
+    """Optimal bandwidth of a Gaussian kernel for n samples in d dimensions, (4 / ((d + 2) n))^(1 / (d + 4))
+    (Musso, Oudjane & Le Gland 2001, for a Gaussian density)."""
+    return float((4.0 / ((d + 2.0) * n)) ** (1.0 / (d + 4.0)))
+
+
+#: Candidates drawn per injected pose in sensor resetting, among which the event's likelihood chooses.
+_SENSOR_DRAWS = 20
+
+
+def sightings_poses(
+    ranges: FloatArray,
+    bearings: FloatArray | None,
+    rows: IntArray,
+    lm_xy: FloatArray,
+    sigma_range: float,
+    sigma_bearing: float,
+    n: int,
+    rng: np.random.Generator,
+) -> FloatArray:
+    """``n`` poses drawn from the likelihood of one event's sightings (sensor resetting, Lenser & Veloso 2000).
+
+    Each pose takes one of the sightings at random, perturbs its range (and bearing) by the sensor noise and
+    places the robot at that range from the landmark in a uniform direction phi around it, the heading
+    phi - bearing; without bearings (beacon ranges) the heading is uniform. A withheld id (row < 0) takes a
+    landmark of the map at random. The poses cover the set the single sighting allows, and the other
+    sightings of the event then weigh them.
+    """
+    k = rng.integers(0, ranges.shape[0], size=n)
+    row = rows[k]
+    unknown = row < 0
+    row[unknown] = rng.integers(0, lm_xy.shape[0], size=int(unknown.sum()))
+    r = np.maximum(ranges[k] + sigma_range * rng.standard_normal(n), 0.0)
+    phi = rng.uniform(-math.pi, math.pi, size=n)  # direction from the robot to the landmark
+    out = np.empty((n, 3))
+    out[:, 0] = lm_xy[row, 0] - r * np.cos(phi)
+    out[:, 1] = lm_xy[row, 1] - r * np.sin(phi)
+    if bearings is None:
+        out[:, 2] = rng.uniform(-math.pi, math.pi, size=n)
+    else:
+        out[:, 2] = phi - (bearings[k] + sigma_bearing * rng.standard_normal(n))
+    out[:, 2] = wrap_angle(out[:, 2])
+    return out
 
 
 def systematic_resample(weights: npt.ArrayLike, n: int, rng: np.random.Generator) -> IntArray:
@@ -711,8 +829,9 @@ class ParticleFilter(Filter):
     consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LandmarkObservations, LaserScan, RangeObservations})
     requires: ClassVar[frozenset[MapKind]] = frozenset()
     Config: ClassVar[type[FilterConfig]] = ParticleFilterConfig
-    # 2: compiled kernels, so other random streams; 3: augmented MCL may inject every particle
-    version: ClassVar[int] = 3
+    # 2: compiled kernels, so other random streams; 3: augmented MCL may inject every particle; 4: roughening
+    # measures the predicted particles' spread, so it never leaves a resampled set of copies (other results)
+    version: ClassVar[int] = 4
     source: ClassVar[str] = "003_e5c93f9be776ee5e.txt sec. 4.2; Thrun, Burgard & Fox, Probabilistic Robotics ch. 6, 8"
     config: ParticleFilterConfig
 
@@ -798,11 +917,13 @@ class ParticleFilter(Filter):
             (cfg.sigma_range_m is None and sensors.landmark_sigma_range_m is None)
             or (cfg.sigma_bearing_rad is None and sensors.landmark_sigma_bearing_rad is None)
         )
+        self._sr, self._sb = sr, sb
         self._inv_var_r, self._inv_var_b = 1.0 / (sr * sr), 1.0 / (sb * sb)
         self._lm_log_norm = -_LOG_2PI - math.log(sr) - math.log(sb)
         srange = range_only_noise(cfg.range_only_sigma_m, sensors, warn=False)
         self._range_warn = self._use_ranges and cfg.range_only_sigma_m is None and sensors.range_sigma_m is None
         eps = cfg.range_outlier_fraction
+        self._srange = srange
         self._range_inv_var = 1.0 / (srange * srange)
         self._range_log_hit = math.log1p(-eps) - 0.5 * _LOG_2PI - math.log(srange)
         self._range_log_floor = math.log(eps / cfg.range_outlier_span_m) if eps > 0.0 else -math.inf
@@ -828,6 +949,8 @@ class ParticleFilter(Filter):
         self._set_uniform_weights(self._n)
         # augmented MCL: per sensor [w_slow, w_fast], started at the first w_avg
         self._w_avg: dict[type, list[float]] = {}
+        # sensor resetting: the last landmark event's sightings and the odometry composed since (robot frame)
+        self._last_sightings: tuple[tuple[FloatArray, ...], FloatArray] | None = None
         self._t = math.nan
         self._diag = self._fresh_diag()
         self._est: Estimate | None = None
@@ -869,6 +992,8 @@ class ParticleFilter(Filter):
             )
             sd = np.array([math.sqrt(vxy), math.sqrt(vth)])
             _move(self._x, False, np.array([u.dx, u.dy, u.dtheta]), sd, 1.0, self._q_std, rng)
+        if self._last_sightings is not None:
+            _compose_into(self._last_sightings[1], u.dx, u.dy, u.dtheta)
         self._t = u.t
         self._diag = self._fresh_diag()
         self._est = None
@@ -996,44 +1121,86 @@ class ParticleFilter(Filter):
         ex, ey = data
         return log_likelihood(self._scan_field, self._x, ex, ey)
 
+    def _best_loglik(self, kind: type, data: tuple[FloatArray, ...], ll: FloatArray, n_pred: int) -> float:
+        """Sum over the sightings of the log-likelihood of each at the particle (of the first ``n_pred``) that
+        explains it best; for a scan, the best particle's log-likelihood of the whole scan (``ll``)."""
+        if kind is LaserScan:
+            return float(np.max(ll[:n_pred]))
+        x = self._x
+        self._x = x[:n_pred]
+        try:
+            total = 0.0
+            for k in range(data[0].shape[0]):
+                one = tuple(a[k : k + 1] for a in data)
+                total += float(np.max(self._loglik(kind, one)))
+        finally:
+            self._x = x
+        return total
+
     def _correct(self, kind: type, m: int, data: tuple[FloatArray, ...]) -> None:
-        """Augmented MCL step: inject, weight, update w_slow/w_fast, resample on low ESS."""
+        """Augmented MCL step: inject (uniform poses), weight, update w_slow/w_fast, resample on low ESS or
+        to inject (poses from the observation)."""
         cfg = self.config
         rng = self._rng
         n = self._n
         resampled = False
         injected = 0
         avg = self._w_avg.get(kind)
-        if cfg.augmented and avg is not None and avg[0] > 0.0:
-            ratio = avg[1] / avg[0]
-            p_inject = max(0.0, 1.0 - ratio)
-            self._diag["w_fast_over_w_slow"] = ratio
-            self._diag["p_inject"] = p_inject
-            injected = int(rng.binomial(n, p_inject)) if p_inject > 0.0 else 0
+        pair = (
+            self._sighting_pair(kind, data) if cfg.augmented and cfg.inject == "sensor" and cfg.inject_pairs else None
+        )
+        from_sensor = cfg.inject == "sensor" and (self._sensor_invertible(kind, m) or pair is not None)
+        if cfg.augmented and not from_sensor and avg is not None and avg[0] > 0.0:
+            injected = self._injection_count(avg, n)
             if injected:
-                # resample from the mixture (1 - p) belief + p uniform over free space (PR table 8.3)
-                assert self._space is not None
+                # resample from the mixture (1 - p) belief + p uniform poses (PR table 8.3), before the
+                # weighting so that the injected poses are weighted by this observation
                 keep = systematic_resample(self._weights(), n - injected, rng)
+                assert self._space is not None
                 self._x = np.concatenate([_gather(self._x, keep), self._space.sample(injected, rng)])
                 self._set_uniform_weights(n)
                 resampled = True
         w = np.empty(self._x.shape[0])
-        log_pred, n_eff = _reweigh(self._logw, self._loglik(kind, data), w)
+        ll = self._loglik(kind, data)
+        log_pred, n_eff = _reweigh(self._logw, ll, w)
         self._w, self._w_of = w, self._logw
         if not math.isfinite(log_pred):
             raise FilterDiverged(f"ParticleFilter: every particle has zero likelihood at t={self._t:.3f} s")
         self._diag["n_eff"] = n_eff
+        n_pred = n - injected if n > injected else n  # the predicted (belief) particles come first
         if cfg.augmented:
+            # The averages measure the belief, so the particles injected in this step are left out (they
+            # had uniform weights, as the kept ones): counting them lowered w_avg by the injected share,
+            # which lowered w_fast, which raised the share, until every particle was replaced at every
+            # update (docs/pf_consistency_kidnap.md). With no particle kept the injected ones are the belief.
+            if cfg.recovery_likelihood == "best":
+                log_avg = self._best_loglik(kind, data, ll, n_pred)
+            elif n_pred < n:
+                top = float(np.max(ll[:n_pred]))
+                log_avg = top + math.log(float(np.mean(np.exp(ll[:n_pred] - top)))) if top > -math.inf else top
+            else:
+                log_avg = log_pred
             # geometric mean per sighting or beam, so that the average neither underflows nor depends on m
-            w_avg = math.exp(log_pred / m)
+            w_avg = math.exp(log_avg / m)
             if avg is None:
-                self._w_avg[kind] = [w_avg, w_avg]
+                avg = self._w_avg[kind] = [w_avg, w_avg]
             else:
                 avg[0] += cfg.alpha_slow * (w_avg - avg[0])
                 avg[1] += cfg.alpha_fast * (w_avg - avg[1])
-        # roughening measures the heading spread about the best particle's heading (the cloud's own)
-        ref_heading = float(self._x[int(np.argmax(w)), 2])
-        if cfg.adaptive == "kld":
+        # poses drawn from this observation enter after its weighting (as in Lenser & Veloso's sensor
+        # resetting and PR table 8.3): weighted by it again they would count it twice
+        late = self._injection_count(avg, n) if cfg.augmented and from_sensor and avg else 0
+        kld = cfg.adaptive == "kld"
+        by_ess = not kld and (late > 0 or n_eff < cfg.resample_ess_fraction * n)
+        jitter: FloatArray | None = None
+        if (resampled or kld or by_ess) and cfg.regularise:
+            # Musso et al. 2001: the kernel's covariance is h^2 times the weighted covariance before resampling
+            jitter = _regularisation_root(self._x, w)
+        elif (resampled or kld or by_ess) and cfg.roughening_k > 0.0 and n_pred > 1:
+            # roughening measures the spread of the predicted particles (not of the injected ones), the
+            # heading's about the best particle's heading (the cloud's own)
+            jitter = _spread(self._x, n_pred, float(self._x[int(np.argmax(w)), 2])) * cfg.roughening_k
+        if kld:
             # KLD sampling draws the new set, and its size, at every correction (Fox 2003, table 1)
             self._x = _kld_resample(
                 self._x,
@@ -1047,16 +1214,88 @@ class ParticleFilter(Filter):
                 math.radians(cfg.kld_bin_theta_deg),
             )
             self._n = n = int(self._x.shape[0])
-            self._set_uniform_weights(n)
+            late = min(late, n)
+            self._x = self._x[: n - late]
             resampled = True
-        elif n_eff < cfg.resample_ess_fraction * n:
-            self._x = _gather(self._x, systematic_resample(w, n, rng))
-            self._set_uniform_weights(n)
+        elif by_ess:
+            self._x = _gather(self._x, systematic_resample(w, n - late, rng))
             resampled = True
-        if resampled and cfg.roughening_k > 0.0:
-            _roughen(self._x, cfg.roughening_k, ref_heading, rng)
+        if resampled and jitter is not None:
+            if jitter.ndim == 2:
+                _jitter_correlated(self._x, _regularisation_bandwidth(n) * jitter, rng)
+            else:
+                _jitter(self._x, jitter * n ** (-1.0 / 3.0), rng)
+        if late:
+            self._x = np.concatenate([self._x, self._injected_poses(kind, data, late, pair)])
+        if cfg.augmented and cfg.inject == "sensor" and cfg.inject_pairs and kind is LandmarkObservations:
+            self._last_sightings = (data, np.zeros(3))
+        if kld or by_ess:
+            self._set_uniform_weights(n)
         self._diag["resampled"] = 1.0 if resampled else 0.0
-        self._diag["injected"] = float(injected)
+        self._diag["injected"] = float(injected + late)
+
+    @staticmethod
+    def _sensor_invertible(kind: type, m: int) -> bool:
+        """Whether an event pins the pose down enough to draw poses from it: two range-bearing sightings or
+        three ranges. One sighting allows a whole circle of poses, all of which go on seeing it alike while
+        only that landmark is in view: injected there they pull the weighted mean round the circle."""
+        return (kind is LandmarkObservations and m >= 2) or (kind is RangeObservations and m >= 3)
+
+    def _injection_count(self, avg: list[float], n: int) -> int:
+        """How many of ``n`` particles augmented MCL replaces: Binomial(n, max(0, 1 - w_fast / w_slow))."""
+        if not avg[0] > 0.0:
+            return 0
+        ratio = avg[1] / avg[0]
+        p_inject = max(0.0, 1.0 - ratio)
+        self._diag["w_fast_over_w_slow"] = ratio
+        self._diag["p_inject"] = p_inject
+        return int(self._rng.binomial(n, p_inject)) if p_inject > 0.0 else 0
+
+    def _sighting_pair(
+        self, kind: type, data: tuple[FloatArray, ...]
+    ) -> tuple[tuple[FloatArray, ...], FloatArray] | None:
+        """The previous landmark event and the odometry since, when this event is a single sighting of a
+        landmark that the previous event did not see: the two together pin the pose down."""
+        last = self._last_sightings
+        if kind is not LandmarkObservations or last is None or data[0].shape[0] != 1:
+            return None
+        row = int(data[2][0])
+        prev = last[0][2]
+        return last if row >= 0 and bool(np.any((prev >= 0) & (prev != row))) else None
+
+    def _injected_poses(
+        self,
+        kind: type,
+        data: tuple[FloatArray, ...],
+        count: int,
+        pair: tuple[tuple[FloatArray, ...], FloatArray] | None = None,
+    ) -> FloatArray:
+        """``count`` poses drawn from the likelihood of a landmark or beacon event (``inject="sensor"``): 20
+        candidates per pose from the single sightings (:func:`sightings_poses`), chosen among by the event's
+        likelihood. With ``pair`` (the previous landmark event and the odometry since) the candidates come
+        from the previous event's sightings, moved by that odometry, and this event chooses among them."""
+        rng = self._rng
+        if pair is not None:
+            (ranges, bearings, rows), delta = pair
+            cand = sightings_poses(ranges, bearings, rows, self._lm_xy, self._sr, self._sb, _SENSOR_DRAWS * count, rng)  # type: ignore[arg-type]
+            c, sn = np.cos(cand[:, 2]), np.sin(cand[:, 2])
+            cand[:, 0] += c * delta[0] - sn * delta[1]
+            cand[:, 1] += sn * delta[0] + c * delta[1]
+            cand[:, 2] = wrap_angle(cand[:, 2] + delta[2])
+        elif kind is LandmarkObservations:
+            ranges, bearings, rows = data
+            cand = sightings_poses(ranges, bearings, rows, self._lm_xy, self._sr, self._sb, _SENSOR_DRAWS * count, rng)  # type: ignore[arg-type]
+        else:
+            ranges, rows = data
+            cand = sightings_poses(ranges, None, rows, self._lm_xy, self._srange, 0.0, _SENSOR_DRAWS * count, rng)  # type: ignore[arg-type]
+        x = self._x
+        self._x = cand
+        try:
+            ll = self._loglik(kind, data)
+        finally:
+            self._x = x
+        cw = np.exp(ll - np.max(ll))
+        return _gather(cand, systematic_resample(cw, count, rng))
 
     # --- output ------------------------------------------------------------------------------------------
 
