@@ -297,6 +297,7 @@ class GtsamFixedLagSmoother(Filter):
 
         lm = world.landmarks
         self._lm_xy = np.asarray(lm.xy, dtype=np.float64).reshape(-1, 2)
+        self._lm_xy_list: list[list[float]] = self._lm_xy.tolist()
         self._lm_row = lm.index_of()
         std = None if lm.std_xy is None else np.asarray(lm.std_xy, dtype=np.float64).reshape(-1, 2)
         self._lm_noise = []
@@ -314,9 +315,10 @@ class GtsamFixedLagSmoother(Filter):
         self._set_node_cov(node_cov_body)
         self._node_key = _X(0)
         self._n_nodes = 1
-        self._delta = [0.0, 0.0, 0.0]
+        self._delta: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self._delta_cov = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
         self._steps_since_node = 0
+        self._per_odometry = cfg.new_pose == "odometry"
         # The filtered belief in plain floats (world frame); estimate() makes the arrays.
         self._mean_f = (float(m[0]), float(m[1]), wrap_scalar(float(m[2])))
         self._cov_f = c.tolist()
@@ -363,15 +365,15 @@ class GtsamFixedLagSmoother(Filter):
         n = step.noise
         q = (n[0] + self._qxy, n[1], n[2], n[3] + self._qxy, n[4], n[5] + self._qth)
         self._delta_cov = propagate_covariance(self._delta_cov, step.f02, step.f12, q)
-        self._delta = list(step.pose)
+        self._delta = pose = step.pose
         self._steps_since_node += 1
         self._t = u.t
         self._nis, self._nis_dof, self._accepted, self._rejected = math.nan, 0, 0, 0
         self._iterations = math.nan
-        if self.config.new_pose == "odometry":
+        if self._per_odometry:
             self._smoother_update(u.t, gtsam.NonlinearFactorGraph(), {})
         else:
-            self._node_odo[-1].append((u.t, self._delta[0], self._delta[1], self._delta[2]))
+            self._node_odo[-1].append((u.t, *pose))
             self._compose_estimate()
 
     def _compose_estimate(self) -> None:
@@ -495,7 +497,8 @@ class GtsamFixedLagSmoother(Filter):
             if row is None or not (math.isfinite(r) and r >= 0.0):
                 rej += 1
                 continue
-            dx, dy = float(self._lm_xy[row, 0]) - x, float(self._lm_xy[row, 1]) - y
+            mx, my = self._lm_xy_list[row]
+            dx, dy = mx - x, my - y
             d = math.hypot(dx, dy)
             if d < 1e-9:
                 rej += 1
@@ -532,18 +535,19 @@ class GtsamFixedLagSmoother(Filter):
         """:meth:`_mahalanobis` for one landmark in scalar arithmetic (a diagnostic on the hot path; equal to
         rounding): nu^T S^-1 nu with S = H P H^T + R, the 2 x 2 inverse in closed form."""
         x, y, th = self._mean_f
-        lx, ly = float(self._lm_xy[row, 0]) - x, float(self._lm_xy[row, 1]) - y
+        mx, my = self._lm_xy_list[row]
+        lx, ly = mx - x, my - y
         q = max(lx * lx + ly * ly, 1e-12)
         d = math.sqrt(q)
-        P = self._cov_f
-        # H rows: a = (-lx/d, -ly/d, 0), c = (ly/q, -lx/q, -1)
+        (p00, p01, p02), (_, p11, p12), (_, _, p22) = self._cov_f  # symmetric by construction
+        # H rows: a = (-lx/d, -ly/d, 0), c = (ly/q, -lx/q, -1); P a and P c - P e_theta
         a0, a1 = -lx / d, -ly / d
         c0, c1 = ly / q, -lx / q
-        pa = [P[i][0] * a0 + P[i][1] * a1 for i in range(3)]
-        pc = [P[i][0] * c0 + P[i][1] * c1 - P[i][2] for i in range(3)]
-        s00 = a0 * pa[0] + a1 * pa[1] + self._var_r
-        s01 = a0 * pc[0] + a1 * pc[1]
-        s11 = c0 * pc[0] + c1 * pc[1] - pc[2] + self._var_b
+        pa0, pa1 = p00 * a0 + p01 * a1, p01 * a0 + p11 * a1
+        pc0, pc1, pc2 = p00 * c0 + p01 * c1 - p02, p01 * c0 + p11 * c1 - p12, p02 * c0 + p12 * c1 - p22
+        s00 = a0 * pa0 + a1 * pa1 + self._var_r
+        s01 = a0 * pc0 + a1 * pc1
+        s11 = c0 * pc0 + c1 * pc1 - pc2 + self._var_b
         n0, n1 = r - d, wrap_scalar(b - (math.atan2(ly, lx) - th))
         det = s00 * s11 - s01 * s01
         return (s11 * n0 * n0 - 2.0 * s01 * n0 * n1 + s00 * n1 * n1) / det
@@ -659,7 +663,7 @@ class GtsamFixedLagSmoother(Filter):
         self._last_update_t = t
         self._iterations = float(result.getIterations())
         self._window_poses = len(self._live_poses)
-        self._delta = [0.0, 0.0, 0.0]
+        self._delta = (0.0, 0.0, 0.0)
         self._delta_cov = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
         self._steps_since_node = 0
         self._compose_estimate()
