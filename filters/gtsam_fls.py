@@ -210,6 +210,25 @@ def _sym(a: FloatArray) -> FloatArray:
     return 0.5 * (a + a.T)
 
 
+_Upper = tuple[float, float, float, float, float, float]
+
+
+def _rotate_cov(c: float, s: float, p: list[list[float]]) -> _Upper:
+    """R P R^T for R = blockdiag([[c, -s], [s, c]], 1) and a symmetric 3x3 nested list P, in plain floats.
+
+    Reads only the upper triangle of ``p`` and returns the upper triangle of the result (00, 01, 02, 11,
+    12, 22). With (c, s) of theta this takes body-frame (x, y, theta) covariance to world coordinates.
+    """
+    (p00, p01, p02), (_, p11, p12), (_, _, p22) = p
+    cc, ss, cs = c * c, s * s, c * s
+    w00 = cc * p00 - 2.0 * cs * p01 + ss * p11
+    w01 = cs * (p00 - p11) + (cc - ss) * p01
+    w02 = c * p02 - s * p12
+    w11 = ss * p00 + 2.0 * cs * p01 + cc * p11
+    w12 = s * p02 + c * p12
+    return (w00, w01, w02, w11, w12, p22)
+
+
 class GtsamFixedLagSmoother(Filter):
     """gtsam fixed-lag smoother over recent poses, with odometry, range-bearing landmarks and pose fixes.
 
@@ -226,7 +245,7 @@ class GtsamFixedLagSmoother(Filter):
     consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LandmarkObservations, PoseFix, RangeObservations})
     requires: ClassVar[frozenset[MapKind]] = frozenset({MapKind.LANDMARKS})
     Config: ClassVar[type[FilterConfig]] = GtsamFLSConfig
-    version: ClassVar[int] = 1
+    version: ClassVar[int] = 2
     source: ClassVar[str] = (
         "gtsam 4.3 fixed-lag smoothers (Dellaert & Kaess 2017); 003_e5c93f9be776ee5e (motion eq. 1-10, "
         "range-bearing eq. 7, 9); 001_71e01b0c4f2511a1 (GPS fixes)"
@@ -261,6 +280,7 @@ class GtsamFixedLagSmoother(Filter):
         self._lm_warn = cfg.sigma_range_m is None and sensors.landmark_sigma_range_m is None
         self._lm_warn |= cfg.sigma_bearing_rad is None and sensors.landmark_sigma_bearing_rad is None
         self._R = np.diag([sr * sr, sb * sb])
+        self._var_r, self._var_b = sr * sr, sb * sb
         # BearingRangeFactor2D's error is (bearing, range).
         self._br_noise = gtsam.noiseModel.Diagonal.Sigmas(np.array([sb, sr]))
         self._gate = chi2_2dof_quantile(cfg.gate_probability)
@@ -277,6 +297,7 @@ class GtsamFixedLagSmoother(Filter):
 
         lm = world.landmarks
         self._lm_xy = np.asarray(lm.xy, dtype=np.float64).reshape(-1, 2)
+        self._lm_xy_list: list[list[float]] = self._lm_xy.tolist()
         self._lm_row = lm.index_of()
         std = None if lm.std_xy is None else np.asarray(lm.std_xy, dtype=np.float64).reshape(-1, 2)
         self._lm_noise = []
@@ -288,20 +309,23 @@ class GtsamFixedLagSmoother(Filter):
         m = np.asarray(initial.mean, dtype=np.float64)
         c = _sym(np.asarray(initial.cov, dtype=np.float64))
         # The newest graph pose (world mean, body-frame marginal covariance) and the increment since it.
-        self._node_pose = gtsam.Pose2(float(m[0]), float(m[1]), wrap_scalar(float(m[2])))
-        R0 = _rot3(self._node_pose.theta())
-        self._set_node_cov(R0.T @ c @ R0)
+        self._set_node(gtsam.Pose2(float(m[0]), float(m[1]), wrap_scalar(float(m[2]))))
+        R0 = _rot3(self._node_th)
+        node_cov_body = R0.T @ c @ R0
+        self._set_node_cov(node_cov_body)
         self._node_key = _X(0)
         self._n_nodes = 1
-        self._delta = [0.0, 0.0, 0.0]
+        self._delta: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self._delta_cov = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
         self._steps_since_node = 0
-        self._mean = np.array([m[0], m[1], wrap_scalar(float(m[2]))])
-        self._cov = c
+        self._per_odometry = cfg.new_pose == "odometry"
+        # The filtered belief in plain floats (world frame); estimate() makes the arrays.
+        self._mean_f = (float(m[0]), float(m[1]), wrap_scalar(float(m[2])))
+        self._cov_f = c.tolist()
 
         self._smoother: Any = None
         self._pending_prior: tuple[Any, Any] | None = (
-            gtsam.PriorFactorPose2(_X(0), self._node_pose, gtsam.noiseModel.Gaussian.Covariance(self._node_cov_body)),
+            gtsam.PriorFactorPose2(_X(0), self._node_pose, gtsam.noiseModel.Gaussian.Covariance(_sym(node_cov_body))),
             self._node_pose,
         )
         self._t0 = math.nan
@@ -341,15 +365,15 @@ class GtsamFixedLagSmoother(Filter):
         n = step.noise
         q = (n[0] + self._qxy, n[1], n[2], n[3] + self._qxy, n[4], n[5] + self._qth)
         self._delta_cov = propagate_covariance(self._delta_cov, step.f02, step.f12, q)
-        self._delta = list(step.pose)
+        self._delta = pose = step.pose
         self._steps_since_node += 1
         self._t = u.t
         self._nis, self._nis_dof, self._accepted, self._rejected = math.nan, 0, 0, 0
         self._iterations = math.nan
-        if self.config.new_pose == "odometry":
+        if self._per_odometry:
             self._smoother_update(u.t, gtsam.NonlinearFactorGraph(), {})
         else:
-            self._node_odo[-1].append((u.t, self._delta[0], self._delta[1], self._delta[2]))
+            self._node_odo[-1].append((u.t, *pose))
             self._compose_estimate()
 
     def _compose_estimate(self) -> None:
@@ -357,34 +381,29 @@ class GtsamFixedLagSmoother(Filter):
 
         Plain floats (this runs on every odometry event): F = [[1, 0, -ey], [0, 1, ex], [0, 0, 1]] with
         (ex, ey) the increment's world displacement, G = blockdiag(R(theta_k), 1), P_w the newest pose's
-        marginal in world coordinates (cached at the smoother update).
+        marginal in world coordinates (cached at the smoother update, with the pose's cos and sin).
         """
-        node = self._node_pose
-        th = node.theta()
+        c, s = self._node_c, self._node_s
         dx, dy, dth = self._delta
-        c, s = math.cos(th), math.sin(th)
         ex, ey = c * dx - s * dy, s * dx + c * dy
-        (d00, d01, d02), (_, d11, d12), (_, _, d22) = self._delta_cov
-        cc, ss, cs = c * c, s * s, c * s
-        rotated = (
-            cc * d00 - 2.0 * cs * d01 + ss * d11,
-            cs * (d00 - d11) + (cc - ss) * d01,
-            c * d02 - s * d12,
-            ss * d00 + 2.0 * cs * d01 + cc * d11,
-            s * d02 + c * d12,
-            d22,
-        )
-        cov = propagate_covariance(self._node_cov_world, -ey, ex, rotated)
-        self._mean = np.array([node.x() + ex, node.y() + ey, wrap_scalar(th + dth)])
-        self._cov = np.array(cov)
-        if not (math.isfinite(ex) and math.isfinite(ey) and all(math.isfinite(v) for v in rotated)):
+        rotated = _rotate_cov(c, s, self._delta_cov)
+        self._cov_f = propagate_covariance(self._node_cov_world, -ey, ex, rotated)
+        self._mean_f = (self._node_x + ex, self._node_y + ey, wrap_scalar(self._node_th + dth))
+        if not math.isfinite(ex + ey + sum(rotated)):
             raise FilterDiverged(f"non-finite estimate at t={self._t:.3f} s")
 
+    def _set_node(self, pose: Any) -> None:
+        """Make ``pose`` (a gtsam ``Pose2``) the newest graph pose; its floats, cos and sin are cached."""
+        self._node_pose = pose
+        self._node_x, self._node_y, self._node_th = pose.x(), pose.y(), pose.theta()
+        self._node_c, self._node_s = math.cos(self._node_th), math.sin(self._node_th)
+
     def _set_node_cov(self, cov_body: FloatArray) -> None:
-        """Store the newest pose's body-frame marginal and its world-coordinate form P_w = G P_b G^T."""
-        self._node_cov_body = _sym(np.asarray(cov_body, dtype=np.float64))
-        G = _rot3(self._node_pose.theta())
-        self._node_cov_world = _sym(G @ self._node_cov_body @ G.T).tolist()
+        """Store the newest pose's body-frame marginal (symmetrised) in world coordinates, P_w = G P_b G^T."""
+        (b00, b01, b02), (b10, b11, b12), (b20, b21, b22) = np.asarray(cov_body, dtype=np.float64).tolist()
+        sym = [[b00, 0.5 * (b01 + b10), 0.5 * (b02 + b20)], [0.0, b11, 0.5 * (b12 + b21)], [0.0, 0.0, b22]]
+        w00, w01, w02, w11, w12, w22 = _rotate_cov(self._node_c, self._node_s, sym)
+        self._node_cov_world = [[w00, w01, w02], [w01, w11, w12], [w02, w12, w22]]
 
     # --- update --------------------------------------------------------------------------------------------
 
@@ -470,21 +489,22 @@ class GtsamFixedLagSmoother(Filter):
         key = self._target_key()
         factors = gtsam.NonlinearFactorGraph()
         stamps: dict[int, float] = {}
-        x, y = float(self._mean[0]), float(self._mean[1])
-        P = self._cov
+        x, y = self._mean_f[0], self._mean_f[1]
+        (p00, p01, _), (_, p11, _), _ = self._cov_f
         nis, acc, rej = 0.0, 0, 0
         for ident, r in zip(z.ids.tolist(), z.ranges.tolist(), strict=True):
             row = self._lm_row.get(ident) if ident != UNKNOWN_ID else None
             if row is None or not (math.isfinite(r) and r >= 0.0):
                 rej += 1
                 continue
-            dx, dy = float(self._lm_xy[row, 0]) - x, float(self._lm_xy[row, 1]) - y
+            mx, my = self._lm_xy_list[row]
+            dx, dy = mx - x, my - y
             d = math.hypot(dx, dy)
             if d < 1e-9:
                 rej += 1
                 continue
             h0, h1 = -dx / d, -dy / d
-            S = h0 * h0 * P[0, 0] + 2.0 * h0 * h1 * P[0, 1] + h1 * h1 * P[1, 1] + self._range_var
+            S = h0 * h0 * p00 + 2.0 * h0 * h1 * p01 + h1 * h1 * p11 + self._range_var
             d2 = (r - d) ** 2 / S
             if not d2 <= self._range_gate:
                 rej += 1
@@ -514,19 +534,20 @@ class GtsamFixedLagSmoother(Filter):
     def _nis_one(self, r: float, b: float, row: int) -> float:
         """:meth:`_mahalanobis` for one landmark in scalar arithmetic (a diagnostic on the hot path; equal to
         rounding): nu^T S^-1 nu with S = H P H^T + R, the 2 x 2 inverse in closed form."""
-        x, y, th = (float(v) for v in self._mean)
-        lx, ly = float(self._lm_xy[row, 0]) - x, float(self._lm_xy[row, 1]) - y
+        x, y, th = self._mean_f
+        mx, my = self._lm_xy_list[row]
+        lx, ly = mx - x, my - y
         q = max(lx * lx + ly * ly, 1e-12)
         d = math.sqrt(q)
-        P = self._cov.tolist()
-        # H rows: a = (-lx/d, -ly/d, 0), c = (ly/q, -lx/q, -1)
+        (p00, p01, p02), (_, p11, p12), (_, _, p22) = self._cov_f  # symmetric by construction
+        # H rows: a = (-lx/d, -ly/d, 0), c = (ly/q, -lx/q, -1); P a and P c - P e_theta
         a0, a1 = -lx / d, -ly / d
         c0, c1 = ly / q, -lx / q
-        pa = [P[i][0] * a0 + P[i][1] * a1 for i in range(3)]
-        pc = [P[i][0] * c0 + P[i][1] * c1 - P[i][2] for i in range(3)]
-        s00 = a0 * pa[0] + a1 * pa[1] + float(self._R[0, 0])
-        s01 = a0 * pc[0] + a1 * pc[1]
-        s11 = c0 * pc[0] + c1 * pc[1] - pc[2] + float(self._R[1, 1])
+        pa0, pa1 = p00 * a0 + p01 * a1, p01 * a0 + p11 * a1
+        pc0, pc1, pc2 = p00 * c0 + p01 * c1 - p02, p01 * c0 + p11 * c1 - p12, p02 * c0 + p12 * c1 - p22
+        s00 = a0 * pa0 + a1 * pa1 + self._var_r
+        s01 = a0 * pc0 + a1 * pc1
+        s11 = c0 * pc0 + c1 * pc1 - pc2 + self._var_b
         n0, n1 = r - d, wrap_scalar(b - (math.atan2(ly, lx) - th))
         det = s00 * s11 - s01 * s01
         return (s11 * n0 * n0 - 2.0 * s01 * n0 * n1 + s00 * n1 * n1) / det
@@ -537,7 +558,7 @@ class GtsamFixedLagSmoother(Filter):
         H = [[-dx/d, -dy/d, 0], [dy/q, -dx/q, -1]] (report 001 fig. 2, corrected), S = H P H^T + R.
         """
         xy = self._lm_xy if rows is None else self._lm_xy[rows]
-        x, y, th = self._mean
+        x, y, th = self._mean_f
         lx, ly = xy[:, 0] - x, xy[:, 1] - y
         q = np.maximum(lx * lx + ly * ly, 1e-12)
         d = np.sqrt(q)
@@ -545,7 +566,7 @@ class GtsamFixedLagSmoother(Filter):
         H = np.zeros((len(d), 2, 3))
         H[:, 0, 0], H[:, 0, 1] = -lx / d, -ly / d
         H[:, 1, 0], H[:, 1, 1], H[:, 1, 2] = ly / q, -lx / q, -1.0
-        S = H @ self._cov @ H.transpose(0, 2, 1) + self._R
+        S = H @ np.array(self._cov_f) @ H.transpose(0, 2, 1) + self._R
         nu = np.stack([r - d, wrap_angle(b - pb)], axis=-1)
         d2 = np.einsum("ni,ni->n", nu, np.linalg.solve(S, nu[..., None])[..., 0])
         if rows is None:
@@ -559,7 +580,7 @@ class GtsamFixedLagSmoother(Filter):
             raise ValueError(f"PoseFix at t={z.t} must have z (2,) or (3,) and a matching cov, got {z.cov.shape}")
         cov = _sym(np.asarray(z.cov, dtype=np.float64))
         if m == 2:
-            th = float(self._mean[2])  # no heading in the fix: the prior's heading is the current belief's
+            th = self._mean_f[2]  # no heading in the fix: the prior's heading is the current belief's
             full = np.zeros((3, 3))
             full[:2, :2] = cov
             full[2, 2] = self.config.pose_fix_heading_sigma_rad**2
@@ -574,10 +595,10 @@ class GtsamFixedLagSmoother(Filter):
                 self._target_key(), prior, gtsam.noiseModel.Gaussian.Covariance(_sym(R3.T @ full @ R3))
             )
         )
-        nu = np.asarray(z.z, dtype=np.float64) - self._mean[:m]
+        nu = np.asarray(z.z, dtype=np.float64) - np.array(self._mean_f[:m])
         if m == 3:
             nu[2] = wrap_scalar(float(nu[2]))
-        S = self._cov[:m, :m] + cov
+        S = np.array(self._cov_f)[:m, :m] + cov
         self._nis = float(nu @ np.linalg.solve(S, nu))
         self._nis_dof, self._accepted, self._rejected = m, 1, 0
         return factors, {}
@@ -635,14 +656,14 @@ class GtsamFixedLagSmoother(Filter):
             self._smoother = self._make_smoother()
         try:
             result = self._smoother.update(factors, values, stamps)
-            self._node_pose = self._smoother.calculateEstimatePose2(self._node_key)
+            self._set_node(self._smoother.calculateEstimatePose2(self._node_key))
             self._set_node_cov(self._marginal(self._node_key))
         except RuntimeError as exc:
             raise FilterDiverged(f"gtsam smoother failed at t={t:.3f} s: {exc}") from exc
         self._last_update_t = t
         self._iterations = float(result.getIterations())
         self._window_poses = len(self._live_poses)
-        self._delta = [0.0, 0.0, 0.0]
+        self._delta = (0.0, 0.0, 0.0)
         self._delta_cov = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
         self._steps_since_node = 0
         self._compose_estimate()
@@ -665,8 +686,8 @@ class GtsamFixedLagSmoother(Filter):
         """The filtered belief: newest pose (+) odometry since it, world-frame covariance (symmetrised)."""
         return Estimate(
             self._t,
-            self._mean.copy(),
-            self._cov.copy(),
+            np.array(self._mean_f),
+            np.array(self._cov_f),
             {
                 "nis": self._nis,
                 "nis_dof": float(self._nis_dof),
