@@ -101,6 +101,9 @@ class Filter(abc.ABC):
     source: ClassVar[str] = ""
     #: The baseline every comparison starts with (dead reckoning): listed first, never marked best.
     baseline: ClassVar[bool] = False
+    #: Parameters that switch on this filter's recovery policy: its kidnap configuration is a configuration
+    #: with these set (the report's summary reads kidnap recovery there). Empty: it recovers as configured.
+    kidnap_params: ClassVar[dict[str, str]] = {}
 
     @classmethod
     def starts_without_pose(cls, config: FilterConfig) -> bool:

@@ -141,8 +141,12 @@ class Report:
         return None
 
     def _kidnap_config(self, filter_name: str, candidates: list[str]) -> str | None:
-        """The configuration's own kidnap configuration: its id with every parameter it sets and the fewest more
+        """The configuration's own kidnap configuration: the one its class declares (``Filter.kidnap_params``
+        added to its parameters) when it was run, else its id with every parameter it sets and the fewest more
         (``f`` -> ``f[recovery=on]``, ``f[a=1]`` -> ``f[a=1,recovery=on]``), if exactly one is that close."""
+        declared = self.col.filters[filter_name].kidnap_name
+        if declared is not None and declared in candidates:
+            return declared
         spec = self.col.filters[filter_name].spec
         mine = set(spec.params)
         fits = [

@@ -64,6 +64,8 @@ class FilterInfo:
     global_start: bool
     #: A row of the posterior Cramer-Rao bound, not a filter (:mod:`locbench.pcrb`).
     bound: bool = False
+    #: The canonical name of its kidnap configuration as its class declares it (``Filter.kidnap_params``).
+    kidnap_name: str | None = None
 
 
 @dataclass
@@ -138,7 +140,9 @@ def describe_filter(name: str) -> FilterInfo:
     try:
         cls: Any = FILTERS.load(spec.ident)
         cfg = resolve_filter(name).params
-        return FilterInfo(name, spec, bool(cls.baseline), bool(cls.starts_without_pose(cfg)))
+        extra = dict(getattr(cls, "kidnap_params", {}) or {})
+        kidnap = resolve_filter(format_spec(spec.ident, spec.as_dict() | extra)).name if extra else None
+        return FilterInfo(name, spec, bool(cls.baseline), bool(cls.starts_without_pose(cfg)), kidnap_name=kidnap)
     except Exception as exc:  # the report must still come out without the class
         log.info("filter %s described by its name only: %s", name, exc)
         return FilterInfo(name, spec, False, False)
