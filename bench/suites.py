@@ -74,7 +74,7 @@ KIDNAP_FILTERS = (
     "kf_linear",
     "pf[augmented=true]",
     "pf[augmented=true,inject=sensor]",
-    # sensor resetting also from pairs of single sightings: recovers on room, at a cost in tracking accuracy
+    # sensor resetting also from pairs of single sightings: recovers on room too (version 5: 5.1 cm office ATE)
     "pf[augmented=true,inject=sensor,inject_pairs=true]",
     # KLD-adaptive MCL (Fox 2003) with the same augmented recovery
     "pf[adaptive=kld,augmented=true]",

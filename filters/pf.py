@@ -104,7 +104,9 @@ Estimate
     Weighted mean of x and y, circular weighted mean of the heading, and the weighted covariance with the
     heading residuals wrapped (symmetric PSD by construction). Diagnostics: ``n_eff`` (effective sample
     size after the last weighting), ``resampled`` (0/1), ``injected`` (particles injected), ``particles``
-    (the particle count), ``p_inject`` and ``w_fast_over_w_slow`` of the sensor of the last update.
+    (the particle count), ``p_inject`` and ``w_fast_over_w_slow`` of the sensor of the last update, and
+    ``pair_chi2`` (with ``inject_pairs``, at a sighting that forms a pair: the best belief particle's squared
+    Mahalanobis residual of it, which ``pair_gate`` compares with its chi-square quantile; NaN otherwise).
 """
 
 from __future__ import annotations
@@ -192,11 +194,20 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
         sighting allows a circle of poses that go on seeing it alike; the other events (and scans) inject
         uniform poses as ``"uniform"`` does.
     inject_pairs : bool
-        With ``inject="sensor"``: a single sighting of a landmark that the previous landmark event did not
-        see is inverted together with that event: candidates from the previous event's sightings, moved by
-        the odometry composed since, chosen by this sighting's likelihood. For worlds that see one landmark
+        With ``inject="sensor"``: a single sighting is inverted together with the previous landmark event
+        when that event saw another landmark: candidates from the previous event's sightings of the other
+        landmarks (not of this one, whose poses all explain this sighting), moved by the odometry composed
+        since, chosen by this sighting's likelihood. For worlds that see one landmark
         at a time (``room``); the odometry between the two events makes these poses less precise than
-        those of one event of two sightings (docs/pf_consistency_kidnap.md).
+        those of one event of two sightings (docs/pf_consistency_kidnap.md); see ``pair_gate``.
+    pair_gate : float
+        With ``inject_pairs``: when > 0, a sighting is inverted with the previous event only when no belief
+        particle explains it, i.e. when even the best particle's squared Mahalanobis residual (range,
+        bearing; 2 degrees of freedom) exceeds the chi-square quantile of this probability (0.99: 9.21), the
+        usual validation gate; the event then injects as a single sighting does (uniform poses). Off (0) by
+        default: a pair pose carries the odometry's error between the two events (2-12 cm on ``office``),
+        but the uniform poses injected instead when the gate closes occasionally win, and the gate measured
+        no better (docs/pf_consistency_kidnap.md).
     recovery_likelihood : {"best", "mean"}
         The w_avg that w_slow and w_fast average, per sighting or beam (geometric mean). ``"mean"``: PR's
         predictive likelihood sum_i w_i p(z | x_i); it falls whenever the cloud has spread (a gap between
@@ -270,6 +281,7 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
     regularise: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)
     inject: Literal["uniform", "sensor"] = field(default="uniform", metadata=RUN_KEY_OMIT_IF_DEFAULT)
     inject_pairs: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    pair_gate: float = field(default=0.0, metadata=RUN_KEY_OMIT_IF_DEFAULT)
     recovery_likelihood: Literal["best", "mean"] = field(default="best", metadata=RUN_KEY_OMIT_IF_DEFAULT)
     adaptive: Literal["none", "kld"] = field(default="none", metadata=RUN_KEY_OMIT_IF_DEFAULT)
     kld_err: float = field(default=0.01, metadata=RUN_KEY_OMIT_IF_DEFAULT)
@@ -323,6 +335,8 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
             raise ConfigError(f"recovery_likelihood must be 'best' or 'mean', got {self.recovery_likelihood!r}")
         if self.inject not in ("uniform", "sensor"):
             raise ConfigError(f"inject must be 'uniform' or 'sensor', got {self.inject!r}")
+        if not 0.0 <= self.pair_gate < 1.0:
+            raise ConfigError(f"pair_gate must be in [0, 1), got {self.pair_gate}")
         if self.roughening_k < 0.0:
             raise ConfigError(f"roughening_k must be >= 0, got {self.roughening_k}")
         if self.laser_beams < 1:
@@ -831,7 +845,7 @@ class ParticleFilter(Filter):
     Config: ClassVar[type[FilterConfig]] = ParticleFilterConfig
     # 2: compiled kernels, so other random streams; 3: augmented MCL may inject every particle; 4: roughening
     # measures the predicted particles' spread, so it never leaves a resampled set of copies (other results)
-    version: ClassVar[int] = 4
+    version: ClassVar[int] = 5
     source: ClassVar[str] = "003_e5c93f9be776ee5e.txt sec. 4.2; Thrun, Burgard & Fox, Probabilistic Robotics ch. 6, 8"
     config: ParticleFilterConfig
 
@@ -964,6 +978,7 @@ class ParticleFilter(Filter):
             "injected": 0.0,
             "p_inject": math.nan,
             "w_fast_over_w_slow": math.nan,
+            "pair_chi2": math.nan,
         }
 
     # --- predict -----------------------------------------------------------------------------------------
@@ -1149,6 +1164,14 @@ class ParticleFilter(Filter):
         pair = (
             self._sighting_pair(kind, data) if cfg.augmented and cfg.inject == "sensor" and cfg.inject_pairs else None
         )
+        ll_belief: FloatArray | None = None
+        if pair is not None:
+            # validation gate: pair poses only when no belief particle explains this (single) sighting
+            ll_belief = self._loglik(kind, data)
+            chi2_best = 2.0 * (self._lm_log_norm - float(np.max(ll_belief)))
+            self._diag["pair_chi2"] = chi2_best
+            if cfg.pair_gate > 0.0 and chi2_best <= -2.0 * math.log1p(-cfg.pair_gate):
+                pair = None
         from_sensor = cfg.inject == "sensor" and (self._sensor_invertible(kind, m) or pair is not None)
         if cfg.augmented and not from_sensor and avg is not None and avg[0] > 0.0:
             injected = self._injection_count(avg, n)
@@ -1161,7 +1184,7 @@ class ParticleFilter(Filter):
                 self._set_uniform_weights(n)
                 resampled = True
         w = np.empty(self._x.shape[0])
-        ll = self._loglik(kind, data)
+        ll = ll_belief if ll_belief is not None and not injected else self._loglik(kind, data)
         log_pred, n_eff = _reweigh(self._logw, ll, w)
         self._w, self._w_of = w, self._logw
         if not math.isfinite(log_pred):
@@ -1254,14 +1277,20 @@ class ParticleFilter(Filter):
     def _sighting_pair(
         self, kind: type, data: tuple[FloatArray, ...]
     ) -> tuple[tuple[FloatArray, ...], FloatArray] | None:
-        """The previous landmark event and the odometry since, when this event is a single sighting of a
-        landmark that the previous event did not see: the two together pin the pose down."""
+        """The previous landmark event's sightings of other (identified) landmarks than this event's single
+        sighting, and the odometry since: the two together pin the pose down. A previous sighting of the same
+        landmark is left out: moved by the odometry since (one step when that landmark stays in view and
+        another leaves it), its poses form the circle this sighting already allows, every one of which
+        explains it (version 4 drew from it too; docs/pf_consistency_kidnap.md)."""
         last = self._last_sightings
         if kind is not LandmarkObservations or last is None or data[0].shape[0] != 1:
             return None
         row = int(data[2][0])
         prev = last[0][2]
-        return last if row >= 0 and bool(np.any((prev >= 0) & (prev != row))) else None
+        other = (prev >= 0) & (prev != row)
+        if row < 0 or not bool(np.any(other)):
+            return None
+        return tuple(a[other] for a in last[0]), last[1]
 
     def _injected_poses(
         self,
