@@ -79,6 +79,7 @@ KIDNAP_FILTERS = (
     # KLD-adaptive MCL (Fox 2003) with the same augmented recovery
     "pf[adaptive=kld,augmented=true]",
     "pf[adaptive=kld,augmented=true,inject=sensor]",
+    "pf[adaptive=kld,augmented=true,inject=sensor,inject_pairs=true]",
     "gtsam_fls",
 )
 KIDNAP_DISTANCES_M = (0.5, 1, 2, 4)

@@ -844,8 +844,12 @@ class ParticleFilter(Filter):
     requires: ClassVar[frozenset[MapKind]] = frozenset()
     Config: ClassVar[type[FilterConfig]] = ParticleFilterConfig
     # 2: compiled kernels, so other random streams; 3: augmented MCL may inject every particle; 4: roughening
-    # measures the predicted particles' spread, so it never leaves a resampled set of copies (other results)
+    # measures the predicted particles' spread, so it never leaves a resampled set of copies (other results);
+    # 5: a sighting pair draws from the previous event's other landmarks only (inject_pairs results)
     version: ClassVar[int] = 5
+    #: The kidnap configuration: augmented MCL with sensor resetting, also from sighting pairs (the one that
+    #: recovers on both office and room, docs/pf_consistency_kidnap.md); 003's PF only resamples.
+    kidnap_params: ClassVar[dict[str, str]] = {"augmented": "true", "inject": "sensor", "inject_pairs": "true"}
     source: ClassVar[str] = "003_e5c93f9be776ee5e.txt sec. 4.2; Thrun, Burgard & Fox, Probabilistic Robotics ch. 6, 8"
     config: ParticleFilterConfig
 
