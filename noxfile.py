@@ -64,10 +64,10 @@ def lint(session: nox.Session) -> None:
 
 @nox.session(python=PYTHON, default=False)
 def bench(session: nox.Session) -> None:
-    """Run suite 'all' and write results/summary; with 'locbench run' arguments after --, a sub-suite into
-    results/custom (never over the committed results/summary of suite 'all')."""
+    """Run suites 'all' and 'consistency' and write results/summary; with 'locbench run' arguments after --, a
+    sub-suite into results/custom (never over the committed results/summary)."""
     _install(session, "all")
-    args = list(session.posargs) or ["--suite", "all", "--jobs", "2"]
+    args = list(session.posargs) or ["--suite", "all", "consistency", "--jobs", "2"]
     results = "results" if not session.posargs else "results/custom"
     if "--results" in args:
         results = args[args.index("--results") + 1]
@@ -75,15 +75,20 @@ def bench(session: nox.Session) -> None:
     if session.posargs and os.path.abspath(results) == os.path.abspath("results"):
         session.error("a sub-suite must not overwrite results/summary (suite 'all'): pass another --results DIR")
     session.run("locbench", "run", "--results", results, *args, env=_data_env())
-    suite = args[args.index("--suite") + 1] if "--suite" in args else None
-    session.run("locbench", "report", "--results", results, *(["--suite", suite] if suite else []))
+    suites: list[str] = []
+    if "--suite" in args:
+        for a in args[args.index("--suite") + 1 :]:
+            if a.startswith("-"):
+                break
+            suites.append(a)
+    session.run("locbench", "report", "--results", results, *(["--suite", *suites] if suites else []))
 
 
 @nox.session(python=PYTHON, default=False)
 def report(session: nox.Session) -> None:
     """Regenerate results/summary (tables, figures, metrics.csv, index.html) from the stored runs of suite 'all'."""
     _install(session, "all")
-    session.run("locbench", "report", "--results", "results", "--suite", "all")
+    session.run("locbench", "report", "--results", "results", "--suite", "all", "consistency")
 
 
 @nox.session(python=PYTHON, default=False)

@@ -156,7 +156,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
     store = Store(args.results)
     if not store.runs.is_dir():
         raise ConfigError(f"{store.runs}: no stored runs; run 'locbench run' first")
-    keep = suite_filter(args.suite) if args.suite else None
+    keep = suite_filter(*args.suite) if args.suite else None
     out = Path(args.out) if args.out else None
     paths = write_report(store, keep=keep, out=out)
     print(summary_text(paths.summary), end="")
@@ -283,7 +283,11 @@ def build_parser() -> argparse.ArgumentParser:
     rep = sub.add_parser("report", help="write summary/metrics.csv, REPORT.md and figures from stored runs")
     rep.add_argument("--results", default=_results_default(), help="results folder (default: results/)")
     rep.add_argument(
-        "--suite", default=None, help="report only the runs of this suite (a name or a TOML file), not every stored run"
+        "--suite",
+        nargs="+",
+        action="extend",
+        default=None,
+        help="report only the runs of these suites (names or TOML files), not every stored run",
     )
     rep.add_argument("--out", default=None, help="write the summary here instead of RESULTS/summary")
     rep.set_defaults(func=_cmd_report)

@@ -92,9 +92,9 @@ def summary_text(tables: tuple[Table, ...]) -> str:
     return "\n".join(out)
 
 
-def suite_filter(suite_name: str) -> Keep:
-    """``keep(dataset, filter)`` for the cells of a named suite or suite file (grids expanded, canonical names)."""
+def suite_filter(*suite_names: str) -> Keep:
+    """``keep(dataset, filter)`` for the cells of named suites or suite files (grids expanded, canonical names)."""
     from locbench.suites import suite_pairs
 
-    cells = {(d.name, f.name) for f, d in suite_pairs(suite_name)}
+    cells = {(d.name, f.name) for name in suite_names for f, d in suite_pairs(name)}
     return lambda dataset, filt: (dataset, filt) in cells
