@@ -3,7 +3,7 @@
 locbench list [FILTER|DATASET ...]
 locbench run [--suite NAME|FILE.toml | --filter SPEC ... --dataset SPEC ...]
              [--seeds N] [--results DIR] [--jobs N] [--executor local|dask [--scheduler ADDRESS]] [--force]
-locbench report [--results DIR] [--suite NAME] [--out DIR]
+locbench report [--results DIR] [--suite NAME ...] [--out DIR]
 locbench check [ID ...]
 locbench fetch SPEC [SPEC ...]
 locbench export [--results DIR] [--out DIR] [--dataset SPEC ...] [--filter SPEC ...] [--smoothed]
