@@ -412,6 +412,9 @@ def test_suite_filter_keeps_the_suites_cells_only() -> None:
     keep = suite_filter("room")
     assert keep("room", "odometry") and keep("room", "ekf_landmarks[association=nearest]")
     assert not keep("office", "odometry") and not keep("room", "ekf_icp")
+    both = suite_filter("room", "consistency")  # several suites: the union of their cells
+    assert both("room", "odometry") and both("office[matched=true]", "ekf_icp")
+    assert not both("office", "odometry")
 
 
 def test_summary_takes_each_filters_own_kidnap_configuration() -> None:
