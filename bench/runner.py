@@ -499,8 +499,6 @@ def store_result(store: Store, task: Task, result: TaskResult) -> list[RunOutcom
     if result.truth is not None:
         try:
             store.write_truth(result.truth)
-            if result.bound is not None:
-                store.write_bound(result.bound)
         except OSError as exc:
             truth_error = f"{_os_message(exc)} (ground truth)"
     outcomes = []
@@ -517,6 +515,19 @@ def store_result(store: Store, task: Task, result: TaskResult) -> list[RunOutcom
             continue
         outcomes.append(RunOutcome(fspec, dspec, task.seed, rec.status, str(rec.meta.get("message", "")), job.note))
     return outcomes
+
+
+def store_bound(store: Store, task: Task, result: TaskResult) -> bool:
+    """Write a task's bound, if it computed one; whether it was stored (a failed write is logged, and the next
+    sweep computes it again)."""
+    if result.bound is None:
+        return False
+    try:
+        store.write_bound(result.bound)
+    except OSError as exc:
+        log.error("%s: bound not stored: %s", task.label, _os_message(exc))
+        return False
+    return True
 
 
 def _os_message(exc: OSError) -> str:
@@ -558,7 +569,7 @@ def run_sweep(
 
     def handle(task: Task, result: TaskResult) -> None:
         res = store_result(store, task, result)
-        bounds[0] += result.bound is not None and store.bound_key(task.dataset.name, task.seed) == task.bound_key
+        bounds[0] += store_bound(store, task, result)
         outcomes.extend(res)
         if progress:
             progress(len(res))

@@ -1108,11 +1108,13 @@ class ParticleFilter(Filter):
         self._scan_field = self._fields[zmax]
         return int(ok.sum()), (ex, ey)
 
-    def _loglik(self, kind: type, data: tuple[FloatArray, ...]) -> FloatArray:
+    def _loglik(self, kind: type, data: tuple[FloatArray, ...], x: FloatArray | None = None) -> FloatArray:
+        """Log-likelihood of an observation at each pose of ``x`` (default: the particles)."""
+        x = self._x if x is None else x
         if kind is LandmarkObservations:
             ranges, bearings, rows = data
             return _sightings_loglik(
-                self._x,
+                x,
                 ranges,
                 bearings,
                 rows,  # type: ignore[arg-type]
@@ -1126,7 +1128,7 @@ class ParticleFilter(Filter):
         if kind is RangeObservations:
             ranges, rows = data
             return _sightings_loglik(
-                self._x,
+                x,
                 ranges,
                 ranges,  # no bearings
                 rows,  # type: ignore[arg-type]
@@ -1138,22 +1140,18 @@ class ParticleFilter(Filter):
                 self._range_log_floor,
             )
         ex, ey = data
-        return log_likelihood(self._scan_field, self._x, ex, ey)
+        return log_likelihood(self._scan_field, x, ex, ey)
 
     def _best_loglik(self, kind: type, data: tuple[FloatArray, ...], ll: FloatArray, n_pred: int) -> float:
         """Sum over the sightings of the log-likelihood of each at the particle (of the first ``n_pred``) that
         explains it best; for a scan, the best particle's log-likelihood of the whole scan (``ll``)."""
         if kind is LaserScan:
             return float(np.max(ll[:n_pred]))
-        x = self._x
-        self._x = x[:n_pred]
-        try:
-            total = 0.0
-            for k in range(data[0].shape[0]):
-                one = tuple(a[k : k + 1] for a in data)
-                total += float(np.max(self._loglik(kind, one)))
-        finally:
-            self._x = x
+        belief = self._x[:n_pred]
+        total = 0.0
+        for k in range(data[0].shape[0]):
+            one = tuple(a[k : k + 1] for a in data)
+            total += float(np.max(self._loglik(kind, one, belief)))
         return total
 
     def _correct(self, kind: type, m: int, data: tuple[FloatArray, ...]) -> None:
@@ -1308,25 +1306,21 @@ class ParticleFilter(Filter):
         likelihood. With ``pair`` (the previous landmark event and the odometry since) the candidates come
         from the previous event's sightings, moved by that odometry, and this event chooses among them."""
         rng = self._rng
+        draws = _SENSOR_DRAWS * count
+        if kind is LandmarkObservations:
+            ranges, bearings, rows = pair[0] if pair is not None else data
+            cand = sightings_poses(ranges, bearings, rows, self._lm_xy, self._sr, self._sb, draws, rng)  # type: ignore[arg-type]
+        else:
+            ranges, rows = data
+            cand = sightings_poses(ranges, None, rows, self._lm_xy, self._srange, 0.0, draws, rng)  # type: ignore[arg-type]
         if pair is not None:
-            (ranges, bearings, rows), delta = pair
-            cand = sightings_poses(ranges, bearings, rows, self._lm_xy, self._sr, self._sb, _SENSOR_DRAWS * count, rng)  # type: ignore[arg-type]
+            # the previous event's poses moved by the odometry since (each candidate's own frame)
+            delta = pair[1]
             c, sn = np.cos(cand[:, 2]), np.sin(cand[:, 2])
             cand[:, 0] += c * delta[0] - sn * delta[1]
             cand[:, 1] += sn * delta[0] + c * delta[1]
             cand[:, 2] = wrap_angle(cand[:, 2] + delta[2])
-        elif kind is LandmarkObservations:
-            ranges, bearings, rows = data
-            cand = sightings_poses(ranges, bearings, rows, self._lm_xy, self._sr, self._sb, _SENSOR_DRAWS * count, rng)  # type: ignore[arg-type]
-        else:
-            ranges, rows = data
-            cand = sightings_poses(ranges, None, rows, self._lm_xy, self._srange, 0.0, _SENSOR_DRAWS * count, rng)  # type: ignore[arg-type]
-        x = self._x
-        self._x = cand
-        try:
-            ll = self._loglik(kind, data)
-        finally:
-            self._x = x
+        ll = self._loglik(kind, data, cand)
         cw = np.exp(ll - np.max(ll))
         return _gather(cand, systematic_resample(cw, count, rng))
 

@@ -220,7 +220,8 @@ class Report:
             )
             keys.append([NAN, float(runs), ate, eff, wpm, head, an_key, upd, rtf, k_key, rec])
         eligible = [not self.col.is_baseline(f) for f in filters]
-        for b in self.bounds_on(dataset):
+        bounds = self.bounds_on(dataset)
+        for b in bounds:
             sub = df[df["filter"] == b]
             ate = tb.mean_of(sub, "ate_m") * 100.0
             wpm = wp.get(b, NAN) * 100.0
@@ -252,7 +253,7 @@ class Report:
             f"chi-square band for the run count ({band_for(n_typ)} for {n_typ} runs); closest to "
             f"{POSE_DOF} is marked best."
         )
-        if self.bounds_on(dataset):
+        if bounds:
             notes.append(tb.BOUND_FOOTNOTE)
         if any("¹" in r[6] for r in rows):
             notes.append(tb.COLLAPSE_FOOTNOTE)
@@ -943,29 +944,8 @@ def _plotly_tracks(dataset: str, world: fg.World, tracks: list[fg.Track], styles
             "hoverinfo": "skip",
         }
     )
-    step = max(1, world.truth_xy.shape[0] // 2000)
-    traces.append(
-        {
-            "type": "scatter",
-            "mode": "lines",
-            "name": world.truth_label,
-            "x": _r(world.truth_xy[::step, 0]),
-            "y": _r(world.truth_xy[::step, 1]),
-            "line": {"color": "#000000", "width": 1.5},
-        }
-    )
-    for tr in tracks:
-        s = max(1, tr.xy.shape[0] // 2000)
-        traces.append(
-            {
-                "type": "scatter",
-                "mode": "lines",
-                "name": tr.label,
-                "x": _r(tr.xy[::s, 0]),
-                "y": _r(tr.xy[::s, 1]),
-                "line": {"color": styles[tr.label].color, "width": 1},
-            }
-        )
+    traces.append(_plotly_path(world.truth_label, world.truth_xy, "#000000", 1.5))
+    traces += [_plotly_path(tr.label, tr.xy, styles[tr.label].color, 1) for tr in tracks]
     (x0, x1), (y0, y1) = fg.world_limits(world)
     return {
         "data": traces,
@@ -975,6 +955,19 @@ def _plotly_tracks(dataset: str, world: fg.World, tracks: list[fg.Track], styles
             "yaxis": {"range": [y0, y1], "title": {"text": "y (m)"}, "scaleanchor": "x"},
             "height": 560,
         },
+    }
+
+
+def _plotly_path(name: str, xy: np.ndarray, color: str, width: float) -> dict:
+    """A path as a plotly line, thinned to at most about 2000 points (the page stays small)."""
+    step = max(1, xy.shape[0] // 2000)
+    return {
+        "type": "scatter",
+        "mode": "lines",
+        "name": name,
+        "x": _r(xy[::step, 0]),
+        "y": _r(xy[::step, 1]),
+        "line": {"color": color, "width": width},
     }
 
 
