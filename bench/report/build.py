@@ -764,7 +764,7 @@ class Report:
             ws[ws["filter"] == f].sort_values("waypoint")["rmse_m"].to_numpy(dtype=np.float64) * 100.0 for f in labels
         ]
         styles = self.bound_styles(labels)
-        title = f"{dataset}: position RMSE at each waypoint over runs (log scale; black dashed: the bound)"
+        title = f"{dataset}: waypoint RMSE over runs (log scale; black: the bound)"
 
         def draw(fig: Figure) -> None:
             fg.draw_waypoint_rmse(fig.add_subplot(), labels, series, styles, title)
