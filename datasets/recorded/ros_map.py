@@ -26,7 +26,9 @@ Frames: the image's first row is the TOP of the map; :class:`OccupancyGrid` has 
 world frame). Images: binary PGM (P5, 8 or 16 bit big-endian, ``#`` comments in the header) by a small parser of
 our own; any other image type (PNG ...) through Pillow when it is installed, averaged to grey.
 
-The YAML is read with ``yaml.safe_load`` semantics (no arbitrary objects); errors are
+The YAML is read with ``yaml.safe_load`` semantics (no arbitrary objects) except that a key given twice in one
+mapping is an error (``safe_load`` keeps the last value); a PGM must hold exactly the bytes its header announces
+(fewer: cut; more: trailing bytes, a header that understates the image). Errors are
 :class:`~locbench.datasets.recorded.files.RecordedDataError` naming the file, the line of the field (YAML) or the
 header line / byte count (PGM) and what was expected.
 
@@ -109,6 +111,33 @@ def _refuse_aliases(path: Path, text: str) -> None:
         return  # reported with its line by safe_load below
 
 
+def _refuse_duplicate_keys(path: Path, text: str) -> None:
+    """Raise at the second occurrence of a key in any YAML mapping (``safe_load`` would let the last one win)."""
+    try:
+        root = yaml.compose(text, Loader=yaml.SafeLoader)
+    except yaml.YAMLError:
+        return  # reported with its line by safe_load below
+    stack = [root] if root is not None else []
+    while stack:
+        node = stack.pop()
+        if isinstance(node, yaml.MappingNode):
+            seen: dict[str, int] = {}
+            for key, value in node.value:
+                if isinstance(key, yaml.ScalarNode):
+                    line = int(key.start_mark.line) + 1
+                    if key.value in seen:
+                        raise RecordedDataError(
+                            path,
+                            f"duplicate key {quote(key.value, 60)} (first on line {seen[key.value]}): expected each "
+                            "key once (the last value would silently win)",
+                            line,
+                        )
+                    seen[key.value] = line
+                stack.append(value)
+        elif isinstance(node, yaml.SequenceNode):
+            stack.extend(node.value)
+
+
 def _read_yaml(path: Path) -> tuple[dict[str, Any], dict[str, int]]:
     try:
         size = path.stat().st_size
@@ -120,6 +149,7 @@ def _read_yaml(path: Path) -> tuple[dict[str, Any], dict[str, int]]:
     except UnicodeDecodeError as exc:
         raise RecordedDataError(path, f"not UTF-8 text ({exc.reason}); expected a map_server YAML file") from None
     _refuse_aliases(path, text)
+    _refuse_duplicate_keys(path, text)
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
@@ -252,6 +282,13 @@ def read_pgm(path: str | os.PathLike[str], max_cells: int = MAX_GRID_CELLS) -> t
     if have < need:
         raise RecordedDataError(
             p, f"truncated image data: {have} bytes after the header, expected {need} ({width} x {height} x {nbytes})"
+        )
+    if have > need:
+        # a header that understates the image (or two images in one file) would silently read a part of it
+        raise RecordedDataError(
+            p,
+            f"{have - need} trailing bytes: {have} bytes after the header, expected exactly {need} "
+            f"({width} x {height} x {nbytes}) as the header says",
         )
     dtype = np.dtype(np.uint8) if nbytes == 1 else np.dtype(">u2")
     pix = np.frombuffer(raw, dtype=dtype, count=width * height, offset=pos).reshape(height, width).astype(np.int64)

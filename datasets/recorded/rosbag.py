@@ -88,6 +88,22 @@ FloatArray = npt.NDArray[np.float64]
 ODOMETRY_TYPES = ("nav_msgs/msg/Odometry",)
 #: Bounds of the validation: the largest odometry twist component (m/s, rad/s) and scan range_max (m).
 MAX_TWIST = 100.0
+#: Largest deviation of a pose quaternion's norm from 1 (float32 round-off is about 1e-7; a zero or a hand-scaled
+#: quaternion is far off).
+QUATERNION_NORM_TOL = 1e-3
+#: Largest tilt of a pose's z axis from the world's vertical, rad (10 degrees): a planar robot's odometry and truth
+#: rotate about z only; a larger roll or pitch would be read as a heading it is not.
+MAX_TILT_RAD = math.radians(10.0)
+#: Largest interval between two messages of the odometry or the truth, s: the truth is interpolated between its
+#: samples and an odometry increment spans its interval, so a longer gap (a clock jump) is refused, not bridged.
+MAX_GAP_S = 60.0
+#: Physical bound of a user's ground robot (m/s, rad/s): an odometry or truth step may move at most
+#: ``MAX_SPEED_MPS * dt + MAX_JITTER_M`` and turn at most ``MAX_TURN_RATE_RADPS * dt + MAX_JITTER_RAD`` (the
+#: allowances absorb a pose's noise between close stamps); a frame reset or a pose at a repeated stamp fails it.
+MAX_SPEED_MPS = 20.0
+MAX_TURN_RATE_RADPS = 20.0
+MAX_JITTER_M = 0.05
+MAX_JITTER_RAD = 0.05
 MAX_SCAN_RANGE_M = 1000.0
 SCAN_TYPES = ("sensor_msgs/msg/LaserScan",)
 TRUTH_TYPES = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped")
@@ -157,6 +173,11 @@ class RosbagParams:
                 raise ConfigError(f"rosbag: parameter {name!r} must be finite, got {getattr(self, name)!r}")
         if not self.odom_topic or not self.truth_topic:
             raise ConfigError("rosbag: 'odom_topic' and 'truth_topic' must name topics")
+        if self.truth_topic == self.odom_topic:
+            raise ConfigError(
+                f"rosbag: 'truth_topic' is the odometry topic {quote(self.odom_topic, 100)}, expected another topic "
+                "(a filter would be scored against its own input)"
+            )
         if not self.path:
             raise ConfigError(
                 "rosbag: parameter 'path' is required: rosbag[path=<.bag file or ROS 2 folder>,map=<yaml>]"
@@ -212,8 +233,9 @@ def _pose_of(msg: Any, msgtype: str) -> Any:
     return msg.pose if msgtype == "geometry_msgs/msg/PoseStamped" else msg.pose.pose
 
 
-def _planar_poses(poses: list[Any]) -> FloatArray:
-    """(x m, y m, yaw rad) of geometry_msgs/Pose messages, shape (n, 3)."""
+def _planar_poses(poses: list[Any], path: Path, topic: str) -> FloatArray:
+    """(x m, y m, yaw rad) of geometry_msgs/Pose messages, shape (n, 3); every orientation must be a unit
+    quaternion (within :data:`QUATERNION_NORM_TOL`) of a rotation tilted at most :data:`MAX_TILT_RAD` from z."""
     xyq = np.array(
         [
             (p.position.x, p.position.y, p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w)
@@ -221,7 +243,64 @@ def _planar_poses(poses: list[Any]) -> FloatArray:
         ],
         dtype=np.float64,
     ).reshape(-1, 6)
-    return np.column_stack([xyq[:, :2], quaternion_to_yaw(xyq[:, 2:])])
+    q = xyq[:, 2:]
+    with np.errstate(invalid="ignore"):
+        norm = np.sqrt(np.sum(q * q, axis=1))
+        # cos(tilt) = the world z component of the body z axis = 1 - 2 (qx^2 + qy^2) for a unit quaternion
+        cos_tilt = 1.0 - 2.0 * (q[:, 0] ** 2 + q[:, 1] ** 2) / np.where(norm > 0, norm * norm, 1.0)
+    bad = np.flatnonzero(~(np.abs(norm - 1.0) <= QUATERNION_NORM_TOL))
+    if bad.size:
+        k = int(bad[0])
+        raise RecordedDataError(
+            path,
+            f"topic {topic!r} message {k + 1}: orientation quaternion (x, y, z, w) = {quote(tuple(q[k].tolist()))} has "
+            f"norm {float(norm[k])!r}, expected a unit quaternion (within {QUATERNION_NORM_TOL})",
+        )
+    tilted = np.flatnonzero(~(cos_tilt >= math.cos(MAX_TILT_RAD)))
+    if tilted.size:
+        k = int(tilted[0])
+        tilt = math.acos(max(-1.0, min(1.0, float(cos_tilt[k]))))
+        raise RecordedDataError(
+            path,
+            f"topic {topic!r} message {k + 1}: orientation tilted {tilt:.4g} rad from the vertical (roll or pitch), "
+            f"expected a planar pose (a rotation about z, tilt at most {MAX_TILT_RAD:.4g} rad)",
+        )
+    return np.column_stack([xyq[:, :2], quaternion_to_yaw(q)])
+
+
+def _check_motion(path: Path, topic: str, name: str, t: FloatArray, pose: FloatArray) -> None:
+    """Refuse a gap above :data:`MAX_GAP_S` and a step faster than the robot's physical bound (module constants)."""
+    if t.size < 2:
+        return
+    if t[-1] == t[0]:
+        raise RecordedDataError(
+            path,
+            f"topic {topic!r}: all {t.size} {name} messages have one stamp {float(t[0])!r} s, expected stamps that "
+            "advance (stamps=bag uses the recording time)",
+        )
+    dt = np.diff(t)
+    gap = np.flatnonzero(dt > MAX_GAP_S)
+    if gap.size:
+        k = int(gap[0]) + 1
+        raise RecordedDataError(
+            path,
+            f"topic {topic!r} message {k + 1} of {t.size}: {name} stamp jumps {float(dt[k - 1]):.6g} s from the "
+            f"previous message, expected gaps of at most {MAX_GAP_S} s (a clock jump is not bridged)",
+        )
+    step = np.hypot(np.diff(pose[:, 0]), np.diff(pose[:, 1]))
+    turn = np.abs(wrap_angle(np.diff(pose[:, 2])))
+    fast = np.flatnonzero(
+        (step > MAX_SPEED_MPS * dt + MAX_JITTER_M) | (turn > MAX_TURN_RATE_RADPS * dt + MAX_JITTER_RAD)
+    )
+    if fast.size:
+        k = int(fast[0]) + 1
+        raise RecordedDataError(
+            path,
+            f"topic {topic!r} message {k + 1} of {t.size}: {name} pose moves {float(step[k - 1]):.6g} m and turns "
+            f"{float(turn[k - 1]):.4g} rad in {float(dt[k - 1]):.6g} s, expected at most {MAX_SPEED_MPS} m/s and "
+            f"{MAX_TURN_RATE_RADPS} rad/s (plus {MAX_JITTER_M} m, {MAX_JITTER_RAD} rad of noise): a frame reset, a "
+            "repeated stamp or a wrong topic",
+        )
 
 
 def resolve_bag_path(path: str | os.PathLike[str], what: str = "bag") -> Path:
@@ -356,12 +435,12 @@ def _read_streams_cached(
 
     odom = by_topic[odom_topic]
     odom_t = np.array([t for t, _ in odom], dtype=np.float64)
-    odom_pose = _planar_poses([m.pose.pose for _, m in odom])
+    odom_pose = _planar_poses([m.pose.pose for _, m in odom], p, odom_topic)
     odom_twist = np.array([(m.twist.twist.linear.x, m.twist.twist.angular.z) for _, m in odom], dtype=np.float64)
     odom_twist = odom_twist.reshape(-1, 2)
     truth = by_topic[truth_topic]
     truth_t = np.array([t for t, _ in truth], dtype=np.float64)
-    truth_pose = _planar_poses([_pose_of(m, truth_type) for _, m in truth])
+    truth_pose = _planar_poses([_pose_of(m, truth_type) for _, m in truth], p, truth_topic)
     scans = tuple(
         LaserScan(
             t,
@@ -389,6 +468,7 @@ def _read_streams_cached(
                 f"topic {topic!r} message {k + 1}: {name} position ({float(arr[k, 0])!r}, {float(arr[k, 1])!r}) m, "
                 f"expected within +-{MAX_POSITION_M} m",
             )
+        _check_motion(p, topic, name, odom_t if name == "odometry" else truth_t, arr)
     bad_twist = np.flatnonzero(
         ~np.all(np.isfinite(odom_twist), axis=1) | np.any(np.abs(odom_twist) > MAX_TWIST, axis=1)
     )
