@@ -42,3 +42,8 @@ def one_line(message: str, limit: int = MAX_MESSAGE_CHARS) -> str:
     """``message`` with line breaks flattened and cut to ``limit`` characters (input errors stay one short line)."""
     flat = " ".join(message.split())
     return flat if len(flat) <= limit else flat[: limit - 20] + " ... [cut]"
+
+
+class ResourceLimit(ConfigError):
+    """A config or input whose estimated memory is above a documented limit (:mod:`locbench.limits`), refused before
+    anything is allocated; the message names the parameter to change."""

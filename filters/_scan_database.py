@@ -61,6 +61,7 @@ from locbench.datasets.base import OccupancyGrid
 from locbench.errors import ConfigError
 from locbench.events import LaserScan
 from locbench.geometry import wrap_angle
+from locbench.limits import DATABASE_BYTES_PER_RAY, SCAN_DATABASE_BYTES_PER_CELL, check_bytes, grid_cells
 from locbench.raycast import cast_rays
 
 logger = logging.getLogger(__name__)
@@ -280,6 +281,13 @@ def build_database(
             f"scan database: a {cols * res:.4g} m x {rows * res:.4g} m map on a {step_m} m lattice has "
             f"{n_lattice:.4g} positions, expected at most {MAX_LATTICE_POSITIONS} (raise grid_step_m)"
         )
+    n_dir = round(360.0 / heading_step_deg)
+    check_bytes(
+        "kf_linear",
+        f"the scan database of a {rows} x {cols} grid ({n_lattice:.4g} positions x {n_dir} headings)",
+        grid_cells((rows, cols)) * SCAN_DATABASE_BYTES_PER_CELL + n_lattice * n_dir * DATABASE_BYTES_PER_RAY,
+        "raise grid_step_m or heading_step_deg, or give a coarser or smaller map",
+    )
     # The lattice holds the world points (i * step, j * step) inside the grid: "grid poses" of the world.
     xs = step_m * np.arange(math.ceil(ox / step_m), math.floor((ox + cols * res) / step_m) + 1)
     ys = step_m * np.arange(math.ceil(oy / step_m), math.floor((oy + rows * res) / step_m) + 1)
@@ -308,7 +316,6 @@ def build_database(
             f"scan database: no free position {clearance_m} m from the walls on a {step_m} m lattice; "
             "expected a smaller grid_step_m or clearance_m"
         )
-    n_dir = round(360.0 / heading_step_deg)
     angles = np.arange(n_dir, dtype=np.float64) * math.radians(heading_step_deg)
     poses = np.column_stack([pts, np.zeros(pts.shape[0])])
     r = cast_rays(occ, res, (ox, oy), poses, angles, max_range_m, method="dda")

@@ -76,6 +76,7 @@ from locbench.filters._icp import MIN_PAIRS, IcpResult, icp_2d
 from locbench.filters._kalman import joseph_correct
 from locbench.filters.base import Estimate, Filter, FilterConfig
 from locbench.geometry import wrap_scalar
+from locbench.limits import RAYCAST_BYTES_PER_CELL, check_bytes, grid_cells
 from locbench.raycast import cast_scan
 
 FloatArray = npt.NDArray[np.float64]
@@ -224,6 +225,12 @@ class IcpEKF(Filter):
             raise ConfigError("IcpEKF needs world.occupancy; the dataset provides no occupancy grid")
         if grid.origin[2] != 0.0:
             raise ConfigError(f"IcpEKF: the occupancy grid origin theta must be 0, got {grid.origin[2]}")
+        check_bytes(
+            "ekf_icp",
+            f"the ray-cast tables of a {grid.shape[0]} x {grid.shape[1]} grid",
+            grid_cells(grid.shape) * RAYCAST_BYTES_PER_CELL,
+            "give a coarser or smaller map",
+        )
         self._grid = grid
         self._res = float(grid.resolution)
         self._origin = (float(grid.origin[0]), float(grid.origin[1]))

@@ -140,6 +140,14 @@ from locbench.filters._motion import (
 from locbench.filters._noise import landmark_noise, range_only_noise
 from locbench.filters.base import CheckTolerances, Estimate, Filter, FilterConfig
 from locbench.geometry import wrap_angle
+from locbench.limits import (
+    FREE_SPACE_BYTES_PER_CELL,
+    LIKELIHOOD_FIELD_BYTES_PER_CELL,
+    PARTICLE_BYTES,
+    check_beams,
+    check_bytes,
+    grid_cells,
+)
 from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
 
 FloatArray = npt.NDArray[np.float64]
@@ -341,6 +349,10 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
             raise ConfigError(f"roughening_k must be >= 0, got {self.roughening_k}")
         if self.laser_beams < 1:
             raise ConfigError(f"laser_beams must be >= 1, got {self.laser_beams}")
+        check_beams("pf", "laser_beams", self.laser_beams)
+        # the particle set is decided by the config alone: refused here, when the spec is parsed
+        size, name = (self.max_particles, "max_particles") if self.adaptive == "kld" else (self.particles, "particles")
+        check_bytes("pf", f"a set of {name}={size}", float(size) * PARTICLE_BYTES, f"lower {name!r}")
         if not (self.z_hit >= 0.0 and self.z_rand >= 0.0 and self.z_hit + self.z_rand > 0.0):
             raise ConfigError(f"z_hit and z_rand must be >= 0 and not both 0, got {self.z_hit}, {self.z_rand}")
         if not 0.0 <= self.range_outlier_fraction < 1.0:
@@ -946,6 +958,17 @@ class ParticleFilter(Filter):
         self._range_log_hit = math.log1p(-eps) - 0.5 * _LOG_2PI - math.log(srange)
         self._range_log_floor = math.log(eps / cfg.range_outlier_span_m) if eps > 0.0 else -math.inf
 
+        needs_space = cfg.init == "uniform" or cfg.augmented
+        if grid is not None and (self._use_laser or needs_space):
+            per_cell = (LIKELIHOOD_FIELD_BYTES_PER_CELL if self._use_laser else 0) + (
+                FREE_SPACE_BYTES_PER_CELL if needs_space else 0
+            )
+            check_bytes(
+                "pf",
+                f"the likelihood field / free-space index of a {grid.shape[0]} x {grid.shape[1]} grid",
+                grid_cells(grid.shape) * per_cell,
+                "give a coarser or smaller map (or use_laser=false, init=belief, augmented=false)",
+            )
         self._grid = grid
         self._fields: dict[float, LikelihoodField] = {}
         self._beam_idx: dict[int, IntArray] = {}
@@ -954,7 +977,6 @@ class ParticleFilter(Filter):
         if lm is not None:
             lo, hi = self._lm_xy.min(axis=0), self._lm_xy.max(axis=0)
             box = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
-        needs_space = cfg.init == "uniform" or cfg.augmented
         self._space = FreeSpaceSampler(grid, box) if needs_space else None
 
         if cfg.init == "uniform":

@@ -461,6 +461,11 @@ def match_reference(clf: CarmenLog, gfs: CarmenLog) -> npt.NDArray[np.int64]:
     return idx.astype(np.int64)
 
 
+#: Largest relative displacement of a relation, m (the Intel lab is about 30 m across; its relations are at most 2.1 m,
+#: the Freiburg benchmark's other buildings' at most 4.4 m).
+MAX_RELATION_M = 100.0
+
+
 def read_relations(path: str | os.PathLike[str], scan_times: npt.ArrayLike) -> Relations:
     """Read a ``.relations`` file and check every time against the raw log's FLASER ``ipc_timestamp``.
 
@@ -474,10 +479,28 @@ def read_relations(path: str | os.PathLike[str], scan_times: npt.ArrayLike) -> R
     Raises
     ------
     RecordedDataError
-        A malformed line, or a time that is no FLASER time (naming the line).
+        A malformed line, no relation at all, a displacement beyond :data:`MAX_RELATION_M` or a turn beyond
+        +-2 pi, t1 = t2, a (t1, t2) pair given twice, or a time that is no FLASER time (naming the line). A
+        relation with t2 < t1 is valid (the pose at t2 seen from the pose at t1; the benchmark's own file has 6).
     """
     cols = ("t1 s", "t2 s", "dx m", "dy m", "dz m", "droll rad", "dpitch rad", "dyaw rad")
     tab = read_table(path, cols)
+    if tab.rows.shape[0] == 0:
+        raise RecordedDataError(path, "no relation, expected at least one 't1 t2 dx dy dz droll dpitch dyaw' line")
+    for c in (2, 3, 4):
+        tab.check_range(c, cols[c], -MAX_RELATION_M, MAX_RELATION_M)
+    tab.check_range(7, cols[7], -2 * math.pi, 2 * math.pi)
+    same = np.flatnonzero(tab.column(0) == tab.column(1))
+    if same.size:
+        raise tab.fail(int(same[0]), "t1 equals t2, expected a relation between two different scans")
+    # a repeated (t1, t2) pair would weigh that relation twice in the relation error
+    order = np.lexsort((tab.column(1), tab.column(0)))
+    pairs = tab.rows[order][:, :2]
+    dup = np.flatnonzero(np.all(pairs[1:] == pairs[:-1], axis=1))
+    if dup.size:
+        r = int(order[dup[0] + 1])
+        first = int(tab.lines[order[dup[0]]])
+        raise tab.fail(r, f"the pair (t1, t2) repeats the relation on line {first}, expected each pair once")
     known = np.unique(np.asarray(scan_times, dtype=np.float64))
     for c, name in ((0, "t1"), (1, "t2")):
         t = tab.column(c)

@@ -34,7 +34,8 @@ Validation: every variable must be a real float array (``true_valid`` may also b
 or 1) of the shape above with finite values; ``t`` strictly increasing; positions (``l``, ``x_true``,
 ``y_true``) within :data:`~locbench.datasets.recorded.files.MAX_POSITION_M`; ``v`` within :data:`MAX_SPEED_MPS`,
 ``om`` within :data:`MAX_TURN_RATE_RADPS`, headings and bearings within +-2 pi; ranges in [0,
-:data:`MAX_RANGE_M`]; ``d`` in [0, :data:`MAX_RANGE_M`]; variances > 0. The robot must move and turn (the
+:data:`MAX_RANGE_M`]; ``d`` in [0, :data:`MAX_RANGE_M`]; variances > 0 and at most the square of
+their quantity's bound (speed, turn rate, range; pi rad for the bearing). The robot must move and turn (the
 per-metre noise divides by the mean speed and turn rate) and see at least one tube.
 
 Frames and identities
@@ -219,6 +220,14 @@ class LostInTheWoodsData:
 MAX_SPEED_MPS = 10.0
 MAX_TURN_RATE_RADPS = 50.0
 MAX_RANGE_M = 100.0
+#: The variances and the largest standard deviation each may have: the bound of its own quantity (a speed sigma of
+#: at most MAX_SPEED_MPS ...; the file's are 0.066 m/s, 0.090 rad/s, 0.030 m and 0.026 rad).
+_VARIANCES = (
+    ("v_var", "speed variance in m^2/s^2", MAX_SPEED_MPS),
+    ("om_var", "turn-rate variance in rad^2/s^2", MAX_TURN_RATE_RADPS),
+    ("r_var", "range variance in m^2", MAX_RANGE_M),
+    ("b_var", "bearing variance in rad^2", math.pi),
+)
 
 
 def _vector(
@@ -312,15 +321,10 @@ def _read_cached(path_str: str, size: int, mtime_ns: int) -> LostInTheWoodsData:
         raise RecordedDataError(path, "variable 'r': no sighting (every range is 0), expected at least one")
     d = _scalar(path, mat, "d", "laser offset in m", positive=False)
     check_range(path, "variable 'd' (laser offset in m)", d, 0.0, MAX_RANGE_M)
-    variances = {
-        name: _scalar(path, mat, name, what, positive=True)
-        for name, what in (
-            ("v_var", "speed variance in m^2/s^2"),
-            ("om_var", "turn-rate variance in rad^2/s^2"),
-            ("r_var", "range variance in m^2"),
-            ("b_var", "bearing variance in rad^2"),
-        )
-    }
+    variances = {name: _scalar(path, mat, name, what, positive=True) for name, what, _ in _VARIANCES}
+    for name, what, sigma_max in _VARIANCES:
+        # a standard deviation beyond the quantity's own bound would make the filters ignore the sensor
+        check_range(path, f"variable {name!r} ({what})", variances[name], 0.0, sigma_max**2)
     return LostInTheWoodsData(
         path=path,
         header=header_text,

@@ -208,9 +208,17 @@ INITIAL_SIGMA_THETA_RAD = 0.02
 PATH_STEP_M = 0.05
 #: Default distance between waypoints, m.
 WAYPOINT_SPACING_M = 5.0
-#: Bounds of the validation (generous: the robots drive at most 0.6 m/s in a 15 m hall).
-MAX_SPEED_MPS = 10.0
-MAX_TURN_RATE_RADPS = 50.0
+#: Physical bounds of the validation: an iRobot Create's top speed is 0.5 m/s (Dataset 6 commands at most 0.086 m/s
+#: and 0.57 rad/s); twice that speed and about 2.5 times its top turn rate.
+MAX_SPEED_MPS = 1.0
+MAX_TURN_RATE_RADPS = 10.0
+#: Largest interval between two odometry samples or two Vicon samples, anywhere in the file, s (Dataset 6: at most
+#: 1.03 s for the odometry, 2.03 s for the truth). An odometry sample is held over its interval and the truth is
+#: interpolated between its samples, so a longer gap (a clock jump, lost data) is refused, never bridged.
+MAX_GAP_S = 10.0
+#: Allowance for Vicon noise between two close samples, m: a truth step may move at most
+#: ``MAX_SPEED_MPS * dt + TRUTH_JITTER_M`` (Dataset 6: at most 0.025 m in one 16 ms step).
+TRUTH_JITTER_M = 0.05
 MAX_RANGE_M = 100.0
 #: Largest truth displacement between two consecutive Vicon samples, m (the robots move about 1 cm).
 MAX_TRUTH_STEP_M = 10.0
@@ -369,7 +377,30 @@ def read_groundtruth(path: str | os.PathLike[str]) -> Trajectory2D:
             f"the truth jumps {float(step[k - 1]):.4g} m from the previous sample, "
             f"expected at most {MAX_TRUTH_STEP_M} m",
         )
+    _check_gaps(tab, "ground-truth")
+    dt = np.diff(tab.rows[:, 0])
+    fast = np.flatnonzero(step > MAX_SPEED_MPS * dt + TRUTH_JITTER_M)
+    if fast.size:
+        k = int(fast[0]) + 1
+        raise tab.fail(
+            k,
+            f"the truth moves {float(step[k - 1]):.4g} m in {float(dt[k - 1]):.4g} s, expected at most "
+            f"{MAX_SPEED_MPS} m/s (the robot's physical bound) plus {TRUTH_JITTER_M} m of Vicon noise",
+        )
     return Trajectory2D(t=tab.rows[:, 0].copy(), xy=tab.rows[:, 1:3].copy(), theta=wrap_angle(tab.rows[:, 3]))
+
+
+def _check_gaps(tab: Table, what: str) -> None:
+    """Refuse an interval above :data:`MAX_GAP_S` between two rows of ``tab`` (column 0: time, s)."""
+    dt = np.diff(tab.rows[:, 0])
+    gap = np.flatnonzero(dt > MAX_GAP_S)
+    if gap.size:
+        k = int(gap[0]) + 1
+        raise tab.fail(
+            k,
+            f"{what} time jumps {float(dt[k - 1]):.6g} s from the previous sample, expected gaps of at most "
+            f"{MAX_GAP_S} s (a gap is not bridged)",
+        )
 
 
 def read_odometry(path: str | os.PathLike[str]) -> Table:
@@ -379,6 +410,7 @@ def read_odometry(path: str | os.PathLike[str]) -> Table:
     tab.check_time_non_decreasing(0, "time [s]")
     tab.check_range(1, _ODO_COLUMNS[1], -MAX_SPEED_MPS, MAX_SPEED_MPS)
     tab.check_range(2, _ODO_COLUMNS[2], -MAX_TURN_RATE_RADPS, MAX_TURN_RATE_RADPS)
+    _check_gaps(tab, "odometry")
     return tab
 
 

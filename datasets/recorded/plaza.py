@@ -137,6 +137,13 @@ _REQUIRED = ("GT", "DR", "TL", "TD")
 #: Bounds of the validation: the largest odometry step between two DR rows (m) and the largest range (m).
 MAX_STEP_M = 100.0
 MAX_RANGE_M = 1000.0
+#: Largest interval between two ``GT`` rows or two ``DR`` rows, and between the ends of the ``GT`` span and the first
+#: and last ``DR`` row, s (both files: at most 0.35 s). The truth is interpolated between its rows and an odometry row
+#: covers its whole interval, so a longer gap is refused, never bridged.
+MAX_GAP_S = 5.0
+#: Physical speed bound of the Plaza robot (a lawn-mower-sized vehicle; both files: at most 4.8 m/s over a 0.1-0.35 s
+#: row): a ``DR`` step over its interval and a ``GT`` step over its interval faster than this are refused.
+MAX_SPEED_MPS = 10.0
 #: Path length of the chord whose direction is the ground-truth heading, m (half behind, half ahead).
 HEADING_CHORD_M = 2.0
 #: Initial belief standard deviations: position (m) and heading (rad).
@@ -206,6 +213,43 @@ def _check_time(path: Path, name: str, a: FloatArray) -> None:
         check_range(path, f"variable {name!r} columns 2-3 (x m, y m)", a[:, 1:3], -MAX_POSITION_M, MAX_POSITION_M)
 
 
+def _check_motion(p: Path, gt: FloatArray, dr: FloatArray) -> None:
+    """Refuse gaps above :data:`MAX_GAP_S` in ``GT`` and ``DR`` (and ``DR`` not reaching the ends of ``GT``) and
+    steps faster than :data:`MAX_SPEED_MPS`."""
+    for name, a in (("GT", gt), ("DR", dr)):
+        dt = np.diff(a[:, 0])
+        gap = np.flatnonzero(dt > MAX_GAP_S)
+        if gap.size:
+            r = int(gap[0]) + 1
+            raise RecordedDataError(
+                p,
+                f"variable {name!r} row {r + 1}: {float(dt[r - 1]):.6g} s after the previous row, expected gaps of at "
+                f"most {MAX_GAP_S} s (a gap is not bridged)",
+            )
+    lead, tail = float(dr[0, 0] - gt[0, 0]), float(gt[-1, 0] - dr[-1, 0])
+    overlaps = dr[0, 0] <= gt[-1, 0] and dr[-1, 0] >= gt[0, 0]  # else load_plaza names the missing overlap
+    if overlaps and (lead > MAX_GAP_S or tail > MAX_GAP_S):
+        raise RecordedDataError(
+            p,
+            f"variable 'DR' spans [{float(dr[0, 0])!r}, {float(dr[-1, 0])!r}] s, {max(lead, tail):.6g} s short of an "
+            f"end of the GT span [{float(gt[0, 0])!r}, {float(gt[-1, 0])!r}] s, expected at most {MAX_GAP_S} s "
+            f"({dr.shape[0]} odometry row(s))",
+        )
+    steps = {
+        "DR": (dr[1:, 1], np.diff(dr[:, 0])),
+        "GT": (np.hypot(np.diff(gt[:, 1]), np.diff(gt[:, 2])), np.diff(gt[:, 0])),
+    }
+    for name, (d, dt) in steps.items():
+        fast = np.flatnonzero(d > MAX_SPEED_MPS * dt)
+        if fast.size:
+            r = int(fast[0]) + 1
+            raise RecordedDataError(
+                p,
+                f"variable {name!r} row {r + 1}: a step of {float(d[r - 1]):.6g} m in {float(dt[r - 1]):.6g} s, "
+                f"expected at most {MAX_SPEED_MPS} m/s (the robot's physical bound)",
+            )
+
+
 @functools.lru_cache(maxsize=8)
 def _read_cached(path: str, size: int, mtime_ns: int) -> PlazaArrays:
     p = Path(path)
@@ -239,6 +283,17 @@ def _read_cached(path: str, size: int, mtime_ns: int) -> PlazaArrays:
     if np.any(v["DR"][:, 1] < 0.0):
         r = int(np.flatnonzero(v["DR"][:, 1] < 0.0)[0])
         raise RecordedDataError(p, f"variable 'DR' row {r + 1}: d_dist {float(v['DR'][r, 1])!r} m, expected >= 0")
+    _check_motion(p, v["GT"], v["DR"])
+    # one range per beacon and radio at an instant: more rows at one stamp than beacons is a stamp lost
+    stamps, counts = np.unique(td[:, 0], return_counts=True)
+    crowded = np.flatnonzero(counts > tl.shape[0])
+    if crowded.size:
+        k = int(crowded[0])
+        raise RecordedDataError(
+            p,
+            f"variable 'TD': {int(counts[k])} ranges at the one time {float(stamps[k])!r} s, expected at most one per "
+            f"beacon ({tl.shape[0]} in TL) at an instant (a lost or constant time column)",
+        )
     out_of_order = int(np.sum(np.diff(td[:, 0]) < 0))
     order = np.argsort(td[:, 0], kind="stable")
     return PlazaArrays(p, v["GT"], v["DR"], drp, tl, td[order], out_of_order)

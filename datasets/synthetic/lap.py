@@ -80,6 +80,7 @@ from locbench.datasets.synthetic.sensors import (
 from locbench.datasets.synthetic.world import World
 from locbench.errors import ConfigError
 from locbench.events import Event, LaserScan
+from locbench.limits import check_bytes
 from locbench.raycast import cast_rays
 from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
 
@@ -98,6 +99,10 @@ LAP_CORNERS = ((17.0, 7.25), (17.0, 1.5), (10.5, 1.5), (10.5, 7.25))
 LAP_LIMITS = DriveLimits(
     dt_s=0.05, v_max_mps=0.5, accel_mps2=0.5, omega_max_radps=1.0, alpha_radps2=2.0, dwell_s=2.0, start_dwell_s=1.0
 )
+#: Most people a lap may hold (the corridor and rooms hold a few; each one costs every beam of every scan a test).
+MAX_PEOPLE = 100
+#: Temporaries of the beam-disc intersection, bytes per (scan, beam, person).
+PEOPLE_BYTES_PER_SAMPLE = 48
 #: Part of the floor where people walk (x_min, y_min, x_max, y_max), m: the lap's corridor stretch and rooms.
 PEOPLE_REGION = (9.0, 0.5, 19.5, 8.2)
 
@@ -298,6 +303,12 @@ def laser_scans_with_people(
     grid = world_map_grid
     steps, world_sensor = laser_sensor_poses(motion, sensor)
     angles = sensor.angles()
+    check_bytes(
+        "lap",
+        f"{steps.shape[0]} scans x {sensor.beams} beams x {len(people)} people",
+        float(steps.shape[0]) * float(sensor.beams) * len(people) * PEOPLE_BYTES_PER_SAMPLE,
+        "lower 'people' or 'laser_beams'",
+    )
     true_r = cast_rays(grid.occupied(), grid.resolution, grid.origin[:2], world_sensor, angles, sensor.max_range_m)
     if people:
         t = motion.t[steps]
@@ -340,8 +351,8 @@ class LapParams:
         # checked when the spec is parsed, so a bad value is a one-line error before anything runs
         check_kidnap_params(self.kidnap_m, self.kidnap_rad)
         _check_beams("laser_beams", self.laser_beams, allow_zero=False)
-        if self.people < 0:
-            raise ConfigError(f"parameter 'people' must be a count >= 0, got {self.people}")
+        if not 0 <= self.people <= MAX_PEOPLE:
+            raise ConfigError(f"parameter 'people' must be a count in [0, {MAX_PEOPLE}], got {self.people}")
 
 
 class LapScenario(SyntheticBuilder):

@@ -52,6 +52,7 @@ from locbench.datasets.synthetic.sensors import (
 from locbench.datasets.synthetic.world import World, wall_with_doors
 from locbench.errors import ConfigError
 from locbench.events import Event, LandmarkObservations, LaserScan, PoseFix
+from locbench.limits import check_beams
 from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
 from locbench.spec import params_to_dict
 
@@ -361,6 +362,7 @@ def _check_beams(name: str, beams: int, allow_zero: bool) -> None:
     if beams < 0 or (beams < 2 and not (allow_zero and beams == 0)):
         expected = "0 (no laser) or >= 2" if allow_zero else ">= 2"
         raise ConfigError(f"parameter {name!r} must be {expected}, got {beams}")
+    check_beams("dataset", name, beams)
 
 
 # --- room (report 003) ----------------------------------------------------------------------------------

@@ -26,6 +26,7 @@ from locbench.datasets.synthetic.world import World
 from locbench.errors import ConfigError
 from locbench.events import UNKNOWN_ID, LandmarkObservations, LaserScan, Odometry, PoseFix
 from locbench.geometry import wrap_angle
+from locbench.limits import SCAN_SAMPLE_BYTES, check_bytes
 from locbench.raycast import cast_rays
 
 logger = logging.getLogger(__name__)
@@ -290,6 +291,13 @@ def laser_sensor_poses(
 ) -> tuple[npt.NDArray[np.int64], FloatArray]:
     """The motion steps at the sensor rate and the world pose of the laser at each, shape (S,), (S, 3)."""
     steps = sample_steps(motion, sensor.rate_hz, offset_steps)
+    # the scans' arrays are (S, B): refused before ray-casting when the plan is too large to hold
+    check_bytes(
+        "laser simulation",
+        f"{steps.shape[0]} scans x {sensor.beams} beams",
+        float(steps.shape[0]) * float(sensor.beams) * SCAN_SAMPLE_BYTES,
+        "lower the dataset's 'laser_beams'",
+    )
     poses = motion.poses[steps]
     sx, sy, sth = sensor.sensor_pose
     c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
