@@ -56,7 +56,7 @@ def check_bytes(who: str, what: str, nbytes: float, fix: str, limit: int = MAX_T
     Parameters
     ----------
     who : str
-        The filter or dataset (``"ekf_icp"``, ``"room"``).
+        The filter or dataset (``"ekf_icp"``, ``"room"``); empty in a config check (the spec parser adds it).
     what : str
         What would be allocated and from what (``"ray-cast tables of a 4096 x 4096 grid"``).
     nbytes : float
@@ -71,16 +71,17 @@ def check_bytes(who: str, what: str, nbytes: float, fix: str, limit: int = MAX_T
     """
     if not nbytes <= limit:  # also NaN
         raise ResourceLimit(
-            f"{who}: {what} needs {_size(nbytes)}, expected at most {limit >> 20} MiB "
+            f"{who + ': ' if who else ''}{what} needs {_size(nbytes)}, expected at most {limit >> 20} MiB "
             f"(locbench.limits.MAX_TABLE_BYTES); {fix}"
         )
 
 
-def check_beams(who: str, name: str, beams: int) -> None:
-    """Refuse more than :data:`MAX_LASER_BEAMS` beams per scan in parameter ``name``."""
+def check_beams(name: str, beams: int) -> None:
+    """Refuse more than :data:`MAX_LASER_BEAMS` beams per scan in parameter ``name`` (the spec parser prefixes the
+    filter or dataset)."""
     if beams > MAX_LASER_BEAMS:
         raise ResourceLimit(
-            f"{who}: parameter {name!r} is {beams}, expected at most {MAX_LASER_BEAMS} beams per scan "
+            f"parameter {name!r} is {beams}, expected at most {MAX_LASER_BEAMS} beams per scan "
             "(locbench.limits.MAX_LASER_BEAMS)"
         )
 

@@ -349,10 +349,10 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
             raise ConfigError(f"roughening_k must be >= 0, got {self.roughening_k}")
         if self.laser_beams < 1:
             raise ConfigError(f"laser_beams must be >= 1, got {self.laser_beams}")
-        check_beams("pf", "laser_beams", self.laser_beams)
+        check_beams("laser_beams", self.laser_beams)
         # the particle set is decided by the config alone: refused here, when the spec is parsed
         size, name = (self.max_particles, "max_particles") if self.adaptive == "kld" else (self.particles, "particles")
-        check_bytes("pf", f"a set of {name}={size}", float(size) * PARTICLE_BYTES, f"lower {name!r}")
+        check_bytes("", f"a set of {name}={size}", float(size) * PARTICLE_BYTES, f"lower {name!r}")
         if not (self.z_hit >= 0.0 and self.z_rand >= 0.0 and self.z_hit + self.z_rand > 0.0):
             raise ConfigError(f"z_hit and z_rand must be >= 0 and not both 0, got {self.z_hit}, {self.z_rand}")
         if not 0.0 <= self.range_outlier_fraction < 1.0:

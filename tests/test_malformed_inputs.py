@@ -480,3 +480,239 @@ def test_map_line_extraction_is_bounded_before_allocation(monkeypatch: pytest.Mo
     monkeypatch.setattr(intel, "MAX_HOUGH_VOTES", 3000)
     with pytest.raises(ConfigError, match=r"map lines: 20 occupied cells x 180 angles = 3600 Hough votes"):
         intel.extract_map_lines(grid)
+
+
+# --- issue 26: inputs that were stored as ok (silent wrong results) -----------------------------------------
+
+
+def _relations(tmp_path: Path, lines: Any) -> Path:
+    """The small Intel folder with its relations replaced by ``lines(old_lines)``."""
+    write_small_intel(tmp_path)
+    rel = tmp_path / "freiburg_slam_benchmark" / "intel.relations"
+    rel.write_text("".join(lines(rel.read_text().splitlines(keepends=True))))
+    return rel
+
+
+def _long_relation(old: list[str]) -> list[str]:
+    f = old[0].split()
+    return [" ".join([f[0], f[1], "1e300", *f[3:]]) + "\n", *old[1:]]
+
+
+def _same_times(old: list[str]) -> list[str]:
+    f = old[1].split()
+    return [old[0], " ".join([f[0], f[0], *f[2:]]) + "\n", *old[2:]]
+
+
+@pytest.mark.parametrize(
+    ("lines", "words"),
+    [
+        (lambda old: [], ("no relation",)),
+        (lambda old: ["# only a comment\n"], ("no relation",)),
+        (_long_relation, (":1", "dx m", "1e+300", "[-100.0, 100.0]")),
+        (_same_times, (":2", "t1 equals t2")),
+        (lambda old: old[:1] * 10_000, (":2", "repeats the relation on line 1")),
+    ],
+)
+def test_intel_relations_are_validated(tmp_path: Path, lines: Any, words: tuple[str, ...]) -> None:
+    rel = _relations(tmp_path, lines)
+    with pytest.raises(RecordedDataError) as info:
+        load_intel(tmp_path, verify=False)
+    clean(info, rel, *words)
+
+
+def test_intel_relation_with_t2_before_t1_is_valid(tmp_path: Path) -> None:
+    # the benchmark's own intel.relations has 6 such rows: the pose at t2 seen from the pose at t1 is still defined
+    rel = _relations(tmp_path, lambda old: old)
+    t = np.loadtxt(rel)[:, :2]
+    assert np.any(t[:, 1] < t[:, 0])
+    ds = load_intel(tmp_path, verify=False)
+    assert ds.relations is not None and len(ds.relations) == t.shape[0]
+
+
+def _plaza(tmp_path: Path, edit: Any) -> Path:
+    d = _tiny()
+    edit(d)
+    path = tmp_path / "plaza.mat"
+    scipy.io.savemat(path, d)
+    return path
+
+
+def _one_odometry_row_for_410_s(d: dict[str, np.ndarray]) -> None:
+    t = np.arange(0.0, 410.01, 0.5)
+    d["GT"] = np.column_stack([t, 0.001 * t, np.zeros_like(t), np.zeros_like(t)])
+    d["DR"] = d["DR"][:1]
+    d["DRp"] = d["DRp"][:2]
+
+
+def _all_ranges_at_one_instant(d: dict[str, np.ndarray]) -> None:
+    d["TD"] = d["TD"].copy()
+    d["TD"][:, 0] = 0.6
+
+
+def _a_50_m_step_in_a_tenth_of_a_second(d: dict[str, np.ndarray]) -> None:
+    d["DR"] = d["DR"].copy()
+    d["DR"][1, 0], d["DR"][1, 1] = 0.6, 50.0
+
+
+def _a_gt_gap(d: dict[str, np.ndarray]) -> None:
+    t = np.r_[0.0, 0.5, 1.0, 1.5, 20.0]
+    d["GT"] = np.column_stack([t, 0.01 * t, np.zeros_like(t), np.zeros_like(t)])
+
+
+@pytest.mark.parametrize(
+    ("edit", "words"),
+    [
+        (_one_odometry_row_for_410_s, ("variable 'DR'", "409.5 s short", "(1 odometry row(s))")),
+        (_all_ranges_at_one_instant, ("variable 'TD'", "4 ranges at the one time 0.6 s", "one per beacon")),
+        (_a_50_m_step_in_a_tenth_of_a_second, ("variable 'DR' row 2", "50 m in 0.1 s", "10.0 m/s")),
+        (_a_gt_gap, ("variable 'GT' row 5", "18.5 s", "at most 5.0 s")),
+    ],
+)
+def test_plaza_time_and_motion_bounds(tmp_path: Path, edit: Any, words: tuple[str, ...]) -> None:
+    path = _plaza(tmp_path, edit)
+    with pytest.raises(RecordedDataError) as info:
+        load_plaza(path)
+    clean(info, path, *words)
+
+
+def _edit_rows(path: Path, edit: Any) -> None:
+    """Apply ``edit(k, fields) -> fields`` to each data row (after the 4 header lines) of an MRCLAM file."""
+    lines = path.read_text().splitlines(keepends=True)
+    out = lines[:4]
+    for k, line in enumerate(lines[4:]):
+        out.append(" \t ".join(edit(k, line.split())) + "\r\n")
+    path.write_text("".join(out))
+
+
+def test_mrclam_odometry_gap_of_1e5_s_is_refused(tmp_path: Path) -> None:
+    folder = _small_folder(tmp_path)
+    odo = folder / "Robot1_Odometry.dat"
+    _edit_rows(odo, lambda k, f: [f"{float(f[0]) + (1e5 if k >= 200 else 0.0):.3f}", *f[1:]])
+    with pytest.raises(RecordedDataError) as info:
+        load_mrclam(folder, 1, verify=False)
+    clean(info, f"{odo}:{4 + 201}", "odometry time jumps 100000 s", "at most 10.0 s")
+
+
+def test_mrclam_truth_gap_of_1e4_s_is_refused_not_interpolated(tmp_path: Path) -> None:
+    folder = _small_folder(tmp_path)
+    gt = folder / "Robot1_Groundtruth.dat"
+    _edit_rows(gt, lambda k, f: [f"{float(f[0]) + (1e4 if k >= 500 else 0.0):.3f}", *f[1:]])
+    with pytest.raises(RecordedDataError) as info:
+        load_mrclam(folder, 1, verify=False)
+    clean(info, f"{gt}:{4 + 501}", "ground-truth time jumps 10000 s")
+
+
+def test_mrclam_speed_of_9_9_m_per_s_is_refused(tmp_path: Path) -> None:
+    folder = _small_folder(tmp_path)
+    odo = folder / "Robot1_Odometry.dat"
+    _edit_rows(odo, lambda k, f: [f[0], "9.900", f[2]])
+    with pytest.raises(RecordedDataError) as info:
+        load_mrclam(folder, 1, verify=False)
+    clean(info, f"{odo}:5", "forward velocity", "9.9", "[-1.0, 1.0]")
+    # the truth moving at that speed is refused as well
+    folder = _small_folder(tmp_path / "truth")
+    gt = folder / "Robot1_Groundtruth.dat"
+    _edit_rows(gt, lambda k, f: [f[0], f"{9.9 * (float(f[0]) - 100.0):.8f}", *f[2:]])
+    with pytest.raises(RecordedDataError) as info:
+        load_mrclam(folder, 1, verify=False)
+    clean(info, f"{gt}:6", "the truth moves", "1.0 m/s")
+
+
+@pytest.mark.parametrize("name", ["v_var", "om_var", "r_var", "b_var"])
+def test_lost_in_the_woods_variance_of_1e300_is_refused(tmp_path: Path, name: str) -> None:
+    path = _litw(tmp_path, lambda m: m.__setitem__(name, np.array([[1e300]])))
+    with pytest.raises(RecordedDataError) as info:
+        load_lost_in_the_woods(path)
+    clean(info, path, f"variable {name!r}", "1e+300")
+
+
+def test_map_yaml_with_a_duplicate_key_is_refused(tmp_path: Path) -> None:
+    _map(tmp_path)
+    y = tmp_path / "m.yaml"
+    y.write_text(y.read_text() + "resolution: 0.5\n")
+    with pytest.raises(RecordedDataError) as info:
+        load_map_server_map(y)
+    clean(info, y, "duplicate key 'resolution'", "first on line")
+
+
+def test_pgm_with_trailing_bytes_is_refused(tmp_path: Path) -> None:
+    _map(tmp_path)
+    pgm = next(tmp_path.glob("*.pgm"))
+    pgm.write_bytes(pgm.read_bytes() + b"\x00" * 7)
+    with pytest.raises(RecordedDataError) as info:
+        load_map_server_map(tmp_path / "m.yaml")
+    clean(info, pgm, "7 trailing bytes", "expected exactly 20")
+
+
+def _odom(msgs: list[Any]) -> list[Any]:
+    return [m for m in msgs if m[0] == "/odom"]
+
+
+def _truth(msgs: list[Any]) -> list[Any]:
+    return [m for m in msgs if m[0] == "/ground_truth"]
+
+
+def _set_quaternion(m: Any, q: tuple[float, float, float, float]) -> None:
+    o = m[2].pose.pose.orientation
+    o.x, o.y, o.z, o.w = q
+
+
+def _zero_quaternion(b: Any, msgs: list[Any]) -> None:
+    _set_quaternion(_truth(msgs)[3], (0.0, 0.0, 0.0, 0.0))
+
+
+def _unnormalised_quaternion(b: Any, msgs: list[Any]) -> None:
+    o = _odom(msgs)[4][2].pose.pose.orientation
+    o.z, o.w = 2.0 * o.z, 2.0 * o.w
+
+
+def _rolled_quaternion(b: Any, msgs: list[Any]) -> None:
+    _set_quaternion(_truth(msgs)[2], (math.sin(math.pi / 4), 0.0, 0.0, math.cos(math.pi / 4)))  # 90 deg about x
+
+
+def _odometry_at_one_stamp(b: Any, msgs: list[Any]) -> None:
+    first = _odom(msgs)[0][2].header.stamp
+    for m in _odom(msgs):
+        m[2].header.stamp.sec, m[2].header.stamp.nanosec = first.sec, first.nanosec
+
+
+def _odometry_frame_reset(b: Any, msgs: list[Any]) -> None:
+    for m in _odom(msgs)[20:]:
+        m[2].pose.pose.position.x += 10.0  # the odometry frame re-zeroed 10 m away mid-run
+
+
+def _truth_clock_jump(b: Any, msgs: list[Any]) -> None:
+    for m in _truth(msgs)[30:]:
+        m[2].header.stamp.sec += 1_000_000
+
+
+@pytest.mark.parametrize(
+    ("edit", "words"),
+    [
+        (_zero_quaternion, ("topic '/ground_truth' message 4", "norm 0.0", "unit quaternion")),
+        (_unnormalised_quaternion, ("topic '/odom' message 5", "norm 2.0", "unit quaternion")),
+        (_rolled_quaternion, ("topic '/ground_truth' message 3", "tilted 1.571 rad", "planar pose")),
+        (_odometry_at_one_stamp, ("topic '/odom'", "messages have one stamp")),
+        (_odometry_frame_reset, ("topic '/odom' message 21", "moves 10 m", "frame reset")),
+        (_truth_clock_jump, ("topic '/ground_truth' message 31", "jumps 1e+06 s", "at most 60.0 s")),
+    ],
+)
+def test_bag_poses_and_clocks_are_validated(
+    tmp_path: Path, bag_parts: tuple[Any, list[Any], Path], edit: Any, words: tuple[str, ...]
+) -> None:
+    from locbench.datasets.recorded.rosbag import load_rosbag
+
+    path = _write_bag(bag_parts, tmp_path / "bad.bag", edit)
+    with pytest.raises(RecordedDataError) as info:
+        load_rosbag(path, bag_parts[2] / "map.yaml")
+    clean(info, path, *words)
+
+
+def test_bag_truth_topic_equal_to_the_odometry_topic_is_refused() -> None:
+    pytest.importorskip("rosbags")
+    from locbench.registry import resolve_dataset
+
+    with pytest.raises(ConfigError) as info:
+        resolve_dataset("rosbag[path=run.bag,truth_topic=/odom]")
+    msg = str(info.value)
+    assert "\n" not in msg and "'truth_topic' is the odometry topic '/odom'" in msg, msg

@@ -126,7 +126,7 @@ class LineRoomParams:
         check_kidnap_params(self.kidnap_m, self.kidnap_rad)
         if self.laser_beams < 2:
             raise ConfigError(f"parameter 'laser_beams' must be >= 2, got {self.laser_beams}")
-        check_beams("line_room", "laser_beams", self.laser_beams)
+        check_beams("laser_beams", self.laser_beams)
         if not (self.laser_sigma_m > 0 and math.isfinite(self.laser_sigma_m)):
             raise ConfigError(f"parameter 'laser_sigma_m' must be a range noise > 0 m, got {self.laser_sigma_m}")
 

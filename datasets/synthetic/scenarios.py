@@ -362,7 +362,7 @@ def _check_beams(name: str, beams: int, allow_zero: bool) -> None:
     if beams < 0 or (beams < 2 and not (allow_zero and beams == 0)):
         expected = "0 (no laser) or >= 2" if allow_zero else ">= 2"
         raise ConfigError(f"parameter {name!r} must be {expected}, got {beams}")
-    check_beams("dataset", name, beams)
+    check_beams(name, beams)
 
 
 # --- room (report 003) ----------------------------------------------------------------------------------
