@@ -71,7 +71,7 @@ def check_bytes(who: str, what: str, nbytes: float, fix: str, limit: int = MAX_T
     """
     if not nbytes <= limit:  # also NaN
         raise ResourceLimit(
-            f"{who + ': ' if who else ''}{what} needs {_size(nbytes)}, expected at most {limit >> 20} MiB "
+            f"{who + ': ' if who else ''}{what} would take {_size(nbytes)}, expected at most {limit >> 20} MiB "
             f"(locbench.limits.MAX_TABLE_BYTES); {fix}"
         )
 

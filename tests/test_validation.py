@@ -19,7 +19,7 @@ from locbench.cli import main
         ("odometry", "lap[people=1000000]", "lap: parameter 'people' must be a count in [0, 100], got 1000000"),
         ("odometry", "room[laser_beams=100000000]", "room: parameter 'laser_beams' is 100000000, expected at most"),
         ("odometry", "line_room[laser_beams=20000]", "line_room: parameter 'laser_beams' is 20000"),
-        ("pf[particles=100000000]", "room", "pf: a set of particles=100000000 needs about 16 GB"),
+        ("pf[particles=100000000]", "room", "pf: a set of particles=100000000 would take about 16 GB"),
         ("pf[adaptive=kld,max_particles=100000000]", "room", "lower 'max_particles'"),
         ("pf[use_laser=true,laser_beams=1000000]", "lap", "pf: parameter 'laser_beams' is 1000000"),
         ("odometry", "line_room[laser_sigma_m=0]", "laser_sigma_m"),

@@ -212,7 +212,7 @@ def _origin(f: _Fields) -> tuple[float, float, float]:
 # --- images --------------------------------------------------------------------------------------
 
 
-def read_pgm(path: str | os.PathLike[str], max_cells: int = MAX_GRID_CELLS) -> tuple[npt.NDArray[np.int64], int]:
+def read_pgm(path: str | os.PathLike[str], max_cells: int = MAX_GRID_CELLS) -> tuple[npt.NDArray[np.uint16], int]:
     """Read a binary PGM (P5) image.
 
     Parameters
@@ -291,7 +291,8 @@ def read_pgm(path: str | os.PathLike[str], max_cells: int = MAX_GRID_CELLS) -> t
             f"({width} x {height} x {nbytes}) as the header says",
         )
     dtype = np.dtype(np.uint8) if nbytes == 1 else np.dtype(">u2")
-    pix = np.frombuffer(raw, dtype=dtype, count=width * height, offset=pos).reshape(height, width).astype(np.int64)
+    # uint16 holds every 8- and 16-bit sample exactly in a quarter of int64's memory (a 2^24-pixel map: 34 MB)
+    pix = np.frombuffer(raw, dtype=dtype, count=width * height, offset=pos).reshape(height, width).astype(np.uint16)
     if int(pix.max()) > maxval:
         r, c = np.unravel_index(int(np.argmax(pix)), pix.shape)
         raise RecordedDataError(p, f"pixel ({r}, {c}) is {int(pix[r, c])}, above the header's maxval {maxval}")
@@ -300,7 +301,7 @@ def read_pgm(path: str | os.PathLike[str], max_cells: int = MAX_GRID_CELLS) -> t
 
 def _read_other_image(
     path: Path, max_cells: int = MAX_GRID_CELLS
-) -> tuple[npt.NDArray[np.int64], int, npt.NDArray[np.bool_] | None]:
+) -> tuple[npt.NDArray[np.uint16], int, npt.NDArray[np.bool_] | None]:
     """Any Pillow-readable image as grey values 0..255 (channels averaged) and a transparency mask.
 
     The size is read from the header and refused above ``max_cells`` before the pixels are decoded; Pillow's
@@ -329,7 +330,10 @@ def _read_other_image(
         raise
     except Exception as exc:  # Pillow raises many types for unreadable files (its bomb guard among them)
         raise RecordedDataError(path, f"unreadable image ({type(exc).__name__}: {quote(str(exc))})") from None
-    grey = np.rint(rgba[..., :3].sum(axis=-1, dtype=np.uint16) / 3.0).astype(np.int64)
+    mean = rgba[..., :3].sum(axis=-1, dtype=np.uint16) / 3.0
+    np.rint(mean, out=mean)  # in place: one float64 temporary, not two
+    grey = mean.astype(np.uint16)
+    del mean
     transparent = rgba[..., 3] < 255 if has_alpha else None
     return grey, 255, transparent
 
@@ -401,9 +405,12 @@ def load_map_server_map(yaml_path: str | os.PathLike[str], max_cells: int = MAX_
             f"{pix.shape[1]} x {pix.shape[0]} pixels at {resolution!r} m span {side:.4g} m, expected at most "
             f"{MAX_EXTENT_M} m per side",
         )
-    occupancy = _pixels_to_occupancy(img_path, pix, maxval, negate, occ_th, free_th, mode, transparent)
+    # image top row -> grid's last row: the pixels are flipped (a view), so the occupancy is built in grid order
+    # without a flipped copy of it
+    flipped = None if transparent is None else transparent[::-1]
+    occupancy = _pixels_to_occupancy(img_path, pix[::-1], maxval, negate, occ_th, free_th, mode, flipped)
     return OccupancyGrid(
-        occupancy=np.ascontiguousarray(occupancy[::-1]),  # image top row -> grid's last row
+        occupancy=np.ascontiguousarray(occupancy),
         resolution=resolution,
         origin=origin,
         occupied_thresh=occ_th,
@@ -413,7 +420,7 @@ def load_map_server_map(yaml_path: str | os.PathLike[str], max_cells: int = MAX_
 
 def _pixels_to_occupancy(
     img_path: Path,
-    pix: npt.NDArray[np.int64],
+    pix: npt.NDArray[np.uint16],
     maxval: int,
     negate: bool,
     occ_th: float,
@@ -421,23 +428,29 @@ def _pixels_to_occupancy(
     mode: str,
     transparent: npt.NDArray[np.bool_] | None,
 ) -> FloatArray:
-    """Occupancy (image row order) from grey values by map_server's rules (module docstring)."""
+    """Occupancy from grey values by map_server's rules (module docstring), in the row order of ``pix`` (the image
+    flipped to grid order by the caller; messages name the image's own rows)."""
     if mode == "raw":
         known = pix <= 100
         unknown = pix == _RAW_UNKNOWN
         bad = ~(known | unknown)
         if np.any(bad):
-            r, c = (int(i) for i in np.argwhere(bad)[0])
+            r, c = (int(i) for i in np.argwhere(bad[::-1])[0])  # the first bad pixel in image order
             raise RecordedDataError(
-                img_path, f"raw mode: pixel ({r}, {c}) is {int(pix[r, c])}, expected 0..100 or {_RAW_UNKNOWN} (unknown)"
+                img_path,
+                f"raw mode: pixel ({r}, {c}) is {int(pix[::-1][r, c])}, expected 0..100 or {_RAW_UNKNOWN} (unknown)",
             )
         return np.where(known, pix / 100.0, -1.0)
-    p = pix / float(maxval) if negate else (maxval - pix) / float(maxval)
-    occupied, free = p > occ_th, p < free_th
-    # scale keeps the probability itself; only transparency marks unknown there
-    out = np.where(occupied, 1.0, np.where(free, 0.0, -1.0)) if mode == "trinary" else p.astype(np.float64)
-    if transparent is not None and mode == "scale":
-        out = np.where(transparent, -1.0, out)
+    # exact integers in float64 either way: the same probabilities as from int64 pixels
+    p = pix / float(maxval) if negate else (maxval - pix) / float(maxval)  # pix <= maxval: no wrap-around
+    if mode != "trinary":
+        # scale keeps the probability itself; only transparency marks unknown there
+        if transparent is not None:
+            p[transparent] = -1.0
+        return p
+    out = np.full(p.shape, -1.0)
+    out[p < free_th] = 0.0
+    out[p > occ_th] = 1.0  # free_th <= occ_th: no cell is both
     return out
 
 
