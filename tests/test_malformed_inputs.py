@@ -412,6 +412,48 @@ def _zero_stamp(b: Any, msgs: list[Any]) -> None:
     scan.header.stamp.sec, scan.header.stamp.nanosec = 0, 0
 
 
+def _odom(msgs: list[Any]) -> list[Any]:
+    return [m for m in msgs if m[0] == "/odom"]
+
+
+def _truth(msgs: list[Any]) -> list[Any]:
+    return [m for m in msgs if m[0] == "/ground_truth"]
+
+
+def _set_quaternion(m: Any, q: tuple[float, float, float, float]) -> None:
+    o = m[2].pose.pose.orientation
+    o.x, o.y, o.z, o.w = q
+
+
+def _zero_quaternion(b: Any, msgs: list[Any]) -> None:
+    _set_quaternion(_truth(msgs)[3], (0.0, 0.0, 0.0, 0.0))
+
+
+def _unnormalised_quaternion(b: Any, msgs: list[Any]) -> None:
+    o = _odom(msgs)[4][2].pose.pose.orientation
+    o.z, o.w = 2.0 * o.z, 2.0 * o.w
+
+
+def _rolled_quaternion(b: Any, msgs: list[Any]) -> None:
+    _set_quaternion(_truth(msgs)[2], (math.sin(math.pi / 4), 0.0, 0.0, math.cos(math.pi / 4)))  # 90 deg about x
+
+
+def _odometry_at_one_stamp(b: Any, msgs: list[Any]) -> None:
+    first = _odom(msgs)[0][2].header.stamp
+    for m in _odom(msgs):
+        m[2].header.stamp.sec, m[2].header.stamp.nanosec = first.sec, first.nanosec
+
+
+def _odometry_frame_reset(b: Any, msgs: list[Any]) -> None:
+    for m in _odom(msgs)[20:]:
+        m[2].pose.pose.position.x += 10.0  # the odometry frame re-zeroed 10 m away mid-run
+
+
+def _truth_clock_jump(b: Any, msgs: list[Any]) -> None:
+    for m in _truth(msgs)[30:]:
+        m[2].header.stamp.sec += 1_000_000
+
+
 @pytest.mark.parametrize(
     ("edit", "words"),
     [
@@ -419,6 +461,13 @@ def _zero_stamp(b: Any, msgs: list[Any]) -> None:
         (_zero_increment, ("topic '/scan' message 1", "angle_increment 0.0")),
         (_huge_range_max, ("topic '/scan' message 1", "range_max 3")),
         (_zero_stamp, ("topic '/scan' message 1", "stamp 0.0", "unset header stamp")),
+        # issue 26: poses and clocks that were read as valid
+        (_zero_quaternion, ("topic '/ground_truth' message 4", "norm 0.0", "unit quaternion")),
+        (_unnormalised_quaternion, ("topic '/odom' message 5", "norm 2.0", "unit quaternion")),
+        (_rolled_quaternion, ("topic '/ground_truth' message 3", "tilted 1.571 rad", "planar pose")),
+        (_odometry_at_one_stamp, ("topic '/odom'", "messages have one stamp")),
+        (_odometry_frame_reset, ("topic '/odom' message 21", "moves 10 m", "frame reset")),
+        (_truth_clock_jump, ("topic '/ground_truth' message 31", "jumps 1e+06 s", "at most 60.0 s")),
     ],
 )
 def test_bad_bag_messages_are_refused_naming_topic_and_message(
@@ -642,70 +691,6 @@ def test_pgm_with_trailing_bytes_is_refused(tmp_path: Path) -> None:
     with pytest.raises(RecordedDataError) as info:
         load_map_server_map(tmp_path / "m.yaml")
     clean(info, pgm, "7 trailing bytes", "expected exactly 20")
-
-
-def _odom(msgs: list[Any]) -> list[Any]:
-    return [m for m in msgs if m[0] == "/odom"]
-
-
-def _truth(msgs: list[Any]) -> list[Any]:
-    return [m for m in msgs if m[0] == "/ground_truth"]
-
-
-def _set_quaternion(m: Any, q: tuple[float, float, float, float]) -> None:
-    o = m[2].pose.pose.orientation
-    o.x, o.y, o.z, o.w = q
-
-
-def _zero_quaternion(b: Any, msgs: list[Any]) -> None:
-    _set_quaternion(_truth(msgs)[3], (0.0, 0.0, 0.0, 0.0))
-
-
-def _unnormalised_quaternion(b: Any, msgs: list[Any]) -> None:
-    o = _odom(msgs)[4][2].pose.pose.orientation
-    o.z, o.w = 2.0 * o.z, 2.0 * o.w
-
-
-def _rolled_quaternion(b: Any, msgs: list[Any]) -> None:
-    _set_quaternion(_truth(msgs)[2], (math.sin(math.pi / 4), 0.0, 0.0, math.cos(math.pi / 4)))  # 90 deg about x
-
-
-def _odometry_at_one_stamp(b: Any, msgs: list[Any]) -> None:
-    first = _odom(msgs)[0][2].header.stamp
-    for m in _odom(msgs):
-        m[2].header.stamp.sec, m[2].header.stamp.nanosec = first.sec, first.nanosec
-
-
-def _odometry_frame_reset(b: Any, msgs: list[Any]) -> None:
-    for m in _odom(msgs)[20:]:
-        m[2].pose.pose.position.x += 10.0  # the odometry frame re-zeroed 10 m away mid-run
-
-
-def _truth_clock_jump(b: Any, msgs: list[Any]) -> None:
-    for m in _truth(msgs)[30:]:
-        m[2].header.stamp.sec += 1_000_000
-
-
-@pytest.mark.parametrize(
-    ("edit", "words"),
-    [
-        (_zero_quaternion, ("topic '/ground_truth' message 4", "norm 0.0", "unit quaternion")),
-        (_unnormalised_quaternion, ("topic '/odom' message 5", "norm 2.0", "unit quaternion")),
-        (_rolled_quaternion, ("topic '/ground_truth' message 3", "tilted 1.571 rad", "planar pose")),
-        (_odometry_at_one_stamp, ("topic '/odom'", "messages have one stamp")),
-        (_odometry_frame_reset, ("topic '/odom' message 21", "moves 10 m", "frame reset")),
-        (_truth_clock_jump, ("topic '/ground_truth' message 31", "jumps 1e+06 s", "at most 60.0 s")),
-    ],
-)
-def test_bag_poses_and_clocks_are_validated(
-    tmp_path: Path, bag_parts: tuple[Any, list[Any], Path], edit: Any, words: tuple[str, ...]
-) -> None:
-    from locbench.datasets.recorded.rosbag import load_rosbag
-
-    path = _write_bag(bag_parts, tmp_path / "bad.bag", edit)
-    with pytest.raises(RecordedDataError) as info:
-        load_rosbag(path, bag_parts[2] / "map.yaml")
-    clean(info, path, *words)
 
 
 def test_bag_truth_topic_equal_to_the_odometry_topic_is_refused() -> None:
