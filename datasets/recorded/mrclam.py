@@ -43,8 +43,11 @@ numbers, integer ids, finite values, a last line without its line end refused as
 sighting times must not go backwards (repeated stamps are allowed: they move nothing); positions lie within
 :data:`~locbench.datasets.recorded.files.MAX_POSITION_M`; speeds within :data:`MAX_SPEED_MPS`, turn rates within
 :data:`MAX_TURN_RATE_RADPS`; ranges in [0, :data:`MAX_RANGE_M`]; bearings and headings within +-2 pi; a truth
-jump between two samples above :data:`MAX_TRUTH_STEP_M` is refused; the run needs at least one odometry
-interval with dt > 0 inside the truth span.
+jump between two samples above :data:`MAX_TRUTH_STEP_M` is refused, and so is a truth step faster than
+:data:`MAX_SPEED_MPS` plus :data:`TRUTH_JITTER_M`; a gap above :data:`MAX_GAP_S` between two odometry or two truth
+samples anywhere in the file is refused (an odometry sample is held over its interval and the truth interpolated
+between its samples: a gap is never bridged); the run needs at least one odometry interval with dt > 0 inside the
+truth span.
 
 Time is Unix seconds (NTP-synchronised between robots and Vicon); it is kept as is (no shift). The world frame is
 the Vicon frame; the robot frame has x forward; bearings are counter-clockwise from x, measured from the robot

@@ -70,7 +70,9 @@ int32 ``DR`` has already lost its centimetres), a wrong shape, a non-finite valu
 time not strictly increasing in ``GT``, ``DR`` or ``DRp``, a position beyond
 :data:`~locbench.datasets.recorded.files.MAX_POSITION_M`, a ``DR`` step outside [0, :data:`MAX_STEP_M`] m or a
 turn beyond +-2 pi rad, a beacon id in ``TD`` that is not in ``TL``, a range outside [0, :data:`MAX_RANGE_M`] m
-(also after subtracting ``range_offset_m``), no ``DR`` row inside the ``GT`` span, and a checksum mismatch
+(also after subtracting ``range_offset_m``), no ``DR`` row inside the ``GT`` span, a gap above :data:`MAX_GAP_S`
+(between ``GT`` rows, ``DR`` rows, or from an end of ``GT`` to the nearest ``DR`` row), a ``DR`` or ``GT`` step
+faster than :data:`MAX_SPEED_MPS`, more ranges at one time stamp than beacons, and a checksum mismatch
 raise :class:`~locbench.datasets.recorded.files.RecordedDataError` naming the file, the
 variable (and row) and what was expected. Parsed files are cached per (path, size, mtime).
 """

@@ -44,7 +44,11 @@ Validation: a bag or map path that does not exist is an error (the user typed it
 skip); any failure to open or decode the bag is a clean error naming it; header stamps must be set (> 0) and
 non-decreasing per topic; poses finite and within :data:`~locbench.datasets.recorded.files.MAX_POSITION_M`;
 twists finite and within :data:`MAX_TWIST`; each scan needs a non-zero ``angle_increment`` with its beams
-spanning at most 2 pi and 0 <= ``range_min`` < ``range_max`` <= :data:`MAX_SCAN_RANGE_M`. Scans outside the truth
+spanning at most 2 pi and 0 <= ``range_min`` < ``range_max`` <= :data:`MAX_SCAN_RANGE_M`; every odometry and truth
+orientation a unit quaternion (:data:`QUATERNION_NORM_TOL`) tilted at most :data:`MAX_TILT_RAD` from the vertical;
+odometry and truth stamps that advance, with gaps of at most :data:`MAX_GAP_S` and steps within
+:data:`MAX_SPEED_MPS` / :data:`MAX_TURN_RATE_RADPS` (plus a noise allowance); ``truth_topic`` not ``odom_topic``.
+Scans outside the truth
 span are counted in ``metadata["scans_outside_truth_span"]``; when a scan topic is read and has messages, at least
 one scan must fall inside the truth span (the dataset contract's declared stream).
 """
