@@ -48,9 +48,8 @@ spanning at most 2 pi and 0 <= ``range_min`` < ``range_max`` <= :data:`MAX_SCAN_
 orientation a unit quaternion (:data:`QUATERNION_NORM_TOL`) tilted at most :data:`MAX_TILT_RAD` from the vertical;
 odometry and truth stamps that advance, with gaps of at most :data:`MAX_GAP_S` and steps within
 :data:`MAX_SPEED_MPS` / :data:`MAX_TURN_RATE_RADPS` (plus a noise allowance); ``truth_topic`` not ``odom_topic``.
-Scans outside the truth
-span are counted in ``metadata["scans_outside_truth_span"]``; when a scan topic is read and has messages, at least
-one scan must fall inside the truth span (the dataset contract's declared stream).
+Scans outside the truth span are counted in ``metadata["scans_outside_truth_span"]``; when a scan topic is read and
+has messages, at least one scan must fall inside the truth span (the dataset contract's declared stream).
 """
 
 from __future__ import annotations
