@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 import pytest
 import scipy.io
-from hypothesis import given
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from test_recorded_intel import write_small_intel
 from test_recorded_lost_in_the_woods import _small_mat
@@ -452,3 +452,36 @@ def test_a_map_at_the_pixel_limit_loads_within_the_memory_limit(base: Path) -> N
     _png(folder / "m.png", 4096, 4096)
     (folder / "m.yaml").write_text("image: m.png\nresolution: 0.05\norigin: [0, 0, 0]\n")
     assert load_map_server_map(folder / "m.yaml").shape == (4096, 4096)
+
+
+# --- filters on grids of any size (issue 26): refused by their estimate, or run within the memory limit -----------
+
+
+@settings(max_examples=6)  # an accepted example builds the tables of a grid of up to 1.6 M cells
+@example(rows=4096, cols=4096, spec="ekf_icp")  # the issue's map: refused
+@example(rows=1200, cols=1200, spec="ekf_icp")  # just under the limit: its tables fit the headroom
+@example(rows=4096, cols=4096, spec="pf[use_laser=true,particles=50]")
+@example(rows=2000, cols=2000, spec="pf[use_laser=true,particles=50]")
+@given(
+    rows=st.integers(1, 4096),
+    cols=st.integers(1, 4096),
+    spec=st.sampled_from(["ekf_icp", "pf[use_laser=true,particles=50]"]),
+)
+def test_grid_filters_refuse_or_run_within_the_memory_limit(rows: int, cols: int, spec: str) -> None:
+    import dataclasses
+
+    from locbench.limits import LIKELIHOOD_FIELD_BYTES_PER_CELL, MAX_TABLE_BYTES, RAYCAST_BYTES_PER_CELL
+    from locbench.registry import make_dataset, make_filter
+    from locbench.runner import run_filter
+
+    occ = np.zeros((rows, cols))
+    occ[::37, ::41] = 1.0
+    ds = make_dataset("tiny_line", 0)
+    ds = dataclasses.replace(ds, world=dataclasses.replace(ds.world, occupancy=OccupancyGrid(occ, 0.05)))
+    trace = run_filter(make_filter(spec), ds, np.random.default_rng(0))
+    per_cell = RAYCAST_BYTES_PER_CELL if spec == "ekf_icp" else LIKELIHOOD_FIELD_BYTES_PER_CELL
+    if rows * cols * per_cell > MAX_TABLE_BYTES:
+        assert trace.status == "error" and trace.message.startswith("ResourceLimit:"), trace.message
+        assert "\n" not in trace.message and len(trace.message) <= MAX_MESSAGE_CHARS
+    else:  # accepted: it ran (a MemoryError under the module's address-space limit would be an error here)
+        assert "MemoryError" not in trace.message and "ResourceLimit" not in trace.message, trace.message
