@@ -38,11 +38,11 @@ Each type has exactly that many fields (:data:`FIELDS`); a type that does not be
 What the dataset is made of
 ---------------------------
 * **Odometry**: the sample at t_k covers [t_k-1, t_k] (checked on M3500: the first sample at t = 1 s moves the
-  robot from the pose at 0 s to the pose at 1 s); the first sample of a file, with no interval before it, is not
-  used. ``odom2``: dx = vx dt, dy = vy dt, dtheta = omega dt. ``odom2diff``: v = (v_r + v_l) / 2,
-  omega = (v_l - v_r) / (2 wheel_distance), dx = v dt cos(omega dt / 2), dy = v dt sin(omega dt / 2),
-  dtheta = omega dt (the mid-rotation model), with the twist (v, omega, dt). The yaw rate's convention is
-  established against the truth, not taken from the readme: dead reckoning from the first truth pose (heading pi)
+  robot from the pose at 0 s to the pose at 1 s); the first sample covers the time since the truth's first row
+  (none on Indoor UWB, whose first sample is at that time and is not used). ``odom2``: dx = vx dt, dy = vy dt,
+  dtheta = omega dt. ``odom2diff``: v = (v_r + v_l) / 2, omega = (v_l - v_r) / (2 wheel_distance),
+  dx = v dt cos(omega dt / 2), dy = v dt sin(omega dt / 2), dtheta = omega dt (the mid-rotation model), with the
+  twist (v, omega, dt). The yaw rate's convention is established against the truth, not taken from the readme: dead reckoning from the first truth pose (heading pi)
   with omega = (v_r - v_l) / wheel_distance strays 1.9 m (RMS) from the truth over the 30 s, while
   (v_l - v_r) / (2 wheel_distance) follows it to 0.04 m RMS over the first 10 s (the readme's column order of the
   two wheels and the meaning of "distance between wheels", half the track, are what that implies; a test checks it).
@@ -391,8 +391,14 @@ def load_librsf(
     arrays = read_set(p_in, p_gt, differential)
     pt = arrays.point.rows
     od = arrays.odom.rows
-    if max_steps and od.shape[0] > max_steps + 1:
-        od = od[: max_steps + 1]
+    # each sample covers the time since the previous one; the first, the time since the truth's first row
+    dts = np.diff(od[:, 0], prepend=float(pt[0, 0]))
+    use = np.flatnonzero(dts > 0.0)
+    if max_steps:
+        use = use[:max_steps]
+    if use.size == 0:
+        raise RecordedDataError(p_in, "no odometry sample after the truth's first time")
+    od, dts = od[use], dts[use]
     t0 = float(pt[0, 0])
     t1 = min(float(pt[-1, 0]), float(od[-1, 0]))
     in_truth = (pt[:, 0] >= t0) & (pt[:, 0] <= t1)
@@ -409,10 +415,9 @@ def load_librsf(
     truth = Trajectory2D(pt[:, 0].copy(), pt[:, 1:3].copy(), np.asarray(theta, dtype=np.float64))
 
     events: list[Event] = []
-    dts = np.diff(od[:, 0])
     steps = []
-    for k in range(1, od.shape[0]):
-        t, dt = float(od[k, 0]), float(dts[k - 1])
+    for k in range(od.shape[0]):
+        t, dt = float(od[k, 0]), float(dts[k])
         if not t0 <= t <= t1:
             continue
         if differential:

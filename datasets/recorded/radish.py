@@ -273,9 +273,11 @@ def available_sites(root: str | os.PathLike[str] | None = None) -> list[str]:
 # --- reading -----------------------------------------------------------------------------------------
 
 
-def decompress_log(path: str | os.PathLike[str], limit: int = MAX_LOG_BYTES) -> bytes:
-    """The decompressed bytes of a ``.gz`` log, read in chunks and refused beyond ``limit`` bytes."""
+def decompress_log(path: str | os.PathLike[str], limit: int | None = None) -> bytes:
+    """The decompressed bytes of a ``.gz`` log, read in chunks and refused beyond ``limit`` bytes
+    (None: :data:`MAX_LOG_BYTES`)."""
     p = Path(path)
+    limit = MAX_LOG_BYTES if limit is None else limit
     out = bytearray()
     try:
         with gzip.open(p, "rb") as f:
@@ -320,8 +322,8 @@ class CorrectedLog:
 
 
 @functools.lru_cache(maxsize=4)
-def _read_corrected(path: str, digest: str) -> CorrectedLog:
-    p = Path(path)
+def _read_corrected(digest: str) -> CorrectedLog:
+    p = Path(_PATHS[digest])
     raw = decompress_log(p)
     unterminated = ""
     if raw and not raw.endswith(b"\n"):
@@ -353,7 +355,9 @@ def read_corrected(path: str | os.PathLike[str], sha256: str | None = None) -> C
         raise MissingDataFile(p, "missing file (expected a gzip-compressed corrected CARMEN log)")
     if sha256:
         verify_sha256(p, sha256)
-    return _read_corrected(str(p.resolve()), content_sha256(p))
+    digest = content_sha256(p)
+    _PATHS[digest] = str(p.resolve())
+    return _read_corrected(digest)
 
 
 def _param_number(p: Path, log: CarmenLog, name: str, default: float, lo: float, hi: float, what: str) -> float:
@@ -416,12 +420,14 @@ class Pairing:
         return int(np.count_nonzero(self.index >= 0))
 
 
-def paired_raw(site: str, corrected: CorrectedLog, root: str | os.PathLike[str] | None) -> Pairing | None:
+def paired_raw(
+    site: str, corrected: CorrectedLog, root: str | os.PathLike[str] | None, verify: bool = True
+) -> Pairing | None:
     """The raw log of a paired site and the pairing (None for a site without a raw log)."""
     spec = RAW_LOGS.get(site)
     if spec is None:
         return None
-    raw_path = locate(spec, root)
+    raw_path = locate(spec, root, verify=verify)
     raw = read_carmen(raw_path, max_backstep_s=MAX_BACKSTEP_S)
     idx = pair_scans(corrected.log.flaser.ranges, raw.flaser.ranges)
     pairing = Pairing(raw, idx)
@@ -517,11 +523,14 @@ def simulate_encoder_error(increments: FloatArray, err: EncoderError, rng: np.ra
 # --- map -----------------------------------------------------------------------------------------------
 
 
+#: The latest path seen with each content sha256 (what the content-keyed caches read, and name in messages).
+_PATHS: dict[str, str] = {}
+
+
 @functools.lru_cache(maxsize=4)
-def _site_map(
-    digest: str, path: str, resolution_m: float, max_cells: int
-) -> tuple[OccupancyGrid, LineMap | None, dict[str, Any]]:
-    cl = _read_corrected(path, digest)
+def _site_map(digest: str, resolution_m: float, max_cells: int) -> tuple[OccupancyGrid, LineMap | None, dict[str, Any]]:
+    path = _PATHS[digest]
+    cl = _read_corrected(digest)
     las = cl.log.flaser
     angles = cl.angle_min + cl.angle_increment * np.arange(las.ranges.shape[1])
     pose = _laser_poses(np.asarray(las.pose), cl.laser_offset_m)
@@ -555,7 +564,8 @@ def site_map(
     """The occupancy grid, line map (or None) and map statistics of a corrected log, cached by its sha256."""
     p = Path(path)
     cl = read_corrected(p)
-    return _site_map(cl.sha256, str(cl.path.resolve()), float(resolution_m), int(max_cells))
+    _PATHS[cl.sha256] = str(p.resolve())
+    return _site_map(cl.sha256, float(resolution_m), int(max_cells))
 
 
 def _laser_poses(pose: FloatArray, offset: float) -> FloatArray:
@@ -604,7 +614,7 @@ def load_radish(
     n_all = len(las)
     ref_all = np.column_stack([np.asarray(las.pose)[:, :2], wrap_angle(np.asarray(las.pose)[:, 2])])
     ranges_all = np.where(las.ranges >= cl.no_return_m, np.inf, las.ranges)
-    pairing = paired_raw(site, cl, root)
+    pairing = paired_raw(site, cl, root, verify)
     metadata: dict[str, Any] = {
         "source": f"Radish corrected CARMEN log {path.name} (Howard & Roy 2003); copy of acschaefer/ple cfcb5a7",
         "file": str(path),
