@@ -37,15 +37,15 @@ Each type has exactly that many fields (:data:`FIELDS`); a type that does not be
 
 What the dataset is made of
 ---------------------------
-* **Odometry**: the sample at t_k covers [t_k-1, t_k] (checked on M3500: the first sample at t = 1 s moves the
-  robot from the pose at 0 s to the pose at 1 s); the first sample covers the time since the truth's first row
-  (none on Indoor UWB, whose first sample is at that time and is not used). ``odom2``: dx = vx dt, dy = vy dt,
-  dtheta = omega dt. ``odom2diff``: v = (v_r + v_l) / 2, omega = (v_l - v_r) / (2 wheel_distance),
-  dx = v dt cos(omega dt / 2), dy = v dt sin(omega dt / 2), dtheta = omega dt (the mid-rotation model), with the
-  twist (v, omega, dt). The yaw rate's convention is established against the truth, not taken from the readme:
-  dead reckoning from the first truth pose (heading pi) with omega = (v_r - v_l) / wheel_distance strays 1.9 m (RMS) from the truth over the 30 s, while
-  (v_l - v_r) / (2 wheel_distance) follows it to 0.04 m RMS over the first 10 s (the readme's column order of the
-  two wheels and the meaning of "distance between wheels", half the track, are what that implies; a test checks it).
+* **Odometry**: the sample at t_k covers [t_k-1, t_k] (checked on M3500: the first sample at t = 1 s moves the robot
+  from the pose at 0 s to the pose at 1 s); the first sample covers the time since the truth's first row (none on
+  Indoor UWB, whose first sample is at that time and is not used). ``odom2``: dx = vx dt, dy = vy dt, dtheta = omega
+  dt. ``odom2diff``: v = (v_r + v_l) / 2, omega = (v_l - v_r) / (2 wheel_distance), dx = v dt cos(omega dt / 2), dy =
+  v dt sin(omega dt / 2), dtheta = omega dt (the mid-rotation model), with the twist (v, omega, dt). The yaw rate's
+  convention is established against the truth, not taken from the readme: dead reckoning from the first truth pose
+  (heading pi) with omega = (v_r - v_l) / wheel_distance strays 1.9 m (RMS) from the truth over the 30 s, while (v_l -
+  v_r) / (2 wheel_distance) follows it to 0.04 m RMS over the first 10 s (the readme's column order of the two wheels
+  and the meaning of "distance between wheels", half the track, are what that implies; a test checks it).
 * **Ranges** (:class:`~locbench.events.RangeObservations`): grouped per identical time, ids = the anchor ids;
   anchors (``world.landmarks``) from the lines' anchor positions (an id with two positions is an error).
 * **Truth**: ``point2`` positions; heading from ``angle`` where the file has it (M3500, W3500), else (Indoor UWB)
