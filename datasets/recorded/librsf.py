@@ -481,6 +481,8 @@ def load_librsf(
         if differential
         else ("simulated, generated Gaussian ranges" if noise == GENERATED else "simulated"),
         "truth_heading": heading_note,
+        # the Labyrinth's readme gives no method for its ground-truth positions; M3500 / W3500 are simulated
+        "reference_kind": "not stated" if differential else "simulation",
         "declared_range_variance_m2": declared_var,
         "range_error": moments,
         "window": {"max_steps": max_steps, "odometry_samples_used": sum(isinstance(e, Odometry) for e in events)},
@@ -552,7 +554,7 @@ class LibrsfDataset(RecordedDataset):
         "generated Gaussian range noise"
     )
     folder: ClassVar[str] = FOLDER
-    identity_keys: ClassVar[tuple[str, ...]] = ("set", "noise")
+    identity_keys: ClassVar[tuple[str, ...]] = ("set",)
 
     @classmethod
     def files(cls, params: LibrsfParams) -> list[RemoteFile]:

@@ -620,6 +620,7 @@ def load_radish(
         "file": str(path),
         "site": site,
         "reference": "SLAM-corrected poses of the same log (not independent ground truth); the map is built from them",
+        "reference_kind": "SLAM",
         "reference_scans": n_all,
         "no_return_m": cl.no_return_m,
         "dropped_unterminated_last_line": cl.dropped_last_line,
