@@ -111,7 +111,7 @@ class Report:
         return _reference_kind(ident or self.col.datasets[dataset].spec.ident, meta, label)
 
     def _recorded_header(self, dataset: str) -> str:
-        semi = " (semi-synthetic odometry)" if semi_synthetic(self._truth_meta(dataset)[1]) else ""
+        semi = " (semi-synthetic)" if semi_synthetic(self._truth_meta(dataset)[1]) else ""
         return f"`{self.col.display(dataset)}`{semi}"
 
     # --- sections -------------------------------------------------------------------------------------
@@ -638,11 +638,11 @@ class Report:
                 "filter ran several), grouped by the kind of reference the scores are measured against: motion "
                 "capture, GPS, survey, not stated (the dataset gives no method), SLAM (another estimator's output, "
                 "whose map comes from the same log: agreement with it is not accuracy) and simulation. A SLAM "
-                "reference with relations (Intel) is scored by the relation error (Kuemmerle et al. 2009), the others "
-                "by ATE against the reference. Semi-synthetic: the recording's scans with simulated odometry (the "
-                "reference increments plus encoder error fitted on the sites with raw odometry). Skipped: the filter "
-                "needs a map kind or sensor the dataset lacks, or its resources exceed a stated bound (the appendix "
-                "lists the reasons)."
+                "reference with relations (Intel) is scored by the relation error (Kuemmerle et al. 2009), the "
+                "others by ATE against the reference. Semi-synthetic: the recording's scans with simulated motion "
+                "increments (the reference increments plus an encoder error fitted where the raw recording exists). "
+                "Skipped: the filter needs a map kind or sensor the dataset lacks, or its resources exceed a stated "
+                "bound (the appendix lists the reasons)."
             )
         )
         for kind, group in groups:
@@ -670,7 +670,12 @@ class Report:
                 ),
             )
             sec.children.append(sub)
-        robust = robustness_table(self.df[self.df["dataset"].isin(names)], filters)
+        noise_of = {}
+        for d in names:
+            rn = self._truth_meta(d)[1].get("range_noise")
+            if isinstance(rn, dict) and isinstance(rn.get("world"), str) and isinstance(rn.get("noise"), str):
+                noise_of[d] = (rn["world"], rn["noise"])
+        robust = robustness_table(self.df[self.df["dataset"].isin(names)], filters, noise_of)
         if robust is not None:
             sec.children.append(Section("Robustness to range noise", "recorded-robustness", [robust]))
         return sec

@@ -2,24 +2,22 @@
 
 Reference kinds
 ---------------
-Every recorded dataset is scored against its reference trajectory, and the kind of that reference says how far
-the scores can be trusted: **motion capture** (Vicon: MRCLAM, Lost in the Woods), **GPS** (CMU Plaza), **survey**
-(surveyed marks), **SLAM** (another estimator's output: Intel's GMapping poses, the Radish corrected logs; the map is
-built from the same log), **simulation** (the libRSF M3500 / W3500 worlds: exact truth of simulated data) and
-**not stated** (the libRSF Labyrinth's ground-truth positions, whose method the dataset does not give). A loader
-names its kind in ``metadata["reference_kind"]``; the datasets older than that field are looked up by id in
-:data:`KNOWN_KINDS`. The report's recorded section shows one group of tables per kind and says the kind in every
-caption; the summary's "recorded median ATE" counts only :data:`INDEPENDENT_KINDS` (measured truth of a recording),
-never a SLAM reference or a simulation.
+Every recorded dataset is scored against its reference trajectory, and the kind of that reference says how far the
+scores can be trusted: **motion capture** (Vicon), **GPS**, **survey** (surveyed marks), **SLAM** (another
+estimator's output, whose map is often built from the same log), **simulation** (exact truth of simulated data) and
+**not stated** (a truth whose method the dataset does not give). A recorded builder names its kind in its class
+attribute ``reference_kind``, or per set in ``metadata["reference_kind"]``. The report's recorded section shows one
+group of tables per kind and says the kind in every caption; the summary's "recorded median ATE" counts only
+:data:`INDEPENDENT_KINDS` (measured truth of a recording), never a SLAM reference or a simulation.
 
-Semi-synthetic data (the Radish sites without raw odometry, ``metadata["odometry"]`` starting with
-"semi-synthetic") are marked wherever their name is shown.
+Semi-synthetic data (``metadata["semi_synthetic"]``: recorded scans with simulated motion increments) are marked
+wherever their name is shown.
 
 Robustness table
 ----------------
-ATE (cm) of each filter on each libRSF world under each range-noise type (heavy-tailed, multimodal, skewed) beside
-the generated Gaussian reference of the same world (``noise=gaussian``: the declared 0.25 m^2), and the ratio to that
-reference.
+ATE (cm) of each filter on each simulated ranging world under each range-noise type (heavy-tailed, multimodal,
+skewed) beside the generated Gaussian reference of the same world (``noise=gaussian``: the declared 0.25 m^2), and
+the ratio to that reference.
 """
 
 from __future__ import annotations
@@ -29,7 +27,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from locbench.errors import LocbenchError
 from locbench.metrics import METRICS
+from locbench.registry import DATASETS
 from locbench.report import tables as tb
 from locbench.report.doc import Table
 
@@ -37,32 +37,31 @@ from locbench.report.doc import Table
 KINDS = ("motion capture", "GPS", "survey", "not stated", "SLAM", "simulation")
 #: Kinds of independent, measured ground truth of a recording: the only ones the summary's recorded median counts.
 INDEPENDENT_KINDS = frozenset({"motion capture", "GPS", "survey", "not stated"})
-#: The kind of the datasets whose loaders predate ``metadata["reference_kind"]``, by dataset id.
-KNOWN_KINDS: dict[str, str] = {
-    "mrclam": "motion capture",
-    "lost_in_the_woods": "motion capture",
-    "plaza": "GPS",
-    "intel": "SLAM",
-}
 #: The noise types of the robustness table, then the Gaussian reference.
 NOISE_TYPES = ("heavy-tailed", "multimodal", "skewed")
 GAUSSIAN = "gaussian"
-WORLDS = ("m3500", "w3500")
 
 
 def reference_kind(dataset_id: str, metadata: dict[str, Any], truth_label: str) -> str:
-    """The kind of a dataset's reference (module docstring); a SLAM truth label is SLAM whatever else is said."""
+    """The kind of a dataset's reference (module docstring); a SLAM truth label is SLAM whatever else is said.
+
+    The stored ``metadata["reference_kind"]`` first, else the builder's
+    :attr:`~locbench.datasets.recorded.base.RecordedDataset.reference_kind`, else "not stated".
+    """
     if truth_label == "SLAM reference":
         return "SLAM"
     kind = metadata.get("reference_kind")
-    if isinstance(kind, str) and kind in KINDS:
-        return kind
-    return KNOWN_KINDS.get(dataset_id, "not stated")
+    if not (isinstance(kind, str) and kind in KINDS):
+        try:
+            kind = getattr(DATASETS.load(dataset_id), "reference_kind", "")
+        except LocbenchError:  # a dataset no longer registered (or not installed): nothing more is known
+            kind = ""
+    return kind if isinstance(kind, str) and kind in KINDS else "not stated"
 
 
 def semi_synthetic(metadata: dict[str, Any]) -> bool:
-    """Whether the dataset's odometry is simulated on top of the recording."""
-    return str(metadata.get("odometry", "")).startswith("semi-synthetic")
+    """Whether the dataset's motion data is simulated on top of the recording (``metadata["semi_synthetic"]``)."""
+    return metadata.get("semi_synthetic") is True
 
 
 def kind_caption(kind: str) -> str:
@@ -72,21 +71,20 @@ def kind_caption(kind: str) -> str:
     )
 
 
-def robustness_table(df: pd.DataFrame, filters: list[str]) -> Table | None:
-    """ATE per filter per noise type beside the Gaussian reference, for each libRSF world present; None if none is.
+def robustness_table(df: pd.DataFrame, filters: list[str], noise_of: dict[str, tuple[str, str]]) -> Table | None:
+    """ATE per filter per noise type beside the Gaussian reference, per world; None without such datasets.
 
-    ``df`` holds the stored metric rows (columns dataset, filter, metric, value); dataset names are canonical
-    (``librsf[noise=skewed,set=m3500]``).
+    ``df`` holds the stored metric rows (columns dataset, filter, metric, value); ``noise_of`` maps a dataset name to
+    its (world, noise type) as its loader stored them (``metadata["range_noise"]``).
     """
-    cols: list[tuple[str, str, str]] = []  # (world, noise, dataset name)
-    names = {str(d) for d in df["dataset"].unique()} if len(df) else set()
-    for world in WORLDS:
-        for noise in (*NOISE_TYPES, GAUSSIAN):
-            name = f"librsf[noise={noise},set={world}]"
-            if name in names:
-                cols.append((world, noise, name))
+    worlds = sorted({w for w, _ in noise_of.values()})
+    order = {n: i for i, n in enumerate((*NOISE_TYPES, GAUSSIAN))}
+    cols = sorted(
+        ((w, n, d) for d, (w, n) in noise_of.items() if n in order), key=lambda c: (worlds.index(c[0]), order[c[1]])
+    )
     if not cols:
         return None
+    ref_of = {w: d for d, (w, n) in noise_of.items() if n == GAUSSIAN}
     scale = METRICS["ate_m"].scale
     ate = df[df["metric"] == "ate_m"]
 
@@ -102,8 +100,7 @@ def robustness_table(df: pd.DataFrame, filters: list[str]) -> Table | None:
         cells, k = [f"`{f}`"], [float("nan")]
         for world, noise, name in cols:
             v = mean(f, name)
-            ref_name = f"librsf[noise={GAUSSIAN},set={world}]"
-            ref = mean(f, ref_name) if ref_name in names else float("nan")
+            ref = mean(f, ref_of[world]) if world in ref_of else float("nan")
             if noise == GAUSSIAN or not np.isfinite(ref) or ref <= 0:
                 cells.append(tb.num(v))
             else:
@@ -118,9 +115,9 @@ def robustness_table(df: pd.DataFrame, filters: list[str]) -> Table | None:
         tuple(head),
         tuple(rows),
         caption=(
-            "Robustness to non-Gaussian range noise (libRSF M3500 / W3500; reference: simulation): ATE (cm) per "
-            "noise type, in brackets the ratio to the same filter's ATE under the generated Gaussian noise of the "
-            "declared variance (0.25 m^2) in the same world"
+            "Robustness to non-Gaussian range noise (reference: simulation): ATE (cm) per noise type, in brackets the "
+            "ratio to the same filter's ATE under the generated Gaussian noise of the declared variance in the same "
+            "world"
         ),
         sort_keys=tuple(keys),
     )

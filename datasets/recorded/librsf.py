@@ -483,6 +483,8 @@ def load_librsf(
         "truth_heading": heading_note,
         # the Labyrinth's readme gives no method for its ground-truth positions; M3500 / W3500 are simulated
         "reference_kind": "not stated" if differential else "simulation",
+        # what the report's robustness table reads (the moment-matched variant is not the reference)
+        **({} if differential or like else {"range_noise": {"world": set_name, "noise": noise}}),
         "declared_range_variance_m2": declared_var,
         "range_error": moments,
         "window": {"max_steps": max_steps, "odometry_samples_used": sum(isinstance(e, Odometry) for e in events)},

@@ -671,6 +671,7 @@ def load_radish(
         metadata["odometry"] = (
             "semi-synthetic: reference increments with simulated encoder error (fitted on intel, aces, freiburg-079)"
         )
+        metadata["semi_synthetic"] = True
         metadata["encoder_error"] = {"sigma_xy_per_m": sxy, "sigma_theta_per_m": stm, "sigma_theta_per_rad": str_}
     metadata["window"] = {"max_scans": max_scans, "scans_used": int(keep.shape[0])}
     sensors = SensorSpec(
@@ -723,6 +724,7 @@ class RadishDataset(RecordedDataset):
         "intel, aces, freiburg-079, semi-synthetic elsewhere"
     )
     folder: ClassVar[str] = FOLDER
+    reference_kind: ClassVar[str] = "SLAM"
     identity_keys: ClassVar[tuple[str, ...]] = ("site",)
 
     @classmethod
