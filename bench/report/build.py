@@ -669,6 +669,9 @@ class Report:
                     sort_keys=tuple((NAN, *(c[1] for c in r)) for r in rtf),
                 ),
             )
+            worse = self._not_below_baseline(fs, group, acc)
+            if worse:
+                sub.add(Text(f"Not below dead reckoning ({kind_caption(kind)}): {worse}."))
             sec.children.append(sub)
         noise_of = {}
         for d in names:
@@ -679,6 +682,22 @@ class Report:
         if robust is not None:
             sec.children.append(Section("Robustness to range noise", "recorded-robustness", [robust]))
         return sec
+
+    def _not_below_baseline(self, fs: list[str], group: list[str], acc: list[list[tuple[str, float]]]) -> str:
+        """The (filter, dataset) cells of a recorded group whose accuracy is no better than the baseline's."""
+        base = [i for i, f in enumerate(fs) if self.col.is_baseline(f)]
+        if not base:
+            return ""
+        out = []
+        for j, d in enumerate(group):
+            ref = acc[base[0]][j][1]
+            if not np.isfinite(ref):
+                continue
+            for i, f in enumerate(fs):
+                v = acc[i][j][1]
+                if i not in base and np.isfinite(v) and v >= ref:
+                    out.append(f"`{f}` on `{self.col.display(d)}` ({tb.num(v)} against {tb.num(ref)})")
+        return "; ".join(out)
 
     # --- experiments ---------------------------------------------------------------------------------
 
