@@ -247,6 +247,17 @@ DATASETS.register(
 )
 
 DATASETS.register(
+    "radish",
+    "locbench.datasets.recorded.radish:RadishDataset",
+    "Radish corrected CARMEN logs (recorded, any NAME-corrected.log.gz): laser, map and SLAM reference; raw odometry "
+    "for intel, aces, freiburg-079, semi-synthetic elsewhere",
+)
+DATASETS.register(
+    "librsf",
+    "locbench.datasets.recorded.librsf:LibrsfDataset",
+    "libRSF ranging sets (Pfeifer, TU Chemnitz): Indoor UWB (real) and M3500 / W3500 with non-Gaussian range noise",
+)
+DATASETS.register(
     "plaza",
     "locbench.datasets.recorded.plaza:PlazaDataset",
     "CMU Plaza range-only runs (recorded, Djugash et al. 2009): odometry, radio ranges to 4 beacons, GPS truth",

@@ -67,6 +67,9 @@ def incompatibility(flt: Filter, ds: Dataset) -> str | None:
     missing = sorted(k.value for k in flt.requires - ds.world.kinds)
     if missing:
         return f"{type(flt).__name__} requires map kinds {missing} which {ds.name or ds.id} does not provide"
+    bound = flt.unsupported(ds.world)
+    if bound is not None:
+        return f"{type(flt).__name__} on {ds.name or ds.id}: {bound}"
     wanted = flt.routed_events() - {Odometry}
     present = {type(e) for e in ds.events}
     if wanted and not wanted & present:

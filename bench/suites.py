@@ -87,8 +87,30 @@ RECORDED_LANDMARK_DATASETS = (
     "lost_in_the_woods",
     "plaza[run=1]",
     "plaza[run=2]",
+    # libRSF (issue 22): the real Labyrinth UWB set and the two simulated worlds under each range-noise type, with the
+    # generated Gaussian reference of the robustness table
+    "librsf[set=indoor_uwb]",
+    *(
+        f"librsf[set={w},noise={n}]"
+        for w in ("m3500", "w3500")
+        for n in ("heavy-tailed", "multimodal", "skewed", "gaussian")
+    ),
 )
-RECORDED_LASER_DATASETS = ("intel",)
+#: The published Radish corrected logs (SOURCES.md section 6); the loader takes any NAME-corrected.log.gz.
+RADISH_SITES = (
+    "acapulco",
+    "aces",
+    "belgioioso",
+    "csail",
+    "freiburg-079",
+    "freiburg-101",
+    "freiburg-campus",
+    "infinite-corridor",
+    "intel",
+    "orebro",
+    "seattle",
+)
+RECORDED_LASER_DATASETS = ("intel", *(f"radish[site={s}]" for s in RADISH_SITES))
 
 #: The model-matched worlds of the consistency suite (the simulator's noise is the nominal noise).
 MATCHED_DATASETS = ("room[matched=true]", "office[matched=true]")
@@ -190,7 +212,7 @@ _SUITES: tuple[Suite, ...] = (
             Block((*ALL_FILTERS, "pf[use_laser=true]"), RECORDED_LASER_DATASETS, 1),
         ),
         "every filter on the recorded datasets (skips where data or a map kind is missing): MRCLAM 6 robots 1-5, "
-        "Lost in the Woods, Intel, CMU Plaza 1 and 2",
+        "Lost in the Woods, Intel, CMU Plaza 1 and 2, the 11 Radish buildings, the 9 libRSF ranging sets",
     ),
     Suite(
         "consistency",

@@ -230,8 +230,30 @@ class ScanDatabase:
         return np.array([self.positions[i, 0], self.positions[i, 1], float(wrap_angle(h * self.heading_step_rad))])
 
 
-#: Largest lattice of recorded positions (each holds 360 / heading_step_deg ranges per bearing).
+#: Largest lattice of recorded positions (each holds 360 / heading_step_deg ranges per bearing): the memory bound of
+#: the database, 200 000 x 72 headings x 8 B = 115 MB of ranges at the default 5 deg.
 MAX_LATTICE_POSITIONS = 200_000
+
+
+def lattice_positions(grid: OccupancyGrid, step_m: float) -> float:
+    """How many lattice positions a database on ``grid`` at ``step_m`` would consider (before the free-space cut)."""
+    rows, cols = grid.shape
+    res = grid.resolution
+    return ((cols * res) / step_m + 1.0) * ((rows * res) / step_m + 1.0)
+
+
+def lattice_too_large(grid: OccupancyGrid, step_m: float) -> str | None:
+    """The refusal message when the lattice exceeds :data:`MAX_LATTICE_POSITIONS`, else None."""
+    n_lattice = lattice_positions(grid, step_m)
+    if n_lattice <= MAX_LATTICE_POSITIONS:
+        return None
+    rows, cols = grid.shape
+    res = grid.resolution
+    return (
+        f"scan database: a {cols * res:.4g} m x {rows * res:.4g} m map on a {step_m} m lattice has "
+        f"{n_lattice:.4g} positions, expected at most {MAX_LATTICE_POSITIONS} (the database's memory bound; "
+        "raise grid_step_m)"
+    )
 
 
 def build_database(
@@ -275,12 +297,10 @@ def build_database(
     res = grid.resolution
     ox, oy = grid.origin[0], grid.origin[1]
     # Refuse a lattice too large to hold before allocating it (a huge map or a tiny step): MAX_LATTICE_POSITIONS.
-    n_lattice = ((cols * res) / step_m + 1.0) * ((rows * res) / step_m + 1.0)
-    if not n_lattice <= MAX_LATTICE_POSITIONS:
-        raise ConfigError(
-            f"scan database: a {cols * res:.4g} m x {rows * res:.4g} m map on a {step_m} m lattice has "
-            f"{n_lattice:.4g} positions, expected at most {MAX_LATTICE_POSITIONS} (raise grid_step_m)"
-        )
+    too_large = lattice_too_large(grid, step_m)
+    if too_large is not None:
+        raise ConfigError(too_large)
+    n_lattice = lattice_positions(grid, step_m)
     n_dir = round(360.0 / heading_step_deg)
     check_bytes(
         "kf_linear",

@@ -126,6 +126,14 @@ class Filter(abc.ABC):
         """
         return self.consumes
 
+    def unsupported(self, world: WorldMap) -> str | None:
+        """Why this configuration cannot run in ``world`` within its stated resource bounds, or None.
+
+        The runner stores such a run as ``skipped`` with this reason (e.g. a scan database that would exceed its
+        memory bound on a large map) instead of failing it in ``reset``. Checked before ``reset``; cheap.
+        """
+        return None
+
     def check_tolerances(self) -> CheckTolerances:
         """The bounds of the conformance checks under this config (defaults unless a filter widens one)."""
         return CheckTolerances()

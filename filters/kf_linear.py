@@ -61,7 +61,7 @@ from locbench.datasets.base import Gaussian2, MapKind, SensorSpec, WorldMap
 from locbench.errors import ConfigError, FilterDiverged
 from locbench.events import LaserScan, Observation, Odometry
 from locbench.filters._motion import increment_variances, resolve_motion_noise
-from locbench.filters._scan_database import ScanDatabase, build_database, match_scan
+from locbench.filters._scan_database import ScanDatabase, build_database, lattice_too_large, match_scan
 from locbench.filters.base import Estimate, Filter, FilterConfig
 from locbench.geometry import wrap_scalar
 
@@ -162,6 +162,13 @@ class LinearKF(Filter):
     source: ClassVar[str] = "004_2a620520509b0112 (linear KF, velocity model and scan-database sensor model, sec. I-II)"
 
     config: LinearKFConfig
+
+    def unsupported(self, world: WorldMap) -> str | None:
+        """The database's memory bound (:data:`~locbench.filters._scan_database.MAX_LATTICE_POSITIONS`): a map too
+        large for it at ``grid_step_m`` is a stored skip with the reason, not a failed run."""
+        if world.occupancy is None or not self.config.grid_step_m > 0:
+            return None
+        return lattice_too_large(world.occupancy, self.config.grid_step_m)
 
     def reset(self, initial: Gaussian2, world: WorldMap, sensors: SensorSpec, rng: np.random.Generator) -> None:
         """Record the scan database on the world's occupancy grid and start from ``initial``; ``rng`` is unused."""

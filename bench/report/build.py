@@ -22,6 +22,8 @@ from locbench.report import figures as fg
 from locbench.report import tables as tb
 from locbench.report.collect import Collected
 from locbench.report.doc import Bullets, Plot, Section, Table, Text
+from locbench.report.reference import INDEPENDENT_KINDS, KINDS, kind_caption, robustness_table, semi_synthetic
+from locbench.report.reference import reference_kind as _reference_kind
 from locbench.report.style import LineStyle, style_for
 from locbench.spec import Spec
 
@@ -97,6 +99,21 @@ class Report:
     def ground_truth(self, dataset: str) -> bool:
         return all(tr.truth_label == "ground truth" for (d, _), tr in self.col.truths.items() if d == dataset)
 
+    def _truth_meta(self, dataset: str) -> tuple[str, dict, str]:
+        for (d, _), tr in sorted(self.col.truths.items()):
+            if d == dataset:
+                return str(tr.meta.get("dataset_id", "")), dict(tr.meta.get("metadata", {}) or {}), tr.truth_label
+        return self.col.datasets[dataset].spec.ident if dataset in self.col.datasets else "", {}, "ground truth"
+
+    def reference_kind(self, dataset: str) -> str:
+        """Motion capture, GPS, survey, not stated, SLAM or simulation (:mod:`locbench.report.reference`)."""
+        ident, meta, label = self._truth_meta(dataset)
+        return _reference_kind(ident or self.col.datasets[dataset].spec.ident, meta, label)
+
+    def _recorded_header(self, dataset: str) -> str:
+        semi = " (semi-synthetic)" if semi_synthetic(self._truth_meta(dataset)[1]) else ""
+        return f"`{self.col.display(dataset)}`{semi}"
+
     # --- sections -------------------------------------------------------------------------------------
 
     def sections(self) -> list[Section]:
@@ -163,7 +180,7 @@ class Report:
     def _recorded_ate(self, filter_name: str) -> tuple[float, int]:
         per = []
         for ds in self.recorded():
-            if not self.ground_truth(ds):
+            if not self.ground_truth(ds) or self.reference_kind(ds) not in INDEPENDENT_KINDS:
                 continue
             sub = self.rows(ds)
             v = tb.values(sub[sub["filter"] == filter_name], "ate_m")
@@ -269,7 +286,8 @@ class Report:
                 )
             )
         notes.append(
-            "Recorded median ATE: median over the recorded datasets with ground truth that this configuration "
+            "Recorded median ATE: median over the recorded datasets with independent ground truth (motion capture, "
+            "GPS, survey or a stated truth; never a SLAM reference or a simulated world) that this configuration "
             "ran on (their number in brackets) of its mean ATE there."
         )
         columns = (
@@ -613,35 +631,73 @@ class Report:
                 return "failed", NAN
             return "-", NAN
 
-        head = ("filter", *(f"`{self.col.display(d)}`" for d in names))
-        acc = [[cell(f, d, self._recorded_metric(d)) for d in names] for f in filters]
-        rtf = [[cell(f, d, "realtime_factor") for d in names] for f in filters]
-        metrics_text = "; ".join(
-            f"`{self.col.display(d)}` {tb.header(self._recorded_metric(d))}"
-            + ("" if self.ground_truth(d) else " against a SLAM reference")
-            for d in names
-        )
+        groups = [(k, [d for d in names if self.reference_kind(d) == k]) for k in KINDS]
         sec.add(
             Text(
                 "Every filter on the recorded datasets (one recording each; the mean over seeds where a randomised "
-                f"filter ran several). Accuracy: {metrics_text}. A SLAM reference is another estimator's output, "
-                "so there the relation error (Kuemmerle et al. 2009) is the metric. Skipped: the filter needs a "
-                "map kind or sensor the dataset lacks (the appendix lists the reasons)."
-            ),
-            Table(
-                head,
-                tuple((f"`{f}`", *(c[0] for c in r)) for f, r in zip(filters, acc, strict=True)),
-                caption="Accuracy (cm)",
-                sort_keys=tuple((NAN, *(c[1] for c in r)) for r in acc),
-            ),
-            Table(
-                head,
-                tuple((f"`{f}`", *(c[0] for c in r)) for f, r in zip(filters, rtf, strict=True)),
-                caption="Real-time factor (x)",
-                sort_keys=tuple((NAN, *(c[1] for c in r)) for r in rtf),
-            ),
+                "filter ran several), grouped by the kind of reference the scores are measured against: motion "
+                "capture, GPS, survey, not stated (the dataset gives no method), SLAM (another estimator's output, "
+                "whose map comes from the same log: agreement with it is not accuracy) and simulation. A SLAM "
+                "reference with relations (Intel) is scored by the relation error (Kuemmerle et al. 2009), the "
+                "others by ATE against the reference. Semi-synthetic: the recording's scans with simulated motion "
+                "increments (the reference increments plus an encoder error fitted where the raw recording exists). "
+                "Skipped: the filter needs a map kind or sensor the dataset lacks, or its resources exceed a stated "
+                "bound (the appendix lists the reasons)."
+            )
         )
+        for kind, group in groups:
+            if not group:
+                continue
+            head = ("filter", *(self._recorded_header(d) for d in group))
+            fs = [f for f in filters if any((f, d) in status for d in group)]
+            acc = [[cell(f, d, self._recorded_metric(d)) for d in group] for f in fs]
+            rtf = [[cell(f, d, "realtime_factor") for d in group] for f in fs]
+            metrics_text = "; ".join(f"`{self.col.display(d)}` {tb.header(self._recorded_metric(d))}" for d in group)
+            sub = Section(f"Reference: {kind}", f"recorded-{slug(kind)}")
+            sub.add(
+                Text(f"Accuracy: {metrics_text}; {kind_caption(kind)}."),
+                Table(
+                    head,
+                    tuple((f"`{f}`", *(c[0] for c in r)) for f, r in zip(fs, acc, strict=True)),
+                    caption=f"Accuracy (cm); {kind_caption(kind)}",
+                    sort_keys=tuple((NAN, *(c[1] for c in r)) for r in acc),
+                ),
+                Table(
+                    head,
+                    tuple((f"`{f}`", *(c[0] for c in r)) for f, r in zip(fs, rtf, strict=True)),
+                    caption=f"Real-time factor (x); {kind_caption(kind)}",
+                    sort_keys=tuple((NAN, *(c[1] for c in r)) for r in rtf),
+                ),
+            )
+            worse = self._not_below_baseline(fs, group, acc)
+            if worse:
+                sub.add(Text(f"Not below dead reckoning ({kind_caption(kind)}): {worse}."))
+            sec.children.append(sub)
+        noise_of = {}
+        for d in names:
+            rn = self._truth_meta(d)[1].get("range_noise")
+            if isinstance(rn, dict) and isinstance(rn.get("world"), str) and isinstance(rn.get("noise"), str):
+                noise_of[d] = (rn["world"], rn["noise"])
+        robust = robustness_table(self.df[self.df["dataset"].isin(names)], filters, noise_of)
+        if robust is not None:
+            sec.children.append(Section("Robustness to range noise", "recorded-robustness", [robust]))
         return sec
+
+    def _not_below_baseline(self, fs: list[str], group: list[str], acc: list[list[tuple[str, float]]]) -> str:
+        """The (filter, dataset) cells of a recorded group whose accuracy is no better than the baseline's."""
+        base = [i for i, f in enumerate(fs) if self.col.is_baseline(f)]
+        if not base:
+            return ""
+        out = []
+        for j, d in enumerate(group):
+            ref = acc[base[0]][j][1]
+            if not np.isfinite(ref):
+                continue
+            for i, f in enumerate(fs):
+                v = acc[i][j][1]
+                if i not in base and np.isfinite(v) and v >= ref:
+                    out.append(f"`{f}` on `{self.col.display(d)}` ({tb.num(v)} against {tb.num(ref)})")
+        return "; ".join(out)
 
     # --- experiments ---------------------------------------------------------------------------------
 

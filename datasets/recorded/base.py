@@ -24,6 +24,9 @@ class RecordedDataset(DatasetBuilder):
     #: Parameters that say which recording a name means; the report always spells them out
     #: (``mrclam[dataset=6,robot=1]``, never a bare default).
     identity_keys: ClassVar[tuple[str, ...]] = ()
+    #: What the reference trajectory is (the report groups recorded data by it): "motion capture", "GPS", "survey",
+    #: "SLAM", "simulation" or "not stated"; a dataset whose sets differ says it in ``metadata["reference_kind"]``.
+    reference_kind: ClassVar[str] = "not stated"
 
     @classmethod
     @abc.abstractmethod

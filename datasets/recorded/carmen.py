@@ -207,8 +207,17 @@ def _readonly(a: np.ndarray) -> np.ndarray:
     return a
 
 
-def _parse(p: Path) -> CarmenLog:
-    raw = p.read_bytes()
+def parse_carmen_bytes(path: str | os.PathLike[str], raw: bytes) -> CarmenLog:
+    """Parse the bytes of a CARMEN log read elsewhere (a decompressed ``*.log.gz``); errors name ``path``.
+
+    No time check and no cache: the caller checks the streams it uses and caches by content.
+    """
+    return _parse(Path(path), raw)
+
+
+def _parse(p: Path, raw: bytes | None = None) -> CarmenLog:
+    if raw is None:
+        raw = p.read_bytes()
     try:
         text = raw.decode("ascii")
     except UnicodeDecodeError as exc:

@@ -727,6 +727,7 @@ class IntelDataset(RecordedDataset):
         "Intel Research Lab laser log (Freiburg SLAM benchmark): relation error; GMapping poses as SLAM reference"
     )
     folder: ClassVar[str] = FOLDER
+    reference_kind: ClassVar[str] = "SLAM"
 
     @classmethod
     def files(cls, params: Any) -> list[RemoteFile]:

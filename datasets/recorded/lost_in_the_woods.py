@@ -532,6 +532,7 @@ class LostInTheWoods(RecordedDataset):
         "Barfoot's Lost in the Woods (dataset2.mat): v/omega at 10 Hz, range-bearing to 17 tubes, Vicon truth"
     )
     folder: ClassVar[str] = "lost_in_the_woods"
+    reference_kind: ClassVar[str] = "motion capture"
 
     @classmethod
     def files(cls, params: Any) -> list[RemoteFile]:

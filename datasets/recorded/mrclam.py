@@ -912,6 +912,7 @@ class MrclamDataset(RecordedDataset):
         "UTIAS MRCLAM: one of 5 robots, twist odometry, camera range-bearing to 15 landmarks, Vicon truth"
     )
     folder: ClassVar[str] = FOLDER
+    reference_kind: ClassVar[str] = "motion capture"
     identity_keys: ClassVar[tuple[str, ...]] = ("dataset", "robot")
 
     @classmethod

@@ -551,6 +551,7 @@ class PlazaDataset(RecordedDataset):
     version: ClassVar[int] = 1
     description: ClassVar[str] = "CMU Plaza: odometry and radio ranges to 4 beacons, GPS truth (Djugash 2009)"
     folder: ClassVar[str] = FOLDER
+    reference_kind: ClassVar[str] = "GPS"
     identity_keys: ClassVar[tuple[str, ...]] = ("run",)
 
     @classmethod
