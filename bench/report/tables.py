@@ -203,9 +203,17 @@ BOUND_FOOTNOTE = (
 )
 
 
-def comparison_table(df: pd.DataFrame, filters: Sequence[str], caption: str, bounds: Sequence[str] = ()) -> Table:
+def comparison_table(
+    df: pd.DataFrame,
+    filters: Sequence[str],
+    caption: str,
+    bounds: Sequence[str] = (),
+    eligible: Sequence[bool] | None = None,
+) -> Table:
     """Mean ± 95 % t-interval over seeds of every comparison metric present, a row per filter; with rows of
-    the bound (``bounds``, shown after the filters), the column ``ate_over_pcrb``."""
+    the bound (``bounds``, shown after the filters), the column ``ate_over_pcrb``. With ``eligible`` (per
+    filter: may be marked best), each ranked column marks its best and the rows tied with it
+    (:func:`locbench.report.significance.mark_ties`)."""
     present = [m for m in COMPARISON if (df["metric"] == m).any()]
     with_bound = bool(bounds) and bool((df["filter"] == BOUND_ALL).any())
     rows: list[tuple[str, ...]] = []
@@ -235,6 +243,23 @@ def comparison_table(df: pd.DataFrame, filters: Sequence[str], caption: str, bou
     ]
     head = ("filter", "runs", "failed", *cols)
     notes = (BOUND_FOOTNOTE,) if with_bound else ()
+    if eligible is not None:
+        from locbench.report import significance as sig
+
+        shown = [f for f in [*filters, *bounds] if f not in bounds or (df["filter"] == f).any()]
+        ranked = [m for m in present if METRICS[m].better]
+        index = {
+            m: 3
+            + present.index(m)
+            + (1 if with_bound and "ate_m" in present and present.index("ate_m") < present.index(m) else 0)
+            for m in ranked
+        }
+        flags = [*eligible, *[False] * (len(shown) - len(filters))]
+        cells, ks = [list(r) for r in rows], [list(k) for k in keys]
+        columns = [sig.Column(index[m], METRICS[m], sig.samples_for(df, shown, m)) for m in ranked]
+        untested = sig.mark_ties(cells, ks, columns, flags)
+        rows = [tuple(r) for r in cells]
+        notes = (*notes, sig.tie_footnote(untested))
     return Table(head, tuple(rows), caption=caption, footnotes=notes, sort_keys=tuple(keys))
 
 
