@@ -59,7 +59,8 @@ class TestResult:
         """``Wilcoxon signed-rank (exact), n = 20, p = 0.003``, or why no test was possible."""
         if not self.tested:
             return f"{self.method}: no test possible (n = {self.n})"
-        return f"{self.method}, n = {self.n}, p = {format_p(self.p)}"
+        p = format_p(self.p)
+        return f"{self.method}, n = {self.n}, p {p}" if p.startswith("<") else f"{self.method}, n = {self.n}, p = {p}"
 
 
 def format_p(p: float) -> str:

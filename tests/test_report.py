@@ -473,3 +473,26 @@ def test_configurations_of_a_sweep_are_listed_in_numeric_order() -> None:
         "pf[particles=300]",
         "pf[particles=3000]",
     ]
+
+
+def test_report_writes_comparisons_and_says_when_no_test_is_possible(store: Store) -> None:
+    paths = write_report(store)
+    csv = pd.read_csv(store.summary / "comparisons.csv")
+    assert list(csv.columns) == [
+        "dataset",
+        "metric",
+        "configuration",
+        "reference",
+        "n",
+        "statistic",
+        "p",
+        "p_holm",
+        "effect",
+        "effect_low",
+        "effect_high",
+    ]
+    text = paths.markdown.read_text()
+    # three seeds: too few for a two-sided paired test, so only the best is bold and the table says why
+    assert "no paired test is possible, so only the best value is in bold" in text
+    assert "Seed audit" in text and "Paired comparisons" in text and "| test (n, p) |" in text
+    assert "verify: `locbench verify` has not been run on this store" in text

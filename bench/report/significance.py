@@ -316,9 +316,10 @@ def draw_cd(ax: Axes, res: RankResult, title: str) -> None:
     configurations whose ranks lie within the CD (not significantly different by Nemenyi), the CD drawn above."""
     k = len(res.configs)
     order = np.argsort(res.ranks, kind="stable")
-    ax.set_xlim(0.5, k + 0.5)
-    ax.set_ylim(-(k // 2 + 2.2), 2.2)
-    ax.axhline(0, color="black", lw=1)
+    # room either side for the labels
+    ax.set_xlim(0.5 - 0.35 * k, k + 0.5 + 0.35 * k)
+    ax.set_ylim(-((k + 1) // 2 + 0.6), 2.0)
+    ax.plot([1, k], [0, 0], color="black", lw=1)
     for r in range(1, k + 1):
         ax.plot([r, r], [0, 0.15], color="black", lw=1)
         ax.text(r, 0.3, str(r), ha="center", va="bottom", fontsize=7)
