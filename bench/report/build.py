@@ -128,8 +128,9 @@ class Report:
         return [
             "locbench runs every localization filter on the same synthetic worlds and recorded datasets and "
             "measures them the same way. Start with the **summary** tables: one row per filter configuration on "
-            "each main comparison, errors in cm, times in us, the best value of each column in bold (the "
-            "dead-reckoning baseline is never marked). Then the **claims** of the five source reports, "
+            "each main comparison, errors in cm, times in us; in bold the best value of each column and every "
+            "configuration a paired test over the seeds does not find different from it (the dead-reckoning "
+            "baseline is never marked). Then the ranks **across datasets**, the **claims** of the five source reports, "
             "each with its verdict and the measured value; the **accuracy against runtime** fronts (lower and "
             "further right is better); **consistency** (does a filter's covariance describe its error?); kidnap "
             "recovery; the recorded data; and one section per experiment. Values are means over seeds; the "
