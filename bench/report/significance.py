@@ -79,36 +79,26 @@ def per_seed(df: pd.DataFrame, metric: str) -> dict[int, float]:
     return out
 
 
-def waypoint_mean_per_seed(df: pd.DataFrame) -> dict[int, float]:
-    """seed -> the mean over waypoints of that run's waypoint errors ``waypoint_<j>_error_m``."""
-    m = df["metric"].astype(str)
-    sel = df[m.str.match(r"^waypoint_\d+_error_m$")]
-    if sel.empty:
-        return {}
-    g = sel.groupby("seed")["value"].mean()
-    return {int(str(s)): float(v) for s, v in g.items()}
-
-
-def rate_per_seed(df: pd.DataFrame, metric: str) -> dict[int, float]:
-    """seed -> a 1/0 metric, a failed run (no value) counting as 0, as the tables' rates do."""
-    out = {s: 0.0 for s in per_seed(df, "failed")}
-    out.update(per_seed(df, metric))
-    return out
-
-
 def samples_for(df: pd.DataFrame, filters: Sequence[str], metric: str) -> list[dict[int, float] | None]:
-    """The per-run values of one column, a dict per row (None: no values)."""
-    out: list[dict[int, float] | None] = []
-    for f in filters:
-        sub = df[df["filter"] == f]
-        if metric == WAYPOINT_MEAN:
-            v = waypoint_mean_per_seed(sub)
-        elif metric == "kidnap_recovered":
-            v = rate_per_seed(sub, metric)
-        else:
-            v = per_seed(sub, metric)
-        out.append(v or None)
-    return out
+    """The per-run values of one column, a dict seed -> value per row (None: no values); one pass over ``df``.
+
+    ``WAYPOINT_MEAN``: each run's mean of ``waypoint_<j>_error_m`` over the waypoints; ``kidnap_recovered``:
+    a failed run (no value) counts as 0, as the tables' rates do; otherwise the metric's value (NaN left out).
+    """
+    if metric == WAYPOINT_MEAN:
+        sel = df[df["metric"].astype(str).str.match(r"^waypoint_\d+_error_m$")]
+        grouped = sel.groupby(["filter", "seed"])["value"].mean()
+    else:
+        sel = df[(df["metric"] == metric) & df["value"].notna()]
+        grouped = sel.groupby(["filter", "seed"])["value"].last()
+    by: dict[str, dict[int, float]] = {}
+    if metric == "kidnap_recovered":
+        failed = df[df["metric"] == "failed"]
+        for f, seed in zip(failed["filter"], failed["seed"], strict=True):
+            by.setdefault(str(f), {})[int(seed)] = 0.0
+    for (f, seed), v in grouped.items():  # type: ignore[misc]
+        by.setdefault(str(f), {})[int(seed)] = float(v)
+    return [by.get(f) or None for f in filters]
 
 
 # --- ties with the best ---------------------------------------------------------------------------------
