@@ -501,10 +501,11 @@ def _group_section(report: Report, gi: int, configs: Sequence[str], datasets: Se
                 st = style_for(i)
                 ax.plot(thresholds, 100 * curves[f], color=st.color, marker=st.marker, ls=st.linestyle, label=f, lw=1)
             ax.set_xscale("log")
+            ax.minorticks_off()
             ax.set_xticks(thresholds, [f"{k:g}" for k in thresholds])
             ax.set_xlabel("position error threshold (cm)")
             ax.set_ylabel("ground-truth times within (%)")
-            ax.set_ylim(0, 100)
+            ax.set_ylim(0, 102)
             ax.set_title(f"group {gi}: accuracy at thresholds, mean over runs and datasets", fontsize=8)
             ax.legend(fontsize=6, loc="best")
 

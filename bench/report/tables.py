@@ -63,33 +63,6 @@ def mean_pm(df: pd.DataFrame, metric: str) -> tuple[str, float]:
     return f"{num(ci.mean)} ± {num(ci.half_width, 2)}", ci.mean
 
 
-def best_rows(keys: Sequence[float], info: MetricInfo, eligible: Sequence[bool]) -> set[int]:
-    """Rows holding the best value of a column (ties all marked); ``eligible`` leaves the baseline out."""
-    vals = np.array(keys, dtype=np.float64)
-    ok = np.isfinite(vals) & np.asarray(eligible, dtype=bool)
-    if not ok.any() or info.better == "":
-        return set()
-    if info.better == "lower":
-        score = vals
-    elif info.better == "higher":
-        score = -vals
-    else:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            score = np.abs(np.log(vals / info.target))
-    score = np.where(ok, score, np.inf)
-    best = float(np.min(score))
-    return {i for i in range(len(vals)) if score[i] == best and np.isfinite(best)}
-
-
-def bold_best(
-    rows: list[list[str]], keys: list[list[float]], columns: Sequence[tuple[int, MetricInfo]], eligible: Sequence[bool]
-) -> None:
-    """Mark the best cell of each listed column in bold, in place."""
-    for col, info in columns:
-        for i in best_rows([k[col] for k in keys], info, eligible):
-            rows[i][col] = f"**{rows[i][col]}**"
-
-
 def anees_verdict(anees: float, runs: int) -> tuple[str, tuple[float, float]]:
     """The verdict of a mean ANEES over ``runs`` runs against the two-sided 95 % chi-square(3N)/N band."""
     lo, hi = chi2_band(POSE_DOF, max(runs, 1), CONFIDENCE)
