@@ -2,7 +2,7 @@
 
 nox                 the tests (the default session)
 nox -s lint         ruff and mypy
-nox -s bench        run every experiment and write results/summary (posargs go to 'locbench run')
+nox -s bench        run every experiment, verify a sample, write results/summary (posargs go to 'locbench run')
 nox -s report       regenerate results/summary from the stored runs, no re-run
 nox -s html         open results/summary/index.html in headless Chromium (renders, sorts; screenshot)
 nox -s perf         pytest-benchmark micro-benchmarks of each filter's predict and update
@@ -11,6 +11,7 @@ nox -s fuzz         the loader fuzzing with the long hypothesis profile (posargs
 
 from __future__ import annotations
 
+import json
 import os
 
 import nox
@@ -65,8 +66,9 @@ def lint(session: nox.Session) -> None:
 
 @nox.session(python=PYTHON, default=False)
 def bench(session: nox.Session) -> None:
-    """Run suites 'all' and 'consistency' and write results/summary; with 'locbench run' arguments after --, a
-    sub-suite into results/custom (never over the committed results/summary)."""
+    """Run suites 'all' and 'consistency', verify a sample of the stored runs (``locbench verify``) and write
+    results/summary; with 'locbench run' arguments after --, a sub-suite into results/custom (never over the
+    committed results/summary)."""
     _install(session, "all")
     args = list(session.posargs) or ["--suite", "all", "consistency", "--jobs", "2"]
     results = "results" if not session.posargs else "results/custom"
@@ -76,6 +78,9 @@ def bench(session: nox.Session) -> None:
     if session.posargs and os.path.abspath(results) == os.path.abspath("results"):
         session.error("a sub-suite must not overwrite results/summary (suite 'all'): pass another --results DIR")
     session.run("locbench", "run", "--results", results, *args, env=_data_env())
+    # re-run 2 % of the stored runs (at least one per filter) and check them bit for bit; the report shows it
+    # (a failure still writes the report, whose provenance says so, and then fails the session)
+    session.run("locbench", "verify", "--results", results, env=_data_env(), success_codes=[0, 1])
     suites: list[str] = []
     if "--suite" in args:
         for a in args[args.index("--suite") + 1 :]:
@@ -83,6 +88,10 @@ def bench(session: nox.Session) -> None:
                 break
             suites.append(a)
     session.run("locbench", "report", "--results", results, *(["--suite", *suites] if suites else []))
+    record = os.path.join(results, "verify.json")
+    with open(record, encoding="utf-8") as fh:
+        if not json.load(fh).get("passed"):
+            session.error(f"locbench verify failed: re-run runs differ from the stored ones (see {record})")
 
 
 @nox.session(python=PYTHON, default=False)

@@ -4,6 +4,7 @@ locbench list [FILTER|DATASET ...]
 locbench run [--suite NAME|FILE.toml | --filter SPEC ... --dataset SPEC ...]
              [--seeds N] [--results DIR] [--jobs N] [--executor local|dask [--scheduler ADDRESS]] [--force]
 locbench report [--results DIR] [--suite NAME ...] [--out DIR]
+locbench verify [--results DIR] [--fraction F] [--seed S]
 locbench check [ID ...]
 locbench fetch SPEC [SPEC ...]
 locbench export [--results DIR] [--out DIR] [--dataset SPEC ...] [--filter SPEC ...] [--smoothed]
@@ -164,6 +165,27 @@ def _cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_verify(args: argparse.Namespace) -> int:
+    from locbench.store import Store
+    from locbench.verify import verify, write_record
+
+    store = Store(args.results)
+    if not store.runs.is_dir():
+        raise ConfigError(f"{store.runs}: no stored runs; run 'locbench run' first")
+    if not 0.0 < args.fraction <= 1.0:
+        raise ConfigError(f"--fraction: expected a share of the runs in (0, 1], got {args.fraction}")
+    res = verify(store, args.fraction, args.seed)
+    record = write_record(store, res)
+    for run, why in res.differ:
+        print(f"differs: {run.label()}: {why}")
+    state = "passed" if res.passed else "FAILED"
+    print(
+        f"verify {state}: {len(res.checked)} of {res.stored} stored runs re-run, {len(res.differ)} differ "
+        f"(fraction {args.fraction:g}, seed {args.seed}); record {record}"
+    )
+    return 0 if res.passed else 1
+
+
 def _cmd_check(args: argparse.Namespace) -> int:
     from locbench.checks import run_checks
 
@@ -291,6 +313,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     rep.add_argument("--out", default=None, help="write the summary here instead of RESULTS/summary")
     rep.set_defaults(func=_cmd_report)
+
+    v = sub.add_parser(
+        "verify", help="re-run a random sample of stored runs; exit 1 when an array other than call times differs"
+    )
+    v.add_argument("--results", default=_results_default(), help="results folder (default: results/)")
+    v.add_argument("--fraction", type=float, default=0.02, help="share of the stored runs to re-run (default 0.02)")
+    v.add_argument("--seed", type=int, default=0, help="seed of the random sample (default 0)")
+    v.set_defaults(func=_cmd_verify)
 
     c = sub.add_parser("check", help="conformance checks for filters and datasets")
     c.add_argument("ids", nargs="*", help="filter or dataset ids/specs (default: all registered)")

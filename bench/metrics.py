@@ -185,6 +185,20 @@ def ate(t_est: npt.ArrayLike, mean: npt.ArrayLike, gt_t: npt.ArrayLike, gt_xy: n
     return float(np.sqrt(np.mean(d2)))
 
 
+#: Position-error thresholds of the accuracy-at-threshold metrics ``within_<k>cm_fraction``, cm.
+WITHIN_THRESHOLDS_CM = (5, 10, 25, 50)
+
+
+def within_fractions(
+    t_est: npt.ArrayLike, mean: npt.ArrayLike, gt_t: npt.ArrayLike, gt_xy: npt.ArrayLike
+) -> dict[str, float]:
+    """Accuracy at thresholds: the fraction of ground-truth times whose position error is at most each of
+    :data:`WITHIN_THRESHOLDS_CM`, as ``within_<k>cm_fraction`` (zero-order hold, no alignment)."""
+    est_xy = estimate_at(t_est, np.asarray(mean, dtype=np.float64)[:, :2], gt_t)
+    err = np.hypot(*(est_xy - np.asarray(gt_xy, dtype=np.float64)).T)
+    return {f"within_{k}cm_fraction": float(np.mean(err <= k / 100.0)) for k in WITHIN_THRESHOLDS_CM}
+
+
 def heading_rmse(t_est: npt.ArrayLike, mean: npt.ArrayLike, gt_t: npt.ArrayLike, gt_theta: npt.ArrayLike) -> float:
     """Heading RMSE over every ground-truth time with the difference wrapped to (-pi, pi], rad."""
     est_th = estimate_at(t_est, np.asarray(mean, dtype=np.float64)[:, 2], gt_t)
@@ -709,8 +723,9 @@ def run_metrics(run: RunRecord, truth: TruthRecord, rpe_delta_m: float = RPE_DEL
         For an ok run: ``failed`` = 0 and ``waypoint_<j>_error_m``, ``waypoint_<j>_est_x_m``,
         ``waypoint_<j>_est_y_m``, ``waypoint_<j>_marked_x_m``, ``waypoint_<j>_marked_y_m`` (j from 1,
         when the dataset has waypoints), ``ate_m``, ``heading_rmse_rad``, ``rpe_m_per_m``,
-        ``final_error_m``, ``anees``, ``nees_in_band_fraction`` (single-run two-sided 95 %
-        chi-square(3) band), ``nll`` (mean over the truth times of :func:`nll`, +inf if any is),
+        ``final_error_m``, ``within_<k>cm_fraction`` (:func:`within_fractions`), ``anees``,
+        ``nees_in_band_fraction`` (single-run two-sided 95 % chi-square(3) band), ``nll`` (mean over the
+        truth times of :func:`nll`, +inf if any is),
         ``predict_us_{mean,median,p95}``, ``update_us_{mean,median,p95}``,
         ``realtime_factor``, ``converged`` and ``time_to_converge_s``; with kidnaps in the truth
         ``kidnap_distance_m``, ``kidnap_recovered``, ``kidnap_time_to_recover_s`` and
@@ -738,6 +753,7 @@ def run_metrics(run: RunRecord, truth: TruthRecord, rpe_delta_m: float = RPE_DEL
             out[f"waypoint_{j + 1}_marked_x_m"] = float(truth.waypoints.xy[j, 0])
             out[f"waypoint_{j + 1}_marked_y_m"] = float(truth.waypoints.xy[j, 1])
     out["ate_m"] = ate(run.t, run.mean, gt.t, gt.xy)
+    out.update(within_fractions(run.t, run.mean, gt.t, gt.xy))
     out["heading_rmse_rad"] = heading_rmse(run.t, run.mean, gt.t, gt.theta)
     out["rpe_m_per_m"] = rpe_per_metre(run.t, run.mean, gt.t, gt_poses, rpe_delta_m)
     out["final_error_m"] = final_error(run.t, run.mean, gt.t, gt.xy)

@@ -116,21 +116,39 @@ def test_end_of_lap_claims() -> None:
 
 
 def test_people_and_kidnap_claims() -> None:
+    with_people = [0.012, 0.010, 0.014, 0.011, 0.013, 0.009, 0.012, 0.010]
+    without = [0.011, 0.012, 0.010, 0.013, 0.009, 0.012, 0.011, 0.010]
     df = _df(
         [
-            ("lap", "ekf_icp", "ate_m", [0.012, 0.014]),
-            ("lap", "ekf_icp", "failed", [0.0, 0.0]),
-            ("lap[people=0]", "ekf_icp", "ate_m", [0.01, 0.011]),
-            ("lap[people=0]", "ekf_icp", "failed", [0.0, 0.0]),
+            ("lap", "ekf_icp", "ate_m", with_people),
+            ("lap", "ekf_icp", "failed", [0.0] * 8),
+            ("lap[people=0]", "ekf_icp", "ate_m", without),
+            ("lap[people=0]", "ekf_icp", "failed", [0.0] * 8),
         ]
     )
-    assert _claim("lap_people_survive", True).evaluate(df).verdict == "reproduced"
+    res = _claim("lap_people_survive", True).evaluate(df)
+    assert res.verdict == "reproduced" and "Mann-Whitney U, n = 16" in res.test
     assert _claim("lap_kidnap_small_only", True).evaluate(df).verdict == "not evaluated"
+    # worse with people on every run: the no-worse test finds it
+    worse = df.copy()
+    worse.loc[(worse["dataset"] == "lap") & (worse["metric"] == "ate_m"), "value"] += 0.01
+    assert _claim("lap_people_survive", True).evaluate(worse).verdict == "not reproduced"
+    # two runs a side: too few for the test
+    few = _df([("lap", "ekf_icp", "ate_m", [0.012, 0.014]), ("lap[people=0]", "ekf_icp", "ate_m", [0.01, 0.011])])
+    assert _claim("lap_people_survive", True).evaluate(few).verdict == "not evaluated"
     kid = _df(
+        [
+            ("lap[kidnap_m=0.5]", "ekf_icp", "kidnap_recovered", [1.0] * 8),
+            ("lap[kidnap_m=2]", "ekf_icp", "kidnap_recovered", [0.0] * 7 + [1.0]),
+        ]
+    )
+    res = _claim("lap_kidnap_small_only", True).evaluate(kid)
+    assert res.verdict == "reproduced" and "Fisher exact, n = 16" in res.test, res.measured
+    # the rates straddle the bar but three runs a side cannot show the difference (one-sided Fisher p = 0.5)
+    small = _df(
         [
             ("lap[kidnap_m=0.5]", "ekf_icp", "kidnap_recovered", [1.0, 1.0, 0.0]),
             ("lap[kidnap_m=2]", "ekf_icp", "kidnap_recovered", [0.0, 0.0, 1.0]),
         ]
     )
-    res = _claim("lap_kidnap_small_only", True).evaluate(kid)
-    assert res.verdict == "reproduced", res.measured
+    assert _claim("lap_kidnap_small_only", True).evaluate(small).verdict == "not reproduced"

@@ -55,7 +55,7 @@ TABLE1_M = {k: [v / 100 for v in vals] for k, vals in report_003.ROOM_TABLE1_CM.
 
 
 def test_room_claims_reproduced_on_the_reports_own_numbers() -> None:
-    df = _tidy(TABLE1_M)
+    df = _tidy(TABLE1_M, seeds=8)
     for c in claims.claims_for("room"):
         res = c.evaluate(df)
         assert res.verdict == "reproduced", (c.id, res.measured)
@@ -79,9 +79,13 @@ def test_calibration_both_ways() -> None:
 def test_ekf_far_below_both_ways_and_matched_by_id() -> None:
     c = _claim("room_ekf_far_below_odometry")
     odo = [0.1, 0.2, 0.3, 0.4, 0.5]
-    good = _tidy({"odometry": odo, "ekf_landmarks[known=true]": [0.05, 0.05, 0.1, 0.1, 0.1]})
+    good = _tidy({"odometry": odo, "ekf_landmarks[known=true]": [0.05, 0.05, 0.1, 0.1, 0.1]}, seeds=8)
     res = c.evaluate(good)
     assert res.verdict == "reproduced" and "ekf_landmarks[known=true]" in res.measured
+    assert "Wilcoxon signed-rank" in res.test and "n = 8" in res.test
+    # the ratios hold, but two runs are too few for the test to find the difference
+    few = c.evaluate(_tidy({"odometry": odo, "ekf_landmarks": [0.05, 0.05, 0.1, 0.1, 0.1]}, seeds=2))
+    assert few.verdict == "not evaluated" and "no test possible (n = 2)" in few.test
     bad = _tidy({"odometry": odo, "ekf_landmarks": [0.05, 0.05, 0.25, 0.3, 0.1]})  # mean ratio 0.59
     assert c.evaluate(bad).verdict == "not reproduced"
     assert c.evaluate(_tidy({"odometry": odo})).verdict == "not evaluated"
@@ -91,8 +95,14 @@ def test_pf_claim_not_evaluated_without_pf_runs() -> None:
     c = _claim("room_pf_le_ekf")
     res = c.evaluate(_tidy({"odometry": TABLE1_M["odometry"], "ekf_landmarks": TABLE1_M["ekf_landmarks"]}))
     assert res.verdict == "not evaluated" and "pf" in res.measured
-    worse = _tidy({"ekf_landmarks": [0.01] * 5, "pf": [0.02] * 5})
-    assert c.evaluate(worse).verdict == "not reproduced"
+    worse = _tidy({"ekf_landmarks": [0.01] * 5, "pf": [0.02] * 5}, seeds=8)
+    res = c.evaluate(worse)
+    assert res.verdict == "not reproduced" and "one-sided Wilcoxon" in res.test and "n = 8" in res.test
+    # the same means but no seed where the EKF is better: the test does not find it, so "no worse" holds
+    rows = _tidy({"ekf_landmarks": [0.01] * 5, "pf": [0.02] * 5}, seeds=8)
+    pf = (rows["filter"] == "pf") & rows["metric"].str.endswith("_error_m")
+    rows.loc[pf, "value"] = np.where(rows.loc[pf, "seed"] % 2 == 0, 0.0, 0.02)
+    assert c.evaluate(rows).verdict == "reproduced"
 
 
 def test_waypoint_stats_rmse_and_distance_of_mean() -> None:
@@ -219,6 +229,10 @@ def test_collect_metrics_is_tidy_and_sorted(store: Store) -> None:
         "realtime_factor",
         "converged",
         "time_to_converge_s",
+        "within_5cm_fraction",
+        "within_10cm_fraction",
+        "within_25cm_fraction",
+        "within_50cm_fraction",
     }
     expected |= {f"waypoint_{j}_{q}" for j in range(1, 6) for q in ("error_m", "est_x_m", "est_y_m")}
     expected |= {f"waypoint_{j}_{q}" for j in range(1, 6) for q in ("marked_x_m", "marked_y_m")}
@@ -459,3 +473,16 @@ def test_configurations_of_a_sweep_are_listed_in_numeric_order() -> None:
         "pf[particles=300]",
         "pf[particles=3000]",
     ]
+
+
+def test_report_writes_comparisons_and_says_when_no_test_is_possible(store: Store) -> None:
+    paths = write_report(store)
+    csv = pd.read_csv(store.summary / "comparisons.csv")
+    # the columns, in its order
+    head = ["dataset", "metric", "configuration", "reference", "n", "statistic", "p", "p_holm"]
+    assert list(csv.columns) == [*head, "effect", "effect_low", "effect_high"]
+    text = paths.markdown.read_text()
+    # three seeds: too few for a two-sided paired test, so only the best is bold and the table says why
+    assert "no paired test is possible, so only the best value is in bold" in text
+    assert "Seed audit" in text and "Paired comparisons" in text and "| test (n, p) |" in text
+    assert "verify: `locbench verify` has not been run on this store" in text

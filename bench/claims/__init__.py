@@ -33,6 +33,7 @@ import numpy as np
 import pandas as pd
 
 from locbench.metrics import mean_estimate_distance, waypoint_rmse
+from locbench.significance import ALPHA, TestResult
 from locbench.spec import Spec
 
 if TYPE_CHECKING:
@@ -47,10 +48,12 @@ _WP_RE = re.compile(r"^waypoint_(\d+)_(error_m|est_x_m|est_y_m|marked_x_m|marked
 
 
 class ClaimResult(NamedTuple):
-    """The verdict of one claim and the measured values behind it, as text."""
+    """The verdict of one claim and the measured values behind it, as text; a claim that compares two filters
+    or settings also names its test, the number of runs and the p-value (``test``, see :func:`test_text`)."""
 
     verdict: Verdict
     measured: str
+    test: str = ""
 
 
 @dataclass(frozen=True)
@@ -137,6 +140,51 @@ class Claim:
         except (KeyError, ValueError, IndexError) as exc:
             log.warning("claim %s could not be evaluated: %s", self.id, exc)
             return ClaimResult("not evaluated", f"could not be evaluated: {exc}")
+
+
+# --- the rule for claims that compare two filters or settings (docs/protocols.md "Claims") ---------------
+
+
+def no_worse(test: TestResult) -> Verdict:
+    """ "A is no worse than B": reproduced when the one-sided test does not find B better at 5 %."""
+    if not test.tested:
+        return "not evaluated"
+    return "reproduced" if not test.p < ALPHA else "not reproduced"
+
+
+def found(test: TestResult) -> Verdict:
+    """ "A differs from (is better than) B": reproduced only when the test finds it at 5 %."""
+    if not test.tested:
+        return "not evaluated"
+    return "reproduced" if test.p < ALPHA else "not reproduced"
+
+
+def all_found(tests: list[TestResult]) -> Verdict:
+    """Several differences claimed together: each must be found at 5 % (an intersection-union test, which
+    needs no correction for the number of parts)."""
+    if not tests or not all(t.tested for t in tests):
+        return "not evaluated"
+    return "reproduced" if all(t.p < ALPHA for t in tests) else "not reproduced"
+
+
+def test_text(*tests: TestResult) -> str:
+    """The tests behind a verdict as the claims table prints them."""
+    return "; ".join(t.text() for t in tests)
+
+
+def paired(df: pd.DataFrame, filter_a: str, filter_b: str, metric: str) -> tuple[np.ndarray, np.ndarray]:
+    """The values of one metric of two filters on the seeds both have, in seed order (paired by construction)."""
+    sel = df[df["metric"] == metric]
+    a = sel[sel["filter"] == filter_a].groupby("seed")["value"].first()
+    b = sel[sel["filter"] == filter_b].groupby("seed")["value"].first()
+    seeds = a.index.intersection(b.index).sort_values()
+    return a.loc[seeds].to_numpy(dtype=np.float64), b.loc[seeds].to_numpy(dtype=np.float64)
+
+
+def per_seed_mean(df: pd.DataFrame, filter_name: str, pattern: str) -> pd.Series:
+    """seed -> the mean of a filter's metrics whose id matches ``pattern`` (a run's mean waypoint error)."""
+    sel = df[(df["filter"] == filter_name) & df["metric"].astype(str).str.match(pattern)]
+    return sel.groupby("seed")["value"].mean()
 
 
 # --- tidy-frame helpers -------------------------------------------------------------------------

@@ -1,4 +1,5 @@
-"""From stored runs to ``<results>/summary/``: ``metrics.csv``, ``REPORT.md`` with its figures, ``index.html``.
+"""From stored runs to ``<results>/summary/``: ``metrics.csv``, ``comparisons.csv``, ``REPORT.md`` with its
+figures, ``index.html``.
 
 The package is split by job: :mod:`~locbench.report.collect` reads the store (the only I/O on runs),
 :mod:`~locbench.report.tables` and :mod:`~locbench.report.figures` turn arrays into tables and drawings,
@@ -57,6 +58,7 @@ def write_report(store: Store, keep: Keep | None = None, out: Path | None = None
     """
     from locbench.report.build import Report
     from locbench.report.render import to_html, to_markdown, write_figures
+    from locbench.report.significance import write_comparisons_csv
 
     col = collect(store, keep)
     summary = out if out is not None else store.summary
@@ -65,6 +67,7 @@ def write_report(store: Store, keep: Keep | None = None, out: Path | None = None
     report = Report(col)
     sections = report.sections()
     intro = report.how_to_read()
+    write_comparisons_csv(report.comparisons, summary / "comparisons.csv")
     pngs = write_figures(sections, summary / "figures")
     md = summary / "REPORT.md"
     write_if_changed(md, to_markdown(TITLE, intro, sections).encode())

@@ -9,6 +9,7 @@ claims an experiment has, comes from :mod:`locbench.claims`; the report names no
 from __future__ import annotations
 
 from collections import defaultdict
+from functools import cached_property
 
 import numpy as np
 import pandas as pd
@@ -19,6 +20,7 @@ from locbench.claims import Experiment, all_claims, experiments, sections_for, w
 from locbench.metrics import CONFIDENCE, METRICS, POSE_DOF, chi2_band, estimate_at, mean_over_runs
 from locbench.pcrb import BOUND_ROWS
 from locbench.report import figures as fg
+from locbench.report import significance as sig
 from locbench.report import tables as tb
 from locbench.report.collect import Collected
 from locbench.report.doc import Bullets, Plot, Section, Table, Text
@@ -52,6 +54,11 @@ class Report:
         self.by_ds: dict[str, pd.DataFrame] = {str(d): g for d, g in self.df.groupby("dataset")} if len(self.df) else {}
         self.exps = [e for e in experiments() if self._has(e.dataset)]
 
+    @cached_property
+    def comparisons(self) -> list[sig.ComparisonRecord]:
+        """Every dataset's paired comparisons with the best (``comparisons.csv``)."""
+        return sig.all_comparisons(self)
+
     # --- helpers ------------------------------------------------------------------------------------
 
     @staticmethod
@@ -71,6 +78,10 @@ class Report:
         return self.col.filter_order(
             {f for f in names if self.col.is_global(f) == global_start and not self.col.is_bound(f)}
         )
+
+    def eligible(self, filters: list[str]) -> list[bool]:
+        """Which rows may be marked best: all but the baseline."""
+        return [not self.col.is_baseline(f) for f in filters]
 
     def bounds_on(self, dataset: str) -> list[str]:
         """The bound's rows stored for a dataset name (synthetic, not kidnapped), in their fixed order."""
@@ -119,6 +130,7 @@ class Report:
     def sections(self) -> list[Section]:
         out = [
             self.summary(),
+            sig.across_datasets(self),
             self.claims(),
             self.pareto(),
             self.consistency(),
@@ -133,8 +145,9 @@ class Report:
         return [
             "locbench runs every localization filter on the same synthetic worlds and recorded datasets and "
             "measures them the same way. Start with the **summary** tables: one row per filter configuration on "
-            "each main comparison, errors in cm, times in us, the best value of each column in bold (the "
-            "dead-reckoning baseline is never marked). Then the **claims** of the five source reports, "
+            "each main comparison, errors in cm, times in us; in bold the best value of each column and every "
+            "configuration a paired test over the seeds does not find different from it (the dead-reckoning "
+            "baseline is never marked). Then the ranks **across datasets**, the **claims** of the five source reports, "
             "each with its verdict and the measured value; the **accuracy against runtime** fronts (lower and "
             "further right is better); **consistency** (does a filter's covariance describe its error?); kidnap "
             "recovery; the recorded data; and one section per experiment. Values are means over seeds; the "
@@ -199,6 +212,7 @@ class Report:
         keys: list[list[float]] = []
         notes: list[str] = []
         substituted: dict[str, str] = {}
+        knames: list[str | None] = []
         for f in filters:
             sub = df[df["filter"] == f]
             runs = int(tb.values(sub, "failed").size)
@@ -210,6 +224,7 @@ class Report:
             rtf = tb.mean_of(sub, "realtime_factor")
             # the kidnap runs of this configuration, or of its filter's one kidnap configuration
             kname = f if f in kfilters else self._kidnap_config(f, kfilters)
+            knames.append(kname)
             if kname is not None and kname != f:
                 substituted[f] = kname
             if kname is not None:
@@ -247,22 +262,10 @@ class Report:
             rows.append([f"`{b}`", str(runs), tb.num(ate), "-", tb.num(wpm), tb.num(head), *["-"] * 5])
             keys.append([NAN, float(runs), ate, NAN, wpm, head, *[NAN] * 5])
             eligible.append(False)
-        tb.bold_best(
-            rows,
-            keys,
-            [
-                (2, METRICS["ate_m"]),
-                (3, METRICS["ate_over_pcrb"]),
-                (4, METRICS["waypoint_rmse_mean_m"]),
-                (5, METRICS["heading_rmse_rad"]),
-                (6, METRICS["anees"]),
-                (7, METRICS["update_us_median"]),
-                (8, METRICS["realtime_factor"]),
-                (9, METRICS["kidnap_recovered"]),
-                (10, METRICS["recorded_ate_median_m"]),
-            ],
-            eligible,
+        untested = sig.mark_ties(
+            rows, keys, sig.summary_columns(self, dataset, filters, len(bounds), kid, knames), eligible
         )
+        notes.append(sig.tie_footnote(untested))
         runs_all = [int(tb.values(df[df["filter"] == f], "failed").size) for f in filters]
         n_typ = max(set(runs_all), key=runs_all.count) if runs_all else 0
         notes.append(
@@ -324,16 +327,20 @@ class Report:
                 df = self.rows(c.dataset)
             res = c.evaluate(df)
             counts[res.verdict] += 1
-            rows.append((c.source.citation, c.text, f"**{res.verdict}**", res.measured, c.reported))
+            rows.append((c.source.citation, c.text, f"**{res.verdict}**", res.measured, res.test or "-", c.reported))
         if not rows:
             return sec
         sec.add(
             Text(
                 "Every claim of the five source reports that locbench checks, once, on the experiment it concerns. "
                 "A claim that does not reproduce is reported with the measured value; no filter was tuned to make "
-                "one pass. " + ", ".join(f"{n} {v}" for v, n in sorted(counts.items())) + "."
+                "one pass. A claim that compares two filters or settings names its test, the number of runs and the "
+                'p-value; its verdict follows the rule of docs/protocols.md ("no worse": the one-sided test does not '
+                "find the other better at 5 %; a difference: the test finds it at 5 %). "
+                + ", ".join(f"{n} {v}" for v, n in sorted(counts.items()))
+                + "."
             ),
-            Table(("report", "claim", "verdict", "measured", "the report's value"), tuple(rows)),
+            Table(("report", "claim", "verdict", "measured", "test (n, p)", "the report's value"), tuple(rows)),
         )
         return sec
 
@@ -652,20 +659,24 @@ class Report:
             fs = [f for f in filters if any((f, d) in status for d in group)]
             acc = [[cell(f, d, self._recorded_metric(d)) for d in group] for f in fs]
             rtf = [[cell(f, d, "realtime_factor") for d in group] for f in fs]
+            acc_cells, acc_note = sig.mark_grid(self, fs, group, acc, self._recorded_metric)
+            rtf_cells, rtf_note = sig.mark_grid(self, fs, group, rtf, lambda d: "realtime_factor")
             metrics_text = "; ".join(f"`{self.col.display(d)}` {tb.header(self._recorded_metric(d))}" for d in group)
             sub = Section(f"Reference: {kind}", f"recorded-{slug(kind)}")
             sub.add(
                 Text(f"Accuracy: {metrics_text}; {kind_caption(kind)}."),
                 Table(
                     head,
-                    tuple((f"`{f}`", *(c[0] for c in r)) for f, r in zip(fs, acc, strict=True)),
+                    tuple(tuple(r) for r in acc_cells),
                     caption=f"Accuracy (cm); {kind_caption(kind)}",
+                    footnotes=(acc_note,),
                     sort_keys=tuple((NAN, *(c[1] for c in r)) for r in acc),
                 ),
                 Table(
                     head,
-                    tuple((f"`{f}`", *(c[0] for c in r)) for f, r in zip(fs, rtf, strict=True)),
+                    tuple(tuple(r) for r in rtf_cells),
                     caption=f"Real-time factor (x); {kind_caption(kind)}",
+                    footnotes=(rtf_note,),
                     sort_keys=tuple((NAN, *(c[1] for c in r)) for r in rtf),
                 ),
             )
@@ -709,7 +720,8 @@ class Report:
         if not e.fold_variants and base in self.col.datasets:
             filters = self.filters_on(base)
             bounds = self.bounds_on(base)
-            sec.add(tb.comparison_table(self.rows(base), filters, f"`{base}`: mean ± 95 % interval over seeds", bounds))
+            caption = f"`{base}`: mean ± 95 % interval over seeds"
+            sec.add(tb.comparison_table(self.rows(base), filters, caption, bounds, self.eligible(filters)))
             wt = tb.waypoint_table(self.rows(base), filters + bounds, f"`{base}`: RMSE at each waypoint over runs (cm)")
             if wt is not None:
                 sec.add(wt)
@@ -861,11 +873,17 @@ class Report:
                 continue
             detail.add(
                 tb.comparison_table(
-                    self.rows(ds), filters, f"`{info.display}`: mean ± 95 % interval", self.bounds_on(ds)
+                    self.rows(ds),
+                    filters,
+                    f"`{info.display}`: mean ± 95 % interval",
+                    self.bounds_on(ds),
+                    self.eligible(filters),
                 )
             )
         if detail.blocks:
             sec.children.append(detail)
+        main = [e.dataset for e in self.exps if e.summary and e.dataset in self.col.datasets]
+        sec.children += sig.appendix_sections(self, main)
         sec.children.append(self.failures())
         sec.children.append(self.provenance())
         return sec
@@ -919,6 +937,7 @@ class Report:
             "runs: "
             + ", ".join(f"{counts[s]} {s}" for s in ("ok", "diverged", "error", "skipped") if counts[s])
             + (f", {len(self.col.broken)} unreadable" if self.col.broken else ""),
+            *([sig.verify_line(self.col.store)] if self.col.store is not None else []),
         )
         return Section("Provenance", "provenance", [Bullets(items)])
 

@@ -63,33 +63,6 @@ def mean_pm(df: pd.DataFrame, metric: str) -> tuple[str, float]:
     return f"{num(ci.mean)} ± {num(ci.half_width, 2)}", ci.mean
 
 
-def best_rows(keys: Sequence[float], info: MetricInfo, eligible: Sequence[bool]) -> set[int]:
-    """Rows holding the best value of a column (ties all marked); ``eligible`` leaves the baseline out."""
-    vals = np.array(keys, dtype=np.float64)
-    ok = np.isfinite(vals) & np.asarray(eligible, dtype=bool)
-    if not ok.any() or info.better == "":
-        return set()
-    if info.better == "lower":
-        score = vals
-    elif info.better == "higher":
-        score = -vals
-    else:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            score = np.abs(np.log(vals / info.target))
-    score = np.where(ok, score, np.inf)
-    best = float(np.min(score))
-    return {i for i in range(len(vals)) if score[i] == best and np.isfinite(best)}
-
-
-def bold_best(
-    rows: list[list[str]], keys: list[list[float]], columns: Sequence[tuple[int, MetricInfo]], eligible: Sequence[bool]
-) -> None:
-    """Mark the best cell of each listed column in bold, in place."""
-    for col, info in columns:
-        for i in best_rows([k[col] for k in keys], info, eligible):
-            rows[i][col] = f"**{rows[i][col]}**"
-
-
 def anees_verdict(anees: float, runs: int) -> tuple[str, tuple[float, float]]:
     """The verdict of a mean ANEES over ``runs`` runs against the two-sided 95 % chi-square(3N)/N band."""
     lo, hi = chi2_band(POSE_DOF, max(runs, 1), CONFIDENCE)
@@ -203,9 +176,17 @@ BOUND_FOOTNOTE = (
 )
 
 
-def comparison_table(df: pd.DataFrame, filters: Sequence[str], caption: str, bounds: Sequence[str] = ()) -> Table:
+def comparison_table(
+    df: pd.DataFrame,
+    filters: Sequence[str],
+    caption: str,
+    bounds: Sequence[str] = (),
+    eligible: Sequence[bool] | None = None,
+) -> Table:
     """Mean ± 95 % t-interval over seeds of every comparison metric present, a row per filter; with rows of
-    the bound (``bounds``, shown after the filters), the column ``ate_over_pcrb``."""
+    the bound (``bounds``, shown after the filters), the column ``ate_over_pcrb``. With ``eligible`` (per
+    filter: may be marked best), each ranked column marks its best and the rows tied with it
+    (:func:`locbench.report.significance.mark_ties`)."""
     present = [m for m in COMPARISON if (df["metric"] == m).any()]
     with_bound = bool(bounds) and bool((df["filter"] == BOUND_ALL).any())
     rows: list[tuple[str, ...]] = []
@@ -235,6 +216,23 @@ def comparison_table(df: pd.DataFrame, filters: Sequence[str], caption: str, bou
     ]
     head = ("filter", "runs", "failed", *cols)
     notes = (BOUND_FOOTNOTE,) if with_bound else ()
+    if eligible is not None:
+        from locbench.report import significance as sig
+
+        shown = [f for f in [*filters, *bounds] if f not in bounds or (df["filter"] == f).any()]
+        ranked = [m for m in present if METRICS[m].better]
+        index = {
+            m: 3
+            + present.index(m)
+            + (1 if with_bound and "ate_m" in present and present.index("ate_m") < present.index(m) else 0)
+            for m in ranked
+        }
+        flags = [*eligible, *[False] * (len(shown) - len(filters))]
+        cells, ks = [list(r) for r in rows], [list(k) for k in keys]
+        columns = [sig.Column(index[m], METRICS[m], sig.samples_for(df, shown, m)) for m in ranked]
+        untested = sig.mark_ties(cells, ks, columns, flags)
+        rows = [tuple(r) for r in cells]
+        notes = (*notes, sig.tie_footnote(untested))
     return Table(head, tuple(rows), caption=caption, footnotes=notes, sort_keys=tuple(keys))
 
 
