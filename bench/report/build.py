@@ -16,9 +16,11 @@ from matplotlib.figure import Figure
 
 import locbench
 from locbench.claims import Experiment, all_claims, experiments, sections_for, waypoint_stats
+from locbench.lost import LOST_THRESHOLDS_M
 from locbench.metrics import CONFIDENCE, METRICS, POSE_DOF, chi2_band, estimate_at, mean_over_runs
 from locbench.pcrb import BOUND_ROWS
 from locbench.report import figures as fg
+from locbench.report import health as hl
 from locbench.report import tables as tb
 from locbench.report.collect import Collected
 from locbench.report.doc import Bullets, Plot, Section, Table, Text
@@ -105,6 +107,7 @@ class Report:
             self.claims(),
             self.pareto(),
             self.consistency(),
+            hl.lost_section(self),
             self.kidnap_and_global(),
             self.recorded_data(),
             *[self.experiment(e) for e in self.exps],
@@ -189,6 +192,8 @@ class Report:
             wpm = wp.get(f, NAN) * 100.0
             head = tb.mean_of(sub, "heading_rmse_rad") * METRICS["heading_rmse_rad"].scale
             an_text, an_key, _, _ = tb.consistency_cell(sub)
+            es = tb.mean_of(sub, "energy_score_m") * METRICS["energy_score_m"].scale
+            lost_auc = hl.best_auroc(self.col, dataset, f)
             upd = tb.mean_of(sub, "update_us_median")
             rtf = tb.mean_of(sub, "realtime_factor")
             # the kidnap runs of this configuration, or of its filter's one kidnap configuration
@@ -212,13 +217,15 @@ class Report:
                     tb.num(wpm),
                     tb.num(head),
                     an_text,
+                    tb.num(es),
+                    tb.num(lost_auc) if not np.isnan(lost_auc) else "-",
                     tb.num(upd) if not np.isnan(upd) else "-",
                     tb.num(rtf),
                     k_text,
                     f"{tb.num(rec)} ({n_rec})" if n_rec else "-",
                 ]
             )
-            keys.append([NAN, float(runs), ate, eff, wpm, head, an_key, upd, rtf, k_key, rec])
+            keys.append([NAN, float(runs), ate, eff, wpm, head, an_key, es, lost_auc, upd, rtf, k_key, rec])
         eligible = [not self.col.is_baseline(f) for f in filters]
         bounds = self.bounds_on(dataset)
         for b in bounds:
@@ -227,8 +234,8 @@ class Report:
             wpm = wp.get(b, NAN) * 100.0
             head = tb.mean_of(sub, "heading_rmse_rad") * METRICS["heading_rmse_rad"].scale
             runs = tb.run_count(sub)
-            rows.append([f"`{b}`", str(runs), tb.num(ate), "-", tb.num(wpm), tb.num(head), *["-"] * 5])
-            keys.append([NAN, float(runs), ate, NAN, wpm, head, *[NAN] * 5])
+            rows.append([f"`{b}`", str(runs), tb.num(ate), "-", tb.num(wpm), tb.num(head), *["-"] * 7])
+            keys.append([NAN, float(runs), ate, NAN, wpm, head, *[NAN] * 7])
             eligible.append(False)
         tb.bold_best(
             rows,
@@ -239,10 +246,12 @@ class Report:
                 (4, METRICS["waypoint_rmse_mean_m"]),
                 (5, METRICS["heading_rmse_rad"]),
                 (6, METRICS["anees"]),
-                (7, METRICS["update_us_median"]),
-                (8, METRICS["realtime_factor"]),
-                (9, METRICS["kidnap_recovered"]),
-                (10, METRICS["recorded_ate_median_m"]),
+                (7, METRICS["energy_score_m"]),
+                (8, METRICS["lost_auroc"]),
+                (9, METRICS["update_us_median"]),
+                (10, METRICS["realtime_factor"]),
+                (11, METRICS["kidnap_recovered"]),
+                (12, METRICS["recorded_ate_median_m"]),
             ],
             eligible,
         )
@@ -252,6 +261,12 @@ class Report:
             f"ANEES: mean over runs of each run's average NEES (heading wrapped), against the two-sided 95 % "
             f"chi-square band for the run count ({band_for(n_typ)} for {n_typ} runs); closest to "
             f"{POSE_DOF} is marked best."
+        )
+        notes.append(
+            "Energy score: proper score of the filter's own position belief, mean over the ground-truth times "
+            f"(lower is better). Lost AUROC: how well the filter's best health signal separates the times its "
+            f"position error exceeds {LOST_THRESHOLDS_M[0]:g} m from the others (1 perfect, 0.5 chance; '-' never "
+            'lost); see "Does the filter know that it is lost?".'
         )
         if bounds:
             notes.append(tb.BOUND_FOOTNOTE)
@@ -280,6 +295,8 @@ class Report:
             "mean waypoint RMSE (cm)",
             "heading RMSE (deg)",
             "ANEES (verdict)",
+            "energy score (cm)",
+            f"lost AUROC ({LOST_THRESHOLDS_M[0]:g} m)",
             "update median (us)",
             "real-time factor (x)",
             f"kidnap recovery at {SUMMARY_KIDNAP_M:g} m (%)",
@@ -413,7 +430,10 @@ class Report:
                 "nominal noise, so a filter whose equations are right must pass. Global-localization runs are left "
                 "out. NLL: the mean negative log-likelihood of the truth under the filter's Gaussian (lower is "
                 "better; unlike the ANEES it also penalises a covariance that is needlessly large), over the runs "
-                "whose covariance never collapsed. ATE / PCRB: the filter's RMS ATE over the bound's (docs/pcrb.md)."
+                "whose covariance never collapsed. ATE / PCRB: the filter's RMS ATE over the bound's (docs/pcrb.md). "
+                "Energy score and CRPS: proper scores of the filter's own belief (its Gaussian in closed form, the "
+                "particle filter's own particles), mean over the ground-truth times and the runs; lower is better, a "
+                "point estimate scores its error, and a belief is rewarded for being sharp only where it is right."
             )
         )
         collapsed = False
@@ -437,7 +457,17 @@ class Report:
         if rows:
             sec.add(
                 Table(
-                    ("dataset", "filter", "runs", "95 % band", "ANEES", "time in 95 % band (%)", "NLL"),
+                    (
+                        "dataset",
+                        "filter",
+                        "runs",
+                        "95 % band",
+                        "ANEES",
+                        "time in 95 % band (%)",
+                        "NLL",
+                        "energy score (cm)",
+                        "CRPS x / y (cm) / heading (deg)",
+                    ),
                     tuple(rows),
                     caption="Other worlds and the recorded data",
                     sort_keys=tuple(keys),
@@ -457,8 +487,12 @@ class Report:
             return None, (), False
         inband = tb.mean_of(sub, "nees_in_band_fraction") * 100.0
         nll = tb.mean_of(sub[np.isfinite(sub["value"]) | (sub["metric"] != "nll")], "nll")
-        cells = (str(n), tb.band_text(n), text, tb.num(inband), tb.num(nll))
-        return cells, (float(n), NAN, key, inband, nll), inf > 0
+        es = tb.mean_of(sub, "energy_score_m") * METRICS["energy_score_m"].scale
+        cx, cy = (tb.mean_of(sub, m) * METRICS[m].scale for m in ("crps_x_m", "crps_y_m"))
+        ch = tb.mean_of(sub, "crps_heading_rad") * METRICS["crps_heading_rad"].scale
+        crps = f"{tb.num(cx)} / {tb.num(cy)} / {tb.num(ch)}"
+        cells = (str(n), tb.band_text(n), text, tb.num(inband), tb.num(nll), tb.num(es), crps)
+        return cells, (float(n), NAN, key, inband, nll, es, NAN), inf > 0
 
     def _shipped_matched_table(self, shipped: str, twin: str) -> tuple[Table, bool]:
         """One row per filter: ANEES, NLL and ATE / PCRB on the shipped world and on its model-matched twin."""
@@ -474,17 +508,21 @@ class Report:
                 collapsed |= inf
                 eff = tb.ate_over_bound(self.rows(ds), f)
                 if cells is None:
-                    row += ["-"] * 4
-                    key += [NAN] * 4
+                    row += ["-"] * 5
+                    key += [NAN] * 5
                 else:
-                    row += [cells[0], cells[2], cells[4], tb.num(eff)]
-                    key += [ckeys[0], ckeys[2], ckeys[4], eff]
+                    row += [cells[0], cells[2], cells[4], cells[5], tb.num(eff)]
+                    key += [ckeys[0], ckeys[2], ckeys[4], ckeys[5], eff]
             if any(c != "-" for c in row[1:]):
                 rows.append(tuple(row))
                 keys.append(tuple(key))
         head = (
             "filter",
-            *(f"{w}: {c}" for w in ("shipped", "matched") for c in ("runs", "ANEES", "NLL", "ATE / PCRB")),
+            *(
+                f"{w}: {c}"
+                for w in ("shipped", "matched")
+                for c in ("runs", "ANEES", "NLL", "energy score (cm)", "ATE / PCRB")
+            ),
         )
         caption = f"`{shipped}` as shipped beside `{twin}` (simulator noise = the filters' nominal noise)"
         return Table(head, tuple(rows), caption=caption, sort_keys=tuple(keys)), collapsed
