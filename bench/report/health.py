@@ -179,18 +179,20 @@ def _roc_plot(rep: Report, curves: dict[str, list[tuple[str, SignalScore]]]) -> 
             ax.set_visible(False)
         fig.suptitle(title, fontsize=9)
 
-    return Plot("lost_roc", title, draw, size=(3.3 * cols, 3.0 * nrows + 0.4))
+    return Plot("lost_roc", title, draw, size=(max(3.3 * cols, 5.5), 3.0 * nrows + 0.4))
 
 
 def _delay_table(rep: Report) -> Table | None:
     """Kidnapped runs: the delay from the kidnap to the first alarm of the filter's best signal there."""
+    from locbench.report.build import KIDNAP_PARAM
+
     col = rep.col
     rows: list[tuple[str, ...]] = []
     keys: list[tuple[float, ...]] = []
     for ds in sorted({d for d, _ in col.health}, key=col.display):
         if np.isnan(rep.kidnap_distance(ds)):
             continue
-        base_spec = col.datasets[ds].spec.without("kidnap_m").name
+        base_spec = col.datasets[ds].spec.without(KIDNAP_PARAM).name
         base = base_spec if base_spec in col.datasets else None
         for f in rep.filters_on(ds):
             series = [s for s in col.health.get((ds, f), []) if np.isfinite(s.kidnap_t)]
