@@ -29,10 +29,12 @@ prediction, and estimation", JASA 102(477), eq. 20-22):
 from __future__ import annotations
 
 import functools
+import math
 from collections.abc import Mapping
 
 import numpy as np
 import numpy.typing as npt
+from numba import njit
 from scipy import special, stats
 
 from locbench.geometry import wrap_angle
@@ -204,17 +206,52 @@ def gaussian_scores(
 def sample_scores(
     points: npt.ArrayLike, weights: npt.ArrayLike, truth: npt.ArrayLike
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """The four scores of one weighted pose sample (m, 3) with weights (m,) at each of k truth poses (k, 3)."""
-    p = np.asarray(points, dtype=np.float64)
+    """The four scores of one weighted pose sample (m, 3) with weights (m,) at each of k truth poses (k, 3).
+
+    The same sums as :func:`crps_sample` and :func:`energy_score_sample` (tested equal), in one compiled pass:
+    the runner calls it at every ground-truth time of a particle filter's run.
+    """
+    p = np.ascontiguousarray(points, dtype=np.float64)
     w = np.asarray(weights, dtype=np.float64)
-    g = np.asarray(truth, dtype=np.float64).reshape(-1, 3)
-    k = g.shape[0]
-    wk = np.broadcast_to(w, (k, w.shape[0]))
-    cx = crps_sample(g[:, 0], np.broadcast_to(p[:, 0], (k, p.shape[0])), wk)
-    cy = crps_sample(g[:, 1], np.broadcast_to(p[:, 1], (k, p.shape[0])), wk)
-    ch = crps_sample(np.zeros(k), wrap_angle(p[None, :, 2] - g[:, 2:3]), wk)
-    es = energy_score_sample(g[:, :2], np.broadcast_to(p[None, :, :2], (k, p.shape[0], 2)), wk)
-    return cx, cy, ch, es
+    w = np.ascontiguousarray(w / w.sum())
+    g = np.ascontiguousarray(np.asarray(truth, dtype=np.float64).reshape(-1, 3))
+    out = _sample_scores_kernel(p, w, g)
+    return out[0], out[1], out[2], out[3]
+
+
+@njit(cache=True)
+def _sample_scores_kernel(p: FloatArray, w: FloatArray, g: FloatArray) -> FloatArray:  # pragma: no cover - compiled
+    m, k = p.shape[0], g.shape[0]
+    # the spread terms do not depend on the truth (except the heading, unwrapped about it): once per sample
+    sx = sy = se = 0.0
+    for i in range(m):
+        for j in range(i + 1, m):
+            ww = w[i] * w[j]
+            dx, dy = p[i, 0] - p[j, 0], p[i, 1] - p[j, 1]
+            sx += ww * abs(dx)
+            sy += ww * abs(dy)
+            se += ww * math.sqrt(dx * dx + dy * dy)
+    out = np.empty((4, k))
+    for r in range(k):
+        fx = fy = fh = fe = sh = 0.0
+        for i in range(m):
+            dx, dy = p[i, 0] - g[r, 0], p[i, 1] - g[r, 1]
+            fx += w[i] * abs(dx)
+            fy += w[i] * abs(dy)
+            fe += w[i] * math.sqrt(dx * dx + dy * dy)
+            hi = _wrap(p[i, 2] - g[r, 2])
+            fh += w[i] * abs(hi)
+            for j in range(i + 1, m):
+                sh += w[i] * w[j] * abs(hi - _wrap(p[j, 2] - g[r, 2]))
+        # each unordered pair once: 0.5 * sum_ij = sum_{i<j}
+        out[0, r], out[1, r], out[2, r], out[3, r] = fx - sx, fy - sy, fh - sh, fe - se
+    return out
+
+
+@njit(cache=True)
+def _wrap(a: float) -> float:  # pragma: no cover - compiled
+    """An angle wrapped to (-pi, pi] (as :func:`locbench.geometry.wrap_angle`)."""
+    return math.pi - ((math.pi - a) % (2.0 * math.pi))
 
 
 def block_length(t: npt.ArrayLike, block_s: float = BLOCK_S) -> int:

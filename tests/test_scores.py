@@ -97,3 +97,21 @@ def test_score_metrics_use_stored_sample_scores_when_present() -> None:
         sc.score_metrics(t, mean, cov, t, gt, {k: np.zeros(2) for k in sc.SAMPLE_SCORE_KEYS})
     lo, hi = sc.ci_ids("crps_heading_rad")
     assert (lo, hi) == ("crps_heading_ci_low_rad", "crps_heading_ci_high_rad")
+
+
+def test_compiled_sample_scores_equal_the_reference_sums() -> None:
+    rng = np.random.default_rng(5)
+    pts = np.column_stack([rng.normal(size=64), rng.normal(size=64), rng.uniform(-np.pi, np.pi, 64)])
+    w = rng.uniform(size=64)
+    truth = np.array([[0.1, -0.2, 3.1], [1.0, 1.0, -3.0], [0.0, 0.0, 0.0]])
+    got = sc.sample_scores(pts, w, truth)
+    k = truth.shape[0]
+    wk = np.broadcast_to(w, (k, 64))
+    ref = (
+        sc.crps_sample(truth[:, 0], np.broadcast_to(pts[:, 0], (k, 64)), wk),
+        sc.crps_sample(truth[:, 1], np.broadcast_to(pts[:, 1], (k, 64)), wk),
+        sc.crps_sample(np.zeros(k), sc.wrap_angle(pts[None, :, 2] - truth[:, 2:3]), wk),
+        sc.energy_score_sample(truth[:, :2], np.broadcast_to(pts[None, :, :2], (k, 64, 2)), wk),
+    )
+    for a, b in zip(got, ref, strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-10, atol=1e-12)
