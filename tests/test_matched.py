@@ -128,7 +128,9 @@ def test_report_shows_each_filter_on_the_shipped_world_beside_its_matched_twin(t
     text = (tmp_path / "summary" / "REPORT.md").read_text()
     section = text[text.index('id="consistency"') :]
     assert "*`room` as shipped beside `room[matched=true]`" in section
-    head = "| filter | shipped: runs | shipped: ANEES | shipped: NLL | shipped: energy score (cm) | shipped: ATE / PCRB |"
+    head = (
+        "| filter | shipped: runs | shipped: ANEES | shipped: NLL | shipped: energy score (cm) | shipped: ATE / PCRB |"
+    )
     assert f"{head} matched: runs |" in section
     df = pd.read_csv(tmp_path / "summary" / "metrics.csv")
     sel = df[(df["filter"] == "ekf_landmarks") & (df["metric"] == "anees")]

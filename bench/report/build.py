@@ -193,13 +193,14 @@ class Report:
             head = tb.mean_of(sub, "heading_rmse_rad") * METRICS["heading_rmse_rad"].scale
             an_text, an_key, _, _ = tb.consistency_cell(sub)
             es = tb.mean_of(sub, "energy_score_m") * METRICS["energy_score_m"].scale
-            lost_auc = hl.best_auroc(self.col, dataset, f)
             upd = tb.mean_of(sub, "update_us_median")
             rtf = tb.mean_of(sub, "realtime_factor")
             # the kidnap runs of this configuration, or of its filter's one kidnap configuration
             kname = f if f in kfilters else self._kidnap_config(f, kfilters)
             if kname is not None and kname != f:
                 substituted[f] = kname
+            # lost detection where a filter does get lost: its kidnap configuration on the kidnapped world
+            lost_auc = hl.best_auroc(self.col, kid, kname) if kid and kname else hl.best_auroc(self.col, dataset, f)
             if kname is not None:
                 _, n_k, r_k, _, _ = tb.rate(kdf[kdf["filter"] == kname], "kidnap_recovered")
                 k_text = f"{100 * r_k:.0f} ({n_k})" + ("²" if kname != f else "") if n_k else "n/a"
@@ -266,7 +267,9 @@ class Report:
             "Energy score: proper score of the filter's own position belief, mean over the ground-truth times "
             f"(lower is better). Lost AUROC: how well the filter's best health signal separates the times its "
             f"position error exceeds {LOST_THRESHOLDS_M[0]:g} m from the others (1 perfect, 0.5 chance; '-' never "
-            'lost); see "Does the filter know that it is lost?".'
+            "lost)"
+            + (f", on `{kid}` with the kidnap configuration as for kidnap recovery" if kid else "")
+            + '; see "Does the filter know that it is lost?".'
         )
         if bounds:
             notes.append(tb.BOUND_FOOTNOTE)
@@ -296,7 +299,7 @@ class Report:
             "heading RMSE (deg)",
             "ANEES (verdict)",
             "energy score (cm)",
-            f"lost AUROC ({LOST_THRESHOLDS_M[0]:g} m)",
+            f"lost AUROC ({LOST_THRESHOLDS_M[0]:g} m{f', {SUMMARY_KIDNAP_M:g} m kidnap' if kid else ''})",
             "update median (us)",
             "real-time factor (x)",
             f"kidnap recovery at {SUMMARY_KIDNAP_M:g} m (%)",
