@@ -34,7 +34,6 @@ from locbench.events import EVENT_TYPES, Odometry
 from locbench.filters.base import Filter
 from locbench.registry import DATASETS, FILTERS, Resolved, build_dataset, resolve_dataset, resolve_filter
 from locbench.runkey import key_params
-from locbench.scores import SAMPLE_SCORE_KEYS, sample_scores
 from locbench.seeding import belief_rng, filter_rng
 from locbench.spec import Spec, stable_hash
 from locbench.store import KIND_NAMES, BoundRecord, RunRecord, Store, TruthRecord
@@ -78,7 +77,7 @@ class _BeliefScorer:
         self._t = ds.ground_truth.t
         self._poses = ds.ground_truth.poses
         self._next = 0
-        self._scores = np.full((len(SAMPLE_SCORE_KEYS), self._t.shape[0]), np.nan)
+        self._scores = np.full((4, self._t.shape[0]), np.nan)
         self.active = rng is not None
 
     def advance(self, t_event: float) -> None:
@@ -91,6 +90,9 @@ class _BeliefScorer:
         if sample is None:
             self.active = False
             return
+        # imported here: scipy and numba stay out of the runner's import (a sweep's start, before its signal handler)
+        from locbench.scores import sample_scores
+
         points, weights = sample
         self._scores[:, self._next : stop] = sample_scores(points, weights, self._poses[self._next : stop])
         self._next = stop
@@ -100,6 +102,8 @@ class _BeliefScorer:
         self.advance(np.inf)
         if not self.active:
             return {}
+        from locbench.scores import SAMPLE_SCORE_KEYS
+
         return dict(zip(SAMPLE_SCORE_KEYS, self._scores, strict=True))
 
 

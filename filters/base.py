@@ -16,7 +16,6 @@ from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
-from scipy import special
 
 from locbench.datasets.base import Gaussian2, MapKind, SensorSpec, WorldMap
 from locbench.events import Event, Observation, Odometry
@@ -92,6 +91,8 @@ def gaussian_health(est: Estimate, nis_dof: float | None = None) -> dict[str, fl
     P = est.cov
     out = {"cov_trace_xy_m2": float(P[0, 0] + P[1, 1]), "heading_var_rad2": float(P[2, 2])}
     if "nis" in est.diagnostics:
+        from scipy import special  # here, not at import: the runner starts without scipy
+
         nis = float(est.diagnostics["nis"])
         dof = float(est.diagnostics.get("nis_dof", np.nan)) if nis_dof is None else float(nis_dof)
         out["nis"] = nis
