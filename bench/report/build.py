@@ -200,7 +200,11 @@ class Report:
             if kname is not None and kname != f:
                 substituted[f] = kname
             # lost detection where a filter does get lost: its kidnap configuration on the kidnapped world
-            lost_auc = hl.best_auroc(self.col, kid, kname) if kid and kname else hl.best_auroc(self.col, dataset, f)
+            # (a configuration without kidnap runs has none, so the column means one thing throughout)
+            if kid:
+                lost_auc = hl.best_auroc(self.col, kid, kname) if kname is not None else NAN
+            else:
+                lost_auc = hl.best_auroc(self.col, dataset, f)
             if kname is not None:
                 _, n_k, r_k, _, _ = tb.rate(kdf[kdf["filter"] == kname], "kidnap_recovered")
                 k_text = f"{100 * r_k:.0f} ({n_k})" + ("²" if kname != f else "") if n_k else "n/a"
