@@ -270,8 +270,8 @@ class Report:
         notes.append(
             "Energy score: proper score of the filter's own position belief, mean over the ground-truth times "
             f"(lower is better). Lost AUROC: how well the filter's best health signal separates the times its "
-            f"position error exceeds {LOST_THRESHOLDS_M[0]:g} m from the others (1 perfect, 0.5 chance; '-' never "
-            "lost)"
+            f"position error exceeds {LOST_THRESHOLDS_M[0]:g} m from the others (1 perfect, 0.5 chance; '-': never "
+            "lost, or no kidnap runs)"
             + (f", on `{kid}` with the kidnap configuration as for kidnap recovery" if kid else "")
             + '; see "Does the filter know that it is lost?".'
         )
