@@ -24,11 +24,11 @@ import numpy as np
 from locbench.datasets.base import Dataset, MapKind, check_dataset_contract
 from locbench.errors import DependencyNotInstalled, LocbenchError, UnknownIdError
 from locbench.events import EVENT_TYPES, OBSERVATION_TYPES, LandmarkObservations, Odometry, RangeObservations
-from locbench.filters.base import Filter, FilterConfig
+from locbench.filters.base import HEALTH_SIGNALS, Filter, FilterConfig
 from locbench.geometry import is_symmetric_psd, pose_error
 from locbench.registry import DATASETS, FILTERS, make_dataset, make_filter, resolve_dataset, resolve_filter
 from locbench.runner import FilterTrace, incompatibility, run_filter
-from locbench.seeding import filter_rng
+from locbench.seeding import belief_rng, filter_rng
 from locbench.spec import Spec
 
 #: What a filter check accepts: a filter instance, or a class (checked with its default config).
@@ -271,6 +271,32 @@ def check_empty_observation(flt: Filter) -> None:
             raise CheckFailed(f"an empty {type(z).__name__} changed the estimate from {before.mean} to {after.mean}")
 
 
+def check_health_and_scores(flt: Filter) -> None:
+    """``health()`` gives named floats from :data:`HEALTH_SIGNALS` at every step; drawing belief samples (the
+    runner's generator) changes no estimate; the four proper scores of the run are finite."""
+    from locbench.scores import SCORE_IDS, score_metrics
+
+    ds = _tiny("tiny_circle")
+    plain = _run(_fresh(flt), ds)
+    reason = incompatibility(flt, ds)
+    if reason is not None:  # pragma: no cover - _run raised already
+        raise CheckFailed(reason)
+    sampled = run_filter(_fresh(flt), ds, filter_rng(type(flt).__name__, ds.name, 0), belief_rng("check", ds.name, 0))
+    for name in ("t", "mean", "cov"):
+        if not np.array_equal(getattr(plain, name), getattr(sampled, name), equal_nan=True):
+            raise CheckFailed(f"drawing belief samples changed the estimates ({name})")
+    if not sampled.health:
+        raise CheckFailed("health() reported no signal")
+    unknown = sorted(set(sampled.health) - set(HEALTH_SIGNALS))
+    if unknown:
+        raise CheckFailed(f"health() reports signals not in HEALTH_SIGNALS: {unknown}")
+    gt = ds.ground_truth
+    scores = score_metrics(sampled.t, sampled.mean, sampled.cov, gt.t, gt.poses, sampled.extra)
+    bad = {k: scores[k] for k in SCORE_IDS if not np.isfinite(scores[k])}
+    if bad:
+        raise CheckFailed(f"proper scores not finite: {bad}")
+
+
 FILTER_CHECKS: dict[str, FilterCheck] = {
     c.name: c
     for c in (
@@ -282,6 +308,7 @@ FILTER_CHECKS: dict[str, FilterCheck] = {
         FilterCheck("check_noise_free", check_noise_free, _runs_on_check_scenarios),
         FilterCheck("check_predict_grows_uncertainty", check_predict_grows_uncertainty, _always),
         FilterCheck("check_empty_observation", check_empty_observation, _consumes_point_observations),
+        FilterCheck("check_health_and_scores", check_health_and_scores, _runs_on_check_scenarios),
     )
 }
 

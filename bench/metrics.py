@@ -54,6 +54,9 @@ Metric ids added on top of the DESIGN list (each documented here, none changes a
   the metrics are the mean absolute translational error |e_xy| (m) and rotational error |e_theta| (rad)
   over the relations whose two times lie within the run (the paper's "abs" columns);
   ``relation_count`` is how many were used.
+- ``crps_x_m``, ``crps_y_m``, ``crps_heading_rad``, ``energy_score_m`` and each one's block-bootstrap interval
+  ``<stem>_ci_low_<unit>``, ``<stem>_ci_high_<unit>`` (``crps_x_ci_low_m`` ...): the proper scores of the
+  filter's own belief, mean over the ground-truth times (:mod:`locbench.scores`).
 - On a dataset whose trajectory is a *SLAM reference* (``TruthRecord.truth_label``), ``ate_m`` and the
   other trajectory errors measure agreement with that reference, not with the truth; the report labels them.
 """
@@ -69,6 +72,7 @@ import numpy.typing as npt
 from scipy import stats
 
 from locbench.geometry import between, pose_error, wrap_angle
+from locbench.scores import score_metrics
 
 if TYPE_CHECKING:
     from locbench.datasets.base import Kidnap
@@ -769,6 +773,7 @@ def run_metrics(run: RunRecord, truth: TruthRecord, rpe_delta_m: float = RPE_DEL
     out.update(convergence_metrics(run.t, run.mean, gt.t, gt_poses))
     out.update(kidnap_metrics(run.t, run.mean, run.cov, gt.t, gt_poses, truth.kidnaps))
     out.update(smoothed_metrics(run.extra, gt.t, gt_poses))
+    out.update(score_metrics(run.t, run.mean, run.cov, gt.t, gt_poses, run.extra))
     out.update(acceptance_metrics(run.diagnostics))
     out.update(particle_count_metrics(run.diagnostics))
     if truth.relations is not None and len(truth.relations):
@@ -837,6 +842,11 @@ METRICS: dict[str, MetricInfo] = {
     "anees": MetricInfo("ANEES", "", 1.0, "closer", float(POSE_DOF)),
     "nees_in_band_fraction": MetricInfo("NEES in 95 % band", "%", 100.0, "higher"),
     "nll": MetricInfo("NLL", "", 1.0),
+    "crps_x_m": MetricInfo("CRPS x", "cm", 100.0),
+    "crps_y_m": MetricInfo("CRPS y", "cm", 100.0),
+    "crps_heading_rad": MetricInfo("CRPS heading", "deg", float(np.degrees(1.0))),
+    "energy_score_m": MetricInfo("energy score", "cm", 100.0),
+    "lost_auroc": MetricInfo("lost AUROC", "", 1.0, "higher"),
     "ate_over_pcrb": MetricInfo("ATE / PCRB", "x", 1.0),
     "predict_us_median": MetricInfo("predict median", "us", 1.0),
     "update_us_median": MetricInfo("update median", "us", 1.0),

@@ -34,14 +34,14 @@ from locbench.events import EVENT_TYPES, Odometry
 from locbench.filters.base import Filter
 from locbench.registry import DATASETS, FILTERS, Resolved, build_dataset, resolve_dataset, resolve_filter
 from locbench.runkey import key_params
-from locbench.seeding import filter_rng
+from locbench.seeding import belief_rng, filter_rng
 from locbench.spec import Spec, stable_hash
 from locbench.store import KIND_NAMES, BoundRecord, RunRecord, Store, TruthRecord
 
 log = logging.getLogger(__name__)
 
 #: Bump when the meaning of stored arrays changes; part of every run key.
-STORE_FORMAT = 1
+STORE_FORMAT = 2
 _RESET = KIND_NAMES.index("reset")
 _KIND_OF = {t: KIND_NAMES.index(t.__name__) for t in EVENT_TYPES}
 
@@ -60,6 +60,51 @@ class FilterTrace:
     message: str = ""
     diverged_t: float | None = None
     extra: dict[str, np.ndarray] = field(default_factory=dict)
+    health: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+class _BeliefScorer:
+    """Scores a filter's own belief samples at the ground-truth times while it runs (:mod:`locbench.scores`).
+
+    Before each event, every ground-truth time earlier than the event gets the belief in force (the one after
+    the previous events: the zero-order hold of :mod:`locbench.metrics`); the ground-truth times of one such
+    interval share one sample. Only the per-time scores are kept, not the samples. Inactive (no cost) for a
+    filter whose :meth:`Filter.belief_sample` is None.
+    """
+
+    def __init__(self, flt: Filter, ds: Dataset, rng: np.random.Generator | None) -> None:
+        self._flt, self._rng = flt, rng
+        self._t = ds.ground_truth.t
+        self._poses = ds.ground_truth.poses
+        self._next = 0
+        self._scores = np.full((4, self._t.shape[0]), np.nan)
+        self.active = rng is not None
+
+    def advance(self, t_event: float) -> None:
+        """Score the ground-truth times before ``t_event`` with the current belief."""
+        if not self.active or self._next >= self._t.shape[0] or self._t[self._next] >= t_event:
+            return
+        stop = int(np.searchsorted(self._t, t_event, side="left"))
+        assert self._rng is not None
+        sample = self._flt.belief_sample(self._rng)
+        if sample is None:
+            self.active = False
+            return
+        # imported here: scipy and numba stay out of the runner's import (a sweep's start, before its signal handler)
+        from locbench.scores import sample_scores
+
+        points, weights = sample
+        self._scores[:, self._next : stop] = sample_scores(points, weights, self._poses[self._next : stop])
+        self._next = stop
+
+    def result(self) -> dict[str, np.ndarray]:
+        """The per-time scores (every ground-truth time scored), or nothing for a Gaussian filter."""
+        self.advance(np.inf)
+        if not self.active:
+            return {}
+        from locbench.scores import SAMPLE_SCORE_KEYS
+
+        return dict(zip(SAMPLE_SCORE_KEYS, self._scores, strict=True))
 
 
 def incompatibility(flt: Filter, ds: Dataset) -> str | None:
@@ -79,10 +124,15 @@ def incompatibility(flt: Filter, ds: Dataset) -> str | None:
     return None
 
 
-def run_filter(flt: Filter, ds: Dataset, rng: np.random.Generator) -> FilterTrace:
+def run_filter(
+    flt: Filter, ds: Dataset, rng: np.random.Generator, sample_rng: np.random.Generator | None = None
+) -> FilterTrace:
     """Reset ``flt`` and run it over ``ds``; never raises for a filter's own failure.
 
-    The first row is the belief right after ``reset`` (kind "reset"); then one row per routed event.
+    The first row is the belief right after ``reset`` (kind "reset"); then one row per routed event, with the
+    filter's :meth:`Filter.health` beside its estimate. With ``sample_rng`` (a generator of the runner's, not
+    the filter's), a filter that exposes belief samples has them scored at every ground-truth time
+    (:class:`_BeliefScorer`; the scores go into ``extra``).
     """
     routed = flt.routed_events()
     n_max = 1 + sum(1 for e in ds.events if isinstance(e, Odometry) or type(e) in routed)
@@ -92,6 +142,8 @@ def run_filter(flt: Filter, ds: Dataset, rng: np.random.Generator) -> FilterTrac
     kind = np.zeros(n_max, dtype=np.int8)
     step_ns = np.zeros(n_max, dtype=np.int64)
     diags: dict[str, np.ndarray] = {}
+    health: dict[str, np.ndarray] = {}
+    scorer = _BeliefScorer(flt, ds, sample_rng)
     status, message, diverged_t = "ok", "", None
     row = 0
 
@@ -106,6 +158,11 @@ def run_filter(flt: Filter, ds: Dataset, rng: np.random.Generator) -> FilterTrac
             if arr is None:
                 arr = diags[name] = np.full(n_max, np.nan)
             arr[row] = value
+        for name, value in flt.health().items():
+            arr = health.get(name)
+            if arr is None:
+                arr = health[name] = np.full(n_max, np.nan)
+            arr[row] = value
         row += 1
 
     t0 = ds.events[0].t if ds.events else 0.0
@@ -116,16 +173,17 @@ def run_filter(flt: Filter, ds: Dataset, rng: np.random.Generator) -> FilterTrac
         clock = time.perf_counter_ns
         for ev in ds.events:
             typ = type(ev)
+            if typ is not Odometry and typ not in routed:
+                continue
+            scorer.advance(ev.t)
             if typ is Odometry:
                 start = clock()
                 flt.predict(ev)  # type: ignore[arg-type]
                 ns = clock() - start
-            elif typ in routed:
+            else:
                 start = clock()
                 flt.update(ev)  # type: ignore[arg-type]
                 ns = clock() - start
-            else:
-                continue
             record(ev.t, _KIND_OF[typ], ns)
             m, c = mean[row - 1], cov[row - 1]
             if not (np.all(np.isfinite(m)) and np.all(np.isfinite(c))):
@@ -144,6 +202,7 @@ def run_filter(flt: Filter, ds: Dataset, rng: np.random.Generator) -> FilterTrac
     if status == "ok":
         try:
             extra = {k: np.asarray(v) for k, v in flt.extra_results().items()}
+            extra |= scorer.result()
         except Exception as exc:
             status, message = "error", f"extra_results failed: {type(exc).__name__}: {exc}"
     return FilterTrace(
@@ -157,6 +216,7 @@ def run_filter(flt: Filter, ds: Dataset, rng: np.random.Generator) -> FilterTrac
         message,
         diverged_t,
         extra,
+        {k: v[:row] for k, v in health.items()},
     )
 
 
@@ -460,7 +520,9 @@ def execute_task(task: Task) -> TaskResult:
             runs.append(_empty_record(meta | {"status": "skipped", "message": reason, "wall_s": 0.0}))
             continue
         start = time.perf_counter()
-        trace = run_filter(flt, ds, filter_rng(job.filter.name, dr.name, task.seed))
+        trace = run_filter(
+            flt, ds, filter_rng(job.filter.name, dr.name, task.seed), belief_rng(job.filter.name, dr.name, task.seed)
+        )
         meta |= {
             "status": trace.status,
             "message": trace.message,
@@ -473,7 +535,17 @@ def execute_task(task: Task) -> TaskResult:
         if trace.status != "ok":
             log.warning("%s on %s: %s: %s", job.filter.name, task.label, trace.status, trace.message)
         runs.append(
-            RunRecord(meta, trace.t, trace.mean, trace.cov, trace.kind, trace.step_ns, trace.diagnostics, trace.extra)
+            RunRecord(
+                meta,
+                trace.t,
+                trace.mean,
+                trace.cov,
+                trace.kind,
+                trace.step_ns,
+                trace.diagnostics,
+                trace.extra,
+                trace.health,
+            )
         )
     return TaskResult(TruthRecord.from_dataset(ds, task.seed, truth_meta), runs, bound)
 

@@ -32,3 +32,9 @@ def dataset_rng(dataset_name: str, seed: int) -> np.random.Generator:
 def filter_rng(filter_name: str, dataset_name: str, seed: int) -> np.random.Generator:
     """The generator handed to a filter's ``reset``."""
     return np.random.default_rng(seed_sequence(seed, "filter", filter_name, dataset_name))
+
+
+def belief_rng(filter_name: str, dataset_name: str, seed: int) -> np.random.Generator:
+    """The runner's own generator for drawing a filter's belief samples (never the filter's: its estimates
+    stay those of a run without samples)."""
+    return np.random.default_rng(seed_sequence(seed, "belief_sample", filter_name, dataset_name))

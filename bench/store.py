@@ -177,6 +177,8 @@ class RunRecord:
         Per-row filter diagnostics, NaN where absent.
     extra : dict of str to ndarray
         Filter-specific arrays (e.g. ``smoothed_t``, ``smoothed_mean`` of a smoother).
+    health : dict of str to ndarray (n,)
+        Per-row :meth:`Filter.health` signals, NaN where absent.
     """
 
     meta: dict[str, Any]
@@ -187,6 +189,7 @@ class RunRecord:
     step_ns: npt.NDArray[np.int64]
     diagnostics: dict[str, FloatArray] = field(default_factory=dict)
     extra: dict[str, np.ndarray] = field(default_factory=dict)
+    health: dict[str, FloatArray] = field(default_factory=dict)
 
     @property
     def status(self) -> str:
@@ -373,6 +376,7 @@ class Store:
             }
             arrays.update({f"diag_{k}": v for k, v in rec.diagnostics.items()})
             arrays.update({f"extra_{k}": v for k, v in rec.extra.items()})
+            arrays.update({f"health_{k}": v for k, v in rec.health.items()})
             np.savez_compressed(tmp / "estimates.npz", **arrays)  # type: ignore[arg-type]
             (tmp / "meta.json").write_text(json.dumps(rec.meta, indent=2, default=str))
             _swap_into_place(tmp, final)
@@ -431,7 +435,8 @@ class Store:
         with np.load(est) as z:
             diag = {k[5:]: z[k] for k in z.files if k.startswith("diag_")}
             extra = {k[6:]: z[k] for k in z.files if k.startswith("extra_")}
-            return RunRecord(meta, z["t"], z["mean"], z["cov"], z["kind"], z["step_ns"], diag, extra)
+            health = {k[7:]: z[k] for k in z.files if k.startswith("health_")}
+            return RunRecord(meta, z["t"], z["mean"], z["cov"], z["kind"], z["step_ns"], diag, extra, health)
 
 
 def _makedirs(path: Path) -> None:

@@ -51,6 +51,63 @@ class Estimate:
     diagnostics: dict[str, float] = field(default_factory=dict)
 
 
+@dataclass(frozen=True)
+class HealthSignal:
+    """What a named :meth:`Filter.health` signal measures and which way means trouble.
+
+    ``lost_when`` is ``"high"`` (a large value should mean the filter is lost: NIS, covariance trace, maximum
+    weight) or ``"low"`` (a small value should: the NIS p-value, the effective sample size, inlier and accepted
+    fractions, w_fast / w_slow); the lost-detection scores (:mod:`locbench.lost`) orient each signal by it.
+    """
+
+    description: str
+    unit: str
+    lost_when: str
+
+
+#: Every health signal a filter may report, by name (a filter reports a subset; the report reads this table).
+HEALTH_SIGNALS: Mapping[str, HealthSignal] = MappingProxyType(
+    {
+        "nis": HealthSignal("NIS of the last update (innovation' S^-1 innovation)", "", "high"),
+        "nis_p": HealthSignal("chi-square upper-tail p-value of that NIS for its degrees of freedom", "", "low"),
+        "cov_trace_xy_m2": HealthSignal("trace of the position covariance", "m^2", "high"),
+        "heading_var_rad2": HealthSignal("heading variance", "rad^2", "high"),
+        "ess_fraction": HealthSignal("effective sample size over the particle count, at the last update", "", "low"),
+        "max_weight": HealthSignal("largest normalised particle weight", "", "high"),
+        "w_fast_over_w_slow": HealthSignal("augmented MCL's short- over long-term likelihood average", "", "low"),
+        "icp_rmse_m": HealthSignal("RMS distance of the ICP pairs of the last scan", "m", "high"),
+        "inlier_fraction": HealthSignal("ICP pairs of the last scan over the points it could pair", "", "low"),
+        "accepted_fraction": HealthSignal("measurements of the last update that passed the gate", "", "low"),
+        "distance_m": HealthSignal("odometry path length since the start", "m", "high"),
+    }
+)
+
+
+def gaussian_health(est: Estimate, nis_dof: float | None = None) -> dict[str, float]:
+    """The health every Gaussian belief has: ``cov_trace_xy_m2``, ``heading_var_rad2``, and ``nis`` with its
+    p-value ``nis_p`` when the filter reports an NIS diagnostic (degrees of freedom ``nis_dof``, else the
+    ``nis_dof`` diagnostic), and ``accepted_fraction`` of the last update when the diagnostics count accepted and
+    rejected measurements; NaN where not defined (a predict)."""
+    P = est.cov
+    out = {"cov_trace_xy_m2": float(P[0, 0] + P[1, 1]), "heading_var_rad2": float(P[2, 2])}
+    if "nis" in est.diagnostics:
+        from scipy import special  # here, not at import: the runner starts without scipy
+
+        nis = float(est.diagnostics["nis"])
+        dof = float(est.diagnostics.get("nis_dof", np.nan)) if nis_dof is None else float(nis_dof)
+        out["nis"] = nis
+        out["nis_p"] = float(special.chdtrc(dof, nis)) if np.isfinite(nis) and dof > 0 else float("nan")
+    if "accepted" in est.diagnostics and "rejected" in est.diagnostics:
+        out["accepted_fraction"] = accepted_share(est.diagnostics["accepted"], est.diagnostics["rejected"])
+    return out
+
+
+def accepted_share(accepted: float, rejected: float) -> float:
+    """Accepted over offered measurements of one update; NaN when nothing was offered."""
+    total = accepted + rejected
+    return accepted / total if total > 0 else float("nan")
+
+
 @dataclass(frozen=True, kw_only=True)
 class CheckTolerances:
     """The bounds the conformance checks (:mod:`locbench.checks`) hold a filter to; a filter may widen one.
@@ -159,6 +216,23 @@ class Filter(abc.ABC):
     @abc.abstractmethod
     def estimate(self) -> Estimate:
         """The current belief; cheap to call after every event."""
+
+    def belief_sample(self, rng: np.random.Generator) -> tuple[FloatArray, FloatArray] | None:
+        """A weighted sample of the current belief, for the proper scores (:mod:`locbench.scores`); optional.
+
+        Returns poses (m, 3) (x m, y m, theta rad) and weights (m,) summing to 1, or None (the default) when the
+        belief is the Gaussian of :meth:`estimate`, which is scored in closed form. ``rng`` is the runner's own
+        generator, not the filter's: drawing the sample must not change any later estimate.
+        """
+        return None
+
+    def health(self) -> dict[str, float]:
+        """Named floats describing the filter's own state after the last call (:data:`HEALTH_SIGNALS`).
+
+        The default is :func:`gaussian_health` of :meth:`estimate`; a filter adds the signals it has. Must not
+        change the belief or consume the filter's random stream; the runner stores the values per event.
+        """
+        return gaussian_health(self.estimate())
 
     def extra_results(self) -> dict[str, Any]:
         """Optional arrays stored with the run at the end (e.g. a smoother's smoothed trajectory)."""

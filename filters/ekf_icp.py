@@ -74,7 +74,7 @@ from locbench.errors import ConfigError, FilterDiverged
 from locbench.events import LaserScan, Observation, Odometry
 from locbench.filters._icp import MIN_PAIRS, IcpResult, icp_2d
 from locbench.filters._kalman import joseph_correct
-from locbench.filters.base import Estimate, Filter, FilterConfig
+from locbench.filters.base import Estimate, Filter, FilterConfig, gaussian_health
 from locbench.geometry import wrap_scalar
 from locbench.limits import RAYCAST_BYTES_PER_CELL, check_bytes, grid_cells
 from locbench.raycast import cast_scan
@@ -86,6 +86,10 @@ logger = logging.getLogger(__name__)
 DEFAULT_LASER_SIGMA_M = 0.01
 #: The ICP correction measures the pose itself (eq. 14).
 _H_POSE = np.eye(3)
+
+
+#: The ICP health before any scan.
+_NO_ICP_HEALTH = {"icp_rmse_m": math.nan, "inlier_fraction": math.nan}
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -251,6 +255,7 @@ class IcpEKF(Filter):
         self._tightened = False
         self._kidnap_resets = 0
         self._diag = self._empty_diag()
+        self._icp_health = _NO_ICP_HEALTH
 
     def _empty_diag(self) -> dict[str, float]:
         return {
@@ -348,6 +353,11 @@ class IcpEKF(Filter):
         cfg = self.config
         res, n_real, n_pred = self.match(z)
         self._t = z.t
+        pairable = min(n_real, n_pred)
+        self._icp_health = {
+            "icp_rmse_m": float(res.rmse_m) if res is not None else math.nan,
+            "inlier_fraction": float(res.matched) / pairable if res is not None and pairable > 0 else math.nan,
+        }
         needed = max(cfg.min_matched_points, math.ceil(cfg.min_matched_fraction * min(n_real, n_pred)))
         if res is None or not res.converged or res.matched < needed:
             self._mismatch(z.t, res)
@@ -391,6 +401,11 @@ class IcpEKF(Filter):
             "iterations": float(res.iterations) if res is not None else 0.0,
             "matched_points": float(res.matched) if res is not None else 0.0,
         }
+
+    def health(self) -> dict[str, float]:
+        """:func:`gaussian_health` (NIS of the H = I pose update, 3 degrees of freedom) with the last scan's
+        ``icp_rmse_m`` and ``inlier_fraction`` (NaN before the first scan)."""
+        return gaussian_health(self.estimate(), nis_dof=3) | self._icp_health
 
     def estimate(self) -> Estimate:
         """The current pose and covariance with the diagnostics of the last call."""

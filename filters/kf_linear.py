@@ -62,7 +62,7 @@ from locbench.errors import ConfigError, FilterDiverged
 from locbench.events import LaserScan, Observation, Odometry
 from locbench.filters._motion import increment_variances, resolve_motion_noise
 from locbench.filters._scan_database import ScanDatabase, build_database, lattice_too_large, match_scan
-from locbench.filters.base import Estimate, Filter, FilterConfig
+from locbench.filters.base import Estimate, Filter, FilterConfig, gaussian_health
 from locbench.geometry import wrap_scalar
 
 FloatArray = npt.NDArray[np.float64]
@@ -283,6 +283,10 @@ class LinearKF(Filter):
             raise FilterDiverged(f"LinearKF: non-finite state at t={t:.3f} s")
 
     # --- output ----------------------------------------------------------------------------------
+
+    def health(self) -> dict[str, float]:
+        """:func:`gaussian_health` with the pose fix's 3 degrees of freedom (NaN NIS after a predict or a miss)."""
+        return gaussian_health(self.estimate(), nis_dof=3)
 
     def estimate(self) -> Estimate:
         """Current mean (x, y, theta) and covariance."""

@@ -138,7 +138,7 @@ from locbench.filters._motion import (
     wheel_variances,
 )
 from locbench.filters._noise import landmark_noise, range_only_noise
-from locbench.filters.base import CheckTolerances, Estimate, Filter, FilterConfig
+from locbench.filters.base import CheckTolerances, Estimate, Filter, FilterConfig, gaussian_health
 from locbench.geometry import wrap_angle
 from locbench.limits import (
     FREE_SPACE_BYTES_PER_CELL,
@@ -156,6 +156,10 @@ logger = logging.getLogger(__name__)
 
 
 _LOG_2PI = math.log(2.0 * math.pi)
+
+
+#: Particles in the belief sample the proper scores use (:meth:`ParticleFilter.belief_sample`).
+BELIEF_SAMPLE_SIZE = 64
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -1368,6 +1372,27 @@ class ParticleFilter(Filter):
     def particles(self) -> tuple[FloatArray, FloatArray]:
         """Copies of the particles (N, 3) (x m, y m, theta rad) and their normalised weights (N,)."""
         return self._x.copy(), self._weights().copy()
+
+    def belief_sample(self, rng: np.random.Generator) -> tuple[FloatArray, FloatArray]:
+        """:data:`BELIEF_SAMPLE_SIZE` particles drawn by systematic resampling of the weights, each of weight 1/m.
+
+        Unbiased: particle i is drawn m w_i times in expectation, so the sample's mean of any function is the
+        weighted set's in expectation. ``rng`` (the runner's, not the filter's) draws only the common offset.
+        """
+        m = BELIEF_SAMPLE_SIZE
+        return _gather(self._x, systematic_resample(self._weights(), m, rng)), np.full(m, 1.0 / m)
+
+    def health(self) -> dict[str, float]:
+        """Covariance trace and heading variance of the particle scatter (:func:`gaussian_health`, no NIS), the
+        ``ess_fraction`` (n_eff / particles) of the last update, the ``max_weight`` and augmented MCL's
+        ``w_fast_over_w_slow`` of the sensor of the last update (NaN when off)."""
+        w = self._weights()
+        n_eff = float(self._diag.get("n_eff", math.nan))
+        return gaussian_health(self.estimate()) | {
+            "ess_fraction": n_eff / float(w.shape[0]),
+            "max_weight": float(np.max(w)),
+            "w_fast_over_w_slow": float(self._diag.get("w_fast_over_w_slow", math.nan)),
+        }
 
     def estimate(self) -> Estimate:
         """Weighted mean (circular heading), weighted covariance (wrapped residuals) and diagnostics."""

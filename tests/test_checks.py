@@ -21,6 +21,7 @@ from locbench.checks import (
     check_estimate_sanity,
     check_filter,
     check_heading_wrap,
+    check_health_and_scores,
     check_noise_free,
     check_predict_grows_uncertainty,
     check_rejects_unconsumed,
@@ -140,6 +141,30 @@ class LooseScaledOdometry(ScaledOdometry, LooseOdometry):
     pass
 
 
+class SamplesWithItsOwnStream(OdometryFilter):
+    """Draws its belief sample from the filter's own generator: its later estimates change."""
+
+    def reset(self, initial: Gaussian2, world: WorldMap, sensors: SensorSpec, rng: np.random.Generator) -> None:
+        super().reset(initial, world, sensors, rng)
+        self._own = rng
+
+    def predict(self, u: Odometry) -> None:
+        super().predict(u)
+        x, y, th = self._x
+        self._x = (x + 1e-3 * float(self._own.standard_normal()), y, th)
+
+    def belief_sample(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        self._own.standard_normal()
+        return np.array([self._x]), np.ones(1)
+
+
+class UnnamedHealth(OdometryFilter):
+    """Reports a health signal nobody declared."""
+
+    def health(self) -> dict[str, float]:
+        return {"mood": 1.0}
+
+
 BROKEN = [
     (check_contract, WorkInInit, OdometryFilter),
     (check_contract, NoOdometry, OdometryFilter),
@@ -152,6 +177,8 @@ BROKEN = [
     (check_noise_free, ScaledOdometry, OdometryFilter),
     (check_predict_grows_uncertainty, ShrinkingPredict, OdometryFilter),
     (check_empty_observation, MovesOnEmptySightings, LandmarkEKF),
+    (check_health_and_scores, SamplesWithItsOwnStream, OdometryFilter),
+    (check_health_and_scores, UnnamedHealth, OdometryFilter),
 ]
 
 

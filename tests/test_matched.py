@@ -128,14 +128,19 @@ def test_report_shows_each_filter_on_the_shipped_world_beside_its_matched_twin(t
     text = (tmp_path / "summary" / "REPORT.md").read_text()
     section = text[text.index('id="consistency"') :]
     assert "*`room` as shipped beside `room[matched=true]`" in section
-    assert "| filter | shipped: runs | shipped: ANEES | shipped: NLL | shipped: ATE / PCRB | matched: runs |" in section
+    head = (
+        "| filter | shipped: runs | shipped: ANEES | shipped: NLL | shipped: energy score (cm) | shipped: ATE / PCRB |"
+    )
+    assert f"{head} matched: runs |" in section
     df = pd.read_csv(tmp_path / "summary" / "metrics.csv")
     sel = df[(df["filter"] == "ekf_landmarks") & (df["metric"] == "anees")]
     shipped = sel[sel["dataset"] == "room"]["value"].mean()
     matched = sel[sel["dataset"] == "room[matched=true]"]["value"].mean()
     row = next(line for line in section.splitlines() if line.startswith("| `ekf_landmarks` |"))
     cells = [c.strip() for c in row.strip("|").split("|")]
-    assert cells[1] == "2" and cells[2].startswith(f"{shipped:.3g} (") and cells[5] == "2"
-    assert cells[6].startswith(f"{matched:.3g} (")
+    assert cells[1] == "2" and cells[2].startswith(f"{shipped:.3g} (") and cells[6] == "2"
+    assert cells[7].startswith(f"{matched:.3g} (")
+    # a finite energy score beside the ANEES on both worlds
+    assert float(cells[4]) > 0 and float(cells[9]) > 0
     # the twin's bound is the matched world's own: the filter's efficiency there is finite
-    assert float(cells[8]) > 0.5
+    assert float(cells[10]) > 0.5

@@ -17,6 +17,7 @@ from locbench.claims import report_003
 from locbench.datasets.base import Trajectory2D, Waypoints
 from locbench.registry import DATASETS, FILTERS
 from locbench.report import collect_metrics, suite_filter, summary_text, write_metrics_csv, write_report
+from locbench.scores import SCORE_IDS, ci_ids
 from locbench.store import KIND_NAMES, RunRecord, Store, TruthRecord
 
 ODO = KIND_NAMES.index("Odometry")
@@ -173,6 +174,7 @@ def _fake_run(truth: TruthRecord, filt: str, drift: float, sigma: float) -> RunR
     upd = np.nonzero(np.isclose(np.mod(base_t, 5.0), 0.0) & (base_t > 0))[0]
     t = np.concatenate([base_t, base_t[upd]])
     order = np.argsort(t, kind="stable")
+    trace = np.concatenate([2.0 * var, 2.0 * var[upd]])[order]
     return RunRecord(
         _meta(filt, truth.seed),
         t[order],
@@ -180,6 +182,7 @@ def _fake_run(truth: TruthRecord, filt: str, drift: float, sigma: float) -> RunR
         np.concatenate([cov, cov[upd]])[order],
         np.concatenate([kind, np.full(upd.shape, LMK, dtype=np.int8)])[order],
         np.concatenate([step_ns, np.full(upd.shape, 50_000, dtype=np.int64)])[order],
+        health={"cov_trace_xy_m2": trace},
     )
 
 
@@ -236,6 +239,7 @@ def test_collect_metrics_is_tidy_and_sorted(store: Store) -> None:
     }
     expected |= {f"waypoint_{j}_{q}" for j in range(1, 6) for q in ("error_m", "est_x_m", "est_y_m")}
     expected |= {f"waypoint_{j}_{q}" for j in range(1, 6) for q in ("marked_x_m", "marked_y_m")}
+    expected |= {i for s in SCORE_IDS for i in (s, *ci_ids(s))}
     assert ids == expected
     failed = df[df["filter"] == "ekf_landmarks[gate=0.1]"]
     assert failed[["metric", "value"]].values.tolist() == [["failed", 1.0]]
@@ -270,6 +274,10 @@ def test_write_report_end_to_end(store: Store) -> None:
         "runs/room/pf/seed-0000",
         "figures/room_trajectories.png",
         "figures/room_pareto.png",
+        "energy score (cm) | lost AUROC (0.25 m) |",
+        "a>Does the filter know that it is lost?",
+        "| `room` | `odometry` | 3 | 0 | never lost |",
+        "CRPS x / y (cm) / heading (deg)",
     ):
         assert needle in text, needle
     assert "003_e5c93f9be776ee5e" not in text and "the issue" not in text

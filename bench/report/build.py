@@ -17,9 +17,11 @@ from matplotlib.figure import Figure
 
 import locbench
 from locbench.claims import Experiment, all_claims, experiments, sections_for, waypoint_stats
+from locbench.lost import LOST_THRESHOLDS_M
 from locbench.metrics import CONFIDENCE, METRICS, POSE_DOF, chi2_band, estimate_at, mean_over_runs
 from locbench.pcrb import BOUND_ROWS
 from locbench.report import figures as fg
+from locbench.report import health as hl
 from locbench.report import significance as sig
 from locbench.report import tables as tb
 from locbench.report.collect import Collected
@@ -134,6 +136,7 @@ class Report:
             self.claims(),
             self.pareto(),
             self.consistency(),
+            hl.lost_section(self),
             self.kidnap_and_global(),
             self.recorded_data(),
             *[self.experiment(e) for e in self.exps],
@@ -220,6 +223,7 @@ class Report:
             wpm = wp.get(f, NAN) * 100.0
             head = tb.mean_of(sub, "heading_rmse_rad") * METRICS["heading_rmse_rad"].scale
             an_text, an_key, _, _ = tb.consistency_cell(sub)
+            es = tb.mean_of(sub, "energy_score_m") * METRICS["energy_score_m"].scale
             upd = tb.mean_of(sub, "update_us_median")
             rtf = tb.mean_of(sub, "realtime_factor")
             # the kidnap runs of this configuration, or of its filter's one kidnap configuration
@@ -227,6 +231,12 @@ class Report:
             knames.append(kname)
             if kname is not None and kname != f:
                 substituted[f] = kname
+            # lost detection where a filter does get lost: its kidnap configuration on the kidnapped world
+            # (a configuration without kidnap runs has none, so the column means one thing throughout)
+            if kid:
+                lost_auc = hl.best_auroc(self.col, kid, kname) if kname is not None else NAN
+            else:
+                lost_auc = hl.best_auroc(self.col, dataset, f)
             if kname is not None:
                 _, n_k, r_k, _, _ = tb.rate(kdf[kdf["filter"] == kname], "kidnap_recovered")
                 k_text = f"{100 * r_k:.0f} ({n_k})" + ("²" if kname != f else "") if n_k else "n/a"
@@ -244,13 +254,15 @@ class Report:
                     tb.num(wpm),
                     tb.num(head),
                     an_text,
+                    tb.num(es),
+                    tb.num(lost_auc) if not np.isnan(lost_auc) else "-",
                     tb.num(upd) if not np.isnan(upd) else "-",
                     tb.num(rtf),
                     k_text,
                     f"{tb.num(rec)} ({n_rec})" if n_rec else "-",
                 ]
             )
-            keys.append([NAN, float(runs), ate, eff, wpm, head, an_key, upd, rtf, k_key, rec])
+            keys.append([NAN, float(runs), ate, eff, wpm, head, an_key, es, lost_auc, upd, rtf, k_key, rec])
         eligible = [not self.col.is_baseline(f) for f in filters]
         bounds = self.bounds_on(dataset)
         for b in bounds:
@@ -259,8 +271,8 @@ class Report:
             wpm = wp.get(b, NAN) * 100.0
             head = tb.mean_of(sub, "heading_rmse_rad") * METRICS["heading_rmse_rad"].scale
             runs = tb.run_count(sub)
-            rows.append([f"`{b}`", str(runs), tb.num(ate), "-", tb.num(wpm), tb.num(head), *["-"] * 5])
-            keys.append([NAN, float(runs), ate, NAN, wpm, head, *[NAN] * 5])
+            rows.append([f"`{b}`", str(runs), tb.num(ate), "-", tb.num(wpm), tb.num(head), *["-"] * 7])
+            keys.append([NAN, float(runs), ate, NAN, wpm, head, *[NAN] * 7])
             eligible.append(False)
         untested = sig.mark_ties(
             rows, keys, sig.summary_columns(self, dataset, filters, len(bounds), kid, knames), eligible
@@ -272,6 +284,14 @@ class Report:
             f"ANEES: mean over runs of each run's average NEES (heading wrapped), against the two-sided 95 % "
             f"chi-square band for the run count ({band_for(n_typ)} for {n_typ} runs); closest to "
             f"{POSE_DOF} is marked best."
+        )
+        notes.append(
+            "Energy score: proper score of the filter's own position belief, mean over the ground-truth times "
+            f"(lower is better). Lost AUROC: how well the filter's best health signal separates the times its "
+            f"position error exceeds {LOST_THRESHOLDS_M[0]:g} m from the others (1 perfect, 0.5 chance; '-': never "
+            "lost, or no kidnap runs)"
+            + (f", on `{kid}` with the kidnap configuration as for kidnap recovery" if kid else "")
+            + '; see "Does the filter know that it is lost?".'
         )
         if bounds:
             notes.append(tb.BOUND_FOOTNOTE)
@@ -301,6 +321,8 @@ class Report:
             "mean waypoint RMSE (cm)",
             "heading RMSE (deg)",
             "ANEES (verdict)",
+            "energy score (cm)",
+            f"lost AUROC ({LOST_THRESHOLDS_M[0]:g} m{f', {SUMMARY_KIDNAP_M:g} m kidnap' if kid else ''})",
             "update median (us)",
             "real-time factor (x)",
             f"kidnap recovery at {SUMMARY_KIDNAP_M:g} m (%)",
@@ -438,7 +460,10 @@ class Report:
                 "nominal noise, so a filter whose equations are right must pass. Global-localization runs are left "
                 "out. NLL: the mean negative log-likelihood of the truth under the filter's Gaussian (lower is "
                 "better; unlike the ANEES it also penalises a covariance that is needlessly large), over the runs "
-                "whose covariance never collapsed. ATE / PCRB: the filter's RMS ATE over the bound's (docs/pcrb.md)."
+                "whose covariance never collapsed. ATE / PCRB: the filter's RMS ATE over the bound's (docs/pcrb.md). "
+                "Energy score and CRPS: proper scores of the filter's own belief (its Gaussian in closed form, the "
+                "particle filter's own particles), mean over the ground-truth times and the runs; lower is better, a "
+                "point estimate scores its error, and a belief is rewarded for being sharp only where it is right."
             )
         )
         collapsed = False
@@ -462,7 +487,17 @@ class Report:
         if rows:
             sec.add(
                 Table(
-                    ("dataset", "filter", "runs", "95 % band", "ANEES", "time in 95 % band (%)", "NLL"),
+                    (
+                        "dataset",
+                        "filter",
+                        "runs",
+                        "95 % band",
+                        "ANEES",
+                        "time in 95 % band (%)",
+                        "NLL",
+                        "energy score (cm)",
+                        "CRPS x / y (cm) / heading (deg)",
+                    ),
                     tuple(rows),
                     caption="Other worlds and the recorded data",
                     sort_keys=tuple(keys),
@@ -482,8 +517,12 @@ class Report:
             return None, (), False
         inband = tb.mean_of(sub, "nees_in_band_fraction") * 100.0
         nll = tb.mean_of(sub[np.isfinite(sub["value"]) | (sub["metric"] != "nll")], "nll")
-        cells = (str(n), tb.band_text(n), text, tb.num(inband), tb.num(nll))
-        return cells, (float(n), NAN, key, inband, nll), inf > 0
+        es = tb.mean_of(sub, "energy_score_m") * METRICS["energy_score_m"].scale
+        cx, cy = (tb.mean_of(sub, m) * METRICS[m].scale for m in ("crps_x_m", "crps_y_m"))
+        ch = tb.mean_of(sub, "crps_heading_rad") * METRICS["crps_heading_rad"].scale
+        crps = f"{tb.num(cx)} / {tb.num(cy)} / {tb.num(ch)}"
+        cells = (str(n), tb.band_text(n), text, tb.num(inband), tb.num(nll), tb.num(es), crps)
+        return cells, (float(n), NAN, key, inband, nll, es, NAN), inf > 0
 
     def _shipped_matched_table(self, shipped: str, twin: str) -> tuple[Table, bool]:
         """One row per filter: ANEES, NLL and ATE / PCRB on the shipped world and on its model-matched twin."""
@@ -499,17 +538,21 @@ class Report:
                 collapsed |= inf
                 eff = tb.ate_over_bound(self.rows(ds), f)
                 if cells is None:
-                    row += ["-"] * 4
-                    key += [NAN] * 4
+                    row += ["-"] * 5
+                    key += [NAN] * 5
                 else:
-                    row += [cells[0], cells[2], cells[4], tb.num(eff)]
-                    key += [ckeys[0], ckeys[2], ckeys[4], eff]
+                    row += [cells[0], cells[2], cells[4], cells[5], tb.num(eff)]
+                    key += [ckeys[0], ckeys[2], ckeys[4], ckeys[5], eff]
             if any(c != "-" for c in row[1:]):
                 rows.append(tuple(row))
                 keys.append(tuple(key))
         head = (
             "filter",
-            *(f"{w}: {c}" for w in ("shipped", "matched") for c in ("runs", "ANEES", "NLL", "ATE / PCRB")),
+            *(
+                f"{w}: {c}"
+                for w in ("shipped", "matched")
+                for c in ("runs", "ANEES", "NLL", "energy score (cm)", "ATE / PCRB")
+            ),
         )
         caption = f"`{shipped}` as shipped beside `{twin}` (simulator noise = the filters' nominal noise)"
         return Table(head, tuple(rows), caption=caption, sort_keys=tuple(keys)), collapsed

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from locbench.lost import HealthSeries, health_series
 from locbench.metrics import nees_at_truth, run_metrics
 from locbench.pcrb import BOUND_ROWS, is_bound_row, pcrb_summary
 from locbench.spec import Spec, format_spec, params_to_dict
@@ -78,6 +79,8 @@ class Collected:
     metas: list[dict[str, Any]] = field(default_factory=list)
     #: (dataset, filter) -> one (t, nees) series per ok run
     nees: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]] = field(default_factory=dict)
+    #: (dataset, filter) -> one lost-detection series per ok run with stored health and ground truth
+    health: dict[tuple[str, str], list[HealthSeries]] = field(default_factory=dict)
     #: (dataset, filter, seed) -> run folder of ok runs
     ok_dirs: dict[tuple[str, str, int], Path] = field(default_factory=dict)
     truths: dict[tuple[str, int], TruthRecord] = field(default_factory=dict)
@@ -219,6 +222,12 @@ def collect(store: Store, keep: Keep | None = None) -> Collected:
         if truth is not None and ne is not None:
             nees[(dataset, filt)].append((truth.ground_truth.t, ne))
             out.ok_dirs[(dataset, filt, seed)] = run_dir
+            if run.health and truth.truth_label == "ground truth":
+                gt = truth.ground_truth
+                kt = truth.kidnaps[0].t if truth.kidnaps else float("nan")
+                out.health.setdefault((dataset, filt), []).append(
+                    health_series(run.t, run.mean, run.health, gt.t, gt.xy, kt)
+                )
     out.nees = dict(nees)
     rows.extend(bound_rows(store, out))
     out.metrics = frame(rows)

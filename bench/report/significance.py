@@ -602,14 +602,17 @@ def summary_columns(
         col(4, "waypoint_rmse_mean_m", samples_for(df, filters, WAYPOINT_MEAN)),
         col(5, "heading_rmse_rad", samples_for(df, filters, "heading_rmse_rad")),
         col(6, "anees", samples_for(df, filters, "anees")),
-        col(7, "update_us_median", samples_for(df, filters, "update_us_median")),
-        col(8, "realtime_factor", samples_for(df, filters, "realtime_factor")),
+        col(7, "energy_score_m", samples_for(df, filters, "energy_score_m")),
+        # one AUROC per configuration over all its runs: a ranking, not a paired test
+        col(8, "lost_auroc", [None] * len(filters)),
+        col(9, "update_us_median", samples_for(df, filters, "update_us_median")),
+        col(10, "realtime_factor", samples_for(df, filters, "realtime_factor")),
         col(
-            9,
+            11,
             "kidnap_recovered",
             [samples_for(kdf, [k], "kidnap_recovered")[0] if k else None for k in knames],
         ),
-        col(10, "recorded_ate_median_m", [recorded_per_dataset(report, f) or None for f in filters]),
+        col(12, "recorded_ate_median_m", [recorded_per_dataset(report, f) or None for f in filters]),
     ]
 
 
