@@ -866,6 +866,11 @@ def systematic_resample(weights: npt.ArrayLike, n: int, rng: np.random.Generator
     return _systematic_indices(w, int(n), float(rng.random()))
 
 
+def _take(a: FloatArray, sel: IntArray | slice) -> FloatArray:
+    """``a[sel]`` as a contiguous float64 array (a copy: the observation's array is not handed on)."""
+    return np.array(a[sel], dtype=np.float64, order="C")
+
+
 class FreeSpaceSampler:
     """Uniform poses over free space: the free cells of a grid, else an axis-aligned box (x0, y0, x1, y1), m."""
 
@@ -1128,30 +1133,31 @@ class ParticleFilter(Filter):
         if self._lm_warn:
             landmark_noise(None, None, SensorSpec(), warn=True)
             self._lm_warn = False
-        ok = np.isfinite(z.ranges) & np.isfinite(z.bearings) & (z.ranges > 0.0)
+        # a few sightings per event: plain floats are cheaper than numpy's masks here
+        ok = [
+            math.isfinite(r) and math.isfinite(b) and r > 0.0
+            for r, b in zip(z.ranges.tolist(), z.bearings.tolist(), strict=True)
+        ]
         sel, rows = self._map_rows(z.ids, ok, "landmark")
-        if sel.size == 0:
+        if sel is None:
             return None
-        data = (
-            np.ascontiguousarray(z.ranges[sel], dtype=np.float64),
-            np.ascontiguousarray(z.bearings[sel], dtype=np.float64),
-            rows,
-        )
-        return int(sel.size), data
+        data = (_take(z.ranges, sel), _take(z.bearings, sel), rows)
+        return int(rows.size), data
 
     def _prepare_ranges(self, z: RangeObservations) -> tuple[int, tuple[FloatArray, IntArray]] | None:
         if self._range_warn:
             range_only_noise(None, SensorSpec(), warn=True)
             self._range_warn = False
-        ok = np.isfinite(z.ranges) & (z.ranges >= 0.0)
+        ok = [math.isfinite(r) and r >= 0.0 for r in z.ranges.tolist()]
         sel, rows = self._map_rows(z.ids, ok, "beacon")
-        if sel.size == 0:
+        if sel is None:
             return None
-        return int(sel.size), (np.ascontiguousarray(z.ranges[sel], dtype=np.float64), rows)
+        return int(rows.size), (_take(z.ranges, sel), rows)
 
-    def _map_rows(self, ids: IntArray, ok: npt.NDArray[np.bool_], what: str) -> tuple[IntArray, IntArray]:
+    def _map_rows(self, ids: IntArray, ok: list[bool], what: str) -> tuple[IntArray | slice | None, IntArray]:
         """The indices of the usable observations (``ok``, id withheld or in the map) and their landmark rows
-        (-1: withheld, marginalised over the map by :func:`_sightings_loglik`)."""
+        (-1: withheld, marginalised over the map by :func:`_sightings_loglik`); the indices are ``slice(None)``
+        when every observation is usable and None when none is."""
         keep: list[int] = []
         rows: list[int] = []
         for k, ident in enumerate(ids.tolist()):
@@ -1163,7 +1169,10 @@ class ParticleFilter(Filter):
                 continue
             keep.append(k)
             rows.append(row)
-        return np.asarray(keep, dtype=np.int64), np.asarray(rows, dtype=np.int64)
+        if not keep:
+            return None, np.empty(0, dtype=np.int64)
+        sel = slice(None) if len(keep) == len(ok) else np.asarray(keep, dtype=np.int64)
+        return sel, np.asarray(rows, dtype=np.int64)
 
     def _prepare_scan(self, z: LaserScan) -> tuple[int, tuple[FloatArray, FloatArray]] | None:
         n_all = int(z.ranges.shape[0])
@@ -1431,7 +1440,7 @@ class ParticleFilter(Filter):
         ``finite``: whether every particle and log-weight is, else the filter has diverged."""
         if not finite:
             raise FilterDiverged(f"ParticleFilter particles became non-finite at t={self._t:.3f} s")
-        self._est = Estimate(t=self._t, mean=mean, cov=cov, diagnostics={})
+        self._est = (mean, cov)
 
     def _diagnostics(self) -> dict[str, float]:
         return {**self._diag, "particles": float(self._n)}
@@ -1442,6 +1451,5 @@ class ParticleFilter(Filter):
 
     def estimate(self) -> Estimate:
         """Weighted mean (circular heading), weighted covariance (wrapped residuals) and diagnostics."""
-        return Estimate(
-            t=self._est.t, mean=self._est.mean.copy(), cov=self._est.cov.copy(), diagnostics=self._diagnostics()
-        )
+        mean, cov = self._est
+        return Estimate(t=self._t, mean=mean.copy(), cov=cov.copy(), diagnostics=self._diagnostics())
