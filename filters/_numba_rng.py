@@ -15,7 +15,8 @@ same bit generator functions, numba's same distribution code.
 from __future__ import annotations
 
 import ctypes
-from typing import Any
+from collections.abc import Callable
+from typing import Any, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -51,7 +52,7 @@ def generator_addresses(rng: np.random.Generator) -> UIntArray:
 
 
 @intrinsic
-def generator_from(typingctx: Any, addresses: Any) -> Any:
+def _generator_from(typingctx: Any, addresses: Any) -> Any:
     """In a kernel: the ``numpy.random.Generator`` whose :func:`generator_addresses` are ``addresses``.
 
     The value has no Python parent and no memory info (the caller owns the generator), so it must not be
@@ -83,3 +84,7 @@ def generator_from(typingctx: Any, addresses: Any) -> Any:
         return gen._getvalue()
 
     return sig, codegen
+
+
+#: The intrinsic as kernels call it (typed for mypy: numba's decorator hides the signature).
+generator_from = cast(Callable[[UIntArray], np.random.Generator], _generator_from)

@@ -69,13 +69,13 @@ from locbench.filters._kalman import (
     subtract,
     wrapped_residual,
 )
+from locbench.filters._landmark_index import LandmarkIndex, gate_radius
 from locbench.filters._motion import (
     MotionKind,
     MotionModel,
     MotionNoiseConfig,
     propagate_covariance,
 )
-from locbench.filters._landmark_index import LandmarkIndex, gate_radius
 from locbench.filters._noise import landmark_noise, range_only_noise
 from locbench.filters.base import Estimate, Filter, FilterConfig
 from locbench.geometry import wrap_angle, wrap_scalar

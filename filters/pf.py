@@ -130,7 +130,6 @@ from locbench.filters._likelihood_field import (
     make_likelihood_field,
     scan_endpoints_robot_frame,
 )
-from locbench.filters._numba_rng import UIntArray, generator_addresses, generator_from
 from locbench.filters._motion import (
     MotionKind,
     MotionNoiseConfig,
@@ -139,6 +138,7 @@ from locbench.filters._motion import (
     wheel_variances,
 )
 from locbench.filters._noise import landmark_noise, range_only_noise
+from locbench.filters._numba_rng import UIntArray, generator_addresses, generator_from
 from locbench.filters.base import CheckTolerances, Estimate, Filter, FilterConfig
 from locbench.geometry import wrap_angle
 from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
@@ -775,7 +775,8 @@ def _finish_stats(
 
 @njit(cache=True, inline="always")
 def _all_finite(a: FloatArray) -> bool:
-    for i in range(a.shape[0]):
+    """Whether every element of ``a`` is finite (a loop: numba compiles no generator inside all())."""
+    for i in range(a.shape[0]):  # noqa: SIM110
         if not math.isfinite(a[i]):
             return False
     return True
@@ -1087,8 +1088,18 @@ class ParticleFilter(Filter):
             self._travelled[0] += abs(u.d_left)
             self._travelled[1] += abs(u.d_right)
             moved = _move(
-                self._x, True, u.d_left, u.d_right, 0.0, math.sqrt(vl), math.sqrt(vr), W, self._q_std, self._gen,
-                self._weights(), self._logw,
+                self._x,
+                True,
+                u.d_left,
+                u.d_right,
+                0.0,
+                math.sqrt(vl),
+                math.sqrt(vr),
+                W,
+                self._q_std,
+                self._gen,
+                self._weights(),
+                self._logw,
             )
         elif (tw := nz.twist_sigmas(u)) is not None:
             self._x = sample_twist_motion(self._x, u, tw[0], tw[1], rng)
@@ -1100,8 +1111,18 @@ class ParticleFilter(Filter):
                 u.dx, u.dy, u.dtheta, nz.sigma_xy_per_m, nz.sigma_theta_per_m, nz.sigma_theta_per_rad
             )
             moved = _move(
-                self._x, False, u.dx, u.dy, u.dtheta, math.sqrt(vxy), math.sqrt(vth), 1.0, self._q_std, self._gen,
-                self._weights(), self._logw,
+                self._x,
+                False,
+                u.dx,
+                u.dy,
+                u.dtheta,
+                math.sqrt(vxy),
+                math.sqrt(vth),
+                1.0,
+                self._q_std,
+                self._gen,
+                self._weights(),
+                self._logw,
             )
         if self._last_sightings is not None:
             _compose_into(self._last_sightings[1], u.dx, u.dy, u.dtheta)
