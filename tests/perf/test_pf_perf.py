@@ -13,6 +13,8 @@ test run (``--benchmark-disable``) each case runs once as a smoke test and the 1
 from __future__ import annotations
 
 import math
+import statistics
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -37,7 +39,7 @@ def _office() -> Dataset:
     return _DATA["office"]
 
 
-@njit  # not cached: tools/pf_fused_interleaved.py loads this file under another module name
+@njit(cache=True)
 def _fused_step(
     x: Any,
     logw: Any,
@@ -156,6 +158,36 @@ def test_pf_fused_reference(benchmark: Any, request: pytest.FixtureRequest, n: i
     benchmark(fused)
     if not benchmark.disabled:
         _report(benchmark, request, n, "fused")
+
+
+@pytest.mark.parametrize("n", [1_000, 10_000, 100_000])
+def test_pf_over_fused_paired(benchmark: Any, request: pytest.FixtureRequest, n: int) -> None:
+    """The filter's landmark step over the fused reference's, paired: each round times a block of filter
+    steps and then a block of fused steps, and the ratio is the median of the rounds' ratios (the cases
+    above run minutes apart, and on a shared machine their ratio drifts with the load)."""
+    if n >= 100_000 and benchmark.disabled:
+        pytest.skip("1e5 particles only when benchmarking (nox -s perf)")
+    step, fused, _, _ = make_steps(n)
+    step()
+    fused()
+    block = max(3, 100_000 // n)  # steps per block: about 50 ms of work
+    ratios: list[float] = []
+
+    def one_round() -> None:
+        t0 = time.perf_counter()
+        for _ in range(block):
+            step()
+        t1 = time.perf_counter()
+        for _ in range(block):
+            fused()
+        ratios.append((t1 - t0) / (time.perf_counter() - t1))
+
+    benchmark.pedantic(one_round, rounds=1 if benchmark.disabled else 21, iterations=1)
+    if not benchmark.disabled:
+        ratio = statistics.median(ratios)
+        benchmark.extra_info["filter_over_fused"] = ratio
+        with request.config.pluginmanager.get_plugin("capturemanager").global_and_fixture_disabled():
+            print(f"\npf landmarks N={n:>6d}: filter / fused {ratio:.3f} (median of {len(ratios)} paired rounds)")
 
 
 def test_fused_reference_is_the_filter() -> None:
