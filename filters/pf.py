@@ -1461,7 +1461,7 @@ class ParticleFilter(Filter):
         ``finite``: whether every particle and log-weight is, else the filter has diverged."""
         if not finite:
             raise FilterDiverged(f"ParticleFilter particles became non-finite at t={self._t:.3f} s")
-        self._est = (mean, cov)
+        self._est: tuple[FloatArray, FloatArray] | None = (mean, cov)
 
     def _diagnostics(self) -> dict[str, float]:
         return {**self._diag, "particles": float(self._n)}
@@ -1472,5 +1472,7 @@ class ParticleFilter(Filter):
 
     def estimate(self) -> Estimate:
         """Weighted mean (circular heading), weighted covariance (wrapped residuals) and diagnostics."""
+        if self._est is None:  # the particles were set from outside: their statistics from scratch
+            self._est = _weighted_stats(self._x, self._weights())
         mean, cov = self._est
         return Estimate(t=self._t, mean=mean.copy(), cov=cov.copy(), diagnostics=self._diagnostics())
