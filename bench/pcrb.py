@@ -47,6 +47,7 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+from numba import njit
 
 from locbench.datasets.base import Dataset
 from locbench.errors import ConfigError
@@ -114,12 +115,27 @@ def pcrb_recursion(j0: FloatArray, jacobians: FloatArray, process_cov: FloatArra
     ndarray, shape (n+1, d, d)
         The bound's covariance J_k^-1 at every step.
     """
+    c = np.ascontiguousarray
+    out: FloatArray = _recursion(
+        c(j0, dtype=np.float64), c(jacobians, dtype=np.float64), c(process_cov, dtype=np.float64),
+        c(meas_info, dtype=np.float64),
+    )  # fmt: skip
+    return out
+
+
+@njit(cache=True)
+def _recursion(j0: FloatArray, jacobians: FloatArray, process_cov: FloatArray, meas_info: FloatArray) -> FloatArray:
+    """:func:`pcrb_recursion` compiled: :func:`information_step` at every step, the same operations (numba's
+    solve, inverse and products call LAPACK and BLAS as numpy's do; equal to rounding)."""
     n = jacobians.shape[0]
-    out = np.empty((n + 1, *j0.shape))
-    j = np.asarray(j0, dtype=np.float64)
+    out = np.empty((n + 1, j0.shape[0], j0.shape[1]))
+    j = j0.copy()
     out[0] = np.linalg.inv(j)
     for k in range(n):
-        j = information_step(j, jacobians[k], process_cov[k], meas_info[k])
+        f = jacobians[k]
+        p = f @ np.linalg.solve(j, np.ascontiguousarray(f.T)) + process_cov[k]
+        m = np.linalg.inv(0.5 * (p + p.T)) + meas_info[k]
+        j = 0.5 * (m + m.T)
         out[k + 1] = np.linalg.inv(j)
     return out
 
