@@ -575,6 +575,27 @@ def _reweigh(logw: FloatArray, ll: FloatArray, w: FloatArray) -> tuple[float, fl
 
 
 @njit(cache=True)
+def _weigh_sightings(
+    poses: FloatArray,
+    ranges: FloatArray,
+    bearings: FloatArray,
+    rows: IntArray,
+    lm_xy: FloatArray,
+    with_bearing: bool,
+    inv_var_r: float,
+    inv_var_b: float,
+    log_a: float,
+    log_floor: float,
+    logw: FloatArray,
+    w: FloatArray,
+) -> tuple[FloatArray, float, float]:
+    """:func:`_sightings_loglik` then :func:`_reweigh` in one call: (log-likelihoods, log_pred, ESS)."""
+    ll = _sightings_loglik(poses, ranges, bearings, rows, lm_xy, with_bearing, inv_var_r, inv_var_b, log_a, log_floor)
+    log_pred, n_eff = _reweigh(logw, ll, w)
+    return ll, log_pred, n_eff
+
+
+@njit(cache=True)
 def _systematic_indices(w: FloatArray, n: int, u: float) -> IntArray:
     """Systematic resampling: for the points (u + k) / n, k = 0..n-1, the index of the first cumulative
     weight (normalised here) above each point (PR table 4.4), O(N + n)."""
@@ -687,11 +708,11 @@ def _spread(x: FloatArray, n: int, ref_heading: float) -> FloatArray:
 @njit(cache=True)
 def _resample_roughened(
     x: FloatArray, w: FloatArray, logw: FloatArray, n_pred: int, roughening_k: float, gen: UIntArray
-) -> FloatArray:
+) -> tuple[FloatArray, FloatArray, FloatArray, bool]:
     """Systematic resampling of all N particles with roughening, as the filter's general path does it: the
     jitter's standard deviations are K N^(-1/3) times the :func:`_spread` of the first ``n_pred`` (predicted)
     particles, the heading's about the heaviest particle's heading; then the weights ``w`` and log-weights
-    ``logw`` are set uniform in place. Returns the new particles."""
+    ``logw`` are set uniform in place. Returns the new particles and their :func:`_checked_stats`."""
     n = x.shape[0]
     best = 0
     for i in range(1, n):
@@ -705,7 +726,8 @@ def _resample_roughened(
     for i in range(n):
         logw[i] = lw
         w[i] = 1.0 / n
-    return out
+    mean, cov, finite = _checked_stats(out, w, logw)
+    return out, mean, cov, finite
 
 
 @njit(cache=True)
@@ -1146,9 +1168,10 @@ class ParticleFilter(Filter):
             raise TypeError(f"ParticleFilter does not consume {type(z).__name__}")  # pragma: no cover
         self._t = z.t
         self._diag = self._fresh_diag()
+        self._stats: tuple[Any, ...] | None = None  # the estimate, when the correction's last kernel made it
         if prepared is not None:
             self._correct(type(z), *prepared)
-        self._set_estimate(*_checked_stats(self._x, self._weights(), self._logw))
+        self._set_estimate(*(self._stats or _checked_stats(self._x, self._weights(), self._logw)))
 
     def _prepare_landmarks(self, z: LandmarkObservations) -> tuple[int, tuple[FloatArray, FloatArray, IntArray]] | None:
         if self._lm_warn:
@@ -1301,8 +1324,17 @@ class ParticleFilter(Filter):
                 self._set_uniform_weights(n)
                 resampled = True
         w = np.empty(self._x.shape[0])
-        ll = ll_belief if ll_belief is not None and not injected else self._loglik(kind, data)
-        log_pred, n_eff = _reweigh(self._logw, ll, w)
+        if ll_belief is not None and not injected:
+            ll = ll_belief
+            log_pred, n_eff = _reweigh(self._logw, ll, w)
+        elif kind is LandmarkObservations:
+            ranges, bearings, rows = data
+            # the likelihood and Bayes' rule in one call
+            lm_args = (self._lm_xy, True, self._inv_var_r, self._inv_var_b, self._lm_log_norm, -math.inf)
+            ll, log_pred, n_eff = _weigh_sightings(self._x, ranges, bearings, rows, *lm_args, self._logw, w)  # type: ignore[arg-type]
+        else:
+            ll = self._loglik(kind, data)
+            log_pred, n_eff = _reweigh(self._logw, ll, w)
         self._w, self._w_of = w, self._logw
         if not math.isfinite(log_pred):
             raise FilterDiverged(f"ParticleFilter: every particle has zero likelihood at t={self._t:.3f} s")
@@ -1336,7 +1368,8 @@ class ParticleFilter(Filter):
         # the usual resampling (on a low ESS, roughened, nothing injected after it) in one compiled call
         fast = by_ess and not late and not cfg.regularise and cfg.roughening_k > 0.0 and n_pred > 1
         if fast:
-            self._x = _resample_roughened(self._x, w, self._logw, n_pred, cfg.roughening_k, self._gen)
+            self._x, *stats = _resample_roughened(self._x, w, self._logw, n_pred, cfg.roughening_k, self._gen)
+            self._stats = tuple(stats)
             resampled = True
         elif (resampled or kld or by_ess) and cfg.regularise:
             # Musso et al. 2001: the kernel's covariance is h^2 times the weighted covariance before resampling
