@@ -1084,6 +1084,17 @@ class ParticleFilter(Filter):
         self._diag = self._fresh_diag()
         self._set_estimate(*_checked_stats(self._x, self._weights(), self._logw))
 
+    def __getstate__(self) -> dict[str, Any]:
+        # the generator's addresses belong to this process's generator object: a copy recomputes its own
+        state = dict(self.__dict__)
+        state.pop("_gen", None)
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        if "_rng" in state:
+            self._gen = generator_addresses(self._rng)
+
     @staticmethod
     def _fresh_diag() -> dict[str, float]:
         return {
