@@ -87,7 +87,9 @@ def bench(session: nox.Session) -> None:
             if a.startswith("-"):
                 break
             suites.append(a)
-    session.run("locbench", "report", "--results", results, *(["--suite", *suites] if suites else []))
+    jobs = args[args.index("--jobs") + 1] if "--jobs" in args else "1"
+    # the report reads the runs and draws the figures with the sweep's processes
+    session.run("locbench", "report", "--results", results, "--jobs", jobs, *(["--suite", *suites] if suites else []))
     record = os.path.join(results, "verify.json")
     with open(record, encoding="utf-8") as fh:
         if not json.load(fh).get("passed"):
@@ -98,7 +100,7 @@ def bench(session: nox.Session) -> None:
 def report(session: nox.Session) -> None:
     """Regenerate results/summary (tables, figures, metrics.csv, index.html) from the stored runs of suite 'all'."""
     _install(session, "all")
-    session.run("locbench", "report", "--results", "results", "--suite", "all", "consistency")
+    session.run("locbench", "report", "--results", "results", "--jobs", "2", "--suite", "all", "consistency")
 
 
 @nox.session(python=PYTHON, default=False)

@@ -3,7 +3,7 @@
 locbench list [FILTER|DATASET ...]
 locbench run [--suite NAME|FILE.toml | --filter SPEC ... --dataset SPEC ...]
              [--seeds N] [--results DIR] [--jobs N] [--executor local|dask [--scheduler ADDRESS]] [--force]
-locbench report [--results DIR] [--suite NAME ...] [--out DIR]
+locbench report [--results DIR] [--suite NAME ...] [--out DIR] [--jobs N]
 locbench verify [--results DIR] [--fraction F] [--seed S]
 locbench check [ID ...]
 locbench fetch SPEC [SPEC ...]
@@ -159,7 +159,9 @@ def _cmd_report(args: argparse.Namespace) -> int:
         raise ConfigError(f"{store.runs}: no stored runs; run 'locbench run' first")
     keep = suite_filter(*args.suite) if args.suite else None
     out = Path(args.out) if args.out else None
-    paths = write_report(store, keep=keep, out=out)
+    if args.jobs < 1:
+        raise ConfigError(f"--jobs must be >= 1, got {args.jobs}")
+    paths = write_report(store, keep=keep, out=out, jobs=args.jobs)
     print(summary_text(paths.summary), end="")
     print(f"report written to {paths.markdown} and {paths.html}")
     return 0
@@ -312,6 +314,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="report only the runs of these suites (names or TOML files), not every stored run",
     )
     rep.add_argument("--out", default=None, help="write the summary here instead of RESULTS/summary")
+    rep.add_argument(
+        "--jobs", type=int, default=1, help="processes that read the runs and draw the figures (default 1)"
+    )
     rep.set_defaults(func=_cmd_report)
 
     v = sub.add_parser(

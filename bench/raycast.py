@@ -222,16 +222,11 @@ def _clip_to_grid(rows: int, cols: int, gx: float, gy: float, dx: float, dy: flo
 
 
 @njit(cache=True, inline="always")
-def _dda_one(occ: BoolArray, gx: float, gy: float, dx: float, dy: float, t_lim: float) -> float:
-    """Distance along one beam to the first occupied cell, in cells (inf if none within t_lim).
-
-    ``(gx, gy)`` is the start in grid units (one cell = 1), ``(dx, dy)`` the unit direction.
-    """
-    rows = occ.shape[0]
-    cols = occ.shape[1]
-    t0, t1 = _clip_to_grid(rows, cols, gx, gy, dx, dy)
-    if t0 >= t1 or t0 > t_lim:
-        return math.inf
+def _dda_start(
+    rows: int, cols: int, gx: float, gy: float, dx: float, dy: float, t0: float
+) -> tuple[int, int, int, int, float, float, float, float]:
+    """The traversal's state where the ray enters the grid at ``t0``: the cell (i, j), the steps (step_i,
+    step_j), the ray parameters of the next vertical and horizontal grid lines and their spacings."""
     ex = gx + t0 * dx
     ey = gy + t0 * dy
     j = min(max(math.floor(ex), 0), cols - 1)
@@ -260,6 +255,21 @@ def _dda_one(occ: BoolArray, gx: float, gy: float, dx: float, dy: float, t_lim: 
         step_i = 0
         t_next_y = math.inf
         t_delta_y = math.inf
+    return i, j, step_i, step_j, t_next_x, t_next_y, t_delta_x, t_delta_y
+
+
+@njit(cache=True, inline="always")
+def _dda_one(occ: BoolArray, gx: float, gy: float, dx: float, dy: float, t_lim: float) -> float:
+    """Distance along one beam to the first occupied cell, in cells (inf if none within t_lim).
+
+    ``(gx, gy)`` is the start in grid units (one cell = 1), ``(dx, dy)`` the unit direction.
+    """
+    rows = occ.shape[0]
+    cols = occ.shape[1]
+    t0, t1 = _clip_to_grid(rows, cols, gx, gy, dx, dy)
+    if t0 >= t1 or t0 > t_lim:
+        return math.inf
+    i, j, step_i, step_j, t_next_x, t_next_y, t_delta_x, t_delta_y = _dda_start(rows, cols, gx, gy, dx, dy, t0)
     t = t0
     while True:
         if occ[i, j]:
@@ -278,6 +288,92 @@ def _dda_one(occ: BoolArray, gx: float, gy: float, dx: float, dy: float, t_lim: 
                 return math.inf
         if t > t_lim:
             return math.inf
+
+
+@njit(cache=True, inline="always")
+def _corner_occupied(occ: BoolArray, vi: int, vj: int) -> bool:
+    """Whether a cell touching grid vertex (row vi, column vj) is occupied or lies off the grid."""
+    rows = occ.shape[0]
+    cols = occ.shape[1]
+    for i in (vi - 1, vi):
+        for j in (vj - 1, vj):
+            if i < 0 or j < 0 or i >= rows or j >= cols or occ[i, j]:
+                return True
+    return False
+
+
+@njit(cache=True)
+def dda_face(
+    occ: BoolArray, gx: float, gy: float, dx: float, dy: float, t_lim: float, near0: float, near1: float
+) -> tuple[float, int, bool]:
+    """:func:`_dda_one`'s traversal (the same distance, bit for bit), also returning the face it enters the
+    hit cell through and whether the ray passes near a corner of the occupied cells.
+
+    Returns (t, axis, near): ``axis`` 0 when the ray enters the hit cell across a vertical grid line (x =
+    const), 1 across a horizontal one, -1 when it starts in it (or nothing is hit). ``near`` is True when a
+    grid vertex that touches an occupied (or off-grid) cell lies within ``near0 + near1 * t`` cells of the
+    ray before the hit, or within three times that of its start or of the hit point: there the range may
+    not be a smooth function of the ray (a perturbed ray may hit another cell or face).
+    """
+    rows = occ.shape[0]
+    cols = occ.shape[1]
+    t0, t1 = _clip_to_grid(rows, cols, gx, gy, dx, dy)
+    if t0 >= t1 or t0 > t_lim:
+        return math.inf, -1, True
+    i, j, step_i, step_j, t_next_x, t_next_y, t_delta_x, t_delta_y = _dda_start(rows, cols, gx, gy, dx, dy, t0)
+    near = t0 > 0.0 or _vertex_near(occ, gx, gy, 3.0 * near0)
+    adx = abs(dx)
+    ady = abs(dy)
+    t = t0
+    axis = -1
+    while True:
+        if occ[i, j]:
+            hx = gx + t * dx
+            hy = gy + t * dy
+            near = near or axis < 0 or _vertex_near(occ, hx, hy, 3.0 * (near0 + near1 * t))
+            return t, axis, near
+        if t_next_x < t_next_y:
+            t = t_next_x
+            t_next_x += t_delta_x
+            line = j + 1 if step_j > 0 else j
+            j += step_j
+            axis = 0
+            if j < 0 or j >= cols:
+                return math.inf, -1, True
+            if not near:
+                near = _crossing_near(occ, gy + t * dy, adx, near0 + near1 * t, line, True)
+        else:
+            t = t_next_y
+            t_next_y += t_delta_y
+            line = i + 1 if step_i > 0 else i
+            i += step_i
+            axis = 1
+            if i < 0 or i >= rows:
+                return math.inf, -1, True
+            if not near:
+                near = _crossing_near(occ, gx + t * dx, ady, near0 + near1 * t, line, False)
+        if t > t_lim:
+            return math.inf, -1, True
+
+
+@njit(cache=True, inline="always")
+def _crossing_near(occ: BoolArray, c: float, across: float, lim: float, line: int, vertical: bool) -> bool:
+    """At the ray's crossing of grid line ``line`` (vertical: x = line, at y = ``c``; else y = line, at x =
+    ``c``): whether one of the two vertices of that line beside the crossing touches an occupied cell and
+    lies within ``lim`` of the ray (``across``: |direction component| normal to the line)."""
+    v = math.floor(c)
+    if (c - v) * across < lim and (_corner_occupied(occ, v, line) if vertical else _corner_occupied(occ, line, v)):
+        return True
+    w = v + 1
+    return (w - c) * across < lim and (_corner_occupied(occ, w, line) if vertical else _corner_occupied(occ, line, w))
+
+
+@njit(cache=True, inline="always")
+def _vertex_near(occ: BoolArray, px: float, py: float, lim: float) -> bool:
+    """Whether the grid vertex nearest to (px, py) (grid units) is within ``lim`` and touches an occupied cell."""
+    vj = math.floor(px + 0.5)
+    vi = math.floor(py + 0.5)
+    return math.hypot(px - vj, py - vi) < lim and _corner_occupied(occ, vi, vj)
 
 
 @njit(cache=True)
@@ -957,3 +1053,175 @@ def cast_rays_reference(
     any_hit = hit.any(axis=-1)
     first = np.argmax(hit, axis=-1)
     return np.where(any_hit, s[first], np.inf)
+
+
+# --- range derivatives for the bound (locbench.pcrb) -------------------------------------------------------
+
+
+def scan_gradients(
+    occ: BoolArray,
+    res: float,
+    ox: float,
+    oy: float,
+    sensors: FloatArray,
+    headings: FloatArray,
+    mount_xy: tuple[float, float],
+    angles: FloatArray,
+    max_range: float,
+    eps: float,
+) -> tuple[FloatArray, FloatArray, npt.NDArray[np.bool_]]:
+    """Ranges of the ``method="dda"`` traversal and their analytic derivatives w.r.t. the robot pose.
+
+    ``sensors`` (S, 3) are the world sensor poses of robots at headings ``headings`` (S,) with the sensor
+    mounted at ``mount_xy`` (m, robot frame). The range of a beam that enters its hit cell across a grid
+    line x = X is r = (X - s_x) / cos(phi) (s the sensor, phi the beam's world angle), across y = Y it is
+    (Y - s_y) / sin(phi); differentiating through s(x, y, theta) and phi = theta + const gives the gradient.
+
+    Returns (ranges (S, B) m as :func:`cast_rays` gives them, gradients (S, B, 3) in (m/m, m/m, m/rad), and
+    ``smooth`` (S, B)): False where central differences of step ``eps`` would not see a smooth function,
+    which the caller then takes by differences: the ray passes near a corner of occupied cells
+    (:func:`dda_face`), starts in or outside the hit cell's face, ends within reach of ``max_range``, or
+    its curvature in the heading brings the one-sided differences' disagreement, about eps |r''|, to half the
+    tolerance 1e-4 (1 + |r'|) of :func:`locbench.pcrb.laser_information` or more. Spread over numba's
+    threads for as many rays as :func:`cast_rays` would spread.
+    """
+    n, nb = sensors.shape[0], angles.shape[0]
+    ranges = np.empty((n, nb))
+    grads = np.zeros((n, nb, 3))
+    smooth = np.zeros((n, nb), dtype=np.bool_)
+    kernel = _gradients_parallel if _use_threads(None, n * nb) else _gradients_serial
+    kernel(occ, res, ox, oy, sensors, headings, mount_xy[0], mount_xy[1], angles, max_range, eps, ranges, grads, smooth)
+    return ranges, grads, smooth
+
+
+@njit(cache=True, inline="always")
+def _ray_gradient(
+    occ: BoolArray,
+    res: float,
+    ox: float,
+    oy: float,
+    sensors: FloatArray,
+    headings: FloatArray,
+    mx: float,
+    my: float,
+    cb: FloatArray,
+    sb: FloatArray,
+    max_range: float,
+    eps: float,
+    p: int,
+    b: int,
+    ranges: FloatArray,
+    grads: FloatArray,
+    smooth: npt.NDArray[np.bool_],
+) -> None:
+    """One ray of :func:`scan_gradients`, written into its outputs."""
+    inv_res = 1.0 / res
+    t_lim = max_range * inv_res
+    # how far a perturbed ray moves (cells): eps of translation and eps of rotation about the robot, 10x
+    near0 = 10.0 * eps * (1.0 + math.hypot(mx, my)) * inv_res
+    near1 = 10.0 * eps
+    gx = (sensors[p, 0] - ox) * inv_res
+    gy = (sensors[p, 1] - oy) * inv_res
+    cp = math.cos(sensors[p, 2])
+    sp = math.sin(sensors[p, 2])
+    dx = cp * cb[b] - sp * sb[b]
+    dy = sp * cb[b] + cp * sb[b]
+    t, axis, near = dda_face(occ, gx, gy, dx, dy, t_lim, near0, near1)
+    r = t * res
+    ranges[p, b] = r
+    if near or axis < 0 or r > max_range - 3.0 * (near0 + near1 * t) * res:
+        return
+    ct = math.cos(headings[p])
+    st = math.sin(headings[p])
+    dsx = -st * mx - ct * my  # d s_x / d theta
+    dsy = ct * mx - st * my
+    if axis == 0:
+        d, dd, dd2 = dx, -dy, -dx  # D = cos(phi) and its first two derivatives in phi
+        n1, n2 = -dsx, ct * mx - st * my  # N = X - s_x: N', N''
+        g0, g1, g2 = -1.0 / dx, 0.0, -dsx / dx + r * dy / dx
+    else:
+        d, dd, dd2 = dy, dx, -dy  # D = sin(phi)
+        n1, n2 = -dsy, st * mx + ct * my  # N = Y - s_y
+        g0, g1, g2 = 0.0, -1.0 / dy, -dsy / dy - r * dx / dy
+    # r = N / D with N = r D: r'' = N'' / D - 2 N' D' / D^2 - r D'' / D + 2 r D'^2 / D^2
+    r2 = n2 / d - 2.0 * n1 * dd / (d * d) - r * dd2 / d + 2.0 * r * dd * dd / (d * d)
+    if eps * abs(r2) >= 0.5e-4 * (1.0 + abs(g2)):
+        return
+    grads[p, b, 0] = g0
+    grads[p, b, 1] = g1
+    grads[p, b, 2] = g2
+    smooth[p, b] = True
+
+
+@njit(cache=True)
+def _gradients_serial(
+    occ: BoolArray, res: float, ox: float, oy: float, sensors: FloatArray, headings: FloatArray, mx: float,
+    my: float, angles: FloatArray, max_range: float, eps: float, ranges: FloatArray, grads: FloatArray,
+    smooth: npt.NDArray[np.bool_],
+) -> None:  # fmt: skip
+    cb = np.cos(angles)
+    sb = np.sin(angles)
+    nb = angles.shape[0]
+    for k in range(sensors.shape[0] * nb):
+        p = k // nb
+        _ray_gradient(occ, res, ox, oy, sensors, headings, mx, my, cb, sb, max_range, eps, p, k - p * nb, ranges,
+                      grads, smooth)  # fmt: skip
+
+
+@njit(cache=True, parallel=True)
+def _gradients_parallel(
+    occ: BoolArray, res: float, ox: float, oy: float, sensors: FloatArray, headings: FloatArray, mx: float,
+    my: float, angles: FloatArray, max_range: float, eps: float, ranges: FloatArray, grads: FloatArray,
+    smooth: npt.NDArray[np.bool_],
+) -> None:  # fmt: skip
+    cb = np.cos(angles)
+    sb = np.sin(angles)
+    nb = angles.shape[0]
+    for k in prange(sensors.shape[0] * nb):
+        p = k // nb
+        _ray_gradient(occ, res, ox, oy, sensors, headings, mx, my, cb, sb, max_range, eps, p, k - p * nb, ranges,
+                      grads, smooth)  # fmt: skip
+
+
+def cast_ray_subset(
+    occ: BoolArray,
+    res: float,
+    ox: float,
+    oy: float,
+    poses: FloatArray,
+    angles: FloatArray,
+    max_range: float,
+    rows: IntArray,
+    beams: IntArray,
+) -> FloatArray:
+    """The ranges of :func:`cast_rays` (``method="dda"``) of the rays (``rows[k]``, ``beams[k]``) only, bit
+    for bit (the same arithmetic per ray), spread over numba's threads."""
+    return _ray_subset_parallel(occ, res, ox, oy, poses, angles, max_range, rows, beams)
+
+
+@njit(cache=True, parallel=True)
+def _ray_subset_parallel(
+    occ: BoolArray,
+    res: float,
+    ox: float,
+    oy: float,
+    poses: FloatArray,
+    angles: FloatArray,
+    max_range: float,
+    rows: IntArray,
+    beams: IntArray,
+) -> FloatArray:
+    out = np.empty(rows.shape[0])
+    inv_res = 1.0 / res
+    t_lim = max_range * inv_res
+    cb = np.cos(angles)
+    sb = np.sin(angles)
+    for k in prange(rows.shape[0]):
+        p = rows[k]
+        b = beams[k]
+        gx = (poses[p, 0] - ox) * inv_res
+        gy = (poses[p, 1] - oy) * inv_res
+        cp = math.cos(poses[p, 2])
+        sp = math.sin(poses[p, 2])
+        out[k] = _dda_one(occ, gx, gy, cp * cb[b] - sp * sb[b], sp * cb[b] + cp * sb[b], t_lim) * res
+    return out

@@ -69,6 +69,7 @@ from locbench.filters._kalman import (
     subtract,
     wrapped_residual,
 )
+from locbench.filters._landmark_index import LandmarkIndex, gate_radius
 from locbench.filters._motion import (
     MotionKind,
     MotionModel,
@@ -240,6 +241,9 @@ class LandmarkEKF(Filter):
         self._lm_row = lm.index_of()
         self._lm_list: list[tuple[float, float]] = [(float(a), float(b)) for a, b in self._lm_xy]
         self._limits = self._sensor_limits(sensors) if cfg.prune_to_sensor_limits else None
+        # a large map: nearest-neighbour candidates from a k-d tree instead of testing every landmark
+        big = len(self._lm_list) >= _VECTOR_NN_MIN and math.isfinite(self._gate)
+        self._index = LandmarkIndex(self._lm_xy) if big else None
 
         m = np.asarray(initial.mean, dtype=np.float64)
         self._x = [float(m[0]), float(m[1]), wrap_scalar(float(m[2]))]
@@ -343,16 +347,23 @@ class LandmarkEKF(Filter):
         """Row of the map landmark nearest to (r, b) in Mahalanobis distance, inside the gate; else None.
 
         Candidates exclude ``used`` rows and, when pruning, landmarks predicted outside the sensor limits.
-        Small maps are scanned in plain floats (about 1 us per landmark); larger ones vectorised in numpy,
-        whose fixed cost (~40 us) pays off above ``_VECTOR_NN_MIN`` landmarks.
+        Small maps are scanned in plain floats (about 1 us per landmark). From ``_VECTOR_NN_MIN`` landmarks
+        on, only those a k-d tree finds within the distance at which a landmark can still pass the gate
+        (:mod:`._landmark_index`) are tested, so the cost per sighting no longer grows with the map; without
+        a finite gate every landmark is tested at once in numpy.
         """
-        if len(self._lm_list) >= _VECTOR_NN_MIN:
+        rows: range | list[int]
+        if self._index is not None:
+            rows = self._index.candidates(self._x, r, b, gate_radius(r, self._P, self._rr, self._rb, self._gate))
+        elif len(self._lm_list) >= _VECTOR_NN_MIN:
             d2 = self._mahalanobis_all(r, b, used)
             best = int(np.argmin(d2))
             return best if d2[best] <= self._gate else None
+        else:
+            rows = range(len(self._lm_list))
         limits = self._limits
         best_row, best_d2 = -1, math.inf
-        for row in range(len(self._lm_list)):
+        for row in rows:
             if row in used:
                 continue
             inn = self._innovation(r, b, row)

@@ -138,6 +138,7 @@ from locbench.filters._motion import (
     wheel_variances,
 )
 from locbench.filters._noise import landmark_noise, range_only_noise
+from locbench.filters._numba_rng import UIntArray, generator_addresses, generator_from
 from locbench.filters.base import CheckTolerances, Estimate, Filter, FilterConfig, gaussian_health
 from locbench.geometry import wrap_angle
 from locbench.limits import (
@@ -484,25 +485,40 @@ def _sightings_loglik(
 def _move(
     x: FloatArray,
     wheels: bool,
-    u: FloatArray,
-    sd: FloatArray,
+    u0: float,
+    u1: float,
+    u2: float,
+    s0: float,
+    s1: float,
     wheelbase: float,
     q_std: FloatArray,
-    rng: np.random.Generator,
-) -> None:
-    """Draw every particle's successor in place, then add the world-frame noise N(0, diag(q_std^2)) (eq. 8).
+    gen: UIntArray,
+    w: FloatArray,
+    logw: FloatArray,
+) -> tuple[FloatArray, FloatArray, bool]:
+    """Draw every particle's successor in place, add the world-frame noise N(0, diag(q_std^2)) (eq. 8), and
+    return the moved cloud's :func:`_weighted_stats` under the weights ``w`` and whether every particle and
+    log-weight is finite (the statistics' first pass runs in the same loop as the motion).
 
-    ``wheels``: the encoder model, u = (d_left, d_right) m with standard deviations sd = (sd_left,
-    sd_right): per particle delta_l ~ N(d_left, sd_left^2), delta_r ~ N(d_right, sd_right^2) moved along the
-    chord at the midpoint heading (report 003 eq. 1-2, 5). Otherwise the increment model, u = (dx, dy,
-    dtheta) in the previous robot frame with sd = (sd_xy, sd_theta): pose (+) (u + e), e ~ N(0, diag(sd_xy^2,
-    sd_xy^2, sd_theta^2)).
+    ``wheels``: the encoder model, (u0, u1) = (d_left, d_right) m with standard deviations (s0, s1) =
+    (sd_left, sd_right): per particle delta_l ~ N(d_left, sd_left^2), delta_r ~ N(d_right, sd_right^2) moved
+    along the chord at the midpoint heading (report 003 eq. 1-2, 5). Otherwise the increment model, (u0, u1,
+    u2) = (dx, dy, dtheta) in the previous robot frame with (s0, s1) = (sd_xy, sd_theta): pose (+) (u + e),
+    e ~ N(0, diag(sd_xy^2, sd_xy^2, sd_theta^2)). ``gen``: the run's generator (:mod:`._numba_rng`).
     """
+    rng = generator_from(gen)
     q0, q1, q2 = q_std[0], q_std[1], q_std[2]
-    u0, u1, u2 = u[0], u[1], u[u.shape[0] - 1]
-    s0, s1 = sd[0], sd[1]
     ref = x[0, 2]
     sr, cr = math.sin(ref), math.cos(ref)
+    # the estimate's first pass (weighted sums about the moved first particle's heading), as _weighted_stats
+    mx = 0.0
+    my = 0.0
+    sc = 0.0
+    ss = 0.0
+    ref1 = 0.0
+    sr1 = 0.0
+    cr1 = 1.0
+    finite = True
     for i in range(x.shape[0]):
         if wheels:
             dl = u0 + s0 * rng.standard_normal()
@@ -510,21 +526,33 @@ def _move(
             dd = 0.5 * (dl + dr)
             turn = (dr - dl) / wheelbase
             s, c = _sincos_near(x[i, 2] + 0.5 * turn, ref, sr, cr)
-            mx, my = dd * c, dd * s
+            mx_i, my_i = dd * c, dd * s
         else:
             ix = u0 + s0 * rng.standard_normal()
             iy = u1 + s0 * rng.standard_normal()
             turn = u2 + s1 * rng.standard_normal()
             s, c = _sincos_near(x[i, 2], ref, sr, cr)
-            mx, my = c * ix - s * iy, s * ix + c * iy
-        x[i, 0] += mx + q0 * rng.standard_normal()
-        x[i, 1] += my + q1 * rng.standard_normal()
+            mx_i, my_i = c * ix - s * iy, s * ix + c * iy
+        x[i, 0] += mx_i + q0 * rng.standard_normal()
+        x[i, 1] += my_i + q1 * rng.standard_normal()
         x[i, 2] = _wrap(x[i, 2] + turn + q2 * rng.standard_normal())
+        if i == 0:
+            ref1 = x[0, 2]
+            sr1, cr1 = math.sin(ref1), math.cos(ref1)
+        mx += w[i] * x[i, 0]
+        my += w[i] * x[i, 1]
+        si, ci = _sincos_near(x[i, 2], ref1, sr1, cr1)
+        sc += w[i] * ci
+        ss += w[i] * si
+        finite = finite and math.isfinite(x[i, 0]) and math.isfinite(x[i, 1]) and math.isfinite(x[i, 2])
+    mean, cov = _finish_stats(x, w, mx, my, sc, ss)
+    return mean, cov, finite and _all_finite(logw)
 
 
 @njit(cache=True)
-def _jitter(x: FloatArray, sd: FloatArray, rng: np.random.Generator) -> None:
-    """Add N(0, diag(sd^2)) to every particle in place and wrap the heading."""
+def _jitter(x: FloatArray, sd: FloatArray, gen: UIntArray) -> None:
+    """Add N(0, diag(sd^2)) to every particle in place and wrap the heading (``gen``: :mod:`._numba_rng`)."""
+    rng = generator_from(gen)
     s0, s1, s2 = sd[0], sd[1], sd[2]
     for i in range(x.shape[0]):
         x[i, 0] += s0 * rng.standard_normal()
@@ -560,6 +588,27 @@ def _reweigh(logw: FloatArray, ll: FloatArray, w: FloatArray) -> tuple[float, fl
         w[i] = wi
         sq += wi * wi
     return log_pred, 1.0 / sq
+
+
+@njit(cache=True)
+def _weigh_sightings(
+    poses: FloatArray,
+    ranges: FloatArray,
+    bearings: FloatArray,
+    rows: IntArray,
+    lm_xy: FloatArray,
+    with_bearing: bool,
+    inv_var_r: float,
+    inv_var_b: float,
+    log_a: float,
+    log_floor: float,
+    logw: FloatArray,
+    w: FloatArray,
+) -> tuple[FloatArray, float, float]:
+    """:func:`_sightings_loglik` then :func:`_reweigh` in one call: (log-likelihoods, log_pred, ESS)."""
+    ll = _sightings_loglik(poses, ranges, bearings, rows, lm_xy, with_bearing, inv_var_r, inv_var_b, log_a, log_floor)
+    log_pred, n_eff = _reweigh(logw, ll, w)
+    return ll, log_pred, n_eff
 
 
 @njit(cache=True)
@@ -611,7 +660,7 @@ def _kld_bound(k: int, err: float, z: float) -> float:
 def _kld_resample(
     x: FloatArray,
     w: FloatArray,
-    rng: np.random.Generator,
+    gen: UIntArray,
     err: float,
     z: float,
     n_min: int,
@@ -622,6 +671,7 @@ def _kld_resample(
     """KLD sampling (Fox 2003, table 1, the resampling step as ROS AMCL does it): draw particles one at a time
     in proportion to ``w``, count the occupied (x, y, theta) bins k as they come, and stop once the count
     reaches the bound of :func:`_kld_bound` for k, kept within [n_min, n_max]. Returns the new set."""
+    rng = generator_from(gen)
     n = x.shape[0]
     cdf = np.empty(n)
     acc = 0.0
@@ -672,9 +722,35 @@ def _spread(x: FloatArray, n: int, ref_heading: float) -> FloatArray:
 
 
 @njit(cache=True)
-def _jitter_correlated(x: FloatArray, root: FloatArray, rng: np.random.Generator) -> None:
+def _resample_roughened(
+    x: FloatArray, w: FloatArray, logw: FloatArray, n_pred: int, roughening_k: float, gen: UIntArray
+) -> tuple[FloatArray, FloatArray, FloatArray, bool]:
+    """Systematic resampling of all N particles with roughening, as the filter's general path does it: the
+    jitter's standard deviations are K N^(-1/3) times the :func:`_spread` of the first ``n_pred`` (predicted)
+    particles, the heading's about the heaviest particle's heading; then the weights ``w`` and log-weights
+    ``logw`` are set uniform in place. Returns the new particles and their :func:`_checked_stats`."""
+    n = x.shape[0]
+    best = 0
+    for i in range(1, n):
+        if w[i] > w[best]:  # np.argmax: the first of equal weights
+            best = i
+    sd = _spread(x, n_pred, x[best, 2]) * roughening_k
+    sd = sd * n ** (-1.0 / 3.0)
+    out = _gather(x, _systematic_indices(w, n, generator_from(gen).random()))
+    _jitter(out, sd, gen)
+    lw = -math.log(n)
+    for i in range(n):
+        logw[i] = lw
+        w[i] = 1.0 / n
+    mean, cov, finite = _checked_stats(out, w, logw)
+    return out, mean, cov, finite
+
+
+@njit(cache=True)
+def _jitter_correlated(x: FloatArray, root: FloatArray, gen: UIntArray) -> None:
     """Add ``root`` e, e ~ N(0, I_3), to every particle in place (``root`` (3, 3), any square root of the
-    jitter's covariance) and wrap the heading."""
+    jitter's covariance) and wrap the heading (``gen``: :mod:`._numba_rng`)."""
+    rng = generator_from(gen)
     for i in range(x.shape[0]):
         e0 = rng.standard_normal()
         e1 = rng.standard_normal()
@@ -700,6 +776,15 @@ def _weighted_stats(poses: FloatArray, w: FloatArray) -> tuple[FloatArray, Float
         si, ci = _sincos_near(poses[i, 2], ref, sr, cr)
         sc += w[i] * ci
         ss += w[i] * si
+    return _finish_stats(poses, w, mx, my, sc, ss)
+
+
+@njit(cache=True, inline="always")
+def _finish_stats(
+    poses: FloatArray, w: FloatArray, mx: float, my: float, sc: float, ss: float
+) -> tuple[FloatArray, FloatArray]:
+    """:func:`_weighted_stats` from its first pass's sums: the circular mean heading and the covariance pass."""
+    n = poses.shape[0]
     mth = math.atan2(ss, sc)
     if mth <= -math.pi:
         mth = math.pi
@@ -724,6 +809,25 @@ def _weighted_stats(poses: FloatArray, w: FloatArray) -> tuple[FloatArray, Float
     mean[1] = my
     mean[2] = mth
     return mean, c
+
+
+@njit(cache=True, inline="always")
+def _all_finite(a: FloatArray) -> bool:
+    """Whether every element of ``a`` is finite (a loop: numba compiles no generator inside all())."""
+    for i in range(a.shape[0]):  # noqa: SIM110
+        if not math.isfinite(a[i]):
+            return False
+    return True
+
+
+@njit(cache=True)
+def _checked_stats(x: FloatArray, w: FloatArray, logw: FloatArray) -> tuple[FloatArray, FloatArray, bool]:
+    """:func:`_weighted_stats` and whether every particle and log-weight is finite, in one call."""
+    mean, cov = _weighted_stats(x, w)
+    finite = True
+    for i in range(x.shape[0]):
+        finite = finite and math.isfinite(x[i, 0]) and math.isfinite(x[i, 1]) and math.isfinite(x[i, 2])
+    return mean, cov, finite and _all_finite(logw)
 
 
 # --- helpers ------------------------------------------------------------------------------------------------
@@ -799,6 +903,11 @@ def systematic_resample(weights: npt.ArrayLike, n: int, rng: np.random.Generator
     if n <= 0:  # augmented MCL may replace every particle by a random one
         return np.empty(0, dtype=np.int64)
     return _systematic_indices(w, int(n), float(rng.random()))
+
+
+def _take(a: FloatArray, sel: IntArray | slice) -> FloatArray:
+    """``a[sel]`` as a contiguous float64 array (a copy: the observation's array is not handed on)."""
+    return np.array(a[sel], dtype=np.float64, order="C")
 
 
 class FreeSpaceSampler:
@@ -913,6 +1022,8 @@ class ParticleFilter(Filter):
         """
         cfg = self.config
         self._rng = rng
+        # the generator's addresses for the kernels' draws (from the same state; see _numba_rng)
+        self._gen = generator_addresses(rng)
         self._n = int(cfg.max_particles if cfg.adaptive == "kld" else cfg.particles)
         self._noise = cfg.motion_noise(sensors)
         nz = self._noise
@@ -997,8 +1108,18 @@ class ParticleFilter(Filter):
         self._last_sightings: tuple[tuple[FloatArray, ...], FloatArray] | None = None
         self._t = math.nan
         self._diag = self._fresh_diag()
-        self._est: Estimate | None = None
-        self._check_finite(math.nan)
+        self._set_estimate(*_checked_stats(self._x, self._weights(), self._logw))
+
+    def __getstate__(self) -> dict[str, Any]:
+        # the generator's addresses belong to this process's generator object: a copy recomputes its own
+        state = dict(self.__dict__)
+        state.pop("_gen", None)
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        if "_rng" in state:
+            self._gen = generator_addresses(self._rng)
 
     @staticmethod
     def _fresh_diag() -> dict[str, float]:
@@ -1025,24 +1146,48 @@ class ParticleFilter(Filter):
             )
             self._travelled[0] += abs(u.d_left)
             self._travelled[1] += abs(u.d_right)
-            sd = np.array([math.sqrt(vl), math.sqrt(vr)])
-            _move(self._x, True, np.array([u.d_left, u.d_right]), sd, W, self._q_std, rng)
+            moved = _move(
+                self._x,
+                True,
+                u.d_left,
+                u.d_right,
+                0.0,
+                math.sqrt(vl),
+                math.sqrt(vr),
+                W,
+                self._q_std,
+                self._gen,
+                self._weights(),
+                self._logw,
+            )
         elif (tw := nz.twist_sigmas(u)) is not None:
             self._x = sample_twist_motion(self._x, u, tw[0], tw[1], rng)
             if self._q_std.any():
-                _jitter(self._x, self._q_std, rng)
+                _jitter(self._x, self._q_std, self._gen)
+            moved = _checked_stats(self._x, self._weights(), self._logw)
         else:
             vxy, vth = increment_variances(
                 u.dx, u.dy, u.dtheta, nz.sigma_xy_per_m, nz.sigma_theta_per_m, nz.sigma_theta_per_rad
             )
-            sd = np.array([math.sqrt(vxy), math.sqrt(vth)])
-            _move(self._x, False, np.array([u.dx, u.dy, u.dtheta]), sd, 1.0, self._q_std, rng)
+            moved = _move(
+                self._x,
+                False,
+                u.dx,
+                u.dy,
+                u.dtheta,
+                math.sqrt(vxy),
+                math.sqrt(vth),
+                1.0,
+                self._q_std,
+                self._gen,
+                self._weights(),
+                self._logw,
+            )
         if self._last_sightings is not None:
             _compose_into(self._last_sightings[1], u.dx, u.dy, u.dtheta)
         self._t = u.t
         self._diag = self._fresh_diag()
-        self._est = None
-        self._check_finite(u.t)
+        self._set_estimate(*moved)
 
     # --- update ------------------------------------------------------------------------------------------
 
@@ -1060,39 +1205,40 @@ class ParticleFilter(Filter):
             raise TypeError(f"ParticleFilter does not consume {type(z).__name__}")  # pragma: no cover
         self._t = z.t
         self._diag = self._fresh_diag()
-        self._est = None
+        self._stats: tuple[Any, ...] | None = None  # the estimate, when the correction's last kernel made it
         if prepared is not None:
             self._correct(type(z), *prepared)
-        self._check_finite(z.t)
+        self._set_estimate(*(self._stats or _checked_stats(self._x, self._weights(), self._logw)))
 
     def _prepare_landmarks(self, z: LandmarkObservations) -> tuple[int, tuple[FloatArray, FloatArray, IntArray]] | None:
         if self._lm_warn:
             landmark_noise(None, None, SensorSpec(), warn=True)
             self._lm_warn = False
-        ok = np.isfinite(z.ranges) & np.isfinite(z.bearings) & (z.ranges > 0.0)
+        # a few sightings per event: plain floats are cheaper than numpy's masks here
+        ok = [
+            math.isfinite(r) and math.isfinite(b) and r > 0.0
+            for r, b in zip(z.ranges.tolist(), z.bearings.tolist(), strict=True)
+        ]
         sel, rows = self._map_rows(z.ids, ok, "landmark")
-        if sel.size == 0:
+        if sel is None:
             return None
-        data = (
-            np.ascontiguousarray(z.ranges[sel], dtype=np.float64),
-            np.ascontiguousarray(z.bearings[sel], dtype=np.float64),
-            rows,
-        )
-        return int(sel.size), data
+        data = (_take(z.ranges, sel), _take(z.bearings, sel), rows)
+        return int(rows.size), data
 
     def _prepare_ranges(self, z: RangeObservations) -> tuple[int, tuple[FloatArray, IntArray]] | None:
         if self._range_warn:
             range_only_noise(None, SensorSpec(), warn=True)
             self._range_warn = False
-        ok = np.isfinite(z.ranges) & (z.ranges >= 0.0)
+        ok = [math.isfinite(r) and r >= 0.0 for r in z.ranges.tolist()]
         sel, rows = self._map_rows(z.ids, ok, "beacon")
-        if sel.size == 0:
+        if sel is None:
             return None
-        return int(sel.size), (np.ascontiguousarray(z.ranges[sel], dtype=np.float64), rows)
+        return int(rows.size), (_take(z.ranges, sel), rows)
 
-    def _map_rows(self, ids: IntArray, ok: npt.NDArray[np.bool_], what: str) -> tuple[IntArray, IntArray]:
+    def _map_rows(self, ids: IntArray, ok: list[bool], what: str) -> tuple[IntArray | slice | None, IntArray]:
         """The indices of the usable observations (``ok``, id withheld or in the map) and their landmark rows
-        (-1: withheld, marginalised over the map by :func:`_sightings_loglik`)."""
+        (-1: withheld, marginalised over the map by :func:`_sightings_loglik`); the indices are ``slice(None)``
+        when every observation is usable and None when none is."""
         keep: list[int] = []
         rows: list[int] = []
         for k, ident in enumerate(ids.tolist()):
@@ -1104,7 +1250,10 @@ class ParticleFilter(Filter):
                 continue
             keep.append(k)
             rows.append(row)
-        return np.asarray(keep, dtype=np.int64), np.asarray(rows, dtype=np.int64)
+        if not keep:
+            return None, np.empty(0, dtype=np.int64)
+        sel = slice(None) if len(keep) == len(ok) else np.asarray(keep, dtype=np.int64)
+        return sel, np.asarray(rows, dtype=np.int64)
 
     def _prepare_scan(self, z: LaserScan) -> tuple[int, tuple[FloatArray, FloatArray]] | None:
         n_all = int(z.ranges.shape[0])
@@ -1212,8 +1361,17 @@ class ParticleFilter(Filter):
                 self._set_uniform_weights(n)
                 resampled = True
         w = np.empty(self._x.shape[0])
-        ll = ll_belief if ll_belief is not None and not injected else self._loglik(kind, data)
-        log_pred, n_eff = _reweigh(self._logw, ll, w)
+        if ll_belief is not None and not injected:
+            ll = ll_belief
+            log_pred, n_eff = _reweigh(self._logw, ll, w)
+        elif kind is LandmarkObservations:
+            ranges, bearings, rows = data
+            # the likelihood and Bayes' rule in one call
+            lm_args = (self._lm_xy, True, self._inv_var_r, self._inv_var_b, self._lm_log_norm, -math.inf)
+            ll, log_pred, n_eff = _weigh_sightings(self._x, ranges, bearings, rows, *lm_args, self._logw, w)  # type: ignore[arg-type]
+        else:
+            ll = self._loglik(kind, data)
+            log_pred, n_eff = _reweigh(self._logw, ll, w)
         self._w, self._w_of = w, self._logw
         if not math.isfinite(log_pred):
             raise FilterDiverged(f"ParticleFilter: every particle has zero likelihood at t={self._t:.3f} s")
@@ -1244,7 +1402,13 @@ class ParticleFilter(Filter):
         kld = cfg.adaptive == "kld"
         by_ess = not kld and (late > 0 or n_eff < cfg.resample_ess_fraction * n)
         jitter: FloatArray | None = None
-        if (resampled or kld or by_ess) and cfg.regularise:
+        # the usual resampling (on a low ESS, roughened, nothing injected after it) in one compiled call
+        fast = by_ess and not late and not cfg.regularise and cfg.roughening_k > 0.0 and n_pred > 1
+        if fast:
+            self._x, *stats = _resample_roughened(self._x, w, self._logw, n_pred, cfg.roughening_k, self._gen)
+            self._stats = tuple(stats)
+            resampled = True
+        elif (resampled or kld or by_ess) and cfg.regularise:
             # Musso et al. 2001: the kernel's covariance is h^2 times the weighted covariance before resampling
             jitter = _regularisation_root(self._x, w)
         elif (resampled or kld or by_ess) and cfg.roughening_k > 0.0 and n_pred > 1:
@@ -1256,7 +1420,7 @@ class ParticleFilter(Filter):
             self._x = _kld_resample(
                 self._x,
                 w,
-                rng,
+                self._gen,
                 cfg.kld_err,
                 cfg.kld_z,
                 cfg.min_particles,
@@ -1268,19 +1432,19 @@ class ParticleFilter(Filter):
             late = min(late, n)
             self._x = self._x[: n - late]
             resampled = True
-        elif by_ess:
+        elif by_ess and not fast:
             self._x = _gather(self._x, systematic_resample(w, n - late, rng))
             resampled = True
         if resampled and jitter is not None:
             if jitter.ndim == 2:
-                _jitter_correlated(self._x, _regularisation_bandwidth(n) * jitter, rng)
+                _jitter_correlated(self._x, _regularisation_bandwidth(n) * jitter, self._gen)
             else:
-                _jitter(self._x, jitter * n ** (-1.0 / 3.0), rng)
+                _jitter(self._x, jitter * n ** (-1.0 / 3.0), self._gen)
         if late:
             self._x = np.concatenate([self._x, self._injected_poses(kind, data, late, pair)])
         if cfg.augmented and cfg.inject == "sensor" and cfg.inject_pairs and kind is LandmarkObservations:
             self._last_sightings = (data, np.zeros(3))
-        if kld or by_ess:
+        if kld or (by_ess and not fast):
             self._set_uniform_weights(n)
         self._diag["resampled"] = 1.0 if resampled else 0.0
         self._diag["injected"] = float(injected + late)
@@ -1362,9 +1526,12 @@ class ParticleFilter(Filter):
             self._w, self._w_of = np.exp(self._logw), self._logw
         return self._w
 
-    def _check_finite(self, t: float) -> None:
-        if not (np.all(np.isfinite(self._x)) and np.all(np.isfinite(self._logw))):
-            raise FilterDiverged(f"ParticleFilter particles became non-finite at t={t:.3f} s")
+    def _set_estimate(self, mean: FloatArray, cov: FloatArray, finite: bool) -> None:
+        """Keep the statistics of the particles after a step (the runner reads them after every event);
+        ``finite``: whether every particle and log-weight is, else the filter has diverged."""
+        if not finite:
+            raise FilterDiverged(f"ParticleFilter particles became non-finite at t={self._t:.3f} s")
+        self._est: tuple[FloatArray, FloatArray] | None = (mean, cov)
 
     def _diagnostics(self) -> dict[str, float]:
         return {**self._diag, "particles": float(self._n)}
@@ -1396,9 +1563,7 @@ class ParticleFilter(Filter):
 
     def estimate(self) -> Estimate:
         """Weighted mean (circular heading), weighted covariance (wrapped residuals) and diagnostics."""
-        if self._est is None:
-            mean, cov = _weighted_stats(self._x, self._weights())
-            self._est = Estimate(t=self._t, mean=mean, cov=cov, diagnostics={})
-        return Estimate(
-            t=self._est.t, mean=self._est.mean.copy(), cov=self._est.cov.copy(), diagnostics=self._diagnostics()
-        )
+        if self._est is None:  # the particles were set from outside: their statistics from scratch
+            self._est = _weighted_stats(self._x, self._weights())
+        mean, cov = self._est
+        return Estimate(t=self._t, mean=mean.copy(), cov=cov.copy(), diagnostics=self._diagnostics())

@@ -428,3 +428,32 @@ def test_range_noise_override_and_the_dataset_value() -> None:
         make_ekf(range_gate_probability=0.0)
     with pytest.raises(ConfigError, match="range_only_sigma_m"):
         make_ekf(range_only_sigma_m=-1.0)
+
+
+@pytest.mark.parametrize("spread", [0.01, 0.3, 3.0])
+def test_index_candidates_find_the_scanned_nearest_landmark(spread: float) -> None:
+    """With the k-d tree (maps of 48 landmarks and more) the association is that of testing every landmark,
+    over random poses, covariances of every size and sightings near and far, also of landmarks by the robot."""
+    rng = np.random.default_rng(int(spread * 100))
+    xy = rng.uniform(-15.0, 15.0, size=(200, 2))
+    world = WorldMap(landmarks=Landmarks(ids=np.arange(200, dtype=np.int64), xy=xy))
+    flt = make_ekf(association="nearest")
+    flt.reset(Gaussian2(np.zeros(3), np.eye(3) * 0.01), world, SensorSpec(), rng)
+    assert flt._index is not None
+    found = 0
+    for _ in range(300):
+        a = rng.standard_normal((3, 3)) * spread
+        flt._P = (a @ a.T + 1e-6 * np.eye(3)).tolist()
+        flt._x = [float(rng.uniform(-10, 10)), float(rng.uniform(-10, 10)), float(rng.uniform(-math.pi, math.pi))]
+        target = xy[int(rng.integers(200))]
+        dx, dy = target[0] - flt._x[0], target[1] - flt._x[1]
+        r = math.hypot(dx, dy) + float(rng.normal(0.0, 0.3))
+        b = math.atan2(dy, dx) - flt._x[2] + float(rng.normal(0.0, 0.2))
+        used = {int(k) for k in rng.integers(0, 200, size=3)}
+        with_index = flt._nearest(max(r, 0.01), b, used)
+        index, flt._index = flt._index, None
+        scanned = flt._nearest(max(r, 0.01), b, used)
+        flt._index = index
+        assert with_index == scanned
+        found += scanned is not None
+    assert found > 30  # the test saw associations, not only rejections

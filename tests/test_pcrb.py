@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from bound_support import differenced_laser_information, scan_poses
 
 from locbench import pcrb
 from locbench.datasets.synthetic.robot import DriveLimits, GoTo, simulate_route
@@ -186,6 +187,20 @@ def test_laser_information_equals_the_analytic_wall_gradient() -> None:
     g2 = g[2:]
     part = pcrb.laser_information(occ, res, (0.0, 0.0), pose, mount, angles, 10.0, 0.02, sigma, meas[None])
     np.testing.assert_allclose(part[0], g2.T @ g2 / sigma**2, rtol=1e-6)
+
+
+@pytest.mark.parametrize("world", ["office", "lap"])
+def test_laser_information_from_one_cast_equals_the_differenced_one(world: str) -> None:
+    """The closed-form derivative (one traversal per beam, differences near cell corners only) gives the
+    information of differencing every beam, to the differences' own error, on a world's real scans, with
+    a mount offset that moves the sensor with the heading."""
+    base = scan_poses(world)
+    for mount in (base[4], (0.12, -0.05, 0.03)):
+        args = (*base[:4], mount, *base[5:])
+        want = differenced_laser_information(*args)
+        got = pcrb.laser_information(*args)
+        # every beam kept or left out alike: one beam's share, ~1/sigma^2 = 1e4, is far above this tolerance
+        np.testing.assert_allclose(got, want, rtol=1e-7, atol=1e-7 * float(np.abs(want).max()))
 
 
 def test_the_laser_tightens_the_bound_of_the_laser_worlds() -> None:

@@ -328,6 +328,18 @@ def test_report_regenerates_identical_bytes(store: Store) -> None:
         assert after[p] == data, p
 
 
+def test_report_with_two_processes_writes_the_same_bytes(store: Store, tmp_path: Path) -> None:
+    """Runs read, metrics computed and figures drawn by two processes: the same files, byte for byte."""
+    one, two = tmp_path / "one", tmp_path / "two"
+    write_report(store, out=one)
+    write_report(store, out=two, jobs=2)
+    files = sorted(p.relative_to(one) for p in one.rglob("*") if p.is_file())
+    assert files == sorted(p.relative_to(two) for p in two.rglob("*") if p.is_file())
+    assert any(f.suffix == ".png" for f in files)
+    for f in files:
+        assert (one / f).read_bytes() == (two / f).read_bytes(), f
+
+
 def test_write_metrics_csv_is_stable(tmp_path: Path) -> None:
     df = pd.DataFrame(
         [("b", "f", 1, "ate_m", 0.1 + 0.2), ("a", "f", 2, "realtime_factor", np.inf), ("a", "f", 2, "anees", 3.0)],

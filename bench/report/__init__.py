@@ -44,7 +44,7 @@ class ReportPaths:
     summary: tuple[Table, ...]
 
 
-def write_report(store: Store, keep: Keep | None = None, out: Path | None = None) -> ReportPaths:
+def write_report(store: Store, keep: Keep | None = None, out: Path | None = None, jobs: int = 1) -> ReportPaths:
     """Write ``metrics.csv``, ``REPORT.md``, ``figures/*.png`` and ``index.html``.
 
     Parameters
@@ -55,12 +55,14 @@ def write_report(store: Store, keep: Keep | None = None, out: Path | None = None
         ``keep(dataset, filter)`` restricts the report to some cells (a suite's, see :func:`suite_filter`).
     out : Path, optional
         The folder to write; default ``store.summary``. Stale figures there are removed.
+    jobs : int
+        Processes that read the runs and draw the figures (1: this process); the files do not depend on it.
     """
     from locbench.report.build import Report
     from locbench.report.render import to_html, to_markdown, write_figures
     from locbench.report.significance import write_comparisons_csv
 
-    col = collect(store, keep)
+    col = collect(store, keep, jobs)
     summary = out if out is not None else store.summary
     summary.mkdir(parents=True, exist_ok=True)
     metrics = write_metrics_csv(col.metrics, summary / "metrics.csv")
@@ -68,7 +70,7 @@ def write_report(store: Store, keep: Keep | None = None, out: Path | None = None
     sections = report.sections()
     intro = report.how_to_read()
     write_comparisons_csv(report.comparisons, summary / "comparisons.csv")
-    pngs = write_figures(sections, summary / "figures")
+    pngs = write_figures(sections, summary / "figures", jobs)
     md = summary / "REPORT.md"
     write_if_changed(md, to_markdown(TITLE, intro, sections).encode())
     page = summary / "index.html"

@@ -79,10 +79,10 @@ class Collected:
     metas: list[dict[str, Any]] = field(default_factory=list)
     #: (dataset, filter) -> one (t, nees) series per ok run
     nees: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]] = field(default_factory=dict)
-    #: (dataset, filter) -> one lost-detection series per ok run with stored health and ground truth
-    health: dict[tuple[str, str], list[HealthSeries]] = field(default_factory=dict)
     #: (dataset, filter, seed) -> run folder of ok runs
     ok_dirs: dict[tuple[str, str, int], Path] = field(default_factory=dict)
+    #: (dataset, filter) -> one lost-detection series per ok run with stored health and ground truth
+    health: dict[tuple[str, str], list[HealthSeries]] = field(default_factory=dict)
     truths: dict[tuple[str, int], TruthRecord] = field(default_factory=dict)
     datasets: dict[str, DatasetInfo] = field(default_factory=dict)
     filters: dict[str, FilterInfo] = field(default_factory=dict)
@@ -179,7 +179,74 @@ def describe_dataset(name: str) -> DatasetInfo:
 Keep = Callable[[str, str], bool]
 
 
-def collect(store: Store, keep: Keep | None = None) -> Collected:
+#: What reading one run gives: ("ok", rel, (meta, info, rows, truth key or None, nees or None, run folder)) or
+#: ("broken", rel, message); the truths read along the way come back beside these.
+_RunRead = tuple[str, str, Any]
+
+#: The store and filter a forked worker of :func:`collect` reads with (set before the pool forks).
+_WORKER: dict[str, Any] = {}
+
+
+def _read_runs(store: Store, keep: Keep | None, run_dirs: Sequence[Path]) -> tuple[list[_RunRead], dict[Any, Any]]:
+    """Read ``run_dirs`` in order and compute each ok run's metrics and NEES series against its truth."""
+    reads: list[_RunRead] = []
+    truths: dict[tuple[str, int], TruthRecord] = {}
+    for run_dir in run_dirs:
+        rel = _relative(run_dir, store.root)
+        try:
+            run = store.read_run(run_dir)
+            meta = run.meta
+            dataset, filt, seed = str(meta["dataset"]), str(meta["filter"]), int(meta["seed"])
+            if keep is not None and not keep(dataset, filt):
+                continue
+            key: tuple[str, int] | None = None
+            hs: HealthSeries | None = None
+            if run.status == "ok":
+                key = (dataset, seed)
+                if key not in truths:
+                    truths[key] = store.read_truth(dataset, seed)
+                truth = truths[key]
+                values = run_metrics(run, truth)
+                ne = nees_at_truth(run.t, run.mean, run.cov, truth.ground_truth.t, truth.ground_truth.poses)
+                if run.health and truth.truth_label == "ground truth":
+                    gt = truth.ground_truth
+                    kt = truth.kidnaps[0].t if truth.kidnaps else float("nan")
+                    hs = health_series(run.t, run.mean, run.health, gt.t, gt.xy, kt)
+            else:
+                values, ne = run_metrics(run, _NO_TRUTH), None
+        except Exception as exc:
+            log.warning("skipping unreadable run %s: %s", rel, exc)
+            # Paths relative to the results folder keep the report independent of where it lives.
+            msg = str(exc).replace(f"{store.root.as_posix()}/", "")
+            reads.append(("broken", rel, f"{type(exc).__name__}: {msg}"))
+            continue
+        info = RunInfo(dataset, filt, seed, run.status, str(meta.get("message", "") or ""))
+        rows = [(dataset, filt, seed, k, float(v)) for k, v in values.items()]
+        reads.append(("ok", rel, (meta, info, rows, key, ne, run_dir, hs)))
+    return reads, truths
+
+
+def _read_chunk(run_dirs: list[Path]) -> tuple[list[_RunRead], dict[Any, Any]]:
+    return _read_runs(_WORKER["store"], _WORKER["keep"], run_dirs)
+
+
+def _read_parallel(store: Store, keep: Keep | None, run_dirs: list[Path], jobs: int) -> list[Any]:
+    """:func:`_read_runs` over ``jobs`` forked processes, in chunks, the results in the order of ``run_dirs``."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    size = max(1, -(-len(run_dirs) // (4 * jobs)))  # a few chunks per worker evens out their load
+    chunks = [run_dirs[i : i + size] for i in range(0, len(run_dirs), size)]
+    _WORKER.update(store=store, keep=keep)
+    try:
+        # fork: the workers inherit the store and the suite filter (a closure) instead of pickling them
+        with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("fork")) as pool:
+            return list(pool.map(_read_chunk, chunks))
+    finally:
+        _WORKER.clear()
+
+
+def collect(store: Store, keep: Keep | None = None, jobs: int = 1) -> Collected:
     """One pass over the stored runs: metrics of every run, statuses, NEES series and truths.
 
     Parameters
@@ -188,46 +255,36 @@ def collect(store: Store, keep: Keep | None = None) -> Collected:
         The results folder.
     keep : callable, optional
         ``keep(dataset, filter)`` selects the cells to report; None keeps all.
+    jobs : int
+        Processes that read the runs and compute their metrics (forked; 1: this process). The result does
+        not depend on it.
     """
+    run_dirs = list(store.iter_runs())
+    if jobs > 1 and len(run_dirs) > 1:
+        parts = _read_parallel(store, keep, run_dirs, jobs)
+    else:
+        parts = [_read_runs(store, keep, run_dirs)]
     rows: list[tuple[str, str, int, str, float]] = []
     out = Collected(metrics=pd.DataFrame(), store=store)
     nees: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]] = defaultdict(list)
-    for run_dir in store.iter_runs():
-        rel = _relative(run_dir, store.root)
-        try:
-            run = store.read_run(run_dir)
-            meta = run.meta
-            dataset, filt, seed = str(meta["dataset"]), str(meta["filter"]), int(meta["seed"])
-            if keep is not None and not keep(dataset, filt):
+    read_truths: dict[tuple[str, int], TruthRecord] = {}
+    for reads, truths in parts:
+        for key, truth in truths.items():
+            read_truths.setdefault(key, truth)
+        for status, rel, payload in reads:
+            if status == "broken":
+                out.broken.append((rel, payload))
                 continue
-            truth: TruthRecord | None = None
-            if run.status == "ok":
-                key = (dataset, seed)
-                if key not in out.truths:
-                    out.truths[key] = store.read_truth(dataset, seed)
-                truth = out.truths[key]
-                values = run_metrics(run, truth)
-                ne = nees_at_truth(run.t, run.mean, run.cov, truth.ground_truth.t, truth.ground_truth.poses)
-            else:
-                values, ne = run_metrics(run, _NO_TRUTH), None
-        except Exception as exc:
-            log.warning("skipping unreadable run %s: %s", rel, exc)
-            # Paths relative to the results folder keep the report independent of where it lives.
-            msg = str(exc).replace(f"{store.root.as_posix()}/", "")
-            out.broken.append((rel, f"{type(exc).__name__}: {msg}"))
-            continue
-        out.metas.append(meta)
-        out.runs.append(RunInfo(dataset, filt, seed, run.status, str(meta.get("message", "") or "")))
-        rows.extend((dataset, filt, seed, k, float(v)) for k, v in values.items())
-        if truth is not None and ne is not None:
-            nees[(dataset, filt)].append((truth.ground_truth.t, ne))
-            out.ok_dirs[(dataset, filt, seed)] = run_dir
-            if run.health and truth.truth_label == "ground truth":
-                gt = truth.ground_truth
-                kt = truth.kidnaps[0].t if truth.kidnaps else float("nan")
-                out.health.setdefault((dataset, filt), []).append(
-                    health_series(run.t, run.mean, run.health, gt.t, gt.xy, kt)
-                )
+            meta, info, run_rows, key, ne, run_dir, hs = payload
+            out.metas.append(meta)
+            out.runs.append(info)
+            rows.extend(run_rows)
+            if key is not None:
+                truth = out.truths.setdefault(key, read_truths[key])
+                nees[(info.dataset, info.filter)].append((truth.ground_truth.t, ne))
+                out.ok_dirs[(info.dataset, info.filter, info.seed)] = run_dir
+                if hs is not None:
+                    out.health.setdefault((info.dataset, info.filter), []).append(hs)
     out.nees = dict(nees)
     rows.extend(bound_rows(store, out))
     out.metrics = frame(rows)

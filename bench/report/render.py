@@ -71,14 +71,43 @@ def plots_of(sections: list[Section]) -> list[Plot]:
     return [b for s in sections for _, sec in s.walk() for b in sec.blocks if isinstance(b, Plot)]
 
 
-def write_figures(sections: list[Section], figdir: Path) -> dict[str, bytes]:
-    """Draw every plot to ``figdir/<name>.png`` (unchanged files untouched), remove stale PNGs; name -> bytes."""
+#: The plots a forked worker of :func:`write_figures` draws (set before the pool forks).
+_PLOTS: list[Plot] = []
+
+
+def _render_nth(i: int) -> bytes:
+    return render_png(_PLOTS[i])
+
+
+def render_pngs(plots: list[Plot], jobs: int = 1) -> list[bytes]:
+    """:func:`render_png` of every plot, in ``jobs`` forked processes when more than 1 (the same bytes: Agg
+    draws deterministically, and a plot's ``draw`` is a closure, so the workers inherit it by forking)."""
+    if jobs <= 1 or len(plots) < 2:
+        return [render_png(p) for p in plots]
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    _PLOTS[:] = plots
+    try:
+        with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("fork")) as pool:
+            return list(pool.map(_render_nth, range(len(plots))))
+    finally:
+        _PLOTS.clear()
+
+
+def write_figures(sections: list[Section], figdir: Path, jobs: int = 1) -> dict[str, bytes]:
+    """Draw every plot to ``figdir/<name>.png`` (unchanged files untouched), remove stale PNGs; name -> bytes.
+
+    ``jobs`` processes draw them (:func:`render_pngs`)."""
     figdir.mkdir(parents=True, exist_ok=True)
-    out: dict[str, bytes] = {}
-    for plot in plots_of(sections):
-        if plot.name in out:
+    plots = plots_of(sections)
+    names: set[str] = set()
+    for plot in plots:
+        if plot.name in names:
             raise ValueError(f"two figures named {plot.name!r}")
-        data = render_png(plot)
+        names.add(plot.name)
+    out: dict[str, bytes] = {}
+    for plot, data in zip(plots, render_pngs(plots, jobs), strict=True):
         write_if_changed(figdir / f"{plot.name}.png", data)
         out[plot.name] = data
     for stale in sorted(figdir.glob("*.png")):

@@ -1,0 +1,70 @@
+"""pytest-benchmark: nearest-neighbour association against map size (issue 24, item 5).
+
+``ekf_landmarks[association=nearest]`` replays the whole office run with the office map as it is and with
+the map tiled 16 and 64 times (copies shifted 100 m apart along x, never seen, so the sightings and the
+associations are the same). With the k-d tree of :mod:`locbench.filters._landmark_index` the time per run
+stays flat in the map's size; ``scan`` is the same filter testing every landmark (the code path of maps
+without an index), its reference.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+import pytest
+
+from locbench.datasets.base import Dataset, Landmarks
+from locbench.events import Odometry
+from locbench.registry import make_dataset, make_filter
+from locbench.seeding import filter_rng
+
+_DATA: dict[int, Dataset] = {}
+
+
+def tiled_office(copies: int) -> Dataset:
+    """The office dataset (seed 0) with its landmark map repeated ``copies`` times, 100 m apart along x."""
+    if copies not in _DATA:
+        ds = make_dataset("office", 0)
+        lm = ds.world.landmarks
+        assert lm is not None
+        step = float(np.ptp(lm.xy[:, 0])) + 100.0
+        xy = np.concatenate([lm.xy + np.array([k * step, 0.0]) for k in range(copies)])
+        ids = np.concatenate([lm.ids + k * (int(lm.ids.max()) + 1) for k in range(copies)])
+        world = dataclasses.replace(ds.world, landmarks=Landmarks(ids=ids, xy=xy))
+        _DATA[copies] = dataclasses.replace(ds, world=world)
+    return _DATA[copies]
+
+
+def replay(ds: Dataset, scan: bool) -> Any:
+    """Run ``ekf_landmarks[association=nearest]`` over ``ds``; ``scan`` tests every landmark (no index)."""
+    flt = make_filter("ekf_landmarks[association=nearest]")
+    flt.reset(ds.initial, ds.world, ds.sensors, filter_rng("ekf_landmarks", ds.name, 0))
+    if scan:
+        flt._index = None
+    routed = flt.routed_events()
+    means = []
+    for ev in ds.events:
+        if isinstance(ev, Odometry):
+            flt.predict(ev)
+        elif type(ev) in routed:
+            flt.update(ev)
+            means.append(flt.estimate().mean)
+    return np.array(means)
+
+
+@pytest.mark.parametrize("copies", [1, 16, 64])
+@pytest.mark.parametrize("method", ["index", "scan"])
+def test_nearest_association_map_size(benchmark: Any, copies: int, method: str) -> None:
+    ds = tiled_office(copies)
+    if benchmark.disabled and copies > 16:
+        pytest.skip("64 copies only when benchmarking (nox -s perf)")
+    benchmark.pedantic(replay, args=(ds, method == "scan"), rounds=7, iterations=1)
+
+
+def test_index_and_scan_associate_alike() -> None:
+    """The tiled map's run is the office map's run, with the index and without."""
+    base = replay(tiled_office(1), scan=True)
+    np.testing.assert_array_equal(replay(tiled_office(16), scan=False), base)
+    np.testing.assert_array_equal(replay(tiled_office(16), scan=True), base)
