@@ -23,6 +23,7 @@ from locbench.report import tables as tb
 from locbench.report.collect import Collected
 from locbench.report.doc import Bullets, Plot, Section, Table, Text
 from locbench.report.style import LineStyle, style_for
+from locbench.report.tuning import tuning_section
 from locbench.spec import Spec
 
 #: The kidnap protocol's dataset parameter (DESIGN "Kidnap recovery"): variants differing only in it form one
@@ -102,6 +103,7 @@ class Report:
     def sections(self) -> list[Section]:
         out = [
             self.summary(),
+            tuning_section(self.col) or Section("", ""),
             self.claims(),
             self.pareto(),
             self.consistency(),
