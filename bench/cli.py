@@ -72,8 +72,9 @@ def _list_params(ids: Sequence[str]) -> int:
             valid = ", ".join(FILTERS.ids() + DATASETS.ids())
             raise UnknownIdError(f"unknown filter or dataset {ident!r}; valid: {valid}")
         print(f"{kind} {ident}: {reg.entry(ident).summary}")
-        print(f"  written {ident}[key=value,...]; a grid: key=a|b|c")
         tunable = tunable_fields(cls) if kind == "filter" else None
+        tune = f"; tunable ('locbench tune {ident}'): {', '.join(tunable) or 'none'}" if tunable is not None else ""
+        print(f"  written {ident}[key=value,...]; a grid: key=a|b|c{tune}")
         rows = [
             (p.name, p.type, p.default, p.unit)
             + ((tunable[p.name].describe() if p.name in tunable else "-",) if tunable is not None else ())
@@ -85,7 +86,6 @@ def _list_params(ids: Sequence[str]) -> int:
             continue
         head: tuple[str, ...] = ("parameter", "type", "default", "unit")
         if tunable is not None:
-            print(f"  tunable ('locbench tune {ident}'): {', '.join(tunable) or 'none'}")
             head += ("tuning range",)
         head += ("meaning",)
         n = len(head) - 1

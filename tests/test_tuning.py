@@ -73,7 +73,7 @@ def test_tunable_metadata_leaves_the_run_key_alone() -> None:
 def test_list_shows_the_tunable_fields_and_ranges(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["list", "ekf_icp"]) == 0
     out = capsys.readouterr().out
-    assert "tunable ('locbench tune ekf_icp'): " in out
+    assert "tunable ('locbench tune ekf_icp'): r_x_m2, " in out
     line = next(ln for ln in out.splitlines() if ln.strip().startswith("max_iterations "))
     assert "[5, 700] int log" in line
     assert main(["list", "pf"]) == 0

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 
 from locbench.report import tables as tb
 from locbench.report.collect import Collected
@@ -35,6 +36,26 @@ def _ate_cm(rows: pd.DataFrame) -> tuple[float, int, int]:
     v = tb.values(rows, "ate_m")
     runs = int(tb.values(rows, "failed").size)
     return (100.0 * float(np.mean(v)) if v.size else NAN), int(v.size), runs
+
+
+def _seeds(seeds: list[int]) -> str:
+    """``0-19`` for a contiguous run of seeds, else the seeds listed."""
+    s = sorted(int(x) for x in seeds)
+    if s and s == list(range(s[0], s[-1] + 1)) and len(s) > 1:
+        return f"{s[0]}-{s[-1]}"
+    return ", ".join(map(str, s))
+
+
+def _split(study: dict[str, Any]) -> str:
+    """One line of the train/test split of a study: datasets and seeds of each side."""
+
+    def side(names: list[str], seeds: list[int]) -> str:
+        return ", ".join(f"`{n}`" for n in names) + f" (seed{'s' if len(seeds) > 1 else ''} {_seeds(seeds)})"
+
+    return (
+        f"`{study['world']}`: tuned on {side(study['train'], study['train_seeds'])}, "
+        f"tested on {side(study['test'], study['test_seeds'])}"
+    )
 
 
 def _value(v: Any) -> str:
@@ -58,18 +79,17 @@ def tuning_section(col: Collected) -> Section | None:
     df = col.metrics
     sec = Section("Tuned against default (test data only)", "tuned")
     budgets = sorted({(len(s["trials"]), len(s["train"]) * len(s["train_seeds"])) for s in studies})
+    splits = list(dict.fromkeys(_split(s) for s in studies))
     sec.add(
         Text(
             "Each filter's declared tunable parameters (noise scales, gates, thresholds, iteration caps; never a "
             "compute knob) were searched with optuna's seeded TPE sampler on train data, and its best configuration "
-            "run on test data it never saw: train seeds "
-            f"{studies[0]['train_seeds'][0]}-{studies[0]['train_seeds'][-1]} against test seeds 0-19 on the "
-            "synthetic worlds, MRCLAM Dataset 6 robots 1-3 against robots 4-5. Budget per filter and world (the "
-            "same for every filter): "
+            "run on test data it never saw. Budget per filter and data (the same for every filter): "
             + "; ".join(f"{t} trials x {r} train runs = {t * r} runs" for t, r in budgets)
-            + ". Objective: mean ATE over the train runs; a failed or diverged trial scores as the worst. Every "
-            "number below is on test data (docs/protocols.md, Tuning)."
-        )
+            + ". Objective: the mean of the train runs' ATE; a trial with a failed or diverged run scores as the "
+            "worst. Every number below is on test data (docs/protocols.md, Tuning)."
+        ),
+        Bullets(tuple(splits)),
     )
     rows: list[tuple[str, ...]] = []
     keys: list[tuple[float, ...]] = []
@@ -98,7 +118,7 @@ def tuning_section(col: Collected) -> Section | None:
             ("filter", "data", "budget (runs)", "default ATE (cm)", "tuned ATE (cm)", "change (%)", "tuned spec"),
             tuple(rows),
             caption="Tuned beside default: mean ATE on the test data (ok runs / runs in brackets)",
-            footnotes=("Test data: seeds 0-19 of room and office; mrclam: robots 4 and 5 (their mean).",),
+            footnotes=("Mean over every test run of the data (several test recordings: over them all).",),
             sort_keys=tuple(keys),
         )
     )
@@ -128,7 +148,7 @@ def trials_plot(studies: list[dict[str, Any]]) -> Plot:
     worlds = list(dict.fromkeys(s["world"] for s in studies))
     filters = list(dict.fromkeys(s["filter"] for s in studies))
     styles = {f: style_for(i) for i, f in enumerate(filters)}
-    title = "Best-so-far train objective (mean ATE, cm, log scale) against trials"
+    title = "Best train objective so far against trials"
 
     def draw(fig: Figure) -> None:
         axes = fig.subplots(1, len(worlds), squeeze=False)[0]
@@ -143,11 +163,11 @@ def trials_plot(studies: list[dict[str, Any]]) -> Plot:
                 st = styles[s["filter"]]
                 xs = np.arange(1, len(ys) + 1)
                 ax.plot(xs, ys, color=st.color, marker=st.marker or None, linestyle=st.linestyle, label=s["filter"])
-            ax.set_yscale("log")
             ax.set_title(world, fontsize=9)
             ax.set_xlabel("trial")
+            ax.xaxis.set_major_locator(MaxNLocator(integer=True))
             ax.grid(True, which="both", alpha=0.3)
-        axes[0].set_ylabel("best train ATE so far (cm)")
+        axes[0].set_ylabel("best mean train ATE so far (cm)")
         axes[-1].legend(fontsize=7, loc="upper right")
         fig.suptitle(title, fontsize=10)
 
