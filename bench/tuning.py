@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from locbench.errors import ConfigError, DependencyNotInstalled
+from locbench.errors import ConfigError, DependencyNotInstalled, LocbenchError
 from locbench.registry import FILTERS, resolve_dataset, resolve_filter
 from locbench.spec import format_spec, non_default_params, parse_spec
 from locbench.store import Store
@@ -336,10 +336,18 @@ class SuiteStudy:
 
 
 def tuned_filters() -> list[str]:
-    """The filters of the main comparison that declare tunable fields (odometry declares none)."""
+    """The filters of the main comparison that declare tunable fields (odometry declares none); a filter whose
+    optional dependency is not installed is left out, with a warning."""
     from locbench.suites import ALL_FILTERS
 
-    return [f for f in ALL_FILTERS if tunable_fields(FILTERS.load(f).Config)]
+    out = []
+    for f in ALL_FILTERS:
+        missing = FILTERS.missing_dependency(f)
+        if missing is not None:
+            log.warning("suite tuned leaves out %s: %s", f, missing)
+        elif tunable_fields(FILTERS.load(f).Config):
+            out.append(f)
+    return out
 
 
 def suite_studies() -> list[SuiteStudy]:
@@ -410,7 +418,8 @@ def run_tuned_suite(
     from locbench.runner import plan_sweep, run_sweep
 
     todo = list(studies) if studies is not None else suite_studies()
-    ready, skipped = [], []
+    ready: list[SuiteStudy] = []
+    skipped: list[tuple[SuiteStudy, str]] = []
     for s in todo:
         reason = _study_available(s)
         (skipped.append((s, reason)) if reason else ready.append(s))
@@ -423,7 +432,10 @@ def run_tuned_suite(
         futures = {pool.submit(_run_study, s, results, trials): s for s in order}
         try:
             for fut in cf.as_completed(futures):
-                done.append((futures[fut], fut.result()))
+                try:
+                    done.append((futures[fut], fut.result()))
+                except Exception as exc:  # a study that fails is reported, and the others go on
+                    skipped.append((futures[fut], f"failed: {type(exc).__name__}: {exc}"))
         except KeyboardInterrupt:
             interrupted = True
             for proc in list(getattr(pool, "_processes", {}).values()):
@@ -433,7 +445,11 @@ def run_tuned_suite(
             pool.shutdown(wait=not interrupted, cancel_futures=True)
     else:
         for s in ready:
-            r = tune(s.filter, s.train, trials, s.seeds, results, executor=executor, jobs=jobs, scheduler=scheduler)
+            try:
+                r = tune(s.filter, s.train, trials, s.seeds, results, executor=executor, jobs=jobs, scheduler=scheduler)
+            except LocbenchError as exc:
+                skipped.append((s, f"failed: {exc}"))
+                continue
             done.append((s, r))
             if r.interrupted:
                 interrupted = True
