@@ -283,18 +283,24 @@ def tune(
             seed=sampler_seed + done + running, n_startup_trials=max(2, trials // 2), constant_liar=True
         )
         trial = study.ask(dists)
-        spec = trial_spec(ident, fixed, trial.params)
-        trial.set_user_attr("spec", spec)
-        plan = plan_sweep([([spec], dnames, seed_list)], str(train_root))
-        if not plan.tasks:
-            result.reused += 1
-        sweep = run_sweep(plan, executor, jobs, scheduler)
-        if sweep.interrupted:
-            trial.set_user_attr("message", "interrupted")
+        try:
+            spec = trial_spec(ident, fixed, trial.params)
+            trial.set_user_attr("spec", spec)
+            plan = plan_sweep([([spec], dnames, seed_list)], str(train_root))
+            if not plan.tasks:
+                result.reused += 1
+            sweep = run_sweep(plan, executor, jobs, scheduler)
+            if sweep.interrupted:
+                raise KeyboardInterrupt
+            value, message = score_trial(store, spec, dnames, seed_list, objective)
+        except BaseException as exc:
+            # Ctrl-C or an error of the command: the trial is failed (the sampler ignores it), never left running
+            trial.set_user_attr("message", "interrupted" if isinstance(exc, KeyboardInterrupt) else str(exc))
             study.tell(trial, state=states.FAIL)
+            if not isinstance(exc, KeyboardInterrupt):
+                raise
             result.interrupted = True
             break
-        value, message = score_trial(store, spec, dnames, seed_list, objective)
         if message:
             trial.set_user_attr("message", message)
         study.tell(trial, value)
@@ -490,7 +496,7 @@ def write_summary(results: str, done: Sequence[tuple[SuiteStudy, TuneResult]]) -
                 "budget_runs": r.budget_runs,
                 "best_spec": best.spec if best else None,
                 "best_value": best.value if best else None,
-                "tuned": {k: tuned_cfg.get(k, getattr(default_cfg, k)) for k in space},
+                "tuned": {k: tuned_cfg.get(k, getattr(default_cfg, k)) for k in space} if best else {},
                 "defaults": {k: getattr(default_cfg, k) for k in space},
                 "ranges": {k: rng.describe() for k, rng in space.items()},
             }

@@ -134,7 +134,14 @@ def values_table(studies: list[dict[str, Any]]) -> Table:
     for s in studies:
         for k, rng in s["ranges"].items():
             rows.append(
-                (f"`{s['filter']}`", s["world"], f"`{k}`", _value(s["defaults"][k]), _value(s["tuned"][k]), rng)
+                (
+                    f"`{s['filter']}`",
+                    s["world"],
+                    f"`{k}`",
+                    _value(s["defaults"][k]),
+                    _value(s["tuned"][k]) if k in s["tuned"] else "-",
+                    rng,
+                )
             )
     return Table(
         ("filter", "data", "parameter", "default", "tuned", "range searched"),
