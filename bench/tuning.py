@@ -314,7 +314,7 @@ def tune(
 
 
 #: Trials per study and train runs per trial of the tuned suite: the budget every filter gets (docs/protocols.md).
-SUITE_TRIALS = 6
+SUITE_TRIALS = 4
 SUITE_TRAIN_SEEDS = 3
 #: The test seeds of the synthetic worlds: the main comparison's own (suite ``default``), so the default rows are
 #: the stored ones and tuned and default runs are paired by seed.
