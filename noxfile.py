@@ -66,11 +66,12 @@ def lint(session: nox.Session) -> None:
 
 @nox.session(python=PYTHON, default=False)
 def bench(session: nox.Session) -> None:
-    """Run suites 'all' and 'consistency', verify a sample of the stored runs (``locbench verify``) and write
-    results/summary; with 'locbench run' arguments after --, a sub-suite into results/custom (never over the
+    """Run suites 'all', 'consistency' and 'tuned' (each filter tuned on train data, then run on the test data),
+    verify a sample of the stored runs (``locbench verify``) and write results/summary; with 'locbench run'
+    arguments after --, a sub-suite into results/custom (never over the
     committed results/summary)."""
     _install(session, "all")
-    args = list(session.posargs) or ["--suite", "all", "consistency", "--jobs", "2"]
+    args = list(session.posargs) or ["--suite", "all", "consistency", "tuned", "--jobs", "2"]
     results = "results" if not session.posargs else "results/custom"
     if "--results" in args:
         results = args[args.index("--results") + 1]
@@ -98,9 +99,10 @@ def bench(session: nox.Session) -> None:
 
 @nox.session(python=PYTHON, default=False)
 def report(session: nox.Session) -> None:
-    """Regenerate results/summary (tables, figures, metrics.csv, index.html) from the stored runs of suite 'all'."""
+    """Regenerate results/summary (tables, figures, metrics.csv, index.html) from the stored runs of suites 'all',
+    'consistency' and 'tuned'."""
     _install(session, "all")
-    session.run("locbench", "report", "--results", "results", "--jobs", "2", "--suite", "all", "consistency")
+    session.run("locbench", "report", "--results", "results", "--jobs", "2", "--suite", "all", "consistency", "tuned")
 
 
 @nox.session(python=PYTHON, default=False)

@@ -3,6 +3,8 @@
 locbench list [FILTER|DATASET ...]
 locbench run [--suite NAME|FILE.toml | --filter SPEC ... --dataset SPEC ...]
              [--seeds N] [--results DIR] [--jobs N] [--executor local|dask [--scheduler ADDRESS]] [--force]
+locbench tune FILTER --dataset SPEC [SPEC ...] --trials N --seeds K [--results DIR] [--objective ate|nll]
+              [--jobs N] [--executor local|dask [--scheduler ADDRESS]]
 locbench report [--results DIR] [--suite NAME ...] [--out DIR] [--jobs N]
 locbench verify [--results DIR] [--fraction F] [--seed S]
 locbench check [ID ...]
@@ -24,6 +26,9 @@ from typing import Any
 
 from locbench import __version__
 from locbench.errors import ConfigError, LocbenchError
+
+#: The suite that tunes (``locbench run --suite tuned``), run by :mod:`locbench.tuning`, not as blocks of runs.
+TUNED_SUITE = "tuned"
 
 log = logging.getLogger("locbench")
 
@@ -57,6 +62,7 @@ def _list_params(ids: Sequence[str]) -> int:
     from locbench.errors import UnknownIdError
     from locbench.registry import DATASETS, FILTERS
     from locbench.spec import describe_params
+    from locbench.tunable import tunable_fields
 
     for ident in ids:
         if ident in FILTERS:
@@ -67,15 +73,26 @@ def _list_params(ids: Sequence[str]) -> int:
             valid = ", ".join(FILTERS.ids() + DATASETS.ids())
             raise UnknownIdError(f"unknown filter or dataset {ident!r}; valid: {valid}")
         print(f"{kind} {ident}: {reg.entry(ident).summary}")
-        print(f"  written {ident}[key=value,...]; a grid: key=a|b|c")
-        rows = [(p.name, p.type, p.default, p.unit, p.meaning) for p in describe_params(cls)]
+        tunable = tunable_fields(cls) if kind == "filter" else None
+        tune = f"; tunable ('locbench tune {ident}'): {', '.join(tunable) or 'none'}" if tunable is not None else ""
+        print(f"  written {ident}[key=value,...]; a grid: key=a|b|c{tune}")
+        rows = [
+            (p.name, p.type, p.default, p.unit)
+            + ((tunable[p.name].describe() if p.name in tunable else "-",) if tunable is not None else ())
+            + (p.meaning,)
+            for p in describe_params(cls)
+        ]
         if not rows:
             print("  (no parameters)")
             continue
-        head = ("parameter", "type", "default", "unit", "meaning")
-        widths = [max(len(r[i]) for r in [*rows, head]) for i in range(4)]
+        head: tuple[str, ...] = ("parameter", "type", "default", "unit")
+        if tunable is not None:
+            head += ("tuning range",)
+        head += ("meaning",)
+        n = len(head) - 1
+        widths = [max(len(r[i]) for r in [*rows, head]) for i in range(n)]
         for r in [head, *rows]:
-            print("  " + "  ".join(c.ljust(w) for c, w in zip(r[:4], widths, strict=True)) + "  " + r[4])
+            print("  " + "  ".join(c.ljust(w) for c, w in zip(r[:n], widths, strict=True)) + "  " + r[n])
     return 0
 
 
@@ -100,16 +117,45 @@ def _cmd_run(args: argparse.Namespace) -> int:
     else:
         blocks = []
         for name in args.suite or ["default"]:
+            if name == TUNED_SUITE:
+                continue
             suite = get_suite(name)
             blocks += list((suite.with_seeds(args.seeds) if args.seeds else suite).blocks)
-    # every spec is resolved and validated here, before anything runs or is written
-    plan = plan_sweep([(b.filters, b.datasets, range(b.seeds)) for b in blocks], args.results, args.force)
-    with tqdm(total=plan.total, unit="run", desc="locbench run", disable=True if args.no_progress else None) as bar:
-        sweep = run_sweep(plan, args.executor, args.jobs, args.scheduler, progress=bar.update)
-    if sweep.interrupted:
-        print(f"interrupted: {sweep.stored} of {sweep.total} runs stored; run the same command to resume")
+    tuned = TUNED_SUITE in (args.suite or [])
+    rc = 0
+    if blocks or not tuned:
+        # every spec is resolved and validated here, before anything runs or is written
+        plan = plan_sweep([(b.filters, b.datasets, range(b.seeds)) for b in blocks], args.results, args.force)
+        bar = tqdm(total=plan.total, unit="run", desc="locbench run", disable=True if args.no_progress else None)
+        with bar:
+            sweep = run_sweep(plan, args.executor, args.jobs, args.scheduler, progress=bar.update)
+        if sweep.interrupted:
+            print(f"interrupted: {sweep.stored} of {sweep.total} runs stored; run the same command to resume")
+            return 130
+        rc = _print_summary(sweep, args.results)
+    if tuned:
+        rc = max(rc, _run_tuned(args))
+    return rc
+
+
+def _run_tuned(args: argparse.Namespace) -> int:
+    """Suite ``tuned``: every study (tuning on train data), then the tuned and default configurations on test data."""
+    from locbench.runner import SweepResult
+    from locbench.tuning import run_tuned_suite
+
+    res = run_tuned_suite(args.results, executor=args.executor, jobs=args.jobs, scheduler=args.scheduler)
+    for s, reason in res.skipped:
+        print(f"  tuned: skipped {s.filter} on {', '.join(s.train)}: {reason}")
+    if res.interrupted:
+        print("interrupted: suite tuned stopped; the finished trials are kept; run the same command to resume")
         return 130
-    return _print_summary(sweep, args.results)
+    for s, r in res.studies:
+        best = r.best
+        print(
+            f"  tuned {s.filter} on {s.world}: {len(r.trials)} trials x {len(s.train) * s.seeds} train runs, best "
+            + (f"{best.value:.4g} ({r.objective}): {best.spec}" if best else "none (every trial failed)")
+        )
+    return _print_summary(SweepResult(res.outcomes, len(res.outcomes)), args.results)
 
 
 def _print_summary(sweep: Any, results: str) -> int:
@@ -157,7 +203,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
     store = Store(args.results)
     if not store.runs.is_dir():
         raise ConfigError(f"{store.runs}: no stored runs; run 'locbench run' first")
-    keep = suite_filter(*args.suite) if args.suite else None
+    keep = suite_filter(*args.suite, results=args.results) if args.suite else None
     out = Path(args.out) if args.out else None
     if args.jobs < 1:
         raise ConfigError(f"--jobs must be >= 1, got {args.jobs}")
@@ -186,6 +232,46 @@ def _cmd_verify(args: argparse.Namespace) -> int:
         f"(fraction {args.fraction:g}, seed {args.seed}); record {record}"
     )
     return 0 if res.passed else 1
+
+
+def _cmd_tune(args: argparse.Namespace) -> int:
+    from locbench.tuning import tune
+
+    if args.jobs < 1:
+        raise ConfigError(f"--jobs must be >= 1, got {args.jobs}")
+    if args.scheduler and args.executor != "dask":
+        raise ConfigError("--scheduler needs --executor dask")
+
+    def show(t: Any) -> None:
+        value = f"{t.value:.6g}" if t.value != float("inf") else "worst (" + t.message + ")"
+        print(f"trial {t.number}: {value}  {t.spec}", flush=True)
+
+    res = tune(
+        args.filter,
+        args.dataset,
+        args.trials,
+        args.seeds,
+        args.results,
+        executor=args.executor,
+        jobs=args.jobs,
+        scheduler=args.scheduler,
+        objective=args.objective,
+        progress=show,
+    )
+    if res.interrupted:
+        print(f"interrupted: {len(res.trials)} trials finished; run the same command to resume")
+        return 130
+    best = res.best
+    print(
+        f"{res.name}: {len(res.trials)} trials x {len(res.datasets) * len(res.seeds)} train runs = "
+        f"{res.budget_runs} runs ({res.reused} trial(s) read back from stored runs)"
+    )
+    if best is None:
+        print("locbench: error: every trial failed or diverged; no configuration to give", file=sys.stderr)
+        return 1
+    print(f"best {res.objective} {best.value:.6g} at trial {best.number}")
+    print(best.spec)
+    return 0
 
 
 def _cmd_check(args: argparse.Namespace) -> int:
@@ -326,6 +412,24 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--fraction", type=float, default=0.02, help="share of the stored runs to re-run (default 0.02)")
     v.add_argument("--seed", type=int, default=0, help="seed of the random sample (default 0)")
     v.set_defaults(func=_cmd_verify)
+    tu = sub.add_parser(
+        "tune",
+        help="tune a filter's tunable parameters on train data (optuna TPE); prints the best spec last",
+    )
+    tu.add_argument("filter", metavar="FILTER", help="a filter id or a spec whose parameters stay fixed")
+    tu.add_argument(
+        "--dataset", nargs="+", action="extend", required=True, metavar="SPEC", help="train datasets (e.g. room)"
+    )
+    tu.add_argument("--trials", type=int, required=True, help="finished trials the study should hold")
+    tu.add_argument(
+        "--seeds", type=int, required=True, help="train seeds per dataset (1000 .. 1000+K-1, apart from test seeds)"
+    )
+    tu.add_argument("--objective", choices=("ate", "nll"), default="ate", help="mean ATE (default) or NLL")
+    tu.add_argument("--results", default=_results_default(), help="results folder; runs and study go to RESULTS/tuning")
+    tu.add_argument("--jobs", type=int, default=1, help="worker processes for each trial's runs (default 1)")
+    tu.add_argument("--executor", choices=("local", "dask"), default="local", help="as for 'locbench run'")
+    tu.add_argument("--scheduler", default=None, metavar="ADDRESS", help="with --executor dask: a running scheduler")
+    tu.set_defaults(func=_cmd_tune)
 
     c = sub.add_parser("check", help="conformance checks for filters and datasets")
     c.add_argument("ids", nargs="*", help="filter or dataset ids/specs (default: all registered)")

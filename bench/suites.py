@@ -238,6 +238,14 @@ _SUITES: tuple[Suite, ...] = (
         "accuracy against runtime: the main cost knob of each filter on office (pf particles, ekf_icp ICP "
         "iterations, gtsam_fls lag, ekf_landmarks' association gate)",
     ),
+    # Run by locbench.tuning (locbench run --suite tuned), not as blocks: each tunable filter tuned on train seeds
+    # and recordings, then its tuned configuration and its default on the test data (docs/protocols.md, Tuning).
+    Suite(
+        "tuned",
+        (),
+        "every tunable filter tuned (optuna TPE, the same budget each) on room, office and MRCLAM 6 robots 1-3, "
+        "then run on the test seeds 0-19 and robots 4-5 beside its default",
+    ),
     Suite(
         "smoke",
         (Block(("odometry", "ekf_landmarks", "ekf_landmarks[association=nearest]"), ("tiny_line", "tiny_circle"), 2),),

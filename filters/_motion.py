@@ -46,6 +46,7 @@ wheel travel in m (positive forward); increments in the previous robot frame.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from dataclasses import dataclass, field
@@ -55,9 +56,11 @@ import numpy as np
 import numpy.typing as npt
 
 from locbench.datasets.base import SensorSpec
+from locbench.errors import ConfigError
 from locbench.events import Odometry
 from locbench.geometry import wrap_angle, wrap_scalar
 from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
+from locbench.tunable import tunable
 
 FloatArray = npt.NDArray[np.float64]
 InputNoise = Literal["per_step", "cumulative"]
@@ -447,6 +450,23 @@ class MotionNoise:
         """Whether a twist noise was given (config or dataset)."""
         return self.twist_sigma_v_mps is not None or self.twist_sigma_omega_radps is not None
 
+    def scaled(self, factor: float) -> MotionNoise:
+        """The same model with every standard deviation (encoder constants, increment, twist noise) times ``factor``."""
+
+        def mul(v: float | None) -> float | None:
+            return None if v is None else v * factor
+
+        return dataclasses.replace(
+            self,
+            k_left=self.k_left * factor,
+            k_right=self.k_right * factor,
+            sigma_xy_per_m=self.sigma_xy_per_m * factor,
+            sigma_theta_per_m=self.sigma_theta_per_m * factor,
+            sigma_theta_per_rad=self.sigma_theta_per_rad * factor,
+            twist_sigma_v_mps=mul(self.twist_sigma_v_mps),
+            twist_sigma_omega_radps=mul(self.twist_sigma_omega_radps),
+        )
+
     def twist_sigmas(self, u: Odometry) -> tuple[float, float] | None:
         """(sigma_v m/s, sigma_omega rad/s) when the twist noise applies to ``u``, else None."""
         if not self.twist_given or u.v is None or u.omega is None or u.dt is None:
@@ -476,6 +496,9 @@ class MotionNoiseConfig:
         Overrides of the increment noise (m/sqrt(m), rad/sqrt(m), rad/sqrt(rad)); None: the dataset's.
     twist_sigma_v_mps, twist_sigma_omega_radps : float or None
         Overrides of the white noise of a measured twist (m/s, rad/s); None: the dataset's (module docstring).
+    motion_noise_scale : float
+        Factor on every motion standard deviation above (encoder constants, increment and twist noise) after
+        they are resolved. Default 1 (the nominal model); the one motion knob a tuner searches.
     """
 
     input_noise: InputNoise = "per_step"
@@ -487,10 +510,18 @@ class MotionNoiseConfig:
     odometry_sigma_theta_per_rad: float | None = None
     twist_sigma_v_mps: float | None = field(default=None, metadata=RUN_KEY_OMIT_IF_DEFAULT)
     twist_sigma_omega_radps: float | None = field(default=None, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    # one knob over every motion noise source (encoders, increments, twist): what a tuner searches
+    motion_noise_scale: float = field(default=1.0, metadata=tunable(0.1, 10.0, log=True, base=RUN_KEY_OMIT_IF_DEFAULT))
+
+    def check_motion_noise(self) -> None:
+        """Raise :class:`ConfigError` for a bad ``motion_noise_scale`` (each config's ``__post_init__`` calls it)."""
+        if not (math.isfinite(self.motion_noise_scale) and self.motion_noise_scale > 0.0):
+            raise ConfigError(f"motion_noise_scale must be a finite factor > 0, got {self.motion_noise_scale}")
 
     def motion_noise(self, sensors: SensorSpec) -> MotionNoise:
-        """The noise model: each override, else the dataset's nominal value, else the module default."""
-        return resolve_motion_noise(
+        """The noise model: each override, else the dataset's nominal value, else the module default; every
+        standard deviation multiplied by ``motion_noise_scale``."""
+        noise = resolve_motion_noise(
             sensors,
             input_noise=self.input_noise,
             wheelbase_m=self.wheelbase_m,
@@ -502,6 +533,7 @@ class MotionNoiseConfig:
             twist_sigma_v_mps=self.twist_sigma_v_mps,
             twist_sigma_omega_radps=self.twist_sigma_omega_radps,
         )
+        return noise if self.motion_noise_scale == 1.0 else noise.scaled(self.motion_noise_scale)
 
 
 def resolve_motion_noise(

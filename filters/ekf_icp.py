@@ -63,7 +63,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
@@ -78,6 +78,7 @@ from locbench.filters.base import Estimate, Filter, FilterConfig, gaussian_healt
 from locbench.geometry import wrap_scalar
 from locbench.limits import RAYCAST_BYTES_PER_CELL, check_bytes, grid_cells
 from locbench.raycast import cast_scan
+from locbench.tunable import tunable
 
 FloatArray = npt.NDArray[np.float64]
 logger = logging.getLogger(__name__)
@@ -144,13 +145,13 @@ class IcpEKFConfig(FilterConfig):
     q_x_dyn_m2_per_m: float = 0.001
     q_y_dyn_m2_per_m: float = 0.001
     q_theta_dyn_rad2_per_rad: float = 0.0011
-    r_x_m2: float = 0.008
-    r_y_m2: float = 0.008
-    r_theta_rad2: float = 0.01
+    r_x_m2: float = field(default=0.008, metadata=tunable(1e-6, 0.1, log=True))
+    r_y_m2: float = field(default=0.008, metadata=tunable(1e-6, 0.1, log=True))
+    r_theta_rad2: float = field(default=0.01, metadata=tunable(1e-6, 0.1, log=True))
     static_noise_period_s: float = 0.1
-    max_iterations: int = 700
+    max_iterations: int = field(default=700, metadata=tunable(5, 700, log=True, integer=True))
     transformation_epsilon: float = 5e-7
-    correspondence_sigmas: float = 3.0
+    correspondence_sigmas: float = field(default=3.0, metadata=tunable(1.0, 6.0))
     max_correspondence_cap_m: float = 1.0
     min_matched_fraction: float = 0.5
     min_matched_points: int = 10

@@ -80,6 +80,7 @@ from locbench.filters._noise import landmark_noise, range_only_noise
 from locbench.filters.base import Estimate, Filter, FilterConfig
 from locbench.geometry import wrap_angle, wrap_scalar
 from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
+from locbench.tunable import tunable
 
 FloatArray = npt.NDArray[np.float64]
 logger = logging.getLogger(__name__)
@@ -170,12 +171,13 @@ class LandmarkEKFConfig(FilterConfig, MotionNoiseConfig):
     prune_margin_m: float = 0.5
     prune_margin_rad: float = 0.2
     use_pose_fixes: bool = False
-    sigma_range_m: float | None = None
-    sigma_bearing_rad: float | None = None
+    sigma_range_m: float | None = field(default=None, metadata=tunable(1e-3, 1.0, log=True))
+    sigma_bearing_rad: float | None = field(default=None, metadata=tunable(1e-3, 0.5, log=True))
     range_only_sigma_m: float | None = field(default=None, metadata=RUN_KEY_OMIT_IF_DEFAULT)
     range_gate_probability: float = field(default=0.99, metadata=RUN_KEY_OMIT_IF_DEFAULT)
 
     def __post_init__(self) -> None:
+        self.check_motion_noise()
         if not 0.0 < self.gate_probability < 1.0:
             raise ConfigError(f"gate_probability must be in (0, 1), got {self.gate_probability}")
         if not 0.0 < self.range_gate_probability <= 1.0:

@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
@@ -60,6 +60,7 @@ from locbench.filters._line_extraction import ExtractedLines, ExtractionParams, 
 from locbench.filters._motion import MotionModel, propagate_covariance, resolve_motion_noise
 from locbench.filters.base import Estimate, Filter, FilterConfig
 from locbench.geometry import TWO_PI, wrap_angle, wrap_scalar
+from locbench.tunable import tunable
 
 FloatArray = npt.NDArray[np.float64]
 logger = logging.getLogger(__name__)
@@ -131,11 +132,11 @@ class LineEKFConfig(FilterConfig):
         Overrides of the dataset's nominal increment noise (m/sqrt(m), rad/sqrt(m), rad/sqrt(rad)).
     """
 
-    chi2_threshold: float = CHI2_2DOF_099
+    chi2_threshold: float = field(default=CHI2_2DOF_099, metadata=tunable(1.0, 30.0, log=True))
     reject_longer: bool = True
     length_margin_m: float = 0.1
-    sigma_rho_m: float = 0.02
-    sigma_psi_rad: float = 0.0175
+    sigma_rho_m: float = field(default=0.02, metadata=tunable(1e-3, 0.5, log=True))
+    sigma_psi_rad: float = field(default=0.0175, metadata=tunable(1e-3, 0.5, log=True))
     sigma_dx_m: float = 0.001
     sigma_dy_m: float = 0.001
     sigma_dtheta_rad: float = 0.0005
@@ -143,8 +144,8 @@ class LineEKFConfig(FilterConfig):
     split_threshold_m: float = 0.05
     min_points: int = 4
     min_length_m: float = 0.3
-    odometry_sigma_xy_per_m: float | None = None
-    odometry_sigma_theta_per_m: float | None = None
+    odometry_sigma_xy_per_m: float | None = field(default=None, metadata=tunable(1e-3, 0.2, log=True))
+    odometry_sigma_theta_per_m: float | None = field(default=None, metadata=tunable(1e-3, 0.5, log=True))
     odometry_sigma_theta_per_rad: float | None = None
 
     def __post_init__(self) -> None:

@@ -84,6 +84,7 @@ from locbench.filters._noise import landmark_noise, range_only_noise
 from locbench.filters.base import Estimate, Filter, FilterConfig
 from locbench.geometry import wrap_angle, wrap_scalar
 from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
+from locbench.tunable import tunable
 
 try:
     import gtsam
@@ -172,14 +173,15 @@ class GtsamFLSConfig(FilterConfig, MotionNoiseConfig):
     landmark_sigma_m: float = 0.001
     use_pose_fixes: bool = False
     pose_fix_heading_sigma_rad: float = 1000.0
-    sigma_range_m: float | None = None
-    sigma_bearing_rad: float | None = None
+    sigma_range_m: float | None = field(default=None, metadata=tunable(1e-3, 1.0, log=True))
+    sigma_bearing_rad: float | None = field(default=None, metadata=tunable(1e-3, 0.5, log=True))
     range_only_sigma_m: float | None = field(default=None, metadata=RUN_KEY_OMIT_IF_DEFAULT)
     range_gate_probability: float = field(default=0.99, metadata=RUN_KEY_OMIT_IF_DEFAULT)
     range_robust: Literal["huber", "none"] = field(default="huber", metadata=RUN_KEY_OMIT_IF_DEFAULT)
     range_huber_k: float = field(default=1.345, metadata=RUN_KEY_OMIT_IF_DEFAULT)
 
     def __post_init__(self) -> None:
+        self.check_motion_noise()
         if not self.lag_s > 0.0:
             raise ConfigError(f"lag_s must be > 0 s, got {self.lag_s}")
         if not 0.0 < self.gate_probability < 1.0:

@@ -49,7 +49,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
@@ -64,6 +64,7 @@ from locbench.filters._motion import increment_variances, resolve_motion_noise
 from locbench.filters._scan_database import ScanDatabase, build_database, lattice_too_large, match_scan
 from locbench.filters.base import Estimate, Filter, FilterConfig, gaussian_health
 from locbench.geometry import wrap_scalar
+from locbench.tunable import tunable
 
 FloatArray = npt.NDArray[np.float64]
 logger = logging.getLogger(__name__)
@@ -111,16 +112,16 @@ class LinearKFConfig(FilterConfig):
 
     grid_step_m: float = 0.25
     heading_step_deg: float = 5.0
-    tolerance_m: float | None = None
+    tolerance_m: float | None = field(default=None, metadata=tunable(0.02, 1.0, log=True))
     max_range_m: float = 8.0
     clearance_m: float = 0.2
     min_bearings: int = 4
-    gate_probability: float = 0.999
+    gate_probability: float = field(default=0.999, metadata=tunable(0.9, 0.99999))
     use_commands: bool = True
     sigma_floor_xy_m: float = 0.001
     sigma_floor_theta_rad: float = 0.0005
-    odometry_sigma_xy_per_m: float | None = None
-    odometry_sigma_theta_per_m: float | None = None
+    odometry_sigma_xy_per_m: float | None = field(default=None, metadata=tunable(1e-3, 0.2, log=True))
+    odometry_sigma_theta_per_m: float | None = field(default=None, metadata=tunable(1e-3, 0.5, log=True))
     odometry_sigma_theta_per_rad: float | None = None
 
     def __post_init__(self) -> None:

@@ -150,6 +150,7 @@ from locbench.limits import (
     grid_cells,
 )
 from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
+from locbench.tunable import tunable
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -290,7 +291,7 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
     augmented: bool = False
     alpha_slow: float = 0.001
     alpha_fast: float = 0.1
-    roughening_k: float = 0.2
+    roughening_k: float = field(default=0.2, metadata=tunable(0.0, 1.0))
     regularise: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)
     inject: Literal["uniform", "sensor"] = field(default="uniform", metadata=RUN_KEY_OMIT_IF_DEFAULT)
     inject_pairs: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)
@@ -319,10 +320,11 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
     sigma_y_m: float = 0.001
     sigma_theta_rad: float = 0.0005
     motion_model: MotionKind = "auto"
-    sigma_range_m: float | None = None
-    sigma_bearing_rad: float | None = None
+    sigma_range_m: float | None = field(default=None, metadata=tunable(1e-3, 1.0, log=True))
+    sigma_bearing_rad: float | None = field(default=None, metadata=tunable(1e-3, 0.5, log=True))
 
     def __post_init__(self) -> None:
+        self.check_motion_noise()
         if self.adaptive not in ("none", "kld"):
             raise ConfigError(f"adaptive must be 'none' or 'kld', got {self.adaptive!r}")
         if not 2 <= self.min_particles <= self.max_particles:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -23,6 +23,7 @@ from locbench.datasets.base import (
 from locbench.errors import FilterDiverged
 from locbench.events import LandmarkObservations, Odometry
 from locbench.filters.base import Estimate, Filter, FilterConfig
+from locbench.tunable import tunable
 
 # --- a hand-made dataset: straight line at 1 m/s, one landmark, 10 Hz ------------------------------
 
@@ -106,3 +107,19 @@ class BadFilter(Filter):
 
     def estimate(self) -> Estimate:
         return Estimate(self._t, self._x.copy(), np.eye(3) * 0.01)
+
+
+# --- a filter with a tunable parameter that makes it diverge (the tuner's worst score) --------------------
+
+
+@dataclass(frozen=True, kw_only=True)
+class TunableBadConfig(FilterConfig):
+    #: below the dataset's duration (5 s on ``line``) the filter diverges at that time
+    fail_at_s: float = field(default=1.0, metadata=tunable(0.5, 20.0))
+    mode: str = "diverge"
+
+
+class TunableBadFilter(BadFilter):
+    """:class:`BadFilter` whose failure time is tunable: a tuner must score its diverging trials as the worst."""
+
+    Config = TunableBadConfig

@@ -97,9 +97,16 @@ def summary_text(tables: tuple[Table, ...]) -> str:
     return "\n".join(out)
 
 
-def suite_filter(*suite_names: str) -> Keep:
-    """``keep(dataset, filter)`` for the cells of named suites or suite files (grids expanded, canonical names)."""
+def suite_filter(*suite_names: str, results: str | Path | None = None) -> Keep:
+    """``keep(dataset, filter)`` for the cells of named suites or suite files (grids expanded, canonical names).
+
+    Suite ``tuned`` has its cells in the results folder (its tuned configurations on the test data,
+    :func:`locbench.tuning.tuned_cells`), so it needs ``results``.
+    """
     from locbench.suites import suite_pairs
+    from locbench.tuning import tuned_cells
 
     cells = {(d.name, f.name) for name in suite_names for f, d in suite_pairs(name)}
+    if "tuned" in suite_names and results is not None:
+        cells |= tuned_cells(results)
     return lambda dataset, filt: (dataset, filt) in cells

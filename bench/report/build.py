@@ -29,6 +29,7 @@ from locbench.report.doc import Bullets, Plot, Section, Table, Text
 from locbench.report.reference import INDEPENDENT_KINDS, KINDS, kind_caption, robustness_table, semi_synthetic
 from locbench.report.reference import reference_kind as _reference_kind
 from locbench.report.style import LineStyle, style_for
+from locbench.report.tuning import tuning_section
 from locbench.spec import Spec
 
 #: The kidnap protocol's dataset parameter (DESIGN "Kidnap recovery"): variants differing only in it form one
@@ -133,6 +134,7 @@ class Report:
         out = [
             self.summary(),
             sig.across_datasets(self),
+            tuning_section(self.col) or Section("", ""),
             self.claims(),
             self.pareto(),
             self.consistency(),

@@ -27,7 +27,28 @@ def finish(ax: Axes, xlabel: str, ylabel: str, title: str) -> None:
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     ax.set_title(title)
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+    handles, labels = ax.get_legend_handles_labels()
+    labels = [wrap_label(x) for x in labels]
+    ax.legend(handles, labels, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+
+
+#: Legend labels longer than this (a tuned configuration's spec) are wrapped after commas.
+LABEL_WRAP = 80
+
+
+def wrap_label(label: str, width: int = LABEL_WRAP) -> str:
+    """A long label broken after commas into lines of at most about ``width`` * 3/4 characters; short ones as given."""
+    if len(label) <= width:
+        return label
+    lines, line = [], ""
+    for part in label.split(","):
+        piece = part + ","
+        if line and len(line) + len(piece) > width * 3 // 4:
+            lines.append(line)
+            line = ""
+        line += piece
+    lines.append(line.rstrip(","))
+    return "\n".join(lines)
 
 
 def pareto_front(x: np.ndarray, y: np.ndarray) -> np.ndarray:
