@@ -240,3 +240,10 @@ def test_the_html_cell_carries_the_hover_and_the_markdown_does_not() -> None:
     page = to_html("T", [], [sec], {})
     assert '<td title="against a: &lt;x&gt;"><strong>1.1</strong></td>' in page
     assert "against a" not in to_markdown("T", [], [sec])
+
+
+def test_a_column_with_one_candidate_is_not_called_untested() -> None:
+    rows = [["`x`", "1"], ["`odometry`", "2"]]
+    columns = [Column(1, METRICS["ate_m"], [dict(enumerate(np.ones(SEEDS))), dict(enumerate(np.ones(SEEDS)))])]
+    marks = mark_ties(rows, [[math.nan, 1.0], [math.nan, 2.0]], columns, [True, False])
+    assert rows[0][1] == "**1**" and not marks.untested and tie_footnote(marks) != UNTESTED_FOOTNOTE

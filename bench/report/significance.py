@@ -183,9 +183,9 @@ def mark_ties(
             )
             for i in v.marked:
                 rows[i][c.index] = f"**{rows[i][c.index]}**"
-            if v.best is None:
+            if v.best is None or not v.comparisons:  # a group with one candidate has nothing to test
                 continue
-            col_untested.append(not any(x.test.tested for x in v.comparisons))
+            col_untested.append(v.untested)
             if hovers is not None:
                 for x in v.comparisons:
                     hovers[x.index][c.index] = effect_hover(c.info, x, names[v.best])
