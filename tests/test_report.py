@@ -476,6 +476,8 @@ def test_configurations_of_a_sweep_are_listed_in_numeric_order() -> None:
 
 
 def test_report_writes_comparisons_and_says_when_no_test_is_possible(store: Store) -> None:
+    for seed in range(N_SEEDS):  # a second candidate, so the columns have a comparison to (not) test
+        store.write_run(_fake_run(_fake_truth(seed), "ukf_landmarks", drift=0.001, sigma=0.01))
     paths = write_report(store)
     csv = pd.read_csv(store.summary / "comparisons.csv")
     # the columns, in its order
