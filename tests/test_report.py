@@ -496,6 +496,8 @@ def test_configurations_of_a_sweep_are_listed_in_numeric_order() -> None:
 
 
 def test_report_writes_comparisons_and_says_when_no_test_is_possible(store: Store) -> None:
+    for seed in range(N_SEEDS):  # a second candidate, so the columns have a comparison to (not) test
+        store.write_run(_fake_run(_fake_truth(seed), "ukf_landmarks", drift=0.001, sigma=0.01))
     paths = write_report(store)
     csv = pd.read_csv(store.summary / "comparisons.csv")
     # the issue's columns, in its order
@@ -506,3 +508,22 @@ def test_report_writes_comparisons_and_says_when_no_test_is_possible(store: Stor
     assert "no paired test is possible, so only the best value is in bold" in text
     assert "Seed audit" in text and "Paired comparisons" in text and "| test (n, p) |" in text
     assert "verify: `locbench verify` has not been run on this store" in text
+
+
+def test_table1_marks_the_tie_at_a_waypoint_and_not_the_shift() -> None:
+    """Report 003's table 1 ranks the measured rows per waypoint: identical errors tie, a shift on every seed not."""
+    from locbench.report.doc import Table
+
+    ekf = [0.01, 0.02, 0.03, 0.04, 0.05]
+    pf = [0.01, 0.07, 0.03, 0.04, 0.05]
+    odo = [0.001] * 5  # the baseline: lowest, never marked
+    rows = _tidy({"ekf_landmarks": ekf, "pf": pf, "odometry": odo}, seeds=8)
+    table = next(b for b in report_003._table1_section(rows, "room") if isinstance(b, Table))
+    by = {r[0]: (r, h) for r, h in zip(table.rows, table.hovers, strict=True)}
+    names = ("ekf_landmarks", "pf", "odometry")
+    (ekf_row, _), (pf_row, pf_tip), (odo_row, _) = (by[f"`{f}` (measured)"] for f in names)
+    assert ekf_row[1].startswith("**") and pf_row[1].startswith("**")  # waypoint 1: identical, tied
+    assert ekf_row[2].startswith("**") and not pf_row[2].startswith("**")  # waypoint 2: 5 cm worse on every seed
+    assert not any(c.startswith("**") for c in odo_row[1:])
+    assert "against ekf_landmarks: median paired difference 5 cm" in pf_tip[2]
+    assert not any(c.startswith("**") for c in by["`pf` (003 table 1)"][0][1:])

@@ -5,11 +5,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pandas as pd
 import pytest
 from scipy import stats
 
 from locbench import significance as sg
-from locbench.report.significance import dataset_groups
+from locbench.metrics import METRICS
+from locbench.report.doc import Section, Table
+from locbench.report.significance import UNTESTED_FOOTNOTE, Column, dataset_groups, mark_ties, tie_footnote
 
 SEEDS = 20
 
@@ -138,3 +141,109 @@ def test_dataset_groups_keep_the_largest_shared_sets() -> None:
     assert (("a", "b", "c", "d"), ("w1", "w2", "w3")) in groups
     assert (("a", "b", "c"), ("r1", "r2", "w1", "w2", "w3")) in groups
     assert all("laser" not in g for _, g in groups)  # a set run on one dataset only
+
+
+# --- the experiments' own tables and the HTML hover ---------------------------------------------------------
+
+
+def _scan_grid_rows(seeds: int) -> pd.DataFrame:
+    """Tidy metrics of report 004's section on two variants with known answers per variant.
+
+    ``scan_grid``: ``kf_linear`` best, ``pf`` the same plus noise (tied), ``ekf_landmarks`` shifted by 5 cm
+    (different), ``odometry`` lowest of all but the baseline (never marked). The mixed variant turns it round:
+    ``ekf_landmarks`` is best there and the others are far behind.
+    """
+    rng = np.random.default_rng(7)
+    base = rng.normal(0.10, 0.02, seeds)
+    per = {
+        "scan_grid": {
+            "kf_linear": base,
+            "pf": base + 0.001 * (-1.0) ** np.arange(seeds),  # differences symmetric about 0
+            "ekf_landmarks": base + 0.05,
+            "odometry": base - 0.05,
+        },
+        "scan_grid[mixed_commands=true]": {
+            "kf_linear": base + 0.2,
+            "pf": base + 0.3,
+            "ekf_landmarks": base,
+        },
+    }
+    rows = []
+    for ds, by in per.items():
+        for f, ate in by.items():
+            for s in range(seeds):
+                rows.append((ds, f, s, "ate_m", float(ate[s])))
+                rows.append((ds, f, s, "anees", 3.0 + float(rng.normal(0.0, 0.5))))
+    return pd.DataFrame(rows, columns=["dataset", "filter", "seed", "metric", "value"])
+
+
+def _cell(table: Table, dataset: str, filt: str, column: int) -> tuple[str, str]:
+    for r, h in zip(table.rows, table.hovers, strict=True):
+        if r[0] == f"`{dataset}`" and r[1] == f"`{filt}`":
+            return r[column], h[column]
+    raise AssertionError(f"no row {dataset} {filt}")
+
+
+def test_an_experiment_table_marks_ties_within_each_dataset_and_hovers_the_effect() -> None:
+    from locbench.claims import report_004
+
+    blocks = report_004._section(_scan_grid_rows(SEEDS), "scan_grid")
+    table = next(b for b in blocks if isinstance(b, Table))
+    ate = 3
+    kf, kf_tip = _cell(table, "scan_grid", "kf_linear", ate)
+    twin, twin_tip = _cell(table, "scan_grid", "pf", ate)
+    worse, worse_tip = _cell(table, "scan_grid", "ekf_landmarks", ate)
+    odo, odo_tip = _cell(table, "scan_grid", "odometry", ate)
+    assert kf.startswith("**") and twin.startswith("**")
+    assert not worse.startswith("**") and not odo.startswith("**") and odo_tip == ""
+    # the best's own cell has no comparison; the others hover their effect against it
+    (best, tip) = ("kf_linear", twin_tip) if kf_tip == "" else ("pf", kf_tip)
+    assert f"against {best}" in tip and "p (Holm)" in tip and "Wilcoxon signed-rank, n = 20" in tip
+    assert "median paired difference 5" in worse_tip and "(95 % bootstrap)" in worse_tip
+    # ranked within each dataset: the mixed variant's best is its own
+    assert _cell(table, "scan_grid[mixed_commands=true]", "ekf_landmarks", ate)[0].startswith("**")
+    assert not _cell(table, "scan_grid[mixed_commands=true]", "kf_linear", ate)[0].startswith("**")
+    assert table.footnotes[-1].startswith("Bold: the best value")
+
+
+def test_an_experiment_table_on_too_few_seeds_says_no_test_is_possible() -> None:
+    from locbench.claims import report_004
+
+    blocks = report_004._section(_scan_grid_rows(sg.MIN_PAIRS - 1), "scan_grid")
+    table = next(b for b in blocks if isinstance(b, Table))
+    assert table.footnotes[-1] == UNTESTED_FOOTNOTE
+    assert "no paired test possible" in _cell(table, "scan_grid", "pf", 3)[1]
+    # only the best is bold
+    assert not _cell(table, "scan_grid", "pf", 3)[0].startswith("**")
+
+
+def test_grouped_marks_name_an_untested_column() -> None:
+    rng = np.random.default_rng(3)
+    a = rng.normal(1.0, 0.1, SEEDS)
+    rows = [["`x`", "1", "1"], ["`y`", "2", "2"]]
+    keys = [[math.nan, 1.0, 1.0], [math.nan, 2.0, 2.0]]
+    columns = [
+        Column(1, METRICS["ate_m"], [dict(enumerate(a)), dict(enumerate(a + 1.0))]),
+        Column(2, METRICS["ate_m"], [{0: 1.0}, {0: 2.0}]),
+    ]
+    marks = mark_ties(rows, keys, columns, [True, True])
+    assert marks.tested == (1,) and marks.untested_columns == (2,) and not marks.untested
+    note = tie_footnote(marks, ("filter", "left", "right"))
+    assert "No paired test is possible in right" in note
+
+
+def test_the_html_cell_carries_the_hover_and_the_markdown_does_not() -> None:
+    from locbench.report.render import to_html, to_markdown
+
+    t = Table(("filter", "ATE"), (("`a`", "**1.0**"), ("`b`", "**1.1**")), hovers=(("", ""), ("", "against a: <x>")))
+    sec = Section("S", "s", [t])
+    page = to_html("T", [], [sec], {})
+    assert '<td title="against a: &lt;x&gt;"><strong>1.1</strong></td>' in page
+    assert "against a" not in to_markdown("T", [], [sec])
+
+
+def test_a_column_with_one_candidate_is_not_called_untested() -> None:
+    rows = [["`x`", "1"], ["`odometry`", "2"]]
+    columns = [Column(1, METRICS["ate_m"], [dict(enumerate(np.ones(SEEDS))), dict(enumerate(np.ones(SEEDS)))])]
+    marks = mark_ties(rows, [[math.nan, 1.0], [math.nan, 2.0]], columns, [True, False])
+    assert rows[0][1] == "**1**" and not marks.untested and tie_footnote(marks) != UNTESTED_FOOTNOTE

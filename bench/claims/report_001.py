@@ -28,6 +28,7 @@ The concrete tests, fixed before any run:
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import fields
 from typing import Any
 
@@ -52,9 +53,9 @@ from locbench.claims import (
     test_text,
 )
 from locbench.errors import LocbenchError
-from locbench.metrics import mean_ci
+from locbench.metrics import METRICS, mean_ci
 from locbench.pcrb import is_bound_row
-from locbench.report.doc import Block, Plot, Table, Text
+from locbench.report.doc import Block, Plot, Text
 from locbench.report.style import PALETTE
 from locbench.significance import ALPHA, TestResult, mann_whitney, wilcoxon_paired
 from locbench.spec import build_params
@@ -397,20 +398,26 @@ def layout_section(df: pd.DataFrame, slug: str) -> list[Block]:
         return [Text("No runs of the base variants.")]
     filters = sorted({str(f) for f in base["filter"].unique()}, key=lambda f: (is_bound_row(f), f != "odometry", f))
     paths = [p for p in PATH_ORDER if p in set(base["path"])]
+    from locbench.report import significance as sig  # imported here: it imports this package
+
     rows: list[tuple[str, ...]] = []
     series: list[tuple[str, str, list[float]]] = []
+    per_run: list[list[dict[int, float] | None]] = []
     for f in filters:
         for p in paths:
             sub = base[(base["filter"] == f) & (base["path"] == p)]
             if not len(sub):
                 continue
-            cells, means = [], []
+            cells, means, runs = [], [], []
             for lay in LAYOUT_ORDER:
-                vals = sub.loc[sub["landmarks"] == lay, "value"].to_numpy(dtype=np.float64)
+                at = sub[sub["landmarks"] == lay]
+                vals = at["value"].to_numpy(dtype=np.float64)
                 cells.append(_mean_pm(vals))
                 means.append(float(np.mean(vals)) if vals.size else float("nan"))
+                runs.append({int(k): float(x) for k, x in zip(at["seed"], vals, strict=True) if np.isfinite(x)} or None)
             rows.append((f"`{f}`", p, *cells))
             series.append((f, p, means))
+            per_run.append(runs)
 
     def draw(fig: Figure) -> None:
         ax = fig.add_subplot()
@@ -437,7 +444,17 @@ def layout_section(df: pd.DataFrame, slug: str) -> list[Block]:
 
     header = ("filter", "path", *LAYOUT_ORDER)
     return [
-        Table(header, tuple(rows), caption=caption),
+        sig.marked_table(
+            header,
+            rows,
+            [(math.nan, math.nan, *m) for _, _, m in series],
+            [sig.Column(2 + j, METRICS["ate_m"], [r[j] for r in per_run]) for j in range(len(LAYOUT_ORDER))],
+            sig.eligible_names([f for f, _, _ in series]),
+            caption=caption,
+            groups=[p for _, p, _ in series],
+            labels=[f"{f}, {p}" for f, p, _ in series],
+            footnotes=("Ranked within each path and layout (the same world and seeds).",),
+        ),
         Plot(f"{slug}_ate_per_layout", "landmark_geometry: ATE per landmark layout and path", draw, size=(8.0, 4.2)),
     ]
 

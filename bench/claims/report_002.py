@@ -35,8 +35,8 @@ from locbench.claims import (
     test_text,
 )
 from locbench.errors import LocbenchError
-from locbench.metrics import mean_ci
-from locbench.report.doc import Block, Plot, Table, Text
+from locbench.metrics import METRICS, mean_ci
+from locbench.report.doc import Block, Plot, Text
 from locbench.report.style import PALETTE
 from locbench.significance import TestResult, wilcoxon_paired
 
@@ -259,15 +259,27 @@ def _gate_section(rows: pd.DataFrame, slug: str) -> list[Block]:
     header = ("dataset", "length check", "chi2 threshold", "runs", "ATE (cm)") + (
         ("accepted lines (%)",) if has_acc else ()
     )
+    from locbench.report import significance as sig  # imported here: it imports this package
+
     out: list[tuple[str, ...]] = []
+    keys: list[tuple[float, ...]] = []
+    groups: list[str] = []
+    labels: list[str] = []
+    samples: list[dict[int, float] | None] = []
     for (ds, flag, chi2), g in tab.groupby(["dataset", "reject_longer", "chi2"], sort=True):
         ci = mean_ci(100.0 * g["ate_m"].to_numpy())
         cell = f"{ci.mean:.2f}" + (f" [{ci.low:.2f}, {ci.high:.2f}]" if ci.n > 1 else "")
         row = [f"`{ds}`", "on" if flag else "off", f"{chi2:g}", str(ci.n), cell]
+        key = [math.nan, math.nan, float(g["chi2"].iloc[0]), float(ci.n), ci.mean / 100.0]
         if has_acc:
             acc = g["accepted"].dropna().to_numpy()
             row.append(f"{100.0 * float(np.mean(acc)):.1f}" if acc.size else "")
+            key.append(100.0 * float(np.mean(acc)) if acc.size else math.nan)
         out.append(tuple(row))
+        keys.append(tuple(key))
+        groups.append(str(ds))
+        labels.append(f"{_setting(bool(flag))}, chi2 {chi2:g}")
+        samples.append({int(k): float(v) for k, v in zip(g["seed"], g["ate_m"], strict=True)} or None)
     datasets = sorted(tab["dataset"].unique())
 
     def draw(fig: Figure) -> None:
@@ -294,7 +306,17 @@ def _gate_section(rows: pd.DataFrame, slug: str) -> list[Block]:
             axes[1].set_ylabel("accepted lines (%)")
 
     return [
-        Table(header, tuple(out), caption="ekf_lines: chi-square threshold sweep (report 002)"),
+        sig.marked_table(
+            header,
+            out,
+            keys,
+            [sig.Column(4, METRICS["ate_m"], samples)],
+            [True] * len(out),
+            caption="ekf_lines: chi-square threshold sweep (report 002)",
+            groups=groups,
+            labels=labels,
+            footnotes=("ATE ranked within each dataset: the settings there run on the same seeds.",),
+        ),
         Plot(
             f"{slug}_chi2_sweep",
             "ekf_lines: ATE and accepted lines against the chi-square threshold",

@@ -23,7 +23,8 @@ from locbench.claims import (
     test_text,
     waypoint_stats,
 )
-from locbench.report.doc import Block, Table, Text
+from locbench.metrics import MetricInfo
+from locbench.report.doc import Block, Text
 from locbench.significance import wilcoxon_paired
 
 SOURCE_003 = Source(
@@ -50,6 +51,10 @@ GROWTH_MIN_LAST_OVER_FIRST = 2.0
 #: A run's waypoint errors (all waypoints; waypoints 3-5), the per-run values the paired tests compare.
 WAYPOINT_ERRORS = r"^waypoint_\d+_error_m$"
 WAYPOINTS_3_5 = r"^waypoint_[345]_error_m$"
+
+
+#: Display metadata of a run's error at one waypoint (``waypoint_<j>_error_m``), for table 1's columns.
+WAYPOINT_ERROR = MetricInfo("waypoint error", "cm", 100.0)
 
 
 def _ref_cm(values: tuple[float, ...]) -> str:
@@ -199,21 +204,49 @@ def _table1_section(rows: pd.DataFrame, slug: str) -> list[Block]:
     ws = waypoint_stats(base)
     if not len(ws):
         return []
+    from locbench.report import significance as sig  # imported here: it imports this package
+
     n_wp = int(ws["waypoint"].max())
     out: list[tuple[str, ...]] = []
+    keys: list[tuple[float, ...]] = []
+    names: list[str | None] = []
     for fid, ref in ROOM_TABLE1_CM.items():
         name = pick_filter(base, fid)
         measured = series(ws, name, "mean_distance_m") if name is not None else np.zeros(0)
         out.append((f"`{name or fid}` (measured)", *(f"{100.0 * v:.1f}" for v in measured[:n_wp])))
+        keys.append((np.nan, *(float(v) for v in measured[:n_wp])))
+        names.append(name)
         out.append((f"`{fid}` (003 table 1)", *(f"{v:.1f}" for v in ref)))
+        keys.append(())
+        names.append(None)
     header = ("filter", *(str(j) for j in range(1, n_wp + 1)))
     width = len(header)
+    # each run's error at waypoint j: the per-run value behind the column (a distance of the mean over runs)
+    shown = [n for n in names if n is not None]
+    columns = []
+    for j in range(1, n_wp + 1):
+        per = dict(zip(shown, sig.samples_for(base, shown, f"waypoint_{j}_error_m"), strict=True))
+        columns.append(sig.Column(j, WAYPOINT_ERROR, [per[n] if n is not None else None for n in names]))
+    flags = sig.eligible_names(shown)
+    eligible = [n is not None and flags[shown.index(n)] for n in names]
     return [
         Text(
             "Distance between each waypoint and the mean estimated position over the runs (cm), as report 003's "
             "table 1 measures it, beside the report's values."
         ),
-        Table(header, tuple(r + ("",) * (width - len(r)) for r in out), caption="room: report 003 table 1"),
+        sig.marked_table(
+            header,
+            [r + ("",) * (width - len(r)) for r in out],
+            [k + (np.nan,) * (width - len(k)) for k in keys],
+            columns,
+            eligible,
+            caption="room: report 003 table 1",
+            labels=[n or "" for n in names],
+            footnotes=(
+                "Measured rows are ranked by the distance shown and tested over each run's error at the "
+                "waypoint; the report's rows are not ranked.",
+            ),
+        ),
     ]
 
 

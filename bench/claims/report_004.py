@@ -24,7 +24,8 @@ from locbench.claims import (
     register_section,
     test_text,
 )
-from locbench.report.doc import Block, Table
+from locbench.metrics import METRICS
+from locbench.report.doc import Block
 from locbench.significance import mann_whitney
 
 SOURCE_004 = Source("004", "Kalman Filtering with STDR Simulator and ROS", "Luc Alexandre Bettaieb")
@@ -101,21 +102,39 @@ register(
 
 
 def _section(df: pd.DataFrame, slug: str) -> list[Block]:
-    """Mean ATE and ANEES of every filter on every stored scan_grid variant."""
-    rows = []
+    """Mean ATE and ANEES of every filter on every stored scan_grid variant; each variant's best in bold."""
+    from locbench.report import significance as sig  # imported here: it imports this package
+
+    rows, keys, groups, names = [], [], [], []
     for (dname, fname), _ in df.groupby(["dataset", "filter"], sort=True):
         ate, n = _mean_metric(df, str(dname), str(fname), "ate_m")
         anees, _ = _mean_metric(df, str(dname), str(fname), "anees")
         rows.append(
             (f"`{dname}`", f"`{fname}`", str(n), f"{100 * ate:.2f}", "-" if np.isnan(anees) else f"{anees:.2f}")
         )
+        keys.append((np.nan, np.nan, float(n), ate, anees))
+        groups.append(str(dname))
+        names.append(str(fname))
     if not rows:
         return []
+    columns = []
+    for index, metric in ((3, "ate_m"), (4, "anees")):
+        per: list[dict[int, float] | None] = []
+        for d, f in zip(groups, names, strict=True):
+            sub = df[(df["dataset"] == d) & (df["filter"] == f)]
+            per.append(sig.samples_for(sub, [f], metric)[0])
+        columns.append(sig.Column(index, METRICS[metric], per))
     return [
-        Table(
+        sig.marked_table(
             ("dataset", "filter", "runs", "mean ATE (cm)", "mean ANEES"),
-            tuple(rows),
+            rows,
+            keys,
+            columns,
+            sig.eligible_names(names),
             caption="scan_grid: translate-or-rotate against mixed commands (report 004)",
+            groups=groups,
+            labels=names,
+            footnotes=(f"Ranked within each dataset; ANEES: closest to {METRICS['anees'].target:g} is best.",),
         )
     ]
 

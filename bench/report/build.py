@@ -276,10 +276,11 @@ class Report:
             rows.append([f"`{b}`", str(runs), tb.num(ate), "-", tb.num(wpm), tb.num(head), *["-"] * 7])
             keys.append([NAN, float(runs), ate, NAN, wpm, head, *[NAN] * 7])
             eligible.append(False)
-        untested = sig.mark_ties(
-            rows, keys, sig.summary_columns(self, dataset, filters, len(bounds), kid, knames), eligible
+        hovers = sig.hover_grid(rows)
+        marks = sig.mark_ties(
+            rows, keys, sig.summary_columns(self, dataset, filters, len(bounds), kid, knames), eligible, hovers=hovers
         )
-        notes.append(sig.tie_footnote(untested))
+        notes.append(sig.tie_footnote(marks))
         runs_all = [int(tb.values(df[df["filter"] == f], "failed").size) for f in filters]
         n_typ = max(set(runs_all), key=runs_all.count) if runs_all else 0
         notes.append(
@@ -336,6 +337,7 @@ class Report:
             caption=f"`{dataset}`: mean over seeds",
             footnotes=tuple(notes),
             sort_keys=tuple(tuple(k) for k in keys),
+            hovers=tuple(tuple(h) for h in hovers),
         )
 
     def claims(self) -> Section:
@@ -704,8 +706,8 @@ class Report:
             fs = [f for f in filters if any((f, d) in status for d in group)]
             acc = [[cell(f, d, self._recorded_metric(d)) for d in group] for f in fs]
             rtf = [[cell(f, d, "realtime_factor") for d in group] for f in fs]
-            acc_cells, acc_note = sig.mark_grid(self, fs, group, acc, self._recorded_metric)
-            rtf_cells, rtf_note = sig.mark_grid(self, fs, group, rtf, lambda d: "realtime_factor")
+            acc_cells, acc_note, acc_hover = sig.mark_grid(self, fs, group, acc, self._recorded_metric)
+            rtf_cells, rtf_note, rtf_hover = sig.mark_grid(self, fs, group, rtf, lambda d: "realtime_factor")
             metrics_text = "; ".join(f"`{self.col.display(d)}` {tb.header(self._recorded_metric(d))}" for d in group)
             sub = Section(f"Reference: {kind}", f"recorded-{slug(kind)}")
             sub.add(
@@ -716,6 +718,7 @@ class Report:
                     caption=f"Accuracy (cm); {kind_caption(kind)}",
                     footnotes=(acc_note,),
                     sort_keys=tuple((NAN, *(c[1] for c in r)) for r in acc),
+                    hovers=acc_hover,
                 ),
                 Table(
                     head,
@@ -723,6 +726,7 @@ class Report:
                     caption=f"Real-time factor (x); {kind_caption(kind)}",
                     footnotes=(rtf_note,),
                     sort_keys=tuple((NAN, *(c[1] for c in r)) for r in rtf),
+                    hovers=rtf_hover,
                 ),
             )
             worse = self._not_below_baseline(fs, group, acc)

@@ -36,7 +36,9 @@ class Table:
     """A table: header, rows of cell text, optional caption and footnotes.
 
     ``sort_keys`` holds, per row, a number per column for sorting in the HTML page (NaN: no numeric
-    key, sorted as text); empty means sort every column as text.
+    key, sorted as text); empty means sort every column as text. ``hovers`` holds, per row, a text per
+    column shown when the pointer rests on the cell in the HTML page (the paired effect against the column's
+    best; "": none); empty means no hovers. The Markdown ignores both.
     """
 
     header: tuple[str, ...]
@@ -44,6 +46,7 @@ class Table:
     caption: str = ""
     footnotes: tuple[str, ...] = ()
     sort_keys: tuple[tuple[float, ...], ...] = ()
+    hovers: tuple[tuple[str, ...], ...] = ()
 
 
 @dataclass(frozen=True)

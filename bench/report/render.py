@@ -181,6 +181,7 @@ def _table_html(t: Table) -> str:
     parts.append("<thead><tr>" + "".join(f"<th>{_inline(h)}</th>" for h in t.header) + "</tr></thead><tbody>")
     for i, row in enumerate(t.rows):
         keys = t.sort_keys[i] if i < len(t.sort_keys) else ()
+        tips = t.hovers[i] if i < len(t.hovers) else ()
         cells = []
         for j, c in enumerate(row):
             k = keys[j] if j < len(keys) else float("nan")
@@ -189,6 +190,8 @@ def _table_html(t: Table) -> str:
                 if k == k and abs(k) != float("inf")
                 else (' data-sort="1e308"' if k == float("inf") else "")
             )
+            if j < len(tips) and tips[j]:
+                attr += f' title="{html.escape(tips[j])}"'
             cells.append(f"<td{attr}>{_inline(c)}</td>")
         parts.append("<tr>" + "".join(cells) + "</tr>")
     parts.append("</tbody></table>")

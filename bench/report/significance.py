@@ -113,26 +113,142 @@ class Column:
     samples: Sequence[dict[int, float] | None]
 
 
+@dataclass(frozen=True)
+class TieMarks:
+    """What :func:`mark_ties` found: the ranked columns (table indices) tested and those with no paired test."""
+
+    tested: tuple[int, ...]
+    untested_columns: tuple[int, ...]
+
+    @property
+    def untested(self) -> bool:
+        """Every ranked column was untested (single runs), so the table says no test was possible."""
+        return bool(self.untested_columns) and not self.tested
+
+
+def effect_hover(info: MetricInfo, c: sg.PairedComparison, reference: str) -> str:
+    """The hover text of a compared cell: the paired effect against the column's best, in display units."""
+    t = c.test
+    if not t.tested:
+        return f"against {reference}: no paired test possible (n = {t.n})"
+    unit = f" {info.unit}" if info.unit else ""
+    s = info.scale
+    eff = f"{tb.num(c.effect * s)}{unit}"
+    if not math.isnan(c.effect_low):
+        eff += f" [{tb.num(c.effect_low * s)}, {tb.num(c.effect_high * s)}] (95 % bootstrap)"
+    p = sg.format_p(c.p_holm)
+    return (
+        f"against {reference}: median paired difference {eff}; Wilcoxon signed-rank, n = {t.n}, "
+        f"p (Holm) {p if p.startswith('<') else '= ' + p}"
+    )
+
+
+def _label(cell: str) -> str:
+    return cell.replace("**", "").replace("`", "")
+
+
 def mark_ties(
-    rows: list[list[str]], keys: list[list[float]], columns: Sequence[Column], eligible: Sequence[bool]
-) -> bool:
+    rows: list[list[str]],
+    keys: list[list[float]],
+    columns: Sequence[Column],
+    eligible: Sequence[bool],
+    *,
+    groups: Sequence[object] | None = None,
+    hovers: list[list[str]] | None = None,
+    labels: Sequence[str] | None = None,
+) -> TieMarks:
     """Bold, in place, each column's best and every row tied with it (:func:`locbench.significance.ties_with_best`).
 
-    Returns whether every ranked column was untested (single runs), so the table says no test was possible.
+    ``groups``: per row, the group it is ranked in (rows of one dataset, the same path ...); each column ranks
+    each group on its own (default: one group). ``hovers``: a grid like ``rows`` that receives, per compared
+    cell, its paired effect against the best (:func:`effect_hover`; the bootstrap then runs). ``labels``: per
+    row, its name in those texts (default: its first cell).
     """
-    untested = []
+    names = [_label(r[0]) for r in rows] if labels is None else list(labels)
+    keyed = [0] * len(rows) if groups is None else list(groups)
+    tested: list[int] = []
+    untested: list[int] = []
     for c in columns:
         target = c.info.target if c.info.better == "closer" else 1.0
-        v = sg.ties_with_best([k[c.index] for k in keys], c.samples, eligible, c.info.better, target, effects=False)  # type: ignore[arg-type]
-        for i in v.marked:
-            rows[i][c.index] = f"**{rows[i][c.index]}**"
-        if v.best is not None:
-            untested.append(not any(x.test.tested for x in v.comparisons))
-    return bool(untested) and all(untested)
+        col_untested = []
+        for g in dict.fromkeys(keyed):
+            ok = [e and k == g for e, k in zip(eligible, keyed, strict=True)]
+            v = sg.ties_with_best(
+                [k[c.index] for k in keys],
+                c.samples,
+                ok,
+                c.info.better,  # type: ignore[arg-type]
+                target,
+                effects=hovers is not None,
+            )
+            for i in v.marked:
+                rows[i][c.index] = f"**{rows[i][c.index]}**"
+            if v.best is None or not v.comparisons:  # a group with one candidate has nothing to test
+                continue
+            col_untested.append(v.untested)
+            if hovers is not None:
+                for x in v.comparisons:
+                    hovers[x.index][c.index] = effect_hover(c.info, x, names[v.best])
+        if col_untested:
+            (untested if all(col_untested) else tested).append(c.index)
+    return TieMarks(tuple(tested), tuple(untested))
 
 
-def tie_footnote(untested: bool) -> str:
-    return UNTESTED_FOOTNOTE if untested else TIES_FOOTNOTE
+def tie_footnote(marks: TieMarks, header: Sequence[str] = ()) -> str:
+    """The footnote of a marked table; with ``header``, it names the columns where no test was possible."""
+    if marks.untested:
+        return UNTESTED_FOOTNOTE
+    if header and marks.untested_columns:
+        cols = ", ".join(header[i] for i in marks.untested_columns)
+        return (
+            f"{TIES_FOOTNOTE} No paired test is possible in {cols} (fewer than {sg.MIN_PAIRS} shared seeds): "
+            "only the best value there is in bold."
+        )
+    return TIES_FOOTNOTE
+
+
+def hover_grid(rows: Sequence[Sequence[str]]) -> list[list[str]]:
+    """An empty hover grid shaped like ``rows`` (for :func:`mark_ties`)."""
+    return [[""] * len(r) for r in rows]
+
+
+def eligible_names(names: Sequence[str]) -> list[bool]:
+    """Which configuration names may be marked best: all but the baseline and the bound's rows."""
+    from locbench.report.collect import describe_filter
+
+    out = []
+    for n in names:
+        info = describe_filter(n)
+        out.append(not (info.baseline or info.bound))
+    return out
+
+
+def marked_table(
+    header: tuple[str, ...],
+    rows: Sequence[Sequence[str]],
+    keys: Sequence[Sequence[float]],
+    columns: Sequence[Column],
+    eligible: Sequence[bool],
+    *,
+    caption: str,
+    groups: Sequence[object] | None = None,
+    labels: Sequence[str] | None = None,
+    footnotes: tuple[str, ...] = (),
+) -> Table:
+    """An experiment's own ranking table: each column's best and its ties in bold (:func:`mark_ties`, within
+    each group), the paired effects as the cells' hovers and the ties footnote (naming the columns where no
+    test was possible). ``keys`` holds, per row and column, the printed value the best is chosen by (NaN: none)."""
+    cells = [list(r) for r in rows]
+    tips = hover_grid(cells)
+    marks = mark_ties(cells, [list(k) for k in keys], columns, eligible, groups=groups, hovers=tips, labels=labels)
+    return Table(
+        header,
+        tuple(tuple(r) for r in cells),
+        caption=caption,
+        footnotes=(*footnotes, tie_footnote(marks, header)),
+        sort_keys=tuple(tuple(k) for k in keys),
+        hovers=tuple(tuple(h) for h in tips),
+    )
 
 
 @dataclass(frozen=True)
@@ -622,17 +738,18 @@ def mark_grid(
     datasets: Sequence[str],
     cells: Sequence[Sequence[tuple[str, float]]],
     metric_of: Callable[[str], str],
-) -> tuple[list[list[str]], str]:
+) -> tuple[list[list[str]], str, tuple[tuple[str, ...], ...]]:
     """A (configuration x dataset) table whose columns are datasets (the recorded data): each column's best and
-    its ties in bold, as text cells, with the footnote that applies."""
+    its ties in bold, as text cells, with the footnote that applies and the cells' hovers (paired effects)."""
     rows = [[f"`{f}`", *(c[0] for c in r)] for f, r in zip(filters, cells, strict=True)]
     keys = [[NAN, *(c[1] for c in r)] for r in cells]
     columns = [
         Column(j + 1, METRICS[metric_of(d)], samples_for(report.rows(d), filters, metric_of(d)))
         for j, d in enumerate(datasets)
     ]
-    untested = mark_ties(rows, keys, columns, report.eligible(list(filters)))
-    return rows, tie_footnote(untested)
+    hovers = hover_grid(rows)
+    marks = mark_ties(rows, keys, columns, report.eligible(list(filters)), hovers=hovers)
+    return rows, tie_footnote(marks), tuple(tuple(h) for h in hovers)
 
 
 def appendix_sections(report: Report, datasets: Sequence[str]) -> list[Section]:

@@ -216,6 +216,7 @@ def comparison_table(
     ]
     head = ("filter", "runs", "failed", *cols)
     notes = (BOUND_FOOTNOTE,) if with_bound else ()
+    hovers: tuple[tuple[str, ...], ...] = ()
     if eligible is not None:
         from locbench.report import significance as sig
 
@@ -230,10 +231,12 @@ def comparison_table(
         flags = [*eligible, *[False] * (len(shown) - len(filters))]
         cells, ks = [list(r) for r in rows], [list(k) for k in keys]
         columns = [sig.Column(index[m], METRICS[m], sig.samples_for(df, shown, m)) for m in ranked]
-        untested = sig.mark_ties(cells, ks, columns, flags)
+        tips = sig.hover_grid(cells)
+        marks = sig.mark_ties(cells, ks, columns, flags, hovers=tips)
         rows = [tuple(r) for r in cells]
-        notes = (*notes, sig.tie_footnote(untested))
-    return Table(head, tuple(rows), caption=caption, footnotes=notes, sort_keys=tuple(keys))
+        hovers = tuple(tuple(h) for h in tips)
+        notes = (*notes, sig.tie_footnote(marks))
+    return Table(head, tuple(rows), caption=caption, footnotes=notes, sort_keys=tuple(keys), hovers=hovers)
 
 
 def wilson_interval(successes: int, n: int, confidence: float = CONFIDENCE) -> tuple[float, float]:
