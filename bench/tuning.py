@@ -58,6 +58,8 @@ SPEC_DIGITS = 4
 TUNING_DIR = "tuning"
 #: What the tuned suite writes after tuning: each study's trials and best configuration, for the report.
 SUMMARY_FILE = "tuned.json"
+#: The study protocol's version, in a journal's name: a journal of an older protocol (no default trial) is not resumed.
+STUDY_VERSION = 2
 #: The user attribute that marks a study's default trial (the plain spec, evaluated first).
 DEFAULT_ATTR = "default"
 
@@ -110,9 +112,10 @@ def study_name(filter_spec: str, datasets: Sequence[str], seeds: int, objective:
 
 
 def journal_path(results: str | os.PathLike[str], name: str) -> Path:
-    """Where a study's journal lies: ``<results>/tuning/studies/<filter id>-<hash of the name>.journal``."""
+    """Where a study's journal lies: ``<results>/tuning/studies/<filter id>-<hash of the name and
+    STUDY_VERSION>.journal``."""
     ident = name.split("[", 1)[0].split(" ", 1)[0]
-    digest = hashlib.sha256(name.encode()).hexdigest()[:12]
+    digest = hashlib.sha256(f"{name} v{STUDY_VERSION}".encode()).hexdigest()[:12]
     return Path(results) / TUNING_DIR / "studies" / f"{ident}-{digest}.journal"
 
 
