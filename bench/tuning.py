@@ -5,8 +5,11 @@ Each trial is one filter spec holding the trial's values (``ekf_landmarks[sigma_
 train datasets and seeds are planned and executed by :func:`locbench.runner.plan_sweep` and
 :func:`locbench.runner.run_sweep` (any executor) and stored as ordinary runs in ``<results>/tuning`` (a store of its
 own, so that no train run ever enters the report's tables), so a trial whose runs are stored is read back, never
-recomputed. The objective is the mean over the train runs of their ATE (or NLL); a trial with a failed or diverged
-run, or a non-finite value, scores :data:`WORST` (+inf), worse than any finite one.
+recomputed. The first trial of every study is the default, the plain spec with no tunable field overridden (a field
+whose default is the dataset's nominal value stays so), and counts in the budget: N trials are the default and N - 1
+searched ones, and the best is the best of them all, so it is never worse than the default on the train data. The
+objective is the mean over the train runs of their ATE (or NLL); a trial with a failed or diverged run, or a
+non-finite value, scores :data:`WORST` (+inf), worse than any finite one.
 
 The study lives in an optuna journal file under ``<results>/tuning/studies/`` that several processes may share:
 rerunning the same command resumes it. The sampler is re-seeded before each trial from the number of trials
@@ -55,6 +58,10 @@ SPEC_DIGITS = 4
 TUNING_DIR = "tuning"
 #: What the tuned suite writes after tuning: each study's trials and best configuration, for the report.
 SUMMARY_FILE = "tuned.json"
+#: The study protocol's version, in a journal's name: a journal of an older protocol (no default trial) is not resumed.
+STUDY_VERSION = 2
+#: The user attribute that marks a study's default trial (the plain spec, evaluated first).
+DEFAULT_ATTR = "default"
 
 
 def _optuna() -> Any:
@@ -105,9 +112,10 @@ def study_name(filter_spec: str, datasets: Sequence[str], seeds: int, objective:
 
 
 def journal_path(results: str | os.PathLike[str], name: str) -> Path:
-    """Where a study's journal lies: ``<results>/tuning/studies/<filter id>-<hash of the name>.journal``."""
+    """Where a study's journal lies: ``<results>/tuning/studies/<filter id>-<hash of the name and
+    STUDY_VERSION>.journal``."""
     ident = name.split("[", 1)[0].split(" ", 1)[0]
-    digest = hashlib.sha256(name.encode()).hexdigest()[:12]
+    digest = hashlib.sha256(f"{name} v{STUDY_VERSION}".encode()).hexdigest()[:12]
     return Path(results) / TUNING_DIR / "studies" / f"{ident}-{digest}.journal"
 
 
@@ -142,9 +150,16 @@ class TuneResult:
 
     @property
     def best(self) -> TrialOutcome | None:
-        """The finished trial with the lowest finite value (the earliest on a tie), or None."""
+        """The finished trial with the lowest finite value (the earliest on a tie, so the default, trial 0, wins
+        ties), or None."""
         finite = [t for t in self.trials if math.isfinite(t.value)]
         return min(finite, key=lambda t: (t.value, t.number)) if finite else None
+
+    @property
+    def default_kept(self) -> bool:
+        """Whether the best configuration is the default (the plain spec): no searched trial beat it."""
+        best = self.best
+        return best is not None and best.spec == self.filter
 
     def best_so_far(self) -> list[float]:
         """The best value after each finished trial (+inf until a trial scores)."""
@@ -228,7 +243,7 @@ def tune(
     datasets : sequence of str
         The train dataset specs (never a test dataset: the protocol's split, docs/protocols.md).
     trials : int
-        Finished trials the study should hold; a rerun with more continues it.
+        Finished trials the study should hold, the default (trial 0) included; a rerun with more continues it.
     seeds : int
         Train seeds per dataset, :func:`train_seeds`.
     results : path
@@ -272,20 +287,30 @@ def tune(
     dists = {k: _distribution(optuna, r) for k, r in space.items()}
     train_root = Path(results) / TUNING_DIR
     store = Store(train_root)
-    result = TuneResult(name, resolve_filter(filter_spec).name, dnames, tuple(seed_list), objective)
+    plain = resolve_filter(filter_spec).name
+    result = TuneResult(name, plain, dnames, tuple(seed_list), objective)
     while True:
-        done = len(study.get_trials(deepcopy=False, states=(states.COMPLETE,)))
-        running = len(study.get_trials(deepcopy=False, states=(states.RUNNING,)))
-        if done + running >= trials:
+        live = study.get_trials(deepcopy=False, states=(states.COMPLETE, states.RUNNING))
+        if len(live) >= trials:
             break
-        # Re-seeded per trial from the study's state: a resumed study asks what an uninterrupted one would have.
-        study.sampler = optuna.samplers.TPESampler(
-            seed=sampler_seed + done + running, n_startup_trials=max(2, trials // 2), constant_liar=True
-        )
-        trial = study.ask(dists)
+        # The default (the plain spec: a None field stays the dataset's nominal value) is the first trial and counts
+        # in the budget, so the best is never worse on the train data than the default.
+        with_default = not any(t.user_attrs.get(DEFAULT_ATTR) for t in live)
+        if with_default:
+            trial = study.ask()  # no parameters: the sampler's observations of each parameter leave it out
+        else:
+            # Re-seeded per trial from the study's state: a resumed study asks what an uninterrupted one would have.
+            # The startup count includes the default, which has no parameters: half the searched trials are random.
+            startup = 1 + max(2, (trials - 1) // 2)
+            study.sampler = optuna.samplers.TPESampler(
+                seed=sampler_seed + len(live), n_startup_trials=startup, constant_liar=True
+            )
+            trial = study.ask(dists)
         try:
-            spec = trial_spec(ident, fixed, trial.params)
+            spec = plain if with_default else trial_spec(ident, fixed, trial.params)
             trial.set_user_attr("spec", spec)
+            if with_default:
+                trial.set_user_attr(DEFAULT_ATTR, True)
             plan = plan_sweep([([spec], dnames, seed_list)], str(train_root))
             if not plan.tasks:
                 result.reused += 1
@@ -467,7 +492,8 @@ def run_tuned_suite(
     blocks: list[tuple[Sequence[str], Sequence[str], Sequence[int]]] = []
     for s, r in done:
         best = r.best
-        specs = [s.filter] + ([best.spec] if best is not None and best.spec != s.filter else [])
+        plain = resolve_filter(s.filter).name
+        specs = [plain] + ([best.spec] if best is not None and best.spec != plain else [])
         blocks.append((specs, s.test, s.test_seeds))
     plan = plan_sweep(blocks, results)
     sweep = run_sweep(plan, executor, jobs, scheduler)
@@ -496,6 +522,7 @@ def write_summary(results: str, done: Sequence[tuple[SuiteStudy, TuneResult]]) -
                 "budget_runs": r.budget_runs,
                 "best_spec": best.spec if best else None,
                 "best_value": best.value if best else None,
+                "default_kept": r.default_kept,
                 "tuned": {k: tuned_cfg.get(k, getattr(default_cfg, k)) for k in space} if best else {},
                 "defaults": {k: getattr(default_cfg, k) for k in space},
                 "ranges": {k: rng.describe() for k, rng in space.items()},

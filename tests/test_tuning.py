@@ -86,8 +86,10 @@ def test_a_misset_noise_parameter_is_found(tmp_path: Path) -> None:
     # with 0.02 m; a filter told 0.5 m (25 times too much) ignores its landmarks. The tuner, on train seeds only,
     # must bring it back to the right value within a factor of 2 (log-scale search over [0.001, 1] m).
     spec = "ekf_landmarks[motion_noise_scale=1,sigma_bearing_rad=0.01745]"
+    # The default (trial 0, the dataset's nominal value) is the right one; the searched trials must find it too.
     res = tuning.tune(spec, ["tiny_line"], 14, 3, tmp_path, objective="nll")
-    best = res.best
+    searched = [t for t in res.trials if t.number > 0 and math.isfinite(t.value)]
+    best = min(searched, key=lambda t: t.value, default=None)
     assert best is not None
     found = resolve_filter(best.spec).params.sigma_range_m
     assert 0.01 <= found <= 0.04, f"tuned sigma_range_m {found} m, the simulator's is 0.02 m"
@@ -103,6 +105,44 @@ def test_same_command_same_trials(tmp_path: Path) -> None:
     b = tuning.tune("ekf_landmarks", ["tiny_line"], 4, 1, tmp_path / "b")
     assert [t.spec for t in a.trials] == [t.spec for t in b.trials]
     assert [t.value for t in a.trials] == [t.value for t in b.trials]
+
+
+def test_the_default_is_trial_0_and_counts_in_the_budget(tmp_path: Path) -> None:
+    spec = "ekf_landmarks[motion_noise_scale=1]"
+    res = tuning.tune(spec, ["tiny_line"], 3, 2, tmp_path)
+    assert [t.number for t in res.trials] == [0, 1, 2] and res.budget_runs == 3 * 2
+    assert res.trials[0].spec == resolve_filter(spec).name  # the plain spec: sigma_* stay the dataset's nominal
+    assert all(t.spec != res.trials[0].spec for t in res.trials[1:])
+    # its runs are ordinary stored runs of the plain spec, read back by a rerun without the journal
+    store = Store(tmp_path / "tuning")
+    assert all(store.existing_meta("tiny_line", res.trials[0].spec, s) for s in tuning.train_seeds(2))
+    for p in (tmp_path / "tuning" / "studies").iterdir():
+        p.unlink()
+    again = tuning.tune(spec, ["tiny_line"], 3, 2, tmp_path)
+    assert again.trials == res.trials and again.reused == 3
+
+
+def test_the_default_is_kept_when_every_searched_trial_is_worse(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # tiny_line's simulator draws ranges with 0.02 m, the default's nominal value; the search may only ask
+    # 0.3-1 m, which ignores the landmarks: no searched trial can beat the default on the train data's NLL.
+    real = tuning.tunable_fields
+
+    def narrowed(cls: Any) -> dict[str, TunableRange]:
+        out = real(cls)
+        return {**out, "sigma_range_m": dataclasses.replace(out["sigma_range_m"], low=0.3, high=1.0)}
+
+    monkeypatch.setattr(tuning, "tunable_fields", narrowed)
+    spec = "ekf_landmarks[motion_noise_scale=1,sigma_bearing_rad=0.01745]"
+    args = ["--dataset", "tiny_line", "--trials", "4", "--seeds", "2", "--results", str(tmp_path)]
+    assert main(["tune", spec, "--objective", "nll", *args]) == 0
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    assert last == resolve_filter(spec).name and "sigma_range_m" not in last
+    res = tuning.tune(spec, ["tiny_line"], 4, 2, tmp_path, objective="nll")
+    assert res.default_kept and res.best is not None and res.best.number == 0
+    assert all(t.value > res.best.value for t in res.trials[1:])
+    assert all(0.3 <= resolve_filter(t.spec).params.sigma_range_m <= 1.0 for t in res.trials[1:])
 
 
 def test_two_filters_get_the_same_budget(tmp_path: Path) -> None:
@@ -187,7 +227,7 @@ def test_cli_prints_the_best_spec_last_runnable_as_is(tmp_path: Path, capsys: py
     lines = capsys.readouterr().out.strip().splitlines()
     assert lines[0].startswith("trial 0: ")
     last = lines[-1]
-    assert resolve_filter(last).name == last and last.startswith("gtsam_fls[")
+    assert resolve_filter(last).name == last and last.startswith("gtsam_fls")
     assert main(["run", "--filter", last, "--dataset", "tiny_line", "--results", str(tmp_path), "--no-progress"]) == 0
 
 
