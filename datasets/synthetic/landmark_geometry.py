@@ -79,6 +79,7 @@ from locbench.datasets.synthetic.scenarios import (
     assemble,
     check_kidnap_params,
     encoder_model,
+    matched_process_noise,
     nominal_odometry_spec,
     true_wheelbase,
 )
@@ -426,6 +427,7 @@ class LandmarkGeometryScenario(SyntheticBuilder):
         )
         spec = SensorSpec(
             **nominal_odometry_spec(),
+            **matched_process_noise(params.matched),
             landmark_sigma_range_m=NOMINAL_SIGMA_RANGE_M,
             landmark_sigma_bearing_rad=NOMINAL_SIGMA_BEARING_RAD,
             landmark_min_range_m=LASER.min_range_m + LANDMARK_RADIUS_M,

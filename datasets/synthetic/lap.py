@@ -63,6 +63,7 @@ from locbench.datasets.synthetic.scenarios import (
     drive,
     execution_stream,
     matched_encoder_model,
+    matched_process_noise,
     matched_stream,
     nominal_odometry_spec,
     office_world,
@@ -381,7 +382,9 @@ class LapScenario(SyntheticBuilder):
             dropout_prob=0.01,
         )
         people = draw_people(world, 0 if params.matched else params.people, people_rng, PEOPLE_REGION)
-        spec = SensorSpec(**nominal_odometry_spec(), laser_sigma_m=laser.sigma_m)
+        spec = SensorSpec(
+            **nominal_odometry_spec(), **matched_process_noise(params.matched), laser_sigma_m=laser.sigma_m
+        )
         meta = {
             "generator_version": LAP_GENERATOR_VERSION,
             "calibration": {
