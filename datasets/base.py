@@ -449,6 +449,8 @@ class DatasetBuilder(abc.ABC):
     version: ClassVar[int] = 1
     #: One line for ``locbench list``.
     description: ClassVar[str] = ""
+    #: Rough duration of the data at the default parameters, s: the runner orders a sweep's tasks by it.
+    nominal_duration_s: ClassVar[float] = 100.0
 
     @abc.abstractmethod
     def build(self, params: Any, rng: np.random.Generator) -> Dataset:

@@ -849,6 +849,13 @@ class ParticleFilter(Filter):
     # 5: a sighting pair draws from the previous event's other landmarks only (inject_pairs results);
     # 6: the system noise is the dataset's when it declares one (0 on a model-matched world)
     version: ClassVar[int] = 6
+    cost_per_data_s: ClassVar[float] = 0.1
+
+    @classmethod
+    def cost_scale(cls, config: FilterConfig) -> float:
+        """The particle count over the default's 1000."""
+        return getattr(config, "particles", 1000) / 1000.0
+
     #: The kidnap configuration: augmented MCL with sensor resetting, also from sighting pairs (the one that
     #: recovers on both office and room, docs/pf_consistency_kidnap.md); 003's PF only resamples.
     kidnap_params: ClassVar[dict[str, str]] = {"augmented": "true", "inject": "sensor", "inject_pairs": "true"}

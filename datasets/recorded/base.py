@@ -24,6 +24,7 @@ class RecordedDataset(DatasetBuilder):
     #: Parameters that say which recording a name means; the report always spells them out
     #: (``mrclam[dataset=6,robot=1]``, never a bare default).
     identity_keys: ClassVar[tuple[str, ...]] = ()
+    nominal_duration_s: ClassVar[float] = 1000.0
 
     @classmethod
     @abc.abstractmethod

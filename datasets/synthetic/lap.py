@@ -350,6 +350,7 @@ class LapScenario(SyntheticBuilder):
 
     Params: ClassVar[type] = LapParams
     version: ClassVar[int] = 2
+    nominal_duration_s: ClassVar[float] = 60.0
     description: ClassVar[str] = (
         "report 000's office lap: 0.05 m grid, rectangular lap, Hokuyo-like laser, people not on the map"
     )

@@ -432,6 +432,7 @@ class RoomScenario(SyntheticBuilder):
 
     Params: ClassVar[type] = RoomParams
     version: ClassVar[int] = 2
+    nominal_duration_s: ClassVar[float] = 60.0
     description: ClassVar[str] = "report 003's 7 m x 2 m room: 4 landmarks, start + 5 waypoints, Kinect-like sensor"
 
     #: Kinect-like detector: 0.8-3.5 m, 57 deg horizontal field of view, cm-level range noise (report 003 sec. 3).
@@ -695,6 +696,7 @@ class OfficeScenario(SyntheticBuilder):
 
     Params: ClassVar[type] = OfficeParams
     version: ClassVar[int] = 2
+    nominal_duration_s: ClassVar[float] = 231.0
     description: ClassVar[str] = "one office floor with walls, doors, landmarks and a waypoint tour; every sensor"
 
     def build(self, params: OfficeParams, rng: np.random.Generator) -> Dataset:
