@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import importlib.util
 import math
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from tool_support import load_tool
 
 from locbench import claims
 from locbench.claims import report_001
@@ -236,11 +235,7 @@ def test_layout_section_gives_a_table_and_a_figure() -> None:
 @pytest.mark.slow
 def test_the_detection_study_reproduces_its_recorded_result() -> None:
     # tools/landmark_detection_stats.py measured the detector's error behind the nominal landmark noise
-    path = Path(__file__).resolve().parents[1] / "tools" / "landmark_detection_stats.py"
-    spec = importlib.util.spec_from_file_location("_landmark_detection_stats", path)
-    assert spec is not None and spec.loader is not None
-    tool = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(tool)
+    tool = load_tool("landmark_detection_stats")
     measured = tool.detection_error_stats()
     assert measured == pytest.approx(tool.RECORDED, rel=1e-9, abs=1e-12)
     assert measured["range_rms_m"] <= lg.NOMINAL_SIGMA_RANGE_M
