@@ -206,6 +206,7 @@ class LandmarkEKF(Filter):
     Config: ClassVar[type[FilterConfig]] = LandmarkEKFConfig
     # 3: the process noise Q is the dataset's when it declares one (0 on a model-matched world)
     version: ClassVar[int] = 3
+    check_configurations: ClassVar[tuple[dict[str, str], ...]] = ({"association": "nearest"},)
     cost_per_data_s: ClassVar[float] = 0.02
     source: ClassVar[str] = "003_e5c93f9be776ee5e (EKF, eq. 1-10); 001_71e01b0c4f2511a1 (sensor Jacobian, GPS)"
 

@@ -113,6 +113,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal
 
@@ -849,6 +850,17 @@ class ParticleFilter(Filter):
     # 5: a sighting pair draws from the previous event's other landmarks only (inject_pairs results);
     # 6: the system noise is the dataset's when it declares one (0 on a model-matched world)
     version: ClassVar[int] = 6
+    check_configurations: ClassVar[tuple[dict[str, str], ...]] = ({"adaptive": "kld"}, {"init": "uniform"})
+
+    @classmethod
+    def declared_check_failures(cls, config: FilterConfig) -> Mapping[str, str]:
+        """``init=uniform`` fails the two tracking checks by design: its estimate starts anywhere in free space."""
+        out = dict(cls.expected_check_failures)
+        if cls.starts_without_pose(config):
+            why = "global localization: from a uniform prior the first estimates are not near the true start"
+            out |= {"check_heading_wrap": why, "check_noise_free": why}
+        return out
+
     cost_per_data_s: ClassVar[float] = 0.1
 
     @classmethod
