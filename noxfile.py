@@ -1,7 +1,7 @@
 """nox sessions for locbench.
 
 nox                 the tests (the default session)
-nox -s lint         ruff and mypy
+nox -s lint         ruff, mypy and the import contracts (lint-imports)
 nox -s bench        run every experiment, verify a sample, write results/summary (posargs go to 'locbench run')
 nox -s report       regenerate results/summary from the stored runs, no re-run
 nox -s html         open results/summary/index.html in headless Chromium (renders, sorts; screenshot)
@@ -57,11 +57,12 @@ def tests_lowest(session: nox.Session) -> None:
 
 @nox.session(python=PYTHON, default=False)
 def lint(session: nox.Session) -> None:
-    """ruff (lint and format check) and mypy over the package."""
+    """ruff (lint and format check), mypy over the package and the import contracts of pyproject.toml."""
     _install(session, "all,lint")
     session.run("ruff", "check", ".")
     session.run("ruff", "format", "--check", ".")
     session.run("mypy", "-p", "locbench")
+    session.run("lint-imports")
 
 
 @nox.session(python=PYTHON, default=False)

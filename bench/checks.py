@@ -321,6 +321,31 @@ def yield_filter_checks(target: FilterLike) -> Iterator[tuple[FilterCheck, str |
         yield check, check.applies(flt)
 
 
+def check_specs(filter_id: str) -> list[str]:
+    """The configurations of a registered filter that the checks run (canonical names): its default, each of
+    its ``check_configurations`` and its kidnap configuration (``kidnap_params``)."""
+    cls: type[Filter] = FILTERS.load(filter_id)
+    out: list[str] = []
+    for params in ({}, *cls.check_configurations, *([cls.kidnap_params] if cls.kidnap_params else [])):
+        name = resolve_filter(Spec(filter_id, tuple(params.items())).name).name
+        if name not in out:
+            out.append(name)
+    return out
+
+
+def marking(flt: Filter, check: FilterCheck) -> tuple[str, str] | None:
+    """The one marking policy of ``locbench check`` and the pytest conformance tests: ``("skip", why)`` when
+    the check does not apply to the filter's declared capabilities, ``("xfail", why)`` when the filter declares
+    it fails (strict: passing it anyway is a failure of the declaration), None to run it plainly."""
+    reason = check.applies(flt)
+    if reason is not None:
+        return ("skip", reason)
+    declared = type(flt).declared_check_failures(flt.config)
+    if check.name in declared:
+        return ("xfail", declared[check.name])
+    return None
+
+
 def check_filter(target: FilterLike, name: str | None = None) -> Iterator[CheckResult]:
     """Run every check that applies to ``target`` (a class or an instance, registered or not).
 
@@ -329,23 +354,23 @@ def check_filter(target: FilterLike, name: str | None = None) -> Iterator[CheckR
     """
     flt = as_filter(target)
     label = name or type(flt).__name__
-    xfail = dict(type(flt).expected_check_failures)
-    for check, reason in yield_filter_checks(flt):
-        if reason is not None:
-            yield CheckResult(label, check.name, "skipped", reason)
+    for check in FILTER_CHECKS.values():
+        mark = marking(flt, check)
+        if mark is not None and mark[0] == "skip":
+            yield CheckResult(label, check.name, "skipped", mark[1])
             continue
         try:
             check.run(flt)
         except (CheckFailed, LocbenchError, AssertionError, TypeError, ValueError) as exc:
             if isinstance(exc, DependencyNotInstalled):
                 yield CheckResult(label, check.name, "skipped", str(exc))
-            elif check.name in xfail:
-                yield CheckResult(label, check.name, "xfailed", xfail[check.name])
+            elif mark is not None:
+                yield CheckResult(label, check.name, "xfailed", mark[1])
             else:
                 yield CheckResult(label, check.name, "failed", f"{type(exc).__name__}: {exc}")
         else:
-            if check.name in xfail:
-                yield CheckResult(label, check.name, "xpassed", f"declared to fail ({xfail[check.name]}) but passed")
+            if mark is not None:
+                yield CheckResult(label, check.name, "xpassed", f"declared to fail ({mark[1]}) but passed")
             else:
                 yield CheckResult(label, check.name, "passed")
 
@@ -388,12 +413,6 @@ DATASET_CHECKS: dict[str, Callable[[str], None]] = {
 # --- running checks -----------------------------------------------------------------------------
 
 
-def expected_failures(filter_id: str) -> dict[str, str]:
-    """The checks a registered filter declares it fails, with reasons."""
-    cls: type[Filter] = FILTERS.load(filter_id)
-    return dict(cls.expected_check_failures)
-
-
 def _dataset_results(spec: str) -> Iterator[CheckResult]:
     resolve_dataset(spec)  # a malformed spec is a clear error, not a failed check
     for name, fn in DATASET_CHECKS.items():
@@ -425,6 +444,8 @@ def run_checks(ids: list[str] | None = None) -> Iterator[CheckResult]:
             for name in checks:
                 yield CheckResult(spec, name, "skipped", reason)
         elif registry is FILTERS:
-            yield from check_filter(make_filter(resolve_filter(spec)), name=spec)
+            # a bare id runs every configuration the filter declares for the checks
+            for one in check_specs(ident) if spec == ident else [spec]:
+                yield from check_filter(make_filter(resolve_filter(one)), name=one)
         else:
             yield from _dataset_results(spec)

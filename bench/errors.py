@@ -22,10 +22,6 @@ class ConfigError(LocbenchError, ValueError):
     """A malformed spec, config value or input file; the message names the field and what was expected."""
 
 
-class IncompatibleRun(LocbenchError):
-    """A filter needs an event stream or map kind that a dataset does not provide (a recorded skip)."""
-
-
 class FilterDiverged(LocbenchError):
     """Raised by a filter (or detected by the runner) when its estimate is no longer meaningful."""
 

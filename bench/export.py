@@ -31,7 +31,7 @@ import numpy.typing as npt
 
 from locbench.datasets.base import Trajectory2D
 from locbench.errors import ConfigError
-from locbench.geometry import wrap_angle
+from locbench.geometry import quaternion_to_yaw, yaw_to_quaternion
 from locbench.store import RunRecord, Store, TruthRecord
 
 log = logging.getLogger(__name__)
@@ -40,20 +40,6 @@ FloatArray = npt.NDArray[np.float64]
 
 TUM_COLUMNS = ("timestamp [s]", "tx [m]", "ty [m]", "tz [m]", "qx", "qy", "qz", "qw")
 TUM_HEADER = "# timestamp tx ty tz qx qy qz qw"
-
-
-def yaw_to_quaternion(theta: npt.ArrayLike) -> FloatArray:
-    """Unit quaternions (qx, qy, qz, qw) of rotations by ``theta`` (rad) about z, shape (..., 4); qw >= 0."""
-    half = 0.5 * wrap_angle(theta)
-    z = np.zeros_like(half)
-    return np.stack([z, z, np.sin(half), np.cos(half)], axis=-1)
-
-
-def quaternion_to_yaw(q: npt.ArrayLike) -> FloatArray:
-    """Yaw (rad, in (-pi, pi]) of quaternions (qx, qy, qz, qw), shape (..., 4) -> (...); q and -q give the same."""
-    a = np.asarray(q, dtype=np.float64)
-    x, y, z, w = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
-    return np.asarray(wrap_angle(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))), dtype=np.float64)
 
 
 def _last_per_time(t: FloatArray, rows: FloatArray) -> tuple[FloatArray, FloatArray]:

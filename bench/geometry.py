@@ -112,3 +112,17 @@ def pose_error(estimate: npt.ArrayLike, truth: npt.ArrayLike) -> FloatArray:
     e = np.asarray(estimate, dtype=np.float64) - np.asarray(truth, dtype=np.float64)
     e[..., 2] = wrap_angle(e[..., 2])
     return e
+
+
+def yaw_to_quaternion(theta: npt.ArrayLike) -> FloatArray:
+    """Unit quaternions (qx, qy, qz, qw) of rotations by ``theta`` (rad) about z, shape (..., 4); qw >= 0."""
+    half = 0.5 * wrap_angle(theta)
+    z = np.zeros_like(half)
+    return np.stack([z, z, np.sin(half), np.cos(half)], axis=-1)
+
+
+def quaternion_to_yaw(q: npt.ArrayLike) -> FloatArray:
+    """Yaw (rad, in (-pi, pi]) of quaternions (qx, qy, qz, qw), shape (..., 4) -> (...); q and -q give the same."""
+    a = np.asarray(q, dtype=np.float64)
+    x, y, z, w = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
+    return np.asarray(wrap_angle(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))), dtype=np.float64)

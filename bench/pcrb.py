@@ -140,6 +140,26 @@ def _recursion(j0: FloatArray, jacobians: FloatArray, process_cov: FloatArray, m
     return out
 
 
+def covariance_recursion(
+    p0: FloatArray, jacobians: FloatArray, process_cov: FloatArray, meas_info: FloatArray
+) -> FloatArray:
+    """Bound covariances P_k at steps 0..n from a possibly singular prior covariance ``p0`` (d, d).
+
+    The covariance form of :func:`pcrb_recursion`: P^- = F P F' + Q, then P = (I + P^- J_meas)^-1 P^-, which is
+    (P^-^-1 + J_meas)^-1 whenever P^- is invertible and stays defined for a zero prior (a robot that starts
+    at its exact true pose) and for the standstill steps after it (Q = 0). Other arguments as there.
+    """
+    n = jacobians.shape[0]
+    eye = np.eye(p0.shape[0])
+    out = np.empty((n + 1, *p0.shape))
+    p = out[0] = np.asarray(p0, dtype=np.float64)
+    for k in range(n):
+        pp = jacobians[k] @ p @ jacobians[k].T + process_cov[k]
+        p = np.linalg.solve(eye + pp @ meas_info[k], pp)
+        p = out[k + 1] = 0.5 * (p + p.T)
+    return out
+
+
 def wheel_travel_from_poses(poses: FloatArray, wheelbase_m: float) -> tuple[FloatArray, FloatArray]:
     """The wheel travel (d_left, d_right) of each step between consecutive poses, m, shape (n,) each.
 
@@ -497,8 +517,8 @@ def pcrb_covariances(dataset: Dataset, noise: TrueNoise | None = None, laser: bo
 
     Units: m^2 in the position block, rad^2 for the heading, world frame. ``noise`` defaults to
     :func:`true_noise`. The odometry steps are the ground-truth steps (one Odometry event per step, as every
-    synthetic world simulates it); the prior is the dataset's initial belief. ``laser`` = False leaves the
-    laser scans out (the bound of an estimator that does not use them).
+    synthetic world simulates it); the prior is the initial error the world realises (:func:`realised_prior`).
+    ``laser`` = False leaves the laser scans out (the bound of an estimator that does not use them).
     """
     if dataset.kidnaps:
         raise ConfigError(f"dataset {dataset.name!r}: a kidnapped run has no bound (the jump is outside the model)")
@@ -509,8 +529,26 @@ def pcrb_covariances(dataset: Dataset, noise: TrueNoise | None = None, laser: bo
         poses, noise.wheelbase_m, noise.k_left, noise.k_right, noise.scale_left, noise.scale_right
     )
     info = _measurement_information(dataset, noise, poses, laser)
-    j0 = np.linalg.inv(np.asarray(dataset.initial.cov, dtype=np.float64)) + info[0]
-    return pcrb_recursion(j0, f, q, info[1:])
+    p0 = realised_prior(dataset)
+    if not p0.any():
+        # the initial error is zero: no measurement at step 0 can lower a zero covariance
+        return covariance_recursion(p0, f, q, info[1:])
+    return pcrb_recursion(np.linalg.inv(p0) + info[0], f, q, info[1:])
+
+
+def realised_prior(dataset: Dataset) -> FloatArray:
+    """Covariance of the initial error the world realises, (3, 3), m^2 and rad^2.
+
+    A world whose initial belief's mean is the true start (the default synthetic worlds: the robot starts at
+    its exact true pose) realises a zero initial error, whatever covariance the belief declares; a world that
+    draws the mean from the belief (the model-matched ones) realises the declared covariance.
+    """
+    gt = dataset.ground_truth
+    start = np.array([gt.xy[0, 0], gt.xy[0, 1], gt.theta[0]])
+    mean = np.asarray(dataset.initial.mean, dtype=np.float64)
+    if np.array_equal(mean[0:2], start[0:2]) and float(wrap_angle(mean[2] - start[2])) == 0.0:
+        return np.zeros((3, 3))
+    return np.asarray(dataset.initial.cov, dtype=np.float64)
 
 
 def pcrb_summary(t: FloatArray, cov: FloatArray, waypoint_t: FloatArray) -> dict[str, float]:
@@ -539,7 +577,9 @@ def pcrb_metrics(dataset: Dataset, laser: bool = True) -> dict[str, float]:
 # --- the bound as rows of the benchmark ---------------------------------------------------------------------
 
 #: Bump when the bound of the same realisation changes: a stored bound of another version is recomputed.
-BOUND_VERSION = 2
+#: 2: the prior is the initial error the world realises (zero where the robot starts at its true pose).
+#: 3: the scan term's range derivative from one traversal per beam (closed form at the hit cell's face).
+BOUND_VERSION = 3
 #: The row of the bound with every sensor the world provides (the accuracy limit of the issue's protocol).
 BOUND_ALL = "pcrb"
 #: The row of the bound without the laser scans: the limit of the estimators that use landmarks and fixes only.

@@ -151,9 +151,11 @@ FILTERS.register(
 )
 
 FILTERS.register(
-    "ekf_icp",
-    "locbench.filters.ekf_icp:IcpEKF",
-    "EKF whose update is ICP between the scan and a scan ray-cast from the occupancy grid (report 000)",
+    "ukf_landmarks",
+    "locbench.filters.ukf_landmarks:LandmarkUKF",
+    "unscented KF (filterpy, Merwe sigma points) with ekf_landmarks' motion, landmark, range and fix models",
+    requires_modules=("filterpy",),
+    install_hint="pip install 'locbench[filterpy]'",
 )
 FILTERS.register(
     "ekf_lines",
@@ -161,16 +163,14 @@ FILTERS.register(
     "EKF on a map of lines, chi-square gated association, Joseph form (report 002)",
 )
 FILTERS.register(
+    "ekf_icp",
+    "locbench.filters.ekf_icp:IcpEKF",
+    "EKF whose update is ICP between the scan and a scan ray-cast from the occupancy grid (report 000)",
+)
+FILTERS.register(
     "kf_linear",
     "locbench.filters.kf_linear:LinearKF",
     "linear Kalman filter (filterpy) with a scan-database pose measurement (report 004)",
-    requires_modules=("filterpy",),
-    install_hint="pip install 'locbench[filterpy]'",
-)
-FILTERS.register(
-    "ukf_landmarks",
-    "locbench.filters.ukf_landmarks:LandmarkUKF",
-    "unscented KF (filterpy, Merwe sigma points) with ekf_landmarks' motion, landmark, range and fix models",
     requires_modules=("filterpy",),
     install_hint="pip install 'locbench[filterpy]'",
 )
@@ -186,6 +186,9 @@ FILTERS.register(
     requires_modules=("gtsam",),
     install_hint="pip install 'locbench[gtsam]'",
 )
+
+#: The built-in filters in registration order (the baseline first): every suite's "every filter".
+BUILTIN_FILTERS: tuple[str, ...] = tuple(FILTERS._entries)
 
 DATASETS.register(
     "room",

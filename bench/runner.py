@@ -354,21 +354,6 @@ class SweepResult:
         return sum(o.status != NOT_STORED for o in self.outcomes)
 
 
-#: Rough compute seconds per second of data of each filter with its default config, for ordering tasks
-#: before any timing is stored (measured order of magnitude on `office`; only the order of tasks depends on it).
-_COST_PER_DATA_S = {
-    "odometry": 0.002,
-    "ekf_landmarks": 0.02,
-    "ekf_lines": 0.15,
-    "ekf_icp": 0.3,
-    "kf_linear": 0.3,
-    "pf": 0.1,
-    "gtsam_fls": 0.1,
-}
-#: Rough duration of each synthetic dataset, s, for the same purpose (recorded ones default to 1000 s).
-_DURATION_S = {"room": 60.0, "office": 231.0, "lap": 60.0, "line_room": 100.0, "scan_grid": 100.0}
-
-
 #: Rough cost of a realisation's bound, s (0.03-0.5 s measured on the synthetic worlds).
 _BOUND_COST_S = 0.5
 
@@ -380,7 +365,9 @@ def _estimate_cost(
 
     ``seen`` caches one stored ``meta.json`` per (dataset, filter) across the tasks of a plan.
     """
-    duration = _DURATION_S.get(dr.id, 1000.0 if dr.id in ("mrclam", "intel", "plaza", "rosbag") else 100.0)
+    # before any timing is stored: the costs the filter and dataset classes declare (only the order of tasks
+    # depends on them)
+    duration = DATASETS.load(dr.id).nominal_duration_s
     total = 0.0
     for job in jobs:
         pair = (dr.name, job.filter.name)
@@ -390,8 +377,8 @@ def _estimate_cost(
         if stored is not None and isinstance(stored.get("wall_s"), (int, float)) and stored.get("status") == "ok":
             total += float(stored["wall_s"])
             continue
-        scale = getattr(job.filter.params, "particles", 1000) / 1000.0 if job.filter.id == "pf" else 1.0
-        total += duration * _COST_PER_DATA_S.get(job.filter.id, 0.1) * scale
+        cls: type[Filter] = job.filter_cls
+        total += duration * cls.cost_per_data_s * cls.cost_scale(job.filter.params)
     return total
 
 

@@ -258,6 +258,11 @@ class SensorSpec:
         White noise of a MEASURED twist (speed m/s, turn rate rad/s) per odometry sample, for datasets whose
         odometry is (v, omega) held for ``dt`` (MRCLAM, Lost in the Woods): the increment's variance is
         (sigma * dt)^2 per component.
+    process_sigma_xy_m, process_sigma_theta_rad : float or None
+        Standard deviation of the additive process noise Q per odometry step (report 003 eq. 8), per world
+        axis (m) and on the heading (rad): unmodelled motion on top of the odometry noise. None leaves the
+        filters' default (report 003's 1 mm, 0.5 mrad); a model-matched world, whose motion is exactly the
+        odometry model, declares 0.
     """
 
     wheelbase_m: float | None = None
@@ -276,6 +281,8 @@ class SensorSpec:
     range_sigma_m: float | None = None
     twist_sigma_v_mps: float | None = None
     twist_sigma_omega_radps: float | None = None
+    process_sigma_xy_m: float | None = None
+    process_sigma_theta_rad: float | None = None
 
 
 #: Labels of :attr:`Dataset.truth_label`: what the "ground truth" trajectory really is.
@@ -442,6 +449,8 @@ class DatasetBuilder(abc.ABC):
     version: ClassVar[int] = 1
     #: One line for ``locbench list``.
     description: ClassVar[str] = ""
+    #: Rough duration of the data at the default parameters, s: the runner orders a sweep's tasks by it.
+    nominal_duration_s: ClassVar[float] = 100.0
 
     @abc.abstractmethod
     def build(self, params: Any, rng: np.random.Generator) -> Dataset:

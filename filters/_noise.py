@@ -1,7 +1,7 @@
-"""Nominal measurement noise of the landmark sensors, resolved once for every filter that uses them.
+"""Nominal noise of the landmark sensors and the additive process noise, resolved once for every filter.
 
 Each value is the filter's config override, else the dataset's nominal value (:class:`SensorSpec`), else a
-module default, which is logged because a defaulted noise model is a choice the user did not make.
+module default; a defaulted measurement noise is logged because it is a choice the user did not make.
 """
 
 from __future__ import annotations
@@ -15,6 +15,25 @@ logger = logging.getLogger(__name__)
 #: Range-bearing noise used when neither the config nor the dataset gives one (logged at reset).
 DEFAULT_SIGMA_RANGE_M = 0.05
 DEFAULT_SIGMA_BEARING_RAD = 0.02
+#: Additive process noise Q per odometry step (report 003 eq. 8) when neither the config nor the dataset gives
+#: one: 1 mm per axis and 0.5 mrad, small beside the encoder noise. A model-matched world declares zero.
+DEFAULT_PROCESS_SIGMA_XY_M = 0.001
+DEFAULT_PROCESS_SIGMA_THETA_RAD = 0.0005
+
+
+def process_noise(
+    sigma_x_m: float | None, sigma_y_m: float | None, sigma_theta_rad: float | None, sensors: SensorSpec
+) -> tuple[float, float, float]:
+    """Standard deviations of the additive process noise Q per odometry step (m, m, rad; report 003 eq. 8):
+    each the config override, else the dataset's ``SensorSpec.process_sigma_xy_m`` /
+    ``process_sigma_theta_rad``, else :data:`DEFAULT_PROCESS_SIGMA_XY_M` / :data:`DEFAULT_PROCESS_SIGMA_THETA_RAD`."""
+    xy = DEFAULT_PROCESS_SIGMA_XY_M if sensors.process_sigma_xy_m is None else sensors.process_sigma_xy_m
+    th = DEFAULT_PROCESS_SIGMA_THETA_RAD if sensors.process_sigma_theta_rad is None else sensors.process_sigma_theta_rad
+    return (
+        float(xy if sigma_x_m is None else sigma_x_m),
+        float(xy if sigma_y_m is None else sigma_y_m),
+        float(th if sigma_theta_rad is None else sigma_theta_rad),
+    )
 
 
 def range_only_noise(range_only_sigma_m: float | None, sensors: SensorSpec, warn: bool = True) -> float:

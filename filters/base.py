@@ -161,6 +161,24 @@ class Filter(abc.ABC):
     #: Parameters that switch on this filter's recovery policy: its kidnap configuration is a configuration
     #: with these set (the report's summary reads kidnap recovery there). Empty: it recovers as configured.
     kidnap_params: ClassVar[dict[str, str]] = {}
+    #: Configurations beyond the default that the conformance checks also run, as parameter overrides
+    #: (``{"adaptive": "kld"}``); the kidnap configuration (:attr:`kidnap_params`) is added to them.
+    check_configurations: ClassVar[tuple[dict[str, str], ...]] = ()
+    #: Rough compute seconds per second of data with the default config (measured order of magnitude on
+    #: ``office``): the runner orders a sweep's tasks by it before any timing is stored.
+    cost_per_data_s: ClassVar[float] = 0.1
+
+    @classmethod
+    def cost_scale(cls, config: FilterConfig) -> float:
+        """How much more a configuration costs than the default (:attr:`cost_per_data_s`); 1 unless a filter
+        has a cost knob."""
+        return 1.0
+
+    @classmethod
+    def declared_check_failures(cls, config: FilterConfig) -> Mapping[str, str]:
+        """The conformance checks ``config`` fails by design, with the reason: :attr:`expected_check_failures`,
+        and in a filter that overrides this, those of some of its configurations."""
+        return cls.expected_check_failures
 
     @classmethod
     def starts_without_pose(cls, config: FilterConfig) -> bool:

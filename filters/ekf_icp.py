@@ -218,6 +218,7 @@ class IcpEKF(Filter):
     requires: ClassVar[frozenset[MapKind]] = frozenset({MapKind.OCCUPANCY})
     Config: ClassVar[type[FilterConfig]] = IcpEKFConfig
     version: ClassVar[int] = 3
+    cost_per_data_s: ClassVar[float] = 0.3
     source: ClassVar[str] = "000_2af74c528ee7b17b (EKF with LRF: eq. 11-18, sec. III-B, IV-B, appendix A)"
 
     config: IcpEKFConfig

@@ -76,7 +76,7 @@ from locbench.filters._motion import (
     MotionNoiseConfig,
     propagate_covariance,
 )
-from locbench.filters._noise import landmark_noise, range_only_noise
+from locbench.filters._noise import landmark_noise, process_noise, range_only_noise
 from locbench.filters.base import Estimate, Filter, FilterConfig
 from locbench.geometry import wrap_angle, wrap_scalar
 from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
@@ -118,11 +118,12 @@ class LandmarkEKFConfig(FilterConfig, MotionNoiseConfig):
 
     Attributes
     ----------
-    sigma_x_m, sigma_y_m, sigma_theta_rad : float
+    sigma_x_m, sigma_y_m, sigma_theta_rad : float or None
         Standard deviations of the additive process noise Q (report 003 eq. 8), per odometry step, in
-        the world frame: unmodelled motion (slip, castor drag) on top of the encoder noise G U G^T. Small by
-        default (1 mm, 1 mm, 0.5 mrad per step) so that the encoder noise dominates; they also keep P
-        from collapsing when the robot stands still.
+        the world frame: unmodelled motion (slip, castor drag) on top of the encoder noise G U G^T. None
+        takes the dataset's ``SensorSpec.process_sigma_xy_m`` / ``process_sigma_theta_rad`` (0 on a
+        model-matched world), else 1 mm, 1 mm, 0.5 mrad per step (:func:`locbench.filters._noise.process_noise`),
+        small so that the encoder noise dominates.
     input_noise : {"per_step", "cumulative"}
         Reading of eq. 10: per-step variance k^2 |delta l_k| (Chong & Kleeman) or the literal accumulated sum.
     motion_model : {"auto", "encoder", "increment"}
@@ -160,9 +161,9 @@ class LandmarkEKFConfig(FilterConfig, MotionNoiseConfig):
         Overrides of the white noise of a measured twist (m/s, rad/s); see :mod:`locbench.filters._motion`.
     """
 
-    sigma_x_m: float = 0.001
-    sigma_y_m: float = 0.001
-    sigma_theta_rad: float = 0.0005
+    sigma_x_m: float | None = None
+    sigma_y_m: float | None = None
+    sigma_theta_rad: float | None = None
     motion_model: MotionKind = "auto"
     association: Literal["known", "nearest"] = "known"
     gate_probability: float = 0.99
@@ -183,8 +184,9 @@ class LandmarkEKFConfig(FilterConfig, MotionNoiseConfig):
         if not 0.0 < self.range_gate_probability <= 1.0:
             raise ConfigError(f"range_gate_probability must be in (0, 1], got {self.range_gate_probability}")
         for name in ("sigma_x_m", "sigma_y_m", "sigma_theta_rad", "prune_margin_m", "prune_margin_rad"):
-            if getattr(self, name) < 0.0:
-                raise ConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
+            v = getattr(self, name)
+            if v is not None and v < 0.0:
+                raise ConfigError(f"{name} must be >= 0, got {v}")
         for name in ("sigma_range_m", "sigma_bearing_rad", "wheelbase_m", "range_only_sigma_m"):
             v = getattr(self, name)
             if v is not None and v <= 0.0:
@@ -205,7 +207,10 @@ class LandmarkEKF(Filter):
     consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LandmarkObservations, PoseFix, RangeObservations})
     requires: ClassVar[frozenset[MapKind]] = frozenset({MapKind.LANDMARKS})
     Config: ClassVar[type[FilterConfig]] = LandmarkEKFConfig
-    version: ClassVar[int] = 2
+    # 3: the process noise Q is the dataset's when it declares one (0 on a model-matched world)
+    version: ClassVar[int] = 3
+    check_configurations: ClassVar[tuple[dict[str, str], ...]] = ({"association": "nearest"},)
+    cost_per_data_s: ClassVar[float] = 0.02
     source: ClassVar[str] = "003_e5c93f9be776ee5e (EKF, eq. 1-10); 001_71e01b0c4f2511a1 (sensor Jacobian, GPS)"
 
     config: LandmarkEKFConfig
@@ -225,7 +230,8 @@ class LandmarkEKF(Filter):
             raise ConfigError("LandmarkEKF needs world.landmarks; the dataset provides none")
         noise = cfg.motion_noise(sensors)
         self._motion = MotionModel(noise, cfg.motion_model, mean="model")
-        self._q = (cfg.sigma_x_m**2, cfg.sigma_y_m**2, cfg.sigma_theta_rad**2)
+        sx, sy, sth = process_noise(cfg.sigma_x_m, cfg.sigma_y_m, cfg.sigma_theta_rad, sensors)
+        self._q = (sx * sx, sy * sy, sth * sth)
 
         sr, sb = landmark_noise(cfg.sigma_range_m, cfg.sigma_bearing_rad, sensors, warn=False)
         # Warn about defaulted landmark noise only once sightings arrive (a range-only dataset has none).

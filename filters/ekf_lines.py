@@ -176,6 +176,7 @@ class LineEKF(Filter):
     requires: ClassVar[frozenset[MapKind]] = frozenset({MapKind.LINES})
     Config: ClassVar[type[FilterConfig]] = LineEKFConfig
     version: ClassVar[int] = 2
+    cost_per_data_s: ClassVar[float] = 0.15
     source: ClassVar[str] = "002_f01b2dfd20d46b8b (EKF map-based localization with lines, eq. 1-8)"
 
     config: LineEKFConfig

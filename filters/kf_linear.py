@@ -160,6 +160,7 @@ class LinearKF(Filter):
     requires: ClassVar[frozenset[MapKind]] = frozenset({MapKind.OCCUPANCY})
     Config: ClassVar[type[FilterConfig]] = LinearKFConfig
     version: ClassVar[int] = 1
+    cost_per_data_s: ClassVar[float] = 0.3
     source: ClassVar[str] = "004_2a620520509b0112 (linear KF, velocity model and scan-database sensor model, sec. I-II)"
 
     config: LinearKFConfig

@@ -55,6 +55,7 @@ class OdometryFilter(Filter):
     consumes: ClassVar[frozenset[type]] = frozenset({Odometry})
     Config: ClassVar[type[FilterConfig]] = OdometryConfig
     version: ClassVar[int] = 1
+    cost_per_data_s: ClassVar[float] = 0.002
     baseline: ClassVar[bool] = True
     source: ClassVar[str] = "all reports (odometry baseline); noise model of 003_e5c93f9be776ee5e eq. 10"
 

@@ -113,6 +113,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal
 
@@ -137,7 +138,7 @@ from locbench.filters._motion import (
     sample_twist_motion,
     wheel_variances,
 )
-from locbench.filters._noise import landmark_noise, range_only_noise
+from locbench.filters._noise import landmark_noise, process_noise, range_only_noise
 from locbench.filters._numba_rng import UIntArray, generator_addresses, generator_from
 from locbench.filters.base import CheckTolerances, Estimate, Filter, FilterConfig, gaussian_health
 from locbench.geometry import wrap_angle
@@ -267,10 +268,10 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
         discretisation and the beams' correlation, which a 1 cm sensor sigma would ignore).
     laser_max_dist_m : float
         Distance to the nearest obstacle at which the likelihood field is clipped, m (AMCL default 2.0).
-    sigma_x_m, sigma_y_m, sigma_theta_rad : float
-        Additive system noise per odometry step (report 003 eq. 8), world frame; the EKF's defaults, so
-        that both filters have "the same encoder model". It also keeps duplicated particles apart while
-        the robot stands still.
+    sigma_x_m, sigma_y_m, sigma_theta_rad : float or None
+        Additive system noise per odometry step (report 003 eq. 8), world frame; None takes the dataset's
+        value, else the EKF's defaults (:func:`locbench.filters._noise.process_noise`), so that both filters
+        have "the same encoder model". It also keeps duplicated particles apart while the robot stands still.
     input_noise : {"per_step", "cumulative"}
         Reading of report 003 eq. 10 (see :mod:`locbench.filters._motion`).
     motion_model : {"auto", "encoder", "increment"}
@@ -316,9 +317,9 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
     z_rand: float = 0.05
     sigma_hit_m: float = 0.2
     laser_max_dist_m: float = 2.0
-    sigma_x_m: float = 0.001
-    sigma_y_m: float = 0.001
-    sigma_theta_rad: float = 0.0005
+    sigma_x_m: float | None = None
+    sigma_y_m: float | None = None
+    sigma_theta_rad: float | None = None
     motion_model: MotionKind = "auto"
     sigma_range_m: float | None = field(default=None, metadata=tunable(1e-3, 1.0, log=True))
     sigma_bearing_rad: float | None = field(default=None, metadata=tunable(1e-3, 0.5, log=True))
@@ -368,8 +369,9 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
             if not getattr(self, name) > 0.0:
                 raise ConfigError(f"{name} must be > 0 m, got {getattr(self, name)}")
         for name in ("sigma_x_m", "sigma_y_m", "sigma_theta_rad"):
-            if getattr(self, name) < 0.0:
-                raise ConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
+            v = getattr(self, name)
+            if v is not None and v < 0.0:
+                raise ConfigError(f"{name} must be >= 0, got {v}")
         for name in ("sigma_range_m", "sigma_bearing_rad", "wheelbase_m", "range_only_sigma_m"):
             v = getattr(self, name)
             if v is not None and v <= 0.0:
@@ -972,8 +974,27 @@ class ParticleFilter(Filter):
     Config: ClassVar[type[FilterConfig]] = ParticleFilterConfig
     # 2: compiled kernels, so other random streams; 3: augmented MCL may inject every particle; 4: roughening
     # measures the predicted particles' spread, so it never leaves a resampled set of copies (other results);
-    # 5: a sighting pair draws from the previous event's other landmarks only (inject_pairs results)
-    version: ClassVar[int] = 5
+    # 5: a sighting pair draws from the previous event's other landmarks only (inject_pairs results);
+    # 6: the system noise is the dataset's when it declares one (0 on a model-matched world)
+    version: ClassVar[int] = 6
+    check_configurations: ClassVar[tuple[dict[str, str], ...]] = ({"adaptive": "kld"}, {"init": "uniform"})
+
+    @classmethod
+    def declared_check_failures(cls, config: FilterConfig) -> Mapping[str, str]:
+        """``init=uniform`` fails the two tracking checks by design: its estimate starts anywhere in free space."""
+        out = dict(cls.expected_check_failures)
+        if cls.starts_without_pose(config):
+            why = "global localization: from a uniform prior the first estimates are not near the true start"
+            out |= {"check_heading_wrap": why, "check_noise_free": why}
+        return out
+
+    cost_per_data_s: ClassVar[float] = 0.1
+
+    @classmethod
+    def cost_scale(cls, config: FilterConfig) -> float:
+        """The particle count over the default's 1000."""
+        return getattr(config, "particles", 1000) / 1000.0
+
     #: The kidnap configuration: augmented MCL with sensor resetting, also from sighting pairs (the one that
     #: recovers on both office and room, docs/pf_consistency_kidnap.md); 003's PF only resamples.
     kidnap_params: ClassVar[dict[str, str]] = {"augmented": "true", "inject": "sensor", "inject_pairs": "true"}
@@ -1033,7 +1054,7 @@ class ParticleFilter(Filter):
             cfg.motion_model == "encoder" or (cfg.motion_model == "auto" and nz.encoder_given)
         )
         self._travelled = [0.0, 0.0]
-        self._q_std = np.array([cfg.sigma_x_m, cfg.sigma_y_m, cfg.sigma_theta_rad])
+        self._q_std = np.array(process_noise(cfg.sigma_x_m, cfg.sigma_y_m, cfg.sigma_theta_rad, sensors))
 
         lm = world.landmarks if world.landmarks is not None and len(world.landmarks) > 0 else None
         grid = world.occupancy

@@ -16,12 +16,10 @@ from locbench.export import (
     export_results,
     export_truth_tum,
     export_tum,
-    quaternion_to_yaw,
     read_tum,
     write_tum,
-    yaw_to_quaternion,
 )
-from locbench.geometry import wrap_angle
+from locbench.geometry import quaternion_to_yaw, wrap_angle, yaw_to_quaternion
 from locbench.metrics import estimate_at
 from locbench.runner import run_group
 from locbench.store import KIND_NAMES, RunRecord, Store

@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
+from tool_support import load_tool
 
 from locbench import claims
 from locbench.claims import report_001
@@ -229,3 +230,13 @@ def test_layout_section_gives_a_table_and_a_figure() -> None:
     assert any(r[:2] == ("`ekf_landmarks`", "circle") and r[2].strip("*").startswith("30.") for r in table.rows)
     assert plot.name == "landmark_geometry_ate_per_layout"
     assert render_png(plot)[:4] == b"\x89PNG"
+
+
+@pytest.mark.slow
+def test_the_detection_study_reproduces_its_recorded_result() -> None:
+    # tools/landmark_detection_stats.py measured the detector's error behind the nominal landmark noise
+    tool = load_tool("landmark_detection_stats")
+    measured = tool.detection_error_stats()
+    assert measured == pytest.approx(tool.RECORDED, rel=1e-9, abs=1e-12)
+    assert measured["range_rms_m"] <= lg.NOMINAL_SIGMA_RANGE_M
+    assert measured["bearing_rms_rad"] <= lg.NOMINAL_SIGMA_BEARING_RAD

@@ -107,6 +107,19 @@ def test_claims_on_synthetic_metrics() -> None:
     assert set(_verdicts(empty).values()) == {"not evaluated"}
 
 
+def test_gate_claims_are_not_judged_on_one_length_check_setting() -> None:
+    # Worded "with the length check on and off": a sweep stored with the check on only is not evaluated.
+    df = _frame(with_acc=True, length_helps=True)
+    on_only = df[~df["filter"].str.contains("reject_longer=false")]
+    v = _verdicts(on_only)
+    assert v["line_room_gate_lowers_error"] == "not evaluated"
+    assert v["line_room_gate_accepts_more"] == "not evaluated"
+    assert (
+        "length check on and with it off"
+        in claims.claims_for("line_room", across_variants=True)[0].evaluate(on_only).measured
+    )
+
+
 def test_gate_section_gives_table_and_figure() -> None:
     (fn,) = claims.sections_for("line_room")
     table, plot = fn(_frame(with_acc=True, length_helps=True), "line_room")

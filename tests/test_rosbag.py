@@ -21,8 +21,7 @@ from locbench.datasets.recorded.files import RecordedDataError
 from locbench.datasets.recorded.ros_map import save_map_server_map
 from locbench.errors import ConfigError, DataNotFound
 from locbench.events import LaserScan, Odometry
-from locbench.export import quaternion_to_yaw
-from locbench.geometry import wrap_angle
+from locbench.geometry import quaternion_to_yaw, wrap_angle
 from locbench.metrics import ate
 from locbench.registry import DATASETS, make_dataset, make_filter
 from locbench.runner import run_filter

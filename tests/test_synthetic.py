@@ -7,6 +7,7 @@ import time
 
 import numpy as np
 import pytest
+from tool_support import load_tool
 
 from locbench.datasets.synthetic import scenarios as sc
 from locbench.datasets.synthetic.robot import DriveLimits, GoTo, simulate_route
@@ -393,3 +394,13 @@ def test_synthetic_worlds_declare_their_sensor_streams() -> None:
     blind = dataclasses.replace(office, events=kept)
     with pytest.raises(ConfigError, match="LandmarkObservations"):
         blind.check()
+
+
+def test_the_room_calibration_study_reproduces_its_recorded_result() -> None:
+    # tools/calibrate_odometry.py fitted the frozen constants; what they achieve is kept beside them
+    tool = load_tool("calibrate_odometry")
+    room = 100.0 * tool.room_dead_reckoning_errors(
+        sc.ENCODER_SCALE_LEFT, sc.ENCODER_SCALE_RIGHT, sc.WHEELBASE_TRUE_RATIO
+    )
+    np.testing.assert_allclose(room, sc.ROOM_CALIBRATION_ACHIEVED_CM, atol=5e-4)
+    # the lap calibration: tests/test_lap.py::test_frozen_calibration_gives_about_15_cm

@@ -14,6 +14,7 @@ pytest.importorskip("filterpy")
 from locbench.datasets.base import Gaussian2, Landmarks, SensorSpec, WorldMap
 from locbench.errors import ConfigError
 from locbench.events import LandmarkObservations, Odometry, PoseFix, RangeObservations
+from locbench.filters._noise import DEFAULT_PROCESS_SIGMA_THETA_RAD
 from locbench.filters.ekf_landmarks import LandmarkEKF, LandmarkEKFConfig, range_bearing
 from locbench.filters.ukf_landmarks import LandmarkUKF, LandmarkUKFConfig, circular_mean
 from locbench.geometry import pose_error, wrap_angle
@@ -84,7 +85,7 @@ def test_sigma_points_straddling_pi_keep_the_heading_and_its_variance() -> None:
     ukf.predict(Odometry(0.1, 0.0, 0.0, 0.0))
     est = ukf.estimate()
     assert abs(wrap_angle(est.mean[2] - (math.pi - 0.001))) < 1e-9
-    assert est.cov[2, 2] == pytest.approx(0.01 + LandmarkEKFConfig().sigma_theta_rad ** 2, rel=1e-9)
+    assert est.cov[2, 2] == pytest.approx(0.01 + DEFAULT_PROCESS_SIGMA_THETA_RAD**2, rel=1e-9)
 
 
 def test_bearing_innovation_is_wrapped_across_pi() -> None:

@@ -2,9 +2,10 @@
 
 pytest-benchmark runs its cases one after another, so on a shared machine the load can change between the
 filter's rounds and the minimal loop's and move their ratio by 2x. This runs one round of each case in turn
-(filter, wrapper alone, minimal loop; optionally first the filter of another checkout and its wrapper),
-21 times by default, and prints the median time per observation of each and the median of the per-round
-ratios. The cases are those of ``tests/perf/test_gtsam_perf.py`` (imported from it)::
+(filter, wrapper alone, the minimal loop that builds the same graph from the same events; optionally first
+the filter of another checkout and its wrapper), 21 times by default, and prints the median time per
+observation of each and the median of the per-round ratios. The cases are those of
+``tests/perf/test_gtsam_perf.py`` (imported from it)::
 
     python tools/gtsam_interleaved.py
     git show main:filters/gtsam_fls.py > /tmp/gtsam_fls_main.py
@@ -44,8 +45,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     bench = _load("_gtsam_perf", Path(__file__).resolve().parents[1] / "tests" / "perf" / "test_gtsam_perf.py")
     ds = make_dataset("office", 0)
-    events, log, make, answers = bench._record(ds)
-    keys = bench.newest_pose_keys(log)
+    events, _, make, answers = bench._record(ds)
 
     def filter_round(cls: Any = None, stub: bool = False) -> float:
         flt = bench._fresh_filter(ds) if cls is None else cls(bench.resolve_filter("gtsam_fls").params)
@@ -60,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
     def minimal_round() -> float:
         smoother = make()
         t = time.perf_counter()
-        bench.replay(smoother, log, keys)
+        bench.minimal_loop(ds, events, smoother)
         return time.perf_counter() - t
 
     cases: dict[str, Callable[[], float]] = {}

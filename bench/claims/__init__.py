@@ -263,27 +263,27 @@ SectionFn = Callable[[pd.DataFrame, str], "list[Block]"]
 
 _CLAIMS: list[Claim] = []
 _SECTIONS: list[tuple[str, SectionFn]] = []
-_EXPERIMENTS: dict[str, Experiment] = {}
+_EXPERIMENTS_BY_DATASET: dict[str, Experiment] = {}
 _loaded = False
 
 
 def register_experiment(experiment: Experiment) -> None:
     """Add an experiment (one per dataset id)."""
-    if experiment.dataset in _EXPERIMENTS:
+    if experiment.dataset in _EXPERIMENTS_BY_DATASET:
         raise ValueError(f"experiment {experiment.dataset!r} registered twice")
-    _EXPERIMENTS[experiment.dataset] = experiment
+    _EXPERIMENTS_BY_DATASET[experiment.dataset] = experiment
 
 
 def experiments() -> tuple[Experiment, ...]:
     """Every registered experiment, by ``order`` then dataset id."""
     _load()
-    return tuple(sorted(_EXPERIMENTS.values(), key=lambda e: (e.order, e.dataset)))
+    return tuple(sorted(_EXPERIMENTS_BY_DATASET.values(), key=lambda e: (e.order, e.dataset)))
 
 
 def experiment_of(dataset_id: str) -> Experiment | None:
     """The experiment registered for a dataset id, if any."""
     _load()
-    return _EXPERIMENTS.get(dataset_id)
+    return _EXPERIMENTS_BY_DATASET.get(dataset_id)
 
 
 def register(*claims: Claim) -> None:

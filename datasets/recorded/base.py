@@ -27,6 +27,7 @@ class RecordedDataset(DatasetBuilder):
     #: What the reference trajectory is (the report groups recorded data by it): "motion capture", "GPS", "survey",
     #: "SLAM", "simulation" or "not stated"; a dataset whose sets differ says it in ``metadata["reference_kind"]``.
     reference_kind: ClassVar[str] = "not stated"
+    nominal_duration_s: ClassVar[float] = 1000.0
 
     @classmethod
     @abc.abstractmethod

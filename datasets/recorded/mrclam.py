@@ -986,11 +986,6 @@ def _place(members: Sequence[str], spec: RemoteFile, target: Path) -> Path:
     return dest
 
 
-def known_checksums(dataset: int) -> dict[str, str]:
-    """sha256 by file name for ``dataset`` (empty: nothing is verified for it)."""
-    return dict(KNOWN_SHA256.get(dataset, {}))
-
-
 __all__: Sequence[str] = (
     "MrclamDataset",
     "MrclamParams",

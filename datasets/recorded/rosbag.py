@@ -82,8 +82,7 @@ from locbench.datasets.recorded.intel import extract_map_lines
 from locbench.datasets.recorded.ros_map import load_map_server_map
 from locbench.errors import ConfigError, DependencyNotInstalled
 from locbench.events import Event, LaserScan, Odometry
-from locbench.export import quaternion_to_yaw
-from locbench.geometry import wrap_angle
+from locbench.geometry import quaternion_to_yaw, wrap_angle
 from locbench.spec import params_to_dict
 
 FloatArray = npt.NDArray[np.float64]
@@ -664,6 +663,7 @@ class RosbagDataset(DatasetBuilder):
 
     Params: ClassVar[type] = RosbagParams
     version: ClassVar[int] = 1
+    nominal_duration_s: ClassVar[float] = 1000.0
     description: ClassVar[str] = "a ROS 1 / ROS 2 bag: nav_msgs/Odometry, sensor_msgs/LaserScan, a truth pose topic"
 
     def build(self, params: RosbagParams, rng: np.random.Generator) -> Dataset:

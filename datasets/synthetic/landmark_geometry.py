@@ -49,7 +49,7 @@ Sensors:
 
 The nominal landmark noise handed to filters (:data:`NOMINAL_SIGMA_RANGE_M` 5 cm,
 :data:`NOMINAL_SIGMA_BEARING_RAD` 0.007 rad) is the measured RMS error of this detector over every path
-and layout (see :func:`detection_error_stats`), rounded up.
+and layout (``tools/landmark_detection_stats.py``, which records what it measured), rounded up.
 
 ``initial_offset_m = d`` moves the initial belief handed to filters d metres from the true start in a
 direction drawn from the seed, with a per-axis standard deviation of max(d, 2 cm) so that the belief
@@ -79,6 +79,7 @@ from locbench.datasets.synthetic.scenarios import (
     assemble,
     check_kidnap_params,
     encoder_model,
+    matched_process_noise,
     nominal_odometry_spec,
     true_wheelbase,
 )
@@ -426,6 +427,7 @@ class LandmarkGeometryScenario(SyntheticBuilder):
         )
         spec = SensorSpec(
             **nominal_odometry_spec(),
+            **matched_process_noise(params.matched),
             landmark_sigma_range_m=NOMINAL_SIGMA_RANGE_M,
             landmark_sigma_bearing_rad=NOMINAL_SIGMA_BEARING_RAD,
             landmark_min_range_m=LASER.min_range_m + LANDMARK_RADIUS_M,
@@ -523,42 +525,3 @@ def _check_params(p: LandmarkGeometryParams) -> None:
         )
     if not 1 <= p.circuits <= 10:
         raise ConfigError(f"parameter 'circuits' must be an integer in 1..10, got {p.circuits}")
-
-
-def detection_error_stats(
-    paths: tuple[str, ...] = PATHS, layouts: tuple[str, ...] = LAYOUTS, seeds: tuple[int, ...] = (0, 1, 2)
-) -> dict[str, float]:
-    """Errors of :func:`detect_landmarks` against the true range and bearing of the disc centres.
-
-    Builds every (path, layout, seed) with the locbench seeding and compares each reported sighting with
-    the truth at its time. Returns the mean and RMS of the range error (m) and of the bearing error
-    (rad) and the number of sightings; the basis of the nominal noise (not run at build time).
-    """
-    from locbench.registry import make_dataset
-
-    dr: list[float] = []
-    db: list[float] = []
-    for path in paths:
-        for layout in layouts:
-            for seed in seeds:
-                ds = make_dataset(f"landmark_geometry[path={path},landmarks={layout}]", seed)
-                gt = ds.ground_truth
-                lm = ds.world.landmarks
-                assert lm is not None
-                for e in ds.events:
-                    if not isinstance(e, LandmarkObservations):
-                        continue
-                    k = int(np.searchsorted(gt.t, e.t - 1e-9))
-                    x, y, th = gt.xy[k, 0], gt.xy[k, 1], gt.theta[k]
-                    for j, r, b in zip(e.ids.tolist(), e.ranges.tolist(), e.bearings.tolist(), strict=True):
-                        cx, cy = lm.xy[j]
-                        dr.append(r - math.hypot(cx - x, cy - y))
-                        db.append(wrap_scalar(b - (math.atan2(cy - y, cx - x) - th)))
-    a, b = np.asarray(dr), np.asarray(db)
-    return {
-        "range_mean_m": float(np.mean(a)),
-        "range_rms_m": float(np.sqrt(np.mean(a * a))),
-        "bearing_mean_rad": float(np.mean(b)),
-        "bearing_rms_rad": float(np.sqrt(np.mean(b * b))),
-        "sightings": float(a.size),
-    }

@@ -23,7 +23,7 @@ Here:
   errors, a wheelbase mismatch and random encoder error k = 0.002 sqrt(m)), calibrated for this lap as a
   property of the world, never of a filter: the *systematic* part (both wheel-scale errors and the
   wheelbase mismatch) is multiplied by one factor ``LAP_SYSTEMATIC_SCALE``, fitted by
-  :func:`calibrate_lap_odometry` so that the median over seeds 0-19 of odometry's end-of-lap error
+  ``tools/calibrate_odometry.py`` so that the median over seeds 0-19 of odometry's end-of-lap error
   (``final_error_m``, robot back on the start) is the report's 15 cm. The room calibration's full
   systematic error under-turns 7 % per turn on the spot, metres after four 90 deg corners; report 000's
   Pioneer was evidently far better calibrated (15 cm after a lap). The random part alone gives a median of
@@ -63,6 +63,7 @@ from locbench.datasets.synthetic.scenarios import (
     drive,
     execution_stream,
     matched_encoder_model,
+    matched_process_noise,
     matched_stream,
     nominal_odometry_spec,
     office_world,
@@ -71,11 +72,8 @@ from locbench.datasets.synthetic.scenarios import (
 from locbench.datasets.synthetic.sensors import (
     EncoderModel,
     LaserSensor,
-    dead_reckon,
     laser_sensor_poses,
-    measured_wheel_travel,
     noisy_scans,
-    odometry_increments,
 )
 from locbench.datasets.synthetic.world import World
 from locbench.errors import ConfigError
@@ -108,6 +106,7 @@ PEOPLE_REGION = (9.0, 0.5, 19.5, 8.2)
 
 #: Report 000 sec. IV: odometry is about 15 cm from the start after one lap, m.
 LAP_TARGET_FINAL_ERROR_M = 0.15
+# (The study is in tools/calibrate_odometry.py.)
 # Fitted by calibrate_lap_odometry() (scipy brentq on the median over seeds 0..19 of the dead-reckoned
 # position error at the last ground-truth time, the noise draws of make_dataset("lap", seed)); re-run unchanged
 # for generator version 2 (execution noise; version 1's exact execution gave 0.04979401478993158).
@@ -157,48 +156,6 @@ def lap_motion(scale: float = LAP_SYSTEMATIC_SCALE, seed: int | None = None, dat
 
     slip_rng = lap_streams(dataset_rng(dataset_name, seed))[2]
     return simulate_route(LAP_START, lap_route(), limits, slip_k=SLIP_K_TRUE, slip_rng=slip_rng)
-
-
-def lap_dead_reckoning_final_errors(
-    scale: float, seeds: Sequence[int] = tuple(range(20)), dataset_name: str = "lap"
-) -> FloatArray:
-    """Odometry's position error at the last ground-truth time for each seed, m, shape (len(seeds),).
-
-    Uses the same noise draws as ``make_dataset(dataset_name, seed)`` (the execution noise of the true
-    motion and the odometry stream).
-    """
-    from locbench.seeding import dataset_rng
-
-    model = lap_encoder_model(scale)
-    out = []
-    for seed in seeds:
-        motion = lap_motion(scale, seed, dataset_name)
-        dl, dr = measured_wheel_travel(motion, model, split_streams(dataset_rng(dataset_name, seed))["odometry"])
-        path = dead_reckon(motion.poses[0], odometry_increments(dl, dr, WHEELBASE_NOMINAL_M))
-        out.append(float(np.hypot(*(path[-1, 0:2] - motion.poses[-1, 0:2]))))
-    return np.asarray(out)
-
-
-def calibrate_lap_odometry(
-    seeds: Sequence[int] = tuple(range(20)), target_m: float = LAP_TARGET_FINAL_ERROR_M
-) -> dict[str, Any]:
-    """Fit ``LAP_SYSTEMATIC_SCALE`` (reproducible; not run at build time).
-
-    Brent's method (scipy ``brentq``) on scale in [0, 1] for median over ``seeds`` of
-    :func:`lap_dead_reckoning_final_errors` = ``target_m``. Returns the factor, the achieved median (m)
-    and the per-seed errors; freeze them as the module constants.
-    """
-    from scipy.optimize import brentq
-
-    def f(a: float) -> float:
-        return float(np.median(lap_dead_reckoning_final_errors(a, seeds))) - target_m
-
-    lo, hi = 0.0, 1.0
-    if f(lo) > 0.0:
-        raise ConfigError(f"the random odometry error alone exceeds {target_m} m on this lap; shorten the lap")
-    a = float(brentq(f, lo, hi, xtol=1e-6))
-    errs = lap_dead_reckoning_final_errors(a, seeds)
-    return {"scale": a, "achieved_median_m": float(np.median(errs)), "errors_m": [float(e) for e in errs]}
 
 
 # --- people ---------------------------------------------------------------------------------------------
@@ -360,6 +317,7 @@ class LapScenario(SyntheticBuilder):
 
     Params: ClassVar[type] = LapParams
     version: ClassVar[int] = 2
+    nominal_duration_s: ClassVar[float] = 60.0
     description: ClassVar[str] = (
         "report 000's office lap: 0.05 m grid, rectangular lap, Hokuyo-like laser, people not on the map"
     )
@@ -392,11 +350,13 @@ class LapScenario(SyntheticBuilder):
             dropout_prob=0.01,
         )
         people = draw_people(world, 0 if params.matched else params.people, people_rng, PEOPLE_REGION)
-        spec = SensorSpec(**nominal_odometry_spec(), laser_sigma_m=laser.sigma_m)
+        spec = SensorSpec(
+            **nominal_odometry_spec(), **matched_process_noise(params.matched), laser_sigma_m=laser.sigma_m
+        )
         meta = {
             "generator_version": LAP_GENERATOR_VERSION,
             "calibration": {
-                "procedure": "locbench.datasets.synthetic.lap.calibrate_lap_odometry",
+                "procedure": "tools/calibrate_odometry.py (calibrate_lap_odometry)",
                 "systematic_scale": LAP_SYSTEMATIC_SCALE,
                 "target_final_error_m": LAP_TARGET_FINAL_ERROR_M,
                 "achieved_median_final_error_m": LAP_CALIBRATION_ACHIEVED_M,

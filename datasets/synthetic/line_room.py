@@ -40,6 +40,7 @@ from locbench.datasets.synthetic.scenarios import (
     drive,
     encoder_model,
     execution_stream,
+    matched_process_noise,
     matched_stream,
     nominal_odometry_spec,
     split_streams,
@@ -163,7 +164,9 @@ class LineRoomScenario(SyntheticBuilder):
             sigma_m=params.laser_sigma_m,
         )
         suite = SensorSuite(encoder=encoder_model(params.matched), laser=laser)
-        spec = SensorSpec(**nominal_odometry_spec(), laser_sigma_m=laser.sigma_m)
+        spec = SensorSpec(
+            **nominal_odometry_spec(), **matched_process_noise(params.matched), laser_sigma_m=laser.sigma_m
+        )
         return assemble(
             dataset_id="line_room",
             params=params,

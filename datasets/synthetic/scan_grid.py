@@ -59,6 +59,7 @@ from locbench.datasets.synthetic.scenarios import (
     encoder_model,
     kidnap_chooser,
     matched_initial_mean,
+    matched_process_noise,
     matched_stream,
     nominal_odometry_spec,
     split_streams,
@@ -341,7 +342,9 @@ class ScanGridScenario(SyntheticBuilder):
             )
             for k in range(n + 1)
         ]
-        spec = SensorSpec(**nominal_odometry_spec(), laser_sigma_m=laser.sigma_m)
+        spec = SensorSpec(
+            **nominal_odometry_spec(), **matched_process_noise(params.matched), laser_sigma_m=laser.sigma_m
+        )
         initial_sigma = (0.02, 0.02, math.radians(1.0))
         start = poses[0].copy()
         if params.matched:

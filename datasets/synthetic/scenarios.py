@@ -6,7 +6,7 @@ landmarks, laser, fixes, kidnap), so that e.g. ``laser_beams`` or ``known_ids`` 
 odometry realisation of a seed.
 
 Every scenario's robot is the same H20-like differential drive with the same wheel-odometry error
-(calibrated on the room, see :func:`calibrate_room_odometry`) and the same execution noise between its
+(calibrated on the room by ``tools/calibrate_odometry.py``) and the same execution noise between its
 commanded twist and its true motion (wheel slip, :data:`SLIP_K_TRUE`, see
 :mod:`locbench.datasets.synthetic.robot`), drawn from its own child stream (:func:`execution_stream`,
 spawned after every other stream so that those are unchanged by it); the tiny scenarios can switch all
@@ -41,11 +41,8 @@ from locbench.datasets.synthetic.sensors import (
     LandmarkSensor,
     LaserSensor,
     PoseFixSensor,
-    dead_reckon,
     landmark_observations,
     laser_scans,
-    measured_wheel_travel,
-    odometry_increments,
     pose_fixes,
     wheel_odometry,
 )
@@ -70,7 +67,8 @@ GENERATOR_VERSION = 2
 WHEELBASE_NOMINAL_M = 0.40
 #: Random encoder error constants k_L = k_R of report 003 eq. 10 (chosen, not fitted), sqrt(m).
 ENCODER_K_TRUE = 0.002
-# Systematic errors fitted by calibrate_room_odometry() on 2026-11-22: scipy least_squares on the log ratio
+# Systematic errors fitted by calibrate_room_odometry() (tools/calibrate_odometry.py) on 2026-11-22: scipy
+# least_squares on the log ratio
 # (measured / 003 table 1) at the 5 waypoints, measured as table 1 does (distance between each waypoint
 # and the mean over seeds 0..19 of the dead-reckoned position at the waypoint time), k fixed at
 # ENCODER_K_TRUE, starting from zero error; fitted for exact execution (generator version 1). Kept for
@@ -136,6 +134,13 @@ def matched_stream(rng: np.random.Generator) -> np.random.Generator:
     """The child generator of a model-matched world's initial draw, spawned after every other stream (only
     when ``matched``, so that the default realisation is unchanged)."""
     return rng.spawn(1)[0]
+
+
+def matched_process_noise(matched: bool) -> dict[str, float]:
+    """SensorSpec process-noise fields of a world: zero on a model-matched one, whose true motion is exactly
+    the odometry model (no unmodelled motion for report 003's Q, eq. 8, to cover); none on the others (the
+    filters keep their default Q)."""
+    return {"process_sigma_xy_m": 0.0, "process_sigma_theta_rad": 0.0} if matched else {}
 
 
 def encoder_model(matched: bool) -> EncoderModel:
@@ -309,7 +314,7 @@ def assemble(
         "execution_noise": execution_metadata(motion),
         "matched": initial_rng is not None,
         "calibration": {
-            "procedure": "locbench.datasets.synthetic.scenarios.calibrate_room_odometry",
+            "procedure": "tools/calibrate_odometry.py (calibrate_room_odometry)",
             "target_cm": list(ROOM_TABLE1_ODOMETRY_CM),
             "achieved_cm": list(ROOM_CALIBRATION_ACHIEVED_CM),
         },
@@ -427,6 +432,7 @@ class RoomScenario(SyntheticBuilder):
 
     Params: ClassVar[type] = RoomParams
     version: ClassVar[int] = 2
+    nominal_duration_s: ClassVar[float] = 60.0
     description: ClassVar[str] = "report 003's 7 m x 2 m room: 4 landmarks, start + 5 waypoints, Kinect-like sensor"
 
     #: Kinect-like detector: 0.8-3.5 m, 57 deg horizontal field of view, cm-level range noise (report 003 sec. 3).
@@ -463,6 +469,7 @@ class RoomScenario(SyntheticBuilder):
         suite = SensorSuite(encoder=encoder_model(params.matched), landmarks=lm, laser=laser)
         spec = SensorSpec(
             **nominal_odometry_spec(),
+            **matched_process_noise(params.matched),
             landmark_sigma_range_m=lm.sigma_range_m,
             landmark_sigma_bearing_rad=lm.sigma_bearing_rad,
             landmark_min_range_m=lm.min_range_m,
@@ -483,43 +490,6 @@ class RoomScenario(SyntheticBuilder):
         )
 
 
-def room_dead_reckoning_errors(
-    scale_left: float,
-    scale_right: float,
-    wheelbase_ratio: float,
-    k: float = ENCODER_K_TRUE,
-    seeds: Sequence[int] = tuple(range(20)),
-    z: Sequence[FloatArray] | None = None,
-) -> FloatArray:
-    """Table-1 odometry error at each room waypoint for given error constants, m, shape (5,).
-
-    The distance between each waypoint and the mean over ``seeds`` of the dead-reckoned position at the
-    waypoint time, with the same noise draws as ``make_dataset("room", seed)`` (the execution noise of the
-    true motion and the encoder noise). ``z`` (one (n_seed, 2) array of encoder draws per seed) may hold
-    the encoder draws precomputed.
-    """
-    from locbench.seeding import dataset_rng
-
-    model = EncoderModel(
-        wheelbase_nominal_m=WHEELBASE_NOMINAL_M, scale_left=scale_left, scale_right=scale_right, k_left=k, k_right=k
-    )
-    ends = []
-    waypoints = None
-    for s_i, seed in enumerate(seeds):
-        motion = room_motion_for(wheelbase_ratio, seed)
-        waypoints = motion.waypoint_xy
-        if z is None:
-            dl, dr = measured_wheel_travel(motion, model, split_streams(dataset_rng("room", seed))["odometry"])
-        else:
-            dl = motion.d_left * (1 + scale_left) + k * np.sqrt(np.abs(motion.d_left)) * z[s_i][: motion.n_steps, 0]
-            dr = motion.d_right * (1 + scale_right) + k * np.sqrt(np.abs(motion.d_right)) * z[s_i][: motion.n_steps, 1]
-        path = dead_reckon(motion.poses[0], odometry_increments(dl, dr, WHEELBASE_NOMINAL_M))
-        ends.append(path[np.round(motion.waypoint_t / motion.dt).astype(np.int64), 0:2])
-    assert waypoints is not None
-    mean_xy = np.mean(np.asarray(ends), axis=0)
-    return np.hypot(*(mean_xy - waypoints).T)
-
-
 def room_motion_for(wheelbase_ratio: float, seed: int | None = None) -> Motion:
     """The kidnap-free room tour with a given true / nominal wheelbase ratio; with a ``seed``, with the
     execution noise of ``make_dataset("room", seed)`` (its execution stream), else executed exactly."""
@@ -532,45 +502,6 @@ def room_motion_for(wheelbase_ratio: float, seed: int | None = None) -> Motion:
     rng = dataset_rng("room", seed)
     split_streams(rng)
     return simulate_route(ROOM_START, legs, limits, slip_k=SLIP_K_TRUE, slip_rng=execution_stream(rng))
-
-
-def calibrate_room_odometry(seeds: Sequence[int] = tuple(range(20))) -> dict[str, Any]:
-    """Fit the world's systematic odometry error to report 003 table 1 (reproducible; not run at build time).
-
-    Least squares (scipy ``least_squares``) over (scale_left, scale_right, wheelbase_ratio) of
-    log(measured / target) at the 5 waypoints, with the random constant k fixed at ENCODER_K_TRUE, the
-    execution noise at SLIP_K_TRUE and the noise draws of ``make_dataset("room", seed)`` for ``seeds``
-    (the true motion is re-simulated for each wheelbase ratio). Returns the fitted constants, the achieved
-    errors (cm) and the ratios; freeze them as the module constants.
-    """
-    from scipy.optimize import least_squares
-
-    from locbench.seeding import dataset_rng
-
-    target = np.asarray(ROOM_TABLE1_ODOMETRY_CM) / 100.0
-    # Encoder draws for more steps than any tour takes (a prefix of the stream is what a dataset uses).
-    n = 2 * room_motion().n_steps
-    z = [split_streams(dataset_rng("room", s))["odometry"].standard_normal((n, 2)) for s in seeds]
-
-    def residual(p: FloatArray) -> FloatArray:
-        e = room_dead_reckoning_errors(p[0] * 1e-2, p[1] * 1e-2, 1.0 + p[2] * 1e-2, seeds=seeds, z=z)
-        return np.log(np.maximum(e, 1e-6) / target)
-
-    best = None
-    for x0 in ([0.0, 0.0, 0.0], [1.0, -1.0, 1.0], [-1.0, 1.0, -1.0], [1.0, -1.0, -1.0], [-1.0, 1.0, 1.0]):
-        sol = least_squares(residual, np.asarray(x0), diff_step=1e-3)
-        if best is None or sol.cost < best.cost:
-            best = sol
-    assert best is not None
-    p = best.x
-    achieved = room_dead_reckoning_errors(p[0] * 1e-2, p[1] * 1e-2, 1.0 + p[2] * 1e-2, seeds=seeds, z=z) * 100
-    return {
-        "scale_left": float(p[0] * 1e-2),
-        "scale_right": float(p[1] * 1e-2),
-        "wheelbase_ratio": float(1.0 + p[2] * 1e-2),
-        "achieved_cm": [float(v) for v in achieved],
-        "ratio": [float(v) for v in achieved / (target * 100)],
-    }
 
 
 # --- office ---------------------------------------------------------------------------------------------
@@ -689,6 +620,7 @@ class OfficeScenario(SyntheticBuilder):
 
     Params: ClassVar[type] = OfficeParams
     version: ClassVar[int] = 2
+    nominal_duration_s: ClassVar[float] = 231.0
     description: ClassVar[str] = "one office floor with walls, doors, landmarks and a waypoint tour; every sensor"
 
     def build(self, params: OfficeParams, rng: np.random.Generator) -> Dataset:
@@ -727,6 +659,7 @@ class OfficeScenario(SyntheticBuilder):
         suite = SensorSuite(encoder=encoder_model(params.matched), landmarks=lm, laser=laser, fixes=fixes)
         spec = SensorSpec(
             **nominal_odometry_spec(),
+            **matched_process_noise(params.matched),
             landmark_sigma_range_m=lm.sigma_range_m,
             landmark_sigma_bearing_rad=lm.sigma_bearing_rad,
             landmark_min_range_m=lm.min_range_m,
