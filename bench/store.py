@@ -320,7 +320,7 @@ class Store:
                 f"{self.root}: not empty and not a locbench results folder (no {MARKER} file); give a new or "
                 f"empty folder, or add the file {MARKER} if this folder is one"
             )
-        _makedirs(self.root)
+        _makedirs(self.runs)
         _atomic_write(
             marker, lambda p: p.write_text("locbench results folder: runs/ and summary/ are written by locbench\n")
         )
