@@ -349,6 +349,7 @@ def plan_sweep(
     store = Store(results)
     plan = Plan([], [], results)
     groups: dict[tuple[str, int], tuple[Resolved, dict[str, Job]]] = {}
+    truths: dict[tuple[str, int], str | None] = {}  # why a realisation's stored truth is stale, or None
     for fspecs, dspecs, seeds in blocks:
         frs = [resolve_filter(s) for s in fspecs]
         drs = [resolve_dataset(s) for s in dspecs]
@@ -364,7 +365,11 @@ def plan_sweep(
                     note = ""
                     meta = None if force else store.existing_meta(dr.name, fr.name, seed)
                     up_to_date = meta is not None and meta.get("run_key") == key and not meta.get("transient")
-                    if up_to_date and store.has_truth(dr.name, seed):
+                    if up_to_date and (dr.name, seed) not in truths:
+                        truths[(dr.name, seed)] = store.truth_problem(dr.name, seed)
+                    if up_to_date and truths[(dr.name, seed)] is not None:
+                        note = f"re-run: the stored ground truth is stale ({truths[(dr.name, seed)]})"
+                    elif up_to_date:
                         bad = store.unreadable(dr.name, fr.name, seed)
                         if bad is None:
                             plan.cached.append(RunOutcome(fr.spec, dr.spec, seed, CACHED))

@@ -234,3 +234,60 @@ def test_dask_worker_killed_mid_sweep_is_an_error_run_and_the_sweep_goes_on(tmp_
     for s in (0, 1):
         o = status[("bad[mode=exit]", s)]
         assert o.status == "error" and "KilledWorker" in o.message
+
+
+#: A child whose LocalCluster start receives a SIGINT (sent by the child to itself, inside the start): the
+#: moment a Ctrl-C used to be dropped.
+CHILD_SIGINT_IN_START = """
+import os, signal, sys
+import distributed
+from locbench.registry import DATASETS, FILTERS
+DATASETS.register("line", "harness_support:LineBuilder")
+FILTERS.register("bad", "harness_support:BadFilter")
+real = distributed.LocalCluster
+class Interrupted(real):
+    def __init__(self, *args, **kwargs):
+        os.kill(os.getpid(), signal.SIGINT)
+        super().__init__(*args, **kwargs)
+distributed.LocalCluster = Interrupted
+from locbench.cli import main
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
+"""
+
+
+@pytest.mark.slow
+def test_sigint_during_the_dask_cluster_start_is_deferred_not_dropped(tmp_path: Path, harness_registry: None) -> None:
+    pytest.importorskip("distributed")
+    script = tmp_path / "child.py"
+    script.write_text(CHILD_SIGINT_IN_START)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(TESTS), os.environ.get("PYTHONPATH", "")]))
+    res = tmp_path / "res"
+    argv = ["run", "--filter", "bad[mode=slow]", "--dataset", "line[steps=20]", "--seeds", "8", "--results", str(res)]
+    proc = subprocess.run(
+        [sys.executable, str(script), *argv, "--no-progress", "--executor", "dask", "--jobs", "2"],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    # dropped, the sweep would run all 8 runs (a second each) and exit 0
+    assert proc.returncode == 130, (proc.stdout, proc.stderr)
+    assert proc.stdout.strip().splitlines() == ["interrupted: 0 of 8 runs stored; run the same command to resume"]
+    assert _stored(res) == 0
+
+
+@pytest.mark.slow
+def test_dask_local_cluster_leaves_no_process_behind(tmp_path: Path) -> None:
+    pytest.importorskip("distributed")
+    import psutil
+
+    before = {p.pid for p in psutil.Process().children(recursive=True)}
+    assert main(["run", "--suite", "smoke", "--seeds", "1", "--results", str(tmp_path), "--no-progress"]) == 0
+    argv = ["run", "--suite", "smoke", "--seeds", "1", "--results", str(tmp_path / "d"), "--no-progress"]
+    assert main([*argv, "--executor", "dask", "--jobs", "2"]) == 0
+    left = [p for p in psutil.Process().children(recursive=True) if p.pid not in before]
+    # multiprocessing's resource tracker is the interpreter's own, shared by every pool: not the sweep's
+    ours = [p for p in left if p.is_running() and p.status() != psutil.STATUS_ZOMBIE]
+    assert [p for p in ours if "resource_tracker" not in " ".join(p.cmdline())] == []
