@@ -331,7 +331,9 @@ def load_suite_file(path: Path, max_configs: int = MAX_CONFIGS, max_seeds: int =
     unknown = sorted(set(data) - {"filters", "datasets", "seeds", "description"})
     if unknown:
         raise ConfigError(
-            f"{path}: unknown field(s) {one_line(', '.join(unknown), 200)}; valid: filters, datasets, seeds, description"
+            f"{path}: unknown field(s) {
+                one_line(', '.join(unknown), 200)
+            }; valid: filters, datasets, seeds, description"
         )
     for key in ("filters", "datasets"):
         val = data.get(key)
