@@ -330,11 +330,8 @@ def load_suite_file(path: Path, max_configs: int = MAX_CONFIGS, max_seeds: int =
         raise ConfigError(f"{path}: not valid TOML (nested too deeply)") from None
     unknown = sorted(set(data) - {"filters", "datasets", "seeds", "description"})
     if unknown:
-        raise ConfigError(
-            f"{path}: unknown field(s) {
-                one_line(', '.join(unknown), 200)
-            }; valid: filters, datasets, seeds, description"
-        )
+        names = one_line(", ".join(unknown), 200)
+        raise ConfigError(f"{path}: unknown field(s) {names}; valid: filters, datasets, seeds, description")
     for key in ("filters", "datasets"):
         val = data.get(key)
         if not isinstance(val, list) or not val or not all(isinstance(v, str) for v in val):
