@@ -1,6 +1,7 @@
 """nox sessions for locbench.
 
 nox                 the tests (the default session)
+nox -s tests_busy   the sweep, executor and signal tests (with the slow ones); .ci/run runs it with both cores busy
 nox -s lint         ruff, mypy and the import contracts (lint-imports)
 nox -s bench        run every experiment, verify a sample, write results/summary (posargs go to 'locbench run')
 nox -s report       regenerate results/summary from the stored runs, no re-run
@@ -46,6 +47,21 @@ def tests(session: nox.Session) -> None:
     that the bound's recursion is compared with its PCRB metric."""
     _install(session, "all,test,stonesoup")
     session.run("pytest", "--benchmark-disable", *session.posargs, env=_data_env())
+
+
+#: The tests that race the machine (executors, Ctrl-C, child processes, dask's ports): run again under load by CI.
+BUSY_TESTS = ("tests/test_sweeps.py", "tests/test_runner.py", "tests/test_store.py", "tests/test_untrusted_inputs.py")
+#: The dask signal tests among the slow ones (a LocalCluster's start is where a Ctrl-C used to be dropped).
+BUSY_DASK = "dask and (ctrl_c or sigint or no_process)"
+
+
+@nox.session(python=PYTHON, default=False)
+def tests_busy(session: nox.Session) -> None:
+    """The sweep, executor and signal tests, and the dask signal tests (.ci/run keeps both cores busy meanwhile)."""
+    _install(session, "all,test")
+    common = ("pytest", "--benchmark-disable", "-p", "no:cacheprovider")
+    session.run(*common, "-m", "not slow", *(session.posargs or BUSY_TESTS), env=_data_env())
+    session.run(*common, "-m", "slow", "-k", BUSY_DASK, "tests/test_sweeps.py", env=_data_env())
 
 
 @nox.session(python=PYTHON, default=False)

@@ -3,6 +3,7 @@
 locbench list [FILTER|DATASET ...]
 locbench run [--suite NAME|FILE.toml | --filter SPEC ... --dataset SPEC ...]
              [--seeds N] [--results DIR] [--jobs N] [--executor local|dask [--scheduler ADDRESS]] [--force]
+             [--connect-timeout S] [--max-configs N] [--max-seeds N]
 locbench tune FILTER --dataset SPEC [SPEC ...] --trials N --seeds K [--results DIR] [--objective ate|nll]
               [--jobs N] [--executor local|dask [--scheduler ADDRESS]]
 locbench report [--results DIR] [--suite NAME ...] [--out DIR] [--jobs N]
@@ -25,7 +26,9 @@ from pathlib import Path
 from typing import Any
 
 from locbench import __version__
-from locbench.errors import ConfigError, LocbenchError
+from locbench.errors import ConfigError, LocbenchError, one_line
+from locbench.spec import MAX_CONFIGS
+from locbench.suites import MAX_SEEDS
 
 #: The suite that tunes (``locbench run --suite tuned``), run by :mod:`locbench.tuning`, not as blocks of runs.
 TUNED_SUITE = "tuned"
@@ -99,41 +102,57 @@ def _list_params(ids: Sequence[str]) -> int:
 def _cmd_run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
+    from locbench.executors import check_scheduler_address
     from locbench.runner import plan_sweep, run_sweep
-    from locbench.suites import Block, get_suite
+    from locbench.store import Store
+    from locbench.suites import Block, check_seeds, get_suite
 
+    # every input is checked here, before anything is expanded, run or written
     if args.suite and (args.filter or args.dataset):
         raise ConfigError("give either --suite or --filter/--dataset, not both")
-    if args.seeds is not None and args.seeds < 1:
-        raise ConfigError(f"--seeds must be >= 1, got {args.seeds}")
+    for name, value in (("--max-configs", args.max_configs), ("--max-seeds", args.max_seeds)):
+        if value < 1:
+            raise ConfigError(f"{name} must be >= 1, got {value}")
+    if args.seeds is not None:
+        check_seeds(args.seeds, args.max_seeds, "--seeds")
     if args.jobs < 1:
         raise ConfigError(f"--jobs must be >= 1, got {args.jobs}")
-    if args.scheduler and args.executor != "dask":
+    if args.jobs > MAX_JOBS:
+        raise ConfigError(f"--jobs {args.jobs}: at most {MAX_JOBS} worker processes")
+    if not (0 < args.connect_timeout <= MAX_CONNECT_TIMEOUT_S):
+        raise ConfigError(f"--connect-timeout must be in (0, {MAX_CONNECT_TIMEOUT_S:g}] s, got {args.connect_timeout}")
+    if args.scheduler is not None and args.executor != "dask":
         raise ConfigError("--scheduler needs --executor dask")
+    scheduler = check_scheduler_address(args.scheduler) if args.scheduler is not None else None
+    limits = {"max_configs": args.max_configs, "max_seeds": args.max_seeds}
     if args.filter or args.dataset:
         if not (args.filter and args.dataset):
             raise ConfigError("--filter and --dataset go together: name at least one of each (see 'locbench list')")
-        blocks = [Block(tuple(args.filter), tuple(args.dataset), args.seeds or 1)]
+        blocks = [Block(tuple(args.filter), tuple(args.dataset), args.seeds or 1, **limits)]
     else:
         blocks = []
         for name in args.suite or ["default"]:
             if name == TUNED_SUITE:
                 continue
-            suite = get_suite(name)
-            blocks += list((suite.with_seeds(args.seeds) if args.seeds else suite).blocks)
+            suite = get_suite(name, **limits)
+            blocks += list((suite.with_seeds(args.seeds, args.max_seeds) if args.seeds else suite).blocks)
     tuned = TUNED_SUITE in (args.suite or [])
     rc = 0
     if blocks or not tuned:
         # every spec is resolved and validated here, before anything runs or is written
         plan = plan_sweep([(b.filters, b.datasets, range(b.seeds)) for b in blocks], args.results, args.force)
+        Store(args.results).claim()  # refuses another tool's folder before anything is written or cleaned in it
         bar = tqdm(total=plan.total, unit="run", desc="locbench run", disable=True if args.no_progress else None)
         with bar:
-            sweep = run_sweep(plan, args.executor, args.jobs, args.scheduler, progress=bar.update)
+            sweep = run_sweep(
+                plan, args.executor, args.jobs, scheduler, progress=bar.update, connect_timeout_s=args.connect_timeout
+            )
         if sweep.interrupted:
             print(f"interrupted: {sweep.stored} of {sweep.total} runs stored; run the same command to resume")
             return 130
         rc = _print_summary(sweep, args.results)
     if tuned:
+        Store(args.results).claim()
         rc = max(rc, _run_tuned(args))
     return rc
 
@@ -156,6 +175,12 @@ def _run_tuned(args: argparse.Namespace) -> int:
             + (f"{best.value:.4g} ({r.objective}): {best.spec}" if best else "none (every trial failed)")
         )
     return _print_summary(SweepResult(res.outcomes, len(res.outcomes)), args.results)
+
+
+#: Most worker processes ``--jobs`` asks for.
+MAX_JOBS = 1024
+#: Longest ``--connect-timeout``, s.
+MAX_CONNECT_TIMEOUT_S = 3600.0
 
 
 def _print_summary(sweep: Any, results: str) -> int:
@@ -185,13 +210,14 @@ def _print_summary(sweep: Any, results: str) -> int:
     for (status, filt, dataset, message), n in groups.items():
         times = f" x{n}" if n > 1 else ""
         print(f"  {status}{times}: {filt} on {dataset}: {message}")
-    failed = counts.get("error", 0) + counts.get(NOT_STORED, 0)
-    if failed:
-        print(
-            f"{counts.get('error', 0)} run(s) failed and {counts.get(NOT_STORED, 0)} were not stored; "
-            f"each failed run's message is in {results}/runs/<dataset>/<filter>/seed-NNNN/meta.json",
-            file=sys.stderr,
-        )
+    errors, lost = counts.get("error", 0), counts.get(NOT_STORED, 0)
+    if errors or lost:
+        where = []
+        if errors:
+            where.append(f"each failed run's message is in {results}/runs/<dataset>/<filter>/seed-NNNN/meta.json")
+        if lost:
+            where.append("the runs not stored are listed above with their folder and the reason")
+        print(f"{errors} run(s) failed and {lost} were not stored; " + "; ".join(where), file=sys.stderr)
         return 1
     return 0
 
@@ -386,6 +412,27 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="ADDRESS",
         help="with --executor dask: a running scheduler (tcp://host:8786); default: a LocalCluster of --jobs workers",
     )
+    r.add_argument(
+        "--connect-timeout",
+        type=float,
+        default=30.0,
+        metavar="S",
+        help="with --scheduler: seconds to wait for the scheduler to answer (default 30)",
+    )
+    r.add_argument(
+        "--max-configs",
+        type=int,
+        default=MAX_CONFIGS,
+        metavar="N",
+        help=f"most filter x dataset configurations a block's grids may make (default {MAX_CONFIGS})",
+    )
+    r.add_argument(
+        "--max-seeds",
+        type=int,
+        default=MAX_SEEDS,
+        metavar="N",
+        help=f"most seeds a block may run (default {MAX_SEEDS})",
+    )
     r.add_argument("--force", action="store_true", help="re-run runs that are already stored")
     r.add_argument("--no-progress", action="store_true", help="no progress bar")
     r.set_defaults(func=_cmd_run)
@@ -462,10 +509,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.func(args))
     except LocbenchError as exc:
         # one line that says what is valid; the traceback would hide it
-        print(f"locbench: error: {exc}", file=sys.stderr)
+        print(f"locbench: error: {one_line(str(exc))}", file=sys.stderr)
         return 2
     except OSError as exc:
-        print(f"locbench: error: {os_error_line(exc)}", file=sys.stderr)
+        print(f"locbench: error: {one_line(os_error_line(exc))}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)

@@ -4,7 +4,10 @@ from __future__ import annotations
 
 
 class LocbenchError(Exception):
-    """Base of every error locbench raises on purpose."""
+    """Base of every error locbench raises on purpose; its text is cut to :data:`MAX_MESSAGE_CHARS`."""
+
+    def __str__(self) -> str:
+        return _cut(super().__str__())
 
 
 class DependencyNotInstalled(LocbenchError):
@@ -15,7 +18,7 @@ class UnknownIdError(LocbenchError, KeyError):
     """An unknown filter, dataset, suite or parameter name; the message lists the valid ones."""
 
     def __str__(self) -> str:  # KeyError would quote the message
-        return str(self.args[0]) if self.args else ""
+        return _cut(str(self.args[0])) if self.args else ""
 
 
 class ConfigError(LocbenchError, ValueError):
@@ -43,3 +46,17 @@ def one_line(message: str, limit: int = MAX_MESSAGE_CHARS) -> str:
 class ResourceLimit(ConfigError):
     """A config or input whose estimated memory is above a documented limit (:mod:`locbench.limits`), refused before
     anything is allocated; the message names the parameter to change."""
+
+
+def _cut(message: str, limit: int = MAX_MESSAGE_CHARS) -> str:
+    return message if len(message) <= limit else message[: limit - 20] + " ... [cut]"
+
+
+#: Longest user-given value quoted in a message, characters.
+MAX_SHOWN_CHARS = 200
+
+
+def shown(value: object, limit: int = MAX_SHOWN_CHARS) -> str:
+    """``repr(value)`` cut to ``limit`` characters, for quoting user input in a message (the rest still fits)."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[: limit - 30]}... ({len(text)} characters)"

@@ -12,11 +12,17 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import contextlib
+import ctypes
 import dataclasses
+import importlib.util
+import ipaddress
 import logging
 import os
+import re
 import signal
+import sys
 import threading
+import time
 import types
 import uuid
 from collections.abc import Callable, Iterator, Sequence
@@ -24,7 +30,7 @@ from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from typing import Any
 
-from locbench.errors import ConfigError, DependencyNotInstalled
+from locbench.errors import ConfigError, DependencyNotInstalled, one_line
 from locbench.runner import Task, TaskResult, execute_task
 
 log = logging.getLogger(__name__)
@@ -59,6 +65,75 @@ _DASK_LOCAL_CONFIG = {
 DASK_RESUBMITS = 2
 #: How often a waiting executor looks at the stop flag, s.
 _POLL_S = 0.2
+
+
+#: Seconds a dask client waits for the scheduler at ``--scheduler`` to answer (``--connect-timeout``).
+CONNECT_TIMEOUT_S = 30.0
+#: Longest ``--scheduler`` address accepted, characters.
+MAX_ADDRESS_CHARS = 300
+#: Schemes of a dask scheduler address (``tcp`` when none is written); ``ucx`` needs its package.
+SCHEDULER_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx")
+#: A DNS host name: dot-separated labels of letters, digits and inner hyphens (RFC 1123), 253 characters at most.
+_HOSTNAME = re.compile(
+    r"^(?=.{1,253}$)[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?(?:\.[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?)*\.?$"
+)
+
+
+def check_scheduler_address(address: str) -> str:
+    """The ``--scheduler`` address checked and written ``scheme://host:port``; a :class:`ConfigError` otherwise.
+
+    Accepts ``[scheme://]host:port`` with a scheme of :data:`SCHEDULER_SCHEMES` (``tcp`` by default), a host
+    name, an IPv4 address or an IPv6 address in brackets (``tcp://[::1]:8786``), and a port 1-65535. Refused:
+    an empty, over-long (:data:`MAX_ADDRESS_CHARS`) or non-printable address, ``http(s)://`` (the dashboard,
+    not the scheduler), ``inproc://`` (one process only), ``ucx://`` without its package, anything else.
+    """
+    expected = "expected [tcp://]HOST:PORT, e.g. tcp://10.0.0.5:8786 or tcp://[::1]:8786"
+    if len(address) > MAX_ADDRESS_CHARS:
+        raise ConfigError(
+            f"--scheduler: an address of {len(address)} characters (at most {MAX_ADDRESS_CHARS}); {expected}"
+        )
+    shown = repr(address)
+    if not address.strip():
+        raise ConfigError(f"--scheduler: empty address; {expected}")
+    if any(c.isspace() or not c.isprintable() for c in address):
+        raise ConfigError(f"--scheduler {shown}: spaces or control characters in the address; {expected}")
+    scheme, sep, rest = address.partition("://")
+    scheme = scheme.lower() if sep else "tcp"
+    rest = rest if sep else address
+    if scheme in ("http", "https"):
+        raise ConfigError(
+            f"--scheduler {shown}: {scheme}:// is the dashboard's web address; the scheduler listens on "
+            "tcp://HOST:PORT (port 8786 by default)"
+        )
+    if scheme == "inproc":
+        raise ConfigError(f"--scheduler {shown}: an inproc:// scheduler lives inside one process only; {expected}")
+    if scheme not in SCHEDULER_SCHEMES:
+        raise ConfigError(f"--scheduler {shown}: unknown scheme {scheme!r}; valid: {', '.join(SCHEDULER_SCHEMES)}")
+    if scheme == "ucx" and not any(importlib.util.find_spec(m) for m in ("ucp", "distributed_ucxx")):
+        raise DependencyNotInstalled(
+            f"--scheduler {shown}: ucx:// needs UCX-Py; install it with: pip install distributed-ucxx"
+        )
+    if rest.startswith("["):
+        end = rest.find("]")
+        host, tail = (rest[1:end], rest[end + 1 :]) if end > 0 else ("", "")
+        try:
+            ipaddress.IPv6Address(host)
+        except ValueError:
+            raise ConfigError(f"--scheduler {shown}: malformed IPv6 address in brackets; {expected}") from None
+        if not tail.startswith(":"):
+            raise ConfigError(f"--scheduler {shown}: no port after the IPv6 address; {expected}")
+        netloc, port = f"[{host}]", tail[1:]
+    else:
+        if rest.count(":") != 1:
+            why = "an IPv6 address goes in brackets" if rest.count(":") > 1 else "no port"
+            raise ConfigError(f"--scheduler {shown}: {why}; {expected}")
+        host, port = rest.split(":")
+        if not _HOSTNAME.match(host):
+            raise ConfigError(f"--scheduler {shown}: {host!r} is not a host name or IP address; {expected}")
+        netloc = host
+    if not (port.isascii() and port.isdigit() and 1 <= int(port) <= 65535):
+        raise ConfigError(f"--scheduler {shown}: port {port!r} is not a number 1-65535; {expected}")
+    return f"{scheme}://{netloc}:{int(port)}"
 
 
 @dataclass
@@ -118,7 +193,12 @@ def get(name: str) -> Callable[..., ExecStatus]:
 
 
 def run_local(
-    tasks: Sequence[Task], handle: Handle, lost: Lost, jobs: int = 1, scheduler: str | None = None
+    tasks: Sequence[Task],
+    handle: Handle,
+    lost: Lost,
+    jobs: int = 1,
+    scheduler: str | None = None,
+    timeout_s: float = 0.0,
 ) -> ExecStatus:
     """Run the tasks in this process (``jobs`` = 1) or in a pool of ``jobs`` worker processes."""
     if scheduler is not None:
@@ -148,10 +228,42 @@ def _run_inline(tasks: Sequence[Task], handle: Handle, lost: Lost) -> ExecStatus
     return ExecStatus()
 
 
+#: How often a pool worker's watchdog looks whether its parent is still alive, s.
+_PARENT_POLL_S = 1.0
+
+
+def _end_with_parent() -> None:
+    """End this worker process when the process that started it dies, however it dies (kill -9 included).
+
+    On Linux the kernel sends SIGKILL at the parent's death (``PR_SET_PDEATHSIG``); everywhere a daemon thread
+    also polls the parent's pid (a dead parent's children are re-parented) and exits, as a fallback.
+    """
+    parent = os.getppid()
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
+    if os.getppid() != parent or parent == 1:  # the parent died before the request above took effect
+        os._exit(1)
+
+    def watch() -> None:
+        while True:
+            time.sleep(_PARENT_POLL_S)
+            if os.getppid() != parent:
+                os._exit(1)
+
+    threading.Thread(target=watch, name="locbench-parent-watchdog", daemon=True).start()
+
+
+#: ``prctl`` option: the signal this process receives when its parent dies (linux/prctl.h).
+_PR_SET_PDEATHSIG = 1
+
+
 def _pool_worker_init() -> None:
     # Ctrl-C reaches the whole process group: only the parent decides what stops, and it kills the workers.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    _end_with_parent()
 
 
 def _kill_pool(pool: cf.ProcessPoolExecutor) -> None:
@@ -243,16 +355,53 @@ def _run_pool(tasks: Sequence[Task], handle: Handle, lost: Lost, jobs: int) -> E
 
 
 @contextlib.contextmanager
-def _sigint_ignored() -> Iterator[None]:
-    """Start child processes with SIGINT ignored (an ignored signal stays ignored across exec), then restore."""
-    if threading.current_thread() is not threading.main_thread():
+def _sigint_deferred() -> Iterator[None]:
+    """Block SIGINT in this thread while a LocalCluster starts, then unblock it: a Ctrl-C meanwhile is deferred.
+
+    The cluster's threads are created here and its worker processes started from them, so they inherit the
+    blocked signal (the group's Ctrl-C does not kill a worker: the parent decides, and kills them). A SIGINT
+    that arrives meanwhile stays pending and reaches the :class:`StopRequest` handler at the unblock, so the
+    sweep stops as soon as the cluster is up (an ignored signal would be dropped).
+    """
+    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "pthread_sigmask"):
         yield
         return
-    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, old)
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+#: Seconds to wait for a dask worker process to exit after its cluster closed, before it is killed.
+_REAP_S = 10.0
+
+
+def _worker_processes(cluster: Any) -> list[Any]:
+    """``psutil.Process`` handles of a LocalCluster's worker processes (pid and start time: no pid reuse)."""
+    import psutil
+
+    procs = []
+    for nanny in list(getattr(cluster, "workers", {}).values()):
+        pid = getattr(nanny, "pid", None)
+        if pid:
+            with contextlib.suppress(psutil.Error):
+                procs.append(psutil.Process(pid))
+    return procs
+
+
+def _reap(procs: list[Any]) -> None:
+    """Wait until a closed cluster's worker processes have exited (a worker outlives its client by seconds),
+    killing any still alive after :data:`_REAP_S`: nothing a sweep started outlives it."""
+    if not procs:
+        return
+    import psutil
+
+    _, alive = psutil.wait_procs(procs, timeout=_REAP_S)
+    for proc in alive:
+        with contextlib.suppress(psutil.Error):
+            proc.kill()
+    psutil.wait_procs(alive, timeout=_REAP_S)
 
 
 def _kill_local_workers(cluster: Any) -> None:
@@ -265,13 +414,19 @@ def _kill_local_workers(cluster: Any) -> None:
 
 
 def run_dask(
-    tasks: Sequence[Task], handle: Handle, lost: Lost, jobs: int = 1, scheduler: str | None = None
+    tasks: Sequence[Task],
+    handle: Handle,
+    lost: Lost,
+    jobs: int = 1,
+    scheduler: str | None = None,
+    timeout_s: float = CONNECT_TIMEOUT_S,
 ) -> ExecStatus:
     """Run the tasks on dask.distributed workers: the scheduler at ``scheduler``, else a LocalCluster of ``jobs``.
 
     Each task is one dask task (longest first by priority); the records come back to this process, which
     writes them. A worker that dies is replaced and its task retried by dask (``allowed-failures`` times),
-    then the task is a ``KilledWorker`` error run; a task that raises is an error run.
+    then the task is a ``KilledWorker`` error run; a task that raises is an error run. A scheduler that does
+    not answer within ``timeout_s`` seconds is a :class:`ConfigError`.
     """
     try:
         import dask
@@ -284,11 +439,12 @@ def run_dask(
     if not tasks:
         return status
     cluster: Any = None
+    workers: list[Any] = []
     if not log.isEnabledFor(logging.INFO):
         # distributed logs every connection at INFO; a sweep prints its own summary
         logging.getLogger("distributed").setLevel(logging.ERROR)
     with StopRequest(raise_now=False) as stop:
-        with _sigint_ignored(), dask.config.set(_DASK_LOCAL_CONFIG):
+        with _sigint_deferred(), dask.config.set(_DASK_LOCAL_CONFIG):
             try:
                 if scheduler is None:
                     cluster = distributed.LocalCluster(
@@ -296,18 +452,25 @@ def run_dask(
                         threads_per_worker=1,
                         processes=True,
                         host="127.0.0.1",
-                        dashboard_address=None,
+                        # no fixed port: the scheduler's HTTP server (dashboard off) on a port the system picks
+                        dashboard_address=":0",
                         scheduler_kwargs={"dashboard": False},
                         silence_logs=logging.CRITICAL,
                     )
+                    workers = _worker_processes(cluster)
                     client = distributed.Client(cluster)
                 else:
-                    client = distributed.Client(scheduler, timeout="10s")
-            except (OSError, TimeoutError) as exc:
+                    address = check_scheduler_address(scheduler)
+                    client = distributed.Client(address, timeout=f"{timeout_s}s")
+            except (OSError, TimeoutError, ValueError) as exc:
                 if cluster is not None:
-                    cluster.close()
-                where = scheduler or "a LocalCluster on 127.0.0.1"
-                raise ConfigError(f"cannot reach the dask scheduler at {where}: {exc}") from None
+                    with contextlib.suppress(Exception):
+                        cluster.close()
+                    _reap(workers)
+                where = one_line(scheduler, 200) if scheduler else "a LocalCluster on 127.0.0.1"
+                raise ConfigError(
+                    one_line(f"cannot reach the dask scheduler at {where} within {timeout_s:g} s: {exc}")
+                ) from None
         run_id = uuid.uuid4().hex[:8]
         todo = list(tasks)
         futures: dict[Any, int] = {}
@@ -376,4 +539,5 @@ def run_dask(
                     _kill_local_workers(cluster)
                 with contextlib.suppress(Exception):
                     cluster.close(timeout=3)
+                _reap(workers)
     return status

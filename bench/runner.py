@@ -399,6 +399,7 @@ def plan_sweep(
     store = Store(results)
     plan = Plan([], [], results)
     groups: dict[tuple[str, int], tuple[Resolved, dict[str, Job]]] = {}
+    truths: dict[tuple[str, int], str | None] = {}  # why a realisation's stored truth is stale, or None
     for fspecs, dspecs, seeds in blocks:
         frs = [resolve_filter(s) for s in fspecs]
         drs = [resolve_dataset(s) for s in dspecs]
@@ -414,7 +415,11 @@ def plan_sweep(
                     note = ""
                     meta = None if force else store.existing_meta(dr.name, fr.name, seed)
                     up_to_date = meta is not None and meta.get("run_key") == key and not meta.get("transient")
-                    if up_to_date and store.has_truth(dr.name, seed):
+                    if up_to_date and (dr.name, seed) not in truths:
+                        truths[(dr.name, seed)] = store.truth_problem(dr.name, seed)
+                    if up_to_date and truths[(dr.name, seed)] is not None:
+                        note = f"re-run: the stored ground truth is stale ({truths[(dr.name, seed)]})"
+                    elif up_to_date:
                         bad = store.unreadable(dr.name, fr.name, seed)
                         if bad is None:
                             plan.cached.append(RunOutcome(fr.spec, dr.spec, seed, CACHED))
@@ -555,25 +560,31 @@ def _bound(task: Task, ds: Dataset) -> BoundRecord | None:
 
 
 def store_result(store: Store, task: Task, result: TaskResult) -> list[RunOutcome]:
-    """Write a task's truth and runs; a write that fails (disk full, read-only) is a ``not stored`` outcome."""
+    """Write a task's truth and runs; a write that fails (disk full, read-only) is a ``not stored`` outcome
+    whose message names the run's folder and the reason."""
     notes = {job.filter.name: job for job in task.jobs}
     truth_error = ""
     if result.truth is not None:
         try:
             store.write_truth(result.truth)
         except OSError as exc:
-            truth_error = f"{_os_message(exc)} (ground truth)"
+            truth_error = f"its ground truth was not stored: {_os_message(exc)}"
     outcomes = []
     for rec in result.runs:
         job = notes[rec.meta["filter"]]
         fspec, dspec = job.filter.spec, task.dataset.spec
+        where = store.run_dir(task.dataset.name, job.filter.name, task.seed)
         if truth_error:
-            outcomes.append(RunOutcome(fspec, dspec, task.seed, NOT_STORED, truth_error))
+            outcomes.append(
+                RunOutcome(fspec, dspec, task.seed, NOT_STORED, f"seed {task.seed} -> {where}: {truth_error}")
+            )
             continue
         try:
             store.write_run(rec)
         except OSError as exc:
-            outcomes.append(RunOutcome(fspec, dspec, task.seed, NOT_STORED, _os_message(exc)))
+            outcomes.append(
+                RunOutcome(fspec, dspec, task.seed, NOT_STORED, f"seed {task.seed} -> {where}: {_os_message(exc)}")
+            )
             continue
         outcomes.append(RunOutcome(fspec, dspec, task.seed, rec.status, str(rec.meta.get("message", "")), job.note))
     return outcomes
@@ -604,6 +615,7 @@ def run_sweep(
     jobs: int = 1,
     scheduler: str | None = None,
     progress: Callable[[int], None] | None = None,
+    connect_timeout_s: float | None = None,
 ) -> SweepResult:
     """Execute a plan and store every run as it arrives.
 
@@ -614,6 +626,11 @@ def run_sweep(
         client of the scheduler at ``scheduler``, else of a LocalCluster of ``jobs`` worker processes.
     progress : callable, optional
         Called with the number of runs each finished task stored (and once with the cached count).
+    connect_timeout_s : float, optional
+        Seconds to wait for the scheduler at ``scheduler`` (default :data:`locbench.executors.CONNECT_TIMEOUT_S`).
+
+    Before anything is computed the store is checked writable, with room for the planned runs
+    (:meth:`Store.check_space`): a full disk is one error, not one per computed run.
 
     SIGINT (Ctrl-C) and SIGTERM stop the sweep: tasks not started are cancelled, running ones abandoned, every
     finished run is kept, and the result says ``interrupted``; rerunning the same plan resumes.
@@ -621,8 +638,10 @@ def run_sweep(
     from locbench import executors
 
     store = Store(plan.results)
+    store.claim()  # another tool's folder is refused before anything is written or cleaned in it
     if plan.tasks:
         store.check_writable()  # a read-only or full results folder is one error before any run, not one per run
+        store.check_space(sum(len(t.jobs) for t in plan.tasks) + len(plan.tasks))
     cleaned = len(store.clean_leftovers())
     outcomes = list(plan.cached)
     bounds = [0]
@@ -640,7 +659,8 @@ def run_sweep(
         handle(task, failed_result(task, "error", message, transient=True))
 
     run = executors.get(executor)
-    status = run(plan.tasks, handle, lost, jobs=jobs, scheduler=scheduler)
+    timeout = executors.CONNECT_TIMEOUT_S if connect_timeout_s is None else connect_timeout_s
+    status = run(plan.tasks, handle, lost, jobs=jobs, scheduler=scheduler, timeout_s=timeout)
     big = len(plan.order)
     outcomes.sort(key=lambda o: plan.order.get((str(o.dataset), o.seed, str(o.filter)), big))
     planned = sum(t.bound_key is not None for t in plan.tasks)

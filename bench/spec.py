@@ -12,12 +12,13 @@ import dataclasses
 import hashlib
 import itertools
 import json
+import math
 import re
 import types
 import typing
 from typing import Any, Literal, TypeVar, Union, get_args, get_origin
 
-from locbench.errors import ConfigError, UnknownIdError
+from locbench.errors import ConfigError, UnknownIdError, shown
 
 P = TypeVar("P")
 
@@ -34,16 +35,18 @@ def parse_spec(text: str) -> tuple[str, dict[str, str]]:
     """
     m = _SPEC_RE.match(text)
     if m is None:
-        raise ConfigError(f"malformed spec {text!r}: expected 'id' or 'id[key=value,...]'")
+        raise ConfigError(f"malformed spec {shown(text)}: expected 'id' or 'id[key=value,...]'")
     ident, body = m.group(1), m.group(2)
     params: dict[str, str] = {}
     if body is not None and body.strip():
         for item in body.split(","):
             if "=" not in item:
-                raise ConfigError(f"malformed parameter {item.strip()!r} in spec {text!r}: expected key=value")
+                raise ConfigError(
+                    f"malformed parameter {shown(item.strip())} in spec {shown(text)}: expected key=value"
+                )
             key, value = (s.strip() for s in item.split("=", 1))
             if not key or key in params:
-                raise ConfigError(f"empty or repeated key {key!r} in spec {text!r}")
+                raise ConfigError(f"empty or repeated key {shown(key)} in spec {shown(text)}")
             params[key] = value
     return ident, params
 
@@ -102,12 +105,23 @@ class Spec:
 GRID_SEP = "|"
 
 
-def expand_grid(text: str) -> list[str]:
+#: Most configurations a grid, or a block of grids, may expand to (``--max-configs`` raises it).
+MAX_CONFIGS = 10_000
+
+
+def grid_size(text: str) -> int:
+    """The number of specs :func:`expand_grid` makes of ``text``, counted without expanding it."""
+    _, params = parse_spec(text)
+    return math.prod(len(v.split(GRID_SEP)) for v in params.values())
+
+
+def expand_grid(text: str, limit: int | None = MAX_CONFIGS) -> list[str]:
     """The specs of a parameter grid: ``|`` separates a key's values and keys cross.
 
     ``"pf[particles=100|300,augmented=true|false]"`` gives the four specs of the cross product, in the order
     written (the first key varies slowest); a spec without ``|`` gives itself. Raises :class:`ConfigError`
-    for an empty value (``particles=100||300``) or a value repeated within one key.
+    for an empty value (``particles=100||300``), a value repeated within one key, or a grid of more than
+    ``limit`` configurations (counted before anything is expanded).
     """
     ident, params = parse_spec(text)
     axes: list[list[str]] = []
@@ -115,9 +129,15 @@ def expand_grid(text: str) -> list[str]:
         values = [v.strip() for v in value.split(GRID_SEP)]
         if len(values) > 1 and (not all(values) or len(set(values)) != len(values)):
             raise ConfigError(
-                f"grid parameter {key}={value!r} in spec {text!r}: expected distinct non-empty values separated by '|'"
+                f"grid parameter {key}={shown(value)} in spec {shown(text)}: "
+                "expected distinct non-empty values separated by '|'"
             )
         axes.append(values)
+    size = math.prod(len(a) for a in axes)
+    if limit is not None and size > limit:
+        raise ConfigError(
+            f"grid spec {shown(text)}: {size} configurations, more than the limit of {limit} (--max-configs raises it)"
+        )
     if all(len(a) == 1 for a in axes):
         return [text.strip()]
     keys = list(params)
@@ -150,7 +170,7 @@ def _convert(raw: Any, tp: Any, where: str) -> Any:
         for a in allowed:
             if str(a) == str(raw) or a == raw:
                 return a
-        raise ConfigError(f"{where}: {raw!r} is not one of {', '.join(map(str, allowed))}")
+        raise ConfigError(f"{where}: {shown(raw)} is not one of {', '.join(map(str, allowed))}")
     if origin in (Union, types.UnionType):
         args = [a for a in get_args(tp) if a is not type(None)]
         if type(None) in get_args(tp) and str(raw).lower() in ("none", "null", ""):
@@ -161,7 +181,7 @@ def _convert(raw: Any, tp: Any, where: str) -> Any:
                 return _convert(raw, a, where)
             except ConfigError as exc:
                 errors.append(str(exc))
-        raise ConfigError(f"{where}: {raw!r} does not fit {tp}")
+        raise ConfigError(f"{where}: {shown(raw)} does not fit {tp}")
     if tp is bool:
         if isinstance(raw, bool):
             return raw
@@ -170,21 +190,21 @@ def _convert(raw: Any, tp: Any, where: str) -> Any:
             return True
         if s in ("0", "false", "no", "off"):
             return False
-        raise ConfigError(f"{where}: expected a boolean (true/false), got {raw!r}")
+        raise ConfigError(f"{where}: expected a boolean (true/false), got {shown(raw)}")
     if tp is int:
         if isinstance(raw, bool):
-            raise ConfigError(f"{where}: expected an integer, got {raw!r}")
+            raise ConfigError(f"{where}: expected an integer, got {shown(raw)}")
         try:
             if isinstance(raw, float) and raw.is_integer():
                 return int(raw)
             return int(str(raw).strip())
         except ValueError:
-            raise ConfigError(f"{where}: expected an integer, got {raw!r}") from None
+            raise ConfigError(f"{where}: expected an integer, got {shown(raw)}") from None
     if tp is float:
         try:
             val = float(str(raw).strip()) if not isinstance(raw, (int, float)) else float(raw)
         except ValueError:
-            raise ConfigError(f"{where}: expected a number, got {raw!r}") from None
+            raise ConfigError(f"{where}: expected a number, got {shown(raw)}") from None
         return val
     if tp is str:
         return str(raw)
@@ -194,7 +214,7 @@ def _convert(raw: Any, tp: Any, where: str) -> Any:
         if len(sub) == 2 and sub[1] is Ellipsis:
             return tuple(_convert(p, sub[0], where) for p in parts)
         if len(parts) != len(sub):
-            raise ConfigError(f"{where}: expected {len(sub)} values separated by ';', got {raw!r}")
+            raise ConfigError(f"{where}: expected {len(sub)} values separated by ';', got {shown(raw)}")
         return tuple(_convert(p, s, where) for p, s in zip(parts, sub, strict=True))
     raise ConfigError(f"{where}: unsupported parameter type {tp}")
 

@@ -7,8 +7,14 @@ Layout (one folder per dataset name, then per filter name, then per seed)::
     runs/<dataset name>/<filter name>/seed-<seed>/meta.json       spec, run key, status, versions, commit
     runs/<dataset name>/<filter name>/seed-<seed>/estimates.npz   per-event estimates and timings
 
+    .locbench                                             the mark of a locbench results folder
+
 Every folder is written to a temporary sibling and renamed into place, so a crash never leaves a
-half-written run behind. Names are the canonical specs (``room[kidnap_m=2]``); a spec that is not a safe
+half-written run behind. Each JSON record holds the sha256 of the arrays it names (``files``) and of itself
+(``meta_sha256``); a record whose file fails its checksum or its shape contract (:func:`run_problem`,
+:func:`truth_problem`, :func:`bound_problem`) is stale: the sweep runs it again and the report leaves it out,
+listed with the reason. Records written before checksums (no ``files``) are checked against the contract
+only. Names are the canonical specs (``room[kidnap_m=2]``); a spec that is not a safe
 folder name is sanitised and given a hash of the full spec (:func:`_safe`), so two specs never share a folder.
 """
 
@@ -25,6 +31,7 @@ import tempfile
 import time
 import uuid
 import zipfile
+import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,7 +41,7 @@ import numpy as np
 import numpy.typing as npt
 
 from locbench.datasets.base import Dataset, Kidnap, Relations, Trajectory2D, Waypoints
-from locbench.errors import ConfigError
+from locbench.errors import ConfigError, one_line
 from locbench.spec import Spec
 
 FloatArray = npt.NDArray[np.float64]
@@ -54,6 +61,16 @@ _UNSAFE = re.compile(r'[\x00-\x1f/\\:*?"<>|]')
 _HASH_CHARS = 16
 #: A run folder, exactly (``seed-0000.old`` or ``seed-0000.tmp`` are not runs).
 _SEED_DIR = re.compile(r"^seed-\d{4,}$")
+#: Temporary entries this module creates: ``mkstemp``/``mkdtemp`` names with our prefix (8 random characters,
+#: then the suffix of the file written), and run folders moved aside (``seed-0001.old-<12 hex>``).
+_TMP_NAME = re.compile(r"^\.tmp-[A-Za-z0-9_]{8}(\.npz|\.json)?$")
+_OLD_NAME = re.compile(r"^seed-\d{4,}\.old-[0-9a-f]{12}$")
+#: The file that marks a results folder as locbench's (written when ``locbench run`` creates or first fills it).
+MARKER = ".locbench"
+#: Free space a sweep needs before it computes anything: a floor and an allowance per run, bytes (a stored
+#: run of the synthetic worlds takes 0.1-0.3 MB, a recorded one up to a few MB).
+MIN_FREE_BYTES = 64 * 2**20
+FREE_BYTES_PER_RUN = 2**20
 #: Leftovers of an interrupted write older than this are removed when a sweep starts, s (a write in
 #: progress lives for a fraction of a second, so another process's temporary folder is never taken).
 STALE_AFTER_S = 600.0
@@ -253,33 +270,6 @@ class Store:
                 return meta
         return None
 
-    def unreadable(self, dataset: str | Spec, filter_name: str | Spec, seed: int) -> str | None:
-        """Why a stored run's files do not load (it is then re-run), or None when they do.
-
-        Opens ``estimates.npz`` (its zip directory, which a truncated or overwritten file lacks) and checks
-        the arrays every run has are listed; ``meta.json`` was read by :meth:`existing_meta`.
-        """
-        est = self.run_dir(dataset, filter_name, seed) / "estimates.npz"
-        try:
-            with zipfile.ZipFile(est) as z:
-                names = set(z.namelist())
-        except (OSError, zipfile.BadZipFile, EOFError) as exc:
-            return f"{est}: {exc}"
-        missing = sorted({"t.npy", "mean.npy", "cov.npy", "kind.npy", "step_ns.npy"} - names)
-        return f"{est}: missing {', '.join(missing)}" if missing else None
-
-    def has_truth(self, dataset: str | Spec, seed: int) -> bool:
-        return self.truth_path(dataset, seed).is_file()
-
-    def bound_key(self, dataset: str | Spec, seed: int) -> str | None:
-        """The ``bound_key`` of a stored bound, or None when there is none or its record does not parse."""
-        try:
-            meta = json.loads(self.bound_path(dataset, seed).with_suffix(".json").read_text(encoding="utf-8"))
-        except (OSError, json.JSONDecodeError, UnicodeDecodeError):
-            return None
-        key = meta.get("bound_key") if isinstance(meta, dict) else None
-        return str(key) if key is not None and self.bound_path(dataset, seed).is_file() else None
-
     def iter_runs(self) -> Iterator[Path]:
         """Every stored run folder, sorted (leftover ``.tmp-*`` and ``*.old-*`` entries are not runs)."""
         if not self.runs.is_dir():
@@ -292,14 +282,18 @@ class Store:
     def clean_leftovers(self, older_than_s: float = STALE_AFTER_S) -> list[Path]:
         """Remove temporary and replaced entries an interrupted write left behind; returns what was removed.
 
-        Only entries older than ``older_than_s`` go, so another process's write in progress is left alone.
+        Only entries under ``runs/<dataset>/<folder>/`` whose names this module creates (:data:`_TMP_NAME`,
+        :data:`_OLD_NAME`) and older than ``older_than_s`` go, so another process's write in progress and any
+        file locbench did not write are left alone.
         """
         removed: list[Path] = []
         if not self.runs.is_dir():
             return removed
         now = time.time()
-        for pattern in ("*/*/.tmp-*", "*/*/*.old*"):
+        for pattern, name in (("*/*/.tmp-*", _TMP_NAME), ("*/*/seed-*.old-*", _OLD_NAME)):
             for p in self.runs.glob(pattern):
+                if not name.match(p.name) or p.parent.name.startswith("."):
+                    continue  # only names this module creates, only under runs/<dataset>/<filter or _truth>/
                 try:
                     if now - p.lstat().st_mtime < older_than_s:
                         continue
@@ -313,6 +307,39 @@ class Store:
         return removed
 
     # --- writing -------------------------------------------------------------------------------
+    def claim(self) -> None:
+        """Mark the results folder as locbench's, creating it; refuse a non-empty folder without the mark.
+
+        A folder that exists, holds anything and has no :data:`MARKER` belongs to someone else (another tool's
+        project): nothing is written or cleaned in it (:class:`ConfigError`).
+        """
+        marker = self.root / MARKER
+        if marker.is_file():
+            return
+        if self.root.exists() and not self.root.is_dir():
+            raise NotADirectoryError(errno.ENOTDIR, os.strerror(errno.ENOTDIR), str(self.root))
+        if self.root.is_dir() and any(self.root.iterdir()):
+            raise ConfigError(
+                f"{self.root}: not empty and not a locbench results folder (no {MARKER} file); give a new or "
+                f"empty folder, or add the file {MARKER} if this folder is one"
+            )
+        _makedirs(self.runs)
+        _atomic_write(
+            marker, lambda p: p.write_text("locbench results folder: runs/ and summary/ are written by locbench\n")
+        )
+
+    def check_space(self, runs: int) -> None:
+        """Raise ``OSError(ENOSPC)`` when the results folder's disk has less room than ``runs`` new runs need
+        (:data:`MIN_FREE_BYTES` + :data:`FREE_BYTES_PER_RUN` each), before anything is computed."""
+        need = MIN_FREE_BYTES + FREE_BYTES_PER_RUN * max(runs, 0)
+        free = shutil.disk_usage(self.runs).free
+        if free < need:
+            raise OSError(
+                errno.ENOSPC,
+                f"{free / 2**20:.0f} MB free, {need / 2**20:.0f} MB needed for {runs} run(s) (1 MB each and 64 MB)",
+                str(self.runs),
+            )
+
     def check_writable(self) -> None:
         """Raise the ``OSError`` a write into ``runs/`` would meet (no permission, read-only, a file in the way)."""
         _makedirs(self.runs)
@@ -341,8 +368,7 @@ class Store:
         if rec.relations is not None:
             arrays.update(rel_t1=rec.relations.t1, rel_t2=rec.relations.t2, rel_delta=rec.relations.delta)
         meta = {"dataset": rec.dataset, "seed": rec.seed, "truth_label": rec.truth_label, **rec.meta}
-        _atomic_write(path, lambda p: np.savez_compressed(p, **arrays))  # type: ignore[arg-type]
-        _atomic_write(path.with_suffix(".json"), lambda p: p.write_text(json.dumps(meta, indent=2, default=str)))
+        _write_npz_and_record(path, arrays, meta)
 
     def write_bound(self, rec: BoundRecord) -> None:
         """Write a realisation's bound beside its truth (arrays first, then the record that names them)."""
@@ -351,8 +377,7 @@ class Store:
         names = sorted(rec.covs)
         arrays = {"t": rec.t} | {f"cov_{i}": rec.covs[n] for i, n in enumerate(names)}
         meta = {"dataset": rec.dataset, "seed": rec.seed, "rows": names, **rec.meta}
-        _atomic_write(path, lambda p: np.savez_compressed(p, **arrays))  # type: ignore[arg-type]
-        _atomic_write(path.with_suffix(".json"), lambda p: p.write_text(json.dumps(meta, indent=2, default=str)))
+        _write_npz_and_record(path, arrays, meta)
 
     def write_run(self, rec: RunRecord) -> Path:
         """Write a run folder atomically: a uniquely named temporary folder, then renamed into place.
@@ -378,7 +403,8 @@ class Store:
             arrays.update({f"extra_{k}": v for k, v in rec.extra.items()})
             arrays.update({f"health_{k}": v for k, v in rec.health.items()})
             np.savez_compressed(tmp / "estimates.npz", **arrays)  # type: ignore[arg-type]
-            (tmp / "meta.json").write_text(json.dumps(rec.meta, indent=2, default=str))
+            meta = _sealed(rec.meta | {"files": {"estimates.npz": npz_digest(tmp / "estimates.npz")}})
+            (tmp / "meta.json").write_text(json.dumps(meta, indent=2))
             _swap_into_place(tmp, final)
         finally:
             if tmp.exists():
@@ -387,56 +413,286 @@ class Store:
 
     # --- reading -------------------------------------------------------------------------------
     def read_truth(self, dataset: str, seed: int) -> TruthRecord:
+        """The stored truth of a realisation, verified (:func:`truth_problem`); a :class:`StaleRecord` otherwise."""
         path = self.truth_path(dataset, seed)
         if not path.is_file():
             raise ConfigError(
                 f"{path}: missing ground truth for dataset {dataset!r} seed {seed}; re-run 'locbench run'"
             )
-        with np.load(path) as z:
-            gt = Trajectory2D(z["gt_t"], z["gt_xy"], z["gt_theta"])
-            wp = Waypoints(z["wp_t"], z["wp_xy"]) if bool(z["has_waypoints"]) else None
-            kid = tuple(
-                Kidnap(float(t), (float(d[0]), float(d[1]), float(d[2])))
-                for t, d in zip(z["kidnap_t"], z["kidnap_delta"], strict=True)
-            )
-            duration = float(z["duration_s"])
-            segs = z["map_segments"] if "map_segments" in z.files else np.zeros((0, 4))
-            lms = z["map_landmarks"] if "map_landmarks" in z.files else np.zeros((0, 2))
-            rel = Relations(z["rel_t1"], z["rel_t2"], z["rel_delta"]) if "rel_t1" in z.files else None
-        meta_path = path.with_suffix(".json")
-        meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
+        meta, z = _load_verified(path, path.with_suffix(".json"), truth_problem, required_record=False)
+        gt = Trajectory2D(z["gt_t"], z["gt_xy"], z["gt_theta"])
+        wp = Waypoints(z["wp_t"], z["wp_xy"]) if bool(z["has_waypoints"]) else None
+        kid = tuple(
+            Kidnap(float(t), (float(d[0]), float(d[1]), float(d[2])))
+            for t, d in zip(z["kidnap_t"], z["kidnap_delta"], strict=True)
+        )
+        duration = float(z["duration_s"])
+        segs = z.get("map_segments", np.zeros((0, 4)))
+        lms = z.get("map_landmarks", np.zeros((0, 2)))
+        rel = Relations(z["rel_t1"], z["rel_t2"], z["rel_delta"]) if "rel_t1" in z else None
         label = str(meta.get("truth_label", "ground truth"))
         return TruthRecord(dataset, seed, gt, wp, kid, duration, meta, segs, lms, rel, label)
 
+    def truth_problem(self, dataset: str | Spec, seed: int) -> str | None:
+        """Why the stored truth of a realisation is missing or stale (its runs are then re-run), or None."""
+        path = self.truth_path(dataset, seed)
+        if not path.is_file():
+            return f"{path}: missing"
+        try:
+            _load_verified(path, path.with_suffix(".json"), truth_problem, required_record=False)
+        except ConfigError as exc:
+            return str(exc)
+        return None
+
+    def has_truth(self, dataset: str | Spec, seed: int) -> bool:
+        return self.truth_path(dataset, seed).is_file()
+
+    def bound_key(self, dataset: str | Spec, seed: int) -> str | None:
+        """The ``bound_key`` of a stored bound that passes its checks, or None (none, unreadable or stale)."""
+        try:
+            bound = self.read_bound(str(dataset), seed)
+        except ConfigError:
+            return None
+        key = bound.meta.get("bound_key") if bound is not None else None
+        return str(key) if key is not None else None
+
     def read_bound(self, dataset: str, seed: int) -> BoundRecord | None:
-        """The stored bound of a realisation, or None when it has none (recorded data, kidnaps, not computed)."""
+        """The stored bound of a realisation, or None when it has none (recorded data, kidnaps, not computed);
+        a :class:`StaleRecord` when its files fail their checks (:func:`bound_problem`)."""
         path = self.bound_path(dataset, seed)
         meta_path = path.with_suffix(".json")
         if not (path.is_file() and meta_path.is_file()):
             return None
+        meta, z = _load_verified(path, meta_path, bound_problem, required_record=True)
+        names = [str(n) for n in meta["rows"]]
+        covs = {n: z[f"cov_{i}"] for i, n in enumerate(names)}
+        return BoundRecord(dataset, seed, z["t"], covs, meta)
+
+    def unreadable(self, dataset: str | Spec, filter_name: str | Spec, seed: int) -> str | None:
+        """Why a stored run is unreadable or stale (it is then re-run), or None when it passes every check."""
         try:
-            meta = json.loads(meta_path.read_text(encoding="utf-8"))
-            names = [str(n) for n in meta["rows"]]
-        except (OSError, json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError) as exc:
-            raise ConfigError(f"{meta_path}: unreadable bound record ({exc}); re-run 'locbench run'") from None
-        with np.load(path) as z:
-            covs = {n: z[f"cov_{i}"] for i, n in enumerate(names)}
-            return BoundRecord(dataset, seed, z["t"], covs, meta)
+            self.read_run(self.run_dir(dataset, filter_name, seed))
+        except ConfigError as exc:
+            return str(exc)
+        return None
 
     def read_run(self, run_dir: str | os.PathLike[str]) -> RunRecord:
+        """A stored run, verified: its record's own checksum and the folder it lies in, its arrays' checksum and
+        shape contract (:func:`run_problem`); a :class:`StaleRecord` naming the file and the reason otherwise."""
         d = Path(run_dir)
+        meta, z = _load_verified(d / "estimates.npz", d / "meta.json", run_problem, required_record=True)
+        name = f"seed-{int(meta['seed']):04d}"
+        where = (_safe(str(meta["dataset"])), _safe(str(meta["filter"])), name)
+        if (d.parent.parent.name, d.parent.name, d.name) != where:
+            raise StaleRecord(
+                f"{d / 'meta.json'}: names {meta['filter']} on {meta['dataset']} seed {meta['seed']}, "
+                f"which is not the run of this folder"
+            )
+        diag = {k[5:]: v for k, v in z.items() if k.startswith("diag_")}
+        extra = {k[6:]: v for k, v in z.items() if k.startswith("extra_")}
+        health = {k[7:]: v for k, v in z.items() if k.startswith("health_")}
+        return RunRecord(meta, z["t"], z["mean"], z["cov"], z["kind"], z["step_ns"], diag, extra, health)
+
+
+class StaleRecord(ConfigError):
+    """A stored record that fails its checksum or shape contract: the sweep runs it again, the report skips it."""
+
+
+#: Longest JSON record read, bytes (a run's meta.json is a few kB).
+MAX_RECORD_BYTES = 1 << 20
+
+
+def _sealed(meta: dict[str, Any]) -> dict[str, Any]:
+    """``meta`` as JSON will hold it, with ``meta_sha256``: the sha256 of the rest (:func:`_record_digest`)."""
+    plain = json.loads(json.dumps(meta, default=str))
+    return plain | {"meta_sha256": _record_digest(plain)}
+
+
+def _record_digest(meta: dict[str, Any]) -> str:
+    body = {k: v for k, v in meta.items() if k != "meta_sha256"}
+    return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()
+
+
+def npz_digest(path: Path) -> str:
+    """The sha256 of an ``.npz`` file's members (names and bytes, in name order).
+
+    It is the arrays' checksum, not the zip's bytes (which hold the time of writing), so two writers of the same
+    truth agree; reading every member also checks the zip's CRC-32s.
+    """
+    h = hashlib.sha256()
+    with zipfile.ZipFile(path) as z:
+        for name in sorted(z.namelist()):
+            h.update(name.encode() + b"\0")
+            with z.open(name) as f:
+                for chunk in iter(lambda: f.read(1 << 20), b""):
+                    h.update(chunk)
+    return h.hexdigest()
+
+
+def _write_npz_and_record(path: Path, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> None:
+    """Write arrays to ``path`` and then the JSON record beside it that holds their checksum."""
+    digest: list[str] = []
+
+    def write(p: Path) -> None:
+        np.savez_compressed(p, **arrays)  # type: ignore[arg-type]
+        digest.append(npz_digest(p))
+
+    _atomic_write(path, write)
+    sealed = _sealed(meta | {"files": {path.name: digest[0]}})
+    _atomic_write(path.with_suffix(".json"), lambda p: p.write_text(json.dumps(sealed, indent=2)))
+
+
+Problem = Any  # Callable[[dict[str, Any], dict[str, np.ndarray]], str | None]
+
+
+def _load_verified(
+    npz: Path, record: Path, contract: Problem, required_record: bool
+) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """The JSON record and the arrays of a stored record, after every check; :class:`StaleRecord` otherwise.
+
+    Checks, in order: the record parses as a JSON object below :data:`MAX_RECORD_BYTES` and its ``meta_sha256``
+    matches; the arrays' checksum matches the record's ``files`` entry (both absent in records written before
+    checksums); every array loads (no pickles); ``contract(meta, arrays)`` holds.
+    """
+    meta: dict[str, Any] = {}
+    if record.is_file() or required_record:
         try:
-            meta = json.loads((d / "meta.json").read_text())
-        except (OSError, json.JSONDecodeError) as exc:
-            raise ConfigError(f"{d / 'meta.json'}: unreadable run record ({exc})") from None
-        est = d / "estimates.npz"
-        if not est.is_file():
-            raise ConfigError(f"{est}: missing estimates for a stored run; re-run with --force")
-        with np.load(est) as z:
-            diag = {k[5:]: z[k] for k in z.files if k.startswith("diag_")}
-            extra = {k[6:]: z[k] for k in z.files if k.startswith("extra_")}
-            health = {k[7:]: z[k] for k in z.files if k.startswith("health_")}
-            return RunRecord(meta, z["t"], z["mean"], z["cov"], z["kind"], z["step_ns"], diag, extra, health)
+            if record.stat().st_size > MAX_RECORD_BYTES:
+                raise StaleRecord(f"{record}: larger than {MAX_RECORD_BYTES} bytes; not a record locbench wrote")
+            data = json.loads(record.read_text(encoding="utf-8"))
+        except (OSError, json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
+            raise StaleRecord(one_line(f"{record}: unreadable record ({exc})")) from None
+        if not isinstance(data, dict):
+            raise StaleRecord(f"{record}: not a JSON object")
+        meta = data
+        if "meta_sha256" in meta and meta["meta_sha256"] != _record_digest(meta):
+            raise StaleRecord(f"{record}: its checksum does not match (the record was altered)")
+    try:
+        expected = (meta.get("files") or {}).get(npz.name) if isinstance(meta.get("files", {}), dict) else ""
+        if expected is not None and npz_digest(npz) != expected:
+            raise StaleRecord(f"{npz}: its sha256 does not match the one recorded in {record.name}")
+        with np.load(npz, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+    except StaleRecord:
+        raise
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError, zlib.error) as exc:
+        raise StaleRecord(one_line(f"{npz}: does not load ({type(exc).__name__}: {exc})")) from None
+    why = contract(meta, arrays)
+    if why is not None:
+        raise StaleRecord(one_line(f"{npz}: {why}"))
+    return meta, arrays
+
+
+def _shape(arrays: dict[str, np.ndarray], name: str, kind: str, shape: tuple[int | None, ...]) -> str | None:
+    """Why ``arrays[name]`` is missing or not of dtype kind ``kind`` and ``shape`` (None: any length), or None."""
+    a = arrays.get(name)
+    if a is None:
+        return f"missing array {name}"
+    if (
+        a.dtype.kind not in kind
+        or a.ndim != len(shape)
+        or any(w is not None and w != n for w, n in zip(shape, a.shape, strict=True))
+    ):
+        want = "x".join("n" if w is None else str(w) for w in shape) or "scalar"
+        return f"array {name} is {a.dtype}{list(a.shape)}, expected {kind}-kind of shape {want}"
+    return None
+
+
+def _first(*problems: str | None) -> str | None:
+    return next((p for p in problems if p is not None), None)
+
+
+def _sorted_finite(a: np.ndarray, name: str) -> str | None:
+    if not np.all(np.isfinite(a)):
+        return f"non-finite values in {name}"
+    if a.size > 1 and not np.all(np.diff(a) >= 0):
+        return f"times {name} are not sorted"
+    return None
+
+
+def run_problem(meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> str | None:
+    """Why a run's record and arrays break the run contract, or None.
+
+    ``meta`` names a filter, a dataset, an integer seed, a run key and a status of :data:`STATUSES`; the arrays
+    are ``t`` (n,), ``mean`` (n, 3), ``cov`` (n, 3, 3) floats, ``kind`` (n,) int8 codes of :data:`KIND_NAMES`,
+    ``step_ns`` (n,) int64 >= 0, each ``diag_*`` (n,) floats; ``n`` equals ``n_rows`` where recorded; under status
+    ok, ``t`` is finite and sorted, ``mean`` and ``cov`` finite.
+    """
+    missing = [k for k in ("filter", "dataset", "seed", "run_key", "status") if k not in meta]
+    if missing:
+        return f"record lacks {', '.join(missing)}"
+    if not isinstance(meta["seed"], int) or isinstance(meta["seed"], bool) or meta["seed"] < 0:
+        return f"record's seed {meta['seed']!r} is not a non-negative integer"
+    if meta["status"] not in STATUSES:
+        return f"record's status {meta['status']!r} is not one of {', '.join(STATUSES)}"
+    n = arrays["t"].shape[0] if "t" in arrays and arrays["t"].ndim == 1 else None
+    why = _first(
+        _shape(arrays, "t", "f", (None,)),
+        _shape(arrays, "mean", "f", (n, 3)),
+        _shape(arrays, "cov", "f", (n, 3, 3)),
+        _shape(arrays, "kind", "i", (n,)),
+        _shape(arrays, "step_ns", "i", (n,)),
+        *(_shape(arrays, k, "f", (n,)) for k in arrays if k.startswith(("diag_", "health_"))),
+    )
+    if why is not None:
+        return why
+    if arrays["kind"].size and (arrays["kind"].min() < 0 or arrays["kind"].max() >= len(KIND_NAMES)):
+        return "event kind codes out of range"
+    if arrays["step_ns"].size and arrays["step_ns"].min() < 0:
+        return "negative call times in step_ns"
+    if "n_rows" in meta and meta["n_rows"] != n:
+        return f"{n} rows, the record says {meta['n_rows']}"
+    if meta["status"] == "ok":
+        if not (np.all(np.isfinite(arrays["mean"])) and np.all(np.isfinite(arrays["cov"]))):
+            return "non-finite estimates under status ok"
+        return _sorted_finite(arrays["t"], "t")
+    return None
+
+
+def truth_problem(meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> str | None:
+    """Why a realisation's truth arrays break their contract, or None: ``gt_t`` (n,) finite and sorted,
+    ``gt_xy`` (n, 2) and ``gt_theta`` (n,) finite, waypoints (m,) and (m, 2), kidnaps (k,) and (k, 3), a finite
+    ``duration_s``, map segments (s, 4) and landmarks (l, 2), relations (r,), (r,) and (r, 3)."""
+    n = arrays["gt_t"].shape[0] if "gt_t" in arrays and arrays["gt_t"].ndim == 1 else None
+    m = arrays["wp_t"].shape[0] if "wp_t" in arrays and arrays["wp_t"].ndim == 1 else None
+    k = arrays["kidnap_t"].shape[0] if "kidnap_t" in arrays and arrays["kidnap_t"].ndim == 1 else None
+    checks = [
+        _shape(arrays, "gt_t", "f", (None,)),
+        _shape(arrays, "gt_xy", "f", (n, 2)),
+        _shape(arrays, "gt_theta", "f", (n,)),
+        _shape(arrays, "wp_t", "f", (None,)),
+        _shape(arrays, "wp_xy", "f", (m, 2)),
+        _shape(arrays, "has_waypoints", "b", ()),
+        _shape(arrays, "kidnap_t", "f", (None,)),
+        _shape(arrays, "kidnap_delta", "f", (k, 3)),
+        _shape(arrays, "duration_s", "f", ()),
+    ]
+    checks += [_shape(arrays, a, "f", (None, w)) for a, w in (("map_segments", 4), ("map_landmarks", 2)) if a in arrays]
+    if "rel_t1" in arrays:
+        r = arrays["rel_t1"].shape[0] if arrays["rel_t1"].ndim == 1 else None
+        checks += [_shape(arrays, "rel_t1", "f", (None,)), _shape(arrays, "rel_t2", "f", (r,))]
+        checks.append(_shape(arrays, "rel_delta", "f", (r, 3)))
+    why = _first(*checks)
+    if why is not None:
+        return why
+    if not (np.all(np.isfinite(arrays["gt_xy"])) and np.all(np.isfinite(arrays["gt_theta"]))):
+        return "non-finite ground truth"
+    if not np.isfinite(arrays["duration_s"]):
+        return "non-finite duration_s"
+    return _sorted_finite(arrays["gt_t"], "gt_t")
+
+
+def bound_problem(meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> str | None:
+    """Why a bound's record and arrays break their contract, or None: ``rows`` names one ``cov_<i>`` (n, 3, 3)
+    float array each, ``t`` (n,) finite and sorted, a ``bound_key``."""
+    rows = meta.get("rows")
+    if not isinstance(rows, list) or "bound_key" not in meta:
+        return "record lacks its rows or bound_key"
+    n = arrays["t"].shape[0] if "t" in arrays and arrays["t"].ndim == 1 else None
+    why = _first(
+        _shape(arrays, "t", "f", (None,)), *(_shape(arrays, f"cov_{i}", "f", (n, 3, 3)) for i in range(len(rows)))
+    )
+    return why if why is not None else _sorted_finite(arrays["t"], "t")
 
 
 def _makedirs(path: Path) -> None:

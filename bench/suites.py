@@ -13,13 +13,20 @@ A suite is also readable from a TOML file (``locbench run --suite my_suite.toml`
 
 from __future__ import annotations
 
+import os
+import stat
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
-from locbench.errors import ConfigError, UnknownIdError
+from locbench.errors import ConfigError, UnknownIdError, one_line, shown
 from locbench.registry import BUILTIN_FILTERS
-from locbench.spec import Spec, expand_grid
+from locbench.spec import MAX_CONFIGS, Spec, expand_grid, grid_size
+
+#: Most seeds a block may run (``--max-seeds`` raises it; a suite file's ``seeds`` too).
+MAX_SEEDS = 10_000
+#: Largest suite file read, bytes (a suite of a few hundred specs is a few kB).
+MAX_SUITE_BYTES = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -27,20 +34,41 @@ class Block:
     """Every filter on every dataset for seeds 0 .. seeds-1.
 
     Grid specs (``pf[particles=100|300]``, :func:`locbench.spec.expand_grid`) are expanded when the block is
-    made, so ``filters`` and ``datasets`` hold one spec per run configuration.
+    made, so ``filters`` and ``datasets`` hold one spec per run configuration. The block's size (filter
+    configurations x dataset configurations) is counted before anything is expanded and refused above
+    ``max_configs``, and ``seeds`` above ``max_seeds``.
     """
 
     filters: tuple[str, ...]
     datasets: tuple[str, ...]
     seeds: int
+    max_configs: int = field(default=MAX_CONFIGS, compare=False, repr=False)
+    max_seeds: int = field(default=MAX_SEEDS, compare=False, repr=False)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "filters", tuple(x for f in self.filters for x in expand_grid(f)))
-        object.__setattr__(self, "datasets", tuple(x for d in self.datasets for x in expand_grid(d)))
+        check_seeds(self.seeds, self.max_seeds, "seeds")
+        nf = sum(grid_size(f) for f in self.filters)
+        nd = sum(grid_size(d) for d in self.datasets)
+        if nf * nd > self.max_configs:
+            raise ConfigError(
+                f"{nf} filter x {nd} dataset configurations = {nf * nd}, more than the limit of "
+                f"{self.max_configs} (--max-configs raises it)"
+            )
+        object.__setattr__(self, "filters", tuple(x for f in self.filters for x in expand_grid(f, None)))
+        object.__setattr__(self, "datasets", tuple(x for d in self.datasets for x in expand_grid(d, None)))
 
     @property
     def runs(self) -> int:
         return len(self.filters) * len(self.datasets) * self.seeds
+
+
+def check_seeds(seeds: object, limit: int, where: str) -> int:
+    """``seeds`` when it is an integer 1 .. ``limit``; a one-line :class:`ConfigError` naming ``where`` otherwise."""
+    if not isinstance(seeds, int) or isinstance(seeds, bool) or seeds < 1:
+        raise ConfigError(f"{where} must be a positive integer, got {shown(seeds)}")
+    if seeds > limit:
+        raise ConfigError(f"{where}: {seeds} seeds, more than the limit of {limit} (--max-seeds raises it)")
+    return seeds
 
 
 @dataclass(frozen=True)
@@ -55,9 +83,10 @@ class Suite:
     def runs(self) -> int:
         return sum(b.runs for b in self.blocks)
 
-    def with_seeds(self, seeds: int) -> Suite:
+    def with_seeds(self, seeds: int, max_seeds: int = MAX_SEEDS) -> Suite:
         """The same suite with every block's seed count replaced (``--seeds``)."""
-        return Suite(self.name, tuple(Block(b.filters, b.datasets, seeds) for b in self.blocks), self.description)
+        blocks = tuple(Block(b.filters, b.datasets, seeds, b.max_configs, max_seeds) for b in self.blocks)
+        return Suite(self.name, blocks, self.description)
 
 
 #: Every built-in filter with its default config (the registry's, in its order): the rows of the main comparison.
@@ -276,47 +305,74 @@ SUITES["all"] = Suite(
 )
 
 
-def get_suite(name: str) -> Suite:
+def get_suite(name: str, max_configs: int = MAX_CONFIGS, max_seeds: int = MAX_SEEDS) -> Suite:
     """A named suite, or a suite read from a ``.toml`` file path (or any path that exists)."""
-    if name.endswith(".toml") or (name not in SUITES and Path(name).exists()):
-        return load_suite_file(Path(name))
+    if name.endswith(".toml") or (name not in SUITES and os.path.lexists(name)):
+        return load_suite_file(Path(name), max_configs, max_seeds)
     try:
         return SUITES[name]
     except KeyError:
         raise UnknownIdError(
-            f"unknown suite {name!r}; valid: {', '.join(sorted(SUITES))} or a path to a .toml file"
+            f"unknown suite {shown(name)}; valid: {', '.join(sorted(SUITES))} or a path to a .toml file"
         ) from None
 
 
-def load_suite_file(path: Path) -> Suite:
-    """Read a one-block suite from TOML; errors name the file and the field."""
+def _read_suite_text(path: Path) -> str:
+    """The text of a suite file: a regular file of at most :data:`MAX_SUITE_BYTES`, UTF-8 (one line otherwise).
+
+    The file is looked at before it is opened (a FIFO would block the open, a device never end) and read with
+    a bound (a file that grows meanwhile is still refused)."""
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        st = path.stat()
     except FileNotFoundError:
         raise ConfigError(f"{path}: suite file not found") from None
-    except IsADirectoryError:
-        raise ConfigError(f"{path}: is a folder; expected a suite name or a .toml suite file") from None
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read the suite file ({exc.strerror})") from None
+    if stat.S_ISDIR(st.st_mode):
+        raise ConfigError(f"{path}: is a folder; expected a suite name or a .toml suite file")
+    if not stat.S_ISREG(st.st_mode):
+        raise ConfigError(f"{path}: not a regular file (a FIFO, socket or device); a suite file is a .toml file")
+    if st.st_size > MAX_SUITE_BYTES:
+        raise ConfigError(f"{path}: {st.st_size} bytes; a suite file is at most {MAX_SUITE_BYTES} bytes")
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+        with os.fdopen(fd, "rb") as f:
+            if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
+                raise ConfigError(f"{path}: not a regular file; a suite file is a .toml file")
+            data = f.read(MAX_SUITE_BYTES + 1)
     except PermissionError:
         raise ConfigError(f"{path}: permission denied reading the suite file") from None
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read the suite file ({exc.strerror})") from None
+    if len(data) > MAX_SUITE_BYTES:
+        raise ConfigError(f"{path}: more than {MAX_SUITE_BYTES} bytes; a suite file is at most that")
+    try:
+        return data.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise ConfigError(f"{path}: not UTF-8 text (byte {exc.start}); a suite file is UTF-8 TOML") from None
+
+
+def load_suite_file(path: Path, max_configs: int = MAX_CONFIGS, max_seeds: int = MAX_SEEDS) -> Suite:
+    """Read a one-block suite from TOML; errors name the file and the field."""
+    text = _read_suite_text(path)
+    try:
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML ({exc})") from None
+    except RecursionError:
+        raise ConfigError(f"{path}: not valid TOML (nested too deeply)") from None
     unknown = sorted(set(data) - {"filters", "datasets", "seeds", "description"})
     if unknown:
-        raise ConfigError(
-            f"{path}: unknown field(s) {', '.join(unknown)}; valid: filters, datasets, seeds, description"
-        )
+        names = one_line(", ".join(unknown), 200)
+        raise ConfigError(f"{path}: unknown field(s) {names}; valid: filters, datasets, seeds, description")
     for key in ("filters", "datasets"):
         val = data.get(key)
         if not isinstance(val, list) or not val or not all(isinstance(v, str) for v in val):
             raise ConfigError(
                 f"{path}: field '{key}' must be a non-empty list of spec strings like \"room[kidnap_m=2]\""
             )
-    seeds = data.get("seeds", 1)
-    if not isinstance(seeds, int) or isinstance(seeds, bool) or seeds < 1:
-        raise ConfigError(f"{path}: field 'seeds' must be a positive integer, got {seeds!r}")
-    block = Block(tuple(data["filters"]), tuple(data["datasets"]), seeds)
+    seeds = check_seeds(data.get("seeds", 1), max_seeds, f"{path}: field 'seeds'")
+    block = Block(tuple(data["filters"]), tuple(data["datasets"]), seeds, max_configs, max_seeds)
     return Suite(path.stem, (block,), str(data.get("description", "")))
 
 

@@ -90,17 +90,27 @@ def test_six_concurrent_writers_neither_crash_nor_corrupt(tmp_path: Path) -> Non
 def test_leftovers_are_ignored_and_cleaned(tmp_path: Path) -> None:
     st = Store(tmp_path)
     final = st.write_run(_record("room"))
-    for name in ("seed-0000.old", ".tmp-abc123"):
+    for name in ("seed-0000.old-0123456789ab", ".tmp-abc12_yz"):
         leftover = final.parent / name
         leftover.mkdir()
         (leftover / "meta.json").write_text("{}")
     (final.parent.parent / "_truth").mkdir()
-    (final.parent.parent / "_truth" / ".tmp-x.npz").write_bytes(b"")
+    (final.parent.parent / "_truth" / ".tmp-x1y2z3w4.npz").write_bytes(b"")
+    # names locbench never writes, and files outside runs/<dataset>/<folder>/, are not its leftovers
+    others = [
+        final.parent / "notes.old",
+        final.parent / ".tmp-mine",
+        final.parent / "seed-0000.old",
+        tmp_path / "runs" / ".tmp-abcdefgh",
+        tmp_path / "data.old-0123456789ab",
+    ]
+    for other in others:
+        other.write_text("someone else's")
     assert list(st.iter_runs()) == [final]
     assert st.clean_leftovers() == []  # fresh: could be another process's write in progress
     removed = st.clean_leftovers(older_than_s=0.0)
-    assert sorted(p.name for p in removed) == [".tmp-abc123", ".tmp-x.npz", "seed-0000.old"]
-    assert sorted(p.name for p in final.parent.iterdir()) == ["seed-0000"]
+    assert sorted(p.name for p in removed) == [".tmp-abc12_yz", ".tmp-x1y2z3w4.npz", "seed-0000.old-0123456789ab"]
+    assert all(other.read_text() == "someone else's" for other in others)
 
 
 def test_unreadable_runs_are_detected(tmp_path: Path) -> None:
