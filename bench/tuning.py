@@ -277,6 +277,9 @@ def tune(
 
     name = study_name(filter_spec, datasets, seeds, objective)
     path = journal_path(results, name)
+    # both folders are locbench's before anything is written in them (another tool's folder is refused)
+    Store(results).claim()
+    Store(Path(results) / TUNING_DIR).claim()
     path.parent.mkdir(parents=True, exist_ok=True)
     storage = JournalStorage(JournalFileBackend(str(path)))
     study = optuna.create_study(study_name=name, storage=storage, direction="minimize", load_if_exists=True)

@@ -10,7 +10,7 @@ import pytest
 
 from locbench.cli import main
 from locbench.runner import run_many
-from locbench.store import Store
+from locbench.store import Store, _sealed, npz_digest
 from locbench.verify import RunId, compare, read_record, record_text, sample, verify
 
 FILTERS = ["bad[fail_at_s=100]", "odometry"]
@@ -22,7 +22,7 @@ def _store(tmp_path: Path) -> Store:
     return Store(tmp_path)
 
 
-def _alter(store: Store, dataset: str, filt: str, seed: int, array: str) -> None:
+def _alter(store: Store, dataset: str, filt: str, seed: int, array: str, reseal: bool = True) -> None:
     """Change one value of one stored array by the smallest step (as a corrupted or non-deterministic run would)."""
     path = store.run_dir(dataset, filt, seed) / "estimates.npz"
     with np.load(path) as z:
@@ -31,6 +31,20 @@ def _alter(store: Store, dataset: str, filt: str, seed: int, array: str) -> None
     a.flat[a.size // 2] = np.nextafter(a.flat[a.size // 2], np.inf)
     arrays[array] = a
     np.savez_compressed(path, **arrays)
+    if reseal:  # a consistent record of other numbers (a non-deterministic run), not a corrupted file
+        meta_path = path.parent / "meta.json"
+        meta = json.loads(meta_path.read_text())
+        meta["files"] = {path.name: npz_digest(path)}
+        meta_path.write_text(json.dumps(_sealed(meta)))
+
+
+@pytest.mark.usefixtures("harness_registry")
+def test_a_run_altered_behind_its_checksum_is_stale(tmp_path: Path) -> None:
+    store = _store(tmp_path)
+    _alter(store, DATASET, "odometry", 1, "mean", reseal=False)
+    res = verify(store, fraction=1.0, seed=0)
+    assert [(r.filter, r.seed) for r, _ in res.differ] == [("odometry", 1)]
+    assert res.differ[0][1].startswith("stale: ") and "sha256" in res.differ[0][1]
 
 
 @pytest.mark.usefixtures("harness_registry")
