@@ -69,8 +69,8 @@ from typing import ClassVar
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import Gaussian2, MapKind, SensorSpec, WorldMap
-from locbench.errors import ConfigError, FilterDiverged
+from locbench.datasets.base import Gaussian2, MapKind, OccupancyGrid, SensorSpec, WorldMap
+from locbench.errors import ConfigError, FilterDiverged, ResourceLimit
 from locbench.events import LaserScan, Observation, Odometry
 from locbench.filters._icp import MIN_PAIRS, IcpResult, icp_2d
 from locbench.filters._kalman import joseph_correct
@@ -223,6 +223,17 @@ class IcpEKF(Filter):
 
     config: IcpEKFConfig
 
+    def unsupported(self, world: WorldMap) -> str | None:
+        """A grid whose ray-cast tables exceed their memory limit is a stored skip with the reason, not a failed
+        run."""
+        if world.occupancy is None:
+            return None
+        try:
+            _check_raycast_tables(world.occupancy)
+        except ResourceLimit as exc:
+            return str(exc)
+        return None
+
     def reset(self, initial: Gaussian2, world: WorldMap, sensors: SensorSpec, rng: np.random.Generator) -> None:
         """Start from ``initial`` on ``world.occupancy``; ``rng`` is unused (the filter is deterministic)."""
         cfg = self.config
@@ -231,12 +242,7 @@ class IcpEKF(Filter):
             raise ConfigError("IcpEKF needs world.occupancy; the dataset provides no occupancy grid")
         if grid.origin[2] != 0.0:
             raise ConfigError(f"IcpEKF: the occupancy grid origin theta must be 0, got {grid.origin[2]}")
-        check_bytes(
-            "ekf_icp",
-            f"the ray-cast tables of a {grid.shape[0]} x {grid.shape[1]} grid",
-            grid_cells(grid.shape) * RAYCAST_BYTES_PER_CELL,
-            "give a coarser or smaller map",
-        )
+        _check_raycast_tables(grid)
         self._grid = grid
         self._res = float(grid.resolution)
         self._origin = (float(grid.origin[0]), float(grid.origin[1]))
@@ -412,3 +418,13 @@ class IcpEKF(Filter):
     def estimate(self) -> Estimate:
         """The current pose and covariance with the diagnostics of the last call."""
         return Estimate(t=self._t, mean=self._x.copy(), cov=self._P.copy(), diagnostics=dict(self._diag))
+
+
+def _check_raycast_tables(grid: OccupancyGrid) -> None:
+    """Refuse (:class:`ResourceLimit`) a grid whose ray-cast tables would exceed the tables' memory limit."""
+    check_bytes(
+        "ekf_icp",
+        f"the ray-cast tables of a {grid.shape[0]} x {grid.shape[1]} grid",
+        grid_cells(grid.shape) * RAYCAST_BYTES_PER_CELL,
+        "give a coarser or smaller map",
+    )

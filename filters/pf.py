@@ -123,7 +123,7 @@ from numba import njit, types
 from numba.typed import Dict
 
 from locbench.datasets.base import Gaussian2, MapKind, OccupancyGrid, SensorSpec, WorldMap
-from locbench.errors import ConfigError, FilterDiverged
+from locbench.errors import ConfigError, FilterDiverged, ResourceLimit
 from locbench.events import UNKNOWN_ID, LandmarkObservations, LaserScan, Observation, Odometry, RangeObservations
 from locbench.filters._likelihood_field import (
     LikelihoodField,
@@ -1034,6 +1034,30 @@ class ParticleFilter(Filter):
 
     # --- reset -------------------------------------------------------------------------------------------
 
+    def _check_grid_tables(self, world: WorldMap) -> None:
+        """Refuse (:class:`ResourceLimit`) a likelihood field / free-space index above the tables' memory limit."""
+        cfg, grid = self.config, world.occupancy
+        use_laser = cfg.use_laser and grid is not None
+        needs_space = cfg.init == "uniform" or cfg.augmented
+        if grid is not None and (use_laser or needs_space):
+            per_cell = (LIKELIHOOD_FIELD_BYTES_PER_CELL if use_laser else 0) + (
+                FREE_SPACE_BYTES_PER_CELL if needs_space else 0
+            )
+            check_bytes(
+                "pf",
+                f"the likelihood field / free-space index of a {grid.shape[0]} x {grid.shape[1]} grid",
+                grid_cells(grid.shape) * per_cell,
+                "give a coarser or smaller map (or use_laser=false, init=belief, augmented=false)",
+            )
+
+    def unsupported(self, world: WorldMap) -> str | None:
+        """A map whose grid tables exceed their memory limit is a stored skip with the reason, not a failed run."""
+        try:
+            self._check_grid_tables(world)
+        except ResourceLimit as exc:
+            return str(exc)
+        return None
+
     def reset(self, initial: Gaussian2, world: WorldMap, sensors: SensorSpec, rng: np.random.Generator) -> None:
         """Draw the particles (from ``initial`` or uniformly over free space) and resolve the noise models.
 
@@ -1096,17 +1120,7 @@ class ParticleFilter(Filter):
         self._range_log_hit = math.log1p(-eps) - 0.5 * _LOG_2PI - math.log(srange)
         self._range_log_floor = math.log(eps / cfg.range_outlier_span_m) if eps > 0.0 else -math.inf
 
-        needs_space = cfg.init == "uniform" or cfg.augmented
-        if grid is not None and (self._use_laser or needs_space):
-            per_cell = (LIKELIHOOD_FIELD_BYTES_PER_CELL if self._use_laser else 0) + (
-                FREE_SPACE_BYTES_PER_CELL if needs_space else 0
-            )
-            check_bytes(
-                "pf",
-                f"the likelihood field / free-space index of a {grid.shape[0]} x {grid.shape[1]} grid",
-                grid_cells(grid.shape) * per_cell,
-                "give a coarser or smaller map (or use_laser=false, init=belief, augmented=false)",
-            )
+        self._check_grid_tables(world)
         self._grid = grid
         self._fields: dict[float, LikelihoodField] = {}
         self._beam_idx: dict[int, IntArray] = {}
@@ -1115,7 +1129,7 @@ class ParticleFilter(Filter):
         if lm is not None:
             lo, hi = self._lm_xy.min(axis=0), self._lm_xy.max(axis=0)
             box = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
-        self._space = FreeSpaceSampler(grid, box) if needs_space else None
+        self._space = FreeSpaceSampler(grid, box) if (cfg.init == "uniform" or cfg.augmented) else None
 
         if cfg.init == "uniform":
             assert self._space is not None

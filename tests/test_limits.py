@@ -26,7 +26,7 @@ from locbench.datasets.recorded.ros_map import load_map_server_map
 from locbench.errors import MAX_MESSAGE_CHARS, ResourceLimit
 from locbench.limits import MAX_TABLE_BYTES, RAYCAST_BYTES_PER_CELL, check_bytes
 from locbench.registry import make_dataset, make_filter
-from locbench.runner import run_filter
+from locbench.runner import incompatibility, run_filter
 
 #: The issue's map: 4096 x 4096 cells at 5 cm.
 SIDE = 4096
@@ -91,6 +91,16 @@ def test_the_runner_records_the_refusal_as_a_failed_run(big_map: Path) -> None:
     trace = run_filter(make_filter("ekf_icp"), ds, np.random.default_rng(0))  # type: ignore[arg-type]
     assert trace.status == "error"
     assert trace.message.startswith("ResourceLimit: ekf_icp: the ray-cast tables of a 4096 x 4096 grid"), trace.message
+
+
+@pytest.mark.parametrize("spec", ["ekf_icp", "pf[use_laser=true]"])
+def test_a_sweep_stores_a_map_above_the_tables_limit_as_a_skip_with_the_reason(big_map: Path, spec: str) -> None:
+    # before reset (the runner's incompatibility check): a map too large for the filter's tables is a stated
+    # skip, as kf_linear's database bound is, never a failed run
+    ds = _on_big_map(big_map)
+    why = incompatibility(make_filter(spec), ds)  # type: ignore[arg-type]
+    assert why is not None and "expected at most 384 MiB" in why, why
+    assert incompatibility(make_filter(spec), make_dataset("tiny_line", 0)) is None  # type: ignore[arg-type]
 
 
 def test_refusing_the_huge_map_stays_far_below_1_gb(big_map: Path) -> None:
