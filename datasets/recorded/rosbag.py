@@ -43,7 +43,8 @@ error listing the topics it has. Parsed streams are cached per (bag, size, mtime
 Validation: a bag or map path that does not exist is an error (the user typed it; never a "data not found"
 skip); the bag must be a regular file (or a ROS 2 folder of regular files) of at most :data:`MAX_BAG_BYTES` and the
 map YAML a regular file of at most :data:`MAX_MAP_YAML_BYTES`, looked at with ``os.stat`` before anything opens
-them (a FIFO, a device or an oversize file: one line naming the path and what was expected); any failure to open or decode the bag is a clean error naming it; header stamps must be set (> 0) and
+them (a FIFO, a device or an oversize file: one line naming the path and what was expected); any failure to open
+or decode the bag is a clean error naming it; header stamps must be set (> 0) and
 non-decreasing per topic; poses finite and within :data:`~locbench.datasets.recorded.files.MAX_POSITION_M`;
 twists finite and within :data:`MAX_TWIST`; each scan needs a non-zero ``angle_increment`` with its beams
 spanning at most 2 pi and 0 <= ``range_min`` < ``range_max`` <= :data:`MAX_SCAN_RANGE_M`; every odometry and truth
