@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from locbench.cli import main
-from locbench.datasets.recorded.rosbag import MAX_BAG_BYTES, MAX_MAP_YAML_BYTES, resolve_bag_path
+from locbench.datasets.recorded.ros_map import MAX_YAML_BYTES
+from locbench.datasets.recorded.rosbag import MAX_BAG_BYTES, resolve_bag_path
 from locbench.errors import ConfigError
 from locbench.runner import run_many
 from locbench.store import MARKER, Store
@@ -249,7 +250,7 @@ def test_bag_and_map_paths_must_be_small_regular_files(tmp_path: Path, what: str
     os.mkfifo(fifo)
     big = tmp_path / "big.yaml"
     with open(big, "wb") as f:  # sparse: no disk used
-        f.truncate(MAX_MAP_YAML_BYTES + 1)
+        f.truncate(MAX_YAML_BYTES + 1)
     cases: list[tuple[str | Path, str]] = [(fifo, "not a regular file"), ("/dev/zero", "not a regular file")]
     if what == "map":
         cases += [(tmp_path, "is a folder; expected the map YAML as a regular file"), (big, "bytes")]
