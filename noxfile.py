@@ -7,7 +7,7 @@ nox -s bench        run every experiment, verify a sample, write results/summary
 nox -s report       regenerate results/summary from the stored runs, no re-run
 nox -s html         open results/summary/index.html in headless Chromium (renders, sorts; screenshot)
 nox -s perf         pytest-benchmark micro-benchmarks of each filter's predict and update
-nox -s fuzz         the loader fuzzing with the long hypothesis profile (posargs go to pytest)
+nox -s fuzz         the loader, store-reader and CLI fuzzing with the long hypothesis profile (posargs go to pytest)
 """
 
 from __future__ import annotations
@@ -152,7 +152,9 @@ def perf(session: nox.Session) -> None:
 
 @nox.session(python=PYTHON, default=False)
 def fuzz(session: nox.Session) -> None:
-    """Fuzz every recorded-data loader with the long hypothesis profile (the tests session runs the short one)."""
+    """Fuzz every recorded-data loader, the store's readers and the CLI's arguments with the long hypothesis profile
+    (the tests session runs the short one)."""
     _install(session, "all,test")
     args = session.posargs or ["--hypothesis-profile=fuzz", "--hypothesis-show-statistics"]
-    session.run("pytest", "--benchmark-disable", "-p", "no:cacheprovider", "tests/test_fuzz_loaders.py", *args)
+    fuzzed = ("tests/test_fuzz_loaders.py", "tests/test_fuzz_store_cli.py")
+    session.run("pytest", "--benchmark-disable", "-p", "no:cacheprovider", *fuzzed, *args)

@@ -12,13 +12,20 @@ on a small input; logs in ``docs/performance.md``) and rounded up; they are an u
 item, not an exact account. With the loaders' own bounds (:mod:`locbench.datasets.recorded.files`) this keeps any
 run, whatever its input, within about 1 GB: a process of about 200 MB (numpy, scipy, numba), a grid of at most
 2^24 cells (134 MB) and tables of at most :data:`MAX_TABLE_BYTES`.
+
+:func:`check_input_file` bounds the files a user names (a suite file, a bag and its map YAML): looked at with
+``os.stat`` before anything opens them, so a FIFO (which would block the open), a device (which never ends) or an
+oversize file is refused with one line instead of hanging or filling the memory.
 """
 
 from __future__ import annotations
 
 import math
+import os
+import stat
+from pathlib import Path
 
-from locbench.errors import ResourceLimit
+from locbench.errors import ConfigError, ResourceLimit
 
 #: Largest estimated allocation of one filter's tables or one builder's arrays, bytes (384 MiB).
 MAX_TABLE_BYTES = 384 << 20
@@ -89,3 +96,61 @@ def check_beams(name: str, beams: int) -> None:
 def grid_cells(shape: tuple[int, int]) -> float:
     """Cells of a grid of ``shape`` (rows, cols), as a float (no overflow)."""
     return float(shape[0]) * float(shape[1])
+
+
+def check_input_file(
+    path: str | os.PathLike[str], what: str, max_bytes: int, *, folder_ok: bool = False
+) -> os.stat_result:
+    """Refuse a user-named input that is not a regular file of at most ``max_bytes`` (looked at before opening).
+
+    Parameters
+    ----------
+    path : path-like
+        The file (or, with ``folder_ok``, a folder of regular files such as a ROS 2 bag).
+    what : str
+        What the input is, for the message ("suite file", "bag", "map YAML").
+    max_bytes : int
+        Largest size accepted, bytes (a folder: the sum of its files).
+    folder_ok : bool
+        Accept a folder whose entries are all regular files (checked one by one, not followed into subfolders).
+
+    Returns
+    -------
+    os.stat_result
+        The stat of ``path``.
+
+    Raises
+    ------
+    ConfigError
+        One line naming the path and what was expected: missing, unreadable, a folder (unless ``folder_ok``), a FIFO,
+        socket or device, or larger than ``max_bytes``.
+    """
+    p = Path(path)
+    expected = f"a regular file{' or a folder of regular files' if folder_ok else ''} of at most {max_bytes} bytes"
+    try:
+        st = p.stat()
+    except FileNotFoundError:
+        raise ConfigError(f"{p}: {what} not found") from None
+    except OSError as exc:
+        raise ConfigError(f"{p}: cannot read the {what} ({exc.strerror})") from None
+    if stat.S_ISDIR(st.st_mode):
+        if not folder_ok:
+            raise ConfigError(f"{p}: is a folder; expected the {what} as {expected}")
+        total = 0
+        try:
+            entries = sorted(p.iterdir())
+            for q in entries:
+                qst = q.stat()
+                if not stat.S_ISREG(qst.st_mode):
+                    raise ConfigError(f"{q}: not a regular file in the {what} folder {p}; expected {expected}")
+                total += qst.st_size
+        except OSError as exc:
+            raise ConfigError(f"{p}: cannot read the {what} folder ({exc.strerror})") from None
+        if total > max_bytes:
+            raise ConfigError(f"{p}: {total} bytes in the {what} folder; expected {expected}")
+        return st
+    if not stat.S_ISREG(st.st_mode):
+        raise ConfigError(f"{p}: not a regular file (a FIFO, socket or device); expected the {what} as {expected}")
+    if st.st_size > max_bytes:
+        raise ConfigError(f"{p}: {st.st_size} bytes; expected the {what} as {expected}")
+    return st

@@ -575,7 +575,17 @@ def _load_verified(
             arrays = {k: z[k] for k in z.files}
     except StaleRecord:
         raise
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError, zlib.error) as exc:
+    # zipfile raises NotImplementedError for an unknown compression method and RuntimeError for an encrypted member
+    except (
+        OSError,
+        ValueError,
+        EOFError,
+        zipfile.BadZipFile,
+        KeyError,
+        zlib.error,
+        NotImplementedError,
+        RuntimeError,
+    ) as exc:
         raise StaleRecord(one_line(f"{npz}: does not load ({type(exc).__name__}: {exc})")) from None
     why = contract(meta, arrays)
     if why is not None:

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from locbench.errors import ConfigError, UnknownIdError, one_line, shown
+from locbench.limits import check_input_file
 from locbench.registry import BUILTIN_FILTERS
 from locbench.spec import MAX_CONFIGS, Spec, expand_grid, grid_size
 
@@ -322,18 +323,7 @@ def _read_suite_text(path: Path) -> str:
 
     The file is looked at before it is opened (a FIFO would block the open, a device never end) and read with
     a bound (a file that grows meanwhile is still refused)."""
-    try:
-        st = path.stat()
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: suite file not found") from None
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read the suite file ({exc.strerror})") from None
-    if stat.S_ISDIR(st.st_mode):
-        raise ConfigError(f"{path}: is a folder; expected a suite name or a .toml suite file")
-    if not stat.S_ISREG(st.st_mode):
-        raise ConfigError(f"{path}: not a regular file (a FIFO, socket or device); a suite file is a .toml file")
-    if st.st_size > MAX_SUITE_BYTES:
-        raise ConfigError(f"{path}: {st.st_size} bytes; a suite file is at most {MAX_SUITE_BYTES} bytes")
+    check_input_file(path, "suite file", MAX_SUITE_BYTES)
     try:
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
         with os.fdopen(fd, "rb") as f:

@@ -113,7 +113,7 @@ def test_export_to_a_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) ->
 @pytest.mark.parametrize(
     ("make", "expected"),
     [
-        (lambda p: p.mkdir(), "is a folder; expected a suite name or a .toml suite file"),
+        (lambda p: p.mkdir(), "is a folder; expected the suite file as a regular file of at most 1048576 bytes"),
         (lambda p: p.write_bytes(b'filters = ["odometry"]\ndatasets = ["r\xf6om"]\n'), "not UTF-8 text (byte 37)"),
     ],
     ids=["is-a-directory", "undecodable"],

@@ -15,6 +15,9 @@ import numpy as np
 import pytest
 
 from locbench.cli import main
+from locbench.datasets.recorded.ros_map import MAX_YAML_BYTES
+from locbench.datasets.recorded.rosbag import MAX_BAG_BYTES, resolve_bag_path
+from locbench.errors import ConfigError
 from locbench.runner import run_many
 from locbench.store import MARKER, Store
 
@@ -238,6 +241,42 @@ def test_suite_files_must_be_small_regular_files(tmp_path: Path, capsys: pytest.
         _one_line(capsys, str(path), expected)
     assert main(["run", "--suite", str(tmp_path), "--results", str(tmp_path / "r")]) == 2
     _one_line(capsys, "is a folder")
+
+
+@pytest.mark.parametrize("what", ["bag", "map"])
+def test_bag_and_map_paths_must_be_small_regular_files(tmp_path: Path, what: str) -> None:
+    """A FIFO, a device, a folder where a file is expected or an oversize file: one line before anything opens it."""
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    big = tmp_path / "big.yaml"
+    with open(big, "wb") as f:  # sparse: no disk used
+        f.truncate(MAX_YAML_BYTES + 1)
+    cases: list[tuple[str | Path, str]] = [(fifo, "not a regular file"), ("/dev/zero", "not a regular file")]
+    if what == "map":
+        cases += [(tmp_path, "is a folder; expected the map YAML as a regular file"), (big, "bytes")]
+    else:
+        (tmp_path / "ros2").mkdir()
+        os.mkfifo(tmp_path / "ros2" / "data.db3")
+        cases += [(tmp_path / "ros2", "not a regular file in the bag folder")]
+    for path, expected in cases:
+        with pytest.raises(ConfigError) as info:
+            resolve_bag_path(path, what)
+        message = str(info.value)
+        assert str(path) in message and expected in message and "\n" not in message, message
+
+
+def test_an_oversize_bag_is_refused_with_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bag = tmp_path / "huge.bag"
+    with open(bag, "wb") as f:  # sparse: no disk used
+        f.truncate(MAX_BAG_BYTES + 1)
+    argv = ["run", "--filter", "odometry", "--dataset", f"rosbag[path={bag}]", "--results", str(tmp_path / "r")]
+    main(argv)
+    out = capsys.readouterr()
+    assert "Traceback" not in out.err
+    runs = list((tmp_path / "r").rglob("meta.json"))
+    assert len(runs) == 1
+    meta = json.loads(runs[0].read_text())
+    assert meta["status"] == "error" and str(bag) in meta["message"] and f"{MAX_BAG_BYTES} bytes" in meta["message"]
 
 
 def test_a_long_spec_error_is_capped(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

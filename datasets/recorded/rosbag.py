@@ -41,7 +41,10 @@ without definitions are decoded with rosbags' latest standard types. A bag that 
 error listing the topics it has. Parsed streams are cached per (bag, size, mtime, topics).
 
 Validation: a bag or map path that does not exist is an error (the user typed it; never a "data not found"
-skip); any failure to open or decode the bag is a clean error naming it; header stamps must be set (> 0) and
+skip); the bag must be a regular file (or a ROS 2 folder of regular files) of at most :data:`MAX_BAG_BYTES` and the
+map YAML a regular file of at most :data:`~locbench.datasets.recorded.ros_map.MAX_YAML_BYTES`, looked at with
+``os.stat`` before anything opens them (a FIFO, a device or an oversize file: one line naming the path and what
+was expected); any failure to open or decode the bag is a clean error naming it; header stamps must be set (> 0) and
 non-decreasing per topic; poses finite and within :data:`~locbench.datasets.recorded.files.MAX_POSITION_M`;
 twists finite and within :data:`MAX_TWIST`; each scan needs a non-zero ``angle_increment`` with its beams
 spanning at most 2 pi and 0 <= ``range_min`` < ``range_max`` <= :data:`MAX_SCAN_RANGE_M`; every odometry and truth
@@ -79,15 +82,19 @@ from locbench.datasets.base import (
 )
 from locbench.datasets.recorded.files import DATA_ENV, MAX_POSITION_M, RecordedDataError, quote
 from locbench.datasets.recorded.intel import extract_map_lines
-from locbench.datasets.recorded.ros_map import load_map_server_map
+from locbench.datasets.recorded.ros_map import MAX_YAML_BYTES, load_map_server_map
 from locbench.errors import ConfigError, DependencyNotInstalled
 from locbench.events import Event, LaserScan, Odometry
 from locbench.geometry import quaternion_to_yaw, wrap_angle
+from locbench.limits import check_input_file
 from locbench.spec import params_to_dict
 
 FloatArray = npt.NDArray[np.float64]
 
 ODOMETRY_TYPES = ("nav_msgs/msg/Odometry",)
+#: Largest bag accepted, bytes (a ROS 2 folder: the sum of its files; 16 GiB). The reader streams the bag, so this
+#: is no memory bound: it refuses a device or a runaway file before the reader starts on it.
+MAX_BAG_BYTES = 16 << 30
 #: Bounds of the validation: the largest odometry twist component (m/s, rad/s) and scan range_max (m).
 MAX_TWIST = 100.0
 #: Largest deviation of a pose quaternion's norm from 1 (float32 round-off is about 1e-7; a zero or a hand-scaled
@@ -321,10 +328,15 @@ def resolve_bag_path(path: str | os.PathLike[str], what: str = "bag") -> Path:
     if not p.is_absolute() and root:
         candidates.append(Path(root).expanduser() / p)
     for c in candidates:
-        if c.exists():
+        if os.path.lexists(c):
             storage_file = c.is_file() and c.suffix in (".db3", ".mcap")
             if what == "bag" and storage_file and (c.parent / "metadata.yaml").is_file():
-                return c.parent
+                c = c.parent
+            # Looked at before anything opens it: a FIFO would block the reader, a device never end.
+            if what == "bag":
+                check_input_file(c, "bag", MAX_BAG_BYTES, folder_ok=True)
+            else:
+                check_input_file(c, "map YAML", MAX_YAML_BYTES)
             return c
     looked = " or ".join(str(c) for c in candidates)
     expected = "a ROS 1 .bag file or a ROS 2 bag folder" if what == "bag" else "a map_server YAML file"
