@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import pytest
@@ -263,17 +262,6 @@ def test_laser_ranges_respect_limits(office: object) -> None:
     assert 0.5 < fin.mean() < 1.0
     assert np.all((r[fin] >= scans[0].range_min) & (r[fin] <= scans[0].range_max))
     assert r.shape[1] == 181 and scans[0].angle_min == pytest.approx(-math.radians(120))
-
-
-def test_build_times() -> None:
-    make_dataset("office", 0)  # numba compile / cache load excluded
-    t0 = time.perf_counter()
-    make_dataset("office", 1)
-    t1 = time.perf_counter()
-    make_dataset("tiny_circle", 1)
-    t2 = time.perf_counter()
-    assert t1 - t0 < 2.0
-    assert t2 - t1 < 0.5
 
 
 def test_room_calibration_over_20_seeds_within_factor_1_5() -> None:
