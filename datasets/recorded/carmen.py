@@ -46,7 +46,13 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.recorded.files import MAX_POSITION_M, MissingDataFile, RecordedDataError, quote
+from locbench.datasets.recorded.files import (
+    MAX_POSITION_M,
+    MissingDataFile,
+    RecordedDataError,
+    float_fields,
+    quote,
+)
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -344,28 +350,7 @@ def _count_error(p: Path, lineno: int, is_last: bool, got: int, expected: int, l
 def _to_floats(
     p: Path, tokens: list[str], lines: list[int], cols: tuple[str, ...], kind: str, offset: int
 ) -> FloatArray:
-    """Convert the numeric fields of one message type at once; on failure find the first bad field and its line."""
-    ncol = len(cols)
-    if not lines:
-        return np.zeros((0, ncol))
-    try:
-        arr = np.array(tokens, dtype=np.float64).reshape(len(lines), ncol)
-    except ValueError:
-        arr = None
-    if arr is not None and np.all(np.isfinite(arr)):
-        return arr
-    # Slow path: locate the first offending field (message order within the type = file order).
-    for r, lineno in enumerate(lines):
-        for c in range(ncol):
-            tok = tokens[r * ncol + c]
-            try:
-                v = float(tok)
-            except ValueError:
-                v = None
-            if v is None or not np.isfinite(v):
-                # The field's position on the line: the host (a word) sits before logger_timestamp.
-                pos = c + offset + 1 + (1 if c == ncol - 1 else 0)
-                raise RecordedDataError(
-                    p, f"{kind} field {pos} ({cols[c]}) is {quote(tok)}, expected a finite number", lineno
-                )
-    raise AssertionError("unreachable: a conversion failed but every field converts")
+    """Convert the numeric fields of one message type at once (:func:`.files.float_fields`)."""
+    last = len(cols) - 1
+    # The field's position on the line: the host (a word) sits before logger_timestamp.
+    return float_fields(p, tokens, lines, cols, kind, lambda c: c + offset + 1 + (1 if c == last else 0))

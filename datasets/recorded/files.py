@@ -294,6 +294,38 @@ def _interval(lo: float, hi: float) -> str:
     return f"in [{lo!r}, {hi!r}]"
 
 
+def float_fields(
+    p: Path, tokens: list[str], lines: list[int], cols: tuple[str, ...], kind: str, position: Callable[[int], int]
+) -> npt.NDArray[np.float64]:
+    """The numeric fields of one record type, converted at once, as a (len(lines), len(cols)) array.
+
+    ``tokens`` holds the fields row by row and ``lines`` each row's line number. On a field that is not a finite
+    number, the slow path finds the first one (file order) and raises :class:`RecordedDataError` naming its line
+    and ``position(c)``, the field's 1-based place on its line for column ``c``.
+    """
+    ncol = len(cols)
+    if not lines:
+        return np.zeros((0, ncol))
+    try:
+        arr = np.array(tokens, dtype=np.float64).reshape(len(lines), ncol)
+    except ValueError:
+        arr = None
+    if arr is not None and np.all(np.isfinite(arr)):
+        return arr
+    for r, lineno in enumerate(lines):
+        for c in range(ncol):
+            tok = tokens[r * ncol + c]
+            try:
+                v = float(tok)
+            except ValueError:
+                v = math.nan
+            if not math.isfinite(v):
+                raise RecordedDataError(
+                    p, f"{kind} field {position(c)} ({cols[c]}) is {quote(tok)}, expected a finite number", lineno
+                )
+    raise AssertionError("unreachable: a conversion failed but every field converts")
+
+
 def check_range(
     path: str | os.PathLike[str], name: str, a: npt.ArrayLike, lo: float = -math.inf, hi: float = math.inf
 ) -> None:

@@ -103,6 +103,7 @@ from locbench.datasets.recorded.files import (
     MissingDataFile,
     RecordedDataError,
     RemoteFile,
+    float_fields,
     locate,
     quote,
 )
@@ -248,35 +249,10 @@ def _read_cached(path: str, size: int, mtime_ns: int, kinds: tuple[str, ...]) ->
         numbers[kind].append(lineno)
     out = {}
     for kind in kinds:
-        ncol = len(FIELDS[kind])
-        out[kind] = Records(
-            p, kind, _floats(p, kind, tokens[kind], numbers[kind], ncol), np.array(numbers[kind], dtype=np.int64)
-        )
+        # field c sits at place c + 2 on its line (after the record type)
+        values = float_fields(p, tokens[kind], numbers[kind], FIELDS[kind], kind, lambda c: c + 2)
+        out[kind] = Records(p, kind, values, np.array(numbers[kind], dtype=np.int64))
     return out
-
-
-def _floats(p: Path, kind: str, tokens: list[str], lines: list[int], ncol: int) -> FloatArray:
-    if not lines:
-        return np.zeros((0, ncol))
-    try:
-        arr = np.array(tokens, dtype=np.float64).reshape(len(lines), ncol)
-        ok = bool(np.all(np.isfinite(arr)))
-    except ValueError:
-        ok = False
-    if ok:
-        return arr
-    for r, lineno in enumerate(lines):
-        for c in range(ncol):
-            tok = tokens[r * ncol + c]
-            try:
-                v = float(tok)
-            except ValueError:
-                v = math.nan
-            if not math.isfinite(v):
-                raise RecordedDataError(
-                    p, f"{kind} field {c + 2} ({FIELDS[kind][c]}) is {quote(tok)}, expected a finite number", lineno
-                )
-    raise AssertionError("unreachable: a conversion failed but every field converts")
 
 
 @dataclass(frozen=True, eq=False)
