@@ -454,20 +454,22 @@ def test_suite_filter_keeps_the_suites_cells_only() -> None:
 def test_summary_takes_each_filters_own_kidnap_configuration() -> None:
     from locbench.report.build import Report
     from locbench.report.collect import Collected, describe_filter, frame
+    from locbench.report.summary import kidnap_config
 
     names = ["pf", "pf[adaptive=kld]", "pf[particles=100]", "pf[augmented=true]", "pf[adaptive=kld,augmented=true]"]
     col = Collected(metrics=frame([]), filters={n: describe_filter(n) for n in names})
     rep = Report(col)
     kid = ["pf[augmented=true]", "pf[adaptive=kld,augmented=true]"]
-    assert rep._kidnap_config("pf", kid) == "pf[augmented=true]"
-    assert rep._kidnap_config("pf[adaptive=kld]", kid) == "pf[adaptive=kld,augmented=true]"
-    assert rep._kidnap_config("pf[particles=100]", kid) is None
+    assert kidnap_config(rep, "pf", kid) == "pf[augmented=true]"
+    assert kidnap_config(rep, "pf[adaptive=kld]", kid) == "pf[adaptive=kld,augmented=true]"
+    assert kidnap_config(rep, "pf[particles=100]", kid) is None
 
 
 def test_summary_takes_the_kidnap_configuration_a_filter_declares(monkeypatch: pytest.MonkeyPatch) -> None:
     from locbench.filters.pf import ParticleFilter
     from locbench.report.build import Report
     from locbench.report.collect import Collected, describe_filter, frame
+    from locbench.report.summary import kidnap_config
 
     monkeypatch.setattr(ParticleFilter, "kidnap_params", {"augmented": "true", "inject": "sensor"})
     names = ["pf", "pf[adaptive=kld]", "pf[augmented=true]", "pf[augmented=true,inject=sensor]"]
@@ -476,9 +478,9 @@ def test_summary_takes_the_kidnap_configuration_a_filter_declares(monkeypatch: p
     rep = Report(col)
     kid = ["pf[augmented=true]", "pf[augmented=true,inject=sensor]", "pf[adaptive=kld,augmented=true]"]
     # the declared one, not the one with the fewest extra parameters
-    assert rep._kidnap_config("pf", kid) == "pf[augmented=true,inject=sensor]"
+    assert kidnap_config(rep, "pf", kid) == "pf[augmented=true,inject=sensor]"
     # not run: the closest configuration that was
-    assert rep._kidnap_config("pf[adaptive=kld]", kid) == "pf[adaptive=kld,augmented=true]"
+    assert kidnap_config(rep, "pf[adaptive=kld]", kid) == "pf[adaptive=kld,augmented=true]"
 
 
 def test_configurations_of_a_sweep_are_listed_in_numeric_order() -> None:
