@@ -17,7 +17,7 @@ if TYPE_CHECKING:
 
 def appendix_section(rep: Report) -> Section:
     sec = Section("Appendix", "appendix")
-    shown = {e.dataset for e in rep.exps if not e.fold_variants}
+    shown = {e.dataset for e in rep.exps if not e.fold_variants} | set(rep.own())
     folded = {e.dataset for e in rep.exps if e.fold_variants}
     detail = Section("Every dataset", "appendix-datasets")
     for ds in sorted(rep.col.datasets):

@@ -40,6 +40,7 @@ from locbench.report.reference import reference_kind as _reference_kind
 from locbench.report.reference import semi_synthetic
 from locbench.report.style import LineStyle, style_for
 from locbench.report.tuning import tuning_section
+from locbench.spec import Spec
 
 
 class Report:
@@ -103,6 +104,18 @@ class Report:
         v = tb.values(self.rows(dataset), "kidnap_distance_m")
         return float(np.median(v)) if v.size else NAN
 
+    @cached_property
+    def _own(self) -> list[str]:
+        from locbench.suites import SUITES
+
+        builtin = {Spec.parse(d).ident for suite in SUITES.values() for b in suite.blocks for d in b.datasets}
+        return [n for n, info in sorted(self.col.datasets.items()) if info.spec.ident not in builtin]
+
+    def own(self) -> list[str]:
+        """A user's own datasets: the stored dataset names whose id no built-in suite runs (a ``rosbag[path=...]``
+        recording, a plug-in's dataset), each reported like a main comparison (summary, figures, runtime)."""
+        return list(self._own)
+
     def recorded(self) -> list[str]:
         return [n for n, info in sorted(self.col.datasets.items()) if info.recorded]
 
@@ -143,6 +156,7 @@ class Report:
             kd.kidnap_section(self),
             rc.recorded_section(self),
             *[ex.experiment_section(self, e) for e in self.exps],
+            *[ex.own_section(self, d) for d in self.own()],
             ap.appendix_section(self),
         ]
         return [s for s in out if s.blocks or s.children]

@@ -30,7 +30,7 @@ def consistency_section(rep: Report) -> Section:
             pairs.append((e.dataset, twin))
         else:
             alone.append(e.dataset)
-    alone += rep.recorded()
+    alone = list(dict.fromkeys([*alone, *rep.own(), *rep.recorded()]))
     sec.add(
         Text(
             "Is a filter's covariance an honest description of its error? The NEES (heading wrapped) at every "

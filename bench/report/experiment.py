@@ -1,4 +1,5 @@
-"""One experiment's section and the figures of one dataset name: trajectories, waypoint RMSE, NEES, particle count."""
+"""One experiment's section, a user's own dataset's section, and the figures of one dataset name: trajectories with
+the map, position error over time, waypoint RMSE, NEES, particle count."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from locbench.claims import Experiment, sections_for, waypoint_stats
 from locbench.metrics import CONFIDENCE, POSE_DOF, chi2_band, estimate_at, mean_over_runs
 from locbench.report import figures as fg
 from locbench.report import tables as tb
-from locbench.report.doc import Plot, Section, Text
+from locbench.report.doc import Plot, Section, Table, Text
 from locbench.report.names import slug
 from locbench.report.plotly import _plotly_tracks
 
@@ -22,6 +23,8 @@ if TYPE_CHECKING:
 MAX_TRACK_PANELS = 12
 #: Ellipses drawn along each track.
 ELLIPSES_PER_TRACK = 10
+#: Most series of the error-over-time figure before it shows the default configurations only.
+MAX_ERROR_SERIES = 8
 
 
 def experiment_section(rep: Report, e: Experiment) -> Section:
@@ -30,22 +33,88 @@ def experiment_section(rep: Report, e: Experiment) -> Section:
     sec.add(Text(text))
     base = e.dataset
     if not e.fold_variants and base in rep.col.datasets:
-        filters = rep.filters_on(base)
-        bounds = rep.bounds_on(base)
-        caption = f"`{base}`: mean ± 95 % interval over seeds"
-        sec.add(tb.comparison_table(rep.rows(base), filters, caption, bounds, rep.eligible(filters)))
-        wt = tb.waypoint_table(rep.rows(base), filters + bounds, f"`{base}`: RMSE at each waypoint over runs (cm)")
-        if wt is not None:
-            sec.add(wt)
-        plots = (trajectory_plot(rep, base), waypoint_plot(rep, base), nees_plot(rep, base), count_plot(rep, base))
-        for plot in plots:
-            if plot is not None:
-                sec.add(plot)
+        sec.add(*dataset_blocks(rep, base))
     # with the bound's rows: an experiment's own tables show the accuracy limit too
     rows = rep.df[rep.df["dataset"].isin(rep.variants_of(e.dataset))]
     for fn in sections_for(e.dataset):
         sec.add(*fn(rows, slug(e.dataset)))
     return sec
+
+
+def own_section(rep: Report, dataset: str) -> Section:
+    """A user's own dataset (no built-in suite runs it): every table and figure that applies, as for a main
+    comparison; its summary table and accuracy-runtime figure are in those sections."""
+    shown = rep.col.display(dataset)
+    sec = Section(f"Your data: `{shown}`", f"own-{slug(dataset)}")
+    truth = next((tr for (d, _), tr in sorted(rep.col.truths.items()) if d == dataset), None)
+    label = truth.truth_label if truth is not None else "reference"
+    sec.add(
+        Text(
+            f"Every filter configuration stored on `{shown}`, scored against its {label} as the built-in worlds "
+            "are; the summary table above gives each configuration's needs and, for those skipped, the reason."
+        ),
+        *dataset_blocks(rep, dataset),
+    )
+    return sec
+
+
+def dataset_blocks(rep: Report, dataset: str) -> list[Table | Plot]:
+    """The comparison and waypoint tables and the figures of one dataset name (those that apply)."""
+    filters = rep.filters_on(dataset)
+    bounds = rep.bounds_on(dataset)
+    out: list[Table | Plot] = []
+    shown = rep.col.display(dataset)
+    if filters:
+        caption = f"`{shown}`: mean ± 95 % interval over seeds"
+        out.append(tb.comparison_table(rep.rows(dataset), filters, caption, bounds, rep.eligible(filters)))
+    wt = tb.waypoint_table(rep.rows(dataset), filters + bounds, f"`{shown}`: RMSE at each waypoint over runs (cm)")
+    if wt is not None:
+        out.append(wt)
+    plots = (
+        trajectory_plot(rep, dataset),
+        error_plot(rep, dataset),
+        waypoint_plot(rep, dataset),
+        nees_plot(rep, dataset),
+        count_plot(rep, dataset),
+    )
+    out += [p for p in plots if p is not None]
+    return out
+
+
+def error_plot(rep: Report, dataset: str) -> Plot | None:
+    """Each configuration's position error over time on the first seed (log scale); on a dataset with more than
+    :data:`MAX_ERROR_SERIES` configurations, the default ones only (the sweeps are in the tables)."""
+    keys = sorted(k for k in rep.col.ok_dirs if k[0] == dataset and not rep.col.is_global(k[1]))
+    if not keys:
+        return None
+    seed = keys[0][2]
+    names = rep.col.filter_order({k[1] for k in keys if k[2] == seed})
+    if len(names) > MAX_ERROR_SERIES:
+        names = [f for f in names if not rep.col.filters[f].spec.params]
+    truth = rep.col.truths[(dataset, seed)]
+    gt = truth.ground_truth
+    series: list[tuple[str, np.ndarray]] = []
+    for f in names:
+        run = rep.col.read_run(dataset, f, seed)
+        est = estimate_at(run.t, run.mean, gt.t)[:, :2]
+        series.append((f, np.linalg.norm(est - gt.xy, axis=1) * 100.0))
+    if not series:
+        return None
+    styles = rep.styles_for([f for f, _ in series])
+    title = f"seed {seed}: position error over time (log scale)"
+    caption = f"`{rep.col.display(dataset)}`, {title}, against the {truth.truth_label}"
+    t = gt.t - gt.t[0]
+
+    def draw(fig: Figure) -> None:
+        ax = fig.add_subplot()
+        for f, err in series:
+            st = styles[f]
+            ok = np.isfinite(err) & (err > 0)
+            ax.plot(t[ok], err[ok], color=st.color, ls=st.linestyle, lw=0.9, label=f)
+        ax.set_yscale("log")
+        fg.finish(ax, "t from the start (s)", "position error (cm)", title)
+
+    return Plot(f"{slug(dataset)}_errors", caption, draw, size=(7.5, 4.2))
 
 
 def trajectory_plot(rep: Report, dataset: str) -> Plot | None:

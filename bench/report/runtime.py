@@ -46,6 +46,12 @@ def pareto_section(rep: Report) -> Section:
         pts = pareto_points(rep, e.dataset, "ate_m")
         if pts:
             sec.add(pareto_plot(rep, f"{slug(e.dataset)}_pareto", e.dataset, [(e.dataset, "ATE (cm)", pts)]))
+    for d in rep.own():
+        metric = rep.recorded_metric(d)
+        pts = pareto_points(rep, d, metric)
+        if pts:
+            shown = rep.col.display(d)
+            sec.add(pareto_plot(rep, f"{slug(d)}_pareto", shown, [(shown, tb.header(metric), pts)]))
     rec = [
         (rep.col.display(d), tb.header(rep.recorded_metric(d)), pareto_points(rep, d, rep.recorded_metric(d)))
         for d in rep.recorded()
@@ -53,7 +59,8 @@ def pareto_section(rep: Report) -> Section:
     rec = [r for r in rec if r[2]]
     if rec:
         sec.add(pareto_plot(rep, "recorded_pareto", "recorded data", rec))
-    return sec
+    # the heading stands only above a figure
+    return sec if any(isinstance(b, Plot) for b in sec.blocks) else Section("Accuracy against runtime", "pareto")
 
 
 def pareto_plot(rep: Report, name: str, title: str, panels: list[tuple[str, str, list[fg.ParetoPoint]]]) -> Plot:
