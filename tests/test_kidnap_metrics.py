@@ -12,10 +12,10 @@ from locbench import metrics as lm
 from locbench.datasets.base import Kidnap, Trajectory2D
 from locbench.report import wilson_interval, write_report
 from locbench.report.build import Report
-from locbench.report.experiment import nees_plot
-from locbench.report.kidnap import kidnap_section
 from locbench.report.collect import collect
 from locbench.report.doc import Plot, Table
+from locbench.report.experiment import nees_plot
+from locbench.report.kidnap import kidnap_section
 from locbench.report.render import render_png
 from locbench.store import KIND_NAMES, RunRecord, Store, TruthRecord
 

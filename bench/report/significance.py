@@ -671,7 +671,7 @@ def seed_audit(report: Report, datasets: Sequence[str]) -> Section:
     return sec
 
 
-# --- the summary table's columns ----------------------------------------------------------------------------
+# --- the summary's per-run ratio to the bound ------------------------------------------------------------
 
 
 def ratio_per_seed(df: pd.DataFrame, config: str, bound: str) -> dict[int, float]:
@@ -679,57 +679,6 @@ def ratio_per_seed(df: pd.DataFrame, config: str, bound: str) -> dict[int, float
     mine = per_seed(df[df["filter"] == config], "ate_m")
     ref = per_seed(df[df["filter"] == bound], "ate_m")
     return {s: mine[s] / ref[s] for s in mine if s in ref and ref[s] > 0}
-
-
-def recorded_per_dataset(report: Report, config: str) -> dict[int, float]:
-    """Recorded dataset index -> the configuration's mean ATE there (the recorded-median column's units)."""
-    out: dict[int, float] = {}
-    for i, ds in enumerate(report.recorded()):
-        if not report.ground_truth(ds):
-            continue
-        sub = report.rows(ds)
-        v = tb.values(sub[sub["filter"] == config], "ate_m")
-        if v.size:
-            out[i] = float(np.mean(v))
-    return out
-
-
-def summary_columns(
-    report: Report,
-    dataset: str,
-    filters: Sequence[str],
-    n_bounds: int,
-    kidnap: str | None,
-    knames: Sequence[str | None],
-) -> list[Column]:
-    """The ranked columns of a summary table (as :meth:`Report.summary_table` lays them out) with per-run values."""
-    from locbench.pcrb import BOUND_ALL
-
-    df = report.rows(dataset)
-    kdf = report.rows(kidnap) if kidnap else df.iloc[0:0]
-    pad: list[dict[int, float] | None] = [None] * n_bounds
-
-    def col(i: int, metric: str, samples: list[dict[int, float] | None]) -> Column:
-        return Column(i, METRICS[metric], samples + pad)
-
-    return [
-        col(2, "ate_m", samples_for(df, filters, "ate_m")),
-        col(3, "ate_over_pcrb", [ratio_per_seed(df, f, BOUND_ALL) or None for f in filters]),
-        col(4, "waypoint_rmse_mean_m", samples_for(df, filters, WAYPOINT_MEAN)),
-        col(5, "heading_rmse_rad", samples_for(df, filters, "heading_rmse_rad")),
-        col(6, "anees", samples_for(df, filters, "anees")),
-        col(7, "energy_score_m", samples_for(df, filters, "energy_score_m")),
-        # one AUROC per configuration over all its runs: a ranking, not a paired test
-        col(8, "lost_auroc", [None] * len(filters)),
-        col(9, "update_us_median", samples_for(df, filters, "update_us_median")),
-        col(10, "realtime_factor", samples_for(df, filters, "realtime_factor")),
-        col(
-            11,
-            "kidnap_recovered",
-            [samples_for(kdf, [k], "kidnap_recovered")[0] if k else None for k in knames],
-        ),
-        col(12, "recorded_ate_median_m", [recorded_per_dataset(report, f) or None for f in filters]),
-    ]
 
 
 def mark_grid(

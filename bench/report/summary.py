@@ -28,7 +28,7 @@ from locbench.pcrb import BOUND_ALL
 from locbench.report import health as hl
 from locbench.report import significance as sig
 from locbench.report import tables as tb
-from locbench.report.doc import Section, Table, Text
+from locbench.report.doc import Block, Section, Table, Text
 from locbench.report.names import KIDNAP_PARAM, NAN
 from locbench.report.reference import INDEPENDENT_KINDS
 
@@ -63,7 +63,7 @@ def summary_section(rep: Report) -> Section:
     return sec
 
 
-def summary_blocks(rep: Report, dataset: str) -> list[Text | Table]:
+def summary_blocks(rep: Report, dataset: str) -> list[Block]:
     """The advice paragraph (when there is a choice to make) and the decision table of one dataset name."""
     table, ctx, rows = _summary(rep, dataset)
     text = advice(ctx, rows)
@@ -158,7 +158,7 @@ def _rows(rep: Report, ctx: Context) -> list[Row]:
         skipped = r.status == "skipped" and r.dataset == ctx.dataset and r.filter not in ran
         if skipped and not rep.col.is_global(r.filter):
             reasons.setdefault(r.filter, r.message)
-    out += [Row(f, df.iloc[0:0], skipped=reasons[f]) for f in rep.col.filter_order(reasons)]
+    out += [Row(f, df.iloc[0:0], skipped=reasons[f]) for f in rep.col.filter_order(set(reasons))]
     out += [Row(b, df[df["filter"] == b], bound=True) for b in rep.bounds_on(ctx.dataset)]
     return out
 
