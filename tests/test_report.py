@@ -632,13 +632,22 @@ def test_advice_is_generated_from_the_numbers() -> None:
     )
 
 
-def test_a_dataset_no_suite_runs_gets_the_whole_report(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """A user's own data (here a synthetic one no built-in suite runs): summary, figures, runtime and the
-    skipped filter's reason, and ``locbench report`` prints its summary table."""
+@pytest.mark.parametrize(
+    ("name", "title"),
+    [
+        ("my_world", "Your data: `my_world`"),  # no built-in suite runs it
+        ("tiny_circle", "`tiny_circle`"),  # a suite's world without a section of its own, alone in the store
+    ],
+)
+def test_a_dataset_no_suite_runs_gets_the_whole_report(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], name: str, title: str
+) -> None:
+    """A user's own data (here a synthetic one no built-in suite runs), or a store without a main comparison:
+    summary, figures, runtime and the skipped filter's reason, and ``locbench report`` prints its summary table."""
     from locbench.cli import main
 
     global DATASET
-    old, DATASET = DATASET, "my_world"
+    old, DATASET = DATASET, name
     try:
         st = Store(tmp_path / "results")
         for seed in range(N_SEEDS):
@@ -651,15 +660,15 @@ def test_a_dataset_no_suite_runs_gets_the_whole_report(tmp_path: Path, capsys: p
         DATASET = old
     assert main(["report", "--results", str(tmp_path / "results")]) == 0
     out = capsys.readouterr().out
-    assert "my_world: mean over seeds" in out and "ekf_landmarks" in out and "skipped: needs an occupancy grid" in out
+    assert f"{name}: mean over seeds" in out and "ekf_landmarks" in out and "skipped: needs an occupancy grid" in out
     text = (st.summary / "REPORT.md").read_text()
     for needle in (
-        '### <a id="summary-my_world"></a>Your data: `my_world`',
-        '## <a id="own-my_world"></a>Your data: `my_world`',
+        f'### <a id="summary-{name}"></a>{title}',
+        f'## <a id="own-{name}"></a>{title}',
         "| `ekf_icp` | laser; occupancy grid | 0 | skipped: needs an occupancy grid |",
         "Which to use, from this table's ATE",
-        "figures/my_world_pareto.png",
+        f"figures/{name}_pareto.png",
     ):
         assert needle in text, needle
     figs = sorted(p.name for p in (st.summary / "figures").glob("*.png"))
-    assert figs == [f"my_world_{k}.png" for k in ("errors", "nees", "pareto", "trajectories", "waypoint_rmse")]
+    assert figs == [f"{name}_{k}.png" for k in ("errors", "nees", "pareto", "trajectories", "waypoint_rmse")]

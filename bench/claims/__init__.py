@@ -8,7 +8,7 @@ The modules of this package register, at import:
 - :class:`Claim`: one checkable claim of a source report: a function from the tidy metrics rows
   (``dataset, filter, seed, metric, value``) of the experiment it concerns to a :class:`ClaimResult`;
 - report sections (:func:`register_section`): extra tables and figures of an experiment, built as
-  :mod:`locbench.report.doc` blocks.
+  :mod:`locbench.docfmt` blocks.
 
 The report itself knows no dataset or filter by name. Filters are matched by id: the plain ``id`` when
 it has runs, otherwise the first parameterised variant in sorted order, named in the measured text.
@@ -37,7 +37,7 @@ from locbench.significance import ALPHA, TestResult
 from locbench.spec import Spec
 
 if TYPE_CHECKING:
-    from locbench.report.doc import Block
+    from locbench.docfmt import Block
 
 log = logging.getLogger(__name__)
 
@@ -300,7 +300,7 @@ def register_section(dataset_id: str, fn: SectionFn) -> None:
     """Add an extra block of an experiment's report section.
 
     ``fn(rows, slug)`` gets the tidy metrics rows of every stored variant of the dataset id and a
-    file-name slug for its figures (``<slug>_*``) and returns :mod:`locbench.report.doc` blocks (text,
+    file-name slug for its figures (``<slug>_*``) and returns :mod:`locbench.docfmt` blocks (text,
     tables, plots); it does no I/O.
     """
     _SECTIONS.append((dataset_id, fn))

@@ -105,16 +105,37 @@ class Report:
         return float(np.median(v)) if v.size else NAN
 
     @cached_property
-    def _own(self) -> list[str]:
+    def _builtin(self) -> frozenset[str]:
+        """The dataset ids some built-in suite runs."""
         from locbench.suites import SUITES
 
-        builtin = {Spec.parse(d).ident for suite in SUITES.values() for b in suite.blocks for d in b.datasets}
-        return [n for n, info in sorted(self.col.datasets.items()) if info.spec.ident not in builtin]
+        return frozenset(Spec.parse(d).ident for suite in SUITES.values() for b in suite.blocks for d in b.datasets)
+
+    @cached_property
+    def _own(self) -> list[str]:
+        own = [n for n, info in sorted(self.col.datasets.items()) if info.spec.ident not in self._builtin]
+        if own or any(e.summary and e.dataset in self.col.datasets for e in self.exps):
+            return own
+        # nothing else would give a summary (a store of, say, recorded runs only): every dataset name that has
+        # no experiment section of its own
+        sectioned = {e.dataset for e in self.exps}
+        folded = {e.dataset for e in self.exps if e.fold_variants}
+        return [
+            n
+            for n, info in sorted(self.col.datasets.items())
+            if n not in sectioned and info.spec.ident not in folded and self.filters_on(n)
+        ]
 
     def own(self) -> list[str]:
-        """A user's own datasets: the stored dataset names whose id no built-in suite runs (a ``rosbag[path=...]``
-        recording, a plug-in's dataset), each reported like a main comparison (summary, figures, runtime)."""
+        """A user's own datasets, each reported like a main comparison (summary, figures, runtime): the stored
+        dataset names whose id no built-in suite runs (a ``rosbag[path=...]`` recording, a plug-in's dataset);
+        in a store without those and without a main comparison, every dataset name without a section."""
         return list(self._own)
+
+    def own_title(self, dataset: str) -> str:
+        """``Your data: `name``` for a dataset no built-in suite runs, else the name."""
+        shown = f"`{self.col.display(dataset)}`"
+        return shown if self.col.datasets[dataset].spec.ident in self._builtin else f"Your data: {shown}"
 
     def recorded(self) -> list[str]:
         return [n for n, info in sorted(self.col.datasets.items()) if info.recorded]
@@ -165,10 +186,12 @@ class Report:
         return [
             "locbench runs every localization filter on the same synthetic worlds and recorded datasets and "
             "measures them the same way. Start with the **summary** tables: one row per filter configuration on "
-            "each main comparison, errors in cm, times in us; in bold the best value of each column and every "
-            "configuration a paired test over the seeds does not find different from it (the dead-reckoning "
-            "baseline is never marked). Then the ranks **across datasets**, the **claims** of the five source reports, "
-            "each with its verdict and the measured value; the **accuracy against runtime** fronts (lower and "
+            "each main comparison and on each dataset of your own (the defaults by ATE, then each filter's other "
+            "configurations under it), with the sensors and map it needs and a line on which to use with which; "
+            "errors in cm, times in us; in bold the best value of each column and every configuration a paired "
+            "test over the seeds does not find different from it (the dead-reckoning baseline is never marked, "
+            "nor an inconsistent ANEES). Then the ranks **across datasets**, the **claims** of the five source "
+            "reports, each with its verdict and the measured value; the **accuracy against runtime** fronts (lower and "
             "further right is better); **consistency** (does a filter's covariance describe its error?); kidnap "
             "recovery; the recorded data; and one section per experiment. Values are means over seeds; the "
             f"appendix gives every dataset's table with {100 * CONFIDENCE:.0f} % Student-t intervals. What every "

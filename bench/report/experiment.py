@@ -45,7 +45,7 @@ def own_section(rep: Report, dataset: str) -> Section:
     """A user's own dataset (no built-in suite runs it): every table and figure that applies, as for a main
     comparison; its summary table and accuracy-runtime figure are in those sections."""
     shown = rep.col.display(dataset)
-    sec = Section(f"Your data: `{shown}`", f"own-{slug(dataset)}")
+    sec = Section(rep.own_title(dataset), f"own-{slug(dataset)}")
     truth = next((tr for (d, _), tr in sorted(rep.col.truths.items()) if d == dataset), None)
     label = truth.truth_label if truth is not None else "reference"
     sec.add(

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 
+from locbench import ranking as rk
 from locbench import significance as sg
 from locbench.events import Odometry
 from locbench.lost import LOST_THRESHOLDS_M
@@ -57,7 +58,7 @@ def summary_section(rep: Report) -> Section:
     """One decision table per main comparison, then one per dataset of a user's own (:meth:`Report.own`)."""
     sec = Section("Summary", "summary")
     names = [(e.title, e.dataset) for e in rep.exps if e.summary and e.dataset in rep.col.datasets]
-    names += [(f"Your data: `{rep.col.display(d)}`", d) for d in rep.own()]
+    names += [(rep.own_title(d), d) for d in rep.own()]
     for title, ds in names:
         sec.children.append(Section(title, f"summary-{ds}", summary_blocks(rep, ds)))
     return sec
@@ -122,20 +123,20 @@ def row_order(rep: Report, filters: Sequence[str], ate: Callable[[str], float]) 
     rest = [f for f in filters if not col.is_baseline(f)]
     by_id: dict[str, list[str]] = {}
     for f in rest:
-        by_id.setdefault(col.filters[f].spec.ident, []).append(f)
+        by_id.setdefault(col.filter_info(f).spec.ident, []).append(f)
 
     def key(x: float) -> float:
         return x if not math.isnan(x) else math.inf
 
     def rank(ident: str) -> tuple[float, str]:
         members = by_id[ident]
-        default = [f for f in members if not col.filters[f].spec.params]
+        default = [f for f in members if not col.filter_info(f).spec.params]
         pick = default or members
         return (min(key(ate(f)) for f in pick), ident)
 
     ids = sorted(by_id, key=rank)
-    defaults = [f for i in ids for f in by_id[i] if not col.filters[f].spec.params]
-    sweeps = [f for i in ids for f in col.filter_order(by_id[i]) if col.filters[f].spec.params]
+    defaults = [f for i in ids for f in by_id[i] if not col.filter_info(f).spec.params]
+    sweeps = [f for i in ids for f in col.filter_order(by_id[i]) if col.filter_info(f).spec.params]
     return [*col.filter_order(base), *defaults, *sweeps]
 
 
@@ -219,7 +220,7 @@ def _mean(metric: str, scale: float | None = None, dash: bool = False) -> Callab
 
 
 def _per_run(metric: str) -> Callable[[Context, Sequence[Row]], list[PerRun]]:
-    return lambda ctx, rows: sig.samples_for(ctx.df, [r.name for r in rows], metric)
+    return lambda ctx, rows: rk.samples_for(ctx.df, [r.name for r in rows], metric)
 
 
 def _runs(ctx: Context, row: Row) -> tuple[str, float]:
@@ -290,7 +291,7 @@ def _kidnap(ctx: Context, row: Row) -> tuple[str, float]:
 
 
 def _kidnap_samples(ctx: Context, rows: Sequence[Row]) -> list[PerRun]:
-    return [sig.samples_for(ctx.kdf, [r.kname], "kidnap_recovered")[0] if r.kname else None for r in rows]
+    return [rk.samples_for(ctx.kdf, [r.kname], "kidnap_recovered")[0] if r.kname else None for r in rows]
 
 
 def _kidnap_note(ctx: Context, cells: Sequence[str]) -> str:
@@ -348,7 +349,7 @@ COLUMNS: tuple[SummaryColumn, ...] = (
         note=lambda ctx, cells: tb.BOUND_FOOTNOTE if ctx.rep.bounds_on(ctx.dataset) else "",
     ),
     SummaryColumn(
-        _fixed("mean waypoint RMSE (cm)"), _waypoints, "waypoint_rmse_mean_m", _per_run(sig.WAYPOINT_MEAN), bound=True
+        _fixed("mean waypoint RMSE (cm)"), _waypoints, "waypoint_rmse_mean_m", _per_run(rk.WAYPOINT_MEAN), bound=True
     ),
     SummaryColumn(
         _fixed("heading RMSE (deg)"),
@@ -474,9 +475,9 @@ def _summary(rep: Report, dataset: str) -> tuple[Table, Context, list[Row]]:
     cols = [COLUMNS[j] for j in shown]
     text = [[grid[j][i][0] for j in shown] for i in range(len(rows))]
     keys = [[grid[j][i][1] for j in shown] for i in range(len(rows))]
-    hovers = sig.hover_grid(text)
+    hovers = rk.hover_grid(text)
     marks = _mark(ctx, rows, cols, text, keys, hovers)
-    notes = [sig.tie_footnote(marks)]
+    notes = [rk.tie_footnote(marks)]
     for k, c in enumerate(cols):
         if c.note is not None:
             n = c.note(ctx, [r[k] for r in text])
@@ -500,7 +501,7 @@ def _mark(
     text: list[list[str]],
     keys: list[list[float]],
     hovers: list[list[str]],
-) -> sig.TieMarks:
+) -> rk.TieMarks:
     """Bold each ranked column's best and its ties (:func:`locbench.report.significance.mark_ties`); the baseline,
     the bound and skipped rows are never candidates, and in a ``consistent_only`` column neither is a row whose
     ANEES is outside the band."""
@@ -514,15 +515,15 @@ def _mark(
     untested: list[int] = []
     for flags, only in ((base, False), (consistent, True)):
         columns = [
-            sig.Column(k, METRICS[c.metric], [*c.samples(ctx, runs), *pad])
+            rk.Column(k, METRICS[c.metric], [*c.samples(ctx, runs), *pad])
             for k, c in enumerate(cols)
             if c.metric is not None and c.samples is not None and c.consistent_only == only
         ]
         if columns:
-            m = sig.mark_ties(text, keys, columns, flags, hovers=hovers)
+            m = rk.mark_ties(text, keys, columns, flags, hovers=hovers)
             tested += m.tested
             untested += m.untested_columns
-    return sig.TieMarks(tuple(sorted(tested)), tuple(sorted(untested)))
+    return rk.TieMarks(tuple(sorted(tested)), tuple(sorted(untested)))
 
 
 # --- the advice -------------------------------------------------------------------------------------------------
@@ -536,7 +537,7 @@ def _have_text(sensors: frozenset[str], maps: frozenset[str]) -> str:
 
 
 def advice(ctx: Context, rows: Sequence[Row]) -> str:
-    """ "If you have X, use Y", generated from the table's numbers.
+    """Which configuration to use with what ("if you have X, use Y"), generated from the table's numbers.
 
     For each combination of sensors and map that some configuration needs (as it declares them, smallest first),
     the configuration with the lowest mean ATE among those that need no more, and every one the column's paired
@@ -550,7 +551,7 @@ def advice(ctx: Context, rows: Sequence[Row]) -> str:
     if not cands:
         return ""
     means = [tb.mean_of(r.sub, "ate_m") for r in cands]
-    samples = sig.samples_for(ctx.df, [r.name for r in cands], "ate_m")
+    samples = rk.samples_for(ctx.df, [r.name for r in cands], "ate_m")
     needs = {}
     for r in cands:
         info = col.filter_info(r.name)
