@@ -5,6 +5,7 @@ from __future__ import annotations
 import ast
 import os
 import shutil
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -192,16 +193,22 @@ def _empty(meta: dict[str, object]) -> RunRecord:
     )
 
 
-@pytest.fixture
-def store(tmp_path: Path) -> Store:
-    st = Store(tmp_path / "results")
+def _fake_store(root: Path) -> Store:
+    """The baseline and one filter on every seed of ``DATASET``, and a filter skipped with its reason."""
+    st = Store(root)
     for seed in range(N_SEEDS):
         truth = _fake_truth(seed)
         st.write_truth(truth)
         st.write_run(_fake_run(truth, "odometry", drift=0.004, sigma=0.01))
         st.write_run(_fake_run(truth, "ekf_landmarks", drift=0.0, sigma=0.01))
-    st.write_run(_empty(_meta("ekf_landmarks[gate=0.1]", 0, "error", "ValueError: boom | bad gate")))
     st.write_run(_empty(_meta("ekf_icp", 0, "skipped", "needs an occupancy grid")))
+    return st
+
+
+@pytest.fixture
+def store(tmp_path: Path) -> Store:
+    st = _fake_store(tmp_path / "results")
+    st.write_run(_empty(_meta("ekf_landmarks[gate=0.1]", 0, "error", "ValueError: boom | bad gate")))
     broken = st.run_dir(DATASET, "pf", 0)
     broken.mkdir(parents=True)
     (broken / "meta.json").write_text("{not json")
@@ -640,24 +647,14 @@ def test_advice_is_generated_from_the_numbers() -> None:
     ],
 )
 def test_a_dataset_no_suite_runs_gets_the_whole_report(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str], name: str, title: str
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, name: str, title: str
 ) -> None:
     """A user's own data (here a synthetic one no built-in suite runs), or a store without a main comparison:
     summary, figures, runtime and the skipped filter's reason, and ``locbench report`` prints its summary table."""
     from locbench.cli import main
 
-    global DATASET
-    old, DATASET = DATASET, name
-    try:
-        st = Store(tmp_path / "results")
-        for seed in range(N_SEEDS):
-            truth = _fake_truth(seed)
-            st.write_truth(truth)
-            st.write_run(_fake_run(truth, "odometry", drift=0.004, sigma=0.01))
-            st.write_run(_fake_run(truth, "ekf_landmarks", drift=0.0, sigma=0.01))
-        st.write_run(_empty(_meta("ekf_icp", 0, "skipped", "needs an occupancy grid")))
-    finally:
-        DATASET = old
+    monkeypatch.setattr(sys.modules[__name__], "DATASET", name)
+    st = _fake_store(tmp_path / "results")
     assert main(["report", "--results", str(tmp_path / "results")]) == 0
     out = capsys.readouterr().out
     assert f"{name}: mean over seeds" in out and "ekf_landmarks" in out and "skipped: needs an occupancy grid" in out
