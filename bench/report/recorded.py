@@ -62,29 +62,24 @@ def recorded_section(rep: Report) -> Section:
         fs = [f for f in filters if any((f, d) in status for d in group)]
         acc = [[cell(f, d, rep.recorded_metric(d)) for d in group] for f in fs]
         rtf = [[cell(f, d, "realtime_factor") for d in group] for f in fs]
-        acc_cells, acc_note, acc_hover = sig.mark_grid(rep, fs, group, acc, rep.recorded_metric)
-        rtf_cells, rtf_note, rtf_hover = sig.mark_grid(rep, fs, group, rtf, lambda d: "realtime_factor")
         metrics_text = "; ".join(f"`{rep.col.display(d)}` {tb.header(rep.recorded_metric(d))}" for d in group)
         sub = Section(f"Reference: {kind}", f"recorded-{slug(kind)}")
-        sub.add(
-            Text(f"Accuracy: {metrics_text}; {kind_caption(kind)}."),
-            Table(
-                head,
-                tuple(tuple(r) for r in acc_cells),
-                caption=f"Accuracy (cm); {kind_caption(kind)}",
-                footnotes=(acc_note,),
-                sort_keys=tuple((NAN, *(c[1] for c in r)) for r in acc),
-                hovers=acc_hover,
-            ),
-            Table(
-                head,
-                tuple(tuple(r) for r in rtf_cells),
-                caption=f"Real-time factor (x); {kind_caption(kind)}",
-                footnotes=(rtf_note,),
-                sort_keys=tuple((NAN, *(c[1] for c in r)) for r in rtf),
-                hovers=rtf_hover,
-            ),
-        )
+        sub.add(Text(f"Accuracy: {metrics_text}; {kind_caption(kind)}."))
+        for grid, metric_of, what in (
+            (acc, rep.recorded_metric, "Accuracy (cm)"),
+            (rtf, lambda d: "realtime_factor", "Real-time factor (x)"),
+        ):
+            cells, note, hover = sig.mark_grid(rep, fs, group, grid, metric_of)
+            sub.add(
+                Table(
+                    head,
+                    tuple(tuple(r) for r in cells),
+                    caption=f"{what}; {kind_caption(kind)}",
+                    footnotes=(note,),
+                    sort_keys=tuple((NAN, *(c[1] for c in r)) for r in grid),
+                    hovers=hover,
+                )
+            )
         worse = not_below_baseline(rep, fs, group, acc)
         if worse:
             sub.add(Text(f"Not below dead reckoning ({kind_caption(kind)}): {worse}."))
