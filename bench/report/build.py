@@ -3,7 +3,8 @@
 Order: how to read this, summary tables (one per summary experiment), claims, accuracy against runtime,
 consistency, kidnap and global localization, recorded data, one section per experiment, appendix (detail
 tables, failed and skipped runs, provenance). Which datasets are main comparisons, which sections and
-claims an experiment has, comes from :mod:`locbench.claims`; the report names no dataset or filter.
+claims an experiment has, comes from :mod:`locbench.experiments` (registered by :mod:`locbench.claims`); the
+report names no dataset or filter.
 
 :class:`Report` holds what every section reads (the rows of a dataset name, the configurations run on it, the
 figure styles); each section is a function of it in its own module (:mod:`~locbench.report.summary`,
@@ -20,7 +21,7 @@ from functools import cached_property
 import numpy as np
 import pandas as pd
 
-from locbench.claims import all_claims, experiments
+from locbench.experiments import all_claims, experiments
 from locbench.metrics import CONFIDENCE
 from locbench.pcrb import BOUND_ROWS
 from locbench.report import appendix as ap

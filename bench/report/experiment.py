@@ -8,7 +8,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from matplotlib.figure import Figure
 
-from locbench.claims import Experiment, sections_for, waypoint_stats
+from locbench.claims import waypoint_stats
+from locbench.experiments import Experiment, sections_for
 from locbench.metrics import CONFIDENCE, POSE_DOF, chi2_band, estimate_at, mean_over_runs
 from locbench.report import figures as fg
 from locbench.report import tables as tb
