@@ -30,7 +30,7 @@ from locbench.report import health as hl
 from locbench.report import significance as sig
 from locbench.report import tables as tb
 from locbench.report.doc import Block, Section, Table, Text
-from locbench.report.names import KIDNAP_PARAM, NAN
+from locbench.report.names import KIDNAP_PARAM, NAN, slug
 from locbench.report.reference import INDEPENDENT_KINDS
 
 if TYPE_CHECKING:
@@ -60,7 +60,7 @@ def summary_section(rep: Report) -> Section:
     names = [(e.title, e.dataset) for e in rep.exps if e.summary and e.dataset in rep.col.datasets]
     names += [(rep.own_title(d), d) for d in rep.own()]
     for title, ds in names:
-        sec.children.append(Section(title, f"summary-{ds}", summary_blocks(rep, ds)))
+        sec.children.append(Section(title, f"summary-{slug(ds)}", summary_blocks(rep, ds)))
     return sec
 
 
