@@ -21,14 +21,16 @@ import numpy.typing as npt
 
 from locbench.datasets.synthetic.lap import LAP_TARGET_FINAL_ERROR_M, lap_encoder_model, lap_motion
 from locbench.datasets.synthetic.scenarios import (
+    room_motion,
+    room_motion_for,
+)
+from locbench.datasets.synthetic.sensors import EncoderModel, dead_reckon, measured_wheel_travel, odometry_increments
+from locbench.datasets.synthetic.toolkit import (
     ENCODER_K_TRUE,
     ROOM_TABLE1_ODOMETRY_CM,
     WHEELBASE_NOMINAL_M,
-    room_motion,
-    room_motion_for,
     split_streams,
 )
-from locbench.datasets.synthetic.sensors import EncoderModel, dead_reckon, measured_wheel_travel, odometry_increments
 from locbench.errors import ConfigError
 
 FloatArray = npt.NDArray[np.float64]
