@@ -408,6 +408,7 @@ def read_table(
         Naming the line: a wrong field count (a line cut short is reported as truncated when it is the
         last line and lacks its newline), a field that is not a number, or a non-integer id.
     """
+    # long: one pass over the table's lines, every refusal naming its line; the numpydoc is a third of it
     p = Path(path)
     try:
         raw = p.read_bytes()

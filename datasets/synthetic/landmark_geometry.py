@@ -412,6 +412,7 @@ class LandmarkGeometryScenario(SyntheticBuilder):
     )
 
     def build(self, params: LandmarkGeometryParams, rng: np.random.Generator) -> Dataset:
+        # long: one scenario's assembly: route, kidnap, sensors, spec and metadata in the order the streams are drawn
         streams = dict(zip(STREAMS, rng.spawn(len(STREAMS)), strict=True))
         world = geometry_world(params.landmarks)
         limits = dataclasses.replace(LIMITS, wheelbase_m=true_wheelbase(params.matched))

@@ -273,6 +273,7 @@ class ScanGridScenario(SyntheticBuilder):
     description: ClassVar[str] = "report 004's scan database at grid poses, translate-or-rotate commands of 1 s"
 
     def build(self, params: ScanGridParams, rng: np.random.Generator) -> Dataset:
+        # long: one scenario's assembly (grid tour, kidnap, scans, dataset) in the order the streams are drawn
         streams = split_streams(rng)
         world = scan_grid_world()
         v_max = params.grid_step_m / COMMAND_S

@@ -285,6 +285,7 @@ def assemble(
     With ``initial_rng`` (model-matched worlds) the initial belief's mean is drawn from the belief around the
     true start (:func:`matched_initial_mean`); otherwise it is the true start.
     """
+    # long: the dataset's fields (events, metadata, initial belief, declared streams) assembled in one place
     world_map = world.world_map(resolution_m)
     events: list[Event] = []
     events.extend(wheel_odometry(motion, suite.encoder, streams["odometry"]))
