@@ -53,7 +53,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
         for ident in reg.ids():
             reason = reg.unavailable_reason(ident)
             state = f"  [{reason}]" if reason else ""
-            print(f"  {ident:<18} {reg.entry(ident).summary}{state}")
+            print(f"  {ident:<18} {reg.summary(ident)}{state}")
     print("suites:")
     for s in SUITES.values():
         print(f"  {s.name:<18} {s.runs:>5} runs: {s.description}")
@@ -75,7 +75,7 @@ def _list_params(ids: Sequence[str]) -> int:
         else:
             valid = ", ".join(FILTERS.ids() + DATASETS.ids())
             raise UnknownIdError(f"unknown filter or dataset {ident!r}; valid: {valid}")
-        print(f"{kind} {ident}: {reg.entry(ident).summary}")
+        print(f"{kind} {ident}: {reg.summary(ident)}")
         tunable = tunable_fields(cls) if kind == "filter" else None
         tune = f"; tunable ('locbench tune {ident}'): {', '.join(tunable) or 'none'}" if tunable is not None else ""
         print(f"  written {ident}[key=value,...]; a grid: key=a|b|c{tune}")
