@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import ast
 import dataclasses
-import functools
 import hashlib
 import importlib.util
 import os
@@ -74,7 +73,10 @@ def _imported_names(source: bytes, module: str, is_package: bool) -> set[str]:
     return out
 
 
-@functools.cache
+#: Digests computed in this process, by class (a reloaded module's class is a new key).
+_DIGESTS: dict[type, str] = {}
+
+
 def source_digest(cls: type) -> str:
     """sha256 of the source of the code that defines ``cls``: the run key's guard against an edit made without
     a ``version`` bump.
@@ -87,6 +89,13 @@ def source_digest(cls: type) -> str:
     files read at run time, and modules imported by name at run time (``importlib.import_module``). Any byte of a
     hashed file counts, comments included: an edit reruns the runs even when it changes no number.
     """
+    if cls not in _DIGESTS:
+        _DIGESTS[cls] = _digest(cls)
+    return _DIGESTS[cls]
+
+
+def _digest(cls: type) -> str:
+    """:func:`source_digest` computed afresh."""
     top = cls.__module__.partition(".")[0]
     scope = {top, *_ALWAYS_HASHED}
     todo = [k.__module__ for k in cls.__mro__ if k.__module__.partition(".")[0] in scope]

@@ -2,11 +2,11 @@
 
 A field carries ``metadata=tunable(low, high, log=True)`` (a float or an integer between bounds, on a log or a
 linear scale) or ``metadata=tunable_choice("a", "b")`` (one of a few values); ``unit="m/sqrt(m)"`` (or
-``metadata=field_unit(...)`` on a field that is not tunable) declares a unit the field's name cannot carry. Noise scales, gates, thresholds and
-iteration caps are tunable; a compute knob (particles, a smoother's lag) is not, since it is the user's budget,
-not an accuracy setting. :func:`tunable_fields` reads them back for ``locbench list FILTER`` and
-``locbench tune`` (:mod:`locbench.tuning`). The metadata does not enter the run key (:mod:`locbench.runkey` reads
-only its own flag), so declaring a field tunable changes no stored run.
+``metadata=field_unit(...)`` on a field that is not tunable) declares a unit the field's name cannot carry.
+Noise scales, gates, thresholds and iteration caps are tunable; a compute knob (particles, a smoother's lag) is
+not, since it is the user's budget, not an accuracy setting. :func:`tunable_fields` reads them back for
+``locbench list FILTER`` and ``locbench tune`` (:mod:`locbench.tuning`). The metadata does not enter the run key
+(:mod:`locbench.runkey` reads only its own flag), so declaring a field tunable changes no stored run.
 """
 
 from __future__ import annotations
