@@ -75,6 +75,8 @@ def _imported_names(source: bytes, module: str, is_package: bool) -> set[str]:
 
 #: Digests computed in this process, by class (a reloaded module's class is a new key).
 _DIGESTS: dict[type, str] = {}
+#: The module names a module's source imports, by (module name, sha256 of its source).
+_IMPORTS: dict[tuple[str, str], set[str]] = {}
 
 
 def source_digest(cls: type) -> str:
@@ -111,8 +113,9 @@ def _digest(cls: type) -> str:
             continue
         with open(path, "rb") as fh:
             data = fh.read().replace(b"\r\n", b"\n")
-        files[name] = hashlib.sha256(data).hexdigest()
+        digest = files[name] = hashlib.sha256(data).hexdigest()
         if path.endswith(".py"):
-            found = _imported_names(data, name, os.path.basename(path) == "__init__.py")
-            todo.extend(n for n in found if n.partition(".")[0] in scope and n not in seen)
+            if (name, digest) not in _IMPORTS:  # parsing is the cost; classes share most modules
+                _IMPORTS[(name, digest)] = _imported_names(data, name, os.path.basename(path) == "__init__.py")
+            todo.extend(n for n in _IMPORTS[(name, digest)] if n.partition(".")[0] in scope and n not in seen)
     return stable_hash(files)
