@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import functools
 import json
+import logging
 import math
 import os
 from collections.abc import Callable
@@ -87,6 +88,8 @@ from locbench.limits import MAX_LASER_BEAMS, check_input_file
 from locbench.spec import params_to_dict
 
 FloatArray = npt.NDArray[np.float64]
+
+log = logging.getLogger(__name__)
 
 FORMAT = "locbench-textlog"
 #: The format version this module reads and writes; a manifest of a later version is refused.
@@ -714,26 +717,8 @@ def build_textlog_dataset(params: TextlogParams) -> Dataset:
 
     t0, t1 = float(truth.t[0]), float(truth.t[-1])
     inside = tuple(e for e in events if t0 <= e.t <= t1)
-    warnings = (
-        [str(w) for w in extra.get("warnings", []) if isinstance(w, str)]
-        if isinstance(extra.get("warnings"), list)
-        else []
-    )
     outside = len(events) - len(inside)
-    if outside:
-        warnings.append(
-            f"{outside} of {len(events)} events lie outside the ground truth's span [{t0!r}, {t1!r}] s and were "
-            "left out"
-        )
-    odo = [
-        e for e in inside if isinstance(e, Odometry) and e.v is not None and e.omega is not None and e.dt is not None
-    ]
-    if odo:
-        why = twist_contradiction(
-            [e.delta for e in odo], [e.v for e in odo], [e.omega for e in odo], [e.dt for e in odo]
-        )
-        if why:
-            warnings.append(f"{events_path}: {why}")
+    warnings = _input_warnings(events, inside, (t0, t1), events_path, extra.get("warnings", []))
     metadata = {
         **extra,
         "source": str(folder),
@@ -763,6 +748,32 @@ def build_textlog_dataset(params: TextlogParams) -> Dataset:
     )
     check_dataset_contract(ds)
     return ds
+
+
+def _input_warnings(
+    events: tuple[Event, ...], inside: tuple[Event, ...], span: tuple[float, float], path: Path, inherited: Any
+) -> list[str]:
+    """The dataset's warnings: an exported dataset's own (``inherited``), then events left out of the truth's span
+    and a twist that contradicts the increments (these two logged)."""
+    found: list[str] = []
+    outside = len(events) - len(inside)
+    if outside:
+        found.append(
+            f"{outside} of {len(events)} events lie outside the ground truth's span [{span[0]!r}, {span[1]!r}] s and "
+            "were left out"
+        )
+    odo = [
+        e for e in inside if isinstance(e, Odometry) and e.v is not None and e.omega is not None and e.dt is not None
+    ]
+    if odo:
+        tw = np.array([(e.v, e.omega, e.dt) for e in odo], dtype=np.float64)
+        why = twist_contradiction([e.delta for e in odo], tw[:, 0], tw[:, 1], tw[:, 2])
+        if why:
+            found.append(f"{path}: {why}")
+    for w in found:
+        log.warning("textlog: %s", w)
+    kept = [str(w) for w in inherited if isinstance(w, str)] if isinstance(inherited, list) else []
+    return kept + found
 
 
 def _version(p: Path) -> tuple[int, int]:
