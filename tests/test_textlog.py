@@ -360,3 +360,17 @@ def test_the_report_shows_the_input_warnings(tmp_path: Path, capsys: pytest.Capt
     capsys.readouterr()
     text = (res / "summary" / "REPORT.md").read_text()
     assert "Input warnings" in text and "odometry twist contradicts its pose: the twist is zero in 20 of" in text
+
+
+def test_a_recorded_range_only_dataset_reads_back_bit_for_bit(tmp_path: Path) -> None:
+    from locbench.registry import DATASETS
+
+    reason = DATASETS.unavailable_reason("plaza")
+    if reason:
+        pytest.skip(reason)
+    folder, notes = export_textlog("plaza[run=1]", 0, tmp_path / "plaza")
+    ds, back = make_dataset("plaza[run=1]", 0), load_textlog(folder)
+    assert notes == [] and {type(e) for e in back.events} == {Odometry, RangeObservations}
+    _round_trip(ds, back)
+    assert back.metadata["reference_kind"] == "GPS"
+    _same_estimates("ekf_landmarks", ds, back)
