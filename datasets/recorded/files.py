@@ -124,6 +124,14 @@ def data_root(root: str | os.PathLike[str] | None = None) -> Path | None:
     return Path(env).expanduser() if env else None
 
 
+def user_path_candidates(path: str | os.PathLike[str]) -> list[Path]:
+    """Where a path the user typed (a bag, a log folder, a sidecar) is looked for: as given (absolute or relative to
+    the working folder), then, when relative, under ``$LOCBENCH_DATA``."""
+    p = Path(path).expanduser()
+    root = os.environ.get(DATA_ENV, "")
+    return [p] + ([Path(root).expanduser() / p] if not p.is_absolute() and root else [])
+
+
 def cache_root() -> Path:
     """The download cache folder (``$LOCBENCH_CACHE`` or pooch's per-user cache)."""
     env = os.environ.get(CACHE_ENV, "")

@@ -98,13 +98,13 @@ from locbench.datasets.base import (
     sort_events,
 )
 from locbench.datasets.recorded.files import (
-    DATA_ENV,
     MAX_POSITION_M,
     RecordedDataError,
     quaternion_problem,
     quote,
     scan_problem,
     twist_contradiction,
+    user_path_candidates,
 )
 from locbench.datasets.recorded.intel import extract_map_lines
 from locbench.datasets.recorded.ros_map import MAX_YAML_BYTES, load_map_server_map
@@ -382,11 +382,8 @@ def resolve_bag_path(path: str | os.PathLike[str], what: str = "bag") -> Path:
     RecordedDataError
         When it is in neither place (an error, not a :class:`MissingDataFile` skip: the user named the path).
     """
-    p = Path(path).expanduser()
-    candidates = [p]
-    root = os.environ.get(DATA_ENV, "")
-    if not p.is_absolute() and root:
-        candidates.append(Path(root).expanduser() / p)
+    candidates = user_path_candidates(path)
+    p = candidates[0]
     for c in candidates:
         if os.path.lexists(c):
             storage_file = c.is_file() and c.suffix in (".db3", ".mcap")

@@ -1,6 +1,6 @@
 """Users' own logs in plain text: the ``locbench-textlog`` format (version 1), read as ``textlog[path=FOLDER]``.
 
-A textlog is a folder (docs/datasets.md, "Plain-text logs", is the full specification; this is its summary):
+A textlog is a folder (docs/datasets.md, section 8, is the full specification; this is its summary):
 
 - ``textlog.json``: the manifest, a JSON object with ``"format": "locbench-textlog"`` and ``"version": 1``, the
   file names below, the nominal noise (``sensors``: fields of :class:`~locbench.datasets.base.SensorSpec`), the
@@ -24,10 +24,10 @@ at most :data:`MAX_LINE_CHARS` long; every error is one line naming the file, th
 was expected (:class:`~locbench.datasets.recorded.files.RecordedDataError`). Bounds: times finite within
 +-:data:`MAX_TIME_S` and non-decreasing in file order; increments within :data:`MAX_STEP_M` and 2 pi; twists within
 :data:`MAX_TWIST`, ``dt`` in (0, :data:`MAX_DT_S`]; positions within
-:data:`~locbench.datasets.recorded.files.MAX_POSITION_M`; scans as a bag's (:func:`~files.scan_problem`) with at
-most :data:`~locbench.limits.MAX_LASER_BEAMS` beams; at most :data:`MAX_ITEMS` sightings or ranges per event, ids
--1 (unknown) or in the landmark file; fix covariances symmetric PSD; no unknown field anywhere (a typo is an error,
-not a silently default value).
+:data:`~locbench.datasets.recorded.files.MAX_POSITION_M`; scans as a bag's
+(:func:`~locbench.datasets.recorded.files.scan_problem`) with at most :data:`~locbench.limits.MAX_LASER_BEAMS`
+beams; at most :data:`MAX_ITEMS` sightings or ranges per event, ids -1 (unknown) or in the landmark file; fix
+covariances symmetric PSD; no unknown field anywhere (a typo is an error, not a silently default value).
 """
 
 from __future__ import annotations
@@ -72,6 +72,7 @@ from locbench.datasets.recorded.files import (
     read_table,
     scan_problem,
     twist_contradiction,
+    user_path_candidates,
 )
 from locbench.errors import ConfigError
 from locbench.events import (
@@ -642,13 +643,8 @@ def read_relations(path: Path) -> Relations:
 
 def resolve_folder(path: str | os.PathLike[str]) -> Path:
     """The textlog folder: as given, else under ``$LOCBENCH_DATA``; an error (not a skip) when in neither."""
-    from locbench.datasets.recorded.files import DATA_ENV
-
-    p = Path(path).expanduser()
-    candidates = [p]
-    root = os.environ.get(DATA_ENV, "")
-    if not p.is_absolute() and root:
-        candidates.append(Path(root).expanduser() / p)
+    candidates = user_path_candidates(path)
+    p = candidates[0]
     for c in candidates:
         if c.is_dir():
             return c
