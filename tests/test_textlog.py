@@ -16,7 +16,7 @@ from range_only_support import INITIAL, SENSORS, WORLD, scenario
 from locbench.cli import main
 from locbench.datasets.base import Dataset, Trajectory2D
 from locbench.datasets.recorded.files import RecordedDataError
-from locbench.datasets.recorded.textlog import MANIFEST, VERSION, load_textlog, write_textlog
+from locbench.datasets.recorded.textlog import MANIFEST, VERSION, _cached_events, load_textlog, write_textlog
 from locbench.errors import MAX_MESSAGE_CHARS, ConfigError
 from locbench.events import LandmarkObservations, LaserScan, Odometry, PoseFix, RangeObservations
 from locbench.export import export_textlog
@@ -374,3 +374,31 @@ def test_a_recorded_range_only_dataset_reads_back_bit_for_bit(tmp_path: Path) ->
     _round_trip(ds, back)
     assert back.metadata["reference_kind"] == "GPS"
     _same_estimates("ekf_landmarks", ds, back)
+
+
+def test_cut_and_mutated_events_files_are_clean_errors_or_load(tmp_path: Path) -> None:
+    """Every cut (at 40 places) and 60 seeded single-byte changes of a small log: a one-line locbench error naming
+    the events file, or a dataset that passes the contract; never another exception."""
+    folder = _write_log(tmp_path / "log", _twist_events())
+    ev = folder / "events.jsonl"
+    raw = ev.read_bytes()
+    rng = np.random.default_rng(25)
+    variants = [raw[:cut] for cut in np.linspace(1, len(raw) - 1, 40).astype(int)]
+    for pos, byte in zip(
+        rng.integers(0, len(raw), 60), rng.choice(list(b'0123456789.,:[]{}"-e nx\n'), 60), strict=True
+    ):
+        variants.append(raw[:pos] + bytes([byte]) + raw[pos + 1 :])
+    outcomes = {"error": 0, "ok": 0}
+    for data in variants:
+        ev.write_bytes(data)
+        _cached_events.cache_clear()  # a same-size rewrite within one clock tick keeps the file's signature
+        try:
+            load_textlog(folder).check()
+            outcomes["ok"] += 1
+        except ConfigError as exc:
+            msg = str(exc)
+            assert "\n" not in msg and len(msg) <= MAX_MESSAGE_CHARS and ("events.jsonl" in msg or "textlog" in msg), (
+                msg
+            )
+            outcomes["error"] += 1
+    assert outcomes["error"] > 40  # the cuts alone
