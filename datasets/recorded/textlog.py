@@ -159,6 +159,25 @@ def _refuse_constant(path: Path) -> Callable[[str], Any]:
     return hook
 
 
+def _json_hooks(path: Path) -> dict[str, Callable[[str], Any]]:
+    """``json`` hooks that keep every number a finite float or a small int (so no later conversion overflows)."""
+
+    def parse_float(text: str) -> float:
+        v = float(text)
+        if not math.isfinite(v):
+            raise RecordedDataError(
+                path, f"number {quote(text, 40)} is beyond the float64 range, expected a finite number"
+            )
+        return v
+
+    def parse_int(text: str) -> int:
+        if len(text.lstrip("-")) > 18:
+            raise RecordedDataError(path, f"integer {quote(text, 40)} has more than 18 digits, expected a smaller one")
+        return int(text)
+
+    return {"parse_float": parse_float, "parse_int": parse_int, "parse_constant": _refuse_constant(path)}
+
+
 def _is_number(v: Any) -> bool:
     return type(v) is float or type(v) is int  # bool is an int subclass: a true is no number
 
@@ -232,11 +251,13 @@ def read_manifest(folder: Path) -> _Manifest:
             path, "not UTF-8 text, expected a JSON object", raw[: exc.start].count(b"\n") + 1
         ) from None
     try:
-        data = json.loads(text, object_pairs_hook=_no_duplicates(path), parse_constant=_refuse_constant(path))
+        data = json.loads(text, object_pairs_hook=_no_duplicates(path), **_json_hooks(path))
     except json.JSONDecodeError as exc:
         raise RecordedDataError(
             path, f"not JSON ({exc.msg} at column {exc.colno}), expected a JSON object", exc.lineno
         ) from None
+    except RecursionError:
+        raise RecordedDataError(path, "JSON nested too deeply, expected a flat manifest object") from None
     if not isinstance(data, dict):
         raise RecordedDataError(path, f"a JSON {type(data).__name__}, expected a JSON object (the manifest)")
     m = _Manifest(path, text, data)
@@ -344,7 +365,7 @@ class _Line:
             raise self.fail(key, f"item {k} is {quote(v[k], 60)}, expected a number ({unit})")
         a = np.array([math.inf if x is None else x for x in v] if nulls else v, dtype=np.float64)
         with np.errstate(invalid="ignore"):
-            bad = np.flatnonzero(np.isfinite(a) & ~((a >= lo) & (a <= hi)))
+            bad = np.flatnonzero(~((a >= lo) & (a <= hi)) & ~(np.isinf(a) & nulls))  # inf here only from null
         if bad.size:
             k = int(bad[0])
             raise self.fail(key, f"item {k} is {float(a[k])!r}, expected a number in [{lo:.6g}, {hi:.6g}] {unit}")
@@ -502,7 +523,7 @@ def read_events(path: str | os.PathLike[str], landmark_ids: frozenset[int] | Non
     ctx = _Context(landmark_ids)
     out: list[Event] = []
     last_t = -math.inf
-    decoder = json.JSONDecoder(parse_constant=_refuse_constant(p))
+    decoder = json.JSONDecoder(**_json_hooks(p))
     with open(p, encoding="utf-8", newline="") as fh:
         lineno = 0
         while True:
@@ -532,6 +553,8 @@ def read_events(path: str | os.PathLike[str], landmark_ids: frozenset[int] | Non
                 ) from None
             except RecordedDataError as exc:
                 raise RecordedDataError(p, str(exc).split(": ", 1)[-1], lineno) from None
+            except RecursionError:
+                raise RecordedDataError(p, "JSON nested too deeply, expected a flat event object", lineno) from None
             if not isinstance(obj, dict):
                 raise RecordedDataError(p, f"a JSON {type(obj).__name__}, expected an event object", lineno)
             kind = obj.get("type")
