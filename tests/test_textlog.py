@@ -405,3 +405,19 @@ def test_cut_and_mutated_events_files_are_clean_errors_or_load(tmp_path: Path) -
             )
             outcomes["error"] += 1
     assert outcomes["error"] > 40  # the cuts alone
+
+
+def test_a_graded_grid_is_written_quantized_and_said_so(tmp_path: Path) -> None:
+    from locbench.datasets.base import OccupancyGrid, WorldMap
+
+    ds = make_dataset("tiny_circle", 0)
+    g = ds.world.occupancy
+    assert g is not None
+    graded = OccupancyGrid(np.where(g.occupancy > 0.5, 0.9, 0.1), g.resolution, g.origin, g.occupied_thresh, 0.196)
+    ds = dataclasses.replace(ds, world=WorldMap(occupancy=graded, landmarks=ds.world.landmarks, lines=ds.world.lines))
+    notes = write_textlog(ds, tmp_path / "graded")
+    assert notes == ["the occupancy grid has graded values: stored in scale mode, quantized to 8 bits"]
+    back = load_textlog(tmp_path / "graded")
+    assert back.world.occupancy is not None
+    np.testing.assert_allclose(back.world.occupancy.occupancy, graded.occupancy, atol=0.5 / 255)
+    np.testing.assert_array_equal(back.world.occupancy.occupied(), graded.occupied())

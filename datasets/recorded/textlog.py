@@ -954,7 +954,7 @@ def write_textlog(ds: Dataset, folder: str | os.PathLike[str], source: str = "",
         manifest["map_lines"] = False  # the dataset's own lines (or none), never lines extracted anew
         if not exact:
             notes.append(f"the occupancy grid has graded values: stored in {mode} mode, quantized to 8 bits")
-    if w.landmarks is not None:
+    if w.landmarks is not None and len(w.landmarks):  # an empty map is no map (WorldMap.kinds)
         lm = w.landmarks
         rows = np.column_stack([lm.ids, lm.xy] + ([lm.std_xy] if lm.std_xy is not None else []))
         head = "id x y" + (" std_x std_y" if lm.std_xy is not None else "") + " (m)"
