@@ -676,8 +676,6 @@ def resolve_folder(path: str | os.PathLike[str]) -> Path:
 
 
 def _grid(m: _Manifest, folder: Path) -> tuple[OccupancyGrid | None, LineMap | None, Path | None]:
-    from locbench.datasets.recorded.rosbag import _map
-
     yaml_path = m.file("map", folder)
     lines_path = m.file("lines", folder)
     want_lines = m.data.get("map_lines", True)
@@ -687,6 +685,8 @@ def _grid(m: _Manifest, folder: Path) -> tuple[OccupancyGrid | None, LineMap | N
     if yaml_path is not None:
         if not yaml_path.exists():
             raise m.fail("map", f"names {str(yaml_path)!r}, which does not exist (expected a map_server YAML)")
+        from locbench.datasets.recorded.rosbag import _map  # the bag's cached map reader (imports scipy: lazily)
+
         grid, lines = _map(yaml_path, want_lines and lines_path is None)
     if lines_path is not None:
         lines = read_lines(lines_path)
