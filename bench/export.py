@@ -16,6 +16,10 @@ scan at the same stamp) the last one, the estimate after every event of that ins
 locbench's metrics hold at that time. Estimate rows that are not finite (a run that diverged) are left out with a
 warning. The times are the dataset's own (recordings keep their Unix stamps), so an export lines up with the
 recording and with other tools' output on it. Every file is written to a temporary file and renamed into place.
+
+:func:`export_textlog` writes a whole dataset realisation (events, truth, map, noise) as a plain-text log, the
+``locbench-textlog`` format of :mod:`locbench.datasets.recorded.textlog`, so that a user sees a worked example of
+the format and any dataset can be read back as ``textlog[path=...]``.
 """
 
 from __future__ import annotations
