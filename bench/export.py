@@ -291,8 +291,6 @@ def export_textlog(spec: str, seed: int, out: str | os.PathLike[str]) -> tuple[P
         kind = cls.reference_kind
     ds = make_dataset(r, seed)
     notes = write_textlog(ds, out, source=f"{r.name} seed {seed}", reference_kind=kind)
-    for note in notes:
-        log.warning("%s: %s", out, note)
     return Path(out), notes
 
 

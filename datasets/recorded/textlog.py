@@ -160,26 +160,24 @@ def _refuse_constant(path: Path) -> Callable[[str], Any]:
 
 
 def _json_hooks(path: Path) -> dict[str, Callable[[str], Any]]:
-    """``json`` hooks that keep every number a finite float or a small int (so no later conversion overflows)."""
-
-    def parse_float(text: str) -> float:
-        v = float(text)
-        if not math.isfinite(v):
-            raise RecordedDataError(
-                path, f"number {quote(text, 40)} is beyond the float64 range, expected a finite number"
-            )
-        return v
+    """``json`` hooks that refuse NaN and Infinity and keep integers small (so no float conversion overflows); a
+    float beyond float64 (1e999) reads as inf and is refused by the field checks. Floats stay with the C parser."""
 
     def parse_int(text: str) -> int:
         if len(text.lstrip("-")) > 18:
             raise RecordedDataError(path, f"integer {quote(text, 40)} has more than 18 digits, expected a smaller one")
         return int(text)
 
-    return {"parse_float": parse_float, "parse_int": parse_int, "parse_constant": _refuse_constant(path)}
+    return {"parse_int": parse_int, "parse_constant": _refuse_constant(path)}
 
 
 def _is_number(v: Any) -> bool:
-    return type(v) is float or type(v) is int  # bool is an int subclass: a true is no number
+    """A finite JSON number (bool is an int subclass: a true is no number; 1e999 reads as inf)."""
+    return type(v) is int or (type(v) is float and math.isfinite(v))
+
+
+_NUMBER_TYPES = frozenset({float, int})
+_NUMBER_OR_NULL_TYPES = frozenset({float, int, type(None)})
 
 
 @dataclass(frozen=True)
@@ -359,16 +357,19 @@ class _Line:
             raise self.fail(key, f"is {quote(v, 60)}, expected a list of numbers ({unit})")
         if len(v) > limit:
             raise self.fail(key, f"has {len(v)} values, expected at most {limit}")
-        ok = all(type(x) is float or type(x) is int or (nulls and x is None) for x in v)
-        if not ok:
-            k = next(i for i, x in enumerate(v) if not (_is_number(x) or (nulls and x is None)))
+        if not set(map(type, v)) <= (_NUMBER_OR_NULL_TYPES if nulls else _NUMBER_TYPES):
+            k = next(i for i, x in enumerate(v) if not (type(x) in _NUMBER_TYPES or (nulls and x is None)))
             raise self.fail(key, f"item {k} is {quote(v[k], 60)}, expected a number ({unit})")
-        a = np.array([math.inf if x is None else x for x in v] if nulls else v, dtype=np.float64)
+        a = np.array(v, dtype=np.float64)  # null -> NaN (JSON itself has no NaN: parse_constant refuses it)
+        null = np.isnan(a) if nulls else np.zeros(a.shape, dtype=bool)
         with np.errstate(invalid="ignore"):
-            bad = np.flatnonzero(~((a >= lo) & (a <= hi)) & ~(np.isinf(a) & nulls))  # inf here only from null
+            bad = np.flatnonzero(~(np.isfinite(a) & (a >= lo) & (a <= hi)) & ~null)
         if bad.size:
             k = int(bad[0])
-            raise self.fail(key, f"item {k} is {float(a[k])!r}, expected a number in [{lo:.6g}, {hi:.6g}] {unit}")
+            raise self.fail(
+                key, f"item {k} is {quote(v[k], 60)}, expected a finite number in [{lo:.6g}, {hi:.6g}] {unit}"
+            )
+        a[null] = math.inf  # no return
         return a
 
     def ids(self, n: int, known: frozenset[int] | None) -> npt.NDArray[np.int64]:
