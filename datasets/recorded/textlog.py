@@ -159,7 +159,7 @@ def _refuse_constant(path: Path) -> Callable[[str], Any]:
     return hook
 
 
-def _json_hooks(path: Path) -> dict[str, Callable[[str], Any]]:
+def _json_hooks(path: Path) -> tuple[Callable[[str], int], Callable[[str], Any]]:
     """``json`` hooks that refuse NaN and Infinity and keep integers small (so no float conversion overflows); a
     float beyond float64 (1e999) reads as inf and is refused by the field checks. Floats stay with the C parser."""
 
@@ -168,7 +168,7 @@ def _json_hooks(path: Path) -> dict[str, Callable[[str], Any]]:
             raise RecordedDataError(path, f"integer {quote(text, 40)} has more than 18 digits, expected a smaller one")
         return int(text)
 
-    return {"parse_int": parse_int, "parse_constant": _refuse_constant(path)}
+    return parse_int, _refuse_constant(path)
 
 
 def _is_number(v: Any) -> bool:
@@ -248,8 +248,9 @@ def read_manifest(folder: Path) -> _Manifest:
         raise RecordedDataError(
             path, "not UTF-8 text, expected a JSON object", raw[: exc.start].count(b"\n") + 1
         ) from None
+    hooks = _json_hooks(path)
     try:
-        data = json.loads(text, object_pairs_hook=_no_duplicates(path), **_json_hooks(path))
+        data = json.loads(text, object_pairs_hook=_no_duplicates(path), parse_int=hooks[0], parse_constant=hooks[1])
     except json.JSONDecodeError as exc:
         raise RecordedDataError(
             path, f"not JSON ({exc.msg} at column {exc.colno}), expected a JSON object", exc.lineno
@@ -524,7 +525,8 @@ def read_events(path: str | os.PathLike[str], landmark_ids: frozenset[int] | Non
     ctx = _Context(landmark_ids)
     out: list[Event] = []
     last_t = -math.inf
-    decoder = json.JSONDecoder(**_json_hooks(p))
+    hooks = _json_hooks(p)
+    decoder = json.JSONDecoder(parse_int=hooks[0], parse_constant=hooks[1])
     with open(p, encoding="utf-8", newline="") as fh:
         lineno = 0
         while True:
