@@ -558,16 +558,22 @@ def _read_streams_cached(
             f"topic {odom_topic!r} message {k + 1}: twist (linear.x, angular.z) = ({float(odom_twist[k, 0])!r}, "
             f"{float(odom_twist[k, 1])!r}), expected finite values within +-{MAX_TWIST} (m/s, rad/s)",
         )
-    fixes = by_topic[fix_topic] if fix_topic else []
-    fix_t = np.array([t for t, _ in fixes], dtype=np.float64)
-    fix_llh = np.array([(m.latitude, m.longitude, m.altitude) for _, m in fixes], dtype=np.float64).reshape(-1, 3)
-    fix_cov = np.array([np.asarray(m.position_covariance, dtype=np.float64) for _, m in fixes]).reshape(-1, 9)
-    fix_cov_type = np.array([int(m.position_covariance_type) for _, m in fixes], dtype=np.int64)
-    fix_status = np.array([int(m.status.status) for _, m in fixes], dtype=np.int64)
-    arrays = (odom_t, odom_pose, odom_twist, truth_t, truth_pose, fix_t, fix_llh, fix_cov, fix_cov_type, fix_status)
+    fix_arrays = _fix_arrays(by_topic[fix_topic] if fix_topic else [])
+    arrays = (odom_t, odom_pose, odom_twist, truth_t, truth_pose, *fix_arrays)
     for a in arrays:
         a.setflags(write=False)  # shared through the cache
     return BagStreams(odom_t, odom_pose, odom_twist, scans, truth_t, truth_pose, truth_type, topics, *arrays[5:])
+
+
+def _fix_arrays(fixes: list[tuple[float, Any]]) -> tuple[npt.NDArray[Any], ...]:
+    """(times, lat/lon/alt, covariances, covariance types, statuses) of (stamp, NavSatFix) pairs, as arrays."""
+    return (
+        np.array([t for t, _ in fixes], dtype=np.float64),
+        np.array([(m.latitude, m.longitude, m.altitude) for _, m in fixes], dtype=np.float64).reshape(-1, 3),
+        np.array([np.asarray(m.position_covariance, dtype=np.float64) for _, m in fixes]).reshape(-1, 9),
+        np.array([int(m.position_covariance_type) for _, m in fixes], dtype=np.int64),
+        np.array([int(m.status.status) for _, m in fixes], dtype=np.int64),
+    )
 
 
 # --- from streams to a dataset -------------------------------------------------------------------
@@ -735,6 +741,43 @@ def _map_cached(path: str, size: int, mtime_ns: int, with_lines: bool) -> tuple[
     return grid, lines
 
 
+def _odometry_events(
+    params: RosbagParams, streams: BagStreams, bag: Path, t0: float, t1: float
+) -> tuple[list[Event], list[str]]:
+    """The odometry increments within the truth span [t0, t1] (the reference pose is the last at or before t0), and
+    the warning when their twist contradicts them."""
+    ot = streams.odom_t
+    first = max(int(np.searchsorted(ot, t0, side="right")) - 1, 0)
+    last = int(np.searchsorted(ot, t1, side="right"))
+    if last - first < 2:
+        raise RecordedDataError(
+            bag,
+            f"no odometry increments on {params.odom_topic!r} within the ground truth's span [{t0!r}, {t1!r}] s "
+            f"({ot.size} odometry messages in [{float(ot[0]) if ot.size else float('nan')!r}, "
+            f"{float(ot[-1]) if ot.size else float('nan')!r}] s)",
+        )
+    inc = odometry_increments(np.asarray(streams.odom_pose[first:last]))
+    tw = streams.odom_twist
+    events: list[Event] = []
+    for j, (dx, dy, dth) in enumerate(inc):
+        k = first + 1 + j
+        events.append(
+            Odometry(
+                float(ot[k]),
+                float(dx),
+                float(dy),
+                float(dth),
+                v=float(tw[k, 0]),
+                omega=float(tw[k, 1]),
+                dt=float(ot[k] - ot[k - 1]),
+            )
+        )
+    w = _twist_warning(inc, np.asarray(tw[first + 1 : last]), ot[first:last], params.odom_topic)
+    if w:
+        log.warning("rosbag %s: %s", bag, w)
+    return events, [w] if w else []
+
+
 def build_rosbag_dataset(params: RosbagParams) -> Dataset:
     """The dataset of ``params`` (what :class:`RosbagDataset` builds)."""
     bag = resolve_bag_path(params.path)
@@ -745,41 +788,7 @@ def build_rosbag_dataset(params: RosbagParams) -> Dataset:
         raise RecordedDataError(bag, f"topic {params.truth_topic!r} has no messages (expected the ground truth)")
     t0, t1 = float(streams.truth_t[0]), float(streams.truth_t[-1])
 
-    # odometry: the reference is the last pose at or before the first truth stamp
-    ot = streams.odom_t
-    first = max(int(np.searchsorted(ot, t0, side="right")) - 1, 0)
-    last = int(np.searchsorted(ot, t1, side="right"))
-    events: list[Event] = []
-    if last - first >= 2:
-        inc = odometry_increments(np.asarray(streams.odom_pose[first:last]))
-        tw = streams.odom_twist
-        for j, (dx, dy, dth) in enumerate(inc):
-            k = first + 1 + j
-            events.append(
-                Odometry(
-                    float(ot[k]),
-                    float(dx),
-                    float(dy),
-                    float(dth),
-                    v=float(tw[k, 0]),
-                    omega=float(tw[k, 1]),
-                    dt=float(ot[k] - ot[k - 1]),
-                )
-            )
-    if not events:
-        raise RecordedDataError(
-            bag,
-            f"no odometry increments on {params.odom_topic!r} within the ground truth's span [{t0!r}, {t1!r}] s "
-            f"({ot.size} odometry messages in [{float(ot[0]) if ot.size else float('nan')!r}, "
-            f"{float(ot[-1]) if ot.size else float('nan')!r}] s)",
-        )
-
-    warnings: list[str] = []
-    if last - first >= 2:
-        w = _twist_warning(inc, np.asarray(streams.odom_twist[first + 1 : last]), ot[first:last], params.odom_topic)
-        if w:
-            warnings.append(w)
-            log.warning("rosbag %s: %s", bag, w)
+    events, warnings = _odometry_events(params, streams, bag, t0, t1)
     grid, lines = None, None
     if params.map:
         grid, lines = _map(resolve_bag_path(params.map, "map"), params.map_lines)
