@@ -177,6 +177,7 @@ class Report:
             hl.lost_section(self),
             kd.kidnap_section(self),
             rc.recorded_section(self),
+            rc.input_warnings_section(self),
             *[ex.experiment_section(self, e) for e in self.exps],
             *[ex.own_section(self, d) for d in self.own()],
             ap.appendix_section(self),

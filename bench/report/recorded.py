@@ -110,3 +110,17 @@ def not_below_baseline(rep: Report, fs: list[str], group: list[str], acc: list[l
             if i not in base and np.isfinite(v) and v >= ref:
                 out.append(f"`{f}` on `{rep.col.display(d)}` ({tb.num(v)} against {tb.num(ref)})")
     return "; ".join(out)
+
+
+def input_warnings_section(rep: Report) -> Section:
+    """What the loaders warned about a dataset's input (``metadata["warnings"]``: a twist that contradicts the
+    poses, events outside the truth's span), so that a number built on a suspect input says so."""
+    sec = Section("Input warnings", "input-warnings")
+    rows = []
+    for d in sorted(rep.col.datasets):
+        found = rep.truth_meta(d)[1].get("warnings")
+        for w in found if isinstance(found, list) else []:
+            rows.append((f"`{rep.col.display(d)}`", str(w)))
+    if rows:
+        sec.add(Text("The loaders' warnings about these datasets' input:"), Table(("dataset", "warning"), tuple(rows)))
+    return sec
