@@ -189,6 +189,7 @@ class LandmarkUKF(LandmarkEKF):
     )
 
     config: LandmarkUKFConfig
+    _compiled_update: ClassVar[bool] = False  # its own corrections, in the EKF's order (_fuse_sightings)
 
     def reset(self, initial: Gaussian2, world: WorldMap, sensors: SensorSpec, rng: np.random.Generator) -> None:
         """Start from ``initial`` with the landmarks of ``world``; ``rng`` is unused (the UKF is deterministic)."""
@@ -309,6 +310,19 @@ class LandmarkUKF(LandmarkEKF):
         with np.errstate(divide="ignore", invalid="ignore"):
             d2 = (s11 * vr * vr - 2.0 * s01 * vr * vb + s00 * vb * vb) / det
         return self._exclude(d2, ~(det > 0.0) | ~(np.min(rng, axis=0) > 1e-6), r_hat, b_hat, used)
+
+    def _exclude(
+        self, d2: FloatArray, bad: npt.NDArray[np.bool_], d: FloatArray, pb: FloatArray, used: set[int]
+    ) -> FloatArray:
+        """``d2`` with inf where a landmark is no candidate: ``bad``, already ``used``, or (when pruning) predicted
+        at a range ``d`` or bearing ``pb`` outside the sensor limits."""
+        if self._limits.shape[0] == 3:
+            lo, hi, half = self._limits.tolist()
+            bad |= (d < lo) | (d > hi) | (np.abs(pb) > half)
+        if used:
+            bad[list(used)] = True
+        d2[bad] = np.inf
+        return d2
 
     def _correct_range(self, r: float, row: int) -> float | None:
         """Fuse one range to beacon ``row`` through the unscented transform; its NIS, or None if gated out."""
