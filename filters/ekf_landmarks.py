@@ -70,7 +70,7 @@ from locbench.filters._kalman import (
     subtract,
     wrapped_residual,
 )
-from locbench.filters._landmark_index import LandmarkIndex, gate_radius
+from locbench.filters._landmark_index import INDEX_MIN_LANDMARKS, LandmarkIndex, gate_radius
 from locbench.filters._motion import (
     MotionKind,
     MotionModel,
@@ -89,7 +89,7 @@ _RESIDUAL_HEADING = wrapped_residual([2])
 
 # Maps with at least this many landmarks take nearest-neighbour candidates from a k-d tree; smaller ones test
 # every landmark in one compiled loop (faster there than the tree's query).
-_VECTOR_NN_MIN = 48
+_VECTOR_NN_MIN = INDEX_MIN_LANDMARKS
 _NO_LIMITS = np.empty(0)
 # the packed compiled calls, bound once (a module attribute costs a lookup per event)
 _predict_packed = kern.predict_packed
