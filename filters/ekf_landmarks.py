@@ -308,7 +308,7 @@ class LandmarkEKF(Filter):
     # The state is the array ``_s``; ``_x`` and ``_P`` read and write it as lists (the slow paths, tests).
     @property
     def _x(self) -> list[float]:
-        return self._s[:3].tolist()  # type: ignore[no-any-return]
+        return self._s[:3].tolist()
 
     @_x.setter
     def _x(self, x: list[float] | tuple[float, float, float]) -> None:
@@ -316,7 +316,7 @@ class LandmarkEKF(Filter):
 
     @property
     def _P(self) -> list[list[float]]:  # noqa: N802 (the covariance's name in the equations)
-        return self._s[3:].reshape(3, 3).tolist()  # type: ignore[no-any-return]
+        return self._s[3:].reshape(3, 3).tolist()
 
     @_P.setter
     def _P(self, P: list[list[float]]) -> None:  # noqa: N802
