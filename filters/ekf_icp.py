@@ -263,6 +263,7 @@ class IcpEKF(Filter):
         self._kidnap_resets = 0
         self._diag = self._empty_diag()
         self._icp_health = _NO_ICP_HEALTH
+        self._beams: dict[tuple[float, float, int, float], tuple[FloatArray, FloatArray, FloatArray]] = {}
 
     def _empty_diag(self) -> dict[str, float]:
         return {
@@ -320,7 +321,7 @@ class IcpEKF(Filter):
             frame at the true pose) onto ray-cast points (robot frame at the predicted pose).
         """
         cfg = self.config
-        angles = z.angles
+        angles, cos_a, sin_a = self._beam_directions(z)
         sx, sy, sth = z.sensor_pose
         x, y, th = self._x.tolist()
         c, s = math.cos(th), math.sin(th)
@@ -333,8 +334,13 @@ class IcpEKF(Filter):
         n_real, n_pred = int(np.count_nonzero(ok_real)), int(np.count_nonzero(ok_pred))
         if n_real < MIN_PAIRS or n_pred < MIN_PAIRS:
             return None, n_real, n_pred
-        src = scan_points(real[ok_real], angles[ok_real], z.sensor_pose)
-        dst = scan_points(pred[ok_pred], angles[ok_pred], z.sensor_pose)
+        # scan_points of both clouds, from the beams' cached directions (the same numbers)
+        src = np.empty((n_real, 2))
+        src[:, 0] = sx + real[ok_real] * cos_a[ok_real]
+        src[:, 1] = sy + real[ok_real] * sin_a[ok_real]
+        dst = np.empty((n_pred, 2))
+        dst[:, 0] = sx + pred[ok_pred] * cos_a[ok_pred]
+        dst[:, 1] = sy + pred[ok_pred] * sin_a[ok_pred]
         r_mean = float(np.mean(real[ok_real]))
         lam_xy = float(np.linalg.eigvalsh(self._P[0:2, 0:2])[-1])
         k = cfg.correspondence_sigmas * (cfg.kidnap_threshold_factor if self._tightened else 1.0)
@@ -352,6 +358,17 @@ class IcpEKF(Filter):
             transformation_epsilon=cfg.transformation_epsilon,
         )
         return res, n_real, n_pred
+
+    def _beam_directions(self, z: LaserScan) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """The scan's beam angles (sensor frame) and cos, sin of angle + sensor heading, computed once per scan
+        geometry (a laser's scans share it)."""
+        key = (z.angle_min, z.angle_increment, int(z.ranges.shape[0]), z.sensor_pose[2])
+        beams = self._beams.get(key)
+        if beams is None:
+            angles = z.angles
+            a = angles + z.sensor_pose[2]
+            beams = self._beams[key] = (angles, np.cos(a), np.sin(a))
+        return beams
 
     def update(self, z: Observation) -> None:
         """Correct with one LaserScan: ICP match, mismatch rules, H = I update (eq. 14-18) or kidnap rule."""
