@@ -320,7 +320,6 @@ class GtsamFixedLagSmoother(Filter):
             s = (cfg.landmark_sigma_m, cfg.landmark_sigma_m) if std is None else tuple(np.maximum(std[k], 1e-6))
             self._lm_noise.append(gtsam.noiseModel.Diagonal.Sigmas(np.array(s, dtype=np.float64)))
         self._limits = self._sensor_limits(sensors)
-        # a large map: nearest-neighbour candidates from a k-d tree (S = H P H^T + R, the index's bound holds)
         self._index = LandmarkIndex(self._lm_xy) if len(self._lm_xy) >= INDEX_MIN_LANDMARKS else None
 
         m = np.asarray(initial.mean, dtype=np.float64)
@@ -567,8 +566,9 @@ class GtsamFixedLagSmoother(Filter):
 
     def _nearest(self, r: float, b: float, used: set[int]) -> int | None:
         """Row of the landmark of smallest d2 (:meth:`_mahalanobis`) among those not ``used``, inside the gate;
-        else None. A large map tests only the candidates of its k-d tree (:mod:`._landmark_index`), in row
-        order: each landmark's d2 is the same number either way, so the first smallest is the same row."""
+        else None. A large map tests only the candidates of its k-d tree (:mod:`._landmark_index`, whose bound
+        is for this gate's S = H P H^T + R), in row order: each landmark's d2 is the same number either way, so
+        the first smallest is the same row."""
         rows: list[int] | None = None
         if self._index is not None:
             radius = gate_radius(r, self._cov_f, self._var_r, self._var_b, self._gate)
