@@ -95,7 +95,8 @@ def bench(session: nox.Session) -> None:
     arguments after --, a sub-suite into results/custom (never over the
     committed results/summary)."""
     _install(session, "all")
-    args = list(session.posargs) or ["--suite", "all", "consistency", "tuned", "--jobs", "2"]
+    # interleaved timing (docs/protocols.md, Runtime): a busy moment slows every configuration of a task alike
+    args = list(session.posargs) or ["--suite", "all", "consistency", "tuned", "--jobs", "2", "--interleave"]
     results = "results" if not session.posargs else "results/custom"
     if "--results" in args:
         results = args[args.index("--results") + 1]
