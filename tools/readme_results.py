@@ -253,6 +253,34 @@ CLAIM_GROUPS = {
 }
 
 
+#: Values cut from a claim's measured text as they stand: (block, start of the claim, pattern, template).
+CLAIM_VALUES = (
+    (
+        "claim-room-ekf-below",
+        "The EKF (ekf_landmarks) is far below",
+        r"ekf_landmarks ([\d. /]+) cm vs odometry ([\d. /]+) cm",
+        "{} cm against {}",
+    ),
+    (
+        "claim-room-pf-ekf",
+        "The PF is at least as accurate",
+        r"pf ([\d.]+) cm vs ekf_landmarks ([\d.]+) cm",
+        "{} cm against {} cm",
+    ),
+    ("claim-lap-odometry", "World calibration: odometry ends", r"median final error ([\d.]+) cm", "{} cm"),
+    ("claim-lap-ekf_icp", "EKF-ICP ends close", r"median final error ([\d.]+) cm", "{} cm"),
+    ("claim-lap-people", "Moving people do not affect", r"median ATE ([\d.]+) cm vs ([\d.]+) cm", "{} against {} cm"),
+    (
+        "claim-line_room-accepted",
+        "A larger chi-square threshold accepts",
+        r"length check off: accepted ([\d. /]+) %",
+        "{} %",
+    ),
+    ("claim-line_room-ate", "With accurate observations", r"length check off: ATE ([\d. /]+) cm", "{} cm"),
+    ("claim-line_room-length", "Rejecting observed lines", r"(\d+) runs differ", "{} paired runs differ"),
+)
+
+
 def claim_values(report: str) -> dict[str, str]:
     """The claims' measured values and verdicts the README quotes, cut from REPORT.md's claims table."""
     rows = {r["claim"]: r for r in md_tables(report, "claims")[0]}
@@ -269,25 +297,11 @@ def claim_values(report: str) -> dict[str, str]:
     out: dict[str, str] = {}
     ratios = measured("World calibration: the odometry distance", r"ratio to table 1 ([\d. /]+)")
     out["claim-room-ratios"] = span([float(x) for x in ratios.group(1).split(" / ")], lambda x: f"{x:.2f}")
-    m = measured("The EKF (ekf_landmarks) is far below", r"ekf_landmarks ([\d. /]+) cm vs odometry ([\d. /]+) cm")
-    out["claim-room-ekf-below"] = f"{m.group(1)} cm against {m.group(2)}"
-    m = measured("The PF is at least as accurate", r"pf ([\d.]+) cm vs ekf_landmarks ([\d.]+) cm")
-    out["claim-room-pf-ekf"] = f"{m.group(1)} cm against {m.group(2)} cm"
+    for name, start, pattern, template in CLAIM_VALUES:
+        out[name] = template.format(*measured(start, pattern).groups())
     out["claim-room-pf-ekf-verdict"] = row("The PF is at least as accurate")["verdict"]
-    m = measured("World calibration: odometry ends", r"median final error ([\d.]+) cm")
-    out["claim-lap-odometry"] = f"{m.group(1)} cm"
-    m = measured("EKF-ICP ends close", r"median final error ([\d.]+) cm")
-    out["claim-lap-ekf_icp"] = f"{m.group(1)} cm"
-    m = measured("Moving people do not affect", r"median ATE ([\d.]+) cm vs ([\d.]+) cm")
-    out["claim-lap-people"] = f"{m.group(1)} against {m.group(2)} cm"
     rec = re.findall(r"D=([\d.]+) m: ([\d.]+)", row("EKF-ICP recovers from small kidnaps")["measured"])
     out["claim-lap-kidnap"] = " / ".join(r for _, r in rec) + " at " + " / ".join(d for d, _ in rec) + " m"
-    m = measured("A larger chi-square threshold accepts", r"length check off: accepted ([\d. /]+) %")
-    out["claim-line_room-accepted"] = f"{m.group(1)} %"
-    m = measured("With accurate observations", r"length check off: ATE ([\d. /]+) cm")
-    out["claim-line_room-ate"] = f"{m.group(1)} cm"
-    m = measured("Rejecting observed lines", r"(\d+) runs differ")
-    out["claim-line_room-length"] = f"{m.group(1)} paired runs differ"
     out["claim-line_room-length-verdict"] = row("Rejecting observed lines")["verdict"]
     m = measured("The linear KF localizes", r"mean ATE ([\d.]+) cm \(\d+ runs\) = ([\d.]+) x odometry's")
     out["claim-scan_grid"] = f"ATE {m.group(1)} cm, {num(100 * float(m.group(2)), 2)} % of odometry's"
