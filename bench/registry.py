@@ -314,6 +314,11 @@ DATASETS.register(
     requires_modules=("rosbags",),
     install_hint="pip install 'locbench[ros]'",
 )
+DATASETS.register(
+    "textlog",
+    "locbench.datasets.recorded.textlog:TextlogDataset",
+    "a user's plain-text log (locbench-textlog v1): JSON-lines events, TUM truth, map_server map, landmark files",
+)
 
 # --- making things from specs -------------------------------------------------------------------
 
