@@ -72,6 +72,8 @@ def test_a_report_without_a_quoted_value_is_an_error_naming_it() -> None:
         tool.run_counts(report.replace("- runs: ", "- run counts: "))
     with pytest.raises(ValueError, match="claims start with 'The PF is at least as accurate'"):
         tool.claim_values(report.replace("| The PF is at least as accurate", "| The PF is as accurate"))
+    with pytest.raises(ValueError, match="no section with the anchor 'summary-office'"):
+        tool.office_report(report.replace('<a id="summary-office">', '<a id="summary-elsewhere">'))
 
 
 def test_span_and_listed() -> None:

@@ -192,9 +192,7 @@ LANDMARK = ("ekf_landmarks", "ukf_landmarks", "gtsam_fls")
 
 def md_tables(report: str, anchor: str) -> list[list[dict[str, str]]]:
     """The tables of REPORT.md's section ``anchor`` (up to the next heading), each as rows of header -> cell."""
-    start = report.index(f'<a id="{anchor}"></a>')
-    end = report.find("\n#", start)
-    lines = report[start : end if end >= 0 else len(report)].splitlines()
+    lines = section_text(report, anchor).splitlines()
     out: list[list[dict[str, str]]] = []
     head: list[str] | None = None
     for line in [*lines, ""]:
@@ -211,7 +209,10 @@ def md_tables(report: str, anchor: str) -> list[list[dict[str, str]]]:
 
 
 def section_text(report: str, anchor: str) -> str:
-    start = report.index(f'<a id="{anchor}"></a>')
+    """REPORT.md's section ``anchor`` up to the next heading; a missing one is an error naming it."""
+    start = report.find(f'<a id="{anchor}"></a>')
+    if start < 0:
+        raise ValueError(f"REPORT.md: no section with the anchor {anchor!r}")
     end = report.find("\n#", start)
     return report[start : end if end >= 0 else len(report)]
 
@@ -232,6 +233,8 @@ def span(vals: Sequence[float], fmt: Callable[[float], str] = num) -> str:
 
 
 def listed(names: Sequence[str]) -> str:
+    if not names:
+        return "none"
     return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
 
 
@@ -409,13 +412,17 @@ def across_landmark_geometry(report: str) -> str:
 def office_report(report: str) -> dict[str, str]:
     """Sentences on REPORT.md's office summary table: who is bold for ATE, the lost-detection AUROC."""
     rows = {plain(r["filter"]): r for r in md_tables(report, "summary-office")[0]}
+    missing = [f for f in HEADLINE if f not in rows]
+    columns = [c for c in next(iter(rows.values()), {}) if c.startswith("lost AUROC")]
+    if missing or len(columns) != 1 or "ATE (cm)" not in rows[HEADLINE[0]]:
+        raise ValueError(f"REPORT.md: the office summary lacks the rows {missing} or its ATE or lost AUROC column")
     best = [f"`{f}`" for f in HEADLINE if bold(rows[f]["ATE (cm)"])]
-    auroc_col = next(c for c in rows["odometry"] if c.startswith("lost AUROC"))
-    auroc = {f: float(plain(rows[f][auroc_col])) for f in HEADLINE[1:] if plain(rows[f][auroc_col]) != "-"}
+    auroc = {f: float(plain(rows[f][columns[0]])) for f in HEADLINE[1:] if plain(rows[f][columns[0]]) != "-"}
     good = sorted((f for f, v in auroc.items() if v >= GOOD_AUROC), key=lambda f: -auroc[f])
     rest = sorted((f for f in auroc if f not in good), key=lambda f: -auroc[f])
     text = f"the best health signal of {listed([f'`{f}`' for f in good])} separates lost from not lost with AUROC "
-    text += span([auroc[f] for f in good]) + ", " + listed([f"`{f}`'s {num(auroc[f])}" for f in rest])
+    text += span([auroc[f] for f in good]) if good else "below " + num(GOOD_AUROC)
+    text += (", " + listed([f"`{f}`'s {num(auroc[f])}" for f in rest])) if rest and good else ""
     return {
         "office-ate-bold": ("only " + best[0] + " is") if len(best) == 1 else listed(best) + " are",
         "lost-auroc": text,
