@@ -327,6 +327,7 @@ class _Schedule:
         self.suspects: collections.deque[tuple[int, Task]] = collections.deque()  # to run alone
         self.casualties: list[tuple[int, Task]] = []  # failed with the executor that broke
         self.flight: dict[cf.Future[TaskResult], tuple[int, Task]] = {}
+        self.ready: collections.deque[tuple[Task, TaskResult]] = collections.deque()  # results to hand on
         self.status = ExecStatus()
         self.abandoned = False
 
@@ -342,10 +343,15 @@ class _Schedule:
                     executor = self.backend.open(1 if alone else self.backend.slots)
                     broken = False
                 if not broken:
-                    self._fill(executor, alone)
+                    broken = self._fill(executor, alone)
                 done, _ = cf.wait(self.flight, timeout=_POLL_S, return_when=cf.FIRST_COMPLETED)
                 for fut in done:
                     broken = self._finished(fut) or broken
+                if done and not (broken or alone or self.backend.raise_now):
+                    # the freed workers get their next parts before this process stores the results (work done
+                    # here waits: a part run now would run before the finished ones are stored)
+                    broken = self._fill(executor, alone)
+                self._hand_on()
                 if (broken or alone) and not self.flight:
                     self._blame(alone)
                     self.backend.close(executor, abandon=False)
@@ -361,20 +367,30 @@ class _Schedule:
     def _left(self) -> bool:
         return bool(self.suspects or self.casualties or any(self.todo))
 
-    def _fill(self, executor: cf.Executor, alone: bool) -> None:
-        """Submit parts while a slot is free: a suspect when alone, else the next part (see the class)."""
+    def _fill(self, executor: cf.Executor, alone: bool) -> bool:
+        """Submit parts while a slot is free: a suspect when alone, else the next part (see the class); whether
+        the executor refused one because it broke (its failed parts are then still to be seen)."""
         while len(self.flight) < (1 if alone else self.backend.slots):
             if alone:
                 if not self.suspects:
-                    return
+                    return False
                 i, part = self.suspects.popleft()
             else:
                 nxt = self._next()
                 if nxt is None:
-                    return
+                    return False
                 i, part = nxt, self.todo[nxt].popleft()
+            try:
+                fut = executor.submit(execute_task, part)
+            except cf.BrokenExecutor:
+                if alone:
+                    self.suspects.appendleft((i, part))
+                else:
+                    self.todo[i].appendleft(part)
+                return True
             self.busy[i] += 1
-            self.flight[executor.submit(execute_task, part)] = (i, part)
+            self.flight[fut] = (i, part)
+        return False
 
     def _next(self) -> int | None:
         """The task whose next part to submit: one started and idle (its worker freed), else a fresh one."""
@@ -386,7 +402,7 @@ class _Schedule:
         return i
 
     def _finished(self, fut: cf.Future[TaskResult]) -> bool:
-        """Hand on a finished part; whether its executor broke."""
+        """Take a finished part's result (to hand on), its death or its failure; whether its executor broke."""
         i, part = self.flight.pop(fut)
         self.busy[i] -= 1
         if fut.cancelled():  # not by this loop (it cancels only when stopping): a dask result lost with its worker
@@ -394,8 +410,7 @@ class _Schedule:
             return False
         exc = fut.exception()
         if exc is None:
-            with self.stop.shield():
-                self.handle(part, fut.result())
+            self.ready.append((part, fut.result()))
         elif self.backend.broken(exc):
             self.casualties.append((i, part))
             return True
@@ -405,6 +420,12 @@ class _Schedule:
             with self.stop.shield():
                 self.lost(part, f"worker failed: {type(exc).__name__}: {exc}")
         return False
+
+    def _hand_on(self) -> None:
+        """Hand the finished parts' results to the caller (which stores them), a signal waiting meanwhile."""
+        with self.stop.shield():
+            while self.ready:
+                self.handle(*self.ready.popleft())
 
     def _blame(self, alone: bool) -> None:
         """After an executor broke: its one part is charged; several each run again alone, uncharged."""
@@ -544,8 +565,9 @@ class _Dask(_Backend):
 
     def close(self, executor: cf.Executor, abandon: bool) -> None:
         executor.shutdown(wait=not abandon)  # without wait it cancels the parts in flight
-        with contextlib.suppress(Exception):
-            self.client.run(forget_realisations)  # a remote worker keeps no dataset after the sweep
+        if not abandon:
+            with contextlib.suppress(Exception):
+                self.client.run(forget_realisations)  # a remote worker keeps no dataset after the sweep
 
 
 def run_dask(
