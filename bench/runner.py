@@ -486,24 +486,28 @@ class _BuildFailed:
     message: str
 
 
-#: This process's last built realisation: (dataset class, dataset name, seed) -> the dataset and its truth's
-#: record, or the failure of its build; one entry, so that the parts of a task that run one after another on
-#: a worker (:func:`locbench.executors.parts`) build their dataset once.
+#: This process's last built realisations, oldest first: (dataset class, dataset name, seed) -> the dataset
+#: and its truth's record, or the failure of its build; so that the parts of a task that run one after another
+#: on a worker (:func:`locbench.executors.parts`) build their dataset once.
 _REALISATION: dict[tuple[type, str, int], tuple[Dataset, TruthRecord] | _BuildFailed] = {}
+#: Realisations a process keeps: two, since two workers freed at once may take each other's next part.
+_KEEP = 2
 
 
 def forget_realisations() -> None:
-    """Drop this process's kept realisation (:data:`_REALISATION`): its memory once a sweep is over."""
+    """Drop this process's kept realisations (:data:`_REALISATION`): their memory once a sweep is over."""
     _REALISATION.clear()
 
 
 def _realisation(task: Task) -> tuple[Dataset, TruthRecord] | _BuildFailed:
     """The task's dataset and its truth's record, built or kept from the previous part; or why it did not build."""
     key = (task.dataset_cls, task.dataset.name, task.seed)
-    kept = _REALISATION.get(key)
+    kept = _REALISATION.pop(key, None)
     if kept is not None:
+        _REALISATION[key] = kept  # the newest now
         return kept
-    _REALISATION.clear()
+    while len(_REALISATION) >= _KEEP:
+        del _REALISATION[next(iter(_REALISATION))]
     dr = task.dataset
     t_build = time.perf_counter()
     built: tuple[Dataset, TruthRecord] | _BuildFailed
