@@ -257,7 +257,9 @@ def _cmd_verify(args: argparse.Namespace) -> int:
         raise ConfigError(f"{store.runs}: no stored runs; run 'locbench run' first")
     if not 0.0 < args.fraction <= 1.0:
         raise ConfigError(f"--fraction: expected a share of the runs in (0, 1], got {args.fraction}")
-    res = verify(store, args.fraction, args.seed)
+    if not 1 <= args.jobs <= MAX_JOBS:
+        raise ConfigError(f"--jobs: expected 1-{MAX_JOBS} processes, got {args.jobs}")
+    res = verify(store, args.fraction, args.seed, jobs=args.jobs)
     record = write_record(store, res)
     for run, why in res.differ:
         print(f"differs: {run.label()}: {why}")
@@ -390,6 +392,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    # long: one argparse declaration per subcommand and option, read top to bottom as the CLI's reference
     p = argparse.ArgumentParser(prog="locbench", description="Comparative benchmark of 2-D localization filters.")
     p.add_argument("--version", action="version", version=f"locbench {__version__}")
     p.add_argument("-v", "--verbose", action="store_true", help="log progress details")
@@ -490,6 +493,7 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--results", default=_results_default(), help="results folder (default: results/)")
     v.add_argument("--fraction", type=float, default=0.02, help="share of the stored runs to re-run (default 0.02)")
     v.add_argument("--seed", type=int, default=0, help="seed of the random sample (default 0)")
+    v.add_argument("--jobs", type=int, default=1, help="worker processes that re-run the sample (default 1)")
     v.set_defaults(func=_cmd_verify)
     tu = sub.add_parser(
         "tune",

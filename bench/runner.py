@@ -3,15 +3,15 @@
 :func:`plan_sweep` decides the work: every spec resolved (a bad one fails before anything runs), each
 (dataset, seed) a :class:`Task` holding the filters that have no up-to-date stored run on it, the tasks
 sorted longest first (stored timings where present, else an estimate) so that no worker idles at the end.
-:func:`execute_task` does one task anywhere, a process of this machine or a dask worker on another: it
-builds the dataset once (its noise depends only on the dataset name and the seed, so every filter sees the
-same realisation), computes the realisation's posterior Cramer-Rao bound where the plan asks for it
-(synthetic worlds, :mod:`locbench.pcrb`), and runs each filter over its events (``predict`` for odometry,
-``update`` for each observation type the filter routes, ``estimate()`` after every call, and the time of
-each call; the filters one after the other, or taking turns over slices of the data when the plan asks for
-interleaved timing, :func:`_interleaved`), returning the records without touching the results folder.
-:func:`run_sweep` hands the tasks to an executor (:mod:`locbench.executors`) and writes every returned record
-into the store as it arrives. An exception
+:func:`execute_task` does one task, or one filter's part of it, anywhere, a process of this machine or a dask
+worker on another: it builds the dataset once and keeps it for the next part (its noise depends only on the
+dataset name and the seed, so every filter sees the same realisation), computes the realisation's posterior
+Cramer-Rao bound where the plan asks for it (synthetic worlds, :mod:`locbench.pcrb`), and runs each filter
+over its events (``predict`` for odometry, ``update`` for each observation type the filter routes,
+``estimate()`` after every call, and the time of each call; with interleaved timing every filter of the task
+in turns over slices of the data, :func:`_interleaved`), returning the records without touching the
+results folder. :func:`run_sweep` hands the tasks to an executor (:mod:`locbench.executors`, which runs them
+one filter at a time) and writes every returned record into the store as it arrives. An exception
 inside a filter or a divergence is stored as a result with its status and message; a failure of the
 machinery (a worker that died, a dataset that did not build) is recorded the same way for every run of
 its task, by :func:`failed_result`; and the sweep goes on.
@@ -547,34 +547,75 @@ def failed_result(task: Task, status: str, message: str, transient: bool = False
     return TaskResult(None, [_empty_record(_meta(task, job) | extra) for job in task.jobs])
 
 
-def execute_task(task: Task) -> TaskResult:
-    """Build the task's dataset and run each of its filters; touches no file (any worker can run it).
+@dataclass(frozen=True)
+class _BuildFailed:
+    """A dataset that did not build: the status and message of every run on it."""
 
-    Never raises for a failure of a filter or of the dataset: those are records with their status.
-    """
+    status: str
+    message: str
+
+
+#: This process's last built realisations, oldest first: (dataset class, dataset name, seed) -> the dataset
+#: and its truth's record, or the failure of its build; so that the parts of a task that run one after another
+#: on a worker (:func:`locbench.executors.parts`) build their dataset once.
+_REALISATION: dict[tuple[type, str, int], tuple[Dataset, TruthRecord] | _BuildFailed] = {}
+#: Realisations a process keeps: two, since two workers freed at once may take each other's next part.
+_KEEP = 2
+
+
+def forget_realisations() -> None:
+    """Drop this process's kept realisations (:data:`_REALISATION`): their memory once a sweep is over."""
+    _REALISATION.clear()
+
+
+def _realisation(task: Task) -> tuple[Dataset, TruthRecord] | _BuildFailed:
+    """The task's dataset and its truth's record, built or kept from the previous part; or why it did not build."""
+    key = (task.dataset_cls, task.dataset.name, task.seed)
+    kept = _REALISATION.pop(key, None)
+    if kept is not None:
+        _REALISATION[key] = kept  # the newest now
+        return kept
+    while len(_REALISATION) >= _KEEP:
+        del _REALISATION[next(iter(_REALISATION))]
     dr = task.dataset
     t_build = time.perf_counter()
+    built: tuple[Dataset, TruthRecord] | _BuildFailed
     try:
         ds: Dataset = build_dataset(task.dataset_cls, dr, task.seed)
     except DataNotFound as exc:
         # Recorded data that is not on this machine: a recorded skip with the reason, not a failure.
-        return failed_result(task, "skipped", f"data not found: {exc}")
+        built = _BuildFailed("skipped", f"data not found: {exc}")
     except Exception as exc:
         msg = f"dataset build failed: {type(exc).__name__}: {exc}"
         log.error("%s: %s", task.label, msg)
-        return failed_result(task, "error", msg)
-    build_s = time.perf_counter() - t_build
-    truth_meta = {
-        "dataset_id": dr.id,
-        "dataset_params": dr.params_dict(),
-        "dataset_version": getattr(task.dataset_cls, "version", 1),
-        "build_s": build_s,
-        "metadata": ds.metadata,
-        "versions": provenance.versions(),
-    }
+        built = _BuildFailed("error", msg)
+    else:
+        truth_meta = {
+            "dataset_id": dr.id,
+            "dataset_params": dr.params_dict(),
+            "dataset_version": getattr(task.dataset_cls, "version", 1),
+            "build_s": time.perf_counter() - t_build,
+            "metadata": ds.metadata,
+            "versions": provenance.versions(),
+        }
+        built = (ds, TruthRecord.from_dataset(ds, task.seed, truth_meta))
+    _REALISATION[key] = built
+    return built
+
+
+def execute_task(task: Task) -> TaskResult:
+    """Build the task's dataset (or take the one this process kept) and run each of its filters; touches no
+    file (any worker can run it).
+
+    Never raises for a failure of a filter or of the dataset: those are records with their status.
+    """
+    built = _realisation(task)
+    if isinstance(built, _BuildFailed):
+        return failed_result(task, built.status, built.message)
+    ds, truth = built
     bound = _bound(task, ds)
     runs = _interleaved(task, ds) if task.slice_s > 0 else [_run_job(task, job, ds) for job in task.jobs]
-    return TaskResult(TruthRecord.from_dataset(ds, task.seed, truth_meta), runs, bound)
+    return TaskResult(truth, runs, bound)
 
 
 def _rngs(task: Task, job: Job) -> tuple[np.random.Generator, np.random.Generator]:
@@ -703,16 +744,26 @@ def _bound(task: Task, ds: Dataset) -> BoundRecord | None:
     return BoundRecord(task.dataset.name, task.seed, ds.ground_truth.t, covs, meta)
 
 
-def store_result(store: Store, task: Task, result: TaskResult) -> list[RunOutcome]:
+def store_result(
+    store: Store, task: Task, result: TaskResult, written: set[tuple[str, int]] | None = None
+) -> list[RunOutcome]:
     """Write a task's truth and runs; a write that fails (disk full, read-only) is a ``not stored`` outcome
-    whose message names the run's folder and the reason."""
+    whose message names the run's folder and the reason.
+
+    ``written`` holds the (dataset, seed) whose truth this sweep stored already: each part of a task carries
+    the same truth, written once, before the first of its runs.
+    """
     notes = {job.filter.name: job for job in task.jobs}
     truth_error = ""
-    if result.truth is not None:
+    realisation = (task.dataset.name, task.seed)
+    if result.truth is not None and (written is None or realisation not in written):
         try:
             store.write_truth(result.truth)
         except OSError as exc:
             truth_error = f"its ground truth was not stored: {_os_message(exc)}"
+        else:
+            if written is not None:
+                written.add(realisation)
     outcomes = []
     for rec in result.runs:
         job = notes[rec.meta["filter"]]
@@ -769,15 +820,16 @@ def run_sweep(
         ``local``: this process (``jobs`` = 1) or a pool of ``jobs`` processes; ``dask``: a dask.distributed
         client of the scheduler at ``scheduler``, else of a LocalCluster of ``jobs`` worker processes.
     progress : callable, optional
-        Called with the number of runs each finished task stored (and once with the cached count).
+        Called with the number of runs each finished part stored (one filter's; once with the cached count).
     connect_timeout_s : float, optional
         Seconds to wait for the scheduler at ``scheduler`` (default :data:`locbench.executors.CONNECT_TIMEOUT_S`).
 
     Before anything is computed the store is checked writable, with room for the planned runs
     (:meth:`Store.check_space`): a full disk is one error, not one per computed run.
 
-    SIGINT (Ctrl-C) and SIGTERM stop the sweep: tasks not started are cancelled, running ones abandoned, every
-    finished run is kept, and the result says ``interrupted``; rerunning the same plan resumes.
+    SIGINT (Ctrl-C) and SIGTERM stop the sweep: runs not started are cancelled, running ones abandoned, every
+    finished run is kept (each is stored as its filter finishes), and the result says ``interrupted``;
+    rerunning the same plan resumes.
     """
     from locbench import executors
 
@@ -791,11 +843,12 @@ def run_sweep(
         provenance.reference()  # once per sweep, here: the workers a pool forks inherit it
     outcomes = list(plan.cached)
     bounds = [0]
+    truths: set[tuple[str, int]] = set()
     if progress and plan.cached:
         progress(len(plan.cached))
 
     def handle(task: Task, result: TaskResult) -> None:
-        res = store_result(store, task, result)
+        res = store_result(store, task, result, truths)
         bounds[0] += store_bound(store, task, result)
         outcomes.extend(res)
         if progress:
