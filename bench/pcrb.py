@@ -115,12 +115,13 @@ def pcrb_recursion(j0: FloatArray, jacobians: FloatArray, process_cov: FloatArra
     ndarray, shape (n+1, d, d)
         The bound's covariance J_k^-1 at every step.
     """
-    c = np.ascontiguousarray
-    out: FloatArray = _recursion(
-        c(j0, dtype=np.float64), c(jacobians, dtype=np.float64), c(process_cov, dtype=np.float64),
-        c(meas_info, dtype=np.float64),
-    )  # fmt: skip
+    out: FloatArray = _recursion(*_contiguous(j0, jacobians, process_cov, meas_info))
     return out
+
+
+def _contiguous(*arrays: FloatArray) -> list[FloatArray]:
+    """The arrays as C-contiguous float64, the layout the compiled recursions are typed for."""
+    return [np.ascontiguousarray(a, dtype=np.float64) for a in arrays]
 
 
 @njit(cache=True)
@@ -149,11 +150,7 @@ def covariance_recursion(
     (P^-^-1 + J_meas)^-1 whenever P^- is invertible and stays defined for a zero prior (a robot that starts
     at its exact true pose) and for the standstill steps after it (Q = 0). Other arguments as there.
     """
-    c = np.ascontiguousarray
-    out: FloatArray = _covariance_recursion(
-        c(p0, dtype=np.float64), c(jacobians, dtype=np.float64), c(process_cov, dtype=np.float64),
-        c(meas_info, dtype=np.float64),
-    )  # fmt: skip
+    out: FloatArray = _covariance_recursion(*_contiguous(p0, jacobians, process_cov, meas_info))
     return out
 
 
