@@ -13,9 +13,7 @@ The modules of this package register, at import:
 The report itself knows no dataset or filter by name. Filters are matched by id: the plain ``id`` when
 it has runs, otherwise the first parameterised variant in sorted order, named in the measured text.
 
-Waypoint statistics here follow the DESIGN protocol: RMSE_j = sqrt(mean_i e_ij^2) over the ok runs
-(report 003 fig. 5) and the distance between waypoint j and the mean estimated position over runs
-(report 003 table 1).
+Waypoint statistics over runs (report 003 fig. 5 and table 1) are :func:`locbench.aggregate.waypoint_stats`.
 """
 
 from __future__ import annotations
@@ -23,7 +21,6 @@ from __future__ import annotations
 import importlib
 import logging
 import pkgutil
-import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
@@ -32,7 +29,6 @@ from typing import TYPE_CHECKING, Literal, NamedTuple
 import numpy as np
 import pandas as pd
 
-from locbench.metrics import mean_estimate_distance, waypoint_rmse
 from locbench.significance import ALPHA, TestResult
 from locbench.spec import Spec
 
@@ -43,8 +39,6 @@ log = logging.getLogger(__name__)
 
 Verdict = Literal["reproduced", "not reproduced", "not evaluated"]
 VERDICTS: tuple[Verdict, ...] = ("reproduced", "not reproduced", "not evaluated")
-
-_WP_RE = re.compile(r"^waypoint_(\d+)_(error_m|est_x_m|est_y_m|marked_x_m|marked_y_m)$")
 
 
 class ClaimResult(NamedTuple):
@@ -207,44 +201,6 @@ def pick_filter(df: pd.DataFrame, filter_id: str) -> str | None:
     if not names:
         return None
     return filter_id if filter_id in names else names[0]
-
-
-def waypoint_stats(df: pd.DataFrame) -> pd.DataFrame:
-    """Per filter and waypoint statistics over the ok runs of one dataset name.
-
-    Parameters
-    ----------
-    df : DataFrame
-        Tidy metrics rows (``dataset, filter, seed, metric, value``) of a single dataset name.
-
-    Returns
-    -------
-    DataFrame
-        Columns ``filter``, ``waypoint`` (int, from 1), ``rmse_m`` (RMSE_j), ``mean_distance_m``
-        (distance between the marked point and the mean estimate; NaN when the CSV lacks the
-        estimate columns) and ``runs`` (how many runs entered), sorted by filter then waypoint.
-    """
-    cols = ["filter", "waypoint", "rmse_m", "mean_distance_m", "runs"]
-    parts = df["metric"].astype(str).str.extract(_WP_RE)
-    sel = parts[0].notna()
-    if not sel.any():
-        return pd.DataFrame(columns=cols)
-    wp = df.loc[sel, ["filter", "seed", "value"]].copy()
-    wp["waypoint"] = parts.loc[sel, 0].astype(int)
-    wp["quantity"] = parts.loc[sel, 1]
-    rows = []
-    for (fname, j), g in wp.groupby(["filter", "waypoint"], sort=True):
-        q = g.pivot_table(index="seed", columns="quantity", values="value", aggfunc="first")
-        if "error_m" not in q:
-            continue
-        rmse = float(waypoint_rmse(q["error_m"].to_numpy()[:, None])[0])
-        dist = float("nan")
-        if {"est_x_m", "est_y_m", "marked_x_m", "marked_y_m"} <= set(q.columns):
-            est = q[["est_x_m", "est_y_m"]].to_numpy()[:, None, :]
-            marked = q[["marked_x_m", "marked_y_m"]].to_numpy()[:, None, :]
-            dist = float(mean_estimate_distance(est, marked)[0])
-        rows.append((str(fname), int(str(j)), rmse, dist, int(q["error_m"].notna().sum())))
-    return pd.DataFrame(rows, columns=cols)
 
 
 def series(ws: pd.DataFrame, filter_name: str, column: str) -> np.ndarray:

@@ -36,6 +36,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
+from locbench.aggregate import mean_ci
 from locbench.claims import (
     Claim,
     ClaimResult,
@@ -53,7 +54,7 @@ from locbench.claims import (
     test_text,
 )
 from locbench.errors import LocbenchError
-from locbench.metrics import METRICS, mean_ci
+from locbench.metric_info import METRICS
 from locbench.pcrb import is_bound_row
 from locbench.report.doc import Block, Plot, Text
 from locbench.report.style import PALETTE

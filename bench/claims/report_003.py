@@ -6,6 +6,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from locbench.aggregate import waypoint_stats
 from locbench.claims import (
     Claim,
     ClaimResult,
@@ -21,9 +22,8 @@ from locbench.claims import (
     register_section,
     series,
     test_text,
-    waypoint_stats,
 )
-from locbench.metrics import MetricInfo
+from locbench.metric_info import MetricInfo
 from locbench.report.doc import Block, Text
 from locbench.significance import wilcoxon_paired
 

@@ -24,7 +24,7 @@ from locbench.claims import (
     register_section,
     test_text,
 )
-from locbench.metrics import METRICS
+from locbench.metric_info import METRICS
 from locbench.report.doc import Block
 from locbench.significance import mann_whitney
 

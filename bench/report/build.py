@@ -16,9 +16,11 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 import locbench
-from locbench.claims import Experiment, all_claims, experiments, sections_for, waypoint_stats
+from locbench.aggregate import mean_over_runs, waypoint_stats
+from locbench.claims import Experiment, all_claims, experiments, sections_for
 from locbench.lost import LOST_THRESHOLDS_M
-from locbench.metrics import CONFIDENCE, METRICS, POSE_DOF, chi2_band, estimate_at, mean_over_runs
+from locbench.metric_info import METRICS
+from locbench.metrics import CONFIDENCE, POSE_DOF, chi2_band, estimate_at
 from locbench.pcrb import BOUND_ROWS
 from locbench.report import figures as fg
 from locbench.report import health as hl

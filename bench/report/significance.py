@@ -21,7 +21,8 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from locbench import significance as sg
-from locbench.metrics import METRICS, WITHIN_THRESHOLDS_CM, MetricInfo
+from locbench.metric_info import METRICS, MetricInfo
+from locbench.metrics import WITHIN_THRESHOLDS_CM
 from locbench.report import tables as tb
 from locbench.report.collect import write_if_changed
 from locbench.report.doc import Plot, Section, Table, Text
