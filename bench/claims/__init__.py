@@ -3,8 +3,9 @@
 The modules of this package register, at import:
 
 - :class:`Source`: a source report, cited by title and authors;
-- :class:`Experiment`: a dataset id with its title and role in the report (a summary dataset with an
-  accuracy-runtime figure, a per-experiment section, variants folded into one table);
+- :class:`Experiment`: a dataset id with the suite that makes its runs (a :class:`~locbench.suites.Suite`
+  object), its title and role in the report (a summary dataset with an accuracy-runtime figure, a
+  per-experiment section, variants folded into one table);
 - :class:`Claim`: one checkable claim of a source report: a function from the tidy metrics rows
   (``dataset, filter, seed, metric, value``) of the experiment it concerns to a :class:`ClaimResult`;
 - report sections (:func:`register_section`): extra tables and figures of an experiment, built as
@@ -22,7 +23,7 @@ import importlib
 import logging
 import pkgutil
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import TYPE_CHECKING, Literal, NamedTuple
 
@@ -31,6 +32,7 @@ import pandas as pd
 
 from locbench.significance import ALPHA, TestResult
 from locbench.spec import Spec
+from locbench.suites import Suite
 
 if TYPE_CHECKING:
     from locbench.report.doc import Block
@@ -65,12 +67,15 @@ class Source:
 
 @dataclass(frozen=True)
 class Experiment:
-    """A dataset id's place in the report.
+    """A dataset id's place in the report, and the suite whose runs it reads.
 
     Attributes
     ----------
     dataset : str
         The dataset id (``office``); its plain name is the experiment's base dataset.
+    suite : Suite
+        The suite that makes the experiment's runs (keyword): it must run some variant of ``dataset``, so an
+        experiment (and its claims) cannot point to runs no suite makes.
     title : str
         Section heading.
     text : str
@@ -92,6 +97,11 @@ class Experiment:
     summary: bool = False
     fold_variants: bool = False
     order: int = 100
+    suite: Suite = field(kw_only=True)
+
+    def __post_init__(self) -> None:
+        if not any(spec_id(d) == self.dataset for b in self.suite.blocks for d in b.datasets):
+            raise ValueError(f"experiment {self.dataset!r}: suite {self.suite.name!r} runs no {self.dataset} dataset")
 
 
 @dataclass(frozen=True)
@@ -117,6 +127,9 @@ class Claim:
     across_variants : bool
         Evaluated once over all variants of the dataset id (a sweep over a dataset parameter, recovery
         against kidnap distance) instead of once per dataset name.
+    suite : Suite or None
+        The suite that makes the runs the claim reads when it is not its experiment's (the consistency
+        claims read the matched worlds of suite ``consistency``); :func:`claim_suite` resolves it.
     """
 
     id: str
@@ -126,6 +139,7 @@ class Claim:
     reported: str
     check: Callable[[pd.DataFrame], ClaimResult]
     across_variants: bool = False
+    suite: Suite | None = None
 
     def evaluate(self, df: pd.DataFrame) -> ClaimResult:
         """Run the check; a check that cannot run (missing data) is "not evaluated", never an exception."""
@@ -276,6 +290,16 @@ def all_claims() -> tuple[Claim, ...]:
     """Every registered claim, in module then registration order."""
     _load()
     return tuple(_CLAIMS)
+
+
+def claim_suite(claim: Claim) -> Suite:
+    """The suite whose runs a claim reads: its own, else its experiment's (a claim without either is an error)."""
+    if claim.suite is not None:
+        return claim.suite
+    exp = experiment_of(claim.dataset)
+    if exp is None:
+        raise ValueError(f"claim {claim.id!r}: no experiment registered for dataset {claim.dataset!r} and no suite")
+    return exp.suite
 
 
 def claims_for(dataset_id: str, across_variants: bool = False) -> tuple[Claim, ...]:

@@ -60,6 +60,7 @@ from locbench.report.doc import Block, Plot, Text
 from locbench.report.style import PALETTE
 from locbench.significance import ALPHA, TestResult, mann_whitney, wilcoxon_paired
 from locbench.spec import build_params
+from locbench.suites import SUITES
 
 log = logging.getLogger(__name__)
 
@@ -471,5 +472,6 @@ register_experiment(
         source=SOURCE_001,
         fold_variants=True,
         order=50,
+        suite=SUITES["landmark_geometry"],
     )
 )

@@ -40,6 +40,7 @@ from locbench.metric_info import METRICS
 from locbench.report.doc import Block, Plot, Text
 from locbench.report.style import PALETTE
 from locbench.significance import TestResult, wilcoxon_paired
+from locbench.suites import SUITES
 
 log = logging.getLogger(__name__)
 
@@ -340,5 +341,6 @@ register_experiment(
         "a 181-beam scan and gates them with a chi-square threshold, swept here, with the length check on and off.",
         source=SOURCE_002,
         order=30,
+        suite=SUITES["line_room"],
     )
 )

@@ -26,6 +26,7 @@ from locbench.claims import (
 from locbench.metric_info import MetricInfo
 from locbench.report.doc import Block, Text
 from locbench.significance import wilcoxon_paired
+from locbench.suites import SUITES
 
 SOURCE_003 = Source(
     "003",
@@ -260,5 +261,6 @@ register_experiment(
         source=SOURCE_003,
         summary=True,
         order=10,
+        suite=SUITES["room"],
     )
 )

@@ -27,6 +27,7 @@ from locbench.claims import (
 from locbench.metric_info import METRICS
 from locbench.report.doc import Block
 from locbench.significance import mann_whitney
+from locbench.suites import SUITES
 
 SOURCE_004 = Source("004", "Kalman Filtering with STDR Simulator and ROS", "Luc Alexandre Bettaieb")
 LINEAR = "scan_grid"
@@ -149,5 +150,6 @@ register_experiment(
         "do both.",
         source=SOURCE_004,
         order=40,
+        suite=SUITES["scan_grid"],
     )
 )
