@@ -57,6 +57,7 @@ def test_aligned_view_holds_every_array_once_at_the_truth_times() -> None:
     # the heading error is wrapped: 3 - (-3) = 6 rad is 6 - 2 pi
     np.testing.assert_allclose(a.error[:, 2], [6.0 - 2 * np.pi, 3.0, 0.1, -6.0 + 2 * np.pi])
     np.testing.assert_allclose(a.position_error, [0.0, 1.0, 1.0, 0.0])
+    assert a.cov is not None
     np.testing.assert_array_equal(a.nees, lm.nees(a.error, a.cov))
     assert a.nees is a.nees  # computed once
     with pytest.raises(ValueError, match="no covariance"):
