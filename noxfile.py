@@ -41,11 +41,18 @@ def _install(session: nox.Session, extras: str) -> None:
     session.install(*CONSTRAINTS, f".[{extras}]")
 
 
+#: The example filter plugin (README "Writing a filter plugin"), installed into the test session.
+EXAMPLE_PLUGIN = "./examples/locbench-iekf-plugin"
+
+
 @nox.session(python=PYTHON)
 def tests(session: nox.Session) -> None:
     """Run the test suite (recorded-data tests read $LOCBENCH_DATA and skip without it); with Stone Soup, so
-    that the bound's recursion is compared with its PCRB metric."""
+    that the bound's recursion is compared with its PCRB metric, and with the example plugin package."""
     _install(session, "all,test,stonesoup")
+    # the example plugin package, so that tests/test_plugin_example.py checks the entry-point path (without it
+    # that file skips); --no-deps: locbench is the checkout's, never an index's
+    session.install("--no-deps", EXAMPLE_PLUGIN)
     session.run("pytest", "--benchmark-disable", *session.posargs, env=_data_env())
 
 

@@ -11,6 +11,7 @@ locbench verify [--results DIR] [--fraction F] [--seed S]
 locbench check [ID ...]
 locbench fetch SPEC [SPEC ...]
 locbench export [--results DIR] [--out DIR] [--dataset SPEC ...] [--filter SPEC ...] [--smoothed]
+locbench export --format textlog --dataset SPEC [--seed N] --out FOLDER
 """
 
 from __future__ import annotations
@@ -53,7 +54,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
         for ident in reg.ids():
             reason = reg.unavailable_reason(ident)
             state = f"  [{reason}]" if reason else ""
-            print(f"  {ident:<18} {reg.entry(ident).summary}{state}")
+            print(f"  {ident:<18} {reg.summary(ident)}{state}")
     print("suites:")
     for s in SUITES.values():
         print(f"  {s.name:<18} {s.runs:>5} runs: {s.description}")
@@ -75,7 +76,7 @@ def _list_params(ids: Sequence[str]) -> int:
         else:
             valid = ", ".join(FILTERS.ids() + DATASETS.ids())
             raise UnknownIdError(f"unknown filter or dataset {ident!r}; valid: {valid}")
-        print(f"{kind} {ident}: {reg.entry(ident).summary}")
+        print(f"{kind} {ident}: {reg.summary(ident)}")
         tunable = tunable_fields(cls) if kind == "filter" else None
         tune = f"; tunable ('locbench tune {ident}'): {', '.join(tunable) or 'none'}" if tunable is not None else ""
         print(f"  written {ident}[key=value,...]; a grid: key=a|b|c{tune}")
@@ -345,9 +346,22 @@ def _cmd_fetch(args: argparse.Namespace) -> int:
 def _cmd_export(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from locbench.export import export_results
+    from locbench.export import export_results, export_textlog
     from locbench.registry import resolve_dataset, resolve_filter
 
+    if args.format == "textlog":
+        if len(args.dataset) != 1 or args.filter or args.smoothed or not args.out:
+            raise ConfigError("--format textlog writes one dataset: give --dataset SPEC --seed N --out FOLDER")
+        seed = 0 if args.seed is None else args.seed
+        if seed < 0:
+            raise ConfigError(f"--seed must be >= 0, got {seed}")
+        folder, notes = export_textlog(args.dataset[0], seed, args.out)
+        for note in notes:
+            print(f"note: {note}")
+        print(f"{args.dataset[0]} seed {seed} written as a textlog to {folder}; read it as textlog[path={folder}]")
+        return 0
+    if args.seed is not None:
+        raise ConfigError("--seed goes with --format textlog (TUM export writes every stored seed)")
     out = args.out or str(Path(args.results) / "tum")
     written = export_results(
         args.results,
@@ -489,7 +503,16 @@ def build_parser() -> argparse.ArgumentParser:
     fe.add_argument("specs", nargs="+", metavar="SPEC", help="e.g. plaza[run=1] or mrclam[dataset=6,robot=1]")
     fe.set_defaults(func=_cmd_fetch)
 
-    ex = sub.add_parser("export", help="write stored runs and their truth as TUM trajectories (for evo)")
+    ex = sub.add_parser(
+        "export", help="write stored runs and their truth as TUM trajectories (for evo), or a dataset as a textlog"
+    )
+    ex.add_argument(
+        "--format",
+        choices=("tum", "textlog"),
+        default="tum",
+        help="tum: stored runs (default); textlog: the dataset --dataset at --seed as a plain-text log in --out",
+    )
+    ex.add_argument("--seed", type=int, default=None, help="with --format textlog: the realisation (default 0)")
     ex.add_argument("--results", default=_results_default(), help="results folder (default: results/)")
     ex.add_argument("--out", default=None, help="output folder (default: RESULTS/tum)")
     ex.add_argument("--dataset", nargs="+", action="extend", default=[], metavar="SPEC", help="only these datasets")

@@ -10,6 +10,7 @@ on. SIGINT (Ctrl-C) and SIGTERM stop an executor: tasks not started are cancelle
 
 from __future__ import annotations
 
+import asyncio
 import concurrent.futures as cf
 import contextlib
 import ctypes
@@ -182,6 +183,30 @@ class StopRequest:
             yield
         finally:
             self._shielded -= 1
+
+
+def probe_scheduler(address: str, timeout_s: float) -> None:
+    """Ask the dask scheduler at ``address`` for its identity; a :class:`TimeoutError` or :class:`OSError` when it
+    does not answer within ``timeout_s`` seconds.
+
+    ``distributed.Client(address, timeout=...)`` bounds the TCP connect only: a peer that accepts the connection
+    but never answers (a wrong service, a stopped process whose socket is still listening) holds the client's
+    handshake forever. This round trip on a fresh event loop is bounded as a whole.
+    """
+    from distributed.comm import connect
+
+    async def identity() -> None:
+        comm = await connect(address, timeout=timeout_s)
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            await comm.read()
+        finally:
+            comm.abort()
+
+    async def bounded() -> None:
+        await asyncio.wait_for(identity(), timeout_s)
+
+    asyncio.run(bounded())
 
 
 def get(name: str) -> Callable[..., ExecStatus]:
@@ -461,6 +486,7 @@ def run_dask(
                     client = distributed.Client(cluster)
                 else:
                     address = check_scheduler_address(scheduler)
+                    probe_scheduler(address, timeout_s)
                     client = distributed.Client(address, timeout=f"{timeout_s}s")
             except (OSError, TimeoutError, ValueError) as exc:
                 if cluster is not None:
@@ -468,8 +494,9 @@ def run_dask(
                         cluster.close()
                     _reap(workers)
                 where = one_line(scheduler, 200) if scheduler else "a LocalCluster on 127.0.0.1"
+                why = str(exc) or "no answer"
                 raise ConfigError(
-                    one_line(f"cannot reach the dask scheduler at {where} within {timeout_s:g} s: {exc}")
+                    one_line(f"cannot reach the dask scheduler at {where} within {timeout_s:g} s: {why}")
                 ) from None
         run_id = uuid.uuid4().hex[:8]
         todo = list(tasks)

@@ -16,6 +16,10 @@ scan at the same stamp) the last one, the estimate after every event of that ins
 locbench's metrics hold at that time. Estimate rows that are not finite (a run that diverged) are left out with a
 warning. The times are the dataset's own (recordings keep their Unix stamps), so an export lines up with the
 recording and with other tools' output on it. Every file is written to a temporary file and renamed into place.
+
+:func:`export_textlog` writes a whole dataset realisation (events, truth, map, noise) as a plain-text log, the
+``locbench-textlog`` format of :mod:`locbench.datasets.recorded.textlog`, so that a user sees a worked example of
+the format and any dataset can be read back as ``textlog[path=...]``.
 """
 
 from __future__ import annotations
@@ -53,7 +57,14 @@ def _fmt(v: float) -> str:
     return repr(float(v))  # the shortest string that reads back as the same float64
 
 
-def write_tum(path: str | os.PathLike[str], t: npt.ArrayLike, poses: npt.ArrayLike, comment: str | None = None) -> Path:
+def write_tum(
+    path: str | os.PathLike[str],
+    t: npt.ArrayLike,
+    poses: npt.ArrayLike,
+    comment: str | None = None,
+    *,
+    keep_all: bool = False,
+) -> Path:
     """Write planar poses as a TUM trajectory file (atomically).
 
     Parameters
@@ -66,6 +77,9 @@ def write_tum(path: str | os.PathLike[str], t: npt.ArrayLike, poses: npt.ArrayLi
         World-frame poses (x m, y m, theta rad); rows with a non-finite value are left out (logged).
     comment : str or None
         Text of a second ``#`` line (provenance).
+    keep_all : bool
+        Write every row, repeated times included, and refuse a non-finite one (a dataset's truth, which must
+        read back row for row; evo wants the default).
 
     Returns
     -------
@@ -82,6 +96,8 @@ def write_tum(path: str | os.PathLike[str], t: npt.ArrayLike, poses: npt.ArrayLi
     if tt.ndim != 1 or pp.shape != (tt.shape[0], 3):
         raise ConfigError(f"{path}: expected times (n,) and poses (n, 3), got {tt.shape} and {pp.shape}")
     finite = np.isfinite(tt) & np.all(np.isfinite(pp), axis=1)
+    if keep_all and not np.all(finite):
+        raise ConfigError(f"{path}: row {int(np.flatnonzero(~finite)[0])} is not finite, expected finite poses")
     if not np.all(finite):
         log.warning("%s: leaving out %d non-finite pose rows of %d", path, int(np.sum(~finite)), tt.shape[0])
         tt, pp = tt[finite], pp[finite]
@@ -91,7 +107,8 @@ def write_tum(path: str | os.PathLike[str], t: npt.ArrayLike, poses: npt.ArrayLi
     if back.size:
         k = int(back[0]) + 1
         raise ConfigError(f"{path}: time goes backwards at row {k}: {float(tt[k])!r} s after {float(tt[k - 1])!r} s")
-    tt, pp = _last_per_time(tt, pp)
+    if not keep_all:
+        tt, pp = _last_per_time(tt, pp)
     q = yaw_to_quaternion(pp[:, 2])
     lines = [TUM_HEADER]
     if comment:
@@ -238,6 +255,43 @@ def export_results(
             truth_rel = store.truth_path(dname, seed).relative_to(store.runs)
             written.append(export_truth_tum(store.read_truth(dname, seed), (root / truth_rel).with_suffix(".tum")))
     return written
+
+
+def export_textlog(spec: str, seed: int, out: str | os.PathLike[str]) -> tuple[Path, list[str]]:
+    """Write the realisation ``seed`` of dataset ``spec`` as a plain-text log (``locbench-textlog``).
+
+    Read back as ``textlog[path=OUT]``, it gives filters the same events, map, noise and initial belief, so a
+    deterministic filter's estimates are bit-identical (a randomised one's too, given the same generators: through
+    ``locbench run`` its draws are keyed by the dataset's name, which differs).
+
+    Parameters
+    ----------
+    spec : str
+        Any registered dataset with parameters (``room``, ``office[kidnap_m=2]``, ``plaza[run=1]``).
+    seed : int
+        The realisation (recordings: any seed is the same data).
+    out : path-like
+        The folder to write (created; an existing one must be empty or a textlog).
+
+    Returns
+    -------
+    (Path, list of str)
+        The folder, and notes on what does not read back exactly (see
+        :func:`~locbench.datasets.recorded.textlog.write_textlog`).
+    """
+    from locbench.datasets.base import SyntheticBuilder
+    from locbench.datasets.recorded.base import RecordedDataset
+    from locbench.datasets.recorded.textlog import write_textlog
+    from locbench.registry import DATASETS, make_dataset, resolve_dataset
+
+    r = resolve_dataset(spec)
+    cls = DATASETS.load(r.id)
+    kind = "simulation" if issubclass(cls, SyntheticBuilder) else ""
+    if issubclass(cls, RecordedDataset):
+        kind = cls.reference_kind
+    ds = make_dataset(r, seed)
+    notes = write_textlog(ds, out, source=f"{r.name} seed {seed}", reference_kind=kind)
+    return Path(out), notes
 
 
 def _atomic_write_text(path: Path, text: str) -> None:

@@ -48,3 +48,23 @@ def git_state() -> dict[str, Any]:
     except (OSError, subprocess.SubprocessError):
         return {"commit": None, "dirty": False}
     return {"commit": sha, "dirty": dirty}
+
+
+@functools.cache
+def _top_level_distributions() -> dict[str, list[str]]:
+    return dict(importlib.metadata.packages_distributions())
+
+
+@functools.cache
+def distribution(cls: type) -> dict[str, str] | None:
+    """``{"name": ..., "version": ...}`` of the installed distribution that provides ``cls``: a plugin's
+    package (``locbench-iekf``), ``locbench`` for the built-in filters and datasets; None for code that no
+    installed distribution provides (a script, a test module)."""
+    names = _top_level_distributions().get(cls.__module__.partition(".")[0], [])
+    if not names:
+        return None
+    name = sorted(names)[0]
+    try:
+        return {"name": name, "version": importlib.metadata.version(name)}
+    except importlib.metadata.PackageNotFoundError:
+        return None

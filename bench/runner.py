@@ -33,7 +33,7 @@ from locbench.errors import DataNotFound, FilterDiverged
 from locbench.events import EVENT_TYPES, Odometry
 from locbench.filters.base import Filter
 from locbench.registry import DATASETS, FILTERS, Resolved, build_dataset, resolve_dataset, resolve_filter
-from locbench.runkey import key_params
+from locbench.runkey import key_params, source_digest
 from locbench.seeding import belief_rng, filter_rng
 from locbench.spec import Spec, stable_hash
 from locbench.store import KIND_NAMES, BoundRecord, RunRecord, Store, TruthRecord
@@ -221,7 +221,8 @@ def run_filter(
 
 
 def run_key(fr: Resolved, dr: Resolved, seed: int) -> str:
-    """The cache key of a run: everything that determines its result."""
+    """The cache key of a run: everything that determines its result, the source of the filter's and the dataset
+    builder's code included (:func:`locbench.runkey.source_digest`)."""
     fcls, dcls = FILTERS.load(fr.id), DATASETS.load(dr.id)
     return stable_hash(
         {
@@ -229,9 +230,11 @@ def run_key(fr: Resolved, dr: Resolved, seed: int) -> str:
             "filter": fr.id,
             "filter_config": key_params(fr.params),
             "filter_version": getattr(fcls, "version", 1),
+            "filter_source": source_digest(fcls),
             "dataset": dr.id,
             "dataset_params": key_params(dr.params),
             "dataset_version": getattr(dcls, "version", 1),
+            "dataset_source": source_digest(dcls),
             "seed": seed,
         }
     )
@@ -250,6 +253,7 @@ def bound_key(dr: Resolved, seed: int) -> str | None:
             "dataset": dr.id,
             "dataset_params": key_params(dr.params),
             "dataset_version": getattr(dcls, "version", 1),
+            "dataset_source": source_digest(dcls),
             "seed": seed,
         }
     )
@@ -449,10 +453,12 @@ def _meta(task: Task, job: Job) -> dict[str, Any]:
         "filter_id": fr.id,
         "filter_config": fr.params_dict(),
         "filter_version": getattr(job.filter_cls, "version", 1),
+        "filter_distribution": provenance.distribution(job.filter_cls),
         "dataset": dr.name,
         "dataset_id": dr.id,
         "dataset_params": dr.params_dict(),
         "dataset_version": getattr(task.dataset_cls, "version", 1),
+        "dataset_distribution": provenance.distribution(task.dataset_cls),
         "seed": task.seed,
         "run_key": job.key,
         "versions": provenance.versions(),

@@ -143,6 +143,7 @@ class Report:
             hl.lost_section(self),
             self.kidnap_and_global(),
             self.recorded_data(),
+            self.input_warnings(),
             *[self.experiment(e) for e in self.exps],
             self.appendix(),
         ]
@@ -744,6 +745,21 @@ class Report:
         robust = robustness_table(self.df[self.df["dataset"].isin(names)], filters, noise_of)
         if robust is not None:
             sec.children.append(Section("Robustness to range noise", "recorded-robustness", [robust]))
+        return sec
+
+    def input_warnings(self) -> Section:
+        """What the loaders warned about a dataset's input (``metadata["warnings"]``: a twist that contradicts the
+        poses, events outside the truth's span), so that a number built on a suspect input says so."""
+        sec = Section("Input warnings", "input-warnings")
+        rows = []
+        for d in sorted(self.col.datasets):
+            found = self._truth_meta(d)[1].get("warnings")
+            for w in found if isinstance(found, list) else []:
+                rows.append((f"`{self.col.display(d)}`", str(w)))
+        if rows:
+            sec.add(
+                Text("The loaders' warnings about these datasets' input:"), Table(("dataset", "warning"), tuple(rows))
+            )
         return sec
 
     def _not_below_baseline(self, fs: list[str], group: list[str], acc: list[list[tuple[str, float]]]) -> str:
