@@ -9,8 +9,8 @@ from __future__ import annotations
 
 from typing import Any, NamedTuple
 
-#: Okabe-Ito colours (black last: it is the ground truth's colour in trajectory figures).
-PALETTE: tuple[str, ...] = ("#0072B2", "#E69F00", "#009E73", "#CC79A7", "#56B4E9", "#D55E00", "#F0E442", "#000000")
+from locbench.docfmt import PALETTE
+
 #: Nine markers (coprime with the eight colours).
 MARKERS: tuple[str, ...] = ("o", "s", "^", "D", "v", "P", "X", "<", "*")
 LINESTYLES: tuple[str, ...] = ("-", "--", "-.", ":")

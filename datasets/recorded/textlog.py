@@ -74,6 +74,7 @@ from locbench.datasets.recorded.files import (
     twist_contradiction,
     user_path_candidates,
 )
+from locbench.datasets.recorded.tum import TUM_COLUMNS, atomic_write_text, write_tum
 from locbench.errors import ConfigError
 from locbench.events import (
     UNKNOWN_ID,
@@ -582,8 +583,6 @@ def read_events(path: str | os.PathLike[str], landmark_ids: frozenset[int] | Non
 
 def read_truth(path: Path) -> Trajectory2D:
     """A TUM trajectory as the ground truth: times non-decreasing, positions within bounds, planar unit rotations."""
-    from locbench.export import TUM_COLUMNS
-
     check_input_file(path, "TUM truth file", MAX_TABLE_FILE_BYTES)
     table = read_table(path, TUM_COLUMNS)
     table.check_rows("pose", 1)
@@ -934,7 +933,6 @@ def write_textlog(ds: Dataset, folder: str | os.PathLike[str], source: str = "",
         empty when the folder reads back as the same dataset.
     """
     from locbench.datasets.recorded.ros_map import save_map_server_map
-    from locbench.export import _atomic_write_text, write_tum
 
     out = Path(folder)
     if out.exists() and not out.is_dir():
@@ -946,7 +944,7 @@ def write_textlog(ds: Dataset, folder: str | os.PathLike[str], source: str = "",
     manifest: dict[str, Any] = {"format": FORMAT, "version": VERSION, "source": source}
     manifest.update(DEFAULT_FILES)
     lines = [json.dumps(_event_object(e), allow_nan=False, separators=(",", ":")) for e in ds.events]
-    _atomic_write_text(out / DEFAULT_FILES["events"], "\n".join(lines) + "\n")
+    atomic_write_text(out / DEFAULT_FILES["events"], "\n".join(lines) + "\n")
     gt = ds.ground_truth
     write_tum(out / DEFAULT_FILES["truth"], gt.t, gt.poses, f"locbench {ds.truth_label}: {source}", keep_all=True)
     w = ds.world
@@ -961,19 +959,19 @@ def write_textlog(ds: Dataset, folder: str | os.PathLike[str], source: str = "",
         lm = w.landmarks
         rows = np.column_stack([lm.ids, lm.xy] + ([lm.std_xy] if lm.std_xy is not None else []))
         head = "id x y" + (" std_x std_y" if lm.std_xy is not None else "") + " (m)"
-        _atomic_write_text(out / "landmarks.txt", _table_text(head, rows, ints=1))
+        atomic_write_text(out / "landmarks.txt", _table_text(head, rows, ints=1))
         manifest["landmarks"] = "landmarks.txt"
     if w.lines is not None and len(w.lines):
-        _atomic_write_text(out / "lines.txt", _table_text("x1 y1 x2 y2 (m)", w.lines.segments))
+        atomic_write_text(out / "lines.txt", _table_text("x1 y1 x2 y2 (m)", w.lines.segments))
         manifest["lines"] = "lines.txt"
     if ds.waypoints is not None and len(ds.waypoints):
         wp = ds.waypoints
-        _atomic_write_text(out / "waypoints.txt", _table_text("t (s) x y (m)", np.column_stack([wp.t, wp.xy])))
+        atomic_write_text(out / "waypoints.txt", _table_text("t (s) x y (m)", np.column_stack([wp.t, wp.xy])))
         manifest["waypoints"] = "waypoints.txt"
     if ds.relations is not None and len(ds.relations):
         r = ds.relations
         rows = np.column_stack([r.t1, r.t2, r.delta])
-        _atomic_write_text(out / "relations.txt", _table_text("t1 t2 (s) dx dy (m) dtheta (rad)", rows))
+        atomic_write_text(out / "relations.txt", _table_text("t1 t2 (s) dx dy (m) dtheta (rad)", rows))
         manifest["relations"] = "relations.txt"
     manifest["sensors"] = {k: float(v) for k in _SENSOR_FIELDS if (v := getattr(ds.sensors, k)) is not None}
     manifest["initial"] = {"mean": ds.initial.mean.tolist(), "cov": ds.initial.cov.tolist()}
@@ -983,5 +981,5 @@ def write_textlog(ds: Dataset, folder: str | os.PathLike[str], source: str = "",
     if ds.kidnaps:
         manifest["kidnaps"] = [{"t": k.t, "delta": [float(v) for v in k.delta]} for k in ds.kidnaps]
     manifest["metadata"] = _json_safe({k: v for k, v in ds.metadata.items() if k not in ("source", "format")})
-    _atomic_write_text(out / MANIFEST, json.dumps(manifest, indent=1, allow_nan=False) + "\n")
+    atomic_write_text(out / MANIFEST, json.dumps(manifest, indent=1, allow_nan=False) + "\n")
     return notes

@@ -1,0 +1,242 @@
+"""One experiment's section, a user's own dataset's section, and the figures of one dataset name: trajectories with
+the map, position error over time, waypoint RMSE, NEES, particle count."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from locbench.aggregate import mean_over_runs, waypoint_stats
+from locbench.experiments import Experiment, sections_for
+from locbench.metrics import CONFIDENCE, POSE_DOF, chi2_band, estimate_at
+from locbench.report import figures as fg
+from locbench.report import tables as tb
+from locbench.report.doc import Plot, Section, Table, Text
+from locbench.report.names import slug
+from locbench.report.plotly import _plotly_tracks
+
+if TYPE_CHECKING:
+    from locbench.report.build import Report
+
+#: Most panels of one trajectory figure.
+MAX_TRACK_PANELS = 12
+#: Ellipses drawn along each track.
+ELLIPSES_PER_TRACK = 10
+#: Most series of the error-over-time figure before it shows the default configurations only.
+MAX_ERROR_SERIES = 8
+
+
+def experiment_section(rep: Report, e: Experiment) -> Section:
+    sec = Section(e.title, f"exp-{slug(e.dataset)}")
+    text = e.text + (f" Source: {e.source.citation}." if e.source else "")
+    sec.add(Text(text))
+    base = e.dataset
+    if not e.fold_variants and base in rep.col.datasets:
+        sec.add(*dataset_blocks(rep, base))
+    # with the bound's rows: an experiment's own tables show the accuracy limit too
+    rows = rep.df[rep.df["dataset"].isin(rep.variants_of(e.dataset))]
+    for fn in sections_for(e.dataset):
+        sec.add(*fn(rows, slug(e.dataset)))
+    return sec
+
+
+def own_section(rep: Report, dataset: str) -> Section:
+    """A user's own dataset (no built-in suite runs it): every table and figure that applies, as for a main
+    comparison; its summary table and accuracy-runtime figure are in those sections."""
+    shown = rep.col.display(dataset)
+    sec = Section(rep.own_title(dataset), f"own-{slug(dataset)}")
+    truth = next((tr for (d, _), tr in sorted(rep.col.truths.items()) if d == dataset), None)
+    label = truth.truth_label if truth is not None else "reference"
+    sec.add(
+        Text(
+            f"Every filter configuration stored on `{shown}`, scored against its {label} as the built-in worlds "
+            "are; the summary table above gives each configuration's needs and, for those skipped, the reason."
+        ),
+        *dataset_blocks(rep, dataset),
+    )
+    return sec
+
+
+def dataset_blocks(rep: Report, dataset: str) -> list[Table | Plot]:
+    """The comparison and waypoint tables and the figures of one dataset name (those that apply)."""
+    filters = rep.filters_on(dataset)
+    bounds = rep.bounds_on(dataset)
+    out: list[Table | Plot] = []
+    shown = rep.col.display(dataset)
+    if filters:
+        caption = f"`{shown}`: mean ± 95 % interval over seeds"
+        out.append(tb.comparison_table(rep.rows(dataset), filters, caption, bounds, rep.eligible(filters)))
+    wt = tb.waypoint_table(rep.rows(dataset), filters + bounds, f"`{shown}`: RMSE at each waypoint over runs (cm)")
+    if wt is not None:
+        out.append(wt)
+    plots = (
+        trajectory_plot(rep, dataset),
+        error_plot(rep, dataset),
+        waypoint_plot(rep, dataset),
+        nees_plot(rep, dataset),
+        count_plot(rep, dataset),
+    )
+    out += [p for p in plots if p is not None]
+    return out
+
+
+def error_plot(rep: Report, dataset: str) -> Plot | None:
+    """Each configuration's position error over time on the first seed (log scale); on a dataset with more than
+    :data:`MAX_ERROR_SERIES` configurations, the default ones only (the sweeps are in the tables)."""
+    keys = sorted(k for k in rep.col.ok_dirs if k[0] == dataset and not rep.col.is_global(k[1]))
+    if not keys:
+        return None
+    seed = keys[0][2]
+    names = rep.col.filter_order({k[1] for k in keys if k[2] == seed})
+    if len(names) > MAX_ERROR_SERIES:
+        names = [f for f in names if not rep.col.filters[f].spec.params]
+    truth = rep.col.truths[(dataset, seed)]
+    gt = truth.ground_truth
+    series: list[tuple[str, np.ndarray]] = []
+    for f in names:
+        run = rep.col.read_run(dataset, f, seed)
+        est = estimate_at(run.t, run.mean, gt.t)[:, :2]
+        series.append((f, np.linalg.norm(est - gt.xy, axis=1) * 100.0))
+    if not series:
+        return None
+    styles = rep.styles_for([f for f, _ in series])
+    title = f"seed {seed}: position error over time (log scale)"
+    caption = f"`{rep.col.display(dataset)}`, {title}, against the {truth.truth_label}"
+    t = gt.t - gt.t[0]
+
+    def draw(fig: Figure) -> None:
+        ax = fig.add_subplot()
+        for f, err in series:
+            st = styles[f]
+            ok = np.isfinite(err) & (err > 0)
+            ax.plot(t[ok], err[ok], color=st.color, ls=st.linestyle, lw=0.9, label=f)
+        ax.set_yscale("log")
+        fg.finish(ax, "t from the start (s)", "position error (cm)", title)
+
+    return Plot(f"{slug(dataset)}_errors", caption, draw, size=(7.5, 4.2))
+
+
+def trajectory_plot(rep: Report, dataset: str) -> Plot | None:
+    keys = [k for k in rep.col.ok_dirs if k[0] == dataset and not rep.col.is_global(k[1])]
+    if not keys:
+        return None
+    seed = min(k[2] for k in keys)
+    truth = rep.col.truths[(dataset, seed)]
+    filters = rep.col.filter_order({k[1] for k in keys if k[2] == seed})
+    shown = filters[:MAX_TRACK_PANELS]
+    gt = truth.ground_truth
+    world = fg.World(
+        truth.map_segments,
+        truth.map_landmarks,
+        gt.xy,
+        truth.truth_label,
+        truth.waypoints.xy if truth.waypoints is not None else np.zeros((0, 2)),
+    )
+    t_marks = np.linspace(gt.t[0], gt.t[-1], ELLIPSES_PER_TRACK + 2)[1:-1]
+    tracks = []
+    for f in shown:
+        run = rep.col.read_run(dataset, f, seed)
+        tracks.append(
+            fg.Track(
+                f,
+                run.mean[:, :2],
+                estimate_at(run.t, run.mean, t_marks)[:, :2],
+                estimate_at(run.t, run.cov, t_marks)[:, :2, :2],
+            )
+        )
+    styles = rep.styles_for(shown)
+    nrows = int(np.ceil(len(tracks) / 3))
+    more = len(filters) - len(shown)
+    caption = (
+        f"`{dataset}`, seed {seed}: each filter's estimate (colour) with 95 % position ellipses, the "
+        f"{truth.truth_label} (black), the map (grey) and the waypoints (x)"
+        + (f"; {more} more configurations are in the appendix tables" if more > 0 else "")
+    )
+
+    def draw(fig: Figure) -> None:
+        fg.draw_trajectories(fig, world, tracks, styles)
+
+    (x0, x1), (y0, y1) = fg.world_limits(world)
+    aspect = (y1 - y0) / max(x1 - x0, 1e-9)
+    panel_w = 3.4
+    size = (panel_w * min(3, len(tracks)), max(1.6, panel_w * aspect * 0.95 + 0.35) * nrows)
+    return Plot(
+        f"{slug(dataset)}_trajectories",
+        caption,
+        draw,
+        size=size,
+        interactive=_plotly_tracks(dataset, world, tracks, styles),
+    )
+
+
+def count_plot(rep: Report, dataset: str) -> Plot | None:
+    """The particle count over time of the filters whose count adapts (KLD sampling), first seed."""
+    keys = sorted(k for k in rep.col.ok_dirs if k[0] == dataset and not rep.col.is_global(k[1]))
+    if not keys or not (rep.rows(dataset)["metric"] == "particles_mean").any():
+        return None
+    seed = keys[0][2]
+    series: list[tuple[str, np.ndarray, np.ndarray]] = []
+    for f in rep.filters_on(dataset):
+        sub = rep.rows(dataset)
+        if (dataset, f, seed) not in rep.col.ok_dirs or not len(tb.values(sub[sub["filter"] == f], "particles_mean")):
+            continue
+        run = rep.col.read_run(dataset, f, seed)
+        count = run.diagnostics.get("particles")
+        if count is None or not np.isfinite(count).any():
+            continue
+        ok = np.isfinite(count)
+        if np.nanmax(count) > np.nanmin(count):
+            series.append((f, run.t[ok], count[ok]))
+    if not series:
+        return None
+    styles = rep.styles_for([f for f, _, _ in series])
+    title = f"{dataset}, seed {seed}: particle count after each step (adaptive filters)"
+
+    def draw(fig: Figure) -> None:
+        ax = fig.add_subplot()
+        for f, t, c in series:
+            st = styles[f]
+            ax.step(t, c, where="post", color=st.color, ls=st.linestyle, lw=0.9, label=f)
+        ax.set_yscale("log")
+        fg.finish(ax, "t (s)", "particles", title)
+
+    return Plot(f"{slug(dataset)}_particle_count", title, draw)
+
+
+def waypoint_plot(rep: Report, dataset: str) -> Plot | None:
+    ws = waypoint_stats(rep.rows(dataset))
+    if not len(ws):
+        return None
+    names = rep.filters_on(dataset) + rep.bounds_on(dataset)
+    labels = [f for f in names if (ws["filter"] == f).any()]
+    series = [
+        ws[ws["filter"] == f].sort_values("waypoint")["rmse_m"].to_numpy(dtype=np.float64) * 100.0 for f in labels
+    ]
+    styles = rep.bound_styles(labels)
+    title = f"{dataset}: waypoint RMSE over runs (log scale; black: the bound)"
+
+    def draw(fig: Figure) -> None:
+        fg.draw_waypoint_rmse(fig.add_subplot(), labels, series, styles, title)
+
+    return Plot(f"{slug(dataset)}_waypoint_rmse", title, draw)
+
+
+def nees_plot(rep: Report, dataset: str) -> Plot | None:
+    entries = sorted((f, s) for (d, f), s in rep.col.nees.items() if d == dataset and not rep.col.is_global(f))
+    if not entries:
+        return None
+    seed = min(k[2] for k in rep.col.ok_dirs if k[0] == dataset)
+    grid = rep.col.truths[(dataset, seed)].ground_truth.t
+    order = rep.col.filter_order({f for f, _ in entries})
+    by = dict(entries)
+    series = [fg.NeesSeries(f, mean_over_runs(grid, by[f])[0], len(by[f])) for f in order]
+    bands = {n: chi2_band(POSE_DOF, n, CONFIDENCE) for n in sorted({s.runs for s in series})}
+    styles = rep.styles_for(order)
+    title = f"{dataset}: mean NEES over runs (pose, heading wrapped; runs from a uniform prior left out)"
+
+    def draw(fig: Figure) -> None:
+        fg.draw_nees(fig.add_subplot(), grid, series, bands, styles, title)
+
+    return Plot(f"{slug(dataset)}_nees", title, draw, size=(7.5, 4.2))
