@@ -3,7 +3,7 @@
 locbench list [FILTER|DATASET ...]
 locbench run [--suite NAME|FILE.toml | --filter SPEC ... --dataset SPEC ...]
              [--seeds N] [--results DIR] [--jobs N] [--executor local|dask [--scheduler ADDRESS]] [--force]
-             [--connect-timeout S] [--max-configs N] [--max-seeds N]
+             [--connect-timeout S] [--max-configs N] [--max-seeds N] [--interleave [S]]
 locbench tune FILTER --dataset SPEC [SPEC ...] --trials N --seeds K [--results DIR] [--objective ate|nll]
               [--jobs N] [--executor local|dask [--scheduler ADDRESS]]
 locbench report [--results DIR] [--suite NAME ...] [--out DIR] [--jobs N]
@@ -30,6 +30,11 @@ from locbench import __version__
 from locbench.errors import ConfigError, LocbenchError, one_line
 from locbench.spec import MAX_CONFIGS
 from locbench.suites import MAX_SEEDS
+
+#: ``locbench run --interleave`` without a value: seconds of data each filter of a task runs before the next
+#: (:attr:`locbench.runner.Task.slice_s`); and the longest slice accepted.
+INTERLEAVE_SLICE_S = 5.0
+MAX_INTERLEAVE_S = 3600.0
 
 #: The suite that tunes (``locbench run --suite tuned``), run by :mod:`locbench.tuning`, not as blocks of runs.
 TUNED_SUITE = "tuned"
@@ -124,6 +129,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--connect-timeout must be in (0, {MAX_CONNECT_TIMEOUT_S:g}] s, got {args.connect_timeout}")
     if args.scheduler is not None and args.executor != "dask":
         raise ConfigError("--scheduler needs --executor dask")
+    if not (0 <= args.interleave <= MAX_INTERLEAVE_S):
+        raise ConfigError(f"--interleave must be in [0, {MAX_INTERLEAVE_S:g}] s of data, got {args.interleave}")
     scheduler = check_scheduler_address(args.scheduler) if args.scheduler is not None else None
     limits = {"max_configs": args.max_configs, "max_seeds": args.max_seeds}
     if args.filter or args.dataset:
@@ -141,7 +148,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     rc = 0
     if blocks or not tuned:
         # every spec is resolved and validated here, before anything runs or is written
-        plan = plan_sweep([(b.filters, b.datasets, range(b.seeds)) for b in blocks], args.results, args.force)
+        specs = [(b.filters, b.datasets, range(b.seeds)) for b in blocks]
+        plan = plan_sweep(specs, args.results, args.force, slice_s=args.interleave)
         Store(args.results).claim()  # refuses another tool's folder before anything is written or cleaned in it
         bar = tqdm(total=plan.total, unit="run", desc="locbench run", disable=True if args.no_progress else None)
         with bar:
@@ -249,7 +257,9 @@ def _cmd_verify(args: argparse.Namespace) -> int:
         raise ConfigError(f"{store.runs}: no stored runs; run 'locbench run' first")
     if not 0.0 < args.fraction <= 1.0:
         raise ConfigError(f"--fraction: expected a share of the runs in (0, 1], got {args.fraction}")
-    res = verify(store, args.fraction, args.seed)
+    if not 1 <= args.jobs <= MAX_JOBS:
+        raise ConfigError(f"--jobs: expected 1-{MAX_JOBS} processes, got {args.jobs}")
+    res = verify(store, args.fraction, args.seed, jobs=args.jobs)
     record = write_record(store, res)
     for run, why in res.differ:
         print(f"differs: {run.label()}: {why}")
@@ -382,6 +392,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    # long: one argparse declaration per subcommand and option, read top to bottom as the CLI's reference
     p = argparse.ArgumentParser(prog="locbench", description="Comparative benchmark of 2-D localization filters.")
     p.add_argument("--version", action="version", version=f"locbench {__version__}")
     p.add_argument("-v", "--verbose", action="store_true", help="log progress details")
@@ -448,6 +459,16 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"most seeds a block may run (default {MAX_SEEDS})",
     )
     r.add_argument("--force", action="store_true", help="re-run runs that are already stored")
+    r.add_argument(
+        "--interleave",
+        type=float,
+        nargs="?",
+        const=INTERLEAVE_SLICE_S,
+        default=0.0,
+        metavar="S",
+        help="interleaved timing: the filters of each (dataset, seed) take turns over S s of data "
+        f"(default {INTERLEAVE_SLICE_S:g}), so a busy moment slows them alike; the same estimates, more memory",
+    )
     r.add_argument("--no-progress", action="store_true", help="no progress bar")
     r.set_defaults(func=_cmd_run)
 
@@ -472,6 +493,7 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--results", default=_results_default(), help="results folder (default: results/)")
     v.add_argument("--fraction", type=float, default=0.02, help="share of the stored runs to re-run (default 0.02)")
     v.add_argument("--seed", type=int, default=0, help="seed of the random sample (default 0)")
+    v.add_argument("--jobs", type=int, default=1, help="worker processes that re-run the sample (default 1)")
     v.set_defaults(func=_cmd_verify)
     tu = sub.add_parser(
         "tune",

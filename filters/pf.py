@@ -1058,6 +1058,7 @@ class ParticleFilter(Filter):
             When neither a landmark map (for ``use_landmarks``) nor an occupancy grid (for ``use_laser``)
             is present.
         """
+        # long: reset resolves every noise model and map the config allows in one place, so a missing input is one error
         cfg = self.config
         self._rng = rng
         # the generator's addresses for the kernels' draws (from the same state; see _numba_rng)

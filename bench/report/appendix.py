@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 import locbench
 from locbench.report import significance as sig
 from locbench.report import tables as tb
+from locbench.report import timing as tm
 from locbench.report.doc import Bullets, Section, Table, Text
 from locbench.report.names import seed_ranges
 
@@ -95,6 +96,7 @@ def provenance_section(rep: Report) -> Section:
         "runs: "
         + ", ".join(f"{counts[s]} {s}" for s in ("ok", "diverged", "error", "skipped") if counts[s])
         + (f", {len(rep.col.broken)} unreadable" if rep.col.broken else ""),
+        tm.machine_line(rep.col.metas),
         *([sig.verify_line(rep.col.store)] if rep.col.store is not None else []),
     )
     return Section("Provenance", "provenance", [Bullets(items)])

@@ -34,6 +34,7 @@ from locbench.report import runtime as rt
 from locbench.report import significance as sig
 from locbench.report import summary as sm
 from locbench.report import tables as tb
+from locbench.report import timing as tm
 from locbench.report.collect import Collected
 from locbench.report.doc import Section, Table, Text
 from locbench.report.names import NAN, seed_ranges, slug
@@ -54,6 +55,8 @@ class Report:
         self.filter_df = self.df[~self.df["filter"].isin(BOUND_ROWS)] if len(self.df) else self.df
         self.by_ds: dict[str, pd.DataFrame] = {str(d): g for d, g in self.df.groupby("dataset")} if len(self.df) else {}
         self.exps = [e for e in experiments() if self.has(e.dataset)]
+        # one x axis for every accuracy-runtime figure: reference units where every run has them
+        self.pareto_x = tm.pareto_x(self.df)
 
     @cached_property
     def comparisons(self) -> list[sig.ComparisonRecord]:

@@ -9,7 +9,7 @@ from locbench.report import figures as fg
 from locbench.report.style import LineStyle
 
 
-def _plotly_pareto(title: str, panels: list[tuple[str, str, list[fg.ParetoPoint]]]) -> dict:
+def _plotly_pareto(title: str, panels: list[tuple[str, str, list[fg.ParetoPoint]]], xlabel: str) -> dict:
     _, _, pts = panels[0]
     traces = []
     for g in sorted({p.group for p in pts}):
@@ -22,14 +22,14 @@ def _plotly_pareto(title: str, panels: list[tuple[str, str, list[fg.ParetoPoint]
                 "x": [p.x for p in sel],
                 "y": [p.y for p in sel],
                 "text": [p.label for p in sel],
-                "hovertemplate": "%{text}<br>real-time factor %{x:.3g}<br>ATE %{y:.3g} cm<extra></extra>",
+                "hovertemplate": f"%{{text}}<br>{xlabel} %{{x:.3g}}<br>ATE %{{y:.3g}} cm<extra></extra>",
             }
         )
     return {
         "data": traces,
         "layout": {
             "title": {"text": f"{title}: ATE against real-time factor"},
-            "xaxis": {"type": "log", "title": {"text": "real-time factor (x)"}},
+            "xaxis": {"type": "log", "title": {"text": xlabel}},
             "yaxis": {"type": "log", "title": {"text": "ATE (cm)"}},
             "height": 460,
         },

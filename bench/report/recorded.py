@@ -10,6 +10,7 @@ import numpy as np
 from locbench.metric_info import METRICS
 from locbench.report import significance as sig
 from locbench.report import tables as tb
+from locbench.report import timing as tm
 from locbench.report.doc import Section, Table, Text
 from locbench.report.names import NAN, slug
 from locbench.report.reference import KINDS, kind_caption, robustness_table
@@ -41,6 +42,10 @@ def recorded_section(rep: Report) -> Section:
             return "failed", NAN
         return "-", NAN
 
+    def with_ref(c: tuple[str, float], f: str, ds: str) -> tuple[str, float]:
+        sub = rep.rows(ds)
+        return tm.with_ref(c[0], sub[sub["filter"] == f], "realtime_factor") if np.isfinite(c[1]) else c[0], c[1]
+
     groups = [(k, [d for d in names if rep.reference_kind(d) == k]) for k in KINDS]
     sec.add(
         Text(
@@ -61,7 +66,7 @@ def recorded_section(rep: Report) -> Section:
         head = ("filter", *(rep.recorded_header(d) for d in group))
         fs = [f for f in filters if any((f, d) in status for d in group)]
         acc = [[cell(f, d, rep.recorded_metric(d)) for d in group] for f in fs]
-        rtf = [[cell(f, d, "realtime_factor") for d in group] for f in fs]
+        rtf = [[with_ref(cell(f, d, "realtime_factor"), f, d) for d in group] for f in fs]
         metrics_text = "; ".join(f"`{rep.col.display(d)}` {tb.header(rep.recorded_metric(d))}" for d in group)
         sub = Section(f"Reference: {kind}", f"recorded-{slug(kind)}")
         sub.add(Text(f"Accuracy: {metrics_text}; {kind_caption(kind)}."))
@@ -75,7 +80,7 @@ def recorded_section(rep: Report) -> Section:
                     head,
                     tuple(tuple(r) for r in cells),
                     caption=f"{what}; {kind_caption(kind)}",
-                    footnotes=(note,),
+                    footnotes=(note, *tm.ref_footnote(cells)),
                     sort_keys=tuple((NAN, *(c[1] for c in r)) for r in grid),
                     hovers=hover,
                 )

@@ -11,6 +11,7 @@ from matplotlib.figure import Figure
 from locbench.metric_info import METRICS
 from locbench.report import figures as fg
 from locbench.report import tables as tb
+from locbench.report import timing as tm
 from locbench.report.doc import Plot, Section, Text
 from locbench.report.names import slug
 from locbench.report.plotly import _plotly_pareto
@@ -24,7 +25,7 @@ def pareto_points(rep: Report, dataset: str, metric: str) -> list[fg.ParetoPoint
     pts = []
     for f in rep.filters_on(dataset):
         sub = df[df["filter"] == f]
-        x, y = tb.mean_of(sub, "realtime_factor"), tb.mean_of(sub, metric) * METRICS[metric].scale
+        x, y = tb.mean_of(sub, rep.pareto_x), tb.mean_of(sub, metric) * METRICS[metric].scale
         if np.isfinite(x) and np.isfinite(y) and x > 0 and y > 0:
             pts.append(fg.ParetoPoint(f, rep.col.filters[f].spec.ident, x, y))
     return pts
@@ -35,7 +36,15 @@ def pareto_section(rep: Report) -> Section:
     sec.add(
         Text(
             "Each marker is one filter configuration (mean over seeds): x is the real-time factor (dataset "
-            "duration over compute time, higher is faster), y the ATE (lower is better), both logarithmic. "
+            "duration over compute time, higher is faster)"
+            + (
+                " in reference units (times the time of a fixed reference workload on the same machine under "
+                "the same load: the real-time factor on a machine whose reference workload takes 1 s, so that "
+                "sweeps on other machines or loads compare)"
+                if rep.pareto_x == tm.PARETO_X
+                else ""
+            )
+            + ", y the ATE (lower is better), both logarithmic. "
             "A line joins each filter's own non-dominated configurations (a parameter sweep draws its "
             "curve); the dotted step is the front over all of them. Runs started without a pose are left out."
         )
@@ -76,7 +85,7 @@ def pareto_plot(rep: Report, name: str, title: str, panels: list[tuple[str, str,
                 ax.set_axis_off()
                 continue
             label, ylabel, pts = panels[k]
-            fg.draw_pareto(ax, pts, styles, "real-time factor (x)", ylabel, label)
+            fg.draw_pareto(ax, pts, styles, tm.pareto_xlabel(rep.pareto_x), ylabel, label)
             if n > 1:
                 leg = ax.get_legend()
                 if leg is not None:
@@ -84,6 +93,6 @@ def pareto_plot(rep: Report, name: str, title: str, panels: list[tuple[str, str,
                 ax.legend(fontsize=5.5, loc="best")
 
     size = (7.0, 4.2) if len(panels) == 1 else (11.0, 3.2 * int(np.ceil(len(panels) / 3)))
-    interactive = _plotly_pareto(title, panels) if len(panels) == 1 else None
+    interactive = _plotly_pareto(title, panels, tm.pareto_xlabel(rep.pareto_x)) if len(panels) == 1 else None
     what = "accuracy" if len(panels) > 1 else "ATE"
     return Plot(name, f"{title}: {what} against real-time factor", draw, size=size, interactive=interactive)

@@ -331,6 +331,7 @@ def across_datasets(report: Report) -> Section:
 
 
 def _group_section(report: Report, gi: int, configs: Sequence[str], datasets: Sequence[str]) -> Section:
+    # long: one across-datasets section: rank tables, both CD diagrams and the skill table share its data
     col = report.col
     configs = col.filter_order(configs)
     baseline = next((f for f in configs if col.is_baseline(f)), None)

@@ -30,6 +30,7 @@ from locbench.pcrb import BOUND_ALL
 from locbench.report import health as hl
 from locbench.report import significance as sig
 from locbench.report import tables as tb
+from locbench.report import timing as tm
 from locbench.report.doc import Block, Section, Table, Text
 from locbench.report.names import KIDNAP_PARAM, NAN, slug
 from locbench.report.reference import INDEPENDENT_KINDS
@@ -220,6 +221,17 @@ def _mean(metric: str, scale: float | None = None, dash: bool = False) -> Callab
     return cell
 
 
+def _mean_and_ref(metric: str, dash: bool = False) -> Callable[[Context, Row], tuple[str, float]]:
+    """:func:`_mean` followed by ``(ref X)``, the same in reference units (:func:`locbench.report.timing.with_ref`)."""
+    raw = _mean(metric, 1.0, dash=dash)
+
+    def cell(ctx: Context, row: Row) -> tuple[str, float]:
+        text, x = raw(ctx, row)
+        return (tm.with_ref(text, row.sub, metric) if np.isfinite(x) else text), x
+
+    return cell
+
+
 def _per_run(metric: str) -> Callable[[Context, Sequence[Row]], list[PerRun]]:
     return lambda ctx, rows: rk.samples_for(ctx.df, [r.name for r in rows], metric)
 
@@ -376,12 +388,16 @@ COLUMNS: tuple[SummaryColumn, ...] = (
     SummaryColumn(_lost_header, _lost, "lost_auroc", lambda ctx, rows: [None] * len(rows), note=_lost_note),
     SummaryColumn(
         _fixed("update median (us)"),
-        _mean("update_us_median", 1.0, dash=True),
+        _mean_and_ref("update_us_median", dash=True),
         "update_us_median",
         _per_run("update_us_median"),
     ),
     SummaryColumn(
-        _fixed("real-time factor (x)"), _mean("realtime_factor", 1.0), "realtime_factor", _per_run("realtime_factor")
+        _fixed("real-time factor (x)"),
+        _mean_and_ref("realtime_factor"),
+        "realtime_factor",
+        _per_run("realtime_factor"),
+        note=lambda ctx, cells: " ".join(tm.ref_footnote([list(cells)])),
     ),
     SummaryColumn(
         _fixed(f"kidnap recovery at {SUMMARY_KIDNAP_M:g} m (%)"),

@@ -136,7 +136,9 @@ COMPARISON = (
     "anees",
     "nees_in_band_fraction",
     "update_us_median",
+    "update_us_median_ref",
     "realtime_factor",
+    "realtime_factor_ref",
     "particles_mean",
 )
 

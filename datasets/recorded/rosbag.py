@@ -444,6 +444,7 @@ def _read_streams_cached(
     stamps: str,
     fix_topic: str = "",
 ) -> BagStreams:
+    # long: one pass over the bag's messages: every topic's decoder shares the reader and the error context
     del signature  # part of the cache key only
     try:
         from rosbags.highlevel import AnyReader
@@ -780,6 +781,7 @@ def _odometry_events(
 
 def build_rosbag_dataset(params: RosbagParams) -> Dataset:
     """The dataset of ``params`` (what :class:`RosbagDataset` builds)."""
+    # long: the bag's streams, sidecars, map and checks assembled in the order their errors should be reported
     bag = resolve_bag_path(params.path)
     streams = read_bag_streams(
         bag, params.odom_topic, params.scan_topic, params.truth_topic, params.stamps, params.fix_topic
