@@ -31,7 +31,7 @@ from locbench.datasets.base import Dataset
 from locbench.divergence import left_world, world_box
 from locbench.errors import DataNotFound, FilterDiverged
 from locbench.events import EVENT_TYPES, Odometry
-from locbench.filters.base import Filter
+from locbench.filters.base import GAUSSIAN_HEALTH_NAMES, Filter, gaussian_health_rows
 from locbench.registry import DATASETS, FILTERS, Resolved, build_dataset, resolve_dataset, resolve_filter
 from locbench.runkey import key_params, source_digest
 from locbench.seeding import belief_rng, filter_rng
@@ -143,6 +143,12 @@ def run_filter(
     step_ns = np.zeros(n_max, dtype=np.int64)
     diags: dict[str, np.ndarray] = {}
     health: dict[str, np.ndarray] = {}
+    # The first row of every diagnostic and health signal, and of both counts at once: the Gaussian health of a
+    # filter keeping Filter.health is computed after the run from the stored rows (_gaussian_health_after),
+    # in the order the per-event calls would have reported it.
+    first: dict[str, int] = {}
+    deferred = type(flt).health is Filter.health
+    per_event_health = flt.event_health if deferred else flt.health
     scorer = _BeliefScorer(flt, ds, sample_rng)
     status, message, diverged_t = "ok", "", None
     row = 0
@@ -153,15 +159,20 @@ def run_filter(
         t[row], kind[row], step_ns[row] = tt, k, ns
         mean[row] = est.mean
         cov[row] = est.cov
-        for name, value in est.diagnostics.items():
+        d = est.diagnostics
+        for name, value in d.items():
             arr = diags.get(name)
             if arr is None:
                 arr = diags[name] = np.full(n_max, np.nan)
+                first[name] = row
             arr[row] = value
-        for name, value in flt.health().items():
+        if _BOTH_COUNTS not in first and "accepted" in d and "rejected" in d:
+            first[_BOTH_COUNTS] = row
+        for name, value in per_event_health().items():
             arr = health.get(name)
             if arr is None:
                 arr = health[name] = np.full(n_max, np.nan)
+                first[" " + name] = row
             arr[row] = value
         row += 1
 
@@ -198,6 +209,8 @@ def run_filter(
         tb = traceback.extract_tb(exc.__traceback__)
         where = f" ({tb[-1].filename.rsplit('/', 1)[-1]}:{tb[-1].lineno})" if tb else ""
         message = f"{type(exc).__name__}: {exc}{where}"
+    if deferred:
+        health = _gaussian_health_after(flt, cov[:row], {k: v[:row] for k, v in diags.items()}, health, first)
     extra: dict[str, np.ndarray] = {}
     if status == "ok":
         try:
@@ -218,6 +231,33 @@ def run_filter(
         extra,
         {k: v[:row] for k, v in health.items()},
     )
+
+
+_BOTH_COUNTS = " accepted+rejected"  # run_filter's key of the first row with both counts (no name has a space)
+
+
+def _gaussian_health_after(
+    flt: Filter,
+    cov: np.ndarray,
+    diags: dict[str, np.ndarray],
+    event: dict[str, np.ndarray],
+    first: dict[str, int],
+) -> dict[str, np.ndarray]:
+    """The health of a filter keeping :meth:`Filter.health`: its Gaussian signals from the run's rows
+    (:func:`gaussian_health_rows`, equal bit for bit to the per-event values) with the per-event
+    :meth:`Filter.event_health` arrays ``event`` (n_max rows, ``first`` the row each appeared in), every name in
+    the order of its first report: by row, the Gaussian ones first as :meth:`Filter.health` merges them."""
+    n = cov.shape[0]
+    gauss = gaussian_health_rows(cov, diags, flt.health_nis_dof) if n else {}
+    starts = {"cov_trace_xy_m2": 0, "heading_var_rad2": 0}
+    if "nis" in first:
+        starts |= {"nis": first["nis"], "nis_p": first["nis"]}
+    if _BOTH_COUNTS in first:
+        starts["accepted_fraction"] = first[_BOTH_COUNTS]
+    order = [(starts[k], 0, i, k) for i, k in enumerate(GAUSSIAN_HEALTH_NAMES) if k in gauss and k in starts]
+    order += [(first[" " + k], 1, i, k) for i, k in enumerate(event)]
+    arrays = gauss | {k: v[:n] for k, v in event.items()}
+    return {k: arrays[k] for *_, k in sorted(order)}
 
 
 def run_key(fr: Resolved, dr: Resolved, seed: int) -> str:
