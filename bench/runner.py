@@ -18,6 +18,7 @@ its task, by :func:`failed_result`; and the sweep goes on.
 from __future__ import annotations
 
 import logging
+import math
 import time
 import traceback
 from collections.abc import Callable, Sequence
@@ -196,11 +197,12 @@ def run_filter(
                 flt.update(ev)  # type: ignore[arg-type]
                 ns = clock() - start
             record(ev.t, _KIND_OF[typ], ns)
-            m, c = mean[row - 1], cov[row - 1]
-            if not (np.all(np.isfinite(m)) and np.all(np.isfinite(c))):
+            # scalar tests on the row's 12 floats: np.all(np.isfinite(.)) twice cost 8 us per event, these 1 us
+            m, c = mean[row - 1].tolist(), cov[row - 1].ravel().tolist()
+            if not (all(map(math.isfinite, m)) and all(map(math.isfinite, c))):
                 raise FilterDiverged(f"non-finite estimate at t={ev.t:.3f} s")
             if not box.contains(m[0], m[1]):
-                raise FilterDiverged(f"{left_world(m, box)} at t={ev.t:.3f} s")
+                raise FilterDiverged(f"{left_world(mean[row - 1], box)} at t={ev.t:.3f} s")
     except FilterDiverged as exc:
         status, message = "diverged", str(exc)
         diverged_t = float(t[row - 1]) if row else float(t0)
