@@ -135,6 +135,8 @@ def run_filter(
     the filter's), a filter that exposes belief samples has them scored at every ground-truth time
     (:class:`_BeliefScorer`; the scores go into ``extra``).
     """
+    # Longer than 80 lines: the per-event loop and its row bookkeeping stay in one frame (record is a closure
+    # over the row buffers), since a further call per event is what this loop is kept free of.
     routed = flt.routed_events()
     n_max = 1 + sum(1 for e in ds.events if isinstance(e, Odometry) or type(e) in routed)
     t = np.full(n_max, np.nan)
