@@ -805,6 +805,7 @@ def run_metrics(
         ``run.extra`` ``smoothed_ate_m`` and ``smoothed_heading_rmse_rad``; with reference relations in the
         truth ``relation_error_m``, ``relation_error_rad`` and ``relation_count``. Undefined values are left out.
     """
+    # long: the metrics table of one run: each metric family appended in the order of metrics.csv from one aligned view
     status = run.status
     if status == "skipped":
         return {}

@@ -437,6 +437,7 @@ def _march_pool(
     whose beam has ended takes the next beam at once. The step's selects replace the unpredictable branches of a
     scalar step; what is left of branching is one per ended beam.
     """
+    # long: a compiled kernel: the work-pool march's state (queue, plane cursors, hit flags) must stay in one frame
     rows = field.shape[0]
     cols = field.shape[1]
     flat = field.reshape(-1)
@@ -888,6 +889,7 @@ def cast_scan(
     ndarray, shape (B,) for one pose, (N, B) for several
         Ranges, m, as in :func:`cast_rays`.
     """
+    # long: the public ray caster's argument checks, sensor geometry and choice of kernel, with numpydoc
     scan = _SCAN_CACHE.get(grid)
     if (
         scan is not None
