@@ -56,7 +56,7 @@ from locbench.errors import LocbenchError
 from locbench.metrics import METRICS, mean_ci
 from locbench.pcrb import is_bound_row
 from locbench.report.doc import Block, Plot, Text
-from locbench.report.style import PALETTE
+from locbench.report.palette import Palette
 from locbench.significance import ALPHA, TestResult, mann_whitney, wilcoxon_paired
 from locbench.spec import build_params
 
@@ -422,8 +422,8 @@ def layout_section(df: pd.DataFrame, slug: str) -> list[Block]:
     def draw(fig: Figure) -> None:
         ax = fig.add_subplot()
         x = np.arange(len(LAYOUT_ORDER))
-        # black is the bound's (the palette's last colour)
-        colors = {f: "#000000" if is_bound_row(f) else PALETTE[i % (len(PALETTE) - 1)] for i, f in enumerate(filters)}
+        # one colour per filter id, as in every figure (the bound black)
+        colors = {f: st.color for f, st in Palette(filters).styles(filters).items()}
         markers = {"circle": "o", "star": "*", "pentagon": "p", "random": "s"}
         for f, p, means in series:
             ls = "--" if spec_id(f) == "odometry" else ":" if is_bound_row(f) else "-"

@@ -22,13 +22,15 @@ from locbench.metrics import CONFIDENCE, METRICS, POSE_DOF, chi2_band, estimate_
 from locbench.pcrb import BOUND_ROWS
 from locbench.report import figures as fg
 from locbench.report import health as hl
+from locbench.report import interactive as ia
 from locbench.report import significance as sig
 from locbench.report import tables as tb
 from locbench.report.collect import Collected
 from locbench.report.doc import Bullets, Plot, Section, Table, Text
+from locbench.report.palette import Palette, split_by_sweep
 from locbench.report.reference import INDEPENDENT_KINDS, KINDS, kind_caption, robustness_table, semi_synthetic
 from locbench.report.reference import reference_kind as _reference_kind
-from locbench.report.style import LineStyle, style_for
+from locbench.report.style import LINESTYLES, LineStyle
 from locbench.report.tuning import tuning_section
 from locbench.spec import Spec
 
@@ -39,8 +41,10 @@ KIDNAP_PARAM = "kidnap_m"
 MATCHED_PARAM = "matched"
 #: The kidnap distance whose recovery rate the summary table shows, m.
 SUMMARY_KIDNAP_M = 2.0
-#: Most panels of one trajectory figure.
+#: Most panels of one trajectory figure before it is split into defaults and one figure per sweep.
 MAX_TRACK_PANELS = 12
+#: Most series of one NEES or waypoint figure before it is split the same way.
+MAX_LINE_SERIES = 10
 #: Ellipses drawn along each track.
 ELLIPSES_PER_TRACK = 10
 NAN = float("nan")
@@ -64,10 +68,15 @@ class Report:
 
     # --- helpers ------------------------------------------------------------------------------------
 
-    @staticmethod
-    def styles_for(names: list[str]) -> dict[str, LineStyle]:
-        """Styles in a figure's own order, so no two of its series share colour, marker and dash."""
-        return {n: style_for(i) for i, n in enumerate(names)}
+    @cached_property
+    def palette(self) -> Palette:
+        """One style per configuration for every figure: a colour and marker per filter id, shades for sweeps."""
+        names = {r.filter for r in self.col.runs}
+        return Palette(names, self.col.filter_order(names))
+
+    def styles_for(self, names: list[str]) -> dict[str, LineStyle]:
+        """The palette's styles of a figure's series (the same in every figure)."""
+        return self.palette.styles(names)
 
     def _has(self, dataset_id: str) -> bool:
         return any(info.spec.ident == dataset_id for info in self.col.datasets.values())
@@ -99,6 +108,10 @@ class Report:
         for i, b in enumerate(n for n in names if self.col.is_bound(n)):
             out[b] = LineStyle("#000000", "", ("--", ":")[i % 2])
         return out
+
+    def split(self, names: list[str], limit: int) -> list[tuple[str, list[str]]]:
+        """A crowded figure's configurations as the defaults and one group per sweep (:func:`split_by_sweep`)."""
+        return split_by_sweep(names, limit)
 
     def variants_of(self, dataset_id: str) -> list[str]:
         return sorted(n for n, info in self.col.datasets.items() if info.spec.ident == dataset_id)
@@ -408,7 +421,8 @@ class Report:
         return sec
 
     def _pareto_plot(self, name: str, title: str, panels: list[tuple[str, str, list[fg.ParetoPoint]]]) -> Plot:
-        styles = self.styles_for(sorted({p.group for _, _, pts in panels for p in pts}))
+        pts_all = [p for _, _, pts in panels for p in pts]
+        styles = self.styles_for(sorted({p.group for p in pts_all} | {p.label for p in pts_all}))
 
         def draw(fig: Figure) -> None:
             n = len(panels)
@@ -420,7 +434,7 @@ class Report:
                     ax.set_axis_off()
                     continue
                 label, ylabel, pts = panels[k]
-                fg.draw_pareto(ax, pts, styles, "real-time factor (x)", ylabel, label)
+                fg.draw_pareto(ax, pts, styles, "real-time factor (x)", ylabel, label, per_config=n == 1)
                 if n > 1:
                     leg = ax.get_legend()
                     if leg is not None:
@@ -428,7 +442,11 @@ class Report:
                     ax.legend(fontsize=5.5, loc="best")
 
         size = (7.0, 4.2) if len(panels) == 1 else (11.0, 3.2 * int(np.ceil(len(panels) / 3)))
-        interactive = _plotly_pareto(title, panels) if len(panels) == 1 else None
+        interactive = (
+            ia.pareto(f"{title}: ATE against real-time factor", panels[0][2], styles, panels[0][1])
+            if len(panels) == 1
+            else None
+        )
         what = "accuracy" if len(panels) > 1 else "ATE"
         return Plot(name, f"{title}: {what} against real-time factor", draw, size=size, interactive=interactive)
 
@@ -476,9 +494,7 @@ class Report:
             table, inf = self._shipped_matched_table(shipped, twin)
             collapsed |= inf
             sec.add(table)
-            plot = self.nees_plot(twin)
-            if plot is not None:
-                sec.add(plot)
+            sec.add(*self.nees_plots(twin))
         rows: list[tuple[str, ...]] = []
         keys: list[tuple[float, ...]] = []
         for ds in alone:
@@ -620,6 +636,7 @@ class Report:
         dists = sorted({self.kidnap_distance(n) for n in names})
         rows: list[tuple[str, ...]] = []
         curves: list[fg.RateCurve] = []
+        kstyles: dict[str, LineStyle] = {}
         families = sorted(set(fam_of.values()))
         for fam in families:
             members = sorted((n for n in names if fam_of[n] == fam), key=self.kidnap_distance)
@@ -644,7 +661,10 @@ class Report:
                 if pts:
                     a = np.array(pts)
                     curves.append(fg.RateCurve(label, label, a[:, 0], a[:, 1], a[:, 2], a[:, 3]))
-        styles = self.styles_for([c.style_key for c in curves])
+                    # the filter's own colour and marker; a second family of worlds gets its own dash
+                    st = self.palette.style(f)
+                    kstyles[label] = st._replace(linestyle=LINESTYLES[families.index(fam) % len(LINESTYLES)])
+        styles = kstyles
         title = f"{ident}: recovery within 30 s, 95 % Wilson intervals"
 
         def draw(fig: Figure) -> None:
@@ -775,24 +795,28 @@ class Report:
             wt = tb.waypoint_table(self.rows(base), filters + bounds, f"`{base}`: RMSE at each waypoint over runs (cm)")
             if wt is not None:
                 sec.add(wt)
-            plots = (self.trajectory_plot(base), self.waypoint_plot(base), self.nees_plot(base), self.count_plot(base))
-            for plot in plots:
-                if plot is not None:
-                    sec.add(plot)
+            count = self.count_plot(base)
+            sec.add(
+                *self.trajectory_plots(base),
+                *self.waypoint_plots(base),
+                *self.nees_plots(base),
+                *([count] if count is not None else []),
+            )
         # with the bound's rows: an experiment's own tables show the accuracy limit too
         rows = self.df[self.df["dataset"].isin(self.variants_of(e.dataset))]
         for fn in sections_for(e.dataset):
             sec.add(*fn(rows, slug(e.dataset)))
         return sec
 
-    def trajectory_plot(self, dataset: str) -> Plot | None:
+    def trajectory_plots(self, dataset: str) -> list[Plot]:
+        """Every configuration's estimate on the first seed: one figure, or, past :data:`MAX_TRACK_PANELS`, one
+        of the defaults and one per sweep (:meth:`split`), so that no configuration is left out."""
         keys = [k for k in self.col.ok_dirs if k[0] == dataset and not self.col.is_global(k[1])]
         if not keys:
-            return None
+            return []
         seed = min(k[2] for k in keys)
         truth = self.col.truths[(dataset, seed)]
         filters = self.col.filter_order({k[1] for k in keys if k[2] == seed})
-        shown = filters[:MAX_TRACK_PANELS]
         gt = truth.ground_truth
         world = fg.World(
             truth.map_segments,
@@ -802,40 +826,39 @@ class Report:
             truth.waypoints.xy if truth.waypoints is not None else np.zeros((0, 2)),
         )
         t_marks = np.linspace(gt.t[0], gt.t[-1], ELLIPSES_PER_TRACK + 2)[1:-1]
-        tracks = []
-        for f in shown:
+        tracks: dict[str, fg.Track] = {}
+        for f in filters:
             run = self.col.read_run(dataset, f, seed)
-            tracks.append(
-                fg.Track(
-                    f,
-                    run.mean[:, :2],
-                    estimate_at(run.t, run.mean, t_marks)[:, :2],
-                    estimate_at(run.t, run.cov, t_marks)[:, :2, :2],
-                )
+            tracks[f] = fg.Track(
+                f,
+                run.mean[:, :2],
+                estimate_at(run.t, run.mean, t_marks)[:, :2],
+                estimate_at(run.t, run.cov, t_marks)[:, :2, :2],
             )
-        styles = self.styles_for(shown)
-        nrows = int(np.ceil(len(tracks) / 3))
-        more = len(filters) - len(shown)
-        caption = (
-            f"`{dataset}`, seed {seed}: each filter's estimate (colour) with 95 % position ellipses, the "
-            f"{truth.truth_label} (black), the map (grey) and the waypoints (x)"
-            + (f"; {more} more configurations are in the appendix tables" if more > 0 else "")
-        )
+        plots = []
+        for key, names in self.split(filters, MAX_TRACK_PANELS):
+            what = {"": "each filter's", "defaults": "each filter's default"}.get(key, f"`{key}`'s configurations'")
+            caption = (
+                f"`{dataset}`, seed {seed}: {what} estimate (colour) with 95 % position ellipses, the "
+                f"{truth.truth_label} (black), the map (grey) and the waypoints (x)"
+            )
+            stem = f"{slug(dataset)}_trajectories{_stem_part(key)}"
+            title = f"{dataset}{_part(key)}, seed {seed}: trajectories"
+            plots.append(self._trajectory_plot(stem, caption, title, world, [tracks[f] for f in names]))
+        return plots
+
+    def _trajectory_plot(self, stem: str, caption: str, title: str, world: fg.World, tracks: list[fg.Track]) -> Plot:
+        styles = self.styles_for([tr.label for tr in tracks])
 
         def draw(fig: Figure) -> None:
             fg.draw_trajectories(fig, world, tracks, styles)
 
+        nrows = int(np.ceil(len(tracks) / 3))
         (x0, x1), (y0, y1) = fg.world_limits(world)
         aspect = (y1 - y0) / max(x1 - x0, 1e-9)
         panel_w = 3.4
         size = (panel_w * min(3, len(tracks)), max(1.6, panel_w * aspect * 0.95 + 0.35) * nrows)
-        return Plot(
-            f"{slug(dataset)}_trajectories",
-            caption,
-            draw,
-            size=size,
-            interactive=_plotly_tracks(dataset, world, tracks, styles),
-        )
+        return Plot(stem, caption, draw, size=size, interactive=ia.tracks(title, world, tracks, styles))
 
     def count_plot(self, dataset: str) -> Plot | None:
         """The particle count over time of the filters whose count adapts (KLD sampling), first seed."""
@@ -872,40 +895,60 @@ class Report:
 
         return Plot(f"{slug(dataset)}_particle_count", title, draw)
 
-    def waypoint_plot(self, dataset: str) -> Plot | None:
+    def waypoint_plots(self, dataset: str) -> list[Plot]:
+        """RMSE at each waypoint: one figure, or the defaults and one per sweep past :data:`MAX_LINE_SERIES`."""
         ws = waypoint_stats(self.rows(dataset))
         if not len(ws):
-            return None
-        names = self.filters_on(dataset) + self.bounds_on(dataset)
-        labels = [f for f in names if (ws["filter"] == f).any()]
-        series = [
-            ws[ws["filter"] == f].sort_values("waypoint")["rmse_m"].to_numpy(dtype=np.float64) * 100.0 for f in labels
-        ]
-        styles = self.bound_styles(labels)
-        title = f"{dataset}: waypoint RMSE over runs (log scale; black: the bound)"
+            return []
+        filters = [f for f in self.filters_on(dataset) if (ws["filter"] == f).any()]
+        bounds = [b for b in self.bounds_on(dataset) if (ws["filter"] == b).any()]
+        plots = []
+        for key, names in self.split(filters, MAX_LINE_SERIES):
+            labels = names + bounds
+            series = [
+                ws[ws["filter"] == f].sort_values("waypoint")["rmse_m"].to_numpy(dtype=np.float64) * 100.0
+                for f in labels
+            ]
+            styles = self.bound_styles(labels)
+            title = f"{dataset}{_part(key)}: waypoint RMSE over runs (log scale; black: the bound)"
 
-        def draw(fig: Figure) -> None:
-            fg.draw_waypoint_rmse(fig.add_subplot(), labels, series, styles, title)
+            def draw(
+                fig: Figure,
+                labels: list[str] = labels,
+                series: list = series,
+                styles: dict = styles,
+                title: str = title,
+            ) -> None:
+                fg.draw_waypoint_rmse(fig.add_subplot(), labels, series, styles, title)
 
-        return Plot(f"{slug(dataset)}_waypoint_rmse", title, draw)
+            plots.append(Plot(f"{slug(dataset)}_waypoint_rmse{_stem_part(key)}", title, draw))
+        return plots
 
-    def nees_plot(self, dataset: str) -> Plot | None:
+    def nees_plots(self, dataset: str) -> list[Plot]:
+        """Mean NEES over runs: one figure, or the defaults and one per sweep past :data:`MAX_LINE_SERIES`."""
         entries = sorted((f, s) for (d, f), s in self.col.nees.items() if d == dataset and not self.col.is_global(f))
         if not entries:
-            return None
+            return []
         seed = min(k[2] for k in self.col.ok_dirs if k[0] == dataset)
         grid = self.col.truths[(dataset, seed)].ground_truth.t
         order = self.col.filter_order({f for f, _ in entries})
         by = dict(entries)
-        series = [fg.NeesSeries(f, mean_over_runs(grid, by[f])[0], len(by[f])) for f in order]
-        bands = {n: chi2_band(POSE_DOF, n, CONFIDENCE) for n in sorted({s.runs for s in series})}
-        styles = self.styles_for(order)
-        title = f"{dataset}: mean NEES over runs (pose, heading wrapped; runs from a uniform prior left out)"
+        mean = {f: fg.NeesSeries(f, mean_over_runs(grid, by[f])[0], len(by[f])) for f in order}
+        plots = []
+        for key, names in self.split(order, MAX_LINE_SERIES):
+            series = [mean[f] for f in names]
+            bands = {n: chi2_band(POSE_DOF, n, CONFIDENCE) for n in sorted({s.runs for s in series})}
+            styles = self.styles_for(names)
+            title = f"{dataset}{_part(key)}: mean NEES over runs"
+            caption = f"{title} (pose, heading wrapped; runs from a uniform prior left out)"
 
-        def draw(fig: Figure) -> None:
-            fg.draw_nees(fig.add_subplot(), grid, series, bands, styles, title)
+            def draw(
+                fig: Figure, series: list = series, bands: dict = bands, styles: dict = styles, title: str = title
+            ) -> None:
+                fg.draw_nees(fig.add_subplot(), grid, series, bands, styles, title)
 
-        return Plot(f"{slug(dataset)}_nees", title, draw, size=(7.5, 4.2))
+            plots.append(Plot(f"{slug(dataset)}_nees{_stem_part(key)}", caption, draw, size=(7.5, 4.2)))
+        return plots
 
     # --- appendix --------------------------------------------------------------------------------------
 
@@ -992,6 +1035,16 @@ class Report:
         return Section("Provenance", "provenance", [Bullets(items)])
 
 
+def _part(key: str) -> str:
+    """A split figure's part in its title: ``, defaults`` or ``, pf's configurations``."""
+    return {"": "", "defaults": ", defaults"}.get(key, f", {key}'s configurations")
+
+
+def _stem_part(key: str) -> str:
+    """A split figure's part in its file stem: the defaults keep the figure's own name."""
+    return f"_{slug(key)}" if key and key != "defaults" else ""
+
+
 def band_for(runs: int) -> str:
     return tb.band_text(runs)
 
@@ -1019,82 +1072,3 @@ def seed_ranges(seeds: list[int] | set[int]) -> str:
         parts.append(str(s[i]) if i == j else f"{s[i]}-{s[j]}")
         i = j + 1
     return ", ".join(parts) if parts else "none"
-
-
-# --- interactive figures (plotly figure dicts: data only, drawn by the HTML page) ------------------------------
-
-
-def _plotly_pareto(title: str, panels: list[tuple[str, str, list[fg.ParetoPoint]]]) -> dict:
-    _, _, pts = panels[0]
-    traces = []
-    for g in sorted({p.group for p in pts}):
-        sel = [p for p in pts if p.group == g]
-        traces.append(
-            {
-                "type": "scatter",
-                "mode": "markers",
-                "name": g,
-                "x": [p.x for p in sel],
-                "y": [p.y for p in sel],
-                "text": [p.label for p in sel],
-                "hovertemplate": "%{text}<br>real-time factor %{x:.3g}<br>ATE %{y:.3g} cm<extra></extra>",
-            }
-        )
-    return {
-        "data": traces,
-        "layout": {
-            "title": {"text": f"{title}: ATE against real-time factor"},
-            "xaxis": {"type": "log", "title": {"text": "real-time factor (x)"}},
-            "yaxis": {"type": "log", "title": {"text": "ATE (cm)"}},
-            "height": 460,
-        },
-    }
-
-
-def _plotly_tracks(dataset: str, world: fg.World, tracks: list[fg.Track], styles: dict[str, LineStyle]) -> dict:
-    traces: list[dict] = []
-    segx: list[float | None] = []
-    segy: list[float | None] = []
-    for x1, y1, x2, y2 in world.segments:
-        segx += [float(x1), float(x2), None]
-        segy += [float(y1), float(y2), None]
-    traces.append(
-        {
-            "type": "scatter",
-            "mode": "lines",
-            "name": "map",
-            "x": segx,
-            "y": segy,
-            "line": {"color": "#aaaaaa", "width": 1},
-            "hoverinfo": "skip",
-        }
-    )
-    traces.append(_plotly_path(world.truth_label, world.truth_xy, "#000000", 1.5))
-    traces += [_plotly_path(tr.label, tr.xy, styles[tr.label].color, 1) for tr in tracks]
-    (x0, x1), (y0, y1) = fg.world_limits(world)
-    return {
-        "data": traces,
-        "layout": {
-            "title": {"text": f"{dataset}: trajectories (click a legend entry to hide it)"},
-            "xaxis": {"range": [x0, x1], "title": {"text": "x (m)"}},
-            "yaxis": {"range": [y0, y1], "title": {"text": "y (m)"}, "scaleanchor": "x"},
-            "height": 560,
-        },
-    }
-
-
-def _plotly_path(name: str, xy: np.ndarray, color: str, width: float) -> dict:
-    """A path as a plotly line, thinned to at most about 2000 points (the page stays small)."""
-    step = max(1, xy.shape[0] // 2000)
-    return {
-        "type": "scatter",
-        "mode": "lines",
-        "name": name,
-        "x": _r(xy[::step, 0]),
-        "y": _r(xy[::step, 1]),
-        "line": {"color": color, "width": width},
-    }
-
-
-def _r(a: np.ndarray) -> list[float]:
-    return [round(float(v), 4) for v in a]
