@@ -853,11 +853,7 @@ class Report:
         def draw(fig: Figure) -> None:
             fg.draw_trajectories(fig, world, tracks, styles)
 
-        nrows = int(np.ceil(len(tracks) / 3))
-        (x0, x1), (y0, y1) = fg.world_limits(world)
-        aspect = (y1 - y0) / max(x1 - x0, 1e-9)
-        panel_w = 3.4
-        size = (panel_w * min(3, len(tracks)), max(1.6, panel_w * aspect * 0.95 + 0.35) * nrows)
+        size = fg.trajectory_size(world, [tr.label for tr in tracks])
         return Plot(stem, caption, draw, size=size, interactive=ia.tracks(title, world, tracks, styles))
 
     def count_plot(self, dataset: str) -> Plot | None:

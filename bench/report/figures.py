@@ -230,11 +230,38 @@ def _draw_world(ax: Axes, world: World) -> None:
         ax.plot(wp[:, 0], wp[:, 1], ls="none", marker="x", ms=5, color="black")
 
 
+#: Width of one trajectory panel, inches, and the panels of one row.
+PANEL_W = 3.4
+PANEL_COLS = 3
+#: A panel title's font size, pt, and the height of one of its lines, inches.
+PANEL_TITLE_PT = 7.5
+PANEL_TITLE_LINE_IN = 0.15
+
+
+def panel_title(label: str) -> str:
+    """A trajectory panel's title: the label broken after commas to the panel's width."""
+    return wrap_label(label, title_chars(PANEL_W, PANEL_TITLE_PT) * 4 // 3)
+
+
+def trajectory_size(world: World, labels: Sequence[str]) -> tuple[float, float]:
+    """The size (inches) of :func:`draw_trajectories`' figure: panels :data:`PANEL_W` wide in rows of
+    :data:`PANEL_COLS`, as tall as the world's aspect asks, plus the lines of each row's longest title."""
+    n = max(len(labels), 1)
+    ncols = min(PANEL_COLS, n)
+    (x0, x1), (y0, y1) = world_limits(world)
+    aspect = (y1 - y0) / max(x1 - x0, 1e-9)
+    height = 0.0
+    for r in range(0, n, ncols):
+        lines = max((panel_title(lab).count("\n") for lab in labels[r : r + ncols]), default=0)
+        height += max(1.6, PANEL_W * aspect * 0.95 + 0.35) + PANEL_TITLE_LINE_IN * lines
+    return PANEL_W * ncols, height
+
+
 def draw_trajectories(fig: Figure, world: World, tracks: Sequence[Track], styles: Mapping[str, LineStyle]) -> None:
     """Small multiples: one panel per filter with the world, the truth and the waypoints in each, axes fitted to
     the world (what leaves it is clipped), the estimate and its 95 % position ellipses."""
     n = max(len(tracks), 1)
-    ncols = min(3, n)
+    ncols = min(PANEL_COLS, n)
     nrows = math.ceil(n / ncols)
     (x0, x1), (y0, y1) = world_limits(world)
     axes = fig.subplots(nrows, ncols, squeeze=False, sharex=True, sharey=True)
@@ -266,7 +293,8 @@ def draw_trajectories(fig: Figure, world: World, tracks: Sequence[Track], styles
         ax.set_xlim(x0, x1)
         ax.set_ylim(y0, y1)
         ax.set_aspect("equal", adjustable="box")
-        ax.set_title(tr.label, fontsize=7.5)
+        # a tuned configuration's long name broken after commas to its panel's width
+        ax.set_title(panel_title(tr.label), fontsize=PANEL_TITLE_PT)
         ax.tick_params(labelsize=6.5)
 
 
