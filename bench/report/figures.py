@@ -243,18 +243,44 @@ def panel_title(label: str) -> str:
     return wrap_label(label, title_chars(PANEL_W, PANEL_TITLE_PT) * 4 // 3)
 
 
-def trajectory_size(world: World, labels: Sequence[str]) -> tuple[float, float]:
-    """The size (inches) of :func:`draw_trajectories`' figure: panels :data:`PANEL_W` wide in rows of
-    :data:`PANEL_COLS`, as tall as the world's aspect asks, plus the lines of each row's longest title."""
+#: Fixed margins of a trajectory figure, inches: left (y tick labels), bottom (x tick labels), right, the gap
+#: between columns, and above each panel's title.
+PANEL_MARGINS_IN = {"left": 0.42, "bottom": 0.3, "right": 0.08, "wspace": 0.1, "title_pad": 0.1}
+
+
+def _panel_rows(world: World, labels: Sequence[str]) -> tuple[int, int, float, float]:
+    """Columns, rows, the height of a panel's axes and of its title band (inches) of a trajectory figure."""
     n = max(len(labels), 1)
     ncols = min(PANEL_COLS, n)
     (x0, x1), (y0, y1) = world_limits(world)
     aspect = (y1 - y0) / max(x1 - x0, 1e-9)
-    height = 0.0
-    for r in range(0, n, ncols):
-        lines = max((panel_title(lab).count("\n") for lab in labels[r : r + ncols]), default=0)
-        height += max(1.6, PANEL_W * aspect * 0.95 + 0.35) + PANEL_TITLE_LINE_IN * lines
-    return PANEL_W * ncols, height
+    lines = 1 + max((panel_title(lab).count("\n") for lab in labels), default=0)
+    title = PANEL_TITLE_LINE_IN * lines + PANEL_MARGINS_IN["title_pad"]
+    return ncols, math.ceil(n / ncols), max(1.25, PANEL_W * aspect * 0.95), title
+
+
+def trajectory_size(world: World, labels: Sequence[str]) -> tuple[float, float]:
+    """The size (inches) of :func:`draw_trajectories`' figure: panels :data:`PANEL_W` wide in rows of
+    :data:`PANEL_COLS`, as tall as the world's aspect asks, each with room for the longest title."""
+    ncols, nrows, axes_h, title_h = _panel_rows(world, labels)
+    return PANEL_W * ncols, nrows * (axes_h + title_h) + PANEL_MARGINS_IN["bottom"]
+
+
+def _fixed_panel_layout(fig: Figure, world: World, labels: Sequence[str]) -> dict[str, float]:
+    """The grid of the panels by fixed margins instead of the constrained layout (about half of a trajectory
+    figure's drawing time): the sizes of everything around a panel are known in advance."""
+    ncols, _, axes_h, title_h = _panel_rows(world, labels)
+    w, h = fig.get_figwidth(), fig.get_figheight()
+    m = PANEL_MARGINS_IN
+    fig.set_layout_engine("none")
+    return {
+        "left": m["left"] / w,
+        "right": 1.0 - m["right"] / w,
+        "bottom": m["bottom"] / h,
+        "top": 1.0 - title_h / h,
+        "wspace": m["wspace"] * ncols / (w - m["left"] - m["right"] - m["wspace"] * (ncols - 1)),
+        "hspace": title_h / axes_h,
+    }
 
 
 def draw_trajectories(fig: Figure, world: World, tracks: Sequence[Track], styles: Mapping[str, LineStyle]) -> None:
@@ -264,7 +290,8 @@ def draw_trajectories(fig: Figure, world: World, tracks: Sequence[Track], styles
     ncols = min(PANEL_COLS, n)
     nrows = math.ceil(n / ncols)
     (x0, x1), (y0, y1) = world_limits(world)
-    axes = fig.subplots(nrows, ncols, squeeze=False, sharex=True, sharey=True)
+    grid = _fixed_panel_layout(fig, world, [tr.label for tr in tracks])
+    axes = fig.subplots(nrows, ncols, squeeze=False, sharex=True, sharey=True, gridspec_kw=grid)
     for k, ax in enumerate(axes.flat):
         if k >= len(tracks):
             ax.set_axis_off()
