@@ -238,7 +238,7 @@ def waypoint_stats(df: pd.DataFrame) -> pd.DataFrame:
     table = wp.groupby(["filter", "waypoint", "seed", "quantity"], sort=True)["value"].first().unstack("quantity")
     quantities = [str(c) for c in table.columns]
     values = table.to_numpy(dtype=np.float64)
-    keys = table.index.droplevel("seed").to_list()
+    keys = [k[:2] for k in table.index.to_list()]  # (filter, waypoint) of each row
     rows = []
     start = 0
     while start < len(keys):

@@ -1,8 +1,8 @@
 """Figure drawing: pure functions from arrays to a matplotlib axis or figure (no I/O, no store).
 
 Each function takes the axis (or figure, for small multiples), the arrays to draw and the
-:class:`~locbench.report.style.LineStyle` of each series; callers pick the styles from one stable order
-so that a filter keeps its colour and marker in every figure.
+:class:`~locbench.report.style.LineStyle` of each series; callers take the styles from the report's one
+:class:`~locbench.report.palette.Palette`, so that a filter keeps its colour and marker in every figure.
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ def finish(ax: Axes, xlabel: str, ylabel: str, title: str) -> None:
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     fig = ax.get_figure(root=True)
+    assert fig is not None  # an axis of the report's figures always has one
     # left-aligned and wrapped to the figure's width: centred over axes that the legend narrows, a long
     # title would run off the canvas on both sides
     size = float(ax.title.get_fontsize())

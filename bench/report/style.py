@@ -1,8 +1,9 @@
-"""The report's fixed drawing style: a colour-blind-safe palette, distinct markers and matplotlib settings.
+"""The report's fixed drawing style: colours, markers, dashes and matplotlib settings.
 
-Colours are Okabe and Ito's eight (2008, "Color Universal Design"), safe for the common forms of colour
-blindness; markers are nine, so with :func:`style_for` the (colour, marker) pair of the i-th name repeats
-only after 63 names (black is kept for the truth): no two lines of one figure share both.
+:data:`PALETTE` is Okabe and Ito's eight (2008, "Color Universal Design"), for series that are not filters
+(the datasets of a claim's figure); a filter's colour and marker come from :mod:`locbench.report.palette`,
+keyed by its id, so that it is the same in every figure. :func:`style_for` gives the i-th of a figure's own
+series a (colour, marker, dash) that repeats only after 63 names (black is kept for the truth).
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ from typing import Any, NamedTuple
 
 #: Okabe-Ito colours (black last: it is the ground truth's colour in trajectory figures).
 PALETTE: tuple[str, ...] = ("#0072B2", "#E69F00", "#009E73", "#CC79A7", "#56B4E9", "#D55E00", "#F0E442", "#000000")
-#: Nine markers (coprime with the eight colours).
+#: Nine markers (coprime with the eight colours; one per filter id in :mod:`locbench.report.palette`).
 MARKERS: tuple[str, ...] = ("o", "s", "^", "D", "v", "P", "X", "<", "*")
 LINESTYLES: tuple[str, ...] = ("-", "--", "-.", ":")
 
