@@ -262,7 +262,7 @@ def _panel_rows(world: World, labels: Sequence[str]) -> tuple[int, int, float, f
 
 def trajectory_size(world: World, labels: Sequence[str]) -> tuple[float, float]:
     """The size (inches) of :func:`draw_trajectories`' figure: panels :data:`PANEL_W` wide in rows of
-    :data:`PANEL_COLS`, as tall as the world's aspect asks, each with room for the longest title."""
+    :data:`PANEL_COLS`, as tall as the world's aspect asks, each with space for the longest title."""
     ncols, nrows, axes_h, title_h = _panel_rows(world, labels)
     return PANEL_W * ncols, nrows * (axes_h + title_h) + PANEL_MARGINS_IN["bottom"]
 
