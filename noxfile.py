@@ -41,11 +41,18 @@ def _install(session: nox.Session, extras: str) -> None:
     session.install(*CONSTRAINTS, f".[{extras}]")
 
 
+#: The example filter plugin (README "Writing a filter plugin"), installed into the test session.
+EXAMPLE_PLUGIN = "./examples/locbench-iekf-plugin"
+
+
 @nox.session(python=PYTHON)
 def tests(session: nox.Session) -> None:
     """Run the test suite (recorded-data tests read $LOCBENCH_DATA and skip without it); with Stone Soup, so
-    that the bound's recursion is compared with its PCRB metric."""
+    that the bound's recursion is compared with its PCRB metric, and with the example plugin package."""
     _install(session, "all,test,stonesoup")
+    # the example plugin package, so that tests/test_plugin_example.py checks the entry-point path (without it
+    # that file skips); --no-deps: locbench is the checkout's, never an index's
+    session.install("--no-deps", EXAMPLE_PLUGIN)
     session.run("pytest", "--benchmark-disable", *session.posargs, env=_data_env())
 
 
@@ -88,7 +95,8 @@ def bench(session: nox.Session) -> None:
     arguments after --, a sub-suite into results/custom (never over the
     committed results/summary)."""
     _install(session, "all")
-    args = list(session.posargs) or ["--suite", "all", "consistency", "tuned", "--jobs", "2"]
+    # interleaved timing (docs/protocols.md, Runtime): a busy moment slows every configuration of a task alike
+    args = list(session.posargs) or ["--suite", "all", "consistency", "tuned", "--jobs", "2", "--interleave"]
     results = "results" if not session.posargs else "results/custom"
     if "--results" in args:
         results = args[args.index("--results") + 1]
@@ -96,9 +104,6 @@ def bench(session: nox.Session) -> None:
     if session.posargs and os.path.abspath(results) == os.path.abspath("results"):
         session.error("a sub-suite must not overwrite results/summary (suite 'all'): pass another --results DIR")
     session.run("locbench", "run", "--results", results, *args, env=_data_env())
-    # re-run 2 % of the stored runs (at least one per filter) and check them bit for bit; the report shows it
-    # (a failure still writes the report, whose provenance says so, and then fails the session)
-    session.run("locbench", "verify", "--results", results, env=_data_env(), success_codes=[0, 1])
     suites: list[str] = []
     if "--suite" in args:
         for a in args[args.index("--suite") + 1 :]:
@@ -106,6 +111,9 @@ def bench(session: nox.Session) -> None:
                 break
             suites.append(a)
     jobs = args[args.index("--jobs") + 1] if "--jobs" in args else "1"
+    # re-run 2 % of the stored runs (at least one per filter) with the sweep's processes and check them bit for
+    # bit; the report shows it (a failure still writes the report, whose provenance says so, then fails the session)
+    session.run("locbench", "verify", "--results", results, "--jobs", jobs, env=_data_env(), success_codes=[0, 1])
     # the report reads the runs and draws the figures with the sweep's processes
     session.run("locbench", "report", "--results", results, "--jobs", jobs, *(["--suite", *suites] if suites else []))
     record = os.path.join(results, "verify.json")

@@ -83,9 +83,11 @@ def _step4(
     An ended lane keeps its cell (so its next load stays in bounds). The next cell's line is prefetched, so that
     the lane's next visit, a whole sweep of the pool later, finds it in L1.
     """
+    # long: a numba intrinsic: the LLVM code generator below must be a closure of its typing function
     sig = types.int64(fstate, istate, planes, q, cols, rows, t_end, t_lim, res, occupied, jump_unit, nudge)
 
     def codegen(context: Any, builder: ir.IRBuilder, signature: Any, args: Any) -> ir.Value:
+        # long: one LLVM function body emitted in order (the four lanes' setup, loop and exit blocks share builders)
         s_arr = context.make_array(signature.args[0])(context, builder, args[0])
         c_arr = context.make_array(signature.args[1])(context, builder, args[1])
         p_arr = context.make_array(signature.args[2])(context, builder, args[2])

@@ -3,7 +3,7 @@
 locbench list [FILTER|DATASET ...]
 locbench run [--suite NAME|FILE.toml | --filter SPEC ... --dataset SPEC ...]
              [--seeds N] [--results DIR] [--jobs N] [--executor local|dask [--scheduler ADDRESS]] [--force]
-             [--connect-timeout S] [--max-configs N] [--max-seeds N]
+             [--connect-timeout S] [--max-configs N] [--max-seeds N] [--interleave [S]]
 locbench tune FILTER --dataset SPEC [SPEC ...] --trials N --seeds K [--results DIR] [--objective ate|nll]
               [--jobs N] [--executor local|dask [--scheduler ADDRESS]]
 locbench report [--results DIR] [--suite NAME ...] [--out DIR] [--jobs N]
@@ -11,6 +11,7 @@ locbench verify [--results DIR] [--fraction F] [--seed S]
 locbench check [ID ...]
 locbench fetch SPEC [SPEC ...]
 locbench export [--results DIR] [--out DIR] [--dataset SPEC ...] [--filter SPEC ...] [--smoothed]
+locbench export --format textlog --dataset SPEC [--seed N] --out FOLDER
 """
 
 from __future__ import annotations
@@ -29,6 +30,11 @@ from locbench import __version__
 from locbench.errors import ConfigError, LocbenchError, one_line
 from locbench.spec import MAX_CONFIGS
 from locbench.suites import MAX_SEEDS
+
+#: ``locbench run --interleave`` without a value: seconds of data each filter of a task runs before the next
+#: (:attr:`locbench.runner.Task.slice_s`); and the longest slice accepted.
+INTERLEAVE_SLICE_S = 5.0
+MAX_INTERLEAVE_S = 3600.0
 
 #: The suite that tunes (``locbench run --suite tuned``), run by :mod:`locbench.tuning`, not as blocks of runs.
 TUNED_SUITE = "tuned"
@@ -53,7 +59,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
         for ident in reg.ids():
             reason = reg.unavailable_reason(ident)
             state = f"  [{reason}]" if reason else ""
-            print(f"  {ident:<18} {reg.entry(ident).summary}{state}")
+            print(f"  {ident:<18} {reg.summary(ident)}{state}")
     print("suites:")
     for s in SUITES.values():
         print(f"  {s.name:<18} {s.runs:>5} runs: {s.description}")
@@ -75,7 +81,7 @@ def _list_params(ids: Sequence[str]) -> int:
         else:
             valid = ", ".join(FILTERS.ids() + DATASETS.ids())
             raise UnknownIdError(f"unknown filter or dataset {ident!r}; valid: {valid}")
-        print(f"{kind} {ident}: {reg.entry(ident).summary}")
+        print(f"{kind} {ident}: {reg.summary(ident)}")
         tunable = tunable_fields(cls) if kind == "filter" else None
         tune = f"; tunable ('locbench tune {ident}'): {', '.join(tunable) or 'none'}" if tunable is not None else ""
         print(f"  written {ident}[key=value,...]; a grid: key=a|b|c{tune}")
@@ -123,6 +129,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--connect-timeout must be in (0, {MAX_CONNECT_TIMEOUT_S:g}] s, got {args.connect_timeout}")
     if args.scheduler is not None and args.executor != "dask":
         raise ConfigError("--scheduler needs --executor dask")
+    if not (0 <= args.interleave <= MAX_INTERLEAVE_S):
+        raise ConfigError(f"--interleave must be in [0, {MAX_INTERLEAVE_S:g}] s of data, got {args.interleave}")
     scheduler = check_scheduler_address(args.scheduler) if args.scheduler is not None else None
     limits = {"max_configs": args.max_configs, "max_seeds": args.max_seeds}
     if args.filter or args.dataset:
@@ -140,7 +148,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     rc = 0
     if blocks or not tuned:
         # every spec is resolved and validated here, before anything runs or is written
-        plan = plan_sweep([(b.filters, b.datasets, range(b.seeds)) for b in blocks], args.results, args.force)
+        specs = [(b.filters, b.datasets, range(b.seeds)) for b in blocks]
+        plan = plan_sweep(specs, args.results, args.force, slice_s=args.interleave)
         Store(args.results).claim()  # refuses another tool's folder before anything is written or cleaned in it
         bar = tqdm(total=plan.total, unit="run", desc="locbench run", disable=True if args.no_progress else None)
         with bar:
@@ -248,7 +257,9 @@ def _cmd_verify(args: argparse.Namespace) -> int:
         raise ConfigError(f"{store.runs}: no stored runs; run 'locbench run' first")
     if not 0.0 < args.fraction <= 1.0:
         raise ConfigError(f"--fraction: expected a share of the runs in (0, 1], got {args.fraction}")
-    res = verify(store, args.fraction, args.seed)
+    if not 1 <= args.jobs <= MAX_JOBS:
+        raise ConfigError(f"--jobs: expected 1-{MAX_JOBS} processes, got {args.jobs}")
+    res = verify(store, args.fraction, args.seed, jobs=args.jobs)
     record = write_record(store, res)
     for run, why in res.differ:
         print(f"differs: {run.label()}: {why}")
@@ -345,9 +356,22 @@ def _cmd_fetch(args: argparse.Namespace) -> int:
 def _cmd_export(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from locbench.export import export_results
+    from locbench.export import export_results, export_textlog
     from locbench.registry import resolve_dataset, resolve_filter
 
+    if args.format == "textlog":
+        if len(args.dataset) != 1 or args.filter or args.smoothed or not args.out:
+            raise ConfigError("--format textlog writes one dataset: give --dataset SPEC --seed N --out FOLDER")
+        seed = 0 if args.seed is None else args.seed
+        if seed < 0:
+            raise ConfigError(f"--seed must be >= 0, got {seed}")
+        folder, notes = export_textlog(args.dataset[0], seed, args.out)
+        for note in notes:
+            print(f"note: {note}")
+        print(f"{args.dataset[0]} seed {seed} written as a textlog to {folder}; read it as textlog[path={folder}]")
+        return 0
+    if args.seed is not None:
+        raise ConfigError("--seed goes with --format textlog (TUM export writes every stored seed)")
     out = args.out or str(Path(args.results) / "tum")
     written = export_results(
         args.results,
@@ -368,6 +392,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    # long: one argparse declaration per subcommand and option, read top to bottom as the CLI's reference
     p = argparse.ArgumentParser(prog="locbench", description="Comparative benchmark of 2-D localization filters.")
     p.add_argument("--version", action="version", version=f"locbench {__version__}")
     p.add_argument("-v", "--verbose", action="store_true", help="log progress details")
@@ -434,6 +459,16 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"most seeds a block may run (default {MAX_SEEDS})",
     )
     r.add_argument("--force", action="store_true", help="re-run runs that are already stored")
+    r.add_argument(
+        "--interleave",
+        type=float,
+        nargs="?",
+        const=INTERLEAVE_SLICE_S,
+        default=0.0,
+        metavar="S",
+        help="interleaved timing: the filters of each (dataset, seed) take turns over S s of data "
+        f"(default {INTERLEAVE_SLICE_S:g}), so a busy moment slows them alike; the same estimates, more memory",
+    )
     r.add_argument("--no-progress", action="store_true", help="no progress bar")
     r.set_defaults(func=_cmd_run)
 
@@ -458,6 +493,7 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--results", default=_results_default(), help="results folder (default: results/)")
     v.add_argument("--fraction", type=float, default=0.02, help="share of the stored runs to re-run (default 0.02)")
     v.add_argument("--seed", type=int, default=0, help="seed of the random sample (default 0)")
+    v.add_argument("--jobs", type=int, default=1, help="worker processes that re-run the sample (default 1)")
     v.set_defaults(func=_cmd_verify)
     tu = sub.add_parser(
         "tune",
@@ -489,7 +525,16 @@ def build_parser() -> argparse.ArgumentParser:
     fe.add_argument("specs", nargs="+", metavar="SPEC", help="e.g. plaza[run=1] or mrclam[dataset=6,robot=1]")
     fe.set_defaults(func=_cmd_fetch)
 
-    ex = sub.add_parser("export", help="write stored runs and their truth as TUM trajectories (for evo)")
+    ex = sub.add_parser(
+        "export", help="write stored runs and their truth as TUM trajectories (for evo), or a dataset as a textlog"
+    )
+    ex.add_argument(
+        "--format",
+        choices=("tum", "textlog"),
+        default="tum",
+        help="tum: stored runs (default); textlog: the dataset --dataset at --seed as a plain-text log in --out",
+    )
+    ex.add_argument("--seed", type=int, default=None, help="with --format textlog: the realisation (default 0)")
     ex.add_argument("--results", default=_results_default(), help="results folder (default: results/)")
     ex.add_argument("--out", default=None, help="output folder (default: RESULTS/tum)")
     ex.add_argument("--dataset", nargs="+", action="extend", default=[], metavar="SPEC", help="only these datasets")

@@ -1,15 +1,20 @@
 """Where a sweep's tasks run: this process, a local process pool, or dask.distributed workers.
 
-Every executor takes the plan's tasks (longest first), runs :func:`locbench.runner.execute_task` on each
-somewhere, and hands each result back to the caller, which writes the store in this process; so a dask
-worker on another machine needs locbench installed but no shared folder. A task whose worker died or raised
-is handed to ``lost`` with the reason, which records an error run for each of its filters, and the sweep goes
-on. SIGINT (Ctrl-C) and SIGTERM stop an executor: tasks not started are cancelled, running ones abandoned
-(their workers killed), and the executor returns within a few seconds saying it was interrupted.
+Every executor goes through one loop (:class:`_Schedule`) over ``concurrent.futures`` executors: this
+process's, a ``ProcessPoolExecutor``, or the dask client's (``Client.get_executor``). It splits the plan's
+tasks (longest first) into one part per filter (:func:`parts`), runs :func:`locbench.runner.execute_task` on
+each somewhere, and hands each result back to the caller, which writes the store in this process as each
+filter finishes; so a dask worker on another machine needs locbench installed but no shared folder. A part
+whose worker died is retried, one that raised or kept killing its worker is handed to ``lost`` with the
+reason, which records an error run for its filter, and the sweep goes on. SIGINT (Ctrl-C) and SIGTERM stop
+the loop: parts not started are not submitted, running ones abandoned (their workers killed), and it returns
+within a few seconds saying it was interrupted.
 """
 
 from __future__ import annotations
 
+import asyncio
+import collections
 import concurrent.futures as cf
 import contextlib
 import ctypes
@@ -17,6 +22,7 @@ import dataclasses
 import importlib.util
 import ipaddress
 import logging
+import multiprocessing
 import os
 import re
 import signal
@@ -24,29 +30,24 @@ import sys
 import threading
 import time
 import types
-import uuid
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from typing import Any
 
 from locbench.errors import ConfigError, DependencyNotInstalled, one_line
-from locbench.runner import Task, TaskResult, execute_task
+from locbench.runner import Task, TaskResult, execute_task, forget_realisations
 
 log = logging.getLogger(__name__)
 
 Handle = Callable[[Task, TaskResult], None]
 Lost = Callable[[Task, str], None]
 
-#: Times a task is handed to a fresh local pool after the worker running it died (a crash, the OOM killer).
-LOCAL_RETRIES = 1
-#: dask's ``distributed.scheduler.allowed-failures`` for a LocalCluster: a task whose worker dies is retried
-#: on another worker this many times, then it is a ``KilledWorker`` error (a remote scheduler keeps its own).
-DASK_ALLOWED_FAILURES = 1
-#: A LocalCluster's settings: the retries above; one task per worker thread at a time, so that a worker's death
-#: is charged to the task it was running only (not to tasks queued behind it on that worker); no profiler.
+#: A LocalCluster's settings: no retry of its own (``allowed-failures`` 0: a worker's death is a
+#: ``KilledWorker`` error at once, which the loop retries as it does the local pool's, :data:`RETRIES`); one
+#: task per worker thread at a time, so that a worker's death is charged to the part it was running only and
+#: the part submitted when a worker frees up goes to that worker; no profiler.
 _DASK_LOCAL_CONFIG = {
-    "distributed.scheduler.allowed-failures": DASK_ALLOWED_FAILURES,
+    "distributed.scheduler.allowed-failures": 0,
     "distributed.scheduler.worker-saturation": 1.0,
     # the statistical profiler samples every worker thread's stack every 10 ms: CPU a sweep does not need
     "distributed.worker.profile.enabled": False,
@@ -61,8 +62,6 @@ _DASK_LOCAL_CONFIG = {
     # results are gathered as they finish: no replicas for the active memory manager to balance
     "distributed.scheduler.active-memory-manager.start": False,
 }
-#: Times a one-filter task that dask gave up on (``KilledWorker``) is submitted again before it is an error run.
-DASK_RESUBMITS = 2
 #: How often a waiting executor looks at the stop flag, s.
 _POLL_S = 0.2
 
@@ -184,6 +183,30 @@ class StopRequest:
             self._shielded -= 1
 
 
+def probe_scheduler(address: str, timeout_s: float) -> None:
+    """Ask the dask scheduler at ``address`` for its identity; a :class:`TimeoutError` or :class:`OSError` when it
+    does not answer within ``timeout_s`` seconds.
+
+    ``distributed.Client(address, timeout=...)`` bounds the TCP connect only: a peer that accepts the connection
+    but never answers (a wrong service, a stopped process whose socket is still listening) holds the client's
+    handshake forever. This round trip on a fresh event loop is bounded as a whole.
+    """
+    from distributed.comm import connect
+
+    async def identity() -> None:
+        comm = await connect(address, timeout=timeout_s)
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            await comm.read()
+        finally:
+            comm.abort()
+
+    async def bounded() -> None:
+        await asyncio.wait_for(identity(), timeout_s)
+
+    asyncio.run(bounded())
+
+
 def get(name: str) -> Callable[..., ExecStatus]:
     """The executor called ``name``: ``local`` or ``dask``."""
     try:
@@ -203,29 +226,251 @@ def run_local(
     """Run the tasks in this process (``jobs`` = 1) or in a pool of ``jobs`` worker processes."""
     if scheduler is not None:
         raise ConfigError("--scheduler needs --executor dask")
-    if jobs <= 1:
-        return _run_inline(tasks, handle, lost)
-    return _run_pool(tasks, handle, lost, jobs)
+    backend: _Backend = _Inline() if jobs <= 1 else _Pool(jobs)
+    with StopRequest(raise_now=backend.raise_now) as stop:
+        return _Schedule(tasks, backend, handle, lost).run(stop)
 
 
-def _run_inline(tasks: Sequence[Task], handle: Handle, lost: Lost) -> ExecStatus:
-    with StopRequest(raise_now=True) as stop:
-        for n, task in enumerate(tasks):
-            if stop.requested:
-                return ExecStatus(interrupted=True)
+# --- the one scheduling loop ---------------------------------------------------------------------------
+
+
+class _Backend:
+    """Where the loop's futures run: opens ``concurrent.futures`` executors and says what a failure means.
+
+    ``slots`` is how many parts run at once; ``raise_now`` whether the work runs in this process (a signal
+    then abandons it by ``KeyboardInterrupt``).
+    """
+
+    slots = 1
+    raise_now = False
+
+    def open(self, workers: int) -> cf.Executor:
+        """An executor of at most ``workers`` workers (a fresh one after :meth:`close`)."""
+        raise NotImplementedError
+
+    def broken(self, exc: BaseException) -> bool:
+        """Whether ``exc`` says the whole executor broke (it fails every part it holds, naming no culprit)."""
+        return isinstance(exc, cf.BrokenExecutor)
+
+    def died(self, exc: BaseException) -> bool:
+        """Whether ``exc`` says the worker running the part died (charged to that part alone)."""
+        return False
+
+    def death(self, times: int) -> str:
+        """The message of a part whose worker died ``times`` times."""
+        return f"its worker process died {times} times (killed, or out of memory)"
+
+    def close(self, executor: cf.Executor, abandon: bool) -> None:
+        """Shut ``executor`` down; with ``abandon`` (an interrupt), kill its workers rather than wait for them."""
+        executor.shutdown(wait=not abandon, cancel_futures=True)
+
+
+class _InlineExecutor(cf.Executor):
+    """Runs each call at submission, in this process: the loop's futures without a worker."""
+
+    def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> cf.Future[Any]:
+        fut: cf.Future[Any] = cf.Future()
+        fut.set_running_or_notify_cancel()
+        try:
+            fut.set_result(fn(*args, **kwargs))
+        except Exception as exc:  # KeyboardInterrupt (a stop) is not caught: it abandons the part
+            fut.set_exception(exc)
+        return fut
+
+
+class _Inline(_Backend):
+    raise_now = True
+
+    def open(self, workers: int) -> cf.Executor:
+        return _InlineExecutor()
+
+    def close(self, executor: cf.Executor, abandon: bool) -> None:
+        forget_realisations()  # the last dataset built here is not kept after the sweep
+
+
+class _Pool(_Backend):
+    """A local ``ProcessPoolExecutor``; its workers end with this process (:func:`_pool_worker_init`)."""
+
+    def __init__(self, jobs: int) -> None:
+        self.slots = jobs
+        self._before: set[Any] = set()
+
+    def open(self, workers: int) -> cf.Executor:
+        # the pool's worker processes are this process's multiprocessing children started from now on
+        self._before = set(multiprocessing.active_children())
+        return cf.ProcessPoolExecutor(max_workers=workers, initializer=_pool_worker_init)
+
+    def close(self, executor: cf.Executor, abandon: bool) -> None:
+        if abandon:
+            kill = getattr(executor, "kill_workers", None)  # Python >= 3.14
+            if callable(kill):
+                kill()
+            for proc in set(multiprocessing.active_children()) - self._before:
+                with contextlib.suppress(Exception):
+                    proc.kill()
+        executor.shutdown(wait=not abandon, cancel_futures=True)
+
+
+#: Times a part whose worker died is submitted again before it is an error run (the local pool and dask alike).
+RETRIES = 1
+
+
+def parts(task: Task) -> list[Task]:
+    """One task per filter of ``task`` (the bound goes with the first), or the task itself when it has none.
+
+    A part's result holds one run, so each run is stored as soon as its filter finishes, and a worker that
+    dies takes only its own filter with it. The parts of a task run one after another on one worker, which
+    builds the dataset once for all of them (:func:`locbench.runner.execute_task` keeps it).
+    """
+    if not task.jobs or task.slice_s > 0:
+        # interleaved timing (Task.slice_s) runs the task's filters in turns: one part, stored together
+        return [task]
+    return [
+        dataclasses.replace(task, jobs=(job,), bound_key=task.bound_key if i == 0 else None)
+        for i, job in enumerate(task.jobs)
+    ]
+
+
+class _Schedule:
+    """The loop every executor runs: parts submitted as workers free up, results handed on, deaths retried.
+
+    At most ``backend.slots`` parts are in flight, never two of one task: a worker that finishes a part is
+    the one free, so the next part of its task goes to it (its dataset is built), else the first task not
+    started (longest first). A part whose worker died (``backend.died``) is charged that death and submitted
+    again up to :data:`RETRIES` times, then it is an error run. An executor that broke (a local pool whose
+    worker died) fails every part it held without saying whose worker died: if it held one, that one is
+    charged; otherwise each runs again alone in a one-worker executor, where a death is its own, so a part is
+    never blamed for a sibling's. A stop (SIGINT, SIGTERM) abandons the parts in flight.
+    """
+
+    def __init__(self, tasks: Sequence[Task], backend: _Backend, handle: Handle, lost: Lost) -> None:
+        self.backend, self.handle, self.lost = backend, handle, lost
+        self.todo = [collections.deque(parts(t)) for t in tasks]
+        self.fresh = collections.deque(range(len(tasks)))  # tasks none of whose parts has started
+        self.started = [False] * len(tasks)
+        self.busy = [0] * len(tasks)  # parts of each task in flight (0 or 1)
+        self.deaths: dict[tuple[int, str], int] = {}  # (task, filter) -> deaths charged to that part
+        self.suspects: collections.deque[tuple[int, Task]] = collections.deque()  # to run alone
+        self.casualties: list[tuple[int, Task]] = []  # failed with the executor that broke
+        self.flight: dict[cf.Future[TaskResult], tuple[int, Task]] = {}
+        self.ready: collections.deque[tuple[Task, TaskResult]] = collections.deque()  # results to hand on
+        self.status = ExecStatus()
+        self.abandoned = False
+
+    def run(self, stop: StopRequest) -> ExecStatus:
+        """Run every part, or until ``stop`` is requested (then the parts in flight are abandoned)."""
+        self.stop = stop
+        executor: cf.Executor | None = None
+        broken = alone = False
+        try:
+            while not stop.requested and (self.flight or self._left()):
+                if executor is None:
+                    alone = bool(self.suspects)
+                    executor = self.backend.open(1 if alone else self.backend.slots)
+                    broken = False
+                if not broken:
+                    broken = self._fill(executor, alone)
+                done, _ = cf.wait(self.flight, timeout=_POLL_S, return_when=cf.FIRST_COMPLETED)
+                for fut in done:
+                    broken = self._finished(fut) or broken
+                if done and not (broken or alone or self.backend.raise_now):
+                    # the freed workers get their next parts before this process stores the results (work done
+                    # here waits: a part run now would run before the finished ones are stored)
+                    broken = self._fill(executor, alone)
+                self._hand_on()
+                if (broken or alone) and not self.flight:
+                    self._blame(alone)
+                    self.backend.close(executor, abandon=False)
+                    executor = None
+        except KeyboardInterrupt:  # raised by the stop request while a part ran in this process
+            self.abandoned = True
+        finally:
+            if executor is not None:
+                self.backend.close(executor, abandon=stop.requested)
+        self.status.interrupted = stop.requested and (self.abandoned or bool(self.flight) or self._left())
+        return self.status
+
+    def _left(self) -> bool:
+        return bool(self.suspects or self.casualties or any(self.todo))
+
+    def _fill(self, executor: cf.Executor, alone: bool) -> bool:
+        """Submit parts while a slot is free: a suspect when alone, else the next part (see the class); whether
+        the executor refused one because it broke (its failed parts are then still to be seen)."""
+        while len(self.flight) < (1 if alone else self.backend.slots):
+            if alone:
+                if not self.suspects:
+                    return False
+                i, part = self.suspects.popleft()
+            else:
+                nxt = self._next()
+                if nxt is None:
+                    return False
+                i, part = nxt, self.todo[nxt].popleft()
             try:
-                result = execute_task(task)
-            except KeyboardInterrupt:
-                return ExecStatus(interrupted=True)
-            except Exception as exc:  # execute_task records a filter's or a dataset's failure itself: a bug
-                with stop.shield():
-                    lost(task, f"task failed: {type(exc).__name__}: {exc}")
-                continue
-            with stop.shield():
-                handle(task, result)
-            if stop.requested and n + 1 < len(tasks):
-                return ExecStatus(interrupted=True)
-    return ExecStatus()
+                fut = executor.submit(execute_task, part)
+            except cf.BrokenExecutor:
+                if alone:
+                    self.suspects.appendleft((i, part))
+                else:
+                    self.todo[i].appendleft(part)
+                return True
+            self.busy[i] += 1
+            self.flight[fut] = (i, part)
+        return False
+
+    def _next(self) -> int | None:
+        """The task whose next part to submit: one started and idle (its worker freed), else a fresh one."""
+        idle = (i for i, q in enumerate(self.todo) if q and not self.busy[i] and self.started[i])
+        i = next(idle, None)
+        if i is None and self.fresh:
+            i = self.fresh.popleft()
+            self.started[i] = True
+        return i
+
+    def _finished(self, fut: cf.Future[TaskResult]) -> bool:
+        """Take a finished part's result (to hand on), its death or its failure; whether its executor broke."""
+        i, part = self.flight.pop(fut)
+        self.busy[i] -= 1
+        if fut.cancelled():  # not by this loop (it cancels only when stopping): a dask result lost with its worker
+            self._charge(i, part)
+            return False
+        exc = fut.exception()
+        if exc is None:
+            self.ready.append((part, fut.result()))
+        elif self.backend.broken(exc):
+            self.casualties.append((i, part))
+            return True
+        elif self.backend.died(exc):
+            self._charge(i, part)
+        else:
+            with self.stop.shield():
+                self.lost(part, f"worker failed: {type(exc).__name__}: {exc}")
+        return False
+
+    def _hand_on(self) -> None:
+        """Hand the finished parts' results to the caller (which stores them), a signal waiting meanwhile."""
+        with self.stop.shield():
+            while self.ready:
+                self.handle(*self.ready.popleft())
+
+    def _blame(self, alone: bool) -> None:
+        """After an executor broke: its one part is charged; several each run again alone, uncharged."""
+        if len(self.casualties) == 1 or alone:
+            for i, part in self.casualties:
+                self._charge(i, part)
+        else:
+            self.suspects.extend(self.casualties)
+        self.casualties.clear()
+
+    def _charge(self, i: int, part: Task) -> None:
+        who = (i, part.jobs[0].filter.name if part.jobs else "")
+        times = self.deaths[who] = self.deaths.get(who, 0) + 1
+        if times <= RETRIES:
+            self.status.retried += 1
+            self.todo[i].appendleft(part)
+            return
+        with self.stop.shield():
+            self.lost(part, self.backend.death(times))
 
 
 #: How often a pool worker's watchdog looks whether its parent is still alive, s.
@@ -264,94 +509,6 @@ def _pool_worker_init() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     _end_with_parent()
-
-
-def _kill_pool(pool: cf.ProcessPoolExecutor) -> None:
-    """Kill the pool's worker processes (their tasks are abandoned; nothing of theirs is stored)."""
-    kill = getattr(pool, "kill_workers", None)  # Python >= 3.14
-    if callable(kill):
-        kill()
-        return
-    for proc in list(getattr(pool, "_processes", {}).values()):
-        with contextlib.suppress(Exception):
-            proc.kill()
-
-
-def split(task: Task) -> list[Task]:
-    """One task per filter of ``task``: after its worker died, so that only the filter that kills it fails."""
-    # the realisation's bound goes with the first part only
-    return [
-        dataclasses.replace(task, jobs=(job,), bound_key=task.bound_key if i == 0 else None)
-        for i, job in enumerate(task.jobs)
-    ]
-
-
-def _run_pool(tasks: Sequence[Task], handle: Handle, lost: Lost, jobs: int) -> ExecStatus:
-    status = ExecStatus()
-    todo = list(tasks)
-    deaths = [0] * len(todo)
-    # A broken pool fails every task it holds and does not say whose worker died: a task that was running
-    # beside others then runs again alone, where a death is its own, so a task is never blamed for a sibling's.
-    alone = [False] * len(todo)
-    queue = list(range(len(todo)))
-    finished = 0
-    with StopRequest(raise_now=False) as stop:
-        while queue and not stop.requested:
-            first_alone = next((i for i in queue if alone[i]), None)
-            if first_alone is not None:
-                batch = [first_alone]
-                queue = [i for i in queue if i != first_alone]
-            else:
-                batch, queue = queue, []
-            pool = cf.ProcessPoolExecutor(max_workers=min(jobs, len(batch)), initializer=_pool_worker_init)
-            futures = {pool.submit(execute_task, todo[i]): i for i in batch}
-            pending = set(futures)
-            try:
-                while pending and not stop.requested:
-                    running = {f for f in pending if f.running()}
-                    done, pending = cf.wait(pending, timeout=_POLL_S, return_when=cf.FIRST_COMPLETED)
-                    for fut in done:
-                        i = futures[fut]
-                        try:
-                            result = fut.result()
-                        except BrokenProcessPool:
-                            # Its own death only when it was alone in the pool or the only one running.
-                            own = len(batch) == 1 or (fut in running and len(running) == 1)
-                            if not own:
-                                alone[i] = alone[i] or fut in running
-                                queue.append(i)
-                                continue
-                            deaths[i] += 1
-                            if deaths[i] <= LOCAL_RETRIES:
-                                status.retried += 1
-                                queue.append(i)
-                            elif len(todo[i].jobs) > 1:
-                                finished += 1
-                                for part in split(todo[i]):
-                                    queue.append(len(todo))
-                                    todo.append(part)
-                                    deaths.append(0)
-                                    alone.append(False)
-                            else:
-                                why = f"its worker process died {deaths[i]} times (killed, or out of memory)"
-                                with stop.shield():
-                                    lost(todo[i], why)
-                                finished += 1
-                            continue
-                        except Exception as exc:
-                            with stop.shield():
-                                lost(todo[i], f"worker failed: {type(exc).__name__}: {exc}")
-                        else:
-                            with stop.shield():
-                                handle(todo[i], result)
-                        finished += 1
-            finally:
-                if stop.requested:
-                    _kill_pool(pool)
-                pool.shutdown(wait=not stop.requested, cancel_futures=True)
-            queue.sort()
-    status.interrupted = stop.requested and finished < len(todo)
-    return status
 
 
 @contextlib.contextmanager
@@ -413,6 +570,32 @@ def _kill_local_workers(cluster: Any) -> None:
                 os.kill(pid, signal.SIGKILL)
 
 
+class _Dask(_Backend):
+    """dask.distributed workers through the client's ``concurrent.futures`` executor (one for the sweep)."""
+
+    def __init__(self, client: Any, slots: int) -> None:
+        import distributed
+
+        self.client, self.slots = client, slots
+        self._killed = distributed.KilledWorker
+        self._executor = client.get_executor(pure=False)
+
+    def open(self, workers: int) -> cf.Executor:
+        return self._executor  # a dask worker that dies is replaced: the executor never breaks
+
+    def died(self, exc: BaseException) -> bool:
+        return isinstance(exc, self._killed)
+
+    def death(self, times: int) -> str:
+        return f"its dask worker died each time it ran, {times} times (KilledWorker)"
+
+    def close(self, executor: cf.Executor, abandon: bool) -> None:
+        executor.shutdown(wait=not abandon)  # without wait it cancels the parts in flight
+        if not abandon:
+            with contextlib.suppress(Exception):
+                self.client.run(forget_realisations)  # a remote worker keeps no dataset after the sweep
+
+
 def run_dask(
     tasks: Sequence[Task],
     handle: Handle,
@@ -423,10 +606,11 @@ def run_dask(
 ) -> ExecStatus:
     """Run the tasks on dask.distributed workers: the scheduler at ``scheduler``, else a LocalCluster of ``jobs``.
 
-    Each task is one dask task (longest first by priority); the records come back to this process, which
-    writes them. A worker that dies is replaced and its task retried by dask (``allowed-failures`` times),
-    then the task is a ``KilledWorker`` error run; a task that raises is an error run. A scheduler that does
-    not answer within ``timeout_s`` seconds is a :class:`ConfigError`.
+    The parts go through :class:`_Schedule` as the local pool's do, one per worker thread at a time; the
+    records come back to this process, which writes them. A worker that dies is replaced by dask, and its part
+    is a ``KilledWorker`` error that the loop retries (a LocalCluster does not retry it itself:
+    ``allowed-failures`` 0; a remote scheduler keeps its own setting); a part that raises is an error run. A
+    scheduler that does not answer within ``timeout_s`` seconds is a :class:`ConfigError`.
     """
     try:
         import dask
@@ -461,6 +645,7 @@ def run_dask(
                     client = distributed.Client(cluster)
                 else:
                     address = check_scheduler_address(scheduler)
+                    probe_scheduler(address, timeout_s)
                     client = distributed.Client(address, timeout=f"{timeout_s}s")
             except (OSError, TimeoutError, ValueError) as exc:
                 if cluster is not None:
@@ -468,74 +653,19 @@ def run_dask(
                         cluster.close()
                     _reap(workers)
                 where = one_line(scheduler, 200) if scheduler else "a LocalCluster on 127.0.0.1"
+                why = str(exc) or "no answer"
                 raise ConfigError(
-                    one_line(f"cannot reach the dask scheduler at {where} within {timeout_s:g} s: {exc}")
+                    one_line(f"cannot reach the dask scheduler at {where} within {timeout_s:g} s: {why}")
                 ) from None
-        run_id = uuid.uuid4().hex[:8]
-        todo = list(tasks)
-        futures: dict[Any, int] = {}
-
-        def submit(i: int) -> Any:
-            key = f"locbench-{run_id}-{i}"
-            fut = client.submit(execute_task, todo[i], pure=False, priority=len(todo) - i, key=key)
-            futures[fut] = i
-            return fut
-
-        resubmitted = [0] * len(todo)
-        pending = {submit(i) for i in range(len(todo))}
+        # a Ctrl-C deferred during the start arrived at the unblock above: the loop then submits nothing
         try:
-            while pending and not stop.requested:
-                with contextlib.suppress(TimeoutError, distributed.TimeoutError):
-                    distributed.wait(list(pending), timeout=_POLL_S, return_when="FIRST_COMPLETED")
-                for fut in [f for f in pending if f.done()]:
-                    pending.discard(fut)
-                    i = futures[fut]
-                    error: BaseException | None = None
-                    # retryable: the worker died (KilledWorker) or the result was lost with it, not the task failed
-                    retryable = fut.status != "error"
-                    if fut.status == "finished":
-                        try:
-                            # a result held by a worker that died since is recomputed: wait for it in the next round
-                            result = fut.result(timeout=_POLL_S)
-                        except (TimeoutError, distributed.TimeoutError):
-                            pending.add(fut)
-                            continue
-                        except Exception as exc:
-                            error = exc
-                        else:
-                            with stop.shield():
-                                handle(todo[i], result)
-                            continue
-                    else:
-                        error = fut.exception() if fut.status == "error" else None
-                    killed = isinstance(error, distributed.KilledWorker)
-                    if (killed or retryable) and (len(todo[i].jobs) > 1 or resubmitted[i] < DASK_RESUBMITS):
-                        # A task with several filters is split, one per filter, to find the one that kills its
-                        # worker; a single one is submitted again, since a task whose worker was killed by
-                        # another task's crash (holding its result) can be charged that death too.
-                        status.retried += 1
-                        parts = split(todo[i]) if len(todo[i].jobs) > 1 else [todo[i]]
-                        for part in parts:
-                            todo.append(part)
-                            resubmitted.append(resubmitted[i] + (len(parts) == 1))
-                            pending.add(submit(len(todo) - 1))
-                        continue
-                    if killed:
-                        reason = "its dask worker died each time it ran (KilledWorker)"
-                    elif error is not None:
-                        reason = f"worker failed: {type(error).__name__}: {error}"
-                    else:
-                        reason = f"dask task {fut.status}"
-                    with stop.shield():
-                        lost(todo[i], reason)
+            slots = jobs if cluster is not None else max(1, sum(client.nthreads().values()))
+            status = _Schedule(tasks, _Dask(client, slots), handle, lost).run(stop)
         finally:
-            status.interrupted = bool(pending) and stop.requested
-            with contextlib.suppress(Exception):
-                client.cancel(list(pending), force=True)
             with contextlib.suppress(Exception):
                 client.close(timeout=2)
             if cluster is not None:
-                if status.interrupted:
+                if stop.requested:
                     _kill_local_workers(cluster)
                 with contextlib.suppress(Exception):
                     cluster.close(timeout=3)

@@ -16,13 +16,16 @@ scan at the same stamp) the last one, the estimate after every event of that ins
 locbench's metrics hold at that time. Estimate rows that are not finite (a run that diverged) are left out with a
 warning. The times are the dataset's own (recordings keep their Unix stamps), so an export lines up with the
 recording and with other tools' output on it. Every file is written to a temporary file and renamed into place.
+
+:func:`export_textlog` writes a whole dataset realisation (events, truth, map, noise) as a plain-text log, the
+``locbench-textlog`` format of :mod:`locbench.datasets.recorded.textlog`, so that a user sees a worked example of
+the format and any dataset can be read back as ``textlog[path=...]``.
 """
 
 from __future__ import annotations
 
 import logging
 import os
-import tempfile
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -30,94 +33,15 @@ import numpy as np
 import numpy.typing as npt
 
 from locbench.datasets.base import Trajectory2D
+from locbench.datasets.recorded.tum import TUM_COLUMNS, read_tum, write_tum
+
+__all__ = ["TUM_COLUMNS", "export_results", "export_textlog", "export_truth_tum", "export_tum", "read_tum", "write_tum"]
 from locbench.errors import ConfigError
-from locbench.geometry import quaternion_to_yaw, yaw_to_quaternion
 from locbench.store import RunRecord, Store, TruthRecord
 
 log = logging.getLogger(__name__)
 
 FloatArray = npt.NDArray[np.float64]
-
-TUM_COLUMNS = ("timestamp [s]", "tx [m]", "ty [m]", "tz [m]", "qx", "qy", "qz", "qw")
-TUM_HEADER = "# timestamp tx ty tz qx qy qz qw"
-
-
-def _last_per_time(t: FloatArray, rows: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Keep, for each distinct time of a non-decreasing ``t``, the last row."""
-    keep = np.ones(t.shape[0], dtype=bool)
-    keep[:-1] = t[1:] != t[:-1]
-    return t[keep], rows[keep]
-
-
-def _fmt(v: float) -> str:
-    return repr(float(v))  # the shortest string that reads back as the same float64
-
-
-def write_tum(path: str | os.PathLike[str], t: npt.ArrayLike, poses: npt.ArrayLike, comment: str | None = None) -> Path:
-    """Write planar poses as a TUM trajectory file (atomically).
-
-    Parameters
-    ----------
-    path : path-like
-        The file to write; its folder is created.
-    t : array-like, shape (n,)
-        Times, s, non-decreasing; rows sharing a time collapse to the last.
-    poses : array-like, shape (n, 3)
-        World-frame poses (x m, y m, theta rad); rows with a non-finite value are left out (logged).
-    comment : str or None
-        Text of a second ``#`` line (provenance).
-
-    Returns
-    -------
-    Path
-        The file.
-
-    Raises
-    ------
-    ConfigError
-        Shapes that do not match, times going backwards, or no finite pose at all.
-    """
-    tt = np.asarray(t, dtype=np.float64)
-    pp = np.asarray(poses, dtype=np.float64)
-    if tt.ndim != 1 or pp.shape != (tt.shape[0], 3):
-        raise ConfigError(f"{path}: expected times (n,) and poses (n, 3), got {tt.shape} and {pp.shape}")
-    finite = np.isfinite(tt) & np.all(np.isfinite(pp), axis=1)
-    if not np.all(finite):
-        log.warning("%s: leaving out %d non-finite pose rows of %d", path, int(np.sum(~finite)), tt.shape[0])
-        tt, pp = tt[finite], pp[finite]
-    if tt.shape[0] == 0:
-        raise ConfigError(f"{path}: no finite pose to write")
-    back = np.flatnonzero(np.diff(tt) < 0)
-    if back.size:
-        k = int(back[0]) + 1
-        raise ConfigError(f"{path}: time goes backwards at row {k}: {float(tt[k])!r} s after {float(tt[k - 1])!r} s")
-    tt, pp = _last_per_time(tt, pp)
-    q = yaw_to_quaternion(pp[:, 2])
-    lines = [TUM_HEADER]
-    if comment:
-        lines.append("# " + " ".join(comment.split()))
-    for k in range(tt.shape[0]):
-        x, y = pp[k, 0], pp[k, 1]
-        lines.append(" ".join(_fmt(v) for v in (tt[k], x, y, 0.0, q[k, 0], q[k, 1], q[k, 2], q[k, 3])))
-    out = Path(path)
-    _atomic_write_text(out, "\n".join(lines) + "\n")
-    return out
-
-
-def read_tum(path: str | os.PathLike[str]) -> Trajectory2D:
-    """Read a TUM trajectory file as planar poses (the yaw of each quaternion; z and roll/pitch are dropped).
-
-    Raises
-    ------
-    RecordedDataError
-        Naming the line: a wrong column count, a field that is not a number, time going backwards.
-    """
-    from locbench.datasets.recorded.files import read_table  # the numeric table reader with line-numbered errors
-
-    table = read_table(path, TUM_COLUMNS)
-    table.check_time_non_decreasing(0, "timestamp")
-    rows = table.rows
-    return Trajectory2D(rows[:, 0].copy(), rows[:, 1:3].copy(), quaternion_to_yaw(rows[:, 4:8]))
 
 
 def _load_run(run: RunRecord | str | os.PathLike[str]) -> RunRecord:
@@ -240,14 +164,38 @@ def export_results(
     return written
 
 
-def _atomic_write_text(path: Path, text: str) -> None:
-    """Write through a temporary file in the same folder, then rename over ``path``."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=path.suffix, dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:  # names may be non-ASCII
-            fh.write(text)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+def export_textlog(spec: str, seed: int, out: str | os.PathLike[str]) -> tuple[Path, list[str]]:
+    """Write the realisation ``seed`` of dataset ``spec`` as a plain-text log (``locbench-textlog``).
+
+    Read back as ``textlog[path=OUT]``, it gives filters the same events, map, noise and initial belief, so a
+    deterministic filter's estimates are bit-identical (a randomised one's too, given the same generators: through
+    ``locbench run`` its draws are keyed by the dataset's name, which differs).
+
+    Parameters
+    ----------
+    spec : str
+        Any registered dataset with parameters (``room``, ``office[kidnap_m=2]``, ``plaza[run=1]``).
+    seed : int
+        The realisation (recordings: any seed is the same data).
+    out : path-like
+        The folder to write (created; an existing one must be empty or a textlog).
+
+    Returns
+    -------
+    (Path, list of str)
+        The folder, and notes on what does not read back exactly (see
+        :func:`~locbench.datasets.recorded.textlog.write_textlog`).
+    """
+    from locbench.datasets.base import SyntheticBuilder
+    from locbench.datasets.recorded.base import RecordedDataset
+    from locbench.datasets.recorded.textlog import write_textlog
+    from locbench.registry import DATASETS, make_dataset, resolve_dataset
+
+    r = resolve_dataset(spec)
+    cls = DATASETS.load(r.id)
+    kind = "simulation" if issubclass(cls, SyntheticBuilder) else ""
+    if issubclass(cls, RecordedDataset):
+        kind = cls.reference_kind
+    ds = make_dataset(r, seed)
+    notes = write_textlog(ds, out, source=f"{r.name} seed {seed}", reference_kind=kind)
+    return Path(out), notes

@@ -672,6 +672,54 @@ def realtime_factor(duration_s: float, compute_ns: npt.ArrayLike) -> float:
     return float(duration_s / total_s) if total_s > 0 else float("inf")
 
 
+#: The runtime metrics of :func:`run_metrics` with a twin in reference units (``<id>_ref``, :func:`reference_units`).
+REFERENCE_TIMES = tuple(f"{call}_us_{stat}" for call in ("predict", "update") for stat in ("mean", "median", "p95"))
+#: The suffix of a metric id in reference units.
+REF_SUFFIX = "_ref"
+
+
+def reference_units(
+    metrics: Mapping[str, float], reference_s: float, reference_cpu_s: float | None = None
+) -> dict[str, float]:
+    """The runtime metrics of one run in reference units, from its raw ones and the reference workload's times.
+
+    A time in reference units is the raw time over the reference workload's time on the same machine under the
+    same load (:mod:`locbench.reference_workload`): what it would be on a machine whose reference workload takes
+    1 s. So ``<call>_us_<stat>_ref`` = ``<call>_us_<stat>`` / reference (us on that machine) and
+    ``realtime_factor_ref`` = ``realtime_factor`` * ``reference_s`` (its real-time factor there). Totals (the
+    real-time factor, the mean and p95 per call) take the wall time ``reference_s``, which holds the turns other
+    processes took, as the totals do; the per-call medians take the CPU time ``reference_cpu_s`` when given: a
+    call of microseconds is rarely interrupted, so its median hardly moves with the load (docs/performance.md,
+    issue 25).
+
+    Parameters
+    ----------
+    metrics : mapping of str to float
+        A run's metrics (:func:`run_metrics`); the runtime ones present are converted.
+    reference_s, reference_cpu_s : float
+        The reference workload's wall and CPU time, s; > 0 and finite (``reference_cpu_s`` None: ``reference_s``).
+    """
+    cpu_s = reference_s if reference_cpu_s is None else reference_cpu_s
+    for name, value in (("reference_s", reference_s), ("reference_cpu_s", cpu_s)):
+        if not (np.isfinite(value) and value > 0):
+            raise ValueError(f"{name} must be a positive finite time in s, got {value!r}")
+    out = {
+        f"{k}{REF_SUFFIX}": metrics[k] / (cpu_s if k.endswith("_median") else reference_s)
+        for k in REFERENCE_TIMES
+        if k in metrics
+    }
+    if "realtime_factor" in metrics:
+        out[f"realtime_factor{REF_SUFFIX}"] = metrics["realtime_factor"] * reference_s
+    return out
+
+
+def _positive(x: object) -> float | None:
+    """``x`` as a float when it is a positive finite number (not a bool), else None."""
+    if isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) and x > 0:
+        return float(x)
+    return None
+
+
 def relation_errors(
     t_est: npt.ArrayLike, mean: npt.ArrayLike, t1: npt.ArrayLike, t2: npt.ArrayLike, delta_ref: npt.ArrayLike
 ) -> tuple[FloatArray, FloatArray]:
@@ -731,7 +779,9 @@ def run_metrics(run: RunRecord, truth: TruthRecord, rpe_delta_m: float = RPE_DEL
         ``nees_in_band_fraction`` (single-run two-sided 95 % chi-square(3) band), ``nll`` (mean over the
         truth times of :func:`nll`, +inf if any is),
         ``predict_us_{mean,median,p95}``, ``update_us_{mean,median,p95}``,
-        ``realtime_factor``, ``converged`` and ``time_to_converge_s``; with kidnaps in the truth
+        ``realtime_factor``, the same in reference units (``<id>_ref``, :func:`reference_units`) when the run's
+        meta has ``reference_s`` (and ``reference_cpu_s``), ``converged`` and ``time_to_converge_s``; with kidnaps
+        in the truth
         ``kidnap_distance_m``, ``kidnap_recovered``, ``kidnap_time_to_recover_s`` and
         ``kidnap_false_confidence_fraction`` (first kidnap); with a smoothed trajectory in
         ``run.extra`` ``smoothed_ate_m`` and ``smoothed_heading_rmse_rad``; with reference relations in the
@@ -770,6 +820,9 @@ def run_metrics(run: RunRecord, truth: TruthRecord, rpe_delta_m: float = RPE_DEL
         for stat, value in runtime_stats(run.step_times_us(call)).items():
             out[f"{call}_us_{stat}"] = value
     out["realtime_factor"] = realtime_factor(truth.duration_s, run.step_ns)
+    ref, ref_cpu = (_positive(run.meta.get(k)) for k in ("reference_s", "reference_cpu_s"))
+    if ref is not None:  # runs stored before reference_s was recorded have none
+        out.update(reference_units(out, ref, ref_cpu))
     out.update(convergence_metrics(run.t, run.mean, gt.t, gt_poses))
     out.update(kidnap_metrics(run.t, run.mean, run.cov, gt.t, gt_poses, truth.kidnaps))
     out.update(smoothed_metrics(run.extra, gt.t, gt_poses))
@@ -851,6 +904,10 @@ METRICS: dict[str, MetricInfo] = {
     "predict_us_median": MetricInfo("predict median", "us", 1.0),
     "update_us_median": MetricInfo("update median", "us", 1.0),
     "realtime_factor": MetricInfo("real-time factor", "x", 1.0, "higher"),
+    # reference units (reference_units): us and x on a machine whose reference workload takes 1 s
+    "predict_us_median_ref": MetricInfo("predict median", "ref us", 1.0),
+    "update_us_median_ref": MetricInfo("update median", "ref us", 1.0),
+    "realtime_factor_ref": MetricInfo("real-time factor", "ref x", 1.0, "higher"),
     "kidnap_recovered": MetricInfo("kidnap recovery", "%", 100.0, "higher"),
     "relation_error_m": MetricInfo("relation error", "cm", 100.0),
     "relation_error_rad": MetricInfo("relation error", "deg", float(np.degrees(1.0))),

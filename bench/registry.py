@@ -30,10 +30,15 @@ class Entry:
 
     id: str
     entry_point: str
+    #: One line for ``locbench list``; empty: the class's own ``description``.
     summary: str = ""
-    #: Top-level modules that must import for the entry to work, and the command that installs them.
+    #: Top-level modules that must import for the entry to work, and the command that installs them (a class may
+    #: declare its own too: ``requires_modules`` and ``install_hint`` on the filter or dataset class).
     requires_modules: tuple[str, ...] = ()
     install_hint: str = ""
+    #: The distribution that registered the entry through an entry-point group, and its version ("" for ours).
+    distribution: str = ""
+    distribution_version: str = ""
 
 
 class Registry(Generic[T]):
@@ -75,7 +80,13 @@ class Registry(Generic[T]):
         self._plugins_loaded = True
         for ep in importlib.metadata.entry_points(group=self.group):
             if ep.name not in self._entries:
-                self.register(ep.name, ep.value, summary=f"plugin from {ep.value}")
+                self.register(ep.name, ep.value)
+                dist = ep.dist
+                if dist is not None:
+                    e = self._entries[ep.name]
+                    self._entries[ep.name] = dataclasses.replace(
+                        e, distribution=dist.name, distribution_version=dist.version
+                    )
 
     def ids(self) -> list[str]:
         """Every registered id, sorted."""
@@ -89,15 +100,45 @@ class Registry(Generic[T]):
         except KeyError:
             raise UnknownIdError(f"unknown {self.kind} {id!r}; valid: {', '.join(self.ids())}") from None
 
-    def missing_dependency(self, id: str) -> str | None:
-        """None when the entry's optional dependencies import, else 'unavailable: install ...'."""
+    def summary(self, id: str) -> str:
+        """The one line ``locbench list`` prints: the registration's summary, else the class's ``description``
+        (a plugin declares it on its class), else where the plugin came from."""
         e = self.entry(id)
-        for mod in e.requires_modules:
-            try:
-                importlib.import_module(mod)
-            except ImportError:
-                return f"unavailable: {mod} is not installed; install it with: {e.install_hint or 'pip install ' + mod}"
-        return None
+        if e.summary:
+            return e.summary
+        cls, _ = self._import(e)
+        described = str(getattr(cls, "description", "") or "") if cls is not None else ""
+        origin = f" ({e.distribution} {e.distribution_version})" if e.distribution else ""
+        return described or f"plugin from {e.entry_point}{origin}"
+
+    def missing_dependency(self, id: str) -> str | None:
+        """None when the entry's optional dependencies import, else 'unavailable: install ...'.
+
+        Checked in order: the registration's ``requires_modules`` (without importing the class), the class's
+        module itself, then the ``requires_modules`` the class declares (with its ``install_hint``).
+        """
+        e = self.entry(id)
+        reason = _missing_module(e.requires_modules, e.install_hint)
+        if reason is not None:
+            return reason
+        cls, reason = self._import(e)
+        if cls is None:
+            return reason
+        return _missing_module(tuple(getattr(cls, "requires_modules", ())), getattr(cls, "install_hint", "") or "")
+
+    def _import(self, e: Entry) -> tuple[type[T] | None, str | None]:
+        """The entry's class, or None and why its module does not import (a missing optional dependency)."""
+        module_name, attr = e.entry_point.split(":", 1)
+        try:
+            module = importlib.import_module(module_name)
+        except ImportError as exc:
+            missing = getattr(exc, "name", None) or ""
+            if missing.split(".")[0] == "locbench":
+                raise  # a broken entry point of our own is a bug, not a missing dependency
+            hint = e.install_hint or "pip install 'locbench[all]'"
+            return None, f"unavailable: {exc}; install with: {hint}"
+        cls: type[T] = getattr(module, attr)
+        return cls, None
 
     def unavailable_reason(self, id: str) -> str | None:
         """Why the entry cannot run here with its default parameters: a missing dependency or missing data.
@@ -113,20 +154,11 @@ class Registry(Generic[T]):
 
     def load(self, id: str) -> type[T]:
         """Import and return the registered class; ``DependencyNotInstalled`` when an optional dependency is missing."""
-        e = self.entry(id)
         reason = self.missing_dependency(id)
         if reason is not None:
             raise DependencyNotInstalled(f"{self.kind} {id!r} is {reason}")
-        module_name, attr = e.entry_point.split(":", 1)
-        try:
-            module = importlib.import_module(module_name)
-        except ImportError as exc:
-            missing = getattr(exc, "name", None) or ""
-            if missing.split(".")[0] == "locbench":
-                raise  # a broken entry point of our own is a bug, not a missing dependency
-            hint = e.install_hint or "pip install 'locbench[all]'"
-            raise DependencyNotInstalled(f"{self.kind} {id!r} is unavailable: {exc}; install with: {hint}") from exc
-        cls: type[T] = getattr(module, attr)
+        cls, _ = self._import(self.entry(id))
+        assert cls is not None  # it imported in missing_dependency
         return cls
 
     def __iter__(self) -> Iterator[str]:
@@ -134,6 +166,16 @@ class Registry(Generic[T]):
 
     def __contains__(self, id: object) -> bool:
         return isinstance(id, str) and id in self.ids()
+
+
+def _missing_module(modules: tuple[str, ...], hint: str) -> str | None:
+    """'unavailable: M is not installed; install it with: HINT' for the first of ``modules`` that does not import."""
+    for mod in modules:
+        try:
+            importlib.import_module(mod)
+        except ImportError:
+            return f"unavailable: {mod} is not installed; install it with: {hint or 'pip install ' + mod}"
+    return None
 
 
 FILTERS: Registry[Any] = Registry("filter", "locbench.filters")
@@ -271,6 +313,11 @@ DATASETS.register(
     "a user's ROS 1 / ROS 2 bag: nav_msgs/Odometry, sensor_msgs/LaserScan, a truth pose topic, a map_server map",
     requires_modules=("rosbags",),
     install_hint="pip install 'locbench[ros]'",
+)
+DATASETS.register(
+    "textlog",
+    "locbench.datasets.recorded.textlog:TextlogDataset",
+    "a user's plain-text log (locbench-textlog v1): JSON-lines events, TUM truth, map_server map, landmark files",
 )
 
 # --- making things from specs -------------------------------------------------------------------

@@ -3,13 +3,15 @@
 :func:`plan_sweep` decides the work: every spec resolved (a bad one fails before anything runs), each
 (dataset, seed) a :class:`Task` holding the filters that have no up-to-date stored run on it, the tasks
 sorted longest first (stored timings where present, else an estimate) so that no worker idles at the end.
-:func:`execute_task` does one task anywhere, a process of this machine or a dask worker on another: it
-builds the dataset once (its noise depends only on the dataset name and the seed, so every filter sees the
-same realisation), computes the realisation's posterior Cramer-Rao bound where the plan asks for it
-(synthetic worlds, :mod:`locbench.pcrb`), and runs each filter over its events (``predict`` for odometry,
-``update`` for each observation type the filter routes, ``estimate()`` after every call, and the time of
-each call), returning the records without touching the results folder. :func:`run_sweep` hands the tasks to an executor
-(:mod:`locbench.executors`) and writes every returned record into the store as it arrives. An exception
+:func:`execute_task` does one task, or one filter's part of it, anywhere, a process of this machine or a dask
+worker on another: it builds the dataset once and keeps it for the next part (its noise depends only on the
+dataset name and the seed, so every filter sees the same realisation), computes the realisation's posterior
+Cramer-Rao bound where the plan asks for it (synthetic worlds, :mod:`locbench.pcrb`), and runs each filter
+over its events (``predict`` for odometry, ``update`` for each observation type the filter routes,
+``estimate()`` after every call, and the time of each call; with interleaved timing every filter of the task
+in turns over slices of the data, :func:`_interleaved`), returning the records without touching the
+results folder. :func:`run_sweep` hands the tasks to an executor (:mod:`locbench.executors`, which runs them
+one filter at a time) and writes every returned record into the store as it arrives. An exception
 inside a filter or a divergence is stored as a result with its status and message; a failure of the
 machinery (a worker that died, a dataset that did not build) is recorded the same way for every run of
 its task, by :func:`failed_result`; and the sweep goes on.
@@ -33,7 +35,7 @@ from locbench.errors import DataNotFound, FilterDiverged
 from locbench.events import EVENT_TYPES, Odometry
 from locbench.filters.base import Filter
 from locbench.registry import DATASETS, FILTERS, Resolved, build_dataset, resolve_dataset, resolve_filter
-from locbench.runkey import key_params
+from locbench.runkey import key_params, source_digest
 from locbench.seeding import belief_rng, filter_rng
 from locbench.spec import Spec, stable_hash
 from locbench.store import KIND_NAMES, BoundRecord, RunRecord, Store, TruthRecord
@@ -134,94 +136,146 @@ def run_filter(
     the filter's), a filter that exposes belief samples has them scored at every ground-truth time
     (:class:`_BeliefScorer`; the scores go into ``extra``).
     """
-    routed = flt.routed_events()
-    n_max = 1 + sum(1 for e in ds.events if isinstance(e, Odometry) or type(e) in routed)
-    t = np.full(n_max, np.nan)
-    mean = np.full((n_max, 3), np.nan)
-    cov = np.full((n_max, 3, 3), np.nan)
-    kind = np.zeros(n_max, dtype=np.int8)
-    step_ns = np.zeros(n_max, dtype=np.int64)
-    diags: dict[str, np.ndarray] = {}
-    health: dict[str, np.ndarray] = {}
-    scorer = _BeliefScorer(flt, ds, sample_rng)
-    status, message, diverged_t = "ok", "", None
-    row = 0
+    run = FilterPass(flt, ds, rng, sample_rng)
+    run.advance(len(ds.events))
+    return run.finish()
 
-    def record(tt: float, k: int, ns: int) -> None:
-        nonlocal row
+
+class FilterPass:
+    """One filter's pass over a dataset (:func:`run_filter`), advanced in stretches of events.
+
+    :func:`execute_task` advances several passes in turn over slices of a dataset (interleaved timing), so a
+    busy moment of the machine falls on every configuration of the task alike; each pass keeps its own filter,
+    generators and arrays, so its estimates are those of a pass alone, bit for bit.
+    """
+
+    def __init__(
+        self, flt: Filter, ds: Dataset, rng: np.random.Generator, sample_rng: np.random.Generator | None = None
+    ) -> None:
+        self._flt, self._ds = flt, ds
+        self._routed = routed = flt.routed_events()
+        n_max = 1 + sum(1 for e in ds.events if isinstance(e, Odometry) or type(e) in routed)
+        self.t = np.full(n_max, np.nan)
+        self.mean = np.full((n_max, 3), np.nan)
+        self.cov = np.full((n_max, 3, 3), np.nan)
+        self.kind = np.zeros(n_max, dtype=np.int8)
+        self.step_ns = np.zeros(n_max, dtype=np.int64)
+        self._n_max = n_max
+        self.diags: dict[str, np.ndarray] = {}
+        self.health: dict[str, np.ndarray] = {}
+        self._scorer = _BeliefScorer(flt, ds, sample_rng)
+        self.status, self.message = "ok", ""
+        self.diverged_t: float | None = None
+        self.row = 0
+        #: The next event to process; the wall time spent in :meth:`advance`, s.
+        self.next = 0
+        self.wall_s = 0.0
+        self._t0 = ds.events[0].t if ds.events else 0.0
+        self._box = world_box(ds)
+        start = time.perf_counter()
+        try:
+            flt.reset(ds.initial, ds.world, ds.sensors, rng)
+            self._record(float(min(self._t0, ds.ground_truth.t[0])), _RESET, 0)
+        except Exception as exc:
+            self._fail(exc)
+        self.wall_s += time.perf_counter() - start
+
+    @property
+    def done(self) -> bool:
+        """Stopped early (diverged, failed) or every event processed."""
+        return self.status != "ok" or self.next >= len(self._ds.events)
+
+    def _record(self, tt: float, k: int, ns: int) -> None:
+        flt, row, n_max = self._flt, self.row, self._n_max
         est = flt.estimate()
-        t[row], kind[row], step_ns[row] = tt, k, ns
-        mean[row] = est.mean
-        cov[row] = est.cov
+        self.t[row], self.kind[row], self.step_ns[row] = tt, k, ns
+        self.mean[row] = est.mean
+        self.cov[row] = est.cov
         for name, value in est.diagnostics.items():
-            arr = diags.get(name)
+            arr = self.diags.get(name)
             if arr is None:
-                arr = diags[name] = np.full(n_max, np.nan)
+                arr = self.diags[name] = np.full(n_max, np.nan)
             arr[row] = value
         for name, value in flt.health().items():
-            arr = health.get(name)
+            arr = self.health.get(name)
             if arr is None:
-                arr = health[name] = np.full(n_max, np.nan)
+                arr = self.health[name] = np.full(n_max, np.nan)
             arr[row] = value
-        row += 1
+        self.row += 1
 
-    t0 = ds.events[0].t if ds.events else 0.0
-    box = world_box(ds)
-    try:
-        flt.reset(ds.initial, ds.world, ds.sensors, rng)
-        record(float(min(t0, ds.ground_truth.t[0])), _RESET, 0)
-        clock = time.perf_counter_ns
-        for ev in ds.events:
-            typ = type(ev)
-            if typ is not Odometry and typ not in routed:
-                continue
-            scorer.advance(ev.t)
-            if typ is Odometry:
-                start = clock()
-                flt.predict(ev)  # type: ignore[arg-type]
-                ns = clock() - start
-            else:
-                start = clock()
-                flt.update(ev)  # type: ignore[arg-type]
-                ns = clock() - start
-            record(ev.t, _KIND_OF[typ], ns)
-            m, c = mean[row - 1], cov[row - 1]
-            if not (np.all(np.isfinite(m)) and np.all(np.isfinite(c))):
-                raise FilterDiverged(f"non-finite estimate at t={ev.t:.3f} s")
-            if not box.contains(m[0], m[1]):
-                raise FilterDiverged(f"{left_world(m, box)} at t={ev.t:.3f} s")
-    except FilterDiverged as exc:
-        status, message = "diverged", str(exc)
-        diverged_t = float(t[row - 1]) if row else float(t0)
-    except Exception as exc:
-        status = "error"
+    def _fail(self, exc: Exception) -> None:
+        if isinstance(exc, FilterDiverged):
+            self.status, self.message = "diverged", str(exc)
+            self.diverged_t = float(self.t[self.row - 1]) if self.row else float(self._t0)
+            return
+        self.status = "error"
         tb = traceback.extract_tb(exc.__traceback__)
         where = f" ({tb[-1].filename.rsplit('/', 1)[-1]}:{tb[-1].lineno})" if tb else ""
-        message = f"{type(exc).__name__}: {exc}{where}"
-    extra: dict[str, np.ndarray] = {}
-    if status == "ok":
+        self.message = f"{type(exc).__name__}: {exc}{where}"
+
+    def advance(self, stop: int) -> None:
+        """Process the events before index ``stop`` not yet processed (none once :attr:`done`)."""
+        if self.done:
+            return
+        flt, routed, scorer, box = self._flt, self._routed, self._scorer, self._box
+        mean, cov = self.mean, self.cov
+        events = self._ds.events
+        clock = time.perf_counter_ns
+        start_s = time.perf_counter()
         try:
-            extra = {k: np.asarray(v) for k, v in flt.extra_results().items()}
-            extra |= scorer.result()
+            while self.next < stop:
+                ev = events[self.next]
+                self.next += 1
+                typ = type(ev)
+                if typ is not Odometry and typ not in routed:
+                    continue
+                scorer.advance(ev.t)
+                if typ is Odometry:
+                    start = clock()
+                    flt.predict(ev)  # type: ignore[arg-type]
+                    ns = clock() - start
+                else:
+                    start = clock()
+                    flt.update(ev)  # type: ignore[arg-type]
+                    ns = clock() - start
+                self._record(ev.t, _KIND_OF[typ], ns)
+                m, c = mean[self.row - 1], cov[self.row - 1]
+                if not (np.all(np.isfinite(m)) and np.all(np.isfinite(c))):
+                    raise FilterDiverged(f"non-finite estimate at t={ev.t:.3f} s")
+                if not box.contains(m[0], m[1]):
+                    raise FilterDiverged(f"{left_world(m, box)} at t={ev.t:.3f} s")
         except Exception as exc:
-            status, message = "error", f"extra_results failed: {type(exc).__name__}: {exc}"
-    return FilterTrace(
-        t[:row],
-        mean[:row],
-        cov[:row],
-        kind[:row],
-        step_ns[:row],
-        {k: v[:row] for k, v in diags.items()},
-        status,
-        message,
-        diverged_t,
-        extra,
-        {k: v[:row] for k, v in health.items()},
-    )
+            self._fail(exc)
+        self.wall_s += time.perf_counter() - start_s
+
+    def finish(self) -> FilterTrace:
+        """The pass's trace (after its filter's extra results and the belief scores, when it ended ok)."""
+        extra: dict[str, np.ndarray] = {}
+        if self.status == "ok":
+            try:
+                extra = {k: np.asarray(v) for k, v in self._flt.extra_results().items()}
+                extra |= self._scorer.result()
+            except Exception as exc:
+                self.status, self.message = "error", f"extra_results failed: {type(exc).__name__}: {exc}"
+        row = self.row
+        return FilterTrace(
+            self.t[:row],
+            self.mean[:row],
+            self.cov[:row],
+            self.kind[:row],
+            self.step_ns[:row],
+            {k: v[:row] for k, v in self.diags.items()},
+            self.status,
+            self.message,
+            self.diverged_t,
+            extra,
+            {k: v[:row] for k, v in self.health.items()},
+        )
 
 
 def run_key(fr: Resolved, dr: Resolved, seed: int) -> str:
-    """The cache key of a run: everything that determines its result."""
+    """The cache key of a run: everything that determines its result, the source of the filter's and the dataset
+    builder's code included (:func:`locbench.runkey.source_digest`)."""
     fcls, dcls = FILTERS.load(fr.id), DATASETS.load(dr.id)
     return stable_hash(
         {
@@ -229,9 +283,11 @@ def run_key(fr: Resolved, dr: Resolved, seed: int) -> str:
             "filter": fr.id,
             "filter_config": key_params(fr.params),
             "filter_version": getattr(fcls, "version", 1),
+            "filter_source": source_digest(fcls),
             "dataset": dr.id,
             "dataset_params": key_params(dr.params),
             "dataset_version": getattr(dcls, "version", 1),
+            "dataset_source": source_digest(dcls),
             "seed": seed,
         }
     )
@@ -250,6 +306,7 @@ def bound_key(dr: Resolved, seed: int) -> str | None:
             "dataset": dr.id,
             "dataset_params": key_params(dr.params),
             "dataset_version": getattr(dcls, "version", 1),
+            "dataset_source": source_digest(dcls),
             "seed": seed,
         }
     )
@@ -302,6 +359,9 @@ class Task:
     cost_s: float = 0.0
     #: The key of the realisation's bound to compute and store, or None (recorded data, kidnaps, stored).
     bound_key: str | None = None
+    #: Interleaved timing: the seconds of data each filter runs before the next takes over (:func:`_interleaved`);
+    #: 0 runs each filter over the whole dataset in turn.
+    slice_s: float = 0.0
 
     @property
     def label(self) -> str:
@@ -383,7 +443,10 @@ def _estimate_cost(
 
 
 def plan_sweep(
-    blocks: Sequence[tuple[Sequence[str], Sequence[str], Sequence[int]]], results: str, force: bool = False
+    blocks: Sequence[tuple[Sequence[str], Sequence[str], Sequence[int]]],
+    results: str,
+    force: bool = False,
+    slice_s: float = 0.0,
 ) -> Plan:
     """Resolve every spec and decide which runs to do; nothing is run or written.
 
@@ -395,6 +458,9 @@ def plan_sweep(
         The results folder; a run whose stored key is unchanged and whose files load is cached.
     force : bool
         Plan every run even when it is stored.
+    slice_s : float
+        Interleaved timing (:attr:`Task.slice_s`): the filters of each task take turns over this many seconds of
+        data; 0 (default) runs them one after the other.
     """
     store = Store(results)
     plan = Plan([], [], results)
@@ -434,7 +500,7 @@ def plan_sweep(
         if jobs or bkey is not None:
             todo = tuple(jobs.values())
             cost = _estimate_cost(store, dr, todo, seen) + (_BOUND_COST_S if bkey is not None else 0.0)
-            plan.tasks.append(Task(dr, DATASETS.load(dr.id), seed, todo, cost, bkey))
+            plan.tasks.append(Task(dr, DATASETS.load(dr.id), seed, todo, cost, bkey, slice_s))
     # Longest first (LPT): the last tasks to start are short, so the workers finish together.
     plan.tasks.sort(key=lambda t: -t.cost_s)
     return plan
@@ -449,15 +515,19 @@ def _meta(task: Task, job: Job) -> dict[str, Any]:
         "filter_id": fr.id,
         "filter_config": fr.params_dict(),
         "filter_version": getattr(job.filter_cls, "version", 1),
+        "filter_distribution": provenance.distribution(job.filter_cls),
         "dataset": dr.name,
         "dataset_id": dr.id,
         "dataset_params": dr.params_dict(),
         "dataset_version": getattr(task.dataset_cls, "version", 1),
+        "dataset_distribution": provenance.distribution(task.dataset_cls),
         "seed": task.seed,
         "run_key": job.key,
         "versions": provenance.versions(),
         "git_commit": git["commit"],
         "git_dirty": git["dirty"],
+        # the machine, its load as the run starts and the reference workload's time (runtimes in reference units)
+        **provenance.machine(),
     }
 
 
@@ -477,69 +547,184 @@ def failed_result(task: Task, status: str, message: str, transient: bool = False
     return TaskResult(None, [_empty_record(_meta(task, job) | extra) for job in task.jobs])
 
 
-def execute_task(task: Task) -> TaskResult:
-    """Build the task's dataset and run each of its filters; touches no file (any worker can run it).
+@dataclass(frozen=True)
+class _BuildFailed:
+    """A dataset that did not build: the status and message of every run on it."""
 
-    Never raises for a failure of a filter or of the dataset: those are records with their status.
-    """
+    status: str
+    message: str
+
+
+#: This process's last built realisations, oldest first: (dataset class, dataset name, seed) -> the dataset
+#: and its truth's record, or the failure of its build; so that the parts of a task that run one after another
+#: on a worker (:func:`locbench.executors.parts`) build their dataset once.
+_REALISATION: dict[tuple[type, str, int], tuple[Dataset, TruthRecord] | _BuildFailed] = {}
+#: Realisations a process keeps: two, since two workers freed at once may take each other's next part.
+_KEEP = 2
+
+
+def forget_realisations() -> None:
+    """Drop this process's kept realisations (:data:`_REALISATION`): their memory once a sweep is over."""
+    _REALISATION.clear()
+
+
+def _realisation(task: Task) -> tuple[Dataset, TruthRecord] | _BuildFailed:
+    """The task's dataset and its truth's record, built or kept from the previous part; or why it did not build."""
+    key = (task.dataset_cls, task.dataset.name, task.seed)
+    kept = _REALISATION.pop(key, None)
+    if kept is not None:
+        _REALISATION[key] = kept  # the newest now
+        return kept
+    while len(_REALISATION) >= _KEEP:
+        del _REALISATION[next(iter(_REALISATION))]
     dr = task.dataset
     t_build = time.perf_counter()
+    built: tuple[Dataset, TruthRecord] | _BuildFailed
     try:
         ds: Dataset = build_dataset(task.dataset_cls, dr, task.seed)
     except DataNotFound as exc:
         # Recorded data that is not on this machine: a recorded skip with the reason, not a failure.
-        return failed_result(task, "skipped", f"data not found: {exc}")
+        built = _BuildFailed("skipped", f"data not found: {exc}")
     except Exception as exc:
         msg = f"dataset build failed: {type(exc).__name__}: {exc}"
         log.error("%s: %s", task.label, msg)
-        return failed_result(task, "error", msg)
-    build_s = time.perf_counter() - t_build
-    truth_meta = {
-        "dataset_id": dr.id,
-        "dataset_params": dr.params_dict(),
-        "dataset_version": getattr(task.dataset_cls, "version", 1),
-        "build_s": build_s,
-        "metadata": ds.metadata,
-        "versions": provenance.versions(),
-    }
+        built = _BuildFailed("error", msg)
+    else:
+        truth_meta = {
+            "dataset_id": dr.id,
+            "dataset_params": dr.params_dict(),
+            "dataset_version": getattr(task.dataset_cls, "version", 1),
+            "build_s": time.perf_counter() - t_build,
+            "metadata": ds.metadata,
+            "versions": provenance.versions(),
+        }
+        built = (ds, TruthRecord.from_dataset(ds, task.seed, truth_meta))
+    _REALISATION[key] = built
+    return built
+
+
+def execute_task(task: Task) -> TaskResult:
+    """Build the task's dataset (or take the one this process kept) and run each of its filters; touches no
+    file (any worker can run it).
+
+    Never raises for a failure of a filter or of the dataset: those are records with their status.
+    """
+    built = _realisation(task)
+    if isinstance(built, _BuildFailed):
+        return failed_result(task, built.status, built.message)
+    ds, truth = built
     bound = _bound(task, ds)
-    runs: list[RunRecord] = []
-    for job in task.jobs:
+    runs = _interleaved(task, ds) if task.slice_s > 0 else [_run_job(task, job, ds) for job in task.jobs]
+    return TaskResult(truth, runs, bound)
+
+
+def _rngs(task: Task, job: Job) -> tuple[np.random.Generator, np.random.Generator]:
+    """A run's filter generator and the runner's belief-sampling one (:mod:`locbench.seeding`)."""
+    name, ds_name = job.filter.name, task.dataset.name
+    return filter_rng(name, ds_name, task.seed), belief_rng(name, ds_name, task.seed)
+
+
+def _run_job(task: Task, job: Job, ds: Dataset) -> RunRecord:
+    """One filter of a task over the whole dataset (a skip when it cannot run on it)."""
+    meta = _meta(task, job)
+    flt: Filter = job.filter_cls(job.filter.params)
+    reason = incompatibility(flt, ds)
+    if reason is not None:
+        return _empty_record(meta | {"status": "skipped", "message": reason, "wall_s": 0.0})
+    start = time.perf_counter()
+    trace = run_filter(flt, ds, *_rngs(task, job))
+    return _trace_record(task, job, ds, meta, trace, time.perf_counter() - start)
+
+
+def _trace_record(
+    task: Task, job: Job, ds: Dataset, meta: dict[str, Any], trace: FilterTrace, wall_s: float
+) -> RunRecord:
+    meta = meta | {
+        "status": trace.status,
+        "message": trace.message,
+        "diverged_t": trace.diverged_t,
+        "wall_s": wall_s,
+        "compute_s": float(trace.step_ns.sum()) / 1e9,
+        "dataset_duration_s": ds.duration,
+        "n_rows": int(trace.t.shape[0]),
+    }
+    if trace.status != "ok":
+        log.warning("%s on %s: %s: %s", job.filter.name, task.label, trace.status, trace.message)
+    arrays = (trace.t, trace.mean, trace.cov, trace.kind, trace.step_ns)
+    return RunRecord(meta, *arrays, trace.diagnostics, trace.extra, trace.health)
+
+
+def slice_stops(ds: Dataset, slice_s: float) -> list[int]:
+    """The event indices that end each ``slice_s`` seconds of ``ds``'s data (the last is the event count)."""
+    n = len(ds.events)
+    if n == 0:
+        return [0]
+    times = np.fromiter((e.t for e in ds.events), dtype=np.float64, count=n)
+    edges = np.arange(times[0] + slice_s, times[-1] + slice_s, slice_s)
+    stops = np.unique(np.searchsorted(times, edges, side="left"))
+    return [int(i) for i in stops if 0 < i < n] + [n]
+
+
+#: Interleaved timing runs a piece of the reference workload at a task's start and then between slices whenever
+#: this much wall time has passed since the last (its cost: a piece, about 4 ms of CPU, per 2 s: 0.2-1.5 %).
+REFERENCE_EVERY_S = 2.0
+
+
+def _reference_piece() -> tuple[float, float]:
+    """The wall and thread CPU time of one piece of the reference workload, s (``reference_workload.run_piece``)."""
+    from locbench.reference_workload import run_piece
+
+    start, start_cpu = time.perf_counter(), time.thread_time()
+    run_piece()
+    cpu = time.thread_time() - start_cpu
+    return time.perf_counter() - start, cpu
+
+
+def _interleaved(task: Task, ds: Dataset) -> list[RunRecord]:
+    """Every filter of a task advanced in turn over ``task.slice_s`` seconds of data at a time.
+
+    A busy moment of the machine then lands on a slice of every configuration of the task, not on one
+    configuration's whole run, so the configurations' timings stay comparable; the first filter of each slice
+    rotates (none always runs right after another's cache pollution). Pieces of the reference workload run
+    between slices (:data:`REFERENCE_EVERY_S`), so the runs' ``reference_s`` (``reference_cpu_s``) is the task's
+    own: the pieces' mean wall (CPU) time times the pieces in a pass, under the load the filters ran under (the
+    sweep's measurement stays as ``reference_sweep_s``). Estimates are those of :func:`_run_job`, bit for bit
+    (each pass has its own filter, generators and arrays); every filter of the task is alive at once, so the
+    task's memory is the sum of its filters' rather than the largest.
+    """
+    from locbench.reference_workload import PIECES
+
+    out: list[RunRecord | None] = [None] * len(task.jobs)
+    live: list[tuple[int, Job, dict[str, Any], FilterPass]] = []
+    for i, job in enumerate(task.jobs):
         meta = _meta(task, job)
         flt: Filter = job.filter_cls(job.filter.params)
         reason = incompatibility(flt, ds)
         if reason is not None:
-            runs.append(_empty_record(meta | {"status": "skipped", "message": reason, "wall_s": 0.0}))
+            out[i] = _empty_record(meta | {"status": "skipped", "message": reason, "wall_s": 0.0})
             continue
+        live.append((i, job, meta, FilterPass(flt, ds, *_rngs(task, job))))
+    pieces: list[tuple[float, float]] = []
+    last = -np.inf
+    for k, stop in enumerate(slice_stops(ds, task.slice_s)):
+        if live and time.perf_counter() - last >= REFERENCE_EVERY_S:
+            pieces.append(_reference_piece())
+            last = time.perf_counter()
+        first = k % len(live) if live else 0
+        for _, _, _, run in live[first:] + live[:first]:
+            run.advance(stop)
+    for i, job, meta, run in live:
         start = time.perf_counter()
-        trace = run_filter(
-            flt, ds, filter_rng(job.filter.name, dr.name, task.seed), belief_rng(job.filter.name, dr.name, task.seed)
-        )
-        meta |= {
-            "status": trace.status,
-            "message": trace.message,
-            "diverged_t": trace.diverged_t,
-            "wall_s": time.perf_counter() - start,
-            "compute_s": float(trace.step_ns.sum()) / 1e9,
-            "dataset_duration_s": ds.duration,
-            "n_rows": int(trace.t.shape[0]),
+        trace = run.finish()
+        wall, cpu = PIECES * np.mean(pieces, axis=0)
+        meta = meta | {
+            "reference_sweep_s": meta["reference_s"],
+            "reference_s": float(wall),
+            "reference_cpu_s": float(cpu),
+            "reference_pieces": len(pieces),
         }
-        if trace.status != "ok":
-            log.warning("%s on %s: %s: %s", job.filter.name, task.label, trace.status, trace.message)
-        runs.append(
-            RunRecord(
-                meta,
-                trace.t,
-                trace.mean,
-                trace.cov,
-                trace.kind,
-                trace.step_ns,
-                trace.diagnostics,
-                trace.extra,
-                trace.health,
-            )
-        )
-    return TaskResult(TruthRecord.from_dataset(ds, task.seed, truth_meta), runs, bound)
+        out[i] = _trace_record(task, job, ds, meta, trace, run.wall_s + time.perf_counter() - start)
+    return [r for r in out if r is not None]
 
 
 def _bound(task: Task, ds: Dataset) -> BoundRecord | None:
@@ -559,16 +744,26 @@ def _bound(task: Task, ds: Dataset) -> BoundRecord | None:
     return BoundRecord(task.dataset.name, task.seed, ds.ground_truth.t, covs, meta)
 
 
-def store_result(store: Store, task: Task, result: TaskResult) -> list[RunOutcome]:
+def store_result(
+    store: Store, task: Task, result: TaskResult, written: set[tuple[str, int]] | None = None
+) -> list[RunOutcome]:
     """Write a task's truth and runs; a write that fails (disk full, read-only) is a ``not stored`` outcome
-    whose message names the run's folder and the reason."""
+    whose message names the run's folder and the reason.
+
+    ``written`` holds the (dataset, seed) whose truth this sweep stored already: each part of a task carries
+    the same truth, written once, before the first of its runs.
+    """
     notes = {job.filter.name: job for job in task.jobs}
     truth_error = ""
-    if result.truth is not None:
+    realisation = (task.dataset.name, task.seed)
+    if result.truth is not None and (written is None or realisation not in written):
         try:
             store.write_truth(result.truth)
         except OSError as exc:
             truth_error = f"its ground truth was not stored: {_os_message(exc)}"
+        else:
+            if written is not None:
+                written.add(realisation)
     outcomes = []
     for rec in result.runs:
         job = notes[rec.meta["filter"]]
@@ -625,15 +820,16 @@ def run_sweep(
         ``local``: this process (``jobs`` = 1) or a pool of ``jobs`` processes; ``dask``: a dask.distributed
         client of the scheduler at ``scheduler``, else of a LocalCluster of ``jobs`` worker processes.
     progress : callable, optional
-        Called with the number of runs each finished task stored (and once with the cached count).
+        Called with the number of runs each finished part stored (one filter's; once with the cached count).
     connect_timeout_s : float, optional
         Seconds to wait for the scheduler at ``scheduler`` (default :data:`locbench.executors.CONNECT_TIMEOUT_S`).
 
     Before anything is computed the store is checked writable, with room for the planned runs
     (:meth:`Store.check_space`): a full disk is one error, not one per computed run.
 
-    SIGINT (Ctrl-C) and SIGTERM stop the sweep: tasks not started are cancelled, running ones abandoned, every
-    finished run is kept, and the result says ``interrupted``; rerunning the same plan resumes.
+    SIGINT (Ctrl-C) and SIGTERM stop the sweep: runs not started are cancelled, running ones abandoned, every
+    finished run is kept (each is stored as its filter finishes), and the result says ``interrupted``;
+    rerunning the same plan resumes.
     """
     from locbench import executors
 
@@ -643,13 +839,16 @@ def run_sweep(
         store.check_writable()  # a read-only or full results folder is one error before any run, not one per run
         store.check_space(sum(len(t.jobs) for t in plan.tasks) + len(plan.tasks))
     cleaned = len(store.clean_leftovers())
+    if plan.tasks:
+        provenance.reference()  # once per sweep, here: the workers a pool forks inherit it
     outcomes = list(plan.cached)
     bounds = [0]
+    truths: set[tuple[str, int]] = set()
     if progress and plan.cached:
         progress(len(plan.cached))
 
     def handle(task: Task, result: TaskResult) -> None:
-        res = store_result(store, task, result)
+        res = store_result(store, task, result, truths)
         bounds[0] += store_bound(store, task, result)
         outcomes.extend(res)
         if progress:

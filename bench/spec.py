@@ -19,6 +19,7 @@ import typing
 from typing import Any, Literal, TypeVar, Union, get_args, get_origin
 
 from locbench.errors import ConfigError, UnknownIdError, shown
+from locbench.tunable import UNIT_KEY
 
 P = TypeVar("P")
 
@@ -377,8 +378,9 @@ def describe_params(cls: type) -> list[ParamDoc]:
     """Every parameter of the dataclass ``cls``: type, default, unit and meaning.
 
     The meaning is the first sentence of the field's entry in the numpydoc ``Attributes`` section of the
-    class (or a base); the unit is the field's ``metadata["unit"]`` when given, else read from its name's
-    suffix (``_m`` metres, ``_rad`` radians, ``_s`` seconds, ``_m2`` square metres ...), else ``-``.
+    class (or a base); the unit is the field's ``metadata["unit"]`` when given (:func:`locbench.tunable.field_unit`),
+    else read from its name's suffix (``_m`` metres, ``_rad`` radians, ``_s`` seconds, ``_m2`` square metres ...),
+    else ``-``.
     """
     docs = _attribute_docs(cls)
     hints = param_fields(cls)
@@ -392,7 +394,9 @@ def describe_params(cls: type) -> list[ParamDoc]:
             default = _format_value(f.default_factory())
         else:
             default = "(required)"
-        unit = str(f.metadata.get("unit", "")) or next((u for s, u in _UNIT_SUFFIXES if f.name.endswith(s)), "-")
+        # "_" + name: a name that is its suffix alone (sigma_xy_per_m) reads as that suffix, not as its tail (_per_m)
+        suffixed = "_" + f.name
+        unit = str(f.metadata.get(UNIT_KEY, "")) or next((u for s, u in _UNIT_SUFFIXES if suffixed.endswith(s)), "-")
         meaning = str(f.metadata.get("doc", "")) or _first_sentence(docs.get(f.name, "")) or "(undocumented)"
         out.append(ParamDoc(f.name, _type_name(hints[f.name]), default, unit, meaning))
     return out

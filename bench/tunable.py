@@ -1,11 +1,12 @@
-"""Which config fields a user would tune, and over what range: declared on each config class as field metadata.
+"""Which config fields a user would tune, and over what range, and a field's unit: declared as field metadata.
 
 A field carries ``metadata=tunable(low, high, log=True)`` (a float or an integer between bounds, on a log or a
-linear scale) or ``metadata=tunable_choice("a", "b")`` (one of a few values). Noise scales, gates, thresholds and
-iteration caps are tunable; a compute knob (particles, a smoother's lag) is not, since it is the user's budget,
-not an accuracy setting. :func:`tunable_fields` reads them back for ``locbench list FILTER`` and
-``locbench tune`` (:mod:`locbench.tuning`). The metadata does not enter the run key (:mod:`locbench.runkey` reads
-only its own flag), so declaring a field tunable changes no stored run.
+linear scale) or ``metadata=tunable_choice("a", "b")`` (one of a few values); ``unit="m/sqrt(m)"`` (or
+``metadata=field_unit(...)`` on a field that is not tunable) declares a unit the field's name cannot carry.
+Noise scales, gates, thresholds and iteration caps are tunable; a compute knob (particles, a smoother's lag) is
+not, since it is the user's budget, not an accuracy setting. :func:`tunable_fields` reads them back for
+``locbench list FILTER`` and ``locbench tune`` (:mod:`locbench.tuning`). The metadata does not enter the run key
+(:mod:`locbench.runkey` reads only its own flag), so declaring a field tunable changes no stored run.
 """
 
 from __future__ import annotations
@@ -19,6 +20,8 @@ from typing import Any, Literal
 
 #: The metadata key of a tunable field.
 TUNABLE_KEY = "tunable"
+#: The metadata key of a field's unit (``locbench list ID`` prints it; else the unit is read from the name's suffix).
+UNIT_KEY = "unit"
 
 
 @dataclass(frozen=True)
@@ -69,16 +72,29 @@ class TunableRange:
 
 
 def tunable(
-    low: float, high: float, *, log: bool = False, integer: bool = False, base: Mapping[str, Any] | None = None
+    low: float,
+    high: float,
+    *,
+    log: bool = False,
+    integer: bool = False,
+    unit: str = "",
+    base: Mapping[str, Any] | None = None,
 ) -> MappingProxyType[str, Any]:
-    """Field metadata of a tunable number in [``low``, ``high``]; ``base`` merges other metadata (the run key's)."""
+    """Field metadata of a tunable number in [``low``, ``high``]; ``unit`` as :func:`field_unit`; ``base`` merges
+    other metadata (the run key's)."""
     rng = TunableRange("int" if integer else "float", float(low), float(high), log)
-    return MappingProxyType({**(base or {}), TUNABLE_KEY: rng})
+    return MappingProxyType({**field_unit(unit, base), TUNABLE_KEY: rng})
 
 
 def tunable_choice(*choices: Any, base: Mapping[str, Any] | None = None) -> MappingProxyType[str, Any]:
     """Field metadata of a tunable choice among ``choices``."""
     return MappingProxyType({**(base or {}), TUNABLE_KEY: TunableRange("choice", choices=tuple(choices))})
+
+
+def field_unit(unit: str, base: Mapping[str, Any] | None = None) -> MappingProxyType[str, Any]:
+    """Field metadata declaring the field's unit (``"m/sqrt(m)"``), for a name whose suffix does not say it;
+    ``""`` declares nothing. Like the tuning range, it never enters the run key."""
+    return MappingProxyType({**(base or {}), **({UNIT_KEY: unit} if unit else {})})
 
 
 def tunable_fields(cls: type) -> dict[str, TunableRange]:

@@ -260,6 +260,7 @@ def tune(
     progress : callable, optional
         Called with each trial as it finishes.
     """
+    # long: the study's lifecycle (claim the folder, resume, trials through the executor, best spec) in order; numpydoc
     if objective not in OBJECTIVES:
         raise ConfigError(f"unknown objective {objective!r}; valid: {', '.join(OBJECTIVES)}")
     if trials < 1:

@@ -131,14 +131,17 @@ def _same(a: np.ndarray, b: np.ndarray) -> bool:
     return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
 
 
-def verify(store: Store, fraction: float = DEFAULT_FRACTION, seed: int = 0) -> VerifyResult:
+def verify(store: Store, fraction: float = DEFAULT_FRACTION, seed: int = 0, jobs: int = 1) -> VerifyResult:
     """Re-run a sample of the stored runs (:func:`sample`) and compare them with the stored ones (:func:`compare`).
 
     A run whose key no longer matches what the current code would store (a filter's or dataset's version was
-    bumped) differs by definition: the store is stale for it. Nothing is written to the store.
+    bumped) differs by definition: the store is stale for it. The re-runs go through the sweep's local executor
+    (``jobs`` worker processes); nothing is written to the store. A re-run that fails to return (its worker died)
+    differs too.
     """
+    from locbench import executors
     from locbench.registry import DATASETS, FILTERS, resolve_dataset, resolve_filter
-    from locbench.runner import Job, Task, execute_task, run_key
+    from locbench.runner import Job, Task, TaskResult, run_key
 
     runs = stored_runs(store)
     result = VerifyResult(fraction, seed, len(runs), store_digest=store_digest(r.run_key for r in runs))
@@ -146,9 +149,11 @@ def verify(store: Store, fraction: float = DEFAULT_FRACTION, seed: int = 0) -> V
     groups: dict[tuple[str, int], list[RunId]] = {}
     for r in chosen:
         groups.setdefault((r.dataset, r.seed), []).append(r)
+    tasks: list[Task] = []
+    stored_name: dict[tuple[str, int], str] = {}  # the task's canonical dataset name -> the stored runs' name
     for (dataset, s), members in sorted(groups.items()):
         dr = resolve_dataset(dataset)
-        jobs: list[Job] = []
+        jobs_of_task: list[Job] = []
         for r in members:
             fr = resolve_filter(r.filter)
             key = run_key(fr, dr, s)
@@ -156,22 +161,37 @@ def verify(store: Store, fraction: float = DEFAULT_FRACTION, seed: int = 0) -> V
                 result.checked.append(r)
                 result.differ.append((r, "stale: the run key changed (a version or parameter of the code)"))
                 continue
-            jobs.append(Job(fr, FILTERS.load(fr.id), key))
-        if not jobs:
-            continue
-        task = Task(dr, DATASETS.load(dr.id), s, tuple(jobs))
-        log.info("re-running %s", task.label)
-        fresh = {rec.meta["filter"]: rec for rec in execute_task(task).runs}
+            jobs_of_task.append(Job(fr, FILTERS.load(fr.id), key))
+        if jobs_of_task:
+            tasks.append(Task(dr, DATASETS.load(dr.id), s, tuple(jobs_of_task)))
+            stored_name[(dr.name, s)] = dataset
+    fresh: dict[tuple[str, int, str], RunRecord] = {}
+    lost: dict[tuple[str, int], str] = {}
+
+    def handle(task: Task, out: TaskResult) -> None:
+        for rec in out.runs:
+            fresh[(stored_name[(task.dataset.name, task.seed)], task.seed, rec.meta["filter"])] = rec
+
+    def on_lost(task: Task, why: str) -> None:
+        lost[(stored_name[(task.dataset.name, task.seed)], task.seed)] = why
+
+    log.info("re-running %d stored runs in %d tasks", sum(len(t.jobs) for t in tasks), len(tasks))
+    executors.run_local(tasks, handle, on_lost, jobs=jobs)
+    for (dataset, s), members in sorted(groups.items()):
         for r in members:
-            if r.filter not in fresh:
+            if any(c is r for c in result.checked):
                 continue
+            rec = fresh.get((dataset, s, r.filter))
             result.checked.append(r)
+            if rec is None:
+                result.differ.append((r, f"not re-run: {lost.get((dataset, s), 'no result came back')}"))
+                continue
             try:
                 stored = store.read_run(store.run_dir(r.dataset, r.filter, r.seed))
             except StaleRecord as exc:  # altered since it was written: its checksum or shape contract fails
                 result.differ.append((r, f"stale: {exc}"))
                 continue
-            diff = compare(stored, fresh[r.filter])
+            diff = compare(stored, rec)
             if diff:
                 result.differ.append((r, ", ".join(diff)))
     return result

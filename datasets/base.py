@@ -447,8 +447,12 @@ class DatasetBuilder(abc.ABC):
     Params: ClassVar[type]
     #: Bump when the generated data changes for the same (params, seed); part of the run key.
     version: ClassVar[int] = 1
-    #: One line for ``locbench list``.
+    #: One line for ``locbench list`` (a registration's own summary wins).
     description: ClassVar[str] = ""
+    #: Top-level modules the builder needs beyond locbench's dependencies, and the command that installs them
+    #: (as :attr:`locbench.filters.base.Filter.requires_modules`).
+    requires_modules: ClassVar[tuple[str, ...]] = ()
+    install_hint: ClassVar[str] = ""
     #: Rough duration of the data at the default parameters, s: the runner orders a sweep's tasks by it.
     nominal_duration_s: ClassVar[float] = 100.0
 

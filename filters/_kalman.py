@@ -145,6 +145,23 @@ def joseph_correct(x: FloatArray, P: FloatArray, y: FloatArray, H: FloatArray, R
     return Correction(x + K @ y, 0.5 * (P_new + P_new.T), y, S, K, nis, log_likelihood(nis, S))
 
 
+def joseph_correct_pose(
+    x: FloatArray, P: FloatArray, y: FloatArray, R: FloatArray
+) -> tuple[FloatArray, FloatArray, float]:
+    """:func:`joseph_correct` for a direct measurement of the whole state (H = I): (x+, P+ symmetrised, NIS).
+
+    Every product with H = I is exact (P H^T = P, H P H^T = P, K H = K), so these are the same bits as
+    :func:`joseph_correct` with ``np.eye(n)``; without those products and the log-likelihood (a determinant)
+    it costs a third fewer small numpy calls per update.
+    """
+    S = P + R
+    Sinv = np.linalg.inv(S)
+    K = P @ Sinv
+    A = np.eye(P.shape[0]) - K
+    P_new = A @ P @ A.T + K @ R @ K.T
+    return x + K @ y, 0.5 * (P_new + P_new.T), float(y @ Sinv @ y)
+
+
 def gain_update(x: FloatArray, P: FloatArray, y: FloatArray, S: FloatArray, Pxz: FloatArray) -> Correction:
     """A correction from the cross covariance (sigma-point filters): K = P_xz S^-1, P+ = P - K S K^T.
 

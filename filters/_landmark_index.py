@@ -26,6 +26,9 @@ from scipy.spatial import cKDTree
 
 FloatArray = npt.NDArray[np.float64]
 
+#: Maps with at least this many landmarks take their candidates from the index; below it the filters test
+#: every landmark (faster there than a query of the tree).
+INDEX_MIN_LANDMARKS = 48
 #: Landmarks within this distance of the pose estimate (m) are always candidates (module docstring).
 NEAR_M = 1.0
 #: Relative and absolute slack (m) on the search radii, far above the rounding of the bound's arithmetic.

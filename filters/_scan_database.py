@@ -283,6 +283,7 @@ def build_database(
     -------
     ScanDatabase
     """
+    # long: report 004's database construction (poses, casts, bearings, index) as one sequence; numpydoc
     if not step_m > 0:
         raise ConfigError(f"scan database: grid_step_m must be > 0 m, got {step_m}")
     per_bearing = 45.0 / heading_step_deg if heading_step_deg > 0 else 0.0
@@ -413,6 +414,7 @@ def match_scan(
     n_bearings : int
         Bearings used.
     """
+    # long: report 004's matching steps (candidates, tolerance, prior gate, best match) share their arrays; numpydoc
     b_idx, r = scan_bearing_ranges(scan)
     k = int(b_idx.shape[0])
     if k < min_bearings:

@@ -144,6 +144,12 @@ class Filter(abc.ABC):
         Bump on any change of behaviour; it is part of the run key, so stored runs are redone.
     source : str
         The report or reference the filter follows (for the README and report).
+    description : str
+        One line for ``locbench list`` (a plugin's summary; a registration's own summary wins).
+    requires_modules : tuple of str
+        Top-level modules the filter needs beyond locbench's dependencies, and ``install_hint``, the command that
+        installs them: a missing one makes the filter "unavailable: ... install it with: HINT" instead of an
+        ImportError (the filter imports them inside its methods, so that its class can be read without them).
     expected_check_failures : mapping of str to str
         Conformance checks the filter fails by design, each with the reason; they run as strict xfail.
 
@@ -156,6 +162,9 @@ class Filter(abc.ABC):
     Config: ClassVar[type[FilterConfig]] = FilterConfig
     version: ClassVar[int] = 1
     source: ClassVar[str] = ""
+    description: ClassVar[str] = ""
+    requires_modules: ClassVar[tuple[str, ...]] = ()
+    install_hint: ClassVar[str] = ""
     #: The baseline every comparison starts with (dead reckoning): listed first, never marked best.
     baseline: ClassVar[bool] = False
     #: Parameters that switch on this filter's recovery policy: its kidnap configuration is a configuration

@@ -73,7 +73,7 @@ from locbench.datasets.base import Gaussian2, MapKind, OccupancyGrid, SensorSpec
 from locbench.errors import ConfigError, FilterDiverged, ResourceLimit
 from locbench.events import LaserScan, Observation, Odometry
 from locbench.filters._icp import MIN_PAIRS, IcpResult, icp_2d
-from locbench.filters._kalman import joseph_correct
+from locbench.filters._kalman import joseph_correct_pose
 from locbench.filters.base import Estimate, Filter, FilterConfig, gaussian_health
 from locbench.geometry import wrap_scalar
 from locbench.limits import RAYCAST_BYTES_PER_CELL, check_bytes, grid_cells
@@ -85,10 +85,6 @@ logger = logging.getLogger(__name__)
 
 #: Laser range noise used when neither the config nor the dataset gives one, m (a Hokuyo URG-04LX is +-3 cm).
 DEFAULT_LASER_SIGMA_M = 0.01
-#: The ICP correction measures the pose itself (eq. 14).
-_H_POSE = np.eye(3)
-
-
 #: The ICP health before any scan.
 _NO_ICP_HEALTH = {"icp_rmse_m": math.nan, "inlier_fraction": math.nan}
 
@@ -202,7 +198,10 @@ def scan_points(ranges: FloatArray, angles: FloatArray, sensor_pose: tuple[float
     """Beam end points in the robot frame, m, shape (n, 2), for the given (finite) ranges and sensor-frame angles."""
     sx, sy, sth = sensor_pose
     a = angles + sth
-    return np.column_stack([sx + ranges * np.cos(a), sy + ranges * np.sin(a)])
+    out = np.empty((a.shape[0], 2))
+    out[:, 0] = sx + ranges * np.cos(a)
+    out[:, 1] = sy + ranges * np.sin(a)
+    return out
 
 
 class IcpEKF(Filter):
@@ -264,6 +263,7 @@ class IcpEKF(Filter):
         self._kidnap_resets = 0
         self._diag = self._empty_diag()
         self._icp_health = _NO_ICP_HEALTH
+        self._beams: dict[tuple[float, float, int, float], tuple[FloatArray, FloatArray, FloatArray]] = {}
 
     def _empty_diag(self) -> dict[str, float]:
         return {
@@ -306,7 +306,7 @@ class IcpEKF(Filter):
         self._P = 0.5 * (P + P.T)
         self._t = u.t
         self._diag = self._empty_diag()
-        if not np.all(np.isfinite(self._x)):
+        if not _all_finite(self._x):
             raise FilterDiverged(f"non-finite state after odometry at t={u.t:.3f}")
 
     # --- observation (sec. III-A.2, III-B) and update (eq. 14-18) ----------------------------------------
@@ -321,9 +321,9 @@ class IcpEKF(Filter):
             frame at the true pose) onto ray-cast points (robot frame at the predicted pose).
         """
         cfg = self.config
-        angles = z.angles
+        angles, cos_a, sin_a = self._beam_directions(z)
         sx, sy, sth = z.sensor_pose
-        x, y, th = (float(v) for v in self._x)
+        x, y, th = self._x.tolist()
         c, s = math.cos(th), math.sin(th)
         sensor_world = np.array([x + c * sx - s * sy, y + s * sx + c * sy, th + sth])
         # the shared caster's one-scan path: its fields are cached with the grid object
@@ -334,8 +334,13 @@ class IcpEKF(Filter):
         n_real, n_pred = int(np.count_nonzero(ok_real)), int(np.count_nonzero(ok_pred))
         if n_real < MIN_PAIRS or n_pred < MIN_PAIRS:
             return None, n_real, n_pred
-        src = scan_points(real[ok_real], angles[ok_real], z.sensor_pose)
-        dst = scan_points(pred[ok_pred], angles[ok_pred], z.sensor_pose)
+        # scan_points of both clouds, from the beams' cached directions (the same numbers)
+        src = np.empty((n_real, 2))
+        src[:, 0] = sx + real[ok_real] * cos_a[ok_real]
+        src[:, 1] = sy + real[ok_real] * sin_a[ok_real]
+        dst = np.empty((n_pred, 2))
+        dst[:, 0] = sx + pred[ok_pred] * cos_a[ok_pred]
+        dst[:, 1] = sy + pred[ok_pred] * sin_a[ok_pred]
         r_mean = float(np.mean(real[ok_real]))
         lam_xy = float(np.linalg.eigvalsh(self._P[0:2, 0:2])[-1])
         k = cfg.correspondence_sigmas * (cfg.kidnap_threshold_factor if self._tightened else 1.0)
@@ -353,6 +358,17 @@ class IcpEKF(Filter):
             transformation_epsilon=cfg.transformation_epsilon,
         )
         return res, n_real, n_pred
+
+    def _beam_directions(self, z: LaserScan) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """The scan's beam angles (sensor frame) and cos, sin of angle + sensor heading, computed once per scan
+        geometry (a laser's scans share it)."""
+        key = (z.angle_min, z.angle_increment, int(z.ranges.shape[0]), z.sensor_pose[2])
+        beams = self._beams.get(key)
+        if beams is None:
+            angles = z.angles
+            a = angles + z.sensor_pose[2]
+            beams = self._beams[key] = (angles, np.cos(a), np.sin(a))
+        return beams
 
     def update(self, z: Observation) -> None:
         """Correct with one LaserScan: ICP match, mismatch rules, H = I update (eq. 14-18) or kidnap rule."""
@@ -375,14 +391,14 @@ class IcpEKF(Filter):
         c, s = math.cos(th), math.sin(th)
         # V = Z - Z^ with Z = X (+) M (eq. 2-3): the ICP translation rotated into the world frame.
         V = np.array([c * tx - s * ty, s * tx + c * ty, wrap_scalar(tth)])
-        # eq. 15-18 with H = I: K = P (P + R)^-1, x + K V, Joseph form (the Kalman core).
-        kc = joseph_correct(self._x, self._P, V, _H_POSE, self._R)
-        x = kc.x
-        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(kc.P))):
+        # eq. 15-18 with H = I (the ICP correction measures the pose itself, eq. 14): K = P (P + R)^-1, x + K V,
+        # Joseph form (the Kalman core's H = I form).
+        x, P, nis = joseph_correct_pose(self._x, self._P, V, self._R)
+        if not (_all_finite(x) and _all_finite(P)):
             raise FilterDiverged(f"non-finite state after the scan update at t={z.t:.3f}")
         x[2] = wrap_scalar(float(x[2]))
         self._x = x
-        self._P = kc.P
+        self._P = P
         self._consecutive = 0
         self._tightened = False  # the report's tighter threshold holds until the filter matches again
         self._diag = {
@@ -390,7 +406,7 @@ class IcpEKF(Filter):
             "accepted": 1.0,
             "iterations": float(res.iterations),
             "matched_points": float(res.matched),
-            "nis": kc.nis,
+            "nis": nis,
         }
 
     def _mismatch(self, t: float, res: IcpResult | None) -> None:
@@ -418,6 +434,11 @@ class IcpEKF(Filter):
     def estimate(self) -> Estimate:
         """The current pose and covariance with the diagnostics of the last call."""
         return Estimate(t=self._t, mean=self._x.copy(), cov=self._P.copy(), diagnostics=dict(self._diag))
+
+
+def _all_finite(a: FloatArray) -> bool:
+    """Whether every entry of a small array is finite (scalar tests: a numpy reduction costs more here)."""
+    return all(map(math.isfinite, a.ravel().tolist()))
 
 
 def _check_raycast_tables(grid: OccupancyGrid) -> None:

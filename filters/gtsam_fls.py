@@ -74,6 +74,7 @@ from locbench.datasets.base import Gaussian2, MapKind, SensorSpec, WorldMap
 from locbench.errors import ConfigError, DependencyNotInstalled, FilterDiverged
 from locbench.events import UNKNOWN_ID, LandmarkObservations, Observation, Odometry, PoseFix, RangeObservations
 from locbench.filters._kalman import chi2_1dof_quantile, chi2_2dof_quantile
+from locbench.filters._landmark_index import INDEX_MIN_LANDMARKS, LandmarkIndex, gate_radius
 from locbench.filters._motion import (
     MotionKind,
     MotionModel,
@@ -319,6 +320,7 @@ class GtsamFixedLagSmoother(Filter):
             s = (cfg.landmark_sigma_m, cfg.landmark_sigma_m) if std is None else tuple(np.maximum(std[k], 1e-6))
             self._lm_noise.append(gtsam.noiseModel.Diagonal.Sigmas(np.array(s, dtype=np.float64)))
         self._limits = self._sensor_limits(sensors)
+        self._index = LandmarkIndex(self._lm_xy) if len(self._lm_xy) >= INDEX_MIN_LANDMARKS else None
 
         m = np.asarray(initial.mean, dtype=np.float64)
         c = _sym(np.asarray(initial.cov, dtype=np.float64))
@@ -472,13 +474,9 @@ class GtsamFixedLagSmoother(Filter):
                 used.add(row)
         nis = 0.0
         if deferred or matches:
-            d2_all = None
             for k in deferred:
-                d2_all = self._mahalanobis(ranges[k], bearings[k])
-                if used:
-                    d2_all[list(used)] = np.inf
-                row = int(np.argmin(d2_all))
-                if d2_all[row] <= self._gate:
+                row = self._nearest(ranges[k], bearings[k], used)
+                if row is not None:
                     matches.append((k, row))
                     used.add(row)
                 else:
@@ -566,8 +564,31 @@ class GtsamFixedLagSmoother(Filter):
         det = s00 * s11 - s01 * s01
         return (s11 * n0 * n0 - 2.0 * s01 * n0 * n1 + s00 * n1 * n1) / det
 
+    def _nearest(self, r: float, b: float, used: set[int]) -> int | None:
+        """Row of the landmark of smallest d2 (:meth:`_mahalanobis`) among those not ``used``, inside the gate;
+        else None. A large map tests only the candidates of its k-d tree (:mod:`._landmark_index`, whose bound
+        is for this gate's S = H P H^T + R), in row order: each landmark's d2 is the same number either way, so
+        the first smallest is the same row."""
+        rows: list[int] | None = None
+        if self._index is not None:
+            radius = gate_radius(r, self._cov_f, self._var_r, self._var_b, self._gate)
+            rows = self._index.candidates(self._mean_f, r, b, radius)
+            if not rows:
+                return None
+        d2 = self._mahalanobis(r, b, rows)
+        if used:
+            if rows is None:
+                d2[list(used)] = np.inf
+            else:
+                d2[[i for i, row in enumerate(rows) if row in used]] = np.inf
+        best = int(np.argmin(d2))
+        if not d2[best] <= self._gate:
+            return None
+        return best if rows is None else rows[best]
+
     def _mahalanobis(self, r: float, b: float, rows: list[int] | None = None) -> FloatArray:
-        """Squared Mahalanobis distance of (r, b) to map landmarks from the current belief (inf outside the limits).
+        """Squared Mahalanobis distance of (r, b) to the map landmarks ``rows`` (default all) from the current
+        belief (inf outside the limits).
 
         H = [[-dx/d, -dy/d, 0], [dy/q, -dx/q, -1]] (report 001 fig. 2, corrected), S = H P H^T + R.
         """
@@ -583,9 +604,8 @@ class GtsamFixedLagSmoother(Filter):
         S = H @ np.array(self._cov_f) @ H.transpose(0, 2, 1) + self._R
         nu = np.stack([r - d, wrap_angle(b - pb)], axis=-1)
         d2 = np.einsum("ni,ni->n", nu, np.linalg.solve(S, nu[..., None])[..., 0])
-        if rows is None:
-            lo, hi, half = self._limits
-            d2[(d < lo) | (d > hi) | (np.abs(pb) > half)] = np.inf
+        lo, hi, half = self._limits
+        d2[(d < lo) | (d > hi) | (np.abs(pb) > half)] = np.inf
         return d2
 
     def _pose_fix_factors(self, z: PoseFix) -> tuple[Any, dict[int, float]]:

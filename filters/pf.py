@@ -1067,6 +1067,7 @@ class ParticleFilter(Filter):
             When neither a landmark map (for ``use_landmarks``) nor an occupancy grid (for ``use_laser``)
             is present.
         """
+        # long: reset resolves every noise model and map the config allows in one place, so a missing input is one error
         cfg = self.config
         self._rng = rng
         # the generator's addresses for the kernels' draws (from the same state; see _numba_rng)
@@ -1367,38 +1368,75 @@ class ParticleFilter(Filter):
         return total
 
     def _correct(self, kind: type, m: int, data: tuple[FloatArray, ...]) -> None:
-        """Augmented MCL step: inject (uniform poses), weight, update w_slow/w_fast, resample on low ESS or
-        to inject (poses from the observation)."""
+        """Augmented MCL step (PR table 8.3): the steps below in order, each chosen by the config.
+
+        Uniform poses enter before the weighting (:meth:`_inject_uniform`), so this observation weights them;
+        poses drawn from the observation enter after the resampling (:meth:`_resample`): weighted by it again
+        they would count it twice (as in Lenser & Veloso's sensor resetting).
+        """
         cfg = self.config
-        rng = self._rng
         n = self._n
-        resampled = False
-        injected = 0
         avg = self._w_avg.get(kind)
-        pair = (
-            self._sighting_pair(kind, data) if cfg.augmented and cfg.inject == "sensor" and cfg.inject_pairs else None
-        )
-        ll_belief: FloatArray | None = None
-        if pair is not None:
-            # validation gate: pair poses only when no belief particle explains this (single) sighting
-            ll_belief = self._loglik(kind, data)
-            chi2_best = 2.0 * (self._lm_log_norm - float(np.max(ll_belief)))
-            self._diag["pair_chi2"] = chi2_best
-            if cfg.pair_gate > 0.0 and chi2_best <= -2.0 * math.log1p(-cfg.pair_gate):
-                pair = None
+        pair, ll_belief = self._gated_pair(kind, data)
         from_sensor = cfg.inject == "sensor" and (self._sensor_invertible(kind, m) or pair is not None)
+        injected = 0
         if cfg.augmented and not from_sensor and avg is not None and avg[0] > 0.0:
-            injected = self._injection_count(avg, n)
-            if injected:
-                # resample from the mixture (1 - p) belief + p uniform poses (PR table 8.3), before the
-                # weighting so that the injected poses are weighted by this observation
-                keep = systematic_resample(self._weights(), n - injected, rng)
-                assert self._space is not None
-                self._x = np.concatenate([_gather(self._x, keep), self._space.sample(injected, rng)])
-                self._set_uniform_weights(n)
-                resampled = True
+            injected = self._inject_uniform(avg, n)
+        ll, log_pred, n_eff, w = self._weigh(kind, data, None if injected else ll_belief)
+        n_pred = n - injected if n > injected else n  # the predicted (belief) particles come first
+        if cfg.augmented:
+            avg = self._track_averages(kind, data, ll, log_pred, n_pred, m, avg)
+        late = self._injection_count(avg, n) if cfg.augmented and from_sensor and avg else 0
+        resampled, reset, late, n = self._resample(w, n_eff, n, n_pred, late, injected > 0)
+        if late:
+            self._x = np.concatenate([self._x, self._injected_poses(kind, data, late, pair)])
+        if cfg.augmented and cfg.inject == "sensor" and cfg.inject_pairs and kind is LandmarkObservations:
+            self._last_sightings = (data, np.zeros(3))
+        if reset:
+            self._set_uniform_weights(n)
+        self._diag["resampled"] = 1.0 if resampled else 0.0
+        self._diag["injected"] = float(injected + late)
+
+    def _gated_pair(
+        self, kind: type, data: tuple[FloatArray, ...]
+    ) -> tuple[tuple[tuple[FloatArray, ...], FloatArray] | None, FloatArray | None]:
+        """The sighting pair to draw poses from (``inject_pairs``) and the belief's log-likelihood when computed.
+
+        Validation gate: pair poses only when no belief particle explains this (single) sighting.
+        """
+        cfg = self.config
+        if not (cfg.augmented and cfg.inject == "sensor" and cfg.inject_pairs):
+            return None, None
+        pair = self._sighting_pair(kind, data)
+        if pair is None:
+            return None, None
+        ll_belief = self._loglik(kind, data)
+        chi2_best = 2.0 * (self._lm_log_norm - float(np.max(ll_belief)))
+        self._diag["pair_chi2"] = chi2_best
+        if cfg.pair_gate > 0.0 and chi2_best <= -2.0 * math.log1p(-cfg.pair_gate):
+            return None, ll_belief
+        return pair, ll_belief
+
+    def _inject_uniform(self, avg: list[float], n: int) -> int:
+        """Resample from the mixture (1 - p) belief + p uniform poses (PR table 8.3) before the weighting;
+        returns how many uniform poses entered (they come last, with uniform weights for all)."""
+        injected = self._injection_count(avg, n)
+        if injected:
+            keep = systematic_resample(self._weights(), n - injected, self._rng)
+            assert self._space is not None
+            self._x = np.concatenate([_gather(self._x, keep), self._space.sample(injected, self._rng)])
+            self._set_uniform_weights(n)
+        return injected
+
+    def _weigh(
+        self, kind: type, data: tuple[FloatArray, ...], ll_belief: FloatArray | None
+    ) -> tuple[FloatArray, float, float, FloatArray]:
+        """Bayes' rule on the log-weights: (log-likelihood per particle, log predictive, ESS, new weights).
+
+        ``ll_belief``: the particles' log-likelihood when the pair gate already computed it.
+        """
         w = np.empty(self._x.shape[0])
-        if ll_belief is not None and not injected:
+        if ll_belief is not None:
             ll = ll_belief
             log_pred, n_eff = _reweigh(self._logw, ll, w)
         elif kind is LandmarkObservations:
@@ -1413,29 +1451,52 @@ class ParticleFilter(Filter):
         if not math.isfinite(log_pred):
             raise FilterDiverged(f"ParticleFilter: every particle has zero likelihood at t={self._t:.3f} s")
         self._diag["n_eff"] = n_eff
-        n_pred = n - injected if n > injected else n  # the predicted (belief) particles come first
-        if cfg.augmented:
-            # The averages measure the belief, so the particles injected in this step are left out (they
-            # had uniform weights, as the kept ones): counting them lowered w_avg by the injected share,
-            # which lowered w_fast, which raised the share, until every particle was replaced at every
-            # update (docs/pf_consistency_kidnap.md). With no particle kept the injected ones are the belief.
-            if cfg.recovery_likelihood == "best":
-                log_avg = self._best_loglik(kind, data, ll, n_pred)
-            elif n_pred < n:
-                top = float(np.max(ll[:n_pred]))
-                log_avg = top + math.log(float(np.mean(np.exp(ll[:n_pred] - top)))) if top > -math.inf else top
-            else:
-                log_avg = log_pred
-            # geometric mean per sighting or beam, so that the average neither underflows nor depends on m
-            w_avg = math.exp(log_avg / m)
-            if avg is None:
-                avg = self._w_avg[kind] = [w_avg, w_avg]
-            else:
-                avg[0] += cfg.alpha_slow * (w_avg - avg[0])
-                avg[1] += cfg.alpha_fast * (w_avg - avg[1])
-        # poses drawn from this observation enter after its weighting (as in Lenser & Veloso's sensor
-        # resetting and PR table 8.3): weighted by it again they would count it twice
-        late = self._injection_count(avg, n) if cfg.augmented and from_sensor and avg else 0
+        return ll, log_pred, n_eff, w
+
+    def _track_averages(
+        self,
+        kind: type,
+        data: tuple[FloatArray, ...],
+        ll: FloatArray,
+        log_pred: float,
+        n_pred: int,
+        m: int,
+        avg: list[float] | None,
+    ) -> list[float]:
+        """Update w_slow and w_fast (PR table 8.3) from this observation's average likelihood of the belief.
+
+        The averages measure the belief, so the particles injected in this step are left out (they had uniform
+        weights, as the kept ones): counting them lowered w_avg by the injected share, which lowered w_fast,
+        which raised the share, until every particle was replaced at every update
+        (docs/pf_consistency_kidnap.md). With no particle kept the injected ones are the belief.
+        """
+        cfg = self.config
+        if cfg.recovery_likelihood == "best":
+            log_avg = self._best_loglik(kind, data, ll, n_pred)
+        elif n_pred < self._n:
+            top = float(np.max(ll[:n_pred]))
+            log_avg = top + math.log(float(np.mean(np.exp(ll[:n_pred] - top)))) if top > -math.inf else top
+        else:
+            log_avg = log_pred
+        # geometric mean per sighting or beam, so that the average neither underflows nor depends on m
+        w_avg = math.exp(log_avg / m)
+        if avg is None:
+            avg = self._w_avg[kind] = [w_avg, w_avg]
+        else:
+            avg[0] += cfg.alpha_slow * (w_avg - avg[0])
+            avg[1] += cfg.alpha_fast * (w_avg - avg[1])
+        return avg
+
+    def _resample(
+        self, w: FloatArray, n_eff: float, n: int, n_pred: int, late: int, resampled: bool
+    ) -> tuple[bool, bool, int, int]:
+        """The resampling the config chooses: KLD sampling at every correction (``adaptive="kld"``), else
+        systematic resampling on a low ESS or to make room for ``late`` poses; then roughening or the
+        regularised kernel. ``resampled``: the uniform injection already resampled.
+
+        Returns (resampled, weights to reset to uniform, late poses that fit, particle count).
+        """
+        cfg = self.config
         kld = cfg.adaptive == "kld"
         by_ess = not kld and (late > 0 or n_eff < cfg.resample_ess_fraction * n)
         jitter: FloatArray | None = None
@@ -1470,21 +1531,14 @@ class ParticleFilter(Filter):
             self._x = self._x[: n - late]
             resampled = True
         elif by_ess and not fast:
-            self._x = _gather(self._x, systematic_resample(w, n - late, rng))
+            self._x = _gather(self._x, systematic_resample(w, n - late, self._rng))
             resampled = True
         if resampled and jitter is not None:
             if jitter.ndim == 2:
                 _jitter_correlated(self._x, _regularisation_bandwidth(n) * jitter, self._gen)
             else:
                 _jitter(self._x, jitter * n ** (-1.0 / 3.0), self._gen)
-        if late:
-            self._x = np.concatenate([self._x, self._injected_poses(kind, data, late, pair)])
-        if cfg.augmented and cfg.inject == "sensor" and cfg.inject_pairs and kind is LandmarkObservations:
-            self._last_sightings = (data, np.zeros(3))
-        if kld or (by_ess and not fast):
-            self._set_uniform_weights(n)
-        self._diag["resampled"] = 1.0 if resampled else 0.0
-        self._diag["injected"] = float(injected + late)
+        return resampled, kld or (by_ess and not fast), late, n
 
     @staticmethod
     def _sensor_invertible(kind: type, m: int) -> bool:

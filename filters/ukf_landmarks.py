@@ -53,6 +53,7 @@ from locbench.datasets.base import Gaussian2, SensorSpec, WorldMap
 from locbench.errors import ConfigError, FilterDiverged
 from locbench.events import Odometry, PoseFix
 from locbench.filters._kalman import gain_update, subtract
+from locbench.filters._landmark_index import NEAR_M
 from locbench.filters.base import Estimate, FilterConfig
 from locbench.filters.ekf_landmarks import LandmarkEKF, LandmarkEKFConfig
 from locbench.geometry import TWO_PI, wrap_angle, wrap_scalar
@@ -189,6 +190,7 @@ class LandmarkUKF(LandmarkEKF):
     )
 
     config: LandmarkUKFConfig
+    _compiled_update: ClassVar[bool] = False  # its own corrections, in the EKF's order (_fuse_sightings)
 
     def reset(self, initial: Gaussian2, world: WorldMap, sensors: SensorSpec, rng: np.random.Generator) -> None:
         """Start from ``initial`` with the landmarks of ``world``; ``rng`` is unused (the UKF is deterministic)."""
@@ -212,6 +214,9 @@ class LandmarkUKF(LandmarkEKF):
         ukf.P = np.array(self._P)
         self._ukf = ukf
         self._R_lm = np.diag([self._rr, self._rb])
+        # the k-d tree's bound (_gate_radius) needs non-negative weights (alpha = 1, beta = 2, kappa = 0 has them)
+        self._weights_nonnegative = bool(np.all(ukf.Wm >= 0.0) and np.all(ukf.Wc >= 0.0))
+        self._wc_sum = float(np.sum(ukf.Wc))
         self._check_finite(math.nan)
 
     # --- predict ---------------------------------------------------------------------------------------------
@@ -284,31 +289,90 @@ class LandmarkUKF(LandmarkEKF):
         return self._correct(np.array([r, b]), self._R_lm, h_all, range_bearing_mean, _residual_bearing, 1, gate)
 
     def _nearest(self, r: float, b: float, used: set[int]) -> int | None:
-        """Row of the landmark nearest to (r, b) in the unscented Mahalanobis distance, inside the gate; else None."""
-        d2 = self._mahalanobis_all(r, b, used)
-        best = int(np.argmin(d2))
-        return best if d2[best] <= self._gate else None
+        """Row of the landmark nearest to (r, b) in the unscented Mahalanobis distance, inside the gate; else None.
 
-    def _mahalanobis_all(self, r: float, b: float, used: set[int]) -> FloatArray:
-        """Squared Mahalanobis distance of (r, b) to every map landmark through the unscented transform."""
+        A large map with non-negative weights tests only the landmarks of the k-d tree within
+        :meth:`_gate_radius`, in row order; every landmark's d2 is the same number either way (the weighted
+        sums are taken per landmark, :func:`_weighted_sum`), so the first smallest is the same row.
+        """
         ukf = self._ukf
         sig = ukf.points_fn.sigma_points(ukf.x, ukf.P)  # (7, 3)
+        rows: list[int] | None = None
+        if self._index is not None and self._weights_nonnegative:
+            radius = self._gate_radius(r, sig)
+            if radius is not None:
+                rows = self._index.candidates(sig[0].tolist(), r, b, radius[0], radius[1])
+                if not rows:
+                    return None
+        d2 = self._mahalanobis_all(r, b, used, sig, rows)
+        best = int(np.argmin(d2))
+        if not d2[best] <= self._gate:
+            return None
+        return best if rows is None else rows[best]
+
+    def _gate_radius(self, r: float, sig: FloatArray) -> tuple[float, float] | None:
+        """(radius m, near m) for :meth:`LandmarkIndex.candidates`: a landmark farther than ``near`` from the
+        mean that passes the gate lies within ``radius`` of the sighted point; None when no such bound follows.
+
+        The bound of :mod:`._landmark_index` for the unscented S, with weights Wm, Wc >= 0 (sum Wm = 1) and the
+        sigma points within rho (m) of the mean in position and tau (rad) in heading. A landmark at d0 >= near
+        >= 2 rho from the mean has every sigma point's range within rho of d0 and bearing within
+        delta = asin(rho / near) + tau of the mean's (an angle subtended plus the heading's spread), so the
+        predicted range is within rho of d0 and the circular mean bearing within delta (all points lie in an
+        arc of half-width delta < pi / 2); hence S_00 <= sum Wc (2 rho)^2 + sigma_r^2 and
+        S_11 <= sum Wc (2 delta)^2 + sigma_b^2, and d2 <= g bounds |vr| and |vb| as for the EKF. The landmark
+        then lies within (|vr| + rho) + (r + |vr| + rho) min(|vb| + delta, pi) of the sighted point.
+        """
+        d = sig[1:, :2] - sig[0, :2]
+        rho = math.sqrt(float(np.max(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])))
+        tau = float(np.max(np.abs(wrap_angle(sig[1:, 2] - sig[0, 2]))))
+        near = max(NEAR_M, 2.0 * rho)
+        delta = math.asin(min(1.0, rho / near)) + tau
+        if not delta < 0.5 * math.pi:
+            return None  # a heading spread this wide bounds nothing: test every landmark
+        g, wc = self._gate, self._wc_sum
+        vr = math.sqrt(g * (wc * 4.0 * rho * rho + self._rr))
+        vb = math.sqrt(g * (wc * 4.0 * delta * delta + self._rb))
+        return (vr + rho) + (r + vr + rho) * min(vb + delta, math.pi), near
+
+    def _mahalanobis_all(
+        self, r: float, b: float, used: set[int], sig: FloatArray, rows: list[int] | None = None
+    ) -> FloatArray:
+        """Squared Mahalanobis distance of (r, b) to the map landmarks ``rows`` (default every one) through the
+        unscented transform of the sigma points ``sig`` (7, 3); inf where excluded."""
+        ukf = self._ukf
         Wm, Wc = ukf.Wm, ukf.Wc
-        lx = self._lm_xy[None, :, 0] - sig[:, None, 0]
-        ly = self._lm_xy[None, :, 1] - sig[:, None, 1]
+        xy = self._lm_xy if rows is None else self._lm_xy[rows]
+        lx = xy[None, :, 0] - sig[:, None, 0]
+        ly = xy[None, :, 1] - sig[:, None, 1]
         rng = np.hypot(lx, ly)  # (7, L)
         brg = np.arctan2(ly, lx) - sig[:, None, 2]
-        r_hat = Wm @ rng
-        b_hat = np.arctan2(Wm @ np.sin(brg), Wm @ np.cos(brg))
+        r_hat = _weighted_sum(Wm, rng)
+        b_hat = np.arctan2(_weighted_sum(Wm, np.sin(brg)), _weighted_sum(Wm, np.cos(brg)))
         er, eb = rng - r_hat, wrap_angle(brg - b_hat)
-        s00 = Wc @ (er * er) + self._rr
-        s01 = Wc @ (er * eb)
-        s11 = Wc @ (eb * eb) + self._rb
+        s00 = _weighted_sum(Wc, er * er) + self._rr
+        s01 = _weighted_sum(Wc, er * eb)
+        s11 = _weighted_sum(Wc, eb * eb) + self._rb
         vr, vb = r - r_hat, wrap_angle(b - b_hat)
         det = s00 * s11 - s01 * s01
         with np.errstate(divide="ignore", invalid="ignore"):
             d2 = (s11 * vr * vr - 2.0 * s01 * vr * vb + s00 * vb * vb) / det
+        if rows is not None and used:
+            used = {i for i, row in enumerate(rows) if row in used}
         return self._exclude(d2, ~(det > 0.0) | ~(np.min(rng, axis=0) > 1e-6), r_hat, b_hat, used)
+
+    def _exclude(
+        self, d2: FloatArray, bad: npt.NDArray[np.bool_], d: FloatArray, pb: FloatArray, used: set[int]
+    ) -> FloatArray:
+        """``d2`` with inf where a landmark is no candidate: ``bad``, already ``used``, or (when pruning) predicted
+        at a range ``d`` or bearing ``pb`` outside the sensor limits."""
+        if self._limits.shape[0] == 3:
+            lo, hi, half = self._limits.tolist()
+            bad |= (d < lo) | (d > hi) | (np.abs(pb) > half)
+        if used:
+            bad[list(used)] = True
+        d2[bad] = np.inf
+        return d2
 
     def _correct_range(self, r: float, row: int) -> float | None:
         """Fuse one range to beacon ``row`` through the unscented transform; its NIS, or None if gated out."""
@@ -349,6 +413,15 @@ class LandmarkUKF(LandmarkEKF):
     def estimate(self) -> Estimate:
         """The current mean (3,), covariance (3, 3) and the diagnostics of the last call."""
         return Estimate(t=self._t, mean=self._ukf.x.copy(), cov=self._ukf.P.copy(), diagnostics=self._diagnostics())
+
+
+def _weighted_sum(w: FloatArray, a: FloatArray) -> FloatArray:
+    """sum_i w_i a[i, :] for (n, L) ``a``, one landmark (column) at a time in the order of i: each column's sum
+    is the same number whatever the other columns (a BLAS product's rounding depends on where a column falls)."""
+    out = w[0] * a[0]
+    for i in range(1, a.shape[0]):
+        out = out + w[i] * a[i]
+    return out
 
 
 def _move_midpoint(s: FloatArray, dt: float, dd: float, dth: float) -> tuple[float, float, float]:

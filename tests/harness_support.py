@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import time
 import uuid
 from dataclasses import dataclass, field
@@ -72,7 +73,10 @@ class LineBuilder(DatasetBuilder):
 @dataclass(frozen=True, kw_only=True)
 class BadConfig(FilterConfig):
     fail_at_s: float = 1.0
-    mode: str = "raise"  # raise, nan, diverge, far (a finite but absurd 1e300 m), exit (the process dies), slow
+    #: raise, nan, diverge, far (a finite but absurd 1e300 m), exit (the process dies), slow, or signal (SIGINT
+    #: to the process ``LOCBENCH_TEST_SIGNAL_PID`` at reset, once: while the marker ``LOCBENCH_TEST_SIGNAL`` is
+    #: absent, which it creates; then dead reckoning)
+    mode: str = "raise"
 
 
 class BadFilter(Filter):
@@ -88,6 +92,12 @@ class BadFilter(Filter):
         if started and self.config.mode == "slow":  # type: ignore[attr-defined]
             # tells a test that a run is in progress (it then interrupts it), in whichever process runs it
             (Path(started) / f"run-{os.getpid()}-{uuid.uuid4().hex}").touch()
+        marker = os.environ.get("LOCBENCH_TEST_SIGNAL")
+        if marker and self.config.mode == "signal" and not Path(marker).exists():  # type: ignore[attr-defined]
+            # a Ctrl-C at a known moment: this run has started, so every run before it on its task has finished
+            Path(marker).touch()
+            os.kill(int(os.environ["LOCBENCH_TEST_SIGNAL_PID"]), signal.SIGINT)
+            time.sleep(60)  # the sweep abandons this run (in this process the signal interrupts the sleep)
 
     def predict(self, u: Odometry) -> None:
         self._t = u.t

@@ -432,11 +432,11 @@ def test_range_noise_override_and_the_dataset_value() -> None:
 
 @pytest.mark.parametrize("spread", [0.01, 0.3, 3.0])
 def test_index_candidates_find_the_scanned_nearest_landmark(spread: float) -> None:
-    """With the k-d tree (maps of 48 landmarks and more) the association is that of testing every landmark,
+    """With the k-d tree (maps of 256 landmarks and more) the association is that of testing every landmark,
     over random poses, covariances of every size and sightings near and far, also of landmarks by the robot."""
     rng = np.random.default_rng(int(spread * 100))
-    xy = rng.uniform(-15.0, 15.0, size=(200, 2))
-    world = WorldMap(landmarks=Landmarks(ids=np.arange(200, dtype=np.int64), xy=xy))
+    xy = rng.uniform(-15.0, 15.0, size=(300, 2))
+    world = WorldMap(landmarks=Landmarks(ids=np.arange(300, dtype=np.int64), xy=xy))
     flt = make_ekf(association="nearest")
     flt.reset(Gaussian2(np.zeros(3), np.eye(3) * 0.01), world, SensorSpec(), rng)
     assert flt._index is not None
@@ -445,11 +445,11 @@ def test_index_candidates_find_the_scanned_nearest_landmark(spread: float) -> No
         a = rng.standard_normal((3, 3)) * spread
         flt._P = (a @ a.T + 1e-6 * np.eye(3)).tolist()
         flt._x = [float(rng.uniform(-10, 10)), float(rng.uniform(-10, 10)), float(rng.uniform(-math.pi, math.pi))]
-        target = xy[int(rng.integers(200))]
+        target = xy[int(rng.integers(300))]
         dx, dy = target[0] - flt._x[0], target[1] - flt._x[1]
         r = math.hypot(dx, dy) + float(rng.normal(0.0, 0.3))
         b = math.atan2(dy, dx) - flt._x[2] + float(rng.normal(0.0, 0.2))
-        used = {int(k) for k in rng.integers(0, 200, size=3)}
+        used = {int(k) for k in rng.integers(0, 300, size=3)}
         with_index = flt._nearest(max(r, 0.01), b, used)
         index, flt._index = flt._index, None
         scanned = flt._nearest(max(r, 0.01), b, used)

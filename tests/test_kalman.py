@@ -16,6 +16,7 @@ from locbench.filters._kalman import (
     gain_update,
     inside_gate,
     joseph_correct,
+    joseph_correct_pose,
     joseph_update,
     wrapped_residual,
 )
@@ -64,6 +65,19 @@ def test_joseph_correct_with_identity_is_the_direct_pose_update() -> None:
     assert np.array_equal(c.x, X + K @ v)  # products with I are exact
     P_new = A @ P @ A.T + K @ Rp @ K.T
     assert np.array_equal(c.P, 0.5 * (P_new + P_new.T))
+
+
+def test_joseph_correct_pose_is_joseph_correct_with_identity() -> None:
+    """The H = I form gives joseph_correct's bits (state, covariance, NIS) on random beliefs."""
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        a = rng.standard_normal((3, 3)) * rng.uniform(1e-3, 3.0)
+        Pr = a @ a.T + 1e-9 * np.eye(3)
+        Rp = np.diag(rng.uniform(1e-6, 1.0, size=3))
+        x, v = rng.standard_normal(3), rng.standard_normal(3) * 0.1
+        c = joseph_correct(x, Pr, v, np.eye(3), Rp)
+        xn, Pn, nis = joseph_correct_pose(x, Pr, v, Rp)
+        assert np.array_equal(xn, c.x) and np.array_equal(Pn, c.P) and nis == c.nis
 
 
 def test_gain_update_equals_the_joseph_update_for_a_linear_model() -> None:

@@ -14,6 +14,8 @@ from locbench.report import wilson_interval, write_report
 from locbench.report.build import Report
 from locbench.report.collect import collect
 from locbench.report.doc import Plot, Table
+from locbench.report.experiment import nees_plots
+from locbench.report.kidnap import kidnap_section
 from locbench.report.render import render_png
 from locbench.store import KIND_NAMES, RunRecord, Store, TruthRecord
 
@@ -302,7 +304,7 @@ def kidnap_store(tmp_path: Path) -> Store:
 
 def test_kidnap_section_table_and_figure_are_deterministic(kidnap_store: Store) -> None:
     col = collect(kidnap_store)
-    first = Report(col).kidnap_and_global()
+    first = kidnap_section(Report(col))
     (line,) = [c for c in first.children if c.title == "Kidnap: line"]
     table, plot = line.blocks
     assert isinstance(table, Table) and isinstance(plot, Plot)
@@ -311,7 +313,7 @@ def test_kidnap_section_table_and_figure_are_deterministic(kidnap_store: Store) 
     assert rows["`tracker`"][2:4] == ("1/2", "0/2")
     assert rows["`odometry`"][2:4] == ("0/2", "0/2")
     assert table.rows[0][0] == "`odometry`"  # the baseline first
-    assert render_png(plot) == render_png(Report(collect(kidnap_store)).kidnap_and_global().children[0].blocks[1])
+    assert render_png(plot) == render_png(kidnap_section(Report(collect(kidnap_store))).children[0].blocks[1])
     (glob,) = [c for c in first.children if c.anchor == "global"]
     (gt,) = [b for b in glob.blocks if isinstance(b, Table)]
     assert [r[1] for r in gt.rows] == ["`pf[init=uniform]`", "`pf[init=uniform]`"]
@@ -324,8 +326,8 @@ def test_report_kidnap_and_global_sections_regenerate_identically(kidnap_store: 
     for needle in ("Kidnap: line", "![line: recovery within 30 s", "Global localization", "smoothed ATE (cm)"):
         assert needle in text, needle
     # runs started from a uniform prior are scored apart, not in the NEES figure of their dataset
-    nees = Report(collect(kidnap_store)).nees_plot("line[kidnap_m=2]")
-    assert nees is not None and "uniform prior left out" in nees.caption
+    nees = nees_plots(Report(collect(kidnap_store)), "line[kidnap_m=2]")
+    assert nees and all("uniform prior left out" in p.caption for p in nees)
     files = sorted(p for p in kidnap_store.summary.rglob("*") if p.is_file())
     before = {p: p.read_bytes() for p in files}
     for p in files:

@@ -11,7 +11,8 @@ from scipy import stats
 
 from locbench import claims
 from locbench.claims.consistency import check_matched_consistency
-from locbench.datasets.synthetic.scenarios import ENCODER_K_NOMINAL, RoomParams
+from locbench.datasets.synthetic.scenarios import RoomParams
+from locbench.datasets.synthetic.toolkit import ENCODER_K_NOMINAL
 from locbench.errors import ConfigError
 from locbench.metrics import chi2_band
 from locbench.pcrb import pcrb_covariances

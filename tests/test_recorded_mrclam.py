@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from tool_support import load_tool
 
 from locbench.datasets.base import Trajectory2D, check_dataset_contract
 from locbench.datasets.recorded import mrclam
@@ -17,7 +18,6 @@ from locbench.datasets.recorded.files import MissingDataFile, RecordedDataError,
 from locbench.datasets.recorded.mrclam import (
     MrclamDataset,
     MrclamParams,
-    derive_nominal_noise,
     load_mrclam,
     read_robot_sightings,
     waypoints_by_distance,
@@ -347,7 +347,7 @@ def test_dataset6_robot1(registered: None) -> None:
 @needs_data
 def test_frozen_noise_matches_a_fresh_derivation() -> None:
     root = os.environ.get("LOCBENCH_DATA", "")
-    got = derive_nominal_noise(Path(root) / "utias_mrclam" / "MRCLAM_Dataset6")
+    got = load_tool("derive_mrclam_noise").derive_nominal_noise(Path(root) / "utias_mrclam" / "MRCLAM_Dataset6")
     frozen = {
         "twist_sigma_v_mps": mrclam.TWIST_SIGMA_V_MPS,
         "twist_sigma_omega_radps": mrclam.TWIST_SIGMA_OMEGA_RADPS,

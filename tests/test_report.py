@@ -5,6 +5,7 @@ from __future__ import annotations
 import ast
 import os
 import shutil
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -192,16 +193,22 @@ def _empty(meta: dict[str, object]) -> RunRecord:
     )
 
 
-@pytest.fixture
-def store(tmp_path: Path) -> Store:
-    st = Store(tmp_path / "results")
+def _fake_store(root: Path) -> Store:
+    """The baseline and one filter on every seed of ``DATASET``, and a filter skipped with its reason."""
+    st = Store(root)
     for seed in range(N_SEEDS):
         truth = _fake_truth(seed)
         st.write_truth(truth)
         st.write_run(_fake_run(truth, "odometry", drift=0.004, sigma=0.01))
         st.write_run(_fake_run(truth, "ekf_landmarks", drift=0.0, sigma=0.01))
-    st.write_run(_empty(_meta("ekf_landmarks[gate=0.1]", 0, "error", "ValueError: boom | bad gate")))
     st.write_run(_empty(_meta("ekf_icp", 0, "skipped", "needs an occupancy grid")))
+    return st
+
+
+@pytest.fixture
+def store(tmp_path: Path) -> Store:
+    st = _fake_store(tmp_path / "results")
+    st.write_run(_empty(_meta("ekf_landmarks[gate=0.1]", 0, "error", "ValueError: boom | bad gate")))
     broken = st.run_dir(DATASET, "pf", 0)
     broken.mkdir(parents=True)
     (broken / "meta.json").write_text("{not json")
@@ -261,7 +268,7 @@ def test_write_report_end_to_end(store: Store) -> None:
         "0-2 (1 datasets)",
         "Summary",
         "*`room`: mean over seeds*",
-        "| filter | runs | ATE (cm) | ATE / PCRB (x) | mean waypoint RMSE (cm) |",
+        "| filter | needs (sensors; map) | runs | ATE (cm) | mean waypoint RMSE (cm) |",
         "| `odometry` | 3 | ",
         "| `ekf_landmarks[gate=0.1]` | 1 | 1 |",
         "`room`: RMSE at each waypoint over runs (cm)",
@@ -274,7 +281,9 @@ def test_write_report_end_to_end(store: Store) -> None:
         "runs/room/pf/seed-0000",
         "figures/room_trajectories.png",
         "figures/room_pareto.png",
-        "energy score (cm) | lost AUROC (0.25 m) |",
+        "energy score (cm) | update median (us) |",
+        "| `odometry` | odometry only | 3 | ",
+        "| `ekf_icp` | laser; occupancy grid | 0 | skipped: needs an occupancy grid |",
         "a>Does the filter know that it is lost?",
         "| `room` | `odometry` | 3 | 0 | never lost |",
         "CRPS x / y (cm) / heading (deg)",
@@ -289,7 +298,13 @@ def test_write_report_end_to_end(store: Store) -> None:
     # the baseline comes first in the tables
     assert text.index("| `odometry` |") < text.index("| `ekf_landmarks` |")
     figs = sorted(p.name for p in (store.summary / "figures").glob("*.png"))
-    assert figs == ["room_nees.png", "room_pareto.png", "room_trajectories.png", "room_waypoint_rmse.png"]
+    assert figs == [
+        "room_errors.png",
+        "room_nees.png",
+        "room_pareto.png",
+        "room_trajectories.png",
+        "room_waypoint_rmse.png",
+    ]
     csv = pd.read_csv(store.summary / "metrics.csv")
     assert list(csv.columns) == ["dataset", "filter", "seed", "metric", "value"]
     assert len(csv) == len(collect_metrics(store))
@@ -454,20 +469,22 @@ def test_suite_filter_keeps_the_suites_cells_only() -> None:
 def test_summary_takes_each_filters_own_kidnap_configuration() -> None:
     from locbench.report.build import Report
     from locbench.report.collect import Collected, describe_filter, frame
+    from locbench.report.summary import kidnap_config
 
     names = ["pf", "pf[adaptive=kld]", "pf[particles=100]", "pf[augmented=true]", "pf[adaptive=kld,augmented=true]"]
     col = Collected(metrics=frame([]), filters={n: describe_filter(n) for n in names})
     rep = Report(col)
     kid = ["pf[augmented=true]", "pf[adaptive=kld,augmented=true]"]
-    assert rep._kidnap_config("pf", kid) == "pf[augmented=true]"
-    assert rep._kidnap_config("pf[adaptive=kld]", kid) == "pf[adaptive=kld,augmented=true]"
-    assert rep._kidnap_config("pf[particles=100]", kid) is None
+    assert kidnap_config(rep, "pf", kid) == "pf[augmented=true]"
+    assert kidnap_config(rep, "pf[adaptive=kld]", kid) == "pf[adaptive=kld,augmented=true]"
+    assert kidnap_config(rep, "pf[particles=100]", kid) is None
 
 
 def test_summary_takes_the_kidnap_configuration_a_filter_declares(monkeypatch: pytest.MonkeyPatch) -> None:
     from locbench.filters.pf import ParticleFilter
     from locbench.report.build import Report
     from locbench.report.collect import Collected, describe_filter, frame
+    from locbench.report.summary import kidnap_config
 
     monkeypatch.setattr(ParticleFilter, "kidnap_params", {"augmented": "true", "inject": "sensor"})
     names = ["pf", "pf[adaptive=kld]", "pf[augmented=true]", "pf[augmented=true,inject=sensor]"]
@@ -476,9 +493,9 @@ def test_summary_takes_the_kidnap_configuration_a_filter_declares(monkeypatch: p
     rep = Report(col)
     kid = ["pf[augmented=true]", "pf[augmented=true,inject=sensor]", "pf[adaptive=kld,augmented=true]"]
     # the declared one, not the one with the fewest extra parameters
-    assert rep._kidnap_config("pf", kid) == "pf[augmented=true,inject=sensor]"
+    assert kidnap_config(rep, "pf", kid) == "pf[augmented=true,inject=sensor]"
     # not run: the closest configuration that was
-    assert rep._kidnap_config("pf[adaptive=kld]", kid) == "pf[adaptive=kld,augmented=true]"
+    assert kidnap_config(rep, "pf[adaptive=kld]", kid) == "pf[adaptive=kld,augmented=true]"
 
 
 def test_configurations_of_a_sweep_are_listed_in_numeric_order() -> None:
@@ -527,3 +544,128 @@ def test_table1_marks_the_tie_at_a_waypoint_and_not_the_shift() -> None:
     assert not any(c.startswith("**") for c in odo_row[1:])
     assert "against ekf_landmarks: median paired difference 5 cm" in pf_tip[2]
     assert not any(c.startswith("**") for c in by["`pf` (003 table 1)"][0][1:])
+
+
+# --- the summary as a decision table (issue 25) ---------------------------------------------------------------
+
+
+def _summary_of(rows: list[tuple[str, str, int, str, float]], dataset: str = "mine") -> tuple[object, object]:
+    from locbench.report.build import Report
+    from locbench.report.collect import Collected, frame
+    from locbench.report.summary import summary_blocks
+
+    rep = Report(Collected(metrics=frame(rows)))
+    blocks = summary_blocks(rep, dataset)
+    return blocks[0], blocks[-1]
+
+
+def _per_seed(values: dict[str, dict[str, float]], seeds: int = 8) -> list[tuple[str, str, int, str, float]]:
+    """Rows of dataset 'mine': each filter's metrics, the same on every seed but for a small seed-wise wobble."""
+    out = []
+    for f, metrics in values.items():
+        for s in range(seeds):
+            out.append(("mine", f, s, "failed", 0.0))
+            for m, v in metrics.items():
+                out.append(("mine", f, s, m, v * (1.0 + 0.01 * s)))
+    return out
+
+
+def test_summary_rows_baseline_then_defaults_by_ate_then_sweeps_under_their_filter() -> None:
+    rows = _per_seed(
+        {
+            "odometry": {"ate_m": 0.5},
+            "pf[particles=300]": {"ate_m": 0.01},
+            "ukf_landmarks": {"ate_m": 0.04},
+            "pf": {"ate_m": 0.03},
+            "ekf_landmarks": {"ate_m": 0.02},
+            "ekf_landmarks[association=nearest]": {"ate_m": 0.05},
+            "pf[particles=100]": {"ate_m": 0.2},
+        }
+    )
+    _, table = _summary_of(rows)
+    assert [r[0].strip("`") for r in table.rows] == [
+        "odometry",
+        "ekf_landmarks",
+        "pf",
+        "ukf_landmarks",
+        "ekf_landmarks[association=nearest]",
+        "pf[particles=100]",
+        "pf[particles=300]",
+    ]
+    needs = dict((r[0].strip("`"), r[1]) for r in table.rows)
+    assert needs["odometry"] == "odometry only"
+    assert "landmark map" in needs["ekf_landmarks"] and "landmark sightings" in needs["ekf_landmarks"]
+    assert "landmark map" not in needs["pf"]  # the particle filter requires no map kind (landmarks or a grid)
+    # no row has a kidnap run, a bound or a recorded dataset: those columns are left out
+    assert "kidnap recovery at 2 m (%)" not in table.header and "ATE / PCRB (x)" not in table.header
+
+
+def test_best_anees_only_among_consistent_values() -> None:
+    # 8 runs: band [1.55, 4.93]; 5.2 is over-confident though closer to 3 (by the log ratio) than 1.6
+    rows = _per_seed(
+        {
+            "odometry": {"ate_m": 0.5, "anees": 3.0},
+            "ekf_landmarks": {"ate_m": 0.02, "anees": 5.2},
+            "ukf_landmarks": {"ate_m": 0.03, "anees": 1.6},
+        },
+        seeds=1,
+    )
+    rows = [(d, f, s, m, 5.2 if f == "ekf_landmarks" and m == "anees" else v) for d, f, s, m, v in rows]
+    more = [(d, f, s, m, v) for s in range(1, 8) for d, f, _, m, v in rows]
+    _, table = _summary_of(rows + [(d, f, s, m, v) for d, f, s, m, v in more])
+    col = table.header.index("ANEES (verdict)")
+    cells = {r[0].strip("`"): r[col] for r in table.rows}
+    assert "over-confident" in cells["ekf_landmarks"] and not cells["ekf_landmarks"].startswith("**")
+    assert cells["ukf_landmarks"].startswith("**") and "(consistent)" in cells["ukf_landmarks"]
+    assert any("among the consistent ones" in n for n in table.footnotes)
+
+
+def test_advice_is_generated_from_the_numbers() -> None:
+    values = {"odometry": {"ate_m": 0.5}, "ekf_landmarks": {"ate_m": 0.02}, "pf": {"ate_m": 0.03}}
+    text, _ = _summary_of(_per_seed(values))
+    assert "with beacon ranges and landmark sightings, `pf` (ATE 3.1" in text.text
+    assert "landmark map, `ekf_landmarks` (ATE 2.07 cm" in text.text
+    # better numbers for the particle filter: it is the choice with a landmark map too
+    values["pf"] = {"ate_m": 0.01}
+    text, _ = _summary_of(_per_seed(values))
+    assert "landmark map, `pf`" in text.text and "`ekf_landmarks`" not in text.text
+    # a paired test that cannot tell two apart names both
+    values["ekf_landmarks"] = {"ate_m": 0.0101}
+    rows = _per_seed(values)
+    rows = [(d, f, s, m, v * (1.3 if f == "pf" and s % 2 else 1.0)) for d, f, s, m, v in rows]
+    text, _ = _summary_of(rows)
+    assert "not found different by the paired test, `ekf_landmarks`" in text.text or (
+        "not found different by the paired test, `pf`" in text.text
+    )
+
+
+@pytest.mark.parametrize(
+    ("name", "title"),
+    [
+        ("my_world", "Your data: `my_world`"),  # no built-in suite runs it
+        ("tiny_circle", "`tiny_circle`"),  # a suite's world without a section of its own, alone in the store
+    ],
+)
+def test_a_dataset_no_suite_runs_gets_the_whole_report(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, name: str, title: str
+) -> None:
+    """A user's own data (here a synthetic one no built-in suite runs), or a store without a main comparison:
+    summary, figures, runtime and the skipped filter's reason, and ``locbench report`` prints its summary table."""
+    from locbench.cli import main
+
+    monkeypatch.setattr(sys.modules[__name__], "DATASET", name)
+    st = _fake_store(tmp_path / "results")
+    assert main(["report", "--results", str(tmp_path / "results")]) == 0
+    out = capsys.readouterr().out
+    assert f"{name}: mean over seeds" in out and "ekf_landmarks" in out and "skipped: needs an occupancy grid" in out
+    text = (st.summary / "REPORT.md").read_text()
+    for needle in (
+        f'### <a id="summary-{name}"></a>{title}',
+        f'## <a id="own-{name}"></a>{title}',
+        "| `ekf_icp` | laser; occupancy grid | 0 | skipped: needs an occupancy grid |",
+        "Which to use, from this table's ATE",
+        f"figures/{name}_pareto.png",
+    ):
+        assert needle in text, needle
+    figs = sorted(p.name for p in (st.summary / "figures").glob("*.png"))
+    assert figs == [f"{name}_{k}.png" for k in ("errors", "nees", "pareto", "trajectories", "waypoint_rmse")]

@@ -13,11 +13,12 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from test_report import _fake_run, _fake_truth
 
+from locbench.palette import FILTER_COLORS, Palette, shade, split_by_sweep
 from locbench.report import figures as fg
-from locbench.report.build import MAX_LINE_SERIES, MAX_TRACK_PANELS, Report
+from locbench.report.build import Report
 from locbench.report.collect import collect
 from locbench.report.doc import Plot
-from locbench.report.palette import FILTER_COLORS, Palette, shade, split_by_sweep
+from locbench.report.experiment import MAX_LINE_SERIES, MAX_TRACK_PANELS
 from locbench.report.render import plots_of, texts_off_canvas
 from locbench.report.style import MPL_STYLE
 from locbench.store import Store

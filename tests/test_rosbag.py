@@ -8,6 +8,7 @@ map is its world's grid saved as a map_server map. Stamps are offset to Unix-lik
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 from collections.abc import Callable
 from pathlib import Path
@@ -20,7 +21,7 @@ from locbench.datasets.base import Dataset, WorldMap
 from locbench.datasets.recorded.files import RecordedDataError
 from locbench.datasets.recorded.ros_map import save_map_server_map
 from locbench.errors import ConfigError, DataNotFound
-from locbench.events import LaserScan, Odometry
+from locbench.events import LandmarkObservations, LaserScan, Odometry, PoseFix
 from locbench.geometry import quaternion_to_yaw, wrap_angle
 from locbench.metrics import ate
 from locbench.registry import DATASETS, make_dataset, make_filter
@@ -202,6 +203,7 @@ def test_bag_round_trips_events_truth_and_map(
 ) -> None:
     ds = load_rosbag(bags(kind), folder / "map.yaml", **NOISE)
     ds.check()
+    assert ds.metadata["warnings"] == []  # the commanded twist agrees with the increments: no warning
     assert ds.metadata["truth_type"] == KINDS[kind][2]
     assert ds.metadata["format"] == ("ROS 1 bag" if kind == "ros1" else "ROS 2 bag")
     # odometry: the increments come back whatever the odometry frame's origin
@@ -397,3 +399,108 @@ def test_quaternion_yaw_and_increments() -> None:
     pose = np.array([[1.0, 1.0, math.pi / 2], [1.0, 2.0, math.pi - 0.1], [0.0, 2.0, -math.pi + 0.1]])
     inc = odometry_increments(pose)
     np.testing.assert_allclose(inc, [[1.0, 0.0, math.pi / 2 - 0.1], [math.cos(0.1), math.sin(0.1), 0.2]], atol=1e-12)
+
+
+# --- twist check, fixes and sidecar files ---------------------------------------------------------------------
+
+
+def test_a_zero_twist_while_the_pose_moves_is_a_warning(folder: Path, synthetic: Dataset) -> None:
+    b = _Bag(True)
+    msgs = []
+    for topic, typ, msg, ns in b.messages(synthetic, "nav_msgs/msg/Odometry"):
+        if topic == "/odom":
+            vec = b.T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)
+            zero = b.T["geometry_msgs/msg/Twist"](linear=vec, angular=vec)
+            msg = dataclasses.replace(msg, twist=dataclasses.replace(msg.twist, twist=zero))
+        msgs.append((topic, typ, msg, ns))
+    ds = load_rosbag(b.write(folder / "zero-twist.bag", msgs), folder / "map.yaml")
+    (w,) = ds.metadata["warnings"]
+    assert w.startswith("topic '/odom': odometry twist contradicts its pose: the twist is zero in ")
+    assert "kf_linear" in w
+
+
+def _latlon(east: np.ndarray, north: np.ndarray, lat0: float, lon0: float) -> tuple[np.ndarray, np.ndarray]:
+    """The inverse of geodetic_to_enu by fixed-point steps (converges to well below a micrometre here)."""
+    from locbench.datasets.recorded.rosbag import geodetic_to_enu
+
+    m_per_deg_lat, m_per_deg_lon = 111_000.0, 111_000.0 * math.cos(math.radians(lat0))
+    lat, lon = lat0 + north / m_per_deg_lat, lon0 + east / m_per_deg_lon
+    for _ in range(8):
+        e, n = geodetic_to_enu(lat, lon, lat0, lon0)
+        lat, lon = lat + (north - n) / m_per_deg_lat, lon + (east - e) / m_per_deg_lon
+    return lat, lon
+
+
+def test_navsatfix_becomes_map_frame_position_fixes(folder: Path, synthetic: Dataset) -> None:
+    lat0, lon0, yaw = 50.8, 12.9, 0.3
+    b = _Bag(False)
+    msgs = b.messages(synthetic, "geometry_msgs/msg/PoseStamped")
+    gt = synthetic.ground_truth
+    pick = np.arange(0, len(gt), 20)
+    c, sn = math.cos(yaw), math.sin(yaw)
+    xy = gt.xy[pick]
+    east, north = c * xy[:, 0] - sn * xy[:, 1], sn * xy[:, 0] + c * xy[:, 1]
+    lat, lon = _latlon(east, north, lat0, lon0)
+    T = b.T
+    for j, k in enumerate(pick):
+        hdr, ns = b.header(float(gt.t[k]), "gps")
+        status = T["sensor_msgs/msg/NavSatStatus"](status=-1 if j == 3 else 0, service=1)
+        cov = np.array([1.0, 0, 0, 0, 4.0, 0, 0, 0, 9.0])
+        fix = T["sensor_msgs/msg/NavSatFix"](
+            header=hdr, status=status, latitude=float(lat[j]), longitude=float(lon[j]), altitude=300.0,
+            position_covariance=cov, position_covariance_type=2 if j % 2 else 0,
+        )  # fmt: skip
+        msgs.append(("/gps", "sensor_msgs/msg/NavSatFix", fix, ns))
+    msgs.sort(key=lambda m: m[3])
+    path = b.write(folder / "gps", msgs)
+    with pytest.raises(ConfigError, match="'fix_topic' needs the map origin's fix_lat0_deg"):
+        load_rosbag(path, folder / "map.yaml", fix_topic="/gps")
+    ds = load_rosbag(
+        path, folder / "map.yaml", fix_topic="/gps", fix_lat0_deg=lat0, fix_lon0_deg=lon0, fix_yaw_rad=yaw,
+        fix_sigma_xy_m=1.5,
+    )  # fmt: skip
+    fixes = [e for e in ds.events if isinstance(e, PoseFix)]
+    assert len(fixes) == len(pick) - 1 and ds.metadata["fixes_without_fix"] == 1
+    keep = [j for j in range(len(pick)) if j != 3]
+    np.testing.assert_allclose([f.z for f in fixes], xy[keep], atol=1e-6)
+    rot = np.array([[c, sn], [-sn, c]])
+    for f, j in zip(fixes, keep, strict=True):
+        want = rot @ np.diag([1.0, 4.0]) @ rot.T if j % 2 else np.diag([1.5**2, 1.5**2])
+        np.testing.assert_allclose(f.cov, want, atol=1e-12)
+    assert PoseFix in ds.declared and ds.sensors.pose_fix_sigma_xy_m == 1.5
+
+
+def test_landmark_waypoint_and_event_sidecars(
+    bags: Callable[[str], Path], folder: Path, synthetic: Dataset, tmp_path: Path
+) -> None:
+    from locbench.datasets.recorded.textlog import _event_object
+
+    lm = synthetic.world.landmarks
+    assert lm is not None and synthetic.waypoints is not None
+    (tmp_path / "lm.txt").write_text(
+        "".join(f"{i} {x!r} {y!r}\n" for i, (x, y) in zip(lm.ids.tolist(), lm.xy.tolist(), strict=True))
+    )
+    wp = synthetic.waypoints
+    (tmp_path / "wp.txt").write_text(
+        "".join(f"{t + OFFSET_S!r} {x!r} {y!r}\n" for t, (x, y) in zip(wp.t.tolist(), wp.xy.tolist(), strict=True))
+    )
+    sightings = [e for e in synthetic.events if isinstance(e, LandmarkObservations)]
+    lines = [json.dumps(_event_object(dataclasses.replace(e, t=e.t + OFFSET_S))) for e in sightings]
+    (tmp_path / "ev.jsonl").write_text("\n".join(lines) + "\n")
+    bags_path = bags("ros1")
+    side = {"landmarks": str(tmp_path / "lm.txt"), "waypoints": str(tmp_path / "wp.txt")}
+    ds = load_rosbag(bags_path, folder / "map.yaml", events=str(tmp_path / "ev.jsonl"), **side, **NOISE)
+    got = [e for e in ds.events if isinstance(e, LandmarkObservations)]
+    assert len(got) == len(sightings) > 0 and LandmarkObservations in ds.declared
+    for a, e in zip(got, sightings, strict=True):
+        assert np.array_equal(a.ids, e.ids) and np.array_equal(a.ranges, e.ranges)
+    assert ds.world.landmarks is not None and np.array_equal(ds.world.landmarks.xy, lm.xy)
+    assert ds.waypoints is not None and len(ds.waypoints) == len(wp)
+    assert str(tmp_path / "ev.jsonl") in ds.sources
+    assert _ate("ekf_landmarks", ds) < 0.5 * _ate("odometry", ds)
+    # odometry in the sidecar would be counted twice: refused
+    (tmp_path / "odo.jsonl").write_text('{"t": 1700000001.0, "type": "odometry", "dx": 0, "dy": 0, "dtheta": 0}\n')
+    with pytest.raises(RecordedDataError, match=r"odo\.jsonl: has Odometry events, expected only landmarks, ranges"):
+        load_rosbag(bags_path, folder / "map.yaml", events=str(tmp_path / "odo.jsonl"))
+    with pytest.raises(RecordedDataError, match=r"nope\.txt: missing landmarks"):
+        load_rosbag(bags_path, folder / "map.yaml", landmarks=str(tmp_path / "nope.txt"))

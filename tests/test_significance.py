@@ -11,8 +11,9 @@ from scipy import stats
 
 from locbench import significance as sg
 from locbench.metrics import METRICS
+from locbench.ranking import UNTESTED_FOOTNOTE, Column, mark_ties, tie_footnote
 from locbench.report.doc import Section, Table
-from locbench.report.significance import UNTESTED_FOOTNOTE, Column, dataset_groups, mark_ties, tie_footnote
+from locbench.report.significance import dataset_groups
 
 SEEDS = 20
 

@@ -9,6 +9,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -207,6 +208,35 @@ def test_ctrl_c_stops_keeps_finished_runs_and_resumes(
     argv = ["run", "--filter", "bad[mode=slow]", "--dataset", "line[steps=20]", "--seeds", "8", "--results", res]
     assert main([*argv, "--no-progress", "--jobs", "2"]) == 0  # the same command resumes
     assert f"{stored} cached, {8 - stored} ok" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [{"jobs": 1}, {"jobs": 2}, pytest.param({"jobs": 2, "executor": "dask"}, marks=pytest.mark.slow)],
+    ids=["inline", "pool", "dask"],
+)
+def test_ctrl_c_after_one_filter_keeps_it_and_the_rerun_does_the_rest(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, extra: dict[str, Any], harness_registry: None
+) -> None:
+    if extra.get("executor") == "dask":
+        pytest.importorskip("distributed")
+        monkeypatch.syspath_prepend(str(TESTS))  # the LocalCluster's spawned workers import harness_support
+    # the third filter of the one task sends this process SIGINT when it starts: the two before it have finished
+    monkeypatch.setenv("LOCBENCH_TEST_SIGNAL", str(tmp_path / "signalled"))
+    monkeypatch.setenv("LOCBENCH_TEST_SIGNAL_PID", str(os.getpid()))
+    specs = ["odometry", "bad[fail_at_s=100]", "bad[fail_at_s=100,mode=signal]"]
+    res = tmp_path / "res"
+    sweep = run_sweep(plan_sweep([(specs, ["line"], [0])], str(res)), **extra)
+    assert sweep.interrupted and (tmp_path / "signalled").exists()
+    assert [str(o.filter) for o in sweep.outcomes] == specs[:2]
+    store = Store(res)
+    assert set(store.iter_runs()) == {store.run_dir("line", f, 0) for f in specs[:2]}
+    kept = {f: (store.run_dir("line", f, 0) / "meta.json").read_bytes() for f in specs[:2]}
+    # the same sweep again: the two finished runs are cached (not recomputed, their files untouched), the third runs
+    again = run_sweep(plan_sweep([(specs, ["line"], [0])], str(res)), **extra)
+    assert not again.interrupted
+    assert {str(o.filter): o.status for o in again.outcomes} == {specs[0]: "cached", specs[1]: "cached", specs[2]: "ok"}
+    assert {f: (store.run_dir("line", f, 0) / "meta.json").read_bytes() for f in specs[:2]} == kept
 
 
 @pytest.mark.slow

@@ -9,6 +9,7 @@ import pytest
 from tool_support import load_tool
 
 from locbench.datasets.synthetic import scenarios as sc
+from locbench.datasets.synthetic import toolkit as tk
 from locbench.datasets.synthetic.robot import DriveLimits, GoTo, simulate_route
 from locbench.datasets.synthetic.sensors import (
     EncoderModel,
@@ -54,7 +55,7 @@ def test_contract_and_every_sensor(spec: str) -> None:
     assert ds.waypoints is not None and len(ds.waypoints) >= 1
     assert ds.ground_truth.t[0] <= ds.events[0].t and ds.ground_truth.t[-1] >= ds.events[-1].t
     np.testing.assert_allclose(np.diff(ds.ground_truth.t), 0.05, atol=1e-9)  # odometry rate
-    assert ds.metadata["generator_version"] == sc.GENERATOR_VERSION
+    assert ds.metadata["generator_version"] == tk.GENERATOR_VERSION
     assert ds.sensors.wheelbase_m and ds.sensors.encoder_k_left and ds.sensors.landmark_sigma_range_m
     # the robot stands on each marked point at its waypoint time (within 1 cm: it steers onto its marks under
     # execution noise and stops a few millimetres from them)
@@ -266,7 +267,7 @@ def test_laser_ranges_respect_limits(office: object) -> None:
 
 def test_room_calibration_over_20_seeds_within_factor_1_5() -> None:
     """Report 003 table 1: distance between each waypoint and the mean dead-reckoned position over 20 runs."""
-    target = np.asarray(sc.ROOM_TABLE1_ODOMETRY_CM) / 100.0
+    target = np.asarray(tk.ROOM_TABLE1_ODOMETRY_CM) / 100.0
     ends = []
     for seed in range(20):
         ds = make_dataset("room", seed)
@@ -276,7 +277,7 @@ def test_room_calibration_over_20_seeds_within_factor_1_5() -> None:
     err = np.hypot(*(np.mean(ends, axis=0) - ds.waypoints.xy).T)
     ratio = err / target
     assert np.all((ratio >= 1 / 1.5) & (ratio <= 1.5)), f"measured {err * 100} cm vs {target * 100} cm"
-    np.testing.assert_allclose(err * 100, sc.ROOM_CALIBRATION_ACHIEVED_CM, atol=0.01)
+    np.testing.assert_allclose(err * 100, tk.ROOM_CALIBRATION_ACHIEVED_CM, atol=0.01)
 
 
 # --- execution noise: the commanded twist is not the true motion ------------------------------------------
@@ -313,7 +314,7 @@ def test_room_commands_differ_from_the_true_motion_by_the_documented_slip() -> N
         assert not np.allclose(motion.d_left, cl) and not np.allclose(motion.d_right, cr)
         # standing still, the robot does not move; moving, each wheel slips by SLIP_K_TRUE sqrt(|c|) z
         np.testing.assert_array_equal(motion.d_left[~moving], 0.0)
-        predicted_sd.append(sc.SLIP_K_TRUE * math.sqrt(float(np.sum(np.abs(cl) + np.abs(cr)))) / motion.wheelbase_m)
+        predicted_sd.append(tk.SLIP_K_TRUE * math.sqrt(float(np.sum(np.abs(cl) + np.abs(cr)))) / motion.wheelbase_m)
         path = _dead_reckon_commands(motion.poses[0], motion.v, motion.omega, motion.dt)
         dth.append(math.remainder(path[-1, 2] - motion.poses[-1, 2], 2.0 * math.pi))
         ate.append(float(np.sqrt(np.mean(np.sum(np.square(path[:, :2] - motion.poses[:, :2]), axis=1)))))
@@ -334,17 +335,17 @@ def test_slip_has_the_documented_size_and_the_encoders_measure_the_true_travel()
     np.testing.assert_array_equal(ds.ground_truth.xy, motion.poses[:, :2])
     np.testing.assert_array_equal([e.v for e in odo], motion.v)
     np.testing.assert_array_equal([e.omega for e in odo], motion.omega)
-    assert ds.metadata["execution_noise"]["slip_k_sqrt_m"] == sc.SLIP_K_TRUE
+    assert ds.metadata["execution_noise"]["slip_k_sqrt_m"] == tk.SLIP_K_TRUE
     # slip per wheel and step: (d - c) / sqrt(|c|) has standard deviation SLIP_K_TRUE (2800 draws: within 5 %)
     cl, cr = _commanded_travel(motion)
     c, d = np.concatenate([cl, cr]), np.concatenate([motion.d_left, motion.d_right])
     z = (d - c)[np.abs(c) > 0] / np.sqrt(np.abs(c[np.abs(c) > 0]))
-    assert z.size > 2000 and abs(float(np.std(z)) / sc.SLIP_K_TRUE - 1.0) < 0.05
+    assert z.size > 2000 and abs(float(np.std(z)) / tk.SLIP_K_TRUE - 1.0) < 0.05
     # the encoders measure the TRUE wheel travel (with their own error, the odometry stream's draws)
     from locbench.seeding import dataset_rng
 
     dl, dr = measured_wheel_travel(
-        motion, sc.robot_encoder_model(), sc.split_streams(dataset_rng("room", 0))["odometry"]
+        motion, tk.robot_encoder_model(), tk.split_streams(dataset_rng("room", 0))["odometry"]
     )
     np.testing.assert_allclose([e.d_left for e in odo], dl, rtol=0, atol=1e-15)
     np.testing.assert_allclose([e.d_right for e in odo], dr, rtol=0, atol=1e-15)
@@ -388,7 +389,7 @@ def test_the_room_calibration_study_reproduces_its_recorded_result() -> None:
     # tools/calibrate_odometry.py fitted the frozen constants; what they achieve is kept beside them
     tool = load_tool("calibrate_odometry")
     room = 100.0 * tool.room_dead_reckoning_errors(
-        sc.ENCODER_SCALE_LEFT, sc.ENCODER_SCALE_RIGHT, sc.WHEELBASE_TRUE_RATIO
+        tk.ENCODER_SCALE_LEFT, tk.ENCODER_SCALE_RIGHT, tk.WHEELBASE_TRUE_RATIO
     )
-    np.testing.assert_allclose(room, sc.ROOM_CALIBRATION_ACHIEVED_CM, atol=5e-4)
+    np.testing.assert_allclose(room, tk.ROOM_CALIBRATION_ACHIEVED_CM, atol=5e-4)
     # the lap calibration: tests/test_lap.py::test_frozen_calibration_gives_about_15_cm

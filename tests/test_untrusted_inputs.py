@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import zipfile
@@ -181,6 +182,44 @@ def test_a_bad_scheduler_address_is_one_line(
     assert main(argv) == 2
     _one_line(capsys, "--scheduler", expected)
     assert not (tmp_path / "r").exists()
+
+
+def test_a_scheduler_that_never_answers_is_one_line_after_the_timeout(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # A socket that listens but never accepts: the kernel completes the TCP handshake, nothing ever replies.
+    pytest.importorskip("distributed")
+    with socket.socket() as silent:
+        silent.bind(("127.0.0.1", 0))
+        silent.listen(4)
+        address = f"tcp://127.0.0.1:{silent.getsockname()[1]}"
+        argv = [*SMOKE, "--results", str(tmp_path / "r"), "--executor", "dask", "--scheduler", address]
+        assert main([*argv, "--connect-timeout", "1"]) == 2
+    _one_line(capsys, "cannot reach the dask scheduler", "within 1 s")
+
+
+def test_a_scheduler_that_answers_runs_the_sweep(tmp_path: Path) -> None:
+    # The identity probe before the client must let a real scheduler through (in-process: no child to end).
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(
+        n_workers=1,
+        processes=False,
+        protocol="tcp://",
+        host="127.0.0.1",
+        dashboard_address=":0",
+        scheduler_kwargs={"dashboard": False},
+    ) as cluster:
+        argv = [
+            *SMOKE,
+            "--results",
+            str(tmp_path / "r"),
+            "--executor",
+            "dask",
+            "--scheduler",
+            cluster.scheduler_address,
+        ]
+        assert main(argv) == 0
+    assert len(list(Store(tmp_path / "r").iter_runs())) == 1
 
 
 @pytest.mark.parametrize(

@@ -92,3 +92,16 @@ def test_the_sample_takes_the_fraction_and_one_run_of_every_filter() -> None:
     assert picked == sample(runs, 0.02, seed=3)
     with pytest.raises(ValueError, match="fraction"):
         sample(runs, 0.0, seed=0)
+
+
+@pytest.mark.usefixtures("harness_registry")
+def test_worker_processes_re_run_the_sample_as_this_process_does(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    store = _store(tmp_path)
+    _alter(store, DATASET, "odometry", 1, "mean")
+    assert main(["verify", "--results", str(tmp_path), "--fraction", "1", "--jobs", "2"]) == 1
+    out = capsys.readouterr().out
+    assert "differs: odometry on line[noise_m=0.01] seed 1: mean" in out
+    record = json.loads((tmp_path / "verify.json").read_text())
+    assert record["checked"] == 6 and len(record["differ"]) == 1

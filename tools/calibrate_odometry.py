@@ -3,7 +3,7 @@
 Usage: python tools/calibrate_odometry.py [room|lap]
 
 ``calibrate_room_odometry`` fitted ``ENCODER_SCALE_LEFT``, ``ENCODER_SCALE_RIGHT`` and ``WHEELBASE_TRUE_RATIO``
-(``locbench.datasets.synthetic.scenarios``) to report 003's table 1; ``calibrate_lap_odometry`` fitted
+(``locbench.datasets.synthetic.toolkit``) to report 003's table 1; ``calibrate_lap_odometry`` fitted
 ``LAP_SYSTEMATIC_SCALE`` (``locbench.datasets.synthetic.lap``) to a 15 cm median end-of-lap error. Both frozen
 results and what they achieve are constants of those modules (``ROOM_CALIBRATION_ACHIEVED_CM``,
 ``LAP_CALIBRATION_ACHIEVED_M``); ``tests/test_synthetic.py`` checks that the error functions below still give
@@ -21,14 +21,16 @@ import numpy.typing as npt
 
 from locbench.datasets.synthetic.lap import LAP_TARGET_FINAL_ERROR_M, lap_encoder_model, lap_motion
 from locbench.datasets.synthetic.scenarios import (
+    room_motion,
+    room_motion_for,
+)
+from locbench.datasets.synthetic.sensors import EncoderModel, dead_reckon, measured_wheel_travel, odometry_increments
+from locbench.datasets.synthetic.toolkit import (
     ENCODER_K_TRUE,
     ROOM_TABLE1_ODOMETRY_CM,
     WHEELBASE_NOMINAL_M,
-    room_motion,
-    room_motion_for,
     split_streams,
 )
-from locbench.datasets.synthetic.sensors import EncoderModel, dead_reckon, measured_wheel_travel, odometry_increments
 from locbench.errors import ConfigError
 
 FloatArray = npt.NDArray[np.float64]

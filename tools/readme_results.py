@@ -1,102 +1,701 @@
-"""Print the README's "Results" figures from a regenerated results/summary/metrics.csv.
+"""The README's result numbers, generated from results/summary/metrics.csv and REPORT.md (and the suites' run counts).
 
-Usage: ``python tools/readme_results.py [results/summary/metrics.csv]``. The README quotes these numbers;
-after ``nox -s bench`` this prints them again so that the README and the summary never disagree.
+Usage::
+
+    python tools/readme_results.py            # print the generated blocks and the per-filter diagnostics
+    python tools/readme_results.py --write    # rewrite README.md's generated blocks from the committed summary
+    python tools/readme_results.py --check    # exit 1 naming every block of README.md that disagrees
+
+A generated block in README.md lies between ``<!-- gen:NAME -->`` and ``<!-- /gen:NAME -->`` (a table on lines of
+its own, or a value inside a sentence); :func:`blocks` makes every one from the tidy metrics, with the report's
+own formatting and aggregation (:mod:`locbench.report.tables`), so the README and the summary cannot disagree:
+``tests/test_readme_results.py`` regenerates them from the committed ``metrics.csv`` and compares. A number
+that only REPORT.md holds (what the report computes from the stored runs rather than from ``metrics.csv``:
+run counts by status, the lost-detection AUROC, the claims' measured values and verdicts, the ranks across
+datasets, the tuned studies, the Wilcoxon ties) is cut from the committed REPORT.md's own tables, and a change
+of REPORT.md's wording that loses one is an error naming it. After ``nox -s bench`` run ``--write``. Numbers
+outside the blocks are measurements that the committed summary does not hold (wall and CPU times, earlier
+versions' figures, runs outside the committed suites); each sentence says how it was measured.
 """
 
 from __future__ import annotations
 
+import argparse
+import itertools
+import re
 import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from locbench.pcrb import BOUND_ALL, BOUND_NO_LASER
-from locbench.report.tables import ate_over_bound, rate
-from locbench.suites import KIDNAP_DISTANCES_M, KIDNAP_FILTERS
+from locbench.report.collect import describe_filter
+from locbench.report.tables import (
+    ate_over_bound,
+    band_text,
+    consistency_cell,
+    mean_of,
+    median_text,
+    num,
+    rate,
+    waypoint_rmse_mean,
+)
+from locbench.suites import KIDNAP_DISTANCES_M, KIDNAP_FILTERS, SUITES
+
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+METRICS_CSV = ROOT / "results" / "summary" / "metrics.csv"
+REPORT_MD = METRICS_CSV.with_name("REPORT.md")
+
+#: ``<!-- gen:NAME -->text<!-- /gen:NAME -->``; the text may span lines.
+BLOCK = re.compile(r"<!-- gen:(?P<name>[\w-]+) -->(?P<body>.*?)<!-- /gen:(?P=name) -->", re.DOTALL)
+
+#: The README's headline rows, in its order (the main comparison's default configurations).
+HEADLINE = ("odometry", "ekf_landmarks", "ukf_landmarks", "gtsam_fls", "pf", "pf[adaptive=kld]", "ekf_lines")
+HEADLINE += ("ekf_icp", "kf_linear")
+#: The recorded table's columns: (header, datasets joined by " / ", metric).
+RECORDED = (
+    ("MRCLAM 6, robots 1 / 2 / 3 / 4 / 5", ("mrclam", *(f"mrclam[robot={r}]" for r in range(2, 6))), "ate_m"),
+    ("Lost in the Woods", ("lost_in_the_woods",), "ate_m"),
+    ("Intel (relation error)", ("intel",), "relation_error_m"),
+    ("Plaza 1 / 2", ("plaza", "plaza[run=2]"), "ate_m"),
+)
+RECORDED_FILTERS = (*HEADLINE[:6], "ekf_icp", "ekf_lines", "kf_linear")
+#: A filter whose default does not run on a recording, and the configuration the table shows there instead.
+RECORDED_VARIANTS = {("pf", "intel"): "pf[use_laser=true]"}
+MATCHED = ("room[matched=true]", "office[matched=true]")
 
 
-def mean(df: pd.DataFrame, metric: str) -> float:
-    v = df.loc[df["metric"] == metric, "value"].to_numpy(dtype=np.float64)
-    v = v[np.isfinite(v)]
-    return float(np.mean(v)) if v.size else float("nan")
+def cm(x: float) -> str:
+    return num(100.0 * x)
 
 
-def headline(df: pd.DataFrame, dataset: str, filters: list[str]) -> None:
-    sub = df[df["dataset"] == dataset]
-    print(f"\n{dataset}: filter | runs | ATE cm | ATE/PCRB | ATE/PCRB(no laser) | ANEES | update us | RTF")
-    for f in filters:
+def table(head: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines += ["| " + " | ".join(r) + " |" for r in rows]
+    return "\n" + "\n".join(lines) + "\n"
+
+
+def kidnap_cell(df: pd.DataFrame, base: str, name: str, d: float) -> tuple[int, int]:
+    sub = df[(df["dataset"] == f"{base}[kidnap_m={d:g}]") & (df["filter"] == name)]
+    k, n, _, _, _ = rate(sub, "kidnap_recovered")
+    return k, n
+
+
+def office_summary(df: pd.DataFrame) -> str:
+    """The headline table on ``office``: the report's summary columns that metrics.csv holds."""
+    sub = df[df["dataset"] == "office"]
+    wp = waypoint_rmse_mean(sub)
+    rows = []
+    for f in HEADLINE:
         s = sub[sub["filter"] == f]
-        if s.empty:
-            continue
-        no_laser = sub[sub["filter"].isin([f, BOUND_NO_LASER])].replace({BOUND_NO_LASER: BOUND_ALL})
-        print(
-            f"{f} | {s['seed'].nunique()} | {100 * mean(s, 'ate_m'):.3g} | {ate_over_bound(sub, f):.3g} | "
-            f"{ate_over_bound(no_laser, f):.3g} | {mean(s, 'anees'):.3g} | {mean(s, 'update_us_median'):.3g} | "
-            f"{mean(s, 'realtime_factor'):.4g}"
-        )
-    for b in (BOUND_ALL, BOUND_NO_LASER):
-        s = sub[sub["filter"] == b]
-        if not s.empty:
-            rms = np.sqrt(np.mean(s[s["metric"] == "ate_m"]["value"] ** 2))
-            print(f"{b} | {s['seed'].nunique()} | {100 * rms:.3g} (RMS)")
-
-
-def kidnaps(df: pd.DataFrame) -> None:
-    for base in ("office", "room"):
-        print(f"\nkidnap recovery on {base} at D = {KIDNAP_DISTANCES_M}")
-        names = sorted({str(f) for f in df[df["dataset"].str.startswith(f"{base}[kidnap_m=")]["filter"].unique()})
-        for f in [*KIDNAP_FILTERS, *(n for n in names if n not in KIDNAP_FILTERS)]:
-            cells = []
-            for d in KIDNAP_DISTANCES_M:
-                sub = df[(df["dataset"] == f"{base}[kidnap_m={d:g}]") & (df["filter"] == f)]
-                k, n, _, _, _ = rate(sub, "kidnap_recovered")
-                cells.append(f"{k}/{n}" if n else "-")
-            print(f"{f}: {' / '.join(cells)}")
-
-
-def consistency(df: pd.DataFrame) -> None:
-    for ds in ("room[matched=true]", "office[matched=true]"):
-        sub = df[df["dataset"] == ds]
-        print(f"\n{ds}: filter | runs | mean ANEES | inf runs | mean NLL | ATE/PCRB")
-        for f in sorted(sub["filter"].unique()):
-            s = sub[sub["filter"] == f]
-            a = s.loc[s["metric"] == "anees", "value"].to_numpy(dtype=np.float64)
-            if not a.size:
-                continue
-            fin = a[np.isfinite(a)]
-            print(
-                f"{f} | {a.size} | {np.mean(fin) if fin.size else float('nan'):.3g} | {int(np.sum(~np.isfinite(a)))} | "
-                f"{mean(s, 'nll'):.3g} | {ate_over_bound(sub, str(f)):.3g}"
+        kid = describe_filter(f).kidnap_name
+        k, n = kidnap_cell(df, "office", kid or f, 2.0)
+        kidnap = f"{100 * k / n:.0f}" if n else "-"
+        if kid:
+            kidnap += f" (`{kid}`)"
+        anees, _, _, _ = consistency_cell(s)
+        rows.append(
+            (
+                f"`{f}`",
+                cm(mean_of(s, "ate_m")),
+                num(ate_over_bound(sub, f)),
+                cm(wp.get(f, float("nan"))),
+                anees,
+                cm(mean_of(s, "energy_score_m")),
+                num(mean_of(s, "update_us_median")).replace("n/a", "-"),
+                num(mean_of(s, "realtime_factor")),
+                kidnap,
             )
+        )
+    head = ("filter", "ATE (cm)", "ATE / PCRB", "mean waypoint RMSE (cm)", "ANEES", "energy score (cm)")
+    head += ("update median (us)", "real-time factor", "kidnap recovery at 2 m (%)")
+    return table(head, rows)
 
 
-def main(path: str) -> None:
-    df = pd.read_csv(path)
-    filters = [
-        "odometry",
-        "ekf_landmarks",
-        "ukf_landmarks",
-        "ekf_landmarks[association=nearest]",
-        "gtsam_fls",
-        "pf",
-        "pf[adaptive=kld]",
-        "ekf_lines",
-        "ekf_icp",
-        "kf_linear",
-    ]
-    headline(df, "office", filters)
-    headline(df, "room", filters)
-    kidnaps(df)
-    consistency(df)
-    print(
-        "\nruns:",
-        df[df["metric"] == "failed"].shape[0],
-        "with rows;",
-        int((df[df["metric"] == "failed"]["value"] > 0.5).sum()),
-        "failed",
+def kidnaps(df: pd.DataFrame) -> str:
+    """Recovered runs / runs per kidnap distance on ``office`` and ``room``, for suite ``kidnap``'s filters."""
+    rows = []
+    for f in KIDNAP_FILTERS:
+        cells = []
+        for base in ("office", "room"):
+            counts = [kidnap_cell(df, base, f, d) for d in KIDNAP_DISTANCES_M]
+            cells.append(" / ".join(f"{k}/{n}" for k, n in counts) if any(n for _, n in counts) else "-")
+        rows.append((f"`{f}`", *cells))
+    d = " / ".join(f"{x:g}" for x in KIDNAP_DISTANCES_M)
+    return table(("filter", f"`office`, D = {d} m", f"`room`, D = {d} m"), rows)
+
+
+def consistency(df: pd.DataFrame) -> str:
+    """Mean ANEES and ATE over the bound on the model-matched worlds, every filter that ran on both or one."""
+    names = sorted({str(f) for f in df[df["dataset"].isin(MATCHED)]["filter"].unique()} - {BOUND_ALL, BOUND_NO_LASER})
+    rows = []
+    for f in names:
+        cells: list[str] = []
+        for ds in MATCHED:
+            sub = df[df["dataset"] == ds]
+            s = sub[sub["filter"] == f]
+            if s.empty:
+                cells += ["-", "-", "-"]
+                continue
+            no_laser = sub[sub["filter"].isin([f, BOUND_NO_LASER])].replace({BOUND_NO_LASER: BOUND_ALL})
+            bound = ate_over_bound(no_laser, f) if (sub["filter"] == BOUND_NO_LASER).any() else ate_over_bound(sub, f)
+            cells += [str(s["seed"].nunique()), consistency_cell(s)[0], num(bound)]
+        rows.append((f"`{f}`", *cells))
+    head = ("filter", "`room` runs", "`room` ANEES", "`room` ATE / PCRB", "`office` runs", "`office` ANEES")
+    return table((*head, "`office` ATE / PCRB (no laser)"), rows)
+
+
+def recorded(df: pd.DataFrame) -> str:
+    """ATE (cm; for Intel the mean relation error) of one run per filter and recording."""
+    rows = []
+    for f in RECORDED_FILTERS:
+        cells = []
+        for _, datasets, metric in RECORDED:
+            vals = []
+            for ds in datasets:
+                name = RECORDED_VARIANTS.get((f, ds), f)
+                s = df[(df["dataset"] == ds) & (df["filter"] == name)]
+                v = mean_of(s, metric)
+                vals.append(cm(v) if np.isfinite(v) else "-")
+            text = " / ".join(vals) if any(v != "-" for v in vals) else "-"
+            variant = {RECORDED_VARIANTS[(f, ds)] for ds in datasets if (f, ds) in RECORDED_VARIANTS}
+            cells.append(text + "".join(f" (`{v}`)" for v in sorted(variant)) if text != "-" else text)
+        rows.append((f"`{f}`", *cells))
+    return table(("filter", *(h for h, _, _ in RECORDED)), rows)
+
+
+def global_localization(df: pd.DataFrame, laser: bool) -> Callable[[], str]:
+    """``k of n runs, median T s`` of the global-localization configuration on ``office``."""
+    name = "pf[augmented=true,init=uniform" + (",use_laser=true]" if laser else "]")
+
+    def text() -> str:
+        s = df[(df["dataset"] == "office") & (df["filter"] == name)]
+        k, n, _, _, _ = rate(s, "converged")
+        t = s[s["metric"] == "time_to_converge_s"]["value"]
+        return f"{k} of {n} runs, median {median_text(t)} s"
+
+    return text
+
+
+# --- the prose's numbers: from the committed REPORT.md's tables and from metrics.csv ----------------------
+
+#: A site where a filter's ATE is below this keeps track (the Radish sentence); above it, the site is named, m.
+TRACKED_M = 0.2
+#: A lost-detection AUROC at or above this joins the group the sentence gives as one range.
+GOOD_AUROC = 0.95
+#: The Gaussian landmark filters (the sentences about "the landmark filters").
+LANDMARK = ("ekf_landmarks", "ukf_landmarks", "gtsam_fls")
+
+
+def md_tables(report: str, anchor: str) -> list[list[dict[str, str]]]:
+    """The tables of REPORT.md's section ``anchor`` (up to the next heading), each as rows of header -> cell."""
+    lines = section_text(report, anchor).splitlines()
+    out: list[list[dict[str, str]]] = []
+    head: list[str] | None = None
+    for line in [*lines, ""]:
+        if not line.startswith("|"):
+            head = None
+            continue
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if head is None:
+            head = cells
+            out.append([])
+        elif not set("".join(cells)) <= set("-"):
+            out[-1].append(dict(zip(head, cells, strict=True)))
+    return out
+
+
+def section_text(report: str, anchor: str) -> str:
+    """REPORT.md's section ``anchor`` up to the next heading; a missing one is an error naming it."""
+    start = report.find(f'<a id="{anchor}"></a>')
+    if start < 0:
+        raise ValueError(f"REPORT.md: no section with the anchor {anchor!r}")
+    end = report.find("\n#", start)
+    return report[start : end if end >= 0 else len(report)]
+
+
+def plain(cell: str) -> str:
+    """A cell without its Markdown (bold, code, footnote marks)."""
+    return re.sub(r"[*`²¹]", "", cell).strip()
+
+
+def bold(cell: str) -> bool:
+    return cell.startswith("**")
+
+
+def span(vals: Sequence[float], fmt: Callable[[float], str] = num) -> str:
+    """``a-b`` of the smallest and largest value (one value when they print alike)."""
+    lo, hi = fmt(min(vals)), fmt(max(vals))
+    return lo if lo == hi else f"{lo}-{hi}"
+
+
+def listed(names: Sequence[str]) -> str:
+    if not names:
+        return "none"
+    return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
+
+
+def find(pattern: str, text: str, what: str) -> re.Match[str]:
+    """``re.search`` that fails naming what it looked for (REPORT.md's wording changed)."""
+    m = re.search(pattern, text)
+    if m is None:
+        raise ValueError(f"REPORT.md: {what} not found (pattern {pattern!r})")
+    return m
+
+
+#: The claims the README gives one verdict for together, by the start of their text in REPORT.md.
+CLAIM_GROUPS = {
+    "003": ("Odometry error grows", "World calibration: the odometry distance", "The EKF (ekf_landmarks) is far below"),
+    "000": ("World calibration: odometry ends", "EKF-ICP ends close", "Moving people", "EKF-ICP recovers"),
+    "002": ("With accurate observations", "A larger chi-square threshold accepts"),
+    "004": ("The linear KF localizes",),
+    "001": ("Error falls with", "The EKF works well", "GPS converges"),
+}
+
+
+#: Values cut from a claim's measured text as they stand: (block, start of the claim, pattern, template).
+CLAIM_VALUES = (
+    (
+        "claim-room-ekf-below",
+        "The EKF (ekf_landmarks) is far below",
+        r"ekf_landmarks ([\d. /]+) cm vs odometry ([\d. /]+) cm",
+        "{} cm against {}",
+    ),
+    (
+        "claim-room-pf-ekf",
+        "The PF is at least as accurate",
+        r"pf ([\d.]+) cm vs ekf_landmarks ([\d.]+) cm",
+        "{} cm against {} cm",
+    ),
+    ("claim-lap-odometry", "World calibration: odometry ends", r"median final error ([\d.]+) cm", "{} cm"),
+    ("claim-lap-ekf_icp", "EKF-ICP ends close", r"median final error ([\d.]+) cm", "{} cm"),
+    ("claim-lap-people", "Moving people do not affect", r"median ATE ([\d.]+) cm vs ([\d.]+) cm", "{} against {} cm"),
+    (
+        "claim-line_room-accepted",
+        "A larger chi-square threshold accepts",
+        r"length check off: accepted ([\d. /]+) %",
+        "{} %",
+    ),
+    ("claim-line_room-ate", "With accurate observations", r"length check off: ATE ([\d. /]+) cm", "{} cm"),
+    ("claim-line_room-length", "Rejecting observed lines", r"(\d+) runs differ", "{} paired runs differ"),
+)
+
+
+def claim_values(report: str) -> dict[str, str]:
+    """The claims' measured values and verdicts the README quotes, cut from REPORT.md's claims table."""
+    rows = {r["claim"]: r for r in md_tables(report, "claims")[0]}
+
+    def row(start: str) -> dict[str, str]:
+        hit = [r for c, r in rows.items() if c.startswith(start)]
+        if len(hit) != 1:
+            raise ValueError(f"REPORT.md: {len(hit)} claims start with {start!r}")
+        return hit[0]
+
+    def measured(start: str, pattern: str) -> re.Match[str]:
+        return find(pattern, row(start)["measured"], f"the measured value of the claim {start!r}")
+
+    out: dict[str, str] = {}
+    ratios = measured("World calibration: the odometry distance", r"ratio to table 1 ([\d. /]+)")
+    out["claim-room-ratios"] = span([float(x) for x in ratios.group(1).split(" / ")], lambda x: f"{x:.2f}")
+    for name, start, pattern, template in CLAIM_VALUES:
+        out[name] = template.format(*measured(start, pattern).groups())
+    out["claim-room-pf-ekf-verdict"] = row("The PF is at least as accurate")["verdict"]
+    rec = re.findall(r"D=([\d.]+) m: ([\d.]+)", row("EKF-ICP recovers from small kidnaps")["measured"])
+    out["claim-lap-kidnap"] = " / ".join(r for _, r in rec) + " at " + " / ".join(d for d, _ in rec) + " m"
+    out["claim-line_room-length-verdict"] = row("Rejecting observed lines")["verdict"]
+    m = measured("The linear KF localizes", r"mean ATE ([\d.]+) cm \(\d+ runs\) = ([\d.]+) x odometry's")
+    out["claim-scan_grid"] = f"ATE {m.group(1)} cm, {num(100 * float(m.group(2)), 2)} % of odometry's"
+    kid = re.findall(
+        r"kidnap_m=(\d+)\] ekf_landmarks: recovered in (\d+/\d+)", row("The EKF does not recover")["measured"]
+    )
+    counts = sorted({k for _, k in kid})
+    out["claim-001-kidnap"] = f"{'/'.join(counts) if len(counts) == 1 else ' and '.join(counts)} recovered at "
+    out["claim-001-kidnap"] += " and ".join(d for d, _ in kid) + " m"
+    out["claim-001-kidnap-verdict"] = row("The EKF does not recover")["verdict"]
+    for key, starts in CLAIM_GROUPS.items():
+        verdicts = {plain(row(start)["verdict"]) for start in starts}
+        v = verdicts.pop() if len(verdicts) == 1 else "mixed"
+        out[f"claims-{key}-verdict"] = v if v == "reproduced" else f"**{v}**"
+    matched = [r["verdict"] for c, r in rows.items() if "[matched=true]" in c and "are consistent" in c]
+    out["claim-matched-verdict"] = matched[0] if len(set(matched)) == 1 else " / ".join(matched)
+    return out
+
+
+def run_counts(report: str) -> dict[str, str]:
+    """Runs of suites ``all`` and ``consistency`` (ok, skipped, failed), suite ``tuned``'s test runs and the last
+    ``locbench verify``, from REPORT.md's provenance and its tuned table (the tuned configurations that are not
+    the default are the reported runs outside ``all`` and ``consistency``)."""
+    prov = section_text(report, "provenance")
+    line = find(r"- runs: (.*)", prov, "the provenance's run counts").group(1)
+    status = {m.group(2): int(m.group(1)) for m in re.finditer(r"(\d+) (\w+)", line)}
+    ok, skipped, failed = (
+        status.get("ok", 0),
+        status.get("skipped", 0),
+        status.get("diverged", 0) + status.get("error", 0),
+    )
+    tuned = md_tables(report, "tuned")[0]
+    count = re.compile(r"\((\d+)/(\d+)\)")
+
+    def n(cell: str) -> int:
+        return int(find(count.pattern, cell, "a tuned cell's run count").group(2))
+
+    extra = sum(n(r["tuned ATE (cm)"]) for r in tuned if r["tuned spec"] != "default kept")
+    test = sum(n(r["default ATE (cm)"]) for r in tuned) + extra
+    v = find(r"verify: passed on [^,]+, (\d+) of \d+ stored runs re-run \(fraction ([\d.]+)", prov, "the verify line")
+    kept = sum(r["tuned spec"] == "default kept" for r in tuned)
+    budget = find(
+        r"Budget per filter and data[^:]*: (\d+) trials x (\d+) train runs",
+        section_text(report, "tuned"),
+        "the tuning budget",
+    )
+    return {
+        "runs-all-total": str(ok - extra + skipped + failed),
+        "runs-all-ok": str(ok - extra),
+        "runs-all-skipped": str(skipped),
+        "runs-all-failed": "none" if not failed else str(failed),
+        "runs-tuned-test": str(test),
+        "verify-rerun": f"{v.group(1)} of them ({100 * float(v.group(2)):.0f} %",
+        "tuned-kept": f"{kept} of {len(tuned)}",
+        "tuned-train-runs": str(len(tuned) * int(budget.group(1)) * int(budget.group(2))),
+        "tuned-studies": f"{len(tuned)} studies of {budget.group(1)} trials x {budget.group(2)} train runs, "
+        f"{len(tuned) * int(budget.group(1)) * int(budget.group(2))} train runs",
+        "tuned-budget": f"{budget.group(1)} trials x {budget.group(2)} train runs",
+    }
+
+
+def tuned_changes(report: str) -> dict[str, str]:
+    """``gains 23 % (8.53 -> 6.57 cm)`` per tuned (filter, data) whose configuration is not the default."""
+    out = {}
+    for r in md_tables(report, "tuned")[0]:
+        if r["tuned spec"] == "default kept":
+            continue
+        change = float(r["change (%)"])
+        a, b = (plain(r[c]).split(" (")[0] for c in ("default ATE (cm)", "tuned ATE (cm)"))
+        word = "gains" if change < 0 else "loses"
+        out[f"tuned-{plain(r['filter'])}-{r['data']}"] = f"{word} {num(abs(change), 2)} % ({a} -> {b} cm)"
+    return out
+
+
+def across_landmark_geometry(report: str) -> str:
+    """The rank sentence of the largest across-datasets group that holds the ``landmark_geometry`` worlds."""
+    groups = []
+    for i in range(1, 100):
+        anchor = f"across-{i}"
+        if f'<a id="{anchor}"></a>' not in report:
+            break
+        text = section_text(report, anchor)
+        names = re.findall(r"`([^`]+)`", find(r"\d+ datasets: (.*)\n", text, "a group's datasets").group(1))
+        worlds = sum(n.split("[")[0] == "landmark_geometry" for n in names)
+        if worlds:
+            groups.append((len(names), -i, anchor, text, worlds))
+    if not groups:
+        raise ValueError("REPORT.md: no across-datasets group with landmark_geometry worlds")
+    n, gi, anchor, text, worlds = max(groups)
+    rows = [r for r in md_tables(report, anchor)[0] if r["skill IQM [95 % CI]"] != "-"]
+    rows.sort(key=lambda r: float(r["average rank, ATE"]))
+    cd = float(find(r"ATE: Friedman .*Nemenyi CD = ([\d.]+)", text, "the ATE critical difference").group(1))
+    first, second, third = rows[:3]
+    r1, r2 = (float(r["average rank, ATE"]) for r in (first, second))
+    tied = "not significantly different" if abs(r2 - r1) < cd else "significantly different"
+    skill = " / ".join(r["skill IQM [95 % CI]"].split(" ")[0] for r in rows[:3])
+    return (
+        f"on the {n} datasets of group {-gi} ({worlds} of them landmark_geometry worlds) {first['configuration']} "
+        f"and {second['configuration']} rank first and second in ATE (average ranks {first['average rank, ATE']} "
+        f"and {second['average rank, ATE']}, Nemenyi CD {cd:g}: {tied}) and {third['configuration']} third "
+        f"({third['average rank, ATE']}); their skill (1 - ATE / ATE(odometry), IQM) is {skill}"
     )
 
 
+def office_report(report: str) -> dict[str, str]:
+    """Sentences on REPORT.md's office summary table: who is bold for ATE, the lost-detection AUROC."""
+    rows = {plain(r["filter"]): r for r in md_tables(report, "summary-office")[0]}
+    missing = [f for f in HEADLINE if f not in rows]
+    columns = [c for c in next(iter(rows.values()), {}) if c.startswith("lost AUROC")]
+    if missing or len(columns) != 1 or "ATE (cm)" not in rows[HEADLINE[0]]:
+        raise ValueError(f"REPORT.md: the office summary lacks the rows {missing} or its ATE or lost AUROC column")
+    best = [f"`{f}`" for f in HEADLINE if bold(rows[f]["ATE (cm)"])]
+    auroc = {f: float(plain(rows[f][columns[0]])) for f in HEADLINE[1:] if plain(rows[f][columns[0]]) != "-"}
+    good = sorted((f for f, v in auroc.items() if v >= GOOD_AUROC), key=lambda f: -auroc[f])
+    rest = sorted((f for f in auroc if f not in good), key=lambda f: -auroc[f])
+    text = f"the best health signal of {listed([f'`{f}`' for f in good])} separates lost from not lost with AUROC "
+    text += span([auroc[f] for f in good]) if good else "below " + num(GOOD_AUROC)
+    text += (", " + listed([f"`{f}`'s {num(auroc[f])}" for f in rest])) if rest and good else ""
+    return {
+        "office-ate-bold": ("only " + best[0] + " is") if len(best) == 1 else listed(best) + " are",
+        "lost-auroc": text,
+    }
+
+
+def robustness(report: str) -> dict[str, str]:
+    """libRSF: the ratio of each filter's ATE under non-Gaussian noise to its Gaussian one (REPORT.md's table)."""
+    rows = md_tables(report, "recorded-robustness")[0]
+    ratios: dict[str, list[float]] = {}
+    for r in rows:
+        f = plain(r["filter"])
+        ratios[f] = [float(x) for c, v in r.items() if "(x ref)" in c for x in re.findall(r"\(([\d.]+)\)", v)]
+    filters = [f for f in ratios if not describe_filter(f).baseline]
+    pf = [f for f in filters if f.split("[")[0] == "pf"]
+    fmt = lambda x: num(x, 2)  # noqa: E731 (the table's own two digits)
+    return {
+        "librsf-ratio": span([x for f in filters for x in ratios[f]], fmt),
+        "librsf-pf-ratio": span([x for f in pf for x in ratios[f]], fmt),
+    }
+
+
+def radish(df: pd.DataFrame, report: str) -> dict[str, str]:
+    """Radish: where each laser filter keeps track, odometry's span, and where the filters were skipped."""
+    sites = sorted(d for d in df["dataset"].unique() if str(d).split("[")[0] == "radish")
+    site = {d: (d.split("site=")[1].rstrip("]") if "site=" in d else "intel") for d in sites}
+    means = df[df["dataset"].isin(sites) & (df["metric"] == "ate_m")].groupby(["filter", "dataset"])["value"].mean()
+    ate = {(str(f), str(d)): float(v) for (f, d), v in zip(means.index, means.to_numpy(), strict=True)}
+    laser = ("pf[use_laser=true]", "ekf_icp")
+    tracked = {f: [v for (g, _), v in ate.items() if g == f and v < TRACKED_M] for f in laser}
+    lost = {f: [(site[d], v) for (g, d), v in sorted(ate.items()) if g == f and v >= TRACKED_M] for f in laser}
+    odo = [v for (f, _), v in ate.items() if f == "odometry"]
+    skipped: dict[str, list[str]] = {}
+    for r in md_tables(report, "failures")[0]:
+        d = plain(r["dataset"])
+        ran = {g for g, _ in ate}  # a filter skipped on every site (it needs landmarks) is not news
+        if r["status"] == "skipped" and d.split("[")[0] == "radish" and plain(r["filter"]) in ran:
+            skipped.setdefault(plain(r["filter"]), []).append(d.split("site=")[1].rstrip("]"))
+    a, b = laser
+    where = [f"`{f}` is skipped on" if not i else f"`{f}` on" for i, f in enumerate(sorted(skipped))]
+    return {
+        "radish-sites": str(len(sites)),
+        "radish-tracked": f"`{a}` is within {span([100 * v for v in tracked[a]])} cm on {len(tracked[a])} sites "
+        f"and `{b}` within {span([100 * v for v in tracked[b]])} cm on {len(tracked[b])}",
+        "radish-odometry": f"{span([v for v in odo], lambda x: num(x, 2))} m",
+        "radish-lost": f"above {num(100 * TRACKED_M)} cm: "
+        + listed([f"`{f}` " + " and ".join(f"{cm(v)} cm on {s}" for s, v in lost[f]) for f in sorted(lost) if lost[f]]),
+        "radish-skipped": listed(
+            [f"{w} {listed(sorted(skipped[f]))}" for w, f in zip(where, sorted(skipped), strict=True)]
+        ),
+    }
+
+
+def office_prose(df: pd.DataFrame) -> dict[str, str]:
+    """The sentences under the headline table: cost and accuracy ratios, the bounds, KLD sampling."""
+
+    def cell(ds: str, f: str, metric: str) -> float:
+        return mean_of(df[(df["dataset"] == ds) & (df["filter"] == f)], metric)
+
+    office = df[df["dataset"] == "office"]
+    no_laser = office[office["filter"].isin([*LANDMARK, BOUND_NO_LASER])].replace({BOUND_NO_LASER: BOUND_ALL})
+    matched = []
+    for ds in MATCHED:
+        sub = df[df["dataset"] == ds]
+        if (sub["filter"] == BOUND_NO_LASER).any():
+            sub = sub[sub["filter"] != BOUND_ALL].replace({BOUND_NO_LASER: BOUND_ALL})
+        matched += [ate_over_bound(sub, f) for f in LANDMARK if (sub["filter"] == f).any()]
+    ate = {f: cell("office", f, "ate_m") for f in HEADLINE}
+    energy = {f: cell("office", f, "energy_score_m") for f in HEADLINE[1:]}
+    order = sorted(energy, key=lambda f: float(num(100 * ate[f])))
+    agree = all(float(cm(energy[a])) <= float(cm(energy[b])) for a, b in itertools.pairwise(order))
+    best = min(energy, key=lambda f: energy[f])
+    kld, pf = "pf[adaptive=kld]", "pf"
+    more = {ds: 100 * (cell(ds, kld, "ate_m") / cell(ds, pf, "ate_m") - 1) for ds in ("office", "room")}
+    particles = cell("office", kld, "particles_mean")
+    update = {f: cell("office", f, "update_us_median") for f in HEADLINE}
+    matched_runs = int(df[df["dataset"] == MATCHED[0]]["seed"].nunique())
+    return {
+        "office-seeds": str(int(office[office["filter"] == "odometry"]["seed"].nunique())),
+        "office-landmark-ate": " / ".join(cm(ate[f]) for f in LANDMARK),
+        "office-kf-ate": cm(ate["kf_linear"]),
+        "pf-ate": f"{cm(ate[pf])} and {cm(cell('room', pf, 'ate_m'))} cm",
+        "ukf-ekf-update": f"{update['ukf_landmarks'] / update['ekf_landmarks']:.0f}x",
+        "kf-bound": num(ate_over_bound(office, "kf_linear")),
+        "landmark-bound-no-laser": span([ate_over_bound(no_laser, f) for f in LANDMARK], lambda x: num(x, 2)),
+        "matched-bound": span([100 * abs(x - 1) for x in matched], lambda x: f"{x:.0f}") + " %",
+        "kld-particles": f"{float(f'{particles:.2g}'):.0f}",
+        "pf-particles": f"{cell('office', pf, 'particles_mean'):.0f}",
+        "kld-update": f"{100 * (1 - update[kld] / update[pf]):.0f} %",
+        "kld-ate": f"{more['office']:.0f} % more ATE on `office` and {more['room']:.0f} % on `room`",
+        "energy-rank": ("ranks as the ATE does" if agree else "does not rank as the ATE does")
+        + f" on `office` (`{best}` {cm(energy[best])} cm best)",
+        "matched-band": f"{matched_runs} seeds, band {band_text(matched_runs)}",
+        "matched-inconsistent": matched_verdicts(df),
+        "matched-runs": f"{matched_runs} runs'",
+        "kidnap-seeds": str(int(df[df["dataset"] == "office[kidnap_m=2]"]["seed"].nunique())),
+        "mrclam-below": mrclam_below(df),
+        "ukf-seed0": ukf_seed0(df),
+        "librsf-below": librsf_below(df),
+    }
+
+
+def matched_verdicts(df: pd.DataFrame) -> str:
+    """ "`ekf_icp` is under-confident and `ekf_lines` over-confident": the filters whose ANEES on the matched
+    ``office`` is outside the band, with their verdict."""
+    sub = df[df["dataset"] == MATCHED[1]]
+    names = sorted({str(f) for f in sub["filter"].unique()} - {BOUND_ALL, BOUND_NO_LASER})
+    out: list[str] = []
+    for f in names:
+        text = consistency_cell(sub[sub["filter"] == f])[0]
+        verdict = text.split("(")[-1].rstrip(")")
+        if verdict != "consistent":
+            out.append(f"`{f}` " + ("is " if not out else "") + verdict)
+    return listed(out) if out else "none is outside the band"
+
+
+def mrclam_below(df: pd.DataFrame) -> str:
+    """``every landmark filter is below odometry``, or the (filter, robot) cells that are not."""
+    names = RECORDED[0][1]
+    worse = []
+    for ds in names:
+        sub = df[(df["dataset"] == ds) & (df["metric"] == "ate_m")]
+        means = sub.groupby("filter")["value"].mean()
+        worse += [f"`{f}` on `{ds}`" for f in RECORDED_FILTERS[1:6] if f in means and means[f] >= means["odometry"]]
+    return "every landmark filter is below odometry" if not worse else "not below odometry: " + listed(worse)
+
+
+def ukf_seed0(df: pd.DataFrame) -> str:
+    """The UKF against the EKF on seed 0 with known identities (the ``ukf_landmarks`` paragraph)."""
+    pairs = []
+    for ds in ("room", "office"):
+        sub = df[(df["dataset"] == ds) & (df["seed"] == 0) & (df["metric"] == "ate_m")]
+        v = sub.groupby("filter")["value"].first()
+        pairs.append((ds, float(v["ukf_landmarks"]), float(v["ekf_landmarks"])))
+    worst = max(abs(u / e - 1) for _, u, e in pairs)
+    return (
+        f"within {100 * worst:.0f} % of the EKF's ("
+        + ", ".join(f"`{d}` {cm(u)} against {cm(e)} cm" for d, u, e in pairs)
+        + ")"
+    )
+
+
+def librsf_below(df: pd.DataFrame) -> str:
+    """``all 9``, or ``k of 9``: the libRSF sets on which every filter that ran has a lower ATE than odometry."""
+    sets = sorted(d for d in df["dataset"].unique() if str(d).split("[")[0] == "librsf")
+    below = 0
+    for d in sets:
+        means = df[(df["dataset"] == d) & (df["metric"] == "ate_m")].groupby("filter")["value"].mean()
+        odo = means.pop("odometry")
+        below += bool((means < odo).all())
+    return f"all {len(sets)}" if below == len(sets) else f"{below} of {len(sets)}"
+
+
+def sweep(df: pd.DataFrame, dataset: str, base: str, param: str) -> list[tuple[float, float]]:
+    """``(value of param, mean ATE m)`` of every configuration on ``dataset`` that differs from ``base`` in
+    ``param`` alone (``base`` included, at its default), by the parameter's value."""
+    from dataclasses import asdict
+
+    from locbench.registry import resolve_filter
+
+    ref = asdict(resolve_filter(base).params)
+    ref.pop(param)
+    sub = df[(df["dataset"] == dataset) & (df["metric"] == "ate_m")]
+    out: list[tuple[float, float]] = []
+    for name, g in sub.groupby("filter"):
+        if str(name).split("[")[0] != base.split("[")[0]:
+            continue
+        p = asdict(resolve_filter(str(name)).params)
+        value = p.pop(param)
+        if p == ref:
+            out.append((float(value), float(g["value"].mean())))
+    return sorted(out)
+
+
+def pareto(df: pd.DataFrame) -> dict[str, str]:
+    """The ``pareto`` sweep on ``office``: where each cost knob stops paying."""
+    from locbench.registry import resolve_filter
+
+    def values(points: Sequence[tuple[float, float]]) -> str:
+        return " / ".join(f"{v:g}" for v, _ in points)
+
+    def ates(points: Sequence[tuple[float, float]]) -> str:
+        return " / ".join(cm(a) for _, a in points)
+
+    icp = sweep(df, "office", "ekf_icp", "max_iterations")
+    default = float(resolve_filter("ekf_icp").params.max_iterations)
+    kept = [(v, a) for v, a in icp if a < TRACKED_M]
+    lost = [(v, a) for v, a in icp if a >= TRACKED_M]
+    k = min(kept)
+    icp_text = f"`ekf_icp` needs about {k[0]:g} ICP iterations (its default allows {default:g}, ATE "
+    icp_text += f"{cm(dict(icp)[default])} cm against {cm(k[1])} cm at {k[0]:g}"
+    if lost:
+        icp_text += f"; {values(lost).replace(' / ', ' or ')} lose the robot: ATE {ates(lost)} cm"
+    gate = sweep(df, "office", "ekf_landmarks[association=nearest]", "gate_probability")
+    good = [(v, a) for v, a in gate if a < TRACKED_M]
+    bad = [(v, a) for v, a in gate if a >= TRACKED_M]
+    gate_text = f"a nearest-neighbour gate of {values(good).replace(' / ', ' or ')} keeps track (ATE {ates(good)} cm)"
+    if bad:
+        gate_text += f" where {values(bad).replace(' / ', ' and ')} lose it ({ates(bad)} cm)"
+    pf = sweep(df, "office", "pf", "particles")
+    lag = sweep(df, "office", "gtsam_fls", "lag_s")
+    return {
+        "pareto-icp": icp_text + ")",
+        "pareto-pf": f"ATE {ates(pf)} cm at {values(pf)} particles",
+        "pareto-lag": f"ATE {span([100 * a for _, a in lag])} cm at lags {values(lag)} s",
+        "pareto-gate": gate_text,
+    }
+
+
+def blocks(df: pd.DataFrame, report: str | None = None) -> dict[str, str]:
+    """Every generated block of the README, by name; ``report`` is REPORT.md's text (default: the committed
+    one, which the same report code wrote from the same runs as ``df``)."""
+    if report is None:
+        report = REPORT_MD.read_text(encoding="utf-8")
+    kidnapped = {f"{b}[kidnap_m={d:g}]" for b in ("office", "room") for d in KIDNAP_DISTANCES_M}
+    used = {"office", "room", *MATCHED, *kidnapped, *(ds for _, group, _ in RECORDED for ds in group)}
+    ident = df["dataset"].astype(str).str.split("[").str[0]
+    df = df[df["dataset"].isin(used) | ident.isin(["radish", "librsf"])]  # what every block reads, once (15 MB)
+    makers: dict[str, Callable[[], str]] = {
+        "office-summary": lambda: office_summary(df),
+        "kidnap": lambda: kidnaps(df),
+        "consistency": lambda: consistency(df),
+        "recorded": lambda: recorded(df),
+        "global-laser": global_localization(df, laser=True),
+        "global-landmarks": global_localization(df, laser=False),
+    }
+    out = {name: make() for name, make in makers.items()}
+    out |= {f"suite-{s.name}-runs": str(s.runs) for s in SUITES.values()}
+    out |= office_prose(df) | radish(df, report) | robustness(report) | office_report(report)
+    out |= claim_values(report) | run_counts(report) | tuned_changes(report) | pareto(df)
+    out["across-landmark-geometry"] = across_landmark_geometry(report)
+    return out
+
+
+def render(text: str, generated: dict[str, str]) -> str:
+    """``text`` with the body of every block replaced by its generated text; a block with no generator is an
+    error naming it."""
+
+    def sub(m: re.Match[str]) -> str:
+        name = m.group("name")
+        if name not in generated:
+            raise KeyError(f"README.md: no generator for the block {name!r}; known: {', '.join(sorted(generated))}")
+        return f"<!-- gen:{name} -->{generated[name]}<!-- /gen:{name} -->"
+
+    return BLOCK.sub(sub, text)
+
+
+def disagreements(text: str, generated: dict[str, str]) -> list[str]:
+    """The names of the README's blocks whose text differs from the generated one."""
+    return [m.group("name") for m in BLOCK.finditer(text) if generated.get(m.group("name")) != m.group("body")]
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("metrics", nargs="?", default=str(METRICS_CSV))
+    mode = ap.add_mutually_exclusive_group()
+    mode.add_argument("--write", action="store_true", help="rewrite README.md's generated blocks")
+    mode.add_argument("--check", action="store_true", help="exit 1 when a block of README.md disagrees")
+    args = ap.parse_args(argv)
+    generated = blocks(pd.read_csv(args.metrics))
+    text = README.read_text(encoding="utf-8")
+    if args.write:
+        README.write_text(render(text, generated), encoding="utf-8")
+        return 0
+    if args.check:
+        bad = disagreements(text, generated)
+        for name in bad:
+            print(f"README.md: block {name!r} disagrees with {args.metrics}; run tools/readme_results.py --write")
+        return 1 if bad else 0
+    for name, body in generated.items():
+        print(f"--- {name}:{body}")
+    return 0
+
+
 if __name__ == "__main__":
-    main(sys.argv[1] if len(sys.argv) > 1 else "results/summary/metrics.csv")
+    sys.exit(main())

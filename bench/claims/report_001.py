@@ -36,6 +36,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
+from locbench import ranking as rk
 from locbench.claims import (
     Claim,
     ClaimResult,
@@ -52,11 +53,11 @@ from locbench.claims import (
     spec_of,
     test_text,
 )
+from locbench.docfmt import Block, Plot, Text
 from locbench.errors import LocbenchError
 from locbench.metrics import METRICS, mean_ci
+from locbench.palette import Palette
 from locbench.pcrb import is_bound_row
-from locbench.report.doc import Block, Plot, Text
-from locbench.report.palette import Palette
 from locbench.significance import ALPHA, TestResult, mann_whitney, wilcoxon_paired
 from locbench.spec import build_params
 
@@ -398,7 +399,6 @@ def layout_section(df: pd.DataFrame, slug: str) -> list[Block]:
         return [Text("No runs of the base variants.")]
     filters = sorted({str(f) for f in base["filter"].unique()}, key=lambda f: (is_bound_row(f), f != "odometry", f))
     paths = [p for p in PATH_ORDER if p in set(base["path"])]
-    from locbench.report import significance as sig  # imported here: it imports this package
 
     rows: list[tuple[str, ...]] = []
     series: list[tuple[str, str, list[float]]] = []
@@ -444,12 +444,12 @@ def layout_section(df: pd.DataFrame, slug: str) -> list[Block]:
 
     header = ("filter", "path", *LAYOUT_ORDER)
     return [
-        sig.marked_table(
+        rk.marked_table(
             header,
             rows,
             [(math.nan, math.nan, *m) for _, _, m in series],
-            [sig.Column(2 + j, METRICS["ate_m"], [r[j] for r in per_run]) for j in range(len(LAYOUT_ORDER))],
-            sig.eligible_names([f for f, _, _ in series]),
+            [rk.Column(2 + j, METRICS["ate_m"], [r[j] for r in per_run]) for j in range(len(LAYOUT_ORDER))],
+            rk.eligible_names([f for f, _, _ in series]),
             caption=caption,
             groups=[p for _, p, _ in series],
             labels=[f"{f}, {p}" for f, p, _ in series],

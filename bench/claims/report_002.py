@@ -21,6 +21,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
+from locbench import ranking as rk
 from locbench.claims import (
     Claim,
     ClaimResult,
@@ -34,10 +35,9 @@ from locbench.claims import (
     spec_id,
     test_text,
 )
+from locbench.docfmt import PALETTE, Block, Plot, Text
 from locbench.errors import LocbenchError
 from locbench.metrics import METRICS, mean_ci
-from locbench.report.doc import Block, Plot, Text
-from locbench.report.style import PALETTE
 from locbench.significance import TestResult, wilcoxon_paired
 
 log = logging.getLogger(__name__)
@@ -263,7 +263,6 @@ def _gate_section(rows: pd.DataFrame, slug: str) -> list[Block]:
     header = ("dataset", "length check", "chi2 threshold", "runs", "ATE (cm)") + (
         ("accepted lines (%)",) if has_acc else ()
     )
-    from locbench.report import significance as sig  # imported here: it imports this package
 
     out: list[tuple[str, ...]] = []
     keys: list[tuple[float, ...]] = []
@@ -310,11 +309,11 @@ def _gate_section(rows: pd.DataFrame, slug: str) -> list[Block]:
             axes[1].set_ylabel("accepted lines (%)")
 
     return [
-        sig.marked_table(
+        rk.marked_table(
             header,
             out,
             keys,
-            [sig.Column(4, METRICS["ate_m"], samples)],
+            [rk.Column(4, METRICS["ate_m"], samples)],
             [True] * len(out),
             caption="ekf_lines: chi-square threshold sweep (report 002)",
             groups=groups,

@@ -6,6 +6,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from locbench import ranking as rk
 from locbench.claims import (
     Claim,
     ClaimResult,
@@ -23,8 +24,8 @@ from locbench.claims import (
     test_text,
     waypoint_stats,
 )
+from locbench.docfmt import Block, Text
 from locbench.metrics import MetricInfo
-from locbench.report.doc import Block, Text
 from locbench.significance import wilcoxon_paired
 
 SOURCE_003 = Source(
@@ -204,7 +205,6 @@ def _table1_section(rows: pd.DataFrame, slug: str) -> list[Block]:
     ws = waypoint_stats(base)
     if not len(ws):
         return []
-    from locbench.report import significance as sig  # imported here: it imports this package
 
     n_wp = int(ws["waypoint"].max())
     out: list[tuple[str, ...]] = []
@@ -225,16 +225,16 @@ def _table1_section(rows: pd.DataFrame, slug: str) -> list[Block]:
     shown = [n for n in names if n is not None]
     columns = []
     for j in range(1, n_wp + 1):
-        per = dict(zip(shown, sig.samples_for(base, shown, f"waypoint_{j}_error_m"), strict=True))
-        columns.append(sig.Column(j, WAYPOINT_ERROR, [per[n] if n is not None else None for n in names]))
-    flags = sig.eligible_names(shown)
+        per = dict(zip(shown, rk.samples_for(base, shown, f"waypoint_{j}_error_m"), strict=True))
+        columns.append(rk.Column(j, WAYPOINT_ERROR, [per[n] if n is not None else None for n in names]))
+    flags = rk.eligible_names(shown)
     eligible = [n is not None and flags[shown.index(n)] for n in names]
     return [
         Text(
             "Distance between each waypoint and the mean estimated position over the runs (cm), as report 003's "
             "table 1 measures it, beside the report's values."
         ),
-        sig.marked_table(
+        rk.marked_table(
             header,
             [r + ("",) * (width - len(r)) for r in out],
             [k + (np.nan,) * (width - len(k)) for k in keys],

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from locbench import ranking as rk
 from locbench.claims import (
     Claim,
     ClaimResult,
@@ -24,8 +25,8 @@ from locbench.claims import (
     register_section,
     test_text,
 )
+from locbench.docfmt import Block
 from locbench.metrics import METRICS
-from locbench.report.doc import Block
 from locbench.significance import mann_whitney
 
 SOURCE_004 = Source("004", "Kalman Filtering with STDR Simulator and ROS", "Luc Alexandre Bettaieb")
@@ -103,7 +104,6 @@ register(
 
 def _section(df: pd.DataFrame, slug: str) -> list[Block]:
     """Mean ATE and ANEES of every filter on every stored scan_grid variant; each variant's best in bold."""
-    from locbench.report import significance as sig  # imported here: it imports this package
 
     rows, keys, groups, names = [], [], [], []
     for (dname, fname), _ in df.groupby(["dataset", "filter"], sort=True):
@@ -122,15 +122,15 @@ def _section(df: pd.DataFrame, slug: str) -> list[Block]:
         per: list[dict[int, float] | None] = []
         for d, f in zip(groups, names, strict=True):
             sub = df[(df["dataset"] == d) & (df["filter"] == f)]
-            per.append(sig.samples_for(sub, [f], metric)[0])
-        columns.append(sig.Column(index, METRICS[metric], per))
+            per.append(rk.samples_for(sub, [f], metric)[0])
+        columns.append(rk.Column(index, METRICS[metric], per))
     return [
-        sig.marked_table(
+        rk.marked_table(
             ("dataset", "filter", "runs", "mean ATE (cm)", "mean ANEES"),
             rows,
             keys,
             columns,
-            sig.eligible_names(names),
+            rk.eligible_names(names),
             caption="scan_grid: translate-or-rotate against mixed commands (report 004)",
             groups=groups,
             labels=names,

@@ -4,8 +4,8 @@ figures, ``index.html``.
 The package is split by job: :mod:`~locbench.report.collect` reads the store (the only I/O on runs),
 :mod:`~locbench.report.tables` and :mod:`~locbench.report.figures` turn arrays into tables and drawings,
 :mod:`~locbench.report.build` orders them into sections from the experiments and claims registered in
-:mod:`locbench.claims`, and :mod:`~locbench.report.render` writes Markdown, PNG and HTML. Regenerating
-from the same runs gives identical bytes.
+:mod:`locbench.experiments` (by :mod:`locbench.claims`), and :mod:`~locbench.report.render` writes Markdown,
+PNG and HTML. Regenerating from the same runs gives identical bytes.
 """
 
 from __future__ import annotations

@@ -67,6 +67,10 @@ class FilterInfo:
     bound: bool = False
     #: The canonical name of its kidnap configuration as its class declares it (``Filter.kidnap_params``).
     kidnap_name: str | None = None
+    #: The event types this configuration uses (``Filter.routed_events``), by class name; empty: not known.
+    sensors: tuple[str, ...] = ()
+    #: The map kinds its class requires (``Filter.requires``), by value (``occupancy``).
+    maps: tuple[str, ...] = ()
 
 
 @dataclass
@@ -103,6 +107,10 @@ class Collected:
         if name not in self.filters:
             self.filters[name] = describe_filter(name)
         return self.filters[name]
+
+    def filter_info(self, name: str) -> FilterInfo:
+        """What the report knows of a filter name (described on first use)."""
+        return self._filter(name)
 
     def is_baseline(self, name: str) -> bool:
         return self._filter(name).baseline
@@ -145,7 +153,18 @@ def describe_filter(name: str) -> FilterInfo:
         cfg = resolve_filter(name).params
         extra = dict(getattr(cls, "kidnap_params", {}) or {})
         kidnap = resolve_filter(format_spec(spec.ident, spec.as_dict() | extra)).name if extra else None
-        return FilterInfo(name, spec, bool(cls.baseline), bool(cls.starts_without_pose(cfg)), kidnap_name=kidnap)
+        # a filter does no work in __init__ (the interface's rule), so asking an instance what it routes is cheap
+        sensors = tuple(sorted(t.__name__ for t in cls(cfg).routed_events()))
+        maps = tuple(sorted(k.value for k in cls.requires))
+        return FilterInfo(
+            name,
+            spec,
+            bool(cls.baseline),
+            bool(cls.starts_without_pose(cfg)),
+            kidnap_name=kidnap,
+            sensors=sensors,
+            maps=maps,
+        )
     except Exception as exc:  # the report must still come out without the class
         log.info("filter %s described by its name only: %s", name, exc)
         return FilterInfo(name, spec, False, False)

@@ -186,7 +186,7 @@ def _roc_plot(rep: Report, curves: dict[str, list[tuple[str, SignalScore]]]) -> 
 
 def _delay_table(rep: Report) -> Table | None:
     """Kidnapped runs: the delay from the kidnap to the first alarm of the filter's best signal there."""
-    from locbench.report.build import KIDNAP_PARAM
+    from locbench.report.names import KIDNAP_PARAM
 
     col = rep.col
     rows: list[tuple[str, ...]] = []

@@ -11,21 +11,27 @@ from typing import Any
 
 import numpy as np
 
+from locbench.palette import plotly_line, plotly_marker
 from locbench.report import figures as fg
-from locbench.report.palette import plotly_line, plotly_marker
 from locbench.report.style import LineStyle
 
 #: Most points of one plotted path (the page stays small).
 MAX_PATH_POINTS = 2000
 
 
-def pareto(title: str, points: Sequence[fg.ParetoPoint], styles: Mapping[str, LineStyle], ylabel: str) -> dict:
+def pareto(
+    title: str,
+    points: Sequence[fg.ParetoPoint],
+    styles: Mapping[str, LineStyle],
+    ylabel: str,
+    xlabel: str = "real-time factor (x)",
+) -> dict:
     """The Pareto panel of :func:`~locbench.report.figures.draw_pareto` as plotly: a marker per configuration
     (its shade, edged in its group's colour, the group's symbol), each group's front as a line, the overall
-    front as a dotted step."""
+    front as a dotted step; ``xlabel`` names the x axis (raw or reference-unit real-time factor)."""
     layers = fg.pareto_layers(points)
     traces: list[dict[str, Any]] = []
-    hover = "%{text}<br>real-time factor %{x:.3g}<br>" + ylabel + " %{y:.3g}<extra></extra>"
+    hover = "%{text}<br>" + xlabel + " %{x:.3g}<br>" + ylabel + " %{y:.3g}<extra></extra>"
     for g, pts, fr in layers.groups:
         st = styles[g]
         for p in pts:
@@ -75,7 +81,7 @@ def pareto(title: str, points: Sequence[fg.ParetoPoint], styles: Mapping[str, Li
         "data": traces,
         "layout": {
             "title": {"text": title},
-            "xaxis": {"type": "log", "title": {"text": "real-time factor (x)"}},
+            "xaxis": {"type": "log", "title": {"text": xlabel}},
             "yaxis": {"type": "log", "title": {"text": ylabel}},
             "height": 460,
         },

@@ -12,23 +12,14 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from locbench import ranking as rk
 from locbench.claims import waypoint_stats
+from locbench.docfmt import num
 from locbench.metrics import CONFIDENCE, METRICS, POSE_DOF, MetricInfo, ate_over_pcrb, chi2_band, mean_ci
 from locbench.pcrb import BOUND_ALL
 from locbench.report.doc import Table
 
 NAN = float("nan")
-
-
-def num(x: float, digits: int = 3) -> str:
-    """A number with ``digits`` significant digits; large values without an exponent."""
-    if np.isnan(x):
-        return "n/a"
-    if np.isinf(x):
-        return "inf" if x > 0 else "-inf"
-    if 100.0 <= abs(x) < 1e9:
-        return f"{x:.0f}"
-    return f"{x:.{digits}g}"
 
 
 def header(metric: str) -> str:
@@ -144,7 +135,9 @@ COMPARISON = (
     "anees",
     "nees_in_band_fraction",
     "update_us_median",
+    "update_us_median_ref",
     "realtime_factor",
+    "realtime_factor_ref",
     "particles_mean",
 )
 
@@ -218,8 +211,6 @@ def comparison_table(
     notes = (BOUND_FOOTNOTE,) if with_bound else ()
     hovers: tuple[tuple[str, ...], ...] = ()
     if eligible is not None:
-        from locbench.report import significance as sig
-
         shown = [f for f in [*filters, *bounds] if f not in bounds or (df["filter"] == f).any()]
         ranked = [m for m in present if METRICS[m].better]
         index = {
@@ -230,12 +221,12 @@ def comparison_table(
         }
         flags = [*eligible, *[False] * (len(shown) - len(filters))]
         cells, ks = [list(r) for r in rows], [list(k) for k in keys]
-        columns = [sig.Column(index[m], METRICS[m], sig.samples_for(df, shown, m)) for m in ranked]
-        tips = sig.hover_grid(cells)
-        marks = sig.mark_ties(cells, ks, columns, flags, hovers=tips)
+        columns = [rk.Column(index[m], METRICS[m], rk.samples_for(df, shown, m)) for m in ranked]
+        tips = rk.hover_grid(cells)
+        marks = rk.mark_ties(cells, ks, columns, flags, hovers=tips)
         rows = [tuple(r) for r in cells]
         hovers = tuple(tuple(h) for h in tips)
-        notes = (*notes, sig.tie_footnote(marks))
+        notes = (*notes, rk.tie_footnote(marks))
     return Table(head, tuple(rows), caption=caption, footnotes=notes, sort_keys=tuple(keys), hovers=hovers)
 
 

@@ -17,10 +17,10 @@ import pandas as pd
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
+from locbench.palette import Palette
 from locbench.report import tables as tb
 from locbench.report.collect import Collected
 from locbench.report.doc import Bullets, Plot, Section, Table, Text
-from locbench.report.palette import Palette
 
 NAN = float("nan")
 

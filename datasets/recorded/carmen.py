@@ -222,6 +222,7 @@ def parse_carmen_bytes(path: str | os.PathLike[str], raw: bytes) -> CarmenLog:
 
 
 def _parse(p: Path, raw: bytes | None = None) -> CarmenLog:
+    # long: one pass over the log's lines whose record kinds share the parser's state and line numbers for errors
     if raw is None:
         raw = p.read_bytes()
     try:

@@ -124,6 +124,14 @@ def data_root(root: str | os.PathLike[str] | None = None) -> Path | None:
     return Path(env).expanduser() if env else None
 
 
+def user_path_candidates(path: str | os.PathLike[str]) -> list[Path]:
+    """Where a path the user typed (a bag, a log folder, a sidecar) is looked for: as given (absolute or relative to
+    the working folder), then, when relative, under ``$LOCBENCH_DATA``."""
+    p = Path(path).expanduser()
+    root = os.environ.get(DATA_ENV, "")
+    return [p] + ([Path(root).expanduser() / p] if not p.is_absolute() and root else [])
+
+
 def cache_root() -> Path:
     """The download cache folder (``$LOCBENCH_CACHE`` or pooch's per-user cache)."""
     env = os.environ.get(CACHE_ENV, "")
@@ -408,6 +416,7 @@ def read_table(
         Naming the line: a wrong field count (a line cut short is reported as truncated when it is the
         last line and lacks its newline), a field that is not a number, or a non-integer id.
     """
+    # long: one pass over the table's lines, every refusal naming its line; the numpydoc is a third of it
     p = Path(path)
     try:
         raw = p.read_bytes()
@@ -539,3 +548,112 @@ def mat_numbers(
             f"variable {name!r}: non-finite value {float(arr[idx])!r} at ({where}) (1-based), expected finite numbers",
         )
     return arr
+
+
+# --- checks shared by the bag and plain-text loaders ---------------------------------------------
+
+#: Largest deviation of a pose quaternion's norm from 1 (float32 round-off is about 1e-7; a zero or a hand-scaled
+#: quaternion is far off).
+QUATERNION_NORM_TOL = 1e-3
+#: Largest tilt of a pose's z axis from the world's vertical, rad (10 degrees): a planar robot's odometry and truth
+#: rotate about z only; a larger roll or pitch would be read as a heading it is not.
+MAX_TILT_RAD = math.radians(10.0)
+#: Largest scan ``range_max``, m.
+MAX_SCAN_RANGE_M = 1000.0
+
+
+def quaternion_problem(q: npt.ArrayLike) -> tuple[int, str] | None:
+    """The first row of quaternions ``q`` (n, 4) as (qx, qy, qz, qw) that is not a planar unit rotation, and why.
+
+    A row must have norm 1 within :data:`QUATERNION_NORM_TOL` and tilt its z axis at most :data:`MAX_TILT_RAD` from
+    the vertical; None when every row does.
+    """
+    a = np.asarray(q, dtype=np.float64).reshape(-1, 4)
+    with np.errstate(invalid="ignore"):
+        norm = np.sqrt(np.sum(a * a, axis=1))
+        # cos(tilt) = the world z component of the body z axis = 1 - 2 (qx^2 + qy^2) for a unit quaternion
+        cos_tilt = 1.0 - 2.0 * (a[:, 0] ** 2 + a[:, 1] ** 2) / np.where(norm > 0, norm * norm, 1.0)
+    bad = np.flatnonzero(~(np.abs(norm - 1.0) <= QUATERNION_NORM_TOL))
+    if bad.size:
+        k = int(bad[0])
+        return k, (
+            f"orientation quaternion (x, y, z, w) = {quote(tuple(a[k].tolist()))} has norm {float(norm[k])!r}, "
+            f"expected a unit quaternion (within {QUATERNION_NORM_TOL})"
+        )
+    tilted = np.flatnonzero(~(cos_tilt >= math.cos(MAX_TILT_RAD)))
+    if tilted.size:
+        k = int(tilted[0])
+        tilt = math.acos(max(-1.0, min(1.0, float(cos_tilt[k]))))
+        return k, (
+            f"orientation tilted {tilt:.4g} rad from the vertical (roll or pitch), expected a planar pose (a rotation "
+            f"about z, tilt at most {MAX_TILT_RAD:.4g} rad)"
+        )
+    return None
+
+
+def scan_problem(n: int, angle_min: float, angle_increment: float, range_min: float, range_max: float) -> str | None:
+    """Why a scan of ``n`` beams with this geometry (rad, m) is unusable, or None.
+
+    It needs a beam, a finite ``angle_min`` within +-2 pi, a non-zero ``angle_increment`` with the beams spanning at
+    most 2 pi, and 0 <= ``range_min`` < ``range_max`` <= :data:`MAX_SCAN_RANGE_M`.
+    """
+    inc, a0 = angle_increment, angle_min
+    if n < 1:
+        return "no ranges, expected at least one beam"
+    if not (math.isfinite(a0) and abs(a0) <= 2 * math.pi):
+        return f"angle_min {a0!r} rad, expected a finite angle within +-2 pi"
+    if not (math.isfinite(inc) and inc != 0.0 and abs(inc) * (n - 1) <= 2 * math.pi + 1e-6):
+        return f"angle_increment {inc!r} rad over {n} beams, expected non-zero with the beams spanning at most 2 pi"
+    if not (math.isfinite(range_min) and 0.0 <= range_min < range_max <= MAX_SCAN_RANGE_M):
+        return (
+            f"range_min {range_min!r}, range_max {range_max!r} m, expected 0 <= range_min < range_max <= "
+            f"{MAX_SCAN_RANGE_M}"
+        )
+    return None
+
+
+#: Twist-against-pose consistency (:func:`twist_contradiction`): an odometry step "moves" above these (m, rad) ...
+TWIST_MOVE_M = 1e-3
+TWIST_MOVE_RAD = 1e-3
+#: ... the twist "says stationary" where |v| dt and |omega| dt are both below a tenth of them, and a share of moving
+#: steps above :data:`TWIST_ZERO_SHARE` with a stationary twist, or a total distance (turn) by the twist outside
+#: [1 / TWIST_RATIO, TWIST_RATIO] times the poses' (when they travel at least 1 m, turn at least 1 rad), contradicts.
+TWIST_ZERO_SHARE = 0.1
+TWIST_RATIO = 2.0
+
+
+def twist_contradiction(increments: npt.ArrayLike, v: npt.ArrayLike, omega: npt.ArrayLike, dt: npt.ArrayLike) -> str:
+    """How an odometry stream's twist contradicts its own pose increments, or "" when it does not.
+
+    ``increments`` (n, 3) are (dx m, dy m, dtheta rad) and ``v`` (m/s), ``omega`` (rad/s), ``dt`` (s) the twist
+    reported with each. A driver that leaves the twist at zero (or fills it in another unit or frame) while the pose
+    moves is common; a filter that predicts from the twist (``kf_linear``, a twist-given motion model) is then
+    wrong by metres, so the loaders say so (the dataset's ``metadata["warnings"]``).
+    """
+    inc = np.asarray(increments, dtype=np.float64).reshape(-1, 3)
+    dt_ = np.asarray(dt, dtype=np.float64)
+    s_twist = np.abs(np.asarray(v, dtype=np.float64)) * dt_
+    a_twist = np.abs(np.asarray(omega, dtype=np.float64)) * dt_
+    s_pose = np.hypot(inc[:, 0], inc[:, 1])
+    a_pose = np.abs(inc[:, 2])
+    moving = (s_pose > TWIST_MOVE_M) | (a_pose > TWIST_MOVE_RAD)
+    still = (s_twist < 0.1 * TWIST_MOVE_M) & (a_twist < 0.1 * TWIST_MOVE_RAD)
+    n_moving, n_zero = int(np.sum(moving)), int(np.sum(moving & still))
+    problems = []
+    if n_moving and n_zero > TWIST_ZERO_SHARE * n_moving:
+        problems.append(f"the twist is zero in {n_zero} of the {n_moving} steps in which the pose moves")
+    for what, unit, tw, po, least in (
+        ("distance", "m", s_twist, s_pose, 1.0),
+        ("turn", "rad", a_twist, a_pose, 1.0),
+    ):
+        total_pose, total_twist = float(np.sum(po)), float(np.sum(tw))
+        if total_pose >= least and not (1.0 / TWIST_RATIO <= total_twist / total_pose <= TWIST_RATIO):
+            problems.append(
+                f"the twist's {what} is {total_twist:.4g} {unit} against the poses' {total_pose:.4g} {unit}"
+            )
+    if not problems:
+        return ""
+    return (
+        "odometry twist contradicts its pose: " + "; ".join(problems) + " (filters that predict from the twist, such "
+        "as kf_linear, will be wrong; check the driver's twist field and its frame)"
+    )

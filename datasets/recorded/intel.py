@@ -353,6 +353,7 @@ def extract_map_lines(
         ``occupied_cells``, ``cells_on_lines`` (cells within one cell of a kept segment's line, in its runs),
         ``segments``, ``total_length_m``.
     """
+    # long: the Hough steps (vote, peak, walk along the line, split at gaps) share the grid's arrays; numpydoc
     res = grid.resolution
     n_occupied = int(np.count_nonzero(grid.occupied()))
     n_angles = math.ceil(180.0 / angle_step_deg)
@@ -604,6 +605,7 @@ def load_intel(
 def _assemble(
     clf_path: Path, gfs_path: Path, rel_path: Path, map_resolution_m: float, max_grid_cells: int = MAX_GRID_CELLS
 ) -> Dataset:
+    # long: the checks of the three files and their cross-checks, in the order the errors should be reported
     clf = read_carmen(clf_path, max_backstep_s=MAX_BACKSTEP_S)
     gfs = read_carmen(gfs_path, max_backstep_s=MAX_BACKSTEP_S, time_checked=("FLASER",))
     for path, log in ((clf_path, clf), (gfs_path, gfs)):

@@ -360,6 +360,7 @@ def load_librsf(
     verify: bool = True,
 ) -> Dataset:
     """One libRSF set (module docstring); ``rng`` draws the generated Gaussian ranges (None: seed 0)."""
+    # long: the loader's steps over one set's files in order, with their refusals; the numpydoc is a third of it
     rel_in, rel_gt = set_files(set_name, noise)
     p_in = locate(RemoteFile(f"{FOLDER}/{rel_in}", sha256=SHA256.get(rel_in)), root, verify=verify)
     p_gt = locate(RemoteFile(f"{FOLDER}/{rel_gt}", sha256=SHA256.get(rel_gt)), root, verify=verify)

@@ -438,6 +438,7 @@ def load_lost_in_the_woods(
     ConfigError
         The sub-interval holds fewer than two valid ground-truth samples.
     """
+    # long: the loader's steps over one .mat file's arrays in order, with their refusals; numpydoc
     p = params if params is not None else LostInTheWoodsParams()
     data = read_lost_in_the_woods(path)
     t = data.t

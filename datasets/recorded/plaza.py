@@ -446,6 +446,7 @@ def load_plaza(
     noise : NominalNoise or None
         Overrides the nominal noise.
     """
+    # long: the loader's steps over one .mat file's arrays in order, with their refusals; numpydoc
     arrays = read_plaza_mat(path, sha256)
     gt = arrays.GT
     t0, t1 = float(gt[0, 0]), float(gt[-1, 0])

@@ -606,6 +606,7 @@ def load_radish(
     encoder_error : EncoderError or None
         Overrides :data:`ENCODER_ERROR`.
     """
+    # long: the loader's steps over one site's files in order, with their refusals; the numpydoc is a third of it
     spec = RemoteFile(f"{FOLDER}/{site}{SUFFIX}", sha256=KNOWN_SHA256.get(site) if verify else None)
     path = locate(spec, root, verify=verify)
     cl = read_corrected(path)

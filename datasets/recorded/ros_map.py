@@ -234,6 +234,7 @@ def read_pgm(path: str | os.PathLike[str], max_cells: int = MAX_GRID_CELLS) -> t
     RecordedDataError
         A missing file, a bad header (naming the header line and the token that is wrong) or data cut short.
     """
+    # long: the header's fields read in order, each with its own refusal; the numpydoc is a third of it
     p = Path(path)
     try:
         raw = p.read_bytes()

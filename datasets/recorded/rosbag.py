@@ -5,7 +5,8 @@ Spec: ``rosbag[path=<bag>,map=<map.yaml>,odom_topic=/odom,scan_topic=/scan,truth
 storage); a relative path is looked up in the working folder, then under ``$LOCBENCH_DATA``. Spec values cannot
 hold ``,`` or ``]``: put such files under a plain name. Reading needs ``pip install 'locbench[ros]'``.
 
-What is read, and how it becomes the dataset:
+What is read, and how it becomes the dataset (``landmarks``, ``waypoints``, ``events`` and ``fix_topic`` are
+optional):
 
 - **Odometry** (``odom_topic``, ``nav_msgs/Odometry``): the message's pose is the robot's pose in its odometry
   frame (only x, y and the yaw of the quaternion are used). Event ``k`` is the increment between consecutive
@@ -29,6 +30,20 @@ What is read, and how it becomes the dataset:
   recorded each message instead, for drivers that leave headers unset). Each topic's stamps must not go backwards
   (an error names the topic and the message number). Events are trimmed to the ground truth's time span; the
   odometry reference pose is the last message at or before the first truth stamp.
+- **Position fixes** (``fix_topic``, ``sensor_msgs/NavSatFix``): latitude and longitude become map-frame (x, y)
+  through the tangent plane at the map origin's ``fix_lat0_deg``, ``fix_lon0_deg`` (WGS84, exact through
+  earth-centred coordinates; the altitude is dropped) turned by ``fix_yaw_rad`` (the map's x axis, counter-clockwise
+  from east); the covariance is the message's east-north block turned likewise, or ``fix_sigma_xy_m``^2 I when its
+  ``position_covariance_type`` is unknown (0). Messages without a fix (``status.status`` -1, or NaN) are skipped
+  and counted (``metadata["fixes_without_fix"]``).
+- **Sidecar files** for what a bag has no standard message for: ``landmarks`` (a landmark map, ``id x y [std_x
+  std_y]`` per line), ``waypoints`` (``t x y``, stamped like the bag) and ``events`` (range-bearing sightings,
+  ranges to beacons and fixes, one JSON object per line in the textlog format of
+  :mod:`~locbench.datasets.recorded.textlog`). Relative paths are looked up like the bag's.
+- **Twist check**: when the odometry's twist contradicts its own poses (zero while the pose moves, or a total
+  distance or turn off by more than a factor 2: :func:`~locbench.datasets.recorded.files.twist_contradiction`), the
+  dataset loads with a warning in ``metadata["warnings"]`` (logged, stored with the run's truth and shown in the
+  report): filters that predict from the twist (``kf_linear``) would be wrong.
 - **Initial belief**: the first ground-truth pose with the covariance diag(``initial_sigma_xy_m``^2 x 2,
   ``initial_sigma_theta_rad``^2).
 - **Nominal noise** handed to filters (nothing in a bag says it; documented defaults, override per recording):
@@ -47,8 +62,9 @@ map YAML a regular file of at most :data:`~locbench.datasets.recorded.ros_map.MA
 was expected); any failure to open or decode the bag is a clean error naming it; header stamps must be set (> 0) and
 non-decreasing per topic; poses finite and within :data:`~locbench.datasets.recorded.files.MAX_POSITION_M`;
 twists finite and within :data:`MAX_TWIST`; each scan needs a non-zero ``angle_increment`` with its beams
-spanning at most 2 pi and 0 <= ``range_min`` < ``range_max`` <= :data:`MAX_SCAN_RANGE_M`; every odometry and truth
-orientation a unit quaternion (:data:`QUATERNION_NORM_TOL`) tilted at most :data:`MAX_TILT_RAD` from the vertical;
+spanning at most 2 pi and 0 <= ``range_min`` < ``range_max`` <= 1000 m
+(:func:`~locbench.datasets.recorded.files.scan_problem`); every odometry and truth orientation a unit quaternion
+tilted at most 10 degrees from the vertical (:func:`~locbench.datasets.recorded.files.quaternion_problem`);
 odometry and truth stamps that advance, with gaps of at most :data:`MAX_GAP_S` and steps within
 :data:`MAX_SPEED_MPS` / :data:`MAX_TURN_RATE_RADPS` (plus a noise allowance); ``truth_topic`` not ``odom_topic``.
 Scans outside the truth span are counted in ``metadata["scans_outside_truth_span"]``; when a scan topic is read and
@@ -59,6 +75,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import logging
 import math
 import os
 from dataclasses import dataclass
@@ -80,29 +97,35 @@ from locbench.datasets.base import (
     check_dataset_contract,
     sort_events,
 )
-from locbench.datasets.recorded.files import DATA_ENV, MAX_POSITION_M, RecordedDataError, quote
+from locbench.datasets.recorded.files import (
+    MAX_POSITION_M,
+    RecordedDataError,
+    quaternion_problem,
+    quote,
+    scan_problem,
+    twist_contradiction,
+    user_path_candidates,
+)
 from locbench.datasets.recorded.intel import extract_map_lines
 from locbench.datasets.recorded.ros_map import MAX_YAML_BYTES, load_map_server_map
 from locbench.errors import ConfigError, DependencyNotInstalled
-from locbench.events import Event, LaserScan, Odometry
-from locbench.geometry import quaternion_to_yaw, wrap_angle
+from locbench.events import Event, LaserScan, Odometry, PoseFix
+from locbench.geometry import is_symmetric_psd, quaternion_to_yaw, wrap_angle
 from locbench.limits import check_input_file
 from locbench.spec import params_to_dict
 
 FloatArray = npt.NDArray[np.float64]
 
+log = logging.getLogger(__name__)
+
 ODOMETRY_TYPES = ("nav_msgs/msg/Odometry",)
 #: Largest bag accepted, bytes (a ROS 2 folder: the sum of its files; 16 GiB). The reader streams the bag, so this
 #: is no memory bound: it refuses a device or a runaway file before the reader starts on it.
 MAX_BAG_BYTES = 16 << 30
+#: Largest sidecar file (landmarks, waypoints, events), bytes: the textlog events file's bound.
+MAX_SIDECAR_BYTES = 512 << 20
 #: Bounds of the validation: the largest odometry twist component (m/s, rad/s) and scan range_max (m).
 MAX_TWIST = 100.0
-#: Largest deviation of a pose quaternion's norm from 1 (float32 round-off is about 1e-7; a zero or a hand-scaled
-#: quaternion is far off).
-QUATERNION_NORM_TOL = 1e-3
-#: Largest tilt of a pose's z axis from the world's vertical, rad (10 degrees): a planar robot's odometry and truth
-#: rotate about z only; a larger roll or pitch would be read as a heading it is not.
-MAX_TILT_RAD = math.radians(10.0)
 #: Largest interval between two messages of the odometry or the truth, s: the truth is interpolated between its
 #: samples and an odometry increment spans its interval, so a longer gap (a clock jump) is refused, not bridged.
 MAX_GAP_S = 60.0
@@ -113,8 +136,8 @@ MAX_SPEED_MPS = 20.0
 MAX_TURN_RATE_RADPS = 20.0
 MAX_JITTER_M = 0.05
 MAX_JITTER_RAD = 0.05
-MAX_SCAN_RANGE_M = 1000.0
 SCAN_TYPES = ("sensor_msgs/msg/LaserScan",)
+FIX_TYPES = ("sensor_msgs/msg/NavSatFix",)
 TRUTH_TYPES = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped")
 _INSTALL = "reading ROS bags needs the rosbags package; install it with: pip install 'locbench[ros]'"
 
@@ -145,6 +168,23 @@ class RosbagParams:
         What the truth topic is.
     map_lines : bool
         Also extract line segments from the map's occupied cells (for ``ekf_lines``).
+    fix_topic : str
+        A ``sensor_msgs/NavSatFix`` topic read as position fixes ("" = none).
+    fix_lat0_deg, fix_lon0_deg : float
+        Latitude and longitude (WGS84, deg) of the map frame's origin; required with ``fix_topic``.
+    fix_yaw_rad : float
+        Direction of the map's x axis, rad counter-clockwise from east (0: x east, y north).
+    fix_sigma_xy_m : float
+        Nominal fix noise per axis, m: the covariance of fixes whose ``position_covariance_type`` is unknown (0).
+    landmarks : str
+        A landmark map file (``id x y [std_x std_y]`` per line, m, map frame) ("" = none).
+    waypoints : str
+        A waypoint file (``t x y`` per line: s in the bag's stamps, m in the map frame) ("" = none).
+    events : str
+        A sidecar events file in the textlog JSON-lines format holding ``landmarks``, ``ranges`` and ``fix`` events
+        (what a bag has no standard message for), stamped like the bag ("" = none).
+    landmark_sigma_range_m, landmark_sigma_bearing_rad, range_sigma_m : float
+        Nominal noise of range-bearing sightings (m, rad) and of ranges to beacons (m).
     """
 
     path: str = ""
@@ -164,9 +204,24 @@ class RosbagParams:
     initial_sigma_theta_rad: float = 0.05
     truth_label: Literal["ground truth", "SLAM reference"] = "ground truth"
     map_lines: bool = True
+    fix_topic: str = ""
+    fix_lat0_deg: float = 0.0
+    fix_lon0_deg: float = 0.0
+    fix_yaw_rad: float = 0.0
+    fix_sigma_xy_m: float = 2.0
+    landmarks: str = ""
+    waypoints: str = ""
+    events: str = ""
+    landmark_sigma_range_m: float = 0.1
+    landmark_sigma_bearing_rad: float = 0.05
+    range_sigma_m: float = 0.1
 
     def __post_init__(self) -> None:
         for name in (
+            "fix_sigma_xy_m",
+            "landmark_sigma_range_m",
+            "landmark_sigma_bearing_rad",
+            "range_sigma_m",
             "laser_sigma_m",
             "odometry_sigma_xy_per_m",
             "odometry_sigma_theta_per_m",
@@ -177,7 +232,17 @@ class RosbagParams:
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0.0):
                 raise ConfigError(f"rosbag: parameter {name!r} must be a finite number >= 0, got {v!r}")
-        for name in ("laser_x_m", "laser_y_m", "laser_yaw_rad"):
+        if not (-90.0 <= self.fix_lat0_deg <= 90.0 and -180.0 <= self.fix_lon0_deg <= 180.0):
+            raise ConfigError(
+                f"rosbag: 'fix_lat0_deg' {self.fix_lat0_deg!r}, 'fix_lon0_deg' {self.fix_lon0_deg!r}: expected a "
+                "latitude in [-90, 90] and a longitude in [-180, 180] (deg)"
+            )
+        if self.fix_topic and self.fix_lat0_deg == 0.0 and self.fix_lon0_deg == 0.0:
+            raise ConfigError(
+                "rosbag: 'fix_topic' needs the map origin's fix_lat0_deg and fix_lon0_deg (WGS84 degrees) to place "
+                "the fixes in the map frame"
+            )
+        for name in ("laser_x_m", "laser_y_m", "laser_yaw_rad", "fix_yaw_rad"):
             if not math.isfinite(getattr(self, name)):
                 raise ConfigError(f"rosbag: parameter {name!r} must be finite, got {getattr(self, name)!r}")
         if not self.odom_topic or not self.truth_topic:
@@ -218,6 +283,14 @@ class BagStreams:
         The truth topic's message type.
     topics : dict
         Every topic of the bag -> (message type, message count).
+    fix_t : ndarray (k,)
+        NavSatFix times, s (empty without ``fix_topic``).
+    fix_llh : ndarray (k, 3)
+        Latitude, longitude (deg) and altitude (m) of each fix.
+    fix_cov : ndarray (k, 9)
+        ``position_covariance`` (ENU, m^2, row-major) of each fix.
+    fix_cov_type, fix_status : ndarray (k,) of int64
+        ``position_covariance_type`` (0 unknown ... 3 known) and ``status.status`` (-1 = no fix).
     """
 
     odom_t: FloatArray
@@ -228,6 +301,11 @@ class BagStreams:
     truth_pose: FloatArray
     truth_type: str
     topics: dict[str, tuple[str, int]]
+    fix_t: FloatArray = dataclasses.field(default_factory=lambda: np.zeros(0))
+    fix_llh: FloatArray = dataclasses.field(default_factory=lambda: np.zeros((0, 3)))
+    fix_cov: FloatArray = dataclasses.field(default_factory=lambda: np.zeros((0, 9)))
+    fix_cov_type: npt.NDArray[np.int64] = dataclasses.field(default_factory=lambda: np.zeros(0, np.int64))
+    fix_status: npt.NDArray[np.int64] = dataclasses.field(default_factory=lambda: np.zeros(0, np.int64))
 
 
 def _stamp(msg: Any, recorded_ns: int, stamps: str) -> float:
@@ -243,8 +321,8 @@ def _pose_of(msg: Any, msgtype: str) -> Any:
 
 
 def _planar_poses(poses: list[Any], path: Path, topic: str) -> FloatArray:
-    """(x m, y m, yaw rad) of geometry_msgs/Pose messages, shape (n, 3); every orientation must be a unit
-    quaternion (within :data:`QUATERNION_NORM_TOL`) of a rotation tilted at most :data:`MAX_TILT_RAD` from z."""
+    """(x m, y m, yaw rad) of geometry_msgs/Pose messages, shape (n, 3); every orientation must be a planar unit
+    quaternion (:func:`~locbench.datasets.recorded.files.quaternion_problem`)."""
     xyq = np.array(
         [
             (p.position.x, p.position.y, p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w)
@@ -253,27 +331,9 @@ def _planar_poses(poses: list[Any], path: Path, topic: str) -> FloatArray:
         dtype=np.float64,
     ).reshape(-1, 6)
     q = xyq[:, 2:]
-    with np.errstate(invalid="ignore"):
-        norm = np.sqrt(np.sum(q * q, axis=1))
-        # cos(tilt) = the world z component of the body z axis = 1 - 2 (qx^2 + qy^2) for a unit quaternion
-        cos_tilt = 1.0 - 2.0 * (q[:, 0] ** 2 + q[:, 1] ** 2) / np.where(norm > 0, norm * norm, 1.0)
-    bad = np.flatnonzero(~(np.abs(norm - 1.0) <= QUATERNION_NORM_TOL))
-    if bad.size:
-        k = int(bad[0])
-        raise RecordedDataError(
-            path,
-            f"topic {topic!r} message {k + 1}: orientation quaternion (x, y, z, w) = {quote(tuple(q[k].tolist()))} has "
-            f"norm {float(norm[k])!r}, expected a unit quaternion (within {QUATERNION_NORM_TOL})",
-        )
-    tilted = np.flatnonzero(~(cos_tilt >= math.cos(MAX_TILT_RAD)))
-    if tilted.size:
-        k = int(tilted[0])
-        tilt = math.acos(max(-1.0, min(1.0, float(cos_tilt[k]))))
-        raise RecordedDataError(
-            path,
-            f"topic {topic!r} message {k + 1}: orientation tilted {tilt:.4g} rad from the vertical (roll or pitch), "
-            f"expected a planar pose (a rotation about z, tilt at most {MAX_TILT_RAD:.4g} rad)",
-        )
+    problem = quaternion_problem(q)
+    if problem is not None:
+        raise RecordedDataError(path, f"topic {topic!r} message {problem[0] + 1}: {problem[1]}")
     return np.column_stack([xyq[:, :2], quaternion_to_yaw(q)])
 
 
@@ -322,11 +382,8 @@ def resolve_bag_path(path: str | os.PathLike[str], what: str = "bag") -> Path:
     RecordedDataError
         When it is in neither place (an error, not a :class:`MissingDataFile` skip: the user named the path).
     """
-    p = Path(path).expanduser()
-    candidates = [p]
-    root = os.environ.get(DATA_ENV, "")
-    if not p.is_absolute() and root:
-        candidates.append(Path(root).expanduser() / p)
+    candidates = user_path_candidates(path)
+    p = candidates[0]
     for c in candidates:
         if os.path.lexists(c):
             storage_file = c.is_file() and c.suffix in (".db3", ".mcap")
@@ -335,11 +392,15 @@ def resolve_bag_path(path: str | os.PathLike[str], what: str = "bag") -> Path:
             # Looked at before anything opens it: a FIFO would block the reader, a device never end.
             if what == "bag":
                 check_input_file(c, "bag", MAX_BAG_BYTES, folder_ok=True)
-            else:
+            elif what == "map":
                 check_input_file(c, "map YAML", MAX_YAML_BYTES)
+            else:
+                check_input_file(c, f"{what} file", MAX_SIDECAR_BYTES)
             return c
     looked = " or ".join(str(c) for c in candidates)
-    expected = "a ROS 1 .bag file or a ROS 2 bag folder" if what == "bag" else "a map_server YAML file"
+    expected = {"bag": "a ROS 1 .bag file or a ROS 2 bag folder", "map": "a map_server YAML file"}.get(
+        what, f"a {what} file"
+    )
     # A path the user typed is an error, not a skip: the run must not be stored as "data not found".
     raise RecordedDataError(p, f"missing {what} (looked for {looked}); expected {expected}")
 
@@ -356,6 +417,7 @@ def read_bag_streams(
     scan_topic: str = "/scan",
     truth_topic: str = "/ground_truth",
     stamps: str = "header",
+    fix_topic: str = "",
 ) -> BagStreams:
     """Parse the odometry, scan and truth topics of a ROS 1 or ROS 2 bag (cached per file signature).
 
@@ -369,7 +431,7 @@ def read_bag_streams(
         rosbags is not installed.
     """
     p = resolve_bag_path(path)
-    return _read_streams_cached(str(p.resolve()), _signature(p), odom_topic, scan_topic, truth_topic, stamps)
+    return _read_streams_cached(str(p.resolve()), _signature(p), odom_topic, scan_topic, truth_topic, stamps, fix_topic)
 
 
 @functools.lru_cache(maxsize=4)
@@ -380,7 +442,9 @@ def _read_streams_cached(
     scan_topic: str,
     truth_topic: str,
     stamps: str,
+    fix_topic: str = "",
 ) -> BagStreams:
+    # long: one pass over the bag's messages: every topic's decoder shares the reader and the error context
     del signature  # part of the cache key only
     try:
         from rosbags.highlevel import AnyReader
@@ -400,6 +464,8 @@ def _read_streams_cached(
         wanted = {"odom_topic": (odom_topic, ODOMETRY_TYPES), "truth_topic": (truth_topic, TRUTH_TYPES)}
         if scan_topic:
             wanted["scan_topic"] = (scan_topic, SCAN_TYPES)
+        if fix_topic:
+            wanted["fix_topic"] = (fix_topic, FIX_TYPES)
         for param, (topic, types) in wanted.items():
             if topic not in topics:
                 raise RecordedDataError(p, f"no topic {topic!r} ({param}); the bag has: {listing}")
@@ -493,9 +559,22 @@ def _read_streams_cached(
             f"topic {odom_topic!r} message {k + 1}: twist (linear.x, angular.z) = ({float(odom_twist[k, 0])!r}, "
             f"{float(odom_twist[k, 1])!r}), expected finite values within +-{MAX_TWIST} (m/s, rad/s)",
         )
-    for a in (odom_t, odom_pose, odom_twist, truth_t, truth_pose):
+    fix_arrays = _fix_arrays(by_topic[fix_topic] if fix_topic else [])
+    arrays = (odom_t, odom_pose, odom_twist, truth_t, truth_pose, *fix_arrays)
+    for a in arrays:
         a.setflags(write=False)  # shared through the cache
-    return BagStreams(odom_t, odom_pose, odom_twist, scans, truth_t, truth_pose, truth_type, topics)
+    return BagStreams(odom_t, odom_pose, odom_twist, scans, truth_t, truth_pose, truth_type, topics, *arrays[5:])
+
+
+def _fix_arrays(fixes: list[tuple[float, Any]]) -> tuple[npt.NDArray[Any], ...]:
+    """(times, lat/lon/alt, covariances, covariance types, statuses) of (stamp, NavSatFix) pairs, as arrays."""
+    return (
+        np.array([t for t, _ in fixes], dtype=np.float64),
+        np.array([(m.latitude, m.longitude, m.altitude) for _, m in fixes], dtype=np.float64).reshape(-1, 3),
+        np.array([np.asarray(m.position_covariance, dtype=np.float64) for _, m in fixes]).reshape(-1, 9),
+        np.array([int(m.position_covariance_type) for _, m in fixes], dtype=np.int64),
+        np.array([int(m.status.status) for _, m in fixes], dtype=np.int64),
+    )
 
 
 # --- from streams to a dataset -------------------------------------------------------------------
@@ -514,19 +593,7 @@ def odometry_increments(pose: FloatArray) -> FloatArray:
 def _check_scan(p: Path, topic: str, k: int, scan: LaserScan) -> None:
     """Raise naming message ``k`` (0-based) of ``topic`` unless the scan's geometry is usable."""
     n = int(scan.ranges.shape[0])
-    inc, a0 = scan.angle_increment, scan.angle_min
-    problem = None
-    if n < 1:
-        problem = "no ranges, expected at least one beam"
-    elif not (math.isfinite(a0) and abs(a0) <= 2 * math.pi):
-        problem = f"angle_min {a0!r} rad, expected a finite angle within +-2 pi"
-    elif not (math.isfinite(inc) and inc != 0.0 and abs(inc) * (n - 1) <= 2 * math.pi + 1e-6):
-        problem = f"angle_increment {inc!r} rad over {n} beams, expected non-zero with the beams spanning at most 2 pi"
-    elif not (math.isfinite(scan.range_min) and 0.0 <= scan.range_min < scan.range_max <= MAX_SCAN_RANGE_M):
-        problem = (
-            f"range_min {scan.range_min!r}, range_max {scan.range_max!r} m, expected 0 <= range_min < range_max <= "
-            f"{MAX_SCAN_RANGE_M}"
-        )
+    problem = scan_problem(n, scan.angle_min, scan.angle_increment, scan.range_min, scan.range_max)
     if problem is not None:
         raise RecordedDataError(p, f"topic {topic!r} message {k + 1}: {problem}")
 
@@ -563,6 +630,97 @@ def load_rosbag(
     return build_rosbag_dataset(params)
 
 
+#: WGS84 ellipsoid: semi-major axis (m) and flattening (NIMA TR8350.2).
+WGS84_A = 6378137.0
+WGS84_F = 1.0 / 298.257223563
+
+
+def _ecef(lat: FloatArray, lon: FloatArray) -> FloatArray:
+    """Earth-centred, earth-fixed (x, y, z) of points on the WGS84 ellipsoid (height 0), m, shape (n, 3)."""
+    e2 = WGS84_F * (2.0 - WGS84_F)
+    n = WGS84_A / np.sqrt(1.0 - e2 * np.sin(lat) ** 2)  # prime vertical radius of curvature
+    return np.column_stack([n * np.cos(lat) * np.cos(lon), n * np.cos(lat) * np.sin(lon), n * (1.0 - e2) * np.sin(lat)])
+
+
+def geodetic_to_enu(
+    lat_deg: npt.ArrayLike, lon_deg: npt.ArrayLike, lat0_deg: float, lon0_deg: float
+) -> tuple[FloatArray, FloatArray]:
+    """East and north (m) of WGS84 points in the tangent plane at (``lat0_deg``, ``lon0_deg``).
+
+    Exact through earth-centred coordinates, on the ellipsoid (the altitude is dropped: a planar map's fixes).
+    """
+    lat = np.radians(np.asarray(lat_deg, dtype=np.float64).reshape(-1))
+    lon = np.radians(np.asarray(lon_deg, dtype=np.float64).reshape(-1))
+    p0, q0 = math.radians(lat0_deg), math.radians(lon0_deg)
+    d = _ecef(lat, lon) - _ecef(np.array([p0]), np.array([q0]))
+    east = -math.sin(q0) * d[:, 0] + math.cos(q0) * d[:, 1]
+    north = -math.sin(p0) * math.cos(q0) * d[:, 0] - math.sin(p0) * math.sin(q0) * d[:, 1] + math.cos(p0) * d[:, 2]
+    return east, north
+
+
+def _fixes(params: RosbagParams, streams: BagStreams, bag: Path, t0: float, t1: float) -> tuple[list[PoseFix], int]:
+    """The NavSatFix messages inside [t0, t1] as map-frame position fixes, and how many had no fix (skipped)."""
+    llh, status = streams.fix_llh, streams.fix_status
+    with np.errstate(invalid="ignore"):
+        valid = (status >= 0) & np.isfinite(llh[:, 0]) & np.isfinite(llh[:, 1])
+    keep = np.flatnonzero(valid & (streams.fix_t >= t0) & (streams.fix_t <= t1))
+    for k in keep:
+        lat, lon = float(llh[k, 0]), float(llh[k, 1])
+        if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+            raise RecordedDataError(
+                bag,
+                f"topic {params.fix_topic!r} message {int(k) + 1}: latitude {lat!r}, longitude {lon!r}, expected "
+                "[-90, 90] and [-180, 180] deg",
+            )
+    east, north = geodetic_to_enu(llh[keep, 0], llh[keep, 1], params.fix_lat0_deg, params.fix_lon0_deg)
+    c, sn = math.cos(params.fix_yaw_rad), math.sin(params.fix_yaw_rad)
+    rot = np.array([[c, sn], [-sn, c]])  # ENU -> map frame (x axis at fix_yaw_rad from east)
+    out = []
+    for j, k in enumerate(keep):
+        xy = rot @ np.array([east[j], north[j]])
+        if not np.all(np.abs(xy) <= MAX_POSITION_M):
+            raise RecordedDataError(
+                bag,
+                f"topic {params.fix_topic!r} message {int(k) + 1}: fix {quote(xy.tolist())} m from the map "
+                f"origin, expected within +-{MAX_POSITION_M} m (is fix_lat0_deg / fix_lon0_deg the map's origin?)",
+            )
+        if streams.fix_cov_type[k] == 0:  # COVARIANCE_TYPE_UNKNOWN
+            cov = np.eye(2) * params.fix_sigma_xy_m**2
+        else:
+            full = streams.fix_cov[k].reshape(3, 3)
+            cov = rot @ full[:2, :2] @ rot.T
+            if not is_symmetric_psd(full[:2, :2]):
+                raise RecordedDataError(
+                    bag,
+                    f"topic {params.fix_topic!r} message {int(k) + 1}: position_covariance east-north block "
+                    f"{quote(full[:2, :2].tolist())}, expected a finite symmetric PSD matrix (m^2)",
+                )
+        out.append(PoseFix(float(streams.fix_t[k]), xy, cov))
+    return out, int(np.sum(~valid))
+
+
+def _sidecar_events(params: RosbagParams, known: frozenset[int] | None, t0: float, t1: float) -> list[Event]:
+    """The events of the ``events`` sidecar (textlog JSON lines) inside [t0, t1]: sightings, ranges, fixes only."""
+    from locbench.datasets.recorded.textlog import read_events
+
+    path = resolve_bag_path(params.events, "events")
+    events = read_events(path, known)
+    other = sorted({type(e).__name__ for e in events if isinstance(e, (Odometry, LaserScan))})
+    if other:
+        raise RecordedDataError(
+            path,
+            f"has {', '.join(other)} events, expected only landmarks, ranges and fix events (the bag gives "
+            "odometry and scans)",
+        )
+    return [e for e in events if t0 <= e.t <= t1]
+
+
+def _twist_warning(inc: FloatArray, twist: FloatArray, t: FloatArray, topic: str) -> str:
+    """The warning when the odometry's twist contradicts its poses (``twist`` and ``t`` aligned with ``inc``)."""
+    why = twist_contradiction(inc, twist[:, 0], twist[:, 1], np.diff(t))
+    return f"topic {topic!r}: {why}" if why else ""
+
+
 def _map(path: Path, with_lines: bool) -> tuple[OccupancyGrid, LineMap | None]:
     st = path.stat()
     return _map_cached(str(path.resolve()), st.st_size, st.st_mtime_ns, with_lines)
@@ -584,46 +742,67 @@ def _map_cached(path: str, size: int, mtime_ns: int, with_lines: bool) -> tuple[
     return grid, lines
 
 
-def build_rosbag_dataset(params: RosbagParams) -> Dataset:
-    """The dataset of ``params`` (what :class:`RosbagDataset` builds)."""
-    bag = resolve_bag_path(params.path)
-    streams = read_bag_streams(bag, params.odom_topic, params.scan_topic, params.truth_topic, params.stamps)
-    if streams.truth_t.size == 0:
-        raise RecordedDataError(bag, f"topic {params.truth_topic!r} has no messages (expected the ground truth)")
-    t0, t1 = float(streams.truth_t[0]), float(streams.truth_t[-1])
-
-    # odometry: the reference is the last pose at or before the first truth stamp
+def _odometry_events(
+    params: RosbagParams, streams: BagStreams, bag: Path, t0: float, t1: float
+) -> tuple[list[Event], list[str]]:
+    """The odometry increments within the truth span [t0, t1] (the reference pose is the last at or before t0), and
+    the warning when their twist contradicts them."""
     ot = streams.odom_t
     first = max(int(np.searchsorted(ot, t0, side="right")) - 1, 0)
     last = int(np.searchsorted(ot, t1, side="right"))
-    events: list[Event] = []
-    if last - first >= 2:
-        inc = odometry_increments(np.asarray(streams.odom_pose[first:last]))
-        tw = streams.odom_twist
-        for j, (dx, dy, dth) in enumerate(inc):
-            k = first + 1 + j
-            events.append(
-                Odometry(
-                    float(ot[k]),
-                    float(dx),
-                    float(dy),
-                    float(dth),
-                    v=float(tw[k, 0]),
-                    omega=float(tw[k, 1]),
-                    dt=float(ot[k] - ot[k - 1]),
-                )
-            )
-    if not events:
+    if last - first < 2:
         raise RecordedDataError(
             bag,
             f"no odometry increments on {params.odom_topic!r} within the ground truth's span [{t0!r}, {t1!r}] s "
             f"({ot.size} odometry messages in [{float(ot[0]) if ot.size else float('nan')!r}, "
             f"{float(ot[-1]) if ot.size else float('nan')!r}] s)",
         )
+    inc = odometry_increments(np.asarray(streams.odom_pose[first:last]))
+    tw = streams.odom_twist
+    events: list[Event] = []
+    for j, (dx, dy, dth) in enumerate(inc):
+        k = first + 1 + j
+        events.append(
+            Odometry(
+                float(ot[k]),
+                float(dx),
+                float(dy),
+                float(dth),
+                v=float(tw[k, 0]),
+                omega=float(tw[k, 1]),
+                dt=float(ot[k] - ot[k - 1]),
+            )
+        )
+    w = _twist_warning(inc, np.asarray(tw[first + 1 : last]), ot[first:last], params.odom_topic)
+    if w:
+        log.warning("rosbag %s: %s", bag, w)
+    return events, [w] if w else []
 
+
+def build_rosbag_dataset(params: RosbagParams) -> Dataset:
+    """The dataset of ``params`` (what :class:`RosbagDataset` builds)."""
+    # long: the bag's streams, sidecars, map and checks assembled in the order their errors should be reported
+    bag = resolve_bag_path(params.path)
+    streams = read_bag_streams(
+        bag, params.odom_topic, params.scan_topic, params.truth_topic, params.stamps, params.fix_topic
+    )
+    if streams.truth_t.size == 0:
+        raise RecordedDataError(bag, f"topic {params.truth_topic!r} has no messages (expected the ground truth)")
+    t0, t1 = float(streams.truth_t[0]), float(streams.truth_t[-1])
+
+    events, warnings = _odometry_events(params, streams, bag, t0, t1)
     grid, lines = None, None
     if params.map:
         grid, lines = _map(resolve_bag_path(params.map, "map"), params.map_lines)
+    landmarks = None
+    if params.landmarks:
+        from locbench.datasets.recorded.textlog import read_landmarks
+
+        landmarks = read_landmarks(resolve_bag_path(params.landmarks, "landmarks"))
+    known = frozenset(int(i) for i in landmarks.ids) if landmarks is not None else None
+    extra: list[Event] = _sidecar_events(params, known, t0, t1) if params.events else []
+    fixes, no_fix = _fixes(params, streams, bag, t0, t1) if params.fix_topic else ([], 0)
+    extra += fixes
     sensor_pose = (params.laser_x_m, params.laser_y_m, params.laser_yaw_rad)
     scans_in = [s for s in streams.scans if t0 <= s.t <= t1]
     if scans_in and grid is None:
@@ -632,6 +811,7 @@ def build_rosbag_dataset(params: RosbagParams) -> Dataset:
             "(or scan_topic= to ignore the laser)"
         )
     events.extend(dataclasses.replace(s, sensor_pose=sensor_pose) for s in scans_in)
+    events.extend(extra)
 
     truth = Trajectory2D(
         np.array(streams.truth_t), np.array(streams.truth_pose[:, :2]), wrap_angle(np.array(streams.truth_pose[:, 2]))
@@ -643,15 +823,26 @@ def build_rosbag_dataset(params: RosbagParams) -> Dataset:
         odometry_sigma_theta_per_m=params.odometry_sigma_theta_per_m,
         odometry_sigma_theta_per_rad=params.odometry_sigma_theta_per_rad,
         laser_sigma_m=params.laser_sigma_m,
+        landmark_sigma_range_m=params.landmark_sigma_range_m,
+        landmark_sigma_bearing_rad=params.landmark_sigma_bearing_rad,
+        range_sigma_m=params.range_sigma_m,
+        pose_fix_sigma_xy_m=params.fix_sigma_xy_m,
     )
+    waypoints = None
+    if params.waypoints:
+        from locbench.datasets.recorded.textlog import read_waypoints
+
+        waypoints = read_waypoints(resolve_bag_path(params.waypoints, "waypoints"), truth)
+    sidecars = tuple(p for p in (params.landmarks, params.waypoints, params.events) if p)
     ds = Dataset(
         id="rosbag",
         params=params_to_dict(params),
         events=sort_events(events),
         ground_truth=truth,
         initial=initial,
-        world=WorldMap(occupancy=grid, lines=lines),
+        world=WorldMap(occupancy=grid, landmarks=landmarks, lines=lines),
         sensors=sensors,
+        waypoints=waypoints,
         name="rosbag",
         metadata={
             "source": str(bag),
@@ -661,10 +852,13 @@ def build_rosbag_dataset(params: RosbagParams) -> Dataset:
             "stamps": params.stamps,
             "map": params.map,
             "scans_outside_truth_span": len(streams.scans) - len(scans_in),
+            "fixes_without_fix": no_fix,
+            "warnings": warnings,
         },
         truth_label=params.truth_label,
-        sources=(str(bag),) + ((params.map,) if params.map else ()),
-        declared=frozenset({LaserScan}) if params.scan_topic and streams.scans else frozenset(),
+        sources=(str(bag),) + ((params.map,) if params.map else ()) + sidecars,
+        declared=(frozenset({LaserScan}) if params.scan_topic and streams.scans else frozenset())
+        | frozenset(type(e) for e in extra),
     )
     check_dataset_contract(ds)
     return ds

@@ -34,7 +34,7 @@ Sensors:
 * the shared robot's execution noise (wheel slip ``SLIP_K_TRUE`` between the commanded twist and the
   true motion, :mod:`locbench.datasets.synthetic.robot`; the robot steers back onto its circle or line),
   from the ``execution`` stream;
-* wheel odometry of the shared robot (:func:`~locbench.datasets.synthetic.scenarios.robot_encoder_model`:
+* wheel odometry of the shared robot (:func:`~locbench.datasets.synthetic.toolkit.robot_encoder_model`:
   the room-calibrated systematic and random encoder error, report 003 eq. 10) rather than report 001
   fig. 1's velocity-noise model, so that every synthetic world has the same robot; 20 Hz;
 * a laser of 151 beams over [-2, 2] rad (report 001 sec. IV-B), 5 Hz, 12 m range (so that the far square
@@ -71,19 +71,18 @@ from typing import Any, ClassVar, Literal
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import Dataset, Gaussian2, Kidnap, SensorSpec, SyntheticBuilder, sort_events
+from locbench.datasets.base import Dataset, Gaussian2, Kidnap, SyntheticBuilder, sort_events
 from locbench.datasets.synthetic.robot import Arc, DriveLimits, GoTo, Leg, Motion, simulate_route
-from locbench.datasets.synthetic.scenarios import (
+from locbench.datasets.synthetic.sensors import LandmarkSensor, LaserSensor, PoseFixSensor, laser_scans
+from locbench.datasets.synthetic.toolkit import (
     SLIP_K_TRUE,
     SensorSuite,
     assemble,
     check_kidnap_params,
     encoder_model,
-    matched_process_noise,
-    nominal_odometry_spec,
+    nominal_sensor_spec,
     true_wheelbase,
 )
-from locbench.datasets.synthetic.sensors import LandmarkSensor, LaserSensor, PoseFixSensor, laser_scans
 from locbench.datasets.synthetic.world import World
 from locbench.errors import ConfigError
 from locbench.events import UNKNOWN_ID, Event, LandmarkObservations, LaserScan
@@ -413,6 +412,7 @@ class LandmarkGeometryScenario(SyntheticBuilder):
     )
 
     def build(self, params: LandmarkGeometryParams, rng: np.random.Generator) -> Dataset:
+        # long: one scenario's assembly: route, kidnap, sensors, spec and metadata in the order the streams are drawn
         streams = dict(zip(STREAMS, rng.spawn(len(STREAMS)), strict=True))
         world = geometry_world(params.landmarks)
         limits = dataclasses.replace(LIMITS, wheelbase_m=true_wheelbase(params.matched))
@@ -425,15 +425,15 @@ class LandmarkGeometryScenario(SyntheticBuilder):
             if params.gps
             else None
         )
-        spec = SensorSpec(
-            **nominal_odometry_spec(),
-            **matched_process_noise(params.matched),
+        # the landmarks are seen by the laser: their limits are the laser's, widened by the landmark's radius
+        spec = nominal_sensor_spec(
+            params.matched,
+            laser=LASER,
             landmark_sigma_range_m=NOMINAL_SIGMA_RANGE_M,
             landmark_sigma_bearing_rad=NOMINAL_SIGMA_BEARING_RAD,
             landmark_min_range_m=LASER.min_range_m + LANDMARK_RADIUS_M,
             landmark_max_range_m=LASER.max_range_m + LANDMARK_RADIUS_M,
             landmark_fov_rad=LASER.fov_rad,
-            laser_sigma_m=LASER.sigma_m,
             pose_fix_sigma_xy_m=fixes.reported_sigma_xy_m if fixes else None,
         )
         # Unless matched, the landmark stream is not used by assemble (landmarks come from the scans below).

@@ -47,9 +47,18 @@ from typing import Any, ClassVar
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import Dataset, SensorSpec, SyntheticBuilder, sort_events
+from locbench.datasets.base import Dataset, SyntheticBuilder, sort_events
 from locbench.datasets.synthetic.robot import DriveLimits, GoTo, Leg, Motion, simulate_route
 from locbench.datasets.synthetic.scenarios import (
+    office_world,
+)
+from locbench.datasets.synthetic.sensors import (
+    EncoderModel,
+    LaserSensor,
+    laser_sensor_poses,
+    noisy_scans,
+)
+from locbench.datasets.synthetic.toolkit import (
     ENCODER_K_TRUE,
     ENCODER_SCALE_LEFT,
     ENCODER_SCALE_RIGHT,
@@ -57,23 +66,15 @@ from locbench.datasets.synthetic.scenarios import (
     WHEELBASE_NOMINAL_M,
     WHEELBASE_TRUE_RATIO,
     SensorSuite,
-    _check_beams,
     assemble,
     check_kidnap_params,
+    check_laser_beams,
     drive,
     execution_stream,
     matched_encoder_model,
-    matched_process_noise,
     matched_stream,
-    nominal_odometry_spec,
-    office_world,
+    nominal_sensor_spec,
     split_streams,
-)
-from locbench.datasets.synthetic.sensors import (
-    EncoderModel,
-    LaserSensor,
-    laser_sensor_poses,
-    noisy_scans,
 )
 from locbench.datasets.synthetic.world import World
 from locbench.errors import ConfigError
@@ -307,7 +308,7 @@ class LapParams:
     def __post_init__(self) -> None:
         # checked when the spec is parsed, so a bad value is a one-line error before anything runs
         check_kidnap_params(self.kidnap_m, self.kidnap_rad)
-        _check_beams("laser_beams", self.laser_beams, allow_zero=False)
+        check_laser_beams("laser_beams", self.laser_beams, allow_zero=False)
         if not 0 <= self.people <= MAX_PEOPLE:
             raise ConfigError(f"parameter 'people' must be a count in [0, {MAX_PEOPLE}], got {self.people}")
 
@@ -350,9 +351,7 @@ class LapScenario(SyntheticBuilder):
             dropout_prob=0.01,
         )
         people = draw_people(world, 0 if params.matched else params.people, people_rng, PEOPLE_REGION)
-        spec = SensorSpec(
-            **nominal_odometry_spec(), **matched_process_noise(params.matched), laser_sigma_m=laser.sigma_m
-        )
+        spec = nominal_sensor_spec(params.matched, laser=laser)
         meta = {
             "generator_version": LAP_GENERATOR_VERSION,
             "calibration": {

@@ -31,22 +31,19 @@ from typing import ClassVar
 
 import numpy as np
 
-from locbench.datasets.base import Dataset, SensorSpec, SyntheticBuilder
+from locbench.datasets.base import Dataset, SyntheticBuilder
 from locbench.datasets.synthetic.robot import DriveLimits, GoTo, Leg
-from locbench.datasets.synthetic.scenarios import (
+from locbench.datasets.synthetic.sensors import LaserSensor
+from locbench.datasets.synthetic.toolkit import (
     SensorSuite,
     assemble,
     check_kidnap_params,
     drive,
     encoder_model,
-    execution_stream,
-    matched_process_noise,
-    matched_stream,
-    nominal_odometry_spec,
-    split_streams,
+    nominal_sensor_spec,
+    scenario_streams,
     true_wheelbase,
 )
-from locbench.datasets.synthetic.sensors import LaserSensor
 from locbench.datasets.synthetic.world import World, wall_with_doors
 from locbench.errors import ConfigError
 from locbench.limits import check_beams
@@ -140,9 +137,7 @@ class LineRoomScenario(SyntheticBuilder):
     description: ClassVar[str] = "report 002's polygonal rooms: wall lines, a laser, 7 waypoints"
 
     def build(self, params: LineRoomParams, rng: np.random.Generator) -> Dataset:
-        streams = split_streams(rng)
-        slip_rng = execution_stream(rng)
-        initial_rng = matched_stream(rng) if params.matched else None
+        streams = scenario_streams(rng, params.matched)
         world = line_room_world()
         limits = dataclasses.replace(LINE_ROOM_LIMITS, wheelbase_m=true_wheelbase(params.matched))
         motion = drive(
@@ -153,8 +148,8 @@ class LineRoomScenario(SyntheticBuilder):
             params.kidnap_m,
             params.kidnap_rad,
             0.5,
-            streams["kidnap"],
-            slip_rng=slip_rng,
+            streams.noise["kidnap"],
+            slip_rng=streams.execution,
         )
         laser = LaserSensor(
             rate_hz=5.0,
@@ -164,18 +159,15 @@ class LineRoomScenario(SyntheticBuilder):
             sigma_m=params.laser_sigma_m,
         )
         suite = SensorSuite(encoder=encoder_model(params.matched), laser=laser)
-        spec = SensorSpec(
-            **nominal_odometry_spec(), **matched_process_noise(params.matched), laser_sigma_m=laser.sigma_m
-        )
         return assemble(
             dataset_id="line_room",
             params=params,
             world=world,
             motion=motion,
             suite=suite,
-            streams=streams,
-            spec=spec,
+            streams=streams.noise,
+            spec=nominal_sensor_spec(params.matched, laser=laser),
             initial_sigma=(0.02, 0.02, math.radians(1.0)),
             resolution_m=LINE_ROOM_RESOLUTION_M,
-            initial_rng=initial_rng,
+            initial_rng=streams.initial,
         )

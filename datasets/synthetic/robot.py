@@ -303,129 +303,168 @@ def simulate_route(
         raise ConfigError(f"simulate_route: slip_k must be >= 0 sqrt(m), got {slip_k}")
     if slip_k > 0 and slip_rng is None:
         raise ConfigError("simulate_route: slip_k > 0 needs a slip_rng (the execution noise's generator)")
-    slip = _Slip(slip_k, slip_rng)
-    steer = slip_k > 0
-    dt = limits.dt_s
-    b = limits.wheelbase_m
-    x, y, th = (float(v) for v in np.asarray(start, dtype=np.float64)[:3])
-    th = wrap_scalar(th)
-    poses = [(x, y, th)]
-    dl_list: list[float] = []
-    dr_list: list[float] = []
-    v_list: list[float] = []
-    w_list: list[float] = []
-    wp_t: list[float] = []
-    wp_xy: list[tuple[float, float]] = []
-    kidnaps: list[Kidnap] = []
-    pending_kidnap = kidnap_t_s is not None and kidnap_chooser is not None
-    max_steps = math.ceil(max_duration_s / dt)
+    drive = _Drive(start, limits, _Slip(slip_k, slip_rng), kidnap_t_s, kidnap_chooser, max_duration_s)
+    drive.dwell(limits.start_dwell_s, mark=False)
+    for leg in legs:
+        if isinstance(leg, GoTo):
+            drive.go_to(float(leg.xy[0]), float(leg.xy[1]), leg.marked)
+        elif isinstance(leg, Arc):
+            drive.arc(leg)
+        else:  # pragma: no cover - type guard
+            raise ConfigError(f"unknown leg type {type(leg).__name__}")
+    return drive.motion()
 
-    def step(v: float, w: float) -> None:
-        nonlocal x, y, th
-        d_left, d_right = slip.travel((v - 0.5 * w * b) * dt, (v + 0.5 * w * b) * dt)
+
+class _Drive:
+    """The state of one drive of :func:`simulate_route`: the true pose, the executed steps and what was marked.
+
+    Each step integrates the executed wheel travel (:class:`_Slip`) from the current true pose; the lists grow by
+    one entry per step of ``limits.dt_s``.
+    """
+
+    def __init__(
+        self,
+        start: npt.ArrayLike,
+        limits: DriveLimits,
+        slip: _Slip,
+        kidnap_t_s: float | None,
+        kidnap_chooser: KidnapChooser | None,
+        max_duration_s: float,
+    ) -> None:
+        self.limits = limits
+        self.slip = slip
+        self.steer = slip.k > 0
+        self.dt = limits.dt_s
+        self.b = limits.wheelbase_m
+        x, y, th = (float(v) for v in np.asarray(start, dtype=np.float64)[:3])
+        self.x, self.y, self.th = x, y, wrap_scalar(th)
+        self.poses = [(self.x, self.y, self.th)]
+        self.dl: list[float] = []
+        self.dr: list[float] = []
+        self.v: list[float] = []
+        self.w: list[float] = []
+        self.wp_t: list[float] = []
+        self.wp_xy: list[tuple[float, float]] = []
+        self.kidnaps: list[Kidnap] = []
+        self.kidnap_t_s = kidnap_t_s
+        self.kidnap_chooser = kidnap_chooser
+        self.pending_kidnap = kidnap_t_s is not None and kidnap_chooser is not None
+        self.max_duration_s = max_duration_s
+        self.max_steps = math.ceil(max_duration_s / self.dt)
+
+    def step(self, v: float, w: float) -> None:
+        """Execute the twist (v m/s, w rad/s) for one step."""
+        b, dt = self.b, self.dt
+        d_left, d_right = self.slip.travel((v - 0.5 * w * b) * dt, (v + 0.5 * w * b) * dt)
         dx, dy, dth = wheel_increment(d_left, d_right, b)
-        c, s = math.cos(th), math.sin(th)
-        x += c * dx - s * dy
-        y += s * dx + c * dy
-        th = wrap_scalar(th + dth)
-        dl_list.append(d_left)
-        dr_list.append(d_right)
-        v_list.append(v)
-        w_list.append(w)
-        poses.append((x, y, th))
-        if len(poses) > max_steps:
-            raise ConfigError(f"simulate_route: the route takes longer than max_duration_s={max_duration_s} s")
+        c, s = math.cos(self.th), math.sin(self.th)
+        self.x += c * dx - s * dy
+        self.y += s * dx + c * dy
+        self.th = wrap_scalar(self.th + dth)
+        self.dl.append(d_left)
+        self.dr.append(d_right)
+        self.v.append(v)
+        self.w.append(w)
+        self.poses.append((self.x, self.y, self.th))
+        if len(self.poses) > self.max_steps:
+            raise ConfigError(f"simulate_route: the route takes longer than max_duration_s={self.max_duration_s} s")
 
-    def dwell(duration: float, mark: bool, xy: tuple[float, float] | None = None) -> None:
-        n = round(duration / dt)
-        k0 = len(poses) - 1
+    def dwell(self, duration: float, mark: bool, xy: tuple[float, float] | None = None) -> None:
+        """Stand still for ``duration`` s; a marked dwell is a waypoint at its middle (at ``xy``, else here)."""
+        n = round(duration / self.dt)
+        k0 = len(self.poses) - 1
         for _ in range(n):
-            step(0.0, 0.0)
+            self.step(0.0, 0.0)
         if mark:
-            wp_t.append((k0 + n // 2) * dt)
-            wp_xy.append(xy if xy is not None else (x, y))
+            self.wp_t.append((k0 + n // 2) * self.dt)
+            self.wp_xy.append(xy if xy is not None else (self.x, self.y))
 
-    def try_kidnap(goal: tuple[float, float] | None) -> bool:
-        nonlocal x, y, th, pending_kidnap
-        if not pending_kidnap or (len(poses) - 1) * dt < float(kidnap_t_s) - 1e-9:  # type: ignore[arg-type]
+    def try_kidnap(self, goal: tuple[float, float] | None) -> bool:
+        """Apply the pending kidnap if its time has come and the chooser gives a delta; True if applied."""
+        if not self.pending_kidnap or (len(self.poses) - 1) * self.dt < float(self.kidnap_t_s) - 1e-9:  # type: ignore[arg-type]
             return False
-        delta = kidnap_chooser(np.array([x, y, th]), goal)  # type: ignore[misc]
+        delta = self.kidnap_chooser(np.array([self.x, self.y, self.th]), goal)  # type: ignore[misc]
         if delta is None:
             return False
-        pending_kidnap = False
-        x += delta[0]
-        y += delta[1]
-        th = wrap_scalar(th + delta[2])
-        poses[-1] = (x, y, th)
-        kidnaps.append(Kidnap(t=(len(poses) - 1) * dt, delta=(float(delta[0]), float(delta[1]), float(delta[2]))))
-        logger.debug("kidnap at t=%.2f s by %s", kidnaps[-1].t, kidnaps[-1].delta)
+        self.pending_kidnap = False
+        self.x += delta[0]
+        self.y += delta[1]
+        self.th = wrap_scalar(self.th + delta[2])
+        self.poses[-1] = (self.x, self.y, self.th)
+        t = (len(self.poses) - 1) * self.dt
+        self.kidnaps.append(Kidnap(t=t, delta=(float(delta[0]), float(delta[1]), float(delta[2]))))
+        logger.debug("kidnap at t=%.2f s by %s", self.kidnaps[-1].t, self.kidnaps[-1].delta)
         return True
 
-    def follow(path: _Path, length: float, v_max: float, acc: float, goal: tuple[float, float] | None) -> bool:
+    def follow(self, path: _Path, length: float, v_max: float, acc: float, goal: tuple[float, float] | None) -> bool:
         """Drive ``length`` m along ``path`` (progress measured on the true pose); False if kidnapped."""
+        omega_max = self.limits.omega_max_radps
         u, s, done = 0.0, 0.0, False
         while not done:
-            s, e_lat, e_th = path.errors(x, y, th, s)
-            u, _, done = _profile(length - s, u, v_max, acc, dt)
+            s, e_lat, e_th = path.errors(self.x, self.y, self.th, s)
+            u, _, done = _profile(length - s, u, v_max, acc, self.dt)
             kappa = path.kappa
-            if steer:
+            if self.steer:
                 kappa -= K_LAT * e_lat + K_HEAD * e_th
             w = kappa * u
-            if steer:
-                w = max(-limits.omega_max_radps, min(limits.omega_max_radps, w))
-            step(u, w)
-            if goal is not None and not done and try_kidnap(goal):
+            if self.steer:
+                w = max(-omega_max, min(omega_max, w))
+            self.step(u, w)
+            if goal is not None and not done and self.try_kidnap(goal):
                 return False
         return True
 
-    dwell(limits.start_dwell_s, mark=False)
-    for leg in legs:
-        if isinstance(leg, GoTo):
-            gx, gy = float(leg.xy[0]), float(leg.xy[1])
-            reached = False
-            while not reached:
-                # turn on the spot toward the goal until the true heading faces it
-                dist = math.hypot(gx - x, gy - y)
-                if dist > 1e-9:
-                    target = math.atan2(gy - y, gx - x)
-                    sign = 1.0 if wrap_scalar(target - th) >= 0 else -1.0
-                    u, done = 0.0, False
-                    while not done:
-                        u, _, done = _profile(
-                            sign * wrap_scalar(target - th), u, limits.omega_max_radps, limits.alpha_radps2, dt
-                        )
-                        step(0.0, sign * u)
-                # drive along the line from here to the goal; a kidnap interrupts and the leg starts again
-                heading = math.atan2(gy - y, gx - x)
-                line = _Path(x, y, heading, 0.0)
-                reached = follow(line, math.hypot(gx - x, gy - y), limits.v_max_mps, limits.accel_mps2, (gx, gy))
-            if leg.marked:
-                dwell(limits.dwell_s, mark=True, xy=(gx, gy))
-        elif isinstance(leg, Arc):
-            if leg.length_m <= 0:
-                raise ConfigError(f"Arc.length_m must be > 0 m, got {leg.length_m}")
-            # the speed limit that keeps omega = kappa v within its own limit
-            kappa = float(leg.curvature_1pm)
-            v_max = limits.v_max_mps if kappa == 0 else min(limits.v_max_mps, limits.omega_max_radps / abs(kappa))
-            acc = limits.accel_mps2 if kappa == 0 else min(limits.accel_mps2, limits.alpha_radps2 / abs(kappa))
-            follow(_Path(x, y, th, kappa), float(leg.length_m), v_max, acc, None)
-            if leg.marked:
-                dwell(limits.dwell_s, mark=True)
-        else:  # pragma: no cover - type guard
-            raise ConfigError(f"unknown leg type {type(leg).__name__}")
+    def turn_toward(self, gx: float, gy: float) -> None:
+        """Turn on the spot until the true heading faces (gx, gy) m (nothing when already there)."""
+        if math.hypot(gx - self.x, gy - self.y) <= 1e-9:
+            return
+        target = math.atan2(gy - self.y, gx - self.x)
+        sign = 1.0 if wrap_scalar(target - self.th) >= 0 else -1.0
+        lim = self.limits
+        u, done = 0.0, False
+        while not done:
+            u, _, done = _profile(
+                sign * wrap_scalar(target - self.th), u, lim.omega_max_radps, lim.alpha_radps2, self.dt
+            )
+            self.step(0.0, sign * u)
 
-    n = len(poses)
-    return Motion(
-        t=np.arange(n, dtype=np.float64) * dt,
-        poses=np.asarray(poses, dtype=np.float64),
-        d_left=np.asarray(dl_list, dtype=np.float64),
-        d_right=np.asarray(dr_list, dtype=np.float64),
-        v=np.asarray(v_list, dtype=np.float64),
-        omega=np.asarray(w_list, dtype=np.float64),
-        dt=dt,
-        wheelbase_m=b,
-        waypoint_t=np.asarray(wp_t, dtype=np.float64).reshape(-1),
-        waypoint_xy=np.asarray(wp_xy, dtype=np.float64).reshape(-1, 2),
-        kidnaps=tuple(kidnaps),
-        slip_k=float(slip_k),
-    )
+    def go_to(self, gx: float, gy: float, marked: bool) -> None:
+        """A :class:`GoTo` leg: turn, then drive the line from here to the goal; a kidnap starts the leg again."""
+        reached = False
+        while not reached:
+            self.turn_toward(gx, gy)
+            line = _Path(self.x, self.y, math.atan2(gy - self.y, gx - self.x), 0.0)
+            length = math.hypot(gx - self.x, gy - self.y)
+            reached = self.follow(line, length, self.limits.v_max_mps, self.limits.accel_mps2, (gx, gy))
+        if marked:
+            self.dwell(self.limits.dwell_s, mark=True, xy=(gx, gy))
+
+    def arc(self, leg: Arc) -> None:
+        """An :class:`Arc` leg from the current true pose, at the speed that keeps omega = kappa v in its limit."""
+        if leg.length_m <= 0:
+            raise ConfigError(f"Arc.length_m must be > 0 m, got {leg.length_m}")
+        lim = self.limits
+        kappa = float(leg.curvature_1pm)
+        v_max = lim.v_max_mps if kappa == 0 else min(lim.v_max_mps, lim.omega_max_radps / abs(kappa))
+        acc = lim.accel_mps2 if kappa == 0 else min(lim.accel_mps2, lim.alpha_radps2 / abs(kappa))
+        self.follow(_Path(self.x, self.y, self.th, kappa), float(leg.length_m), v_max, acc, None)
+        if leg.marked:
+            self.dwell(lim.dwell_s, mark=True)
+
+    def motion(self) -> Motion:
+        """The drive as a :class:`Motion`."""
+        n = len(self.poses)
+        return Motion(
+            t=np.arange(n, dtype=np.float64) * self.dt,
+            poses=np.asarray(self.poses, dtype=np.float64),
+            d_left=np.asarray(self.dl, dtype=np.float64),
+            d_right=np.asarray(self.dr, dtype=np.float64),
+            v=np.asarray(self.v, dtype=np.float64),
+            omega=np.asarray(self.w, dtype=np.float64),
+            dt=self.dt,
+            wheelbase_m=self.b,
+            waypoint_t=np.asarray(self.wp_t, dtype=np.float64).reshape(-1),
+            waypoint_xy=np.asarray(self.wp_xy, dtype=np.float64).reshape(-1, 2),
+            kidnaps=tuple(self.kidnaps),
+            slip_k=float(self.slip.k),
+        )

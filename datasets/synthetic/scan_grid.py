@@ -8,7 +8,7 @@ World
     An 8 m x 6 m room with a cabinet, a pillar, a short partition and a table against the north wall
     (so that no symmetry makes two poses look alike at eight bearings).
 Robot and commands
-    The shared differential-drive robot of :mod:`locbench.datasets.synthetic.scenarios` (true wheelbase
+    The shared differential-drive robot of :mod:`locbench.datasets.synthetic.toolkit` (true wheelbase
     and random wheel error as everywhere). A planner that knows the true pose issues one command per second
     toward each goal of a fixed tour (8 marked waypoints, the heading crossing +-pi): rotate at up to
     45 deg/s (one scan bearing per command) until facing the goal within 0.5 deg, then translate at up to
@@ -44,14 +44,14 @@ from locbench.datasets.base import (
     Dataset,
     Gaussian2,
     Kidnap,
-    SensorSpec,
     SyntheticBuilder,
     Trajectory2D,
     Waypoints,
     sort_events,
 )
 from locbench.datasets.synthetic.robot import wheel_increment
-from locbench.datasets.synthetic.scenarios import (
+from locbench.datasets.synthetic.sensors import LaserSensor, odometry_increments
+from locbench.datasets.synthetic.toolkit import (
     ENCODER_K_TRUE,
     GENERATOR_VERSION,
     WHEELBASE_NOMINAL_M,
@@ -59,13 +59,11 @@ from locbench.datasets.synthetic.scenarios import (
     encoder_model,
     kidnap_chooser,
     matched_initial_mean,
-    matched_process_noise,
     matched_stream,
-    nominal_odometry_spec,
+    nominal_sensor_spec,
     split_streams,
     true_wheelbase,
 )
-from locbench.datasets.synthetic.sensors import LaserSensor, odometry_increments
 from locbench.datasets.synthetic.world import World
 from locbench.errors import ConfigError
 from locbench.events import Event, LaserScan, Odometry
@@ -197,7 +195,7 @@ def drive_commands(
 ) -> _Commands:
     """Plan and execute 1 s commands along ``tour``; see the module docstring.
 
-    ``kidnap`` is (time s, chooser) with a chooser as :func:`~locbench.datasets.synthetic.scenarios.kidnap_chooser`
+    ``kidnap`` is (time s, chooser) with a chooser as :func:`~locbench.datasets.synthetic.toolkit.kidnap_chooser`
     returns. Each command draws ``2 * SUBSTEPS`` normals from ``rng`` (slip of each wheel per sub-step).
     ``wheelbase_m`` is the true wheelbase (default: the shared robot's, :func:`true_wheelbase`).
     """
@@ -275,6 +273,7 @@ class ScanGridScenario(SyntheticBuilder):
     description: ClassVar[str] = "report 004's scan database at grid poses, translate-or-rotate commands of 1 s"
 
     def build(self, params: ScanGridParams, rng: np.random.Generator) -> Dataset:
+        # long: one scenario's assembly (grid tour, kidnap, scans, dataset) in the order the streams are drawn
         streams = split_streams(rng)
         world = scan_grid_world()
         v_max = params.grid_step_m / COMMAND_S
@@ -342,9 +341,7 @@ class ScanGridScenario(SyntheticBuilder):
             )
             for k in range(n + 1)
         ]
-        spec = SensorSpec(
-            **nominal_odometry_spec(), **matched_process_noise(params.matched), laser_sigma_m=laser.sigma_m
-        )
+        spec = nominal_sensor_spec(params.matched, laser=laser)
         initial_sigma = (0.02, 0.02, math.radians(1.0))
         start = poses[0].copy()
         if params.matched:

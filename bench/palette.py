@@ -16,8 +16,8 @@ from __future__ import annotations
 from collections import defaultdict
 from collections.abc import Iterable, Sequence
 
+from locbench.docfmt import LINESTYLES, MARKERS, LineStyle
 from locbench.pcrb import BOUND_ROWS
-from locbench.report.style import LINESTYLES, MARKERS, LineStyle
 from locbench.spec import Spec
 
 #: Tol's muted scheme, in his order (indigo, cyan, teal, green, olive, sand, rose, wine, purple).
@@ -39,7 +39,7 @@ VARIANT_DASHES: tuple[str, ...] = ("--", "-.", ":")
 #: How far the shades of a filter's configurations go towards black (negative) and white (positive).
 SHADE_RANGE = (-0.5, 0.45)
 
-#: matplotlib marker -> plotly marker symbol (:data:`locbench.report.style.MARKERS`, and "" for none).
+#: matplotlib marker -> plotly marker symbol (:data:`locbench.docfmt.MARKERS`, and "" for none).
 PLOTLY_SYMBOLS: dict[str, str] = {
     "o": "circle",
     "s": "square",

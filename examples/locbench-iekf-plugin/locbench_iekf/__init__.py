@@ -1,0 +1,1 @@
+"""An example locbench filter plugin: :class:`locbench_iekf.iekf.IteratedLandmarkEKF` (filter id ``iekf``)."""

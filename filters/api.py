@@ -1,0 +1,90 @@
+"""The public API of a filter: every type a filter receives, returns and declares, importable from one module.
+
+A filter written outside locbench (a plugin registered through the ``locbench.filters`` entry-point group, see
+the README's "Writing a filter plugin") imports from here, from :mod:`locbench.filters.motion` (the shared
+motion models) and from :mod:`locbench.filters.noise` (the shared noise resolution), and from nothing else of
+locbench; these names keep their meaning across releases. What a filter receives:
+
+* ``reset(initial, world, sensors, rng)``: :class:`Gaussian2` (mean (3,), cov (3, 3)), :class:`WorldMap`
+  (any of :class:`OccupancyGrid`, :class:`Landmarks`, :class:`LineMap`; the kinds in ``requires`` are
+  present), :class:`SensorSpec` (the dataset's nominal noise, None where unknown), a ``numpy`` Generator;
+* ``predict(u)``: an :class:`Odometry` increment (dx, dy, dtheta in the previous robot frame, optional wheel
+  travel and twist);
+* ``update(z)``: one of the observation types in its ``consumes``: :class:`LaserScan`,
+  :class:`LandmarkObservations`, :class:`RangeObservations`, :class:`PoseFix`.
+
+It returns an :class:`Estimate` and declares a ``Config`` deriving from :class:`FilterConfig`, whose fields
+may carry :func:`tunable` / :func:`tunable_choice` ranges and a :func:`field_unit`.
+"""
+
+from __future__ import annotations
+
+from locbench.datasets.base import Gaussian2, Landmarks, LineMap, MapKind, OccupancyGrid, SensorSpec, WorldMap
+from locbench.errors import ConfigError, FilterDiverged
+from locbench.events import (
+    EVENT_TYPES,
+    OBSERVATION_TYPES,
+    UNKNOWN_ID,
+    Event,
+    LandmarkObservations,
+    LaserScan,
+    Observation,
+    Odometry,
+    PoseFix,
+    RangeObservations,
+)
+from locbench.filters import motion, noise
+from locbench.filters.base import (
+    HEALTH_SIGNALS,
+    CheckTolerances,
+    Estimate,
+    Filter,
+    FilterConfig,
+    FloatArray,
+    HealthSignal,
+    accepted_share,
+    gaussian_health,
+)
+from locbench.geometry import compose, wrap_angle, wrap_scalar
+from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
+from locbench.tunable import field_unit, tunable, tunable_choice
+
+__all__ = [
+    "EVENT_TYPES",
+    "HEALTH_SIGNALS",
+    "OBSERVATION_TYPES",
+    "RUN_KEY_OMIT_IF_DEFAULT",
+    "UNKNOWN_ID",
+    "CheckTolerances",
+    "ConfigError",
+    "Estimate",
+    "Event",
+    "Filter",
+    "FilterConfig",
+    "FilterDiverged",
+    "FloatArray",
+    "Gaussian2",
+    "HealthSignal",
+    "LandmarkObservations",
+    "Landmarks",
+    "LaserScan",
+    "LineMap",
+    "MapKind",
+    "Observation",
+    "OccupancyGrid",
+    "Odometry",
+    "PoseFix",
+    "RangeObservations",
+    "SensorSpec",
+    "WorldMap",
+    "accepted_share",
+    "compose",
+    "field_unit",
+    "gaussian_health",
+    "motion",
+    "noise",
+    "tunable",
+    "tunable_choice",
+    "wrap_angle",
+    "wrap_scalar",
+]

@@ -1,0 +1,76 @@
+"""The shared motion models, public: what the built-in filters predict with, for a plugin filter to reuse.
+
+The wheel-encoder model of report 003 (eq. 1-5, 10), the odometry-increment model and the twist noise of
+recorded odometry, their Jacobians, covariances and samplers, and :class:`MotionModel`, which picks one of
+them per :class:`~locbench.events.Odometry` event. The models, their equations, frames and units are
+documented in the implementation module (``locbench.filters._motion``, where the built-in filters import them
+from); this module is the stable name a plugin imports: ``from locbench.filters.motion import MotionModel``.
+
+A config that mixes in :class:`MotionNoiseConfig` gets the motion-noise fields every built-in filter has
+(``input_noise``, ``wheelbase_m``, ``encoder_k_left`` ... ``motion_noise_scale``) and their resolution against
+the dataset's nominal noise (:meth:`MotionNoiseConfig.motion_noise`).
+"""
+
+from __future__ import annotations
+
+from locbench.filters._motion import (
+    DEFAULT_ENCODER_K,
+    DEFAULT_SIGMA_THETA_PER_M,
+    DEFAULT_SIGMA_THETA_PER_RAD,
+    DEFAULT_SIGMA_XY_PER_M,
+    InputNoise,
+    MotionKind,
+    MotionModel,
+    MotionNoise,
+    MotionNoiseConfig,
+    Step,
+    increment_covariance,
+    increment_jacobians,
+    increment_variances,
+    input_covariance,
+    jacobian_state,
+    jacobian_wheels,
+    predict_arc,
+    predict_midpoint,
+    propagate_covariance,
+    resolve_motion_noise,
+    sample_increment_motion,
+    sample_twist_motion,
+    sample_wheel_motion,
+    twist_increment,
+    twist_increment_covariance,
+    twist_jacobian,
+    wheel_to_motion,
+    wheel_variances,
+)
+
+__all__ = [
+    "DEFAULT_ENCODER_K",
+    "DEFAULT_SIGMA_THETA_PER_M",
+    "DEFAULT_SIGMA_THETA_PER_RAD",
+    "DEFAULT_SIGMA_XY_PER_M",
+    "InputNoise",
+    "MotionKind",
+    "MotionModel",
+    "MotionNoise",
+    "MotionNoiseConfig",
+    "Step",
+    "increment_covariance",
+    "increment_jacobians",
+    "increment_variances",
+    "input_covariance",
+    "jacobian_state",
+    "jacobian_wheels",
+    "predict_arc",
+    "predict_midpoint",
+    "propagate_covariance",
+    "resolve_motion_noise",
+    "sample_increment_motion",
+    "sample_twist_motion",
+    "sample_wheel_motion",
+    "twist_increment",
+    "twist_increment_covariance",
+    "twist_jacobian",
+    "wheel_to_motion",
+    "wheel_variances",
+]
