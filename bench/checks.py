@@ -274,6 +274,7 @@ def check_empty_observation(flt: Filter) -> None:
 def check_health_and_scores(flt: Filter) -> None:
     """``health()`` gives named floats from :data:`HEALTH_SIGNALS` at every step; drawing belief samples (the
     runner's generator) changes no estimate; the four proper scores of the run are finite."""
+    from locbench.metrics import align
     from locbench.scores import SCORE_IDS, score_metrics
 
     ds = _tiny("tiny_circle")
@@ -291,7 +292,7 @@ def check_health_and_scores(flt: Filter) -> None:
     if unknown:
         raise CheckFailed(f"health() reports signals not in HEALTH_SIGNALS: {unknown}")
     gt = ds.ground_truth
-    scores = score_metrics(sampled.t, sampled.mean, sampled.cov, gt.t, gt.poses, sampled.extra)
+    scores = score_metrics(align(sampled.t, sampled.mean, gt.t, gt.poses, sampled.cov), sampled.extra)
     bad = {k: scores[k] for k in SCORE_IDS if not np.isfinite(scores[k])}
     if bad:
         raise CheckFailed(f"proper scores not finite: {bad}")

@@ -20,10 +20,13 @@ import importlib
 import logging
 import pkgutil
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal, NamedTuple
 
 import pandas as pd
+
+from locbench.spec import Spec
+from locbench.suites import Suite
 
 if TYPE_CHECKING:
     from locbench.docfmt import Block
@@ -79,6 +82,9 @@ class Experiment:
         Its variants are shown folded (by its registered sections) instead of one table each.
     order : int
         Position among the experiment sections (and summary tables), ascending.
+    suite : Suite
+        The suite that makes the experiment's runs (keyword): it must run some variant of ``dataset``, so an
+        experiment (and its claims) cannot point to runs no suite makes.
     """
 
     dataset: str
@@ -88,6 +94,11 @@ class Experiment:
     summary: bool = False
     fold_variants: bool = False
     order: int = 100
+    suite: Suite = field(kw_only=True)
+
+    def __post_init__(self) -> None:
+        if not any(Spec.parse(d).ident == self.dataset for b in self.suite.blocks for d in b.datasets):
+            raise ValueError(f"experiment {self.dataset!r}: suite {self.suite.name!r} runs no {self.dataset} dataset")
 
 
 @dataclass(frozen=True)
@@ -113,6 +124,9 @@ class Claim:
     across_variants : bool
         Evaluated once over all variants of the dataset id (a sweep over a dataset parameter, recovery
         against kidnap distance) instead of once per dataset name.
+    suite : Suite or None
+        The suite that makes the runs the claim reads when it is not its experiment's (the consistency
+        claims read the matched worlds of suite ``consistency``); :func:`claim_suite` resolves it.
     """
 
     id: str
@@ -122,6 +136,7 @@ class Claim:
     reported: str
     check: Callable[[pd.DataFrame], ClaimResult]
     across_variants: bool = False
+    suite: Suite | None = None
 
     def evaluate(self, df: pd.DataFrame) -> ClaimResult:
         """Run the check; a check that cannot run (missing data) is "not evaluated", never an exception."""
@@ -211,3 +226,13 @@ def sections_for(dataset_id: str) -> tuple[SectionFn, ...]:
     """The extra report sections registered for a dataset id."""
     _load()
     return tuple(fn for ds, fn in _SECTIONS if ds == dataset_id)
+
+
+def claim_suite(claim: Claim) -> Suite:
+    """The suite whose runs a claim reads: its own, else its experiment's (a claim without either is an error)."""
+    if claim.suite is not None:
+        return claim.suite
+    exp = experiment_of(claim.dataset)
+    if exp is None:
+        raise ValueError(f"claim {claim.id!r}: no experiment registered for dataset {claim.dataset!r} and no suite")
+    return exp.suite

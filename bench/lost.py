@@ -31,7 +31,7 @@ import numpy.typing as npt
 from scipy import stats
 
 from locbench.filters.base import HEALTH_SIGNALS
-from locbench.metrics import KIDNAP_WINDOW_S, hold_indices
+from locbench.metrics import KIDNAP_WINDOW_S, Aligned
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -82,20 +82,12 @@ class HealthSeries:
     kidnap_t: float = float("nan")
 
 
-def health_series(
-    t_est: npt.ArrayLike,
-    mean: npt.ArrayLike,
-    health: Mapping[str, npt.ArrayLike],
-    gt_t: npt.ArrayLike,
-    gt_xy: npt.ArrayLike,
-    kidnap_t: float = float("nan"),
-) -> HealthSeries:
-    """The :class:`HealthSeries` of one run (signals not in :data:`HEALTH_SIGNALS` are ignored)."""
-    idx = hold_indices(t_est, gt_t)
-    est = np.asarray(mean, dtype=np.float64)[idx, :2]
-    err = np.hypot(*(est - np.asarray(gt_xy, dtype=np.float64)).T)
-    sig = {k: oriented(k, forward_fill(v)[idx]) for k, v in health.items() if k in HEALTH_SIGNALS}
-    return HealthSeries(np.asarray(gt_t, dtype=np.float64), err, sig, kidnap_t)
+def health_series(a: Aligned, health: Mapping[str, npt.ArrayLike], kidnap_t: float = float("nan")) -> HealthSeries:
+    """The :class:`HealthSeries` of one run from its aligned view ``a`` (:func:`locbench.metrics.align`): each
+    stored signal is held at the ground-truth times by the view's rows (signals not in :data:`HEALTH_SIGNALS`
+    are ignored)."""
+    sig = {k: oriented(k, forward_fill(v)[a.rows]) for k, v in health.items() if k in HEALTH_SIGNALS}
+    return HealthSeries(a.t, a.position_error, sig, kidnap_t)
 
 
 def auroc(score: npt.ArrayLike, positive: npt.ArrayLike) -> float:

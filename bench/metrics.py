@@ -8,6 +8,9 @@ Conventions shared by every function here:
   At equal times the later row wins, so a predict and an update at the same ``t`` score the update.
 - Errors are taken at the **ground-truth times** (and at the waypoint times for waypoint errors), never
   at the filter's own times, so that filters with different update rates are scored on the same grid.
+- **Align once, then compute** (as evo associates estimate and reference before any metric): :func:`align`
+  holds a run's estimates at the ground-truth times once, giving an :class:`Aligned` view (times, held
+  means and covariances, truth, wrapped errors, NEES); every per-time metric takes that view.
 - Position errors in m, headings in rad wrapped to (-pi, pi], times in s, runtimes in microseconds.
 - No alignment of the estimate to the truth: a localization filter works in the map frame.
 
@@ -65,7 +68,9 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, NamedTuple
+from dataclasses import dataclass
+from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -148,6 +153,95 @@ def estimate_at(t_est: npt.ArrayLike, values: npt.ArrayLike, t_query: npt.ArrayL
     return v[hold_indices(t_est, t_query)]
 
 
+# --- the aligned view: a run held at the ground-truth times, once ------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class Aligned:
+    """A run's estimates held at the ground-truth times (zero-order hold), made once by :func:`align`.
+
+    Every per-time metric reads this view instead of re-running the hold on the raw arrays (evo associates
+    estimate and reference once, then computes). Derived arrays are computed on first use and kept.
+
+    Attributes
+    ----------
+    t : ndarray, shape (k,)
+        Ground-truth times, s.
+    rows : ndarray of intp, shape (k,)
+        Row of the stored estimates in force at each time (:func:`hold_indices`); other per-row series of the
+        run (its health signals) are held by indexing with it.
+    mean : ndarray, shape (k, 3)
+        Held estimate (x m, y m, theta rad), world frame.
+    truth : ndarray, shape (k, 3)
+        Ground-truth poses at ``t``, world frame.
+    cov : ndarray, shape (k, 3, 3), or None
+        Held covariance (None for a trajectory without one: a smoothed trajectory).
+    """
+
+    t: FloatArray
+    rows: npt.NDArray[np.intp]
+    mean: FloatArray
+    truth: FloatArray
+    cov: FloatArray | None = None
+
+    @cached_property
+    def error(self) -> FloatArray:
+        """Estimate minus truth with the heading difference wrapped to (-pi, pi], shape (k, 3) (m, m, rad)."""
+        return pose_error(self.mean, self.truth)
+
+    @cached_property
+    def position_error(self) -> FloatArray:
+        """|p_hat(t_k) - p(t_k)|, shape (k,), m."""
+        e = self.error
+        return np.hypot(e[:, 0], e[:, 1])
+
+    @cached_property
+    def nees(self) -> FloatArray:
+        """NEES of the pose at every time (:func:`nees`), shape (k,); needs ``cov``."""
+        if self.cov is None:
+            raise ValueError("this aligned trajectory has no covariance: no NEES")
+        return nees(self.error, self.cov)
+
+
+def align(
+    t_est: npt.ArrayLike,
+    mean: npt.ArrayLike,
+    gt_t: npt.ArrayLike,
+    gt_poses: npt.ArrayLike,
+    cov: npt.ArrayLike | None = None,
+) -> Aligned:
+    """The :class:`Aligned` view of stored estimates at the ground-truth times (zero-order hold).
+
+    Parameters
+    ----------
+    t_est : array-like, shape (n,)
+        Times of the stored estimates, s, non-decreasing.
+    mean : array-like, shape (n, 3)
+        Estimated poses (x m, y m, theta rad), world frame.
+    gt_t : array-like, shape (k,)
+        Ground-truth times, s.
+    gt_poses : array-like, shape (k, 3)
+        Ground-truth poses, world frame.
+    cov : array-like, shape (n, 3, 3), optional
+        The estimates' covariances.
+    """
+    rows = hold_indices(t_est, gt_t)
+    held_cov = None if cov is None else np.asarray(cov, dtype=np.float64)[rows]
+    return Aligned(
+        np.asarray(gt_t, dtype=np.float64),
+        rows,
+        np.asarray(mean, dtype=np.float64)[rows],
+        np.asarray(gt_poses, dtype=np.float64),
+        held_cov,
+    )
+
+
+def align_run(run: RunRecord, truth: TruthRecord) -> Aligned:
+    """The :class:`Aligned` view of a stored run (means and covariances) at its truth's ground-truth times."""
+    gt = truth.ground_truth
+    return align(run.t, run.mean, gt.t, gt.poses, run.cov)
+
+
 # --- errors of one run --------------------------------------------------------------------------
 
 
@@ -179,13 +273,12 @@ def waypoint_errors(
     return errors, est_xy
 
 
-def ate(t_est: npt.ArrayLike, mean: npt.ArrayLike, gt_t: npt.ArrayLike, gt_xy: npt.ArrayLike) -> float:
+def ate(a: Aligned) -> float:
     """Absolute trajectory error: position RMSE over every ground-truth time, no alignment.
 
     ATE = sqrt(mean_k |p_hat(t_k) - p(t_k)|^2) over the ground-truth times t_k, m.
     """
-    est_xy = estimate_at(t_est, np.asarray(mean, dtype=np.float64)[:, :2], gt_t)
-    d2 = np.sum((est_xy - np.asarray(gt_xy, dtype=np.float64)) ** 2, axis=1)
+    d2 = np.sum(a.error[:, :2] ** 2, axis=1)
     return float(np.sqrt(np.mean(d2)))
 
 
@@ -193,28 +286,21 @@ def ate(t_est: npt.ArrayLike, mean: npt.ArrayLike, gt_t: npt.ArrayLike, gt_xy: n
 WITHIN_THRESHOLDS_CM = (5, 10, 25, 50)
 
 
-def within_fractions(
-    t_est: npt.ArrayLike, mean: npt.ArrayLike, gt_t: npt.ArrayLike, gt_xy: npt.ArrayLike
-) -> dict[str, float]:
+def within_fractions(a: Aligned) -> dict[str, float]:
     """Accuracy at thresholds: the fraction of ground-truth times whose position error is at most each of
     :data:`WITHIN_THRESHOLDS_CM`, as ``within_<k>cm_fraction`` (zero-order hold, no alignment)."""
-    est_xy = estimate_at(t_est, np.asarray(mean, dtype=np.float64)[:, :2], gt_t)
-    err = np.hypot(*(est_xy - np.asarray(gt_xy, dtype=np.float64)).T)
+    err = a.position_error
     return {f"within_{k}cm_fraction": float(np.mean(err <= k / 100.0)) for k in WITHIN_THRESHOLDS_CM}
 
 
-def heading_rmse(t_est: npt.ArrayLike, mean: npt.ArrayLike, gt_t: npt.ArrayLike, gt_theta: npt.ArrayLike) -> float:
+def heading_rmse(a: Aligned) -> float:
     """Heading RMSE over every ground-truth time with the difference wrapped to (-pi, pi], rad."""
-    est_th = estimate_at(t_est, np.asarray(mean, dtype=np.float64)[:, 2], gt_t)
-    d = wrap_angle(est_th - np.asarray(gt_theta, dtype=np.float64))
-    return float(np.sqrt(np.mean(d**2)))
+    return float(np.sqrt(np.mean(a.error[:, 2] ** 2)))
 
 
-def final_error(t_est: npt.ArrayLike, mean: npt.ArrayLike, gt_t: npt.ArrayLike, gt_xy: npt.ArrayLike) -> float:
+def final_error(a: Aligned) -> float:
     """Position error at the last ground-truth time, m."""
-    gt_t = np.asarray(gt_t, dtype=np.float64)
-    est_xy = estimate_at(t_est, np.asarray(mean, dtype=np.float64)[:, :2], gt_t[-1:])
-    return float(np.hypot(*(est_xy[0] - np.asarray(gt_xy, dtype=np.float64)[-1])))
+    return float(a.position_error[-1])
 
 
 def distance_pairs(gt_xy: npt.ArrayLike, delta_m: float = RPE_DELTA_M) -> tuple[npt.NDArray[np.intp], FloatArray]:
@@ -249,13 +335,7 @@ def distance_pairs(gt_xy: npt.ArrayLike, delta_m: float = RPE_DELTA_M) -> tuple[
     return pairs, s[pairs[:, 1]] - s[pairs[:, 0]]
 
 
-def rpe_per_metre(
-    t_est: npt.ArrayLike,
-    mean: npt.ArrayLike,
-    gt_t: npt.ArrayLike,
-    gt_poses: npt.ArrayLike,
-    delta_m: float = RPE_DELTA_M,
-) -> float:
+def rpe_per_metre(a: Aligned, delta_m: float = RPE_DELTA_M) -> float:
     """Relative pose error per metre travelled (metric id ``rpe_m_per_m``).
 
     Definition: take the pairs (i, j) of ground-truth times from :func:`distance_pairs` (j is the first
@@ -267,11 +347,8 @@ def rpe_per_metre(
 
     Parameters
     ----------
-    t_est : array-like, shape (n,)
-    mean : array-like, shape (n, 3)
-    gt_t : array-like, shape (k,)
-    gt_poses : array-like, shape (k, 3)
-        Ground-truth poses (x m, y m, theta rad).
+    a : Aligned
+        The run at the ground-truth times.
     delta_m : float
         Travelled distance per pair, m.
 
@@ -280,11 +357,11 @@ def rpe_per_metre(
     float
         Mean translational drift per metre; NaN when the path is shorter than ``delta_m``.
     """
-    gt = np.asarray(gt_poses, dtype=np.float64)
+    gt = a.truth
     pairs, dist = distance_pairs(gt[:, :2], delta_m)
     if pairs.shape[0] == 0:
         return float("nan")
-    est = estimate_at(t_est, np.asarray(mean, dtype=np.float64), gt_t)
+    est = a.mean
     rel_true = between(gt[pairs[:, 0]], gt[pairs[:, 1]])
     rel_est = between(est[pairs[:, 0]], est[pairs[:, 1]])
     err = between(rel_true, rel_est)
@@ -329,21 +406,9 @@ def nees(errors: npt.ArrayLike, cov: npt.ArrayLike) -> FloatArray:
     return out
 
 
-def nees_at_truth(
-    t_est: npt.ArrayLike, mean: npt.ArrayLike, cov: npt.ArrayLike, gt_t: npt.ArrayLike, gt_poses: npt.ArrayLike
-) -> FloatArray:
+def nees_at_truth(a: Aligned) -> FloatArray:
     """NEES of the pose (x, y, theta) at every ground-truth time, heading error wrapped, shape (k,)."""
-    return nees(*_errors_at_truth(t_est, mean, cov, gt_t, gt_poses))
-
-
-def _errors_at_truth(
-    t_est: npt.ArrayLike, mean: npt.ArrayLike, cov: npt.ArrayLike, gt_t: npt.ArrayLike, gt_poses: npt.ArrayLike
-) -> tuple[FloatArray, FloatArray]:
-    """Pose error (heading wrapped) and the held covariance at every ground-truth time, (k, 3), (k, 3, 3)."""
-    idx = hold_indices(t_est, gt_t)
-    m = np.asarray(mean, dtype=np.float64)[idx]
-    P = np.asarray(cov, dtype=np.float64)[idx]
-    return pose_error(m, gt_poses), P
+    return a.nees
 
 
 def nll(errors: npt.ArrayLike, cov: npt.ArrayLike) -> FloatArray:
@@ -379,35 +444,11 @@ def nll(errors: npt.ArrayLike, cov: npt.ArrayLike) -> FloatArray:
     return out
 
 
-def nll_at_truth(
-    t_est: npt.ArrayLike, mean: npt.ArrayLike, cov: npt.ArrayLike, gt_t: npt.ArrayLike, gt_poses: npt.ArrayLike
-) -> FloatArray:
+def nll_at_truth(a: Aligned) -> FloatArray:
     """NLL of the pose (x, y, theta) at every ground-truth time, heading error wrapped, shape (k,)."""
-    return nll(*_errors_at_truth(t_est, mean, cov, gt_t, gt_poses))
-
-
-def ate_over_pcrb(ate_m: npt.ArrayLike, pcrb_ate_m: float) -> float:
-    """Efficiency of a filter against the posterior Cramer-Rao bound: sqrt(mean over runs of ate_m^2) / bound.
-
-    Parameters
-    ----------
-    ate_m : array-like, shape (n_runs,)
-        The filter's ATE of each run (seed) on one dataset, m.
-    pcrb_ate_m : float
-        The bound's ATE on the same dataset (RMS over the same seeds, :func:`locbench.pcrb.pcrb_metrics`), m.
-
-    Returns
-    -------
-    float
-        Dimensionless, >= 1 up to sampling noise for any estimator the bound covers (1 = efficient); nan for
-        no runs.
-    """
-    a = np.asarray(ate_m, dtype=np.float64)
-    if a.size == 0:
-        return float("nan")
-    if not pcrb_ate_m > 0:
-        raise ValueError(f"pcrb_ate_m must be > 0 m, got {pcrb_ate_m}")
-    return float(np.sqrt(np.mean(a * a)) / pcrb_ate_m)
+    if a.cov is None:
+        raise ValueError("this aligned trajectory has no covariance: no NLL")
+    return nll(a.error, a.cov)
 
 
 def chi2_band(dof: int = POSE_DOF, n_runs: int = 1, confidence: float = CONFIDENCE) -> tuple[float, float]:
@@ -440,21 +481,8 @@ def fraction_in_band(values: npt.ArrayLike, band: tuple[float, float]) -> float:
 # --- recovery: kidnap and global localization ----------------------------------------------------
 
 
-def within_recovery(
-    t_est: npt.ArrayLike, mean: npt.ArrayLike, gt_t: npt.ArrayLike, gt_poses: npt.ArrayLike
-) -> npt.NDArray[np.bool_]:
+def within_recovery(a: Aligned) -> npt.NDArray[np.bool_]:
     """Whether the estimate meets the recovery criterion at each ground-truth time.
-
-    Parameters
-    ----------
-    t_est : array-like, shape (n,)
-        Estimate times, s.
-    mean : array-like, shape (n, 3)
-        Estimated poses (x m, y m, theta rad), world frame.
-    gt_t : array-like, shape (k,)
-        Ground-truth times, s.
-    gt_poses : array-like, shape (k, 3)
-        Ground-truth poses, world frame.
 
     Returns
     -------
@@ -462,10 +490,9 @@ def within_recovery(
         Position error <= :data:`RECOVERY_POSITION_M` and |wrapped heading error| <=
         :data:`RECOVERY_HEADING_RAD` (zero-order hold of the estimate).
     """
-    est = estimate_at(t_est, np.asarray(mean, dtype=np.float64), gt_t)
-    e = pose_error(est, np.asarray(gt_poses, dtype=np.float64))
+    e = a.error
     with np.errstate(invalid="ignore"):
-        return (np.hypot(e[:, 0], e[:, 1]) <= RECOVERY_POSITION_M) & (np.abs(e[:, 2]) <= RECOVERY_HEADING_RAD)
+        return (a.position_error <= RECOVERY_POSITION_M) & (np.abs(e[:, 2]) <= RECOVERY_HEADING_RAD)
 
 
 def first_hold(
@@ -531,22 +558,14 @@ def false_confidence_bound(probability: float = FALSE_CONFIDENCE_PROBABILITY, do
     return float(stats.chi2.ppf(probability, dof))
 
 
-def kidnap_metrics(
-    t_est: npt.ArrayLike,
-    mean: npt.ArrayLike,
-    cov: npt.ArrayLike,
-    gt_t: npt.ArrayLike,
-    gt_poses: npt.ArrayLike,
-    kidnaps: Sequence[Kidnap],
-) -> dict[str, float]:
+def kidnap_metrics(a: Aligned, kidnaps: Sequence[Kidnap]) -> dict[str, float]:
     """Recovery from the first kidnap of a run (definitions in the module docstring).
 
     Parameters
     ----------
-    t_est, mean, cov : array-like, shapes (n,), (n, 3), (n, 3, 3)
-        The stored estimates.
-    gt_t, gt_poses : array-like, shapes (k,), (k, 3)
-        The ground truth (after a kidnap: the pose after the jump).
+    a : Aligned
+        The run at the ground-truth times, with its covariances (after a kidnap the truth is the pose after
+        the jump).
     kidnaps : sequence of Kidnap
         The truth's kidnap events (time s, world-frame jump (dx m, dy m, dtheta rad)); only the first
         (earliest) is scored.
@@ -561,12 +580,12 @@ def kidnap_metrics(
         return {}
     ordered = sorted(kidnaps, key=lambda k: k.t)
     first = ordered[0]
-    tt = np.asarray(gt_t, dtype=np.float64)
+    tt = a.t
     t_k = float(first.t)
     # the window ends at 30 s, at the next kidnap (which would score a different jump) or with the truth
     t_next = float(ordered[1].t) if len(ordered) > 1 else np.inf
     window_end = min(t_k + KIDNAP_WINDOW_S, t_next, float(tt[-1]))
-    ok = within_recovery(t_est, mean, tt, gt_poses)
+    ok = within_recovery(a)
     if np.isfinite(t_next):
         ok = ok & (tt < t_next - _T_EPS)  # a hold must not straddle the next jump
     t_s = first_hold(tt, ok, t_k, latest_start=min(t_k + KIDNAP_WINDOW_S, t_next))
@@ -574,28 +593,25 @@ def kidnap_metrics(
     out["kidnap_recovered"] = 1.0 if t_s is not None else 0.0
     if t_s is not None:
         out["kidnap_time_to_recover_s"] = t_s - t_k
-    ne = nees_at_truth(t_est, mean, cov, tt, gt_poses)
-    confident = ne > false_confidence_bound()
+    confident = a.nees > false_confidence_bound()
     out["kidnap_false_confidence_fraction"] = time_fraction(tt, confident, t_k, window_end if t_s is None else t_s)
     return out
 
 
-def convergence_metrics(
-    t_est: npt.ArrayLike, mean: npt.ArrayLike, gt_t: npt.ArrayLike, gt_poses: npt.ArrayLike
-) -> dict[str, float]:
+def convergence_metrics(a: Aligned) -> dict[str, float]:
     """Global localization: ``converged`` (1/0) and ``time_to_converge_s`` (only when converged).
 
     The recovery criterion (module docstring) searched from the first ground-truth time t_0 over the
     whole run; ``time_to_converge_s`` = t_s - t_0, s.
     """
-    tt = np.asarray(gt_t, dtype=np.float64)
-    t_s = first_hold(tt, within_recovery(t_est, mean, tt, gt_poses), float(tt[0]))
+    tt = a.t
+    t_s = first_hold(tt, within_recovery(a), float(tt[0]))
     if t_s is None:
         return {"converged": 0.0}
     return {"converged": 1.0, "time_to_converge_s": t_s - float(tt[0])}
 
 
-def smoothed_metrics(extra: Mapping[str, np.ndarray], gt_t: npt.ArrayLike, gt_poses: npt.ArrayLike) -> dict[str, float]:
+def smoothed_metrics(extra: Mapping[str, np.ndarray], a: Aligned) -> dict[str, float]:
     """ATE and heading RMSE of a smoothed trajectory stored in a run's ``extra``, if there is one.
 
     Parameters
@@ -603,8 +619,8 @@ def smoothed_metrics(extra: Mapping[str, np.ndarray], gt_t: npt.ArrayLike, gt_po
     extra : mapping
         The run's filter-specific arrays; uses ``smoothed_t`` (n,), s, and ``smoothed_mean`` (n, 3),
         world frame.
-    gt_t, gt_poses : array-like, shapes (k,), (k, 3)
-        The ground truth.
+    a : Aligned
+        The run at the ground-truth times: its times and truth (the smoothed poses are held there).
 
     Returns
     -------
@@ -632,11 +648,8 @@ def smoothed_metrics(extra: Mapping[str, np.ndarray], gt_t: npt.ArrayLike, gt_po
         return {}
     if np.any(np.diff(st) < 0):
         raise ValueError("smoothed trajectory: 'smoothed_t' must be non-decreasing")
-    gp = np.asarray(gt_poses, dtype=np.float64)
-    return {
-        "smoothed_ate_m": ate(st, sm, gt_t, gp[:, :2]),
-        "smoothed_heading_rmse_rad": heading_rmse(st, sm, gt_t, gp[:, 2]),
-    }
+    smoothed = align(st, sm, a.t, a.truth)
+    return {"smoothed_ate_m": ate(smoothed), "smoothed_heading_rmse_rad": heading_rmse(smoothed)}
 
 
 # --- runtime ------------------------------------------------------------------------------------
@@ -756,7 +769,9 @@ def relation_errors(
 # --- one run ------------------------------------------------------------------------------------
 
 
-def run_metrics(run: RunRecord, truth: TruthRecord, rpe_delta_m: float = RPE_DELTA_M) -> dict[str, float]:
+def run_metrics(
+    run: RunRecord, truth: TruthRecord, rpe_delta_m: float = RPE_DELTA_M, aligned: Aligned | None = None
+) -> dict[str, float]:
     """Every metric of one stored run, keyed by its DESIGN metric id.
 
     Parameters
@@ -767,6 +782,9 @@ def run_metrics(run: RunRecord, truth: TruthRecord, rpe_delta_m: float = RPE_DEL
         The ground truth of the same dataset and seed.
     rpe_delta_m : float
         Travelled distance of the RPE pairs, m (``rpe_m_per_m`` is defined with the default 1 m).
+    aligned : Aligned, optional
+        ``align_run(run, truth)`` when the caller has it already (the report keeps its NEES series); made
+        here otherwise.
 
     Returns
     -------
@@ -794,8 +812,7 @@ def run_metrics(run: RunRecord, truth: TruthRecord, rpe_delta_m: float = RPE_DEL
         return {"failed": 1.0}
     if run.t.shape[0] == 0:
         raise ValueError("an ok run has no estimates")
-    gt = truth.ground_truth
-    gt_poses = gt.poses
+    a = aligned if aligned is not None else align_run(run, truth)
     out: dict[str, float] = {"failed": 0.0}
     if truth.waypoints is not None and len(truth.waypoints):
         err, est_xy = waypoint_errors(run.t, run.mean, truth.waypoints.t, truth.waypoints.xy)
@@ -806,16 +823,15 @@ def run_metrics(run: RunRecord, truth: TruthRecord, rpe_delta_m: float = RPE_DEL
             # The marked point itself, so that the distance of the mean estimate needs only the CSV.
             out[f"waypoint_{j + 1}_marked_x_m"] = float(truth.waypoints.xy[j, 0])
             out[f"waypoint_{j + 1}_marked_y_m"] = float(truth.waypoints.xy[j, 1])
-    out["ate_m"] = ate(run.t, run.mean, gt.t, gt.xy)
-    out.update(within_fractions(run.t, run.mean, gt.t, gt.xy))
-    out["heading_rmse_rad"] = heading_rmse(run.t, run.mean, gt.t, gt.theta)
-    out["rpe_m_per_m"] = rpe_per_metre(run.t, run.mean, gt.t, gt_poses, rpe_delta_m)
-    out["final_error_m"] = final_error(run.t, run.mean, gt.t, gt.xy)
-    ne = nees_at_truth(run.t, run.mean, run.cov, gt.t, gt_poses)
-    out["anees"] = anees(ne)
-    out["nees_in_band_fraction"] = fraction_in_band(ne, chi2_band(POSE_DOF, 1))
+    out["ate_m"] = ate(a)
+    out.update(within_fractions(a))
+    out["heading_rmse_rad"] = heading_rmse(a)
+    out["rpe_m_per_m"] = rpe_per_metre(a, rpe_delta_m)
+    out["final_error_m"] = final_error(a)
+    out["anees"] = anees(a.nees)
+    out["nees_in_band_fraction"] = fraction_in_band(a.nees, chi2_band(POSE_DOF, 1))
     # +inf when any time's covariance is singular, as the ANEES.
-    out["nll"] = float(np.mean(nll_at_truth(run.t, run.mean, run.cov, gt.t, gt_poses)))
+    out["nll"] = float(np.mean(nll_at_truth(a)))
     for call in ("predict", "update"):
         for stat, value in runtime_stats(run.step_times_us(call)).items():
             out[f"{call}_us_{stat}"] = value
@@ -823,10 +839,10 @@ def run_metrics(run: RunRecord, truth: TruthRecord, rpe_delta_m: float = RPE_DEL
     ref, ref_cpu = (_positive(run.meta.get(k)) for k in ("reference_s", "reference_cpu_s"))
     if ref is not None:  # runs stored before reference_s was recorded have none
         out.update(reference_units(out, ref, ref_cpu))
-    out.update(convergence_metrics(run.t, run.mean, gt.t, gt_poses))
-    out.update(kidnap_metrics(run.t, run.mean, run.cov, gt.t, gt_poses, truth.kidnaps))
-    out.update(smoothed_metrics(run.extra, gt.t, gt_poses))
-    out.update(score_metrics(run.t, run.mean, run.cov, gt.t, gt_poses, run.extra))
+    out.update(convergence_metrics(a))
+    out.update(kidnap_metrics(a, truth.kidnaps))
+    out.update(smoothed_metrics(run.extra, a))
+    out.update(score_metrics(a, run.extra))
     out.update(acceptance_metrics(run.diagnostics))
     out.update(particle_count_metrics(run.diagnostics))
     if truth.relations is not None and len(truth.relations):
@@ -864,163 +880,3 @@ def acceptance_metrics(diagnostics: dict[str, FloatArray]) -> dict[str, float]:
         return {}
     total = float(np.nansum(acc) + np.nansum(rej))
     return {"accepted_fraction": float(np.nansum(acc)) / total} if total > 0 else {}
-
-
-# --- metric metadata: what the report's tables print ------------------------------------------------
-
-
-class MetricInfo(NamedTuple):
-    """How a metric is shown: header, display unit and the factor from its SI value, and which way is better.
-
-    ``better`` is ``"lower"``, ``"higher"`` or ``"closer"`` (to ``target``, in ratio: the ANEES against
-    the pose dimension) or ``""`` (no best value).
-    """
-
-    header: str
-    unit: str
-    scale: float = 1.0
-    better: str = "lower"
-    target: float = float("nan")
-    digits: int = 3
-
-
-#: Display metadata of the metric ids the report tables show; errors in cm, headings in deg, times in us.
-METRICS: dict[str, MetricInfo] = {
-    "ate_m": MetricInfo("ATE", "cm", 100.0),
-    "smoothed_ate_m": MetricInfo("smoothed ATE", "cm", 100.0),
-    "waypoint_rmse_mean_m": MetricInfo("mean waypoint RMSE", "cm", 100.0),
-    "heading_rmse_rad": MetricInfo("heading RMSE", "deg", float(np.degrees(1.0))),
-    "rpe_m_per_m": MetricInfo("RPE", "%", 100.0),
-    "final_error_m": MetricInfo("final error", "cm", 100.0),
-    "anees": MetricInfo("ANEES", "", 1.0, "closer", float(POSE_DOF)),
-    "nees_in_band_fraction": MetricInfo("NEES in 95 % band", "%", 100.0, "higher"),
-    "nll": MetricInfo("NLL", "", 1.0),
-    "crps_x_m": MetricInfo("CRPS x", "cm", 100.0),
-    "crps_y_m": MetricInfo("CRPS y", "cm", 100.0),
-    "crps_heading_rad": MetricInfo("CRPS heading", "deg", float(np.degrees(1.0))),
-    "energy_score_m": MetricInfo("energy score", "cm", 100.0),
-    "lost_auroc": MetricInfo("lost AUROC", "", 1.0, "higher"),
-    "ate_over_pcrb": MetricInfo("ATE / PCRB", "x", 1.0),
-    "predict_us_median": MetricInfo("predict median", "us", 1.0),
-    "update_us_median": MetricInfo("update median", "us", 1.0),
-    "realtime_factor": MetricInfo("real-time factor", "x", 1.0, "higher"),
-    # reference units (reference_units): us and x on a machine whose reference workload takes 1 s
-    "predict_us_median_ref": MetricInfo("predict median", "ref us", 1.0),
-    "update_us_median_ref": MetricInfo("update median", "ref us", 1.0),
-    "realtime_factor_ref": MetricInfo("real-time factor", "ref x", 1.0, "higher"),
-    "kidnap_recovered": MetricInfo("kidnap recovery", "%", 100.0, "higher"),
-    "relation_error_m": MetricInfo("relation error", "cm", 100.0),
-    "relation_error_rad": MetricInfo("relation error", "deg", float(np.degrees(1.0))),
-    "accepted_fraction": MetricInfo("accepted", "%", 100.0, "higher"),
-    "particles_mean": MetricInfo("mean particles", "", 1.0, ""),
-    "recorded_ate_median_m": MetricInfo("recorded median ATE", "cm", 100.0),
-}
-
-
-# --- aggregations over seeds --------------------------------------------------------------------
-
-
-class MeanCI(NamedTuple):
-    """A mean over seeds with its two-sided t-interval (``low``/``high`` NaN when n < 2)."""
-
-    mean: float
-    low: float
-    high: float
-    n: int
-
-    @property
-    def half_width(self) -> float:
-        return (self.high - self.low) / 2.0
-
-
-def mean_ci(values: npt.ArrayLike, confidence: float = CONFIDENCE) -> MeanCI:
-    """Mean with a Student-t confidence interval, NaNs ignored.
-
-    mean +- t_{(1+c)/2, n-1} * s / sqrt(n) with s the sample standard deviation (ddof = 1). With
-    fewer than two finite values the interval is NaN; with an infinite value the mean is infinite and
-    the interval NaN.
-    """
-    v = np.asarray(values, dtype=np.float64).ravel()
-    v = v[~np.isnan(v)]
-    n = int(v.size)
-    if n == 0:
-        return MeanCI(float("nan"), float("nan"), float("nan"), 0)
-    m = float(np.mean(v))
-    if n < 2 or not np.all(np.isfinite(v)):
-        return MeanCI(m, float("nan"), float("nan"), n)
-    h = float(stats.t.ppf(0.5 + confidence / 2.0, n - 1) * np.std(v, ddof=1) / np.sqrt(n))
-    return MeanCI(m, m - h, m + h, n)
-
-
-def waypoint_rmse(errors: npt.ArrayLike) -> FloatArray:
-    """RMSE at each waypoint over runs, RMSE_j = sqrt(mean_i e_ij^2) (report 003 fig. 5).
-
-    Parameters
-    ----------
-    errors : array-like, shape (runs, m)
-        e_ij in m; NaN entries (a run without that waypoint) are ignored.
-
-    Returns
-    -------
-    ndarray, shape (m,)
-        RMSE_j in m.
-    """
-    e = np.asarray(errors, dtype=np.float64)
-    return np.sqrt(np.nanmean(e**2, axis=0))
-
-
-def mean_estimate_distance(est_xy: npt.ArrayLike, marked_xy: npt.ArrayLike) -> FloatArray:
-    """Distance between each waypoint and the mean estimated position over runs (report 003 table 1).
-
-    Parameters
-    ----------
-    est_xy : array-like, shape (runs, m, 2)
-        Estimated positions at the waypoints, m.
-    marked_xy : array-like, shape (m, 2) or (runs, m, 2)
-        The marked points, m (per run when they may differ; then their mean is used).
-
-    Returns
-    -------
-    ndarray, shape (m,)
-        |mean_i p_hat_ij - p_j| in m.
-    """
-    est = np.asarray(est_xy, dtype=np.float64)
-    mk = np.asarray(marked_xy, dtype=np.float64)
-    if mk.ndim == 3:
-        mk = np.nanmean(mk, axis=0)
-    d = np.nanmean(est, axis=0) - mk
-    return np.hypot(d[:, 0], d[:, 1])
-
-
-def mean_over_runs(
-    t_grid: npt.ArrayLike, series: Sequence[tuple[npt.ArrayLike, npt.ArrayLike]]
-) -> tuple[FloatArray, npt.NDArray[np.int64]]:
-    """Mean over runs of a per-time quantity (the NEES) at each time of a common grid.
-
-    Each run's series is sampled on ``t_grid`` by zero-order hold (so runs whose ground truth has
-    different sample times still line up); times before a run's first sample take its first value.
-
-    Parameters
-    ----------
-    t_grid : array-like, shape (k,)
-        Common times, s.
-    series : sequence of (t (n_i,), values (n_i,))
-        One series per run.
-
-    Returns
-    -------
-    mean : ndarray, shape (k,)
-        Mean over the runs with a finite or infinite (non-NaN) value at that time.
-    count : ndarray of int64, shape (k,)
-        How many runs entered each mean.
-    """
-    grid = np.asarray(t_grid, dtype=np.float64)
-    if not series:
-        return np.full(grid.shape, np.nan), np.zeros(grid.shape, dtype=np.int64)
-    stack = np.vstack([estimate_at(t, np.asarray(v, dtype=np.float64), grid) for t, v in series])
-    valid = ~np.isnan(stack)
-    count = valid.sum(axis=0).astype(np.int64)
-    total = np.where(valid, stack, 0.0).sum(axis=0)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        mean = np.where(count > 0, total / np.maximum(count, 1), np.nan)
-    return mean, count

@@ -15,7 +15,7 @@ import pandas as pd
 
 from locbench import significance as sg
 from locbench.docfmt import Table, num
-from locbench.metrics import MetricInfo
+from locbench.metric_info import MetricInfo
 from locbench.pcrb import is_bound_row
 from locbench.spec import Spec
 

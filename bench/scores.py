@@ -18,9 +18,10 @@ prediction, and estimation", JASA 102(477), eq. 20-22):
   the first term has none and is a quasi-Monte Carlo mean over :data:`ENERGY_DRAWS` fixed scrambled-Sobol normal
   draws (seed :data:`ENERGY_SEED`), the same draws at every time, so the score is deterministic. A point mass
   scores its Euclidean error exactly.
-- Scores are taken at every ground-truth time with the belief in force there (zero-order hold, as every
-  metric in :mod:`locbench.metrics`), then averaged; the interval of that mean is a circular block bootstrap over
-  time (:func:`block_bootstrap_ci`) with blocks of :data:`BLOCK_S` seconds of ground truth.
+- Scores are taken at every ground-truth time with the belief in force there (the run's aligned view,
+  :func:`locbench.metrics.align`, as every metric in :mod:`locbench.metrics`), then averaged; the interval of
+  that mean is a circular block bootstrap over time (:func:`block_bootstrap_ci`) with blocks of
+  :data:`BLOCK_S` seconds of ground truth.
 - A particle filter exposes a fixed-size unbiased subsample of its particles (:meth:`Filter.belief_sample`);
   the runner scores it at each ground-truth time while the filter runs (:func:`sample_scores`) and stores the
   per-time scores, not the samples (:data:`SAMPLE_SCORE_KEYS` in the run's ``extra``).
@@ -31,6 +32,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Mapping
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -38,6 +40,9 @@ from numba import njit
 from scipy import special, stats
 
 from locbench.geometry import wrap_angle
+
+if TYPE_CHECKING:
+    from locbench.metrics import Aligned
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -303,22 +308,14 @@ def ci_ids(score_id: str) -> tuple[str, str]:
     return f"{stem}_ci_low_{unit}", f"{stem}_ci_high_{unit}"
 
 
-def score_metrics(
-    t_est: npt.ArrayLike,
-    mean: npt.ArrayLike,
-    cov: npt.ArrayLike,
-    gt_t: npt.ArrayLike,
-    gt_poses: npt.ArrayLike,
-    extra: Mapping[str, np.ndarray],
-) -> dict[str, float]:
+def score_metrics(a: Aligned, extra: Mapping[str, np.ndarray]) -> dict[str, float]:
     """The proper-score rows of one run: each of :data:`SCORE_IDS` and its block-bootstrap interval.
 
     A run whose ``extra`` holds the per-time scores of its own samples (:data:`SAMPLE_SCORE_KEYS`, one per
-    ground-truth time) is scored by those; any other by its Gaussian (mean, covariance) held at the truth times.
+    ground-truth time) is scored by those; any other by its Gaussian (mean, covariance) held at the truth times,
+    read from the run's aligned view ``a`` (:func:`locbench.metrics.align`, with covariances).
     """
-    from locbench.metrics import hold_indices
-
-    gt_t = np.asarray(gt_t, dtype=np.float64)
+    gt_t = a.t
     if all(k in extra for k in SAMPLE_SCORE_KEYS):
         per = [np.asarray(extra[k], dtype=np.float64) for k in SAMPLE_SCORE_KEYS]
         if any(p.shape != gt_t.shape for p in per):
@@ -326,9 +323,9 @@ def score_metrics(
                 f"stored belief scores have {per[0].shape[0]} rows for {gt_t.shape[0]} ground-truth times; re-run"
             )
     else:
-        idx = hold_indices(t_est, gt_t)
-        m = np.asarray(mean, dtype=np.float64)[idx]
-        per = list(gaussian_scores(m, np.asarray(cov, dtype=np.float64)[idx], gt_poses))
+        if a.cov is None:
+            raise ValueError("a Gaussian belief's scores need the aligned covariances")
+        per = list(gaussian_scores(a.mean, a.cov, a.truth))
     size = block_length(gt_t)
     out: dict[str, float] = {}
     for sid, s in zip(SCORE_IDS, per, strict=True):

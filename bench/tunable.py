@@ -6,7 +6,9 @@ linear scale) or ``metadata=tunable_choice("a", "b")`` (one of a few values); ``
 Noise scales, gates, thresholds and iteration caps are tunable; a compute knob (particles, a smoother's lag) is
 not, since it is the user's budget, not an accuracy setting. :func:`tunable_fields` reads them back for
 ``locbench list FILTER`` and ``locbench tune`` (:mod:`locbench.tuning`). The metadata does not enter the run key
-(:mod:`locbench.runkey` reads only its own flag), so declaring a field tunable changes no stored run.
+(:mod:`locbench.runkey` reads only its own flag), so declaring a field tunable changes no stored run. The
+values a field accepts at all are its :func:`locbench.filters.base.bound` metadata (``base=`` merges the two);
+a search range lies inside it.
 """
 
 from __future__ import annotations

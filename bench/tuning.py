@@ -187,7 +187,7 @@ def score_trial(
     Raises :class:`ConfigError` for a skipped run (the filter cannot run on a train dataset, or its data is absent):
     that is a wrong command, not a bad trial.
     """
-    from locbench.metrics import ate, nll_at_truth
+    from locbench.metrics import align, ate, nll_at_truth
 
     values: list[float] = []
     for d in datasets:
@@ -201,10 +201,8 @@ def score_trial(
                 return WORST, f"{status} on {dname} seed {seed}: {meta.get('message', '')}".rstrip(": ")
             run = store.read_run(store.run_dir(dname, spec, seed))
             gt = store.read_truth(dname, seed).ground_truth
-            if objective == "ate":
-                v = ate(run.t, run.mean, gt.t, gt.xy)
-            else:
-                v = float(np.mean(nll_at_truth(run.t, run.mean, run.cov, gt.t, gt.poses)))
+            aligned = align(run.t, run.mean, gt.t, gt.poses, run.cov)
+            v = ate(aligned) if objective == "ate" else float(np.mean(nll_at_truth(aligned)))
             if not math.isfinite(v):
                 return WORST, f"non-finite {OBJECTIVES[objective]} on {dname} seed {seed}"
             values.append(float(v))

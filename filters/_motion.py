@@ -56,8 +56,8 @@ import numpy as np
 import numpy.typing as npt
 
 from locbench.datasets.base import SensorSpec
-from locbench.errors import ConfigError
 from locbench.events import Odometry
+from locbench.filters.base import POSITIVE_OR_DATASET, bound
 from locbench.geometry import wrap_angle, wrap_scalar
 from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
 from locbench.tunable import tunable
@@ -502,7 +502,7 @@ class MotionNoiseConfig:
     """
 
     input_noise: InputNoise = "per_step"
-    wheelbase_m: float | None = None
+    wheelbase_m: float | None = field(default=None, metadata=POSITIVE_OR_DATASET)
     encoder_k_left: float | None = None
     encoder_k_right: float | None = None
     odometry_sigma_xy_per_m: float | None = None
@@ -511,12 +511,15 @@ class MotionNoiseConfig:
     twist_sigma_v_mps: float | None = field(default=None, metadata=RUN_KEY_OMIT_IF_DEFAULT)
     twist_sigma_omega_radps: float | None = field(default=None, metadata=RUN_KEY_OMIT_IF_DEFAULT)
     # one knob over every motion noise source (encoders, increments, twist): what a tuner searches
-    motion_noise_scale: float = field(default=1.0, metadata=tunable(0.1, 10.0, log=True, base=RUN_KEY_OMIT_IF_DEFAULT))
-
-    def check_motion_noise(self) -> None:
-        """Raise :class:`ConfigError` for a bad ``motion_noise_scale`` (each config's ``__post_init__`` calls it)."""
-        if not (math.isfinite(self.motion_noise_scale) and self.motion_noise_scale > 0.0):
-            raise ConfigError(f"motion_noise_scale must be a finite factor > 0, got {self.motion_noise_scale}")
+    motion_noise_scale: float = field(
+        default=1.0,
+        metadata=tunable(
+            0.1,
+            10.0,
+            log=True,
+            base=bound(0.0, low_open=True, finite=True, what="a finite factor", base=RUN_KEY_OMIT_IF_DEFAULT),
+        ),
+    )
 
     def motion_noise(self, sensors: SensorSpec) -> MotionNoise:
         """The noise model: each override, else the dataset's nominal value, else the module default; every

@@ -14,7 +14,9 @@ locbench; these names keep their meaning across releases. What a filter receives
   :class:`LandmarkObservations`, :class:`RangeObservations`, :class:`PoseFix`.
 
 It returns an :class:`Estimate` and declares a ``Config`` deriving from :class:`FilterConfig`, whose fields
-may carry :func:`tunable` / :func:`tunable_choice` ranges and a :func:`field_unit`.
+may carry :func:`tunable` / :func:`tunable_choice` ranges, a :func:`field_unit` and the values they accept
+(:func:`bound`, :data:`POSITIVE` ..., checked once by :class:`FilterConfig`; a config's own ``__post_init__``
+adds rules across fields after calling ``super().__post_init__()``).
 """
 
 from __future__ import annotations
@@ -36,6 +38,12 @@ from locbench.events import (
 from locbench.filters import motion, noise
 from locbench.filters.base import (
     HEALTH_SIGNALS,
+    NON_NEGATIVE,
+    NON_NEGATIVE_OR_NONE,
+    POSITIVE,
+    POSITIVE_OR_DATASET,
+    PROBABILITY,
+    Bound,
     CheckTolerances,
     Estimate,
     Filter,
@@ -43,6 +51,7 @@ from locbench.filters.base import (
     FloatArray,
     HealthSignal,
     accepted_share,
+    bound,
     gaussian_health,
 )
 from locbench.geometry import compose, wrap_angle, wrap_scalar
@@ -52,9 +61,15 @@ from locbench.tunable import field_unit, tunable, tunable_choice
 __all__ = [
     "EVENT_TYPES",
     "HEALTH_SIGNALS",
+    "NON_NEGATIVE",
+    "NON_NEGATIVE_OR_NONE",
     "OBSERVATION_TYPES",
+    "POSITIVE",
+    "POSITIVE_OR_DATASET",
+    "PROBABILITY",
     "RUN_KEY_OMIT_IF_DEFAULT",
     "UNKNOWN_ID",
+    "Bound",
     "CheckTolerances",
     "ConfigError",
     "Estimate",
@@ -78,6 +93,7 @@ __all__ = [
     "SensorSpec",
     "WorldMap",
     "accepted_share",
+    "bound",
     "compose",
     "field_unit",
     "gaussian_health",

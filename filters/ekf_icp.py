@@ -74,7 +74,7 @@ from locbench.errors import ConfigError, FilterDiverged, ResourceLimit
 from locbench.events import LaserScan, Observation, Odometry
 from locbench.filters._icp import MIN_PAIRS, IcpResult, icp_2d
 from locbench.filters._kalman import joseph_correct_pose
-from locbench.filters.base import Estimate, Filter, FilterConfig, gaussian_health
+from locbench.filters.base import POSITIVE, POSITIVE_OR_DATASET, Estimate, Filter, FilterConfig, bound, gaussian_health
 from locbench.geometry import wrap_scalar
 from locbench.limits import RAYCAST_BYTES_PER_CELL, check_bytes, grid_cells
 from locbench.raycast import cast_scan
@@ -135,63 +135,26 @@ class IcpEKFConfig(FilterConfig):
         Laser range noise for D_min/D_0, m; None takes the dataset's nominal ``laser_sigma_m``.
     """
 
-    q_x_stat_m2: float = 0.0005
-    q_y_stat_m2: float = 0.0005
-    q_theta_stat_rad2: float = 0.0005
-    q_x_dyn_m2_per_m: float = 0.001
-    q_y_dyn_m2_per_m: float = 0.001
-    q_theta_dyn_rad2_per_rad: float = 0.0011
-    r_x_m2: float = field(default=0.008, metadata=tunable(1e-6, 0.1, log=True))
-    r_y_m2: float = field(default=0.008, metadata=tunable(1e-6, 0.1, log=True))
-    r_theta_rad2: float = field(default=0.01, metadata=tunable(1e-6, 0.1, log=True))
-    static_noise_period_s: float = 0.1
-    max_iterations: int = field(default=700, metadata=tunable(5, 700, log=True, integer=True))
-    transformation_epsilon: float = 5e-7
-    correspondence_sigmas: float = field(default=3.0, metadata=tunable(1.0, 6.0))
-    max_correspondence_cap_m: float = 1.0
-    min_matched_fraction: float = 0.5
-    min_matched_points: int = 10
-    kidnap_mismatches: int = 100
-    kidnap_cov_factor: float = 10.0
-    kidnap_threshold_factor: float = 0.5
-    laser_sigma_m: float | None = None
-
-    def __post_init__(self) -> None:
-        for name in (
-            "q_x_stat_m2",
-            "q_y_stat_m2",
-            "q_theta_stat_rad2",
-            "q_x_dyn_m2_per_m",
-            "q_y_dyn_m2_per_m",
-            "q_theta_dyn_rad2_per_rad",
-        ):
-            if not getattr(self, name) >= 0.0:
-                raise ConfigError(f"{name} must be a variance >= 0, got {getattr(self, name)}")
-        for name in (
-            "r_x_m2",
-            "r_y_m2",
-            "r_theta_rad2",
-            "static_noise_period_s",
-            "transformation_epsilon",
-            "correspondence_sigmas",
-            "max_correspondence_cap_m",
-        ):
-            if not getattr(self, name) > 0.0:
-                raise ConfigError(f"{name} must be > 0, got {getattr(self, name)}")
-        if self.max_iterations < 1:
-            raise ConfigError(f"max_iterations must be >= 1, got {self.max_iterations}")
-        if not 0.0 <= self.min_matched_fraction <= 1.0:
-            raise ConfigError(f"min_matched_fraction must be in [0, 1], got {self.min_matched_fraction}")
-        if self.min_matched_points < MIN_PAIRS:
-            raise ConfigError(f"min_matched_points must be >= {MIN_PAIRS}, got {self.min_matched_points}")
-        if self.kidnap_mismatches < 1:
-            raise ConfigError(f"kidnap_mismatches must be >= 1, got {self.kidnap_mismatches}")
-        if not self.kidnap_cov_factor >= 1.0:
-            raise ConfigError(f"kidnap_cov_factor must be >= 1, got {self.kidnap_cov_factor}")
-        if not 0.0 < self.kidnap_threshold_factor <= 1.0:
-            raise ConfigError(f"kidnap_threshold_factor must be in (0, 1], got {self.kidnap_threshold_factor}")
-        if self.laser_sigma_m is not None and not self.laser_sigma_m > 0.0:
-            raise ConfigError(f"laser_sigma_m must be > 0 (or None for the dataset's value), got {self.laser_sigma_m}")
+    q_x_stat_m2: float = field(default=0.0005, metadata=bound(0.0, what="a variance"))
+    q_y_stat_m2: float = field(default=0.0005, metadata=bound(0.0, what="a variance"))
+    q_theta_stat_rad2: float = field(default=0.0005, metadata=bound(0.0, what="a variance"))
+    q_x_dyn_m2_per_m: float = field(default=0.001, metadata=bound(0.0, what="a variance"))
+    q_y_dyn_m2_per_m: float = field(default=0.001, metadata=bound(0.0, what="a variance"))
+    q_theta_dyn_rad2_per_rad: float = field(default=0.0011, metadata=bound(0.0, what="a variance"))
+    r_x_m2: float = field(default=0.008, metadata=tunable(1e-6, 0.1, log=True, base=POSITIVE))
+    r_y_m2: float = field(default=0.008, metadata=tunable(1e-6, 0.1, log=True, base=POSITIVE))
+    r_theta_rad2: float = field(default=0.01, metadata=tunable(1e-6, 0.1, log=True, base=POSITIVE))
+    static_noise_period_s: float = field(default=0.1, metadata=POSITIVE)
+    max_iterations: int = field(default=700, metadata=tunable(5, 700, log=True, integer=True, base=bound(1)))
+    transformation_epsilon: float = field(default=5e-7, metadata=POSITIVE)
+    correspondence_sigmas: float = field(default=3.0, metadata=tunable(1.0, 6.0, base=POSITIVE))
+    max_correspondence_cap_m: float = field(default=1.0, metadata=POSITIVE)
+    min_matched_fraction: float = field(default=0.5, metadata=bound(0.0, 1.0))
+    min_matched_points: int = field(default=10, metadata=bound(MIN_PAIRS))
+    kidnap_mismatches: int = field(default=100, metadata=bound(1))
+    kidnap_cov_factor: float = field(default=10.0, metadata=bound(1.0))
+    kidnap_threshold_factor: float = field(default=0.5, metadata=bound(0.0, 1.0, low_open=True))
+    laser_sigma_m: float | None = field(default=None, metadata=POSITIVE_OR_DATASET)
 
 
 def scan_points(ranges: FloatArray, angles: FloatArray, sensor_pose: tuple[float, float, float]) -> FloatArray:

@@ -77,7 +77,16 @@ from locbench.filters._motion import (
     MotionNoiseConfig,
 )
 from locbench.filters._noise import landmark_noise, process_noise, range_only_noise
-from locbench.filters.base import Estimate, Filter, FilterConfig
+from locbench.filters.base import (
+    NON_NEGATIVE,
+    NON_NEGATIVE_OR_NONE,
+    POSITIVE_OR_DATASET,
+    PROBABILITY,
+    Estimate,
+    Filter,
+    FilterConfig,
+    bound,
+)
 from locbench.geometry import wrap_angle, wrap_scalar
 from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
 from locbench.tunable import tunable
@@ -167,36 +176,25 @@ class LandmarkEKFConfig(FilterConfig, MotionNoiseConfig):
         Overrides of the white noise of a measured twist (m/s, rad/s); see :mod:`locbench.filters._motion`.
     """
 
-    sigma_x_m: float | None = None
-    sigma_y_m: float | None = None
-    sigma_theta_rad: float | None = None
+    sigma_x_m: float | None = field(default=None, metadata=NON_NEGATIVE_OR_NONE)
+    sigma_y_m: float | None = field(default=None, metadata=NON_NEGATIVE_OR_NONE)
+    sigma_theta_rad: float | None = field(default=None, metadata=NON_NEGATIVE_OR_NONE)
     motion_model: MotionKind = "auto"
     association: Literal["known", "nearest"] = "known"
-    gate_probability: float = 0.99
+    gate_probability: float = field(default=0.99, metadata=PROBABILITY)
     gate_known: bool = False
     prune_to_sensor_limits: bool = True
-    prune_margin_m: float = 0.5
-    prune_margin_rad: float = 0.2
+    prune_margin_m: float = field(default=0.5, metadata=NON_NEGATIVE)
+    prune_margin_rad: float = field(default=0.2, metadata=NON_NEGATIVE)
     use_pose_fixes: bool = False
-    sigma_range_m: float | None = field(default=None, metadata=tunable(1e-3, 1.0, log=True))
-    sigma_bearing_rad: float | None = field(default=None, metadata=tunable(1e-3, 0.5, log=True))
-    range_only_sigma_m: float | None = field(default=None, metadata=RUN_KEY_OMIT_IF_DEFAULT)
-    range_gate_probability: float = field(default=0.99, metadata=RUN_KEY_OMIT_IF_DEFAULT)
-
-    def __post_init__(self) -> None:
-        self.check_motion_noise()
-        if not 0.0 < self.gate_probability < 1.0:
-            raise ConfigError(f"gate_probability must be in (0, 1), got {self.gate_probability}")
-        if not 0.0 < self.range_gate_probability <= 1.0:
-            raise ConfigError(f"range_gate_probability must be in (0, 1], got {self.range_gate_probability}")
-        for name in ("sigma_x_m", "sigma_y_m", "sigma_theta_rad", "prune_margin_m", "prune_margin_rad"):
-            v = getattr(self, name)
-            if v is not None and v < 0.0:
-                raise ConfigError(f"{name} must be >= 0, got {v}")
-        for name in ("sigma_range_m", "sigma_bearing_rad", "wheelbase_m", "range_only_sigma_m"):
-            v = getattr(self, name)
-            if v is not None and v <= 0.0:
-                raise ConfigError(f"{name} must be > 0 (or None for the dataset's value), got {v}")
+    sigma_range_m: float | None = field(default=None, metadata=tunable(1e-3, 1.0, log=True, base=POSITIVE_OR_DATASET))
+    sigma_bearing_rad: float | None = field(
+        default=None, metadata=tunable(1e-3, 0.5, log=True, base=POSITIVE_OR_DATASET)
+    )
+    range_only_sigma_m: float | None = field(default=None, metadata=POSITIVE_OR_DATASET | RUN_KEY_OMIT_IF_DEFAULT)
+    range_gate_probability: float = field(
+        default=0.99, metadata=bound(0.0, 1.0, low_open=True, base=RUN_KEY_OMIT_IF_DEFAULT)
+    )
 
 
 class LandmarkEKF(Filter):

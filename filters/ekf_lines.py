@@ -58,7 +58,7 @@ from locbench.events import LaserScan, Observation, Odometry
 from locbench.filters._kalman import joseph_correct
 from locbench.filters._line_extraction import ExtractedLines, ExtractionParams, extract_lines
 from locbench.filters._motion import MotionModel, propagate_covariance, resolve_motion_noise
-from locbench.filters.base import Estimate, Filter, FilterConfig
+from locbench.filters.base import NON_NEGATIVE, Estimate, Filter, FilterConfig, bound
 from locbench.geometry import TWO_PI, wrap_angle, wrap_scalar
 from locbench.tunable import tunable
 
@@ -132,15 +132,22 @@ class LineEKFConfig(FilterConfig):
         Overrides of the dataset's nominal increment noise (m/sqrt(m), rad/sqrt(m), rad/sqrt(rad)).
     """
 
-    chi2_threshold: float = field(default=CHI2_2DOF_099, metadata=tunable(1.0, 30.0, log=True))
+    chi2_threshold: float = field(
+        default=CHI2_2DOF_099,
+        metadata=tunable(
+            1.0, 30.0, log=True, base=bound(0.0, low_open=True, expected="> 0 (a squared Mahalanobis distance)")
+        ),
+    )
     reject_longer: bool = True
-    length_margin_m: float = 0.1
-    sigma_rho_m: float = field(default=0.02, metadata=tunable(1e-3, 0.5, log=True))
-    sigma_psi_rad: float = field(default=0.0175, metadata=tunable(1e-3, 0.5, log=True))
-    sigma_dx_m: float = 0.001
-    sigma_dy_m: float = 0.001
-    sigma_dtheta_rad: float = 0.0005
-    laser_sigma_m: float | None = None
+    length_margin_m: float = field(default=0.1, metadata=NON_NEGATIVE)
+    sigma_rho_m: float = field(default=0.02, metadata=tunable(1e-3, 0.5, log=True, base=NON_NEGATIVE))
+    sigma_psi_rad: float = field(default=0.0175, metadata=tunable(1e-3, 0.5, log=True, base=NON_NEGATIVE))
+    sigma_dx_m: float = field(default=0.001, metadata=NON_NEGATIVE)
+    sigma_dy_m: float = field(default=0.001, metadata=NON_NEGATIVE)
+    sigma_dtheta_rad: float = field(default=0.0005, metadata=NON_NEGATIVE)
+    laser_sigma_m: float | None = field(
+        default=None, metadata=bound(0.0, low_open=True, unit="m", optional=True, none_means="the dataset's")
+    )
     split_threshold_m: float = 0.05
     min_points: int = 4
     min_length_m: float = 0.3
@@ -149,13 +156,7 @@ class LineEKFConfig(FilterConfig):
     odometry_sigma_theta_per_rad: float | None = None
 
     def __post_init__(self) -> None:
-        if not self.chi2_threshold > 0:
-            raise ConfigError(f"chi2_threshold must be > 0 (a squared Mahalanobis distance), got {self.chi2_threshold}")
-        for name in ("length_margin_m", "sigma_rho_m", "sigma_psi_rad", "sigma_dx_m", "sigma_dy_m", "sigma_dtheta_rad"):
-            if not getattr(self, name) >= 0.0:
-                raise ConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
-        if self.laser_sigma_m is not None and not self.laser_sigma_m > 0:
-            raise ConfigError(f"laser_sigma_m must be > 0 m (or None for the dataset's), got {self.laser_sigma_m}")
+        super().__post_init__()  # the bounds declared on the fields; the line extraction's joint rule follows
         if not self.split_threshold_m > 0 or self.min_points < 3 or self.min_length_m < 0:
             raise ConfigError(
                 "line extraction: split_threshold_m must be > 0 m, min_points >= 3 and min_length_m >= 0 m, got "

@@ -82,7 +82,17 @@ from locbench.filters._motion import (
     propagate_covariance,
 )
 from locbench.filters._noise import landmark_noise, process_noise, range_only_noise
-from locbench.filters.base import Estimate, Filter, FilterConfig
+from locbench.filters.base import (
+    NON_NEGATIVE,
+    NON_NEGATIVE_OR_NONE,
+    POSITIVE,
+    POSITIVE_OR_DATASET,
+    PROBABILITY,
+    Estimate,
+    Filter,
+    FilterConfig,
+    bound,
+)
 from locbench.geometry import wrap_angle, wrap_scalar
 from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
 from locbench.tunable import tunable
@@ -167,48 +177,30 @@ class GtsamFLSConfig(FilterConfig, MotionNoiseConfig):
     """
 
     smoother: Literal["incremental", "batch"] = "incremental"
-    lag_s: float = 2.0
+    lag_s: float = field(default=2.0, metadata=bound(0.0, low_open=True, unit="s"))
     new_pose: Literal["observation", "odometry"] = "observation"
-    relinearize_threshold: float = 0.01
-    relinearize_skip: int = 1
-    sigma_xy_m: float | None = None
-    sigma_theta_rad: float | None = None
+    relinearize_threshold: float = field(default=0.01, metadata=NON_NEGATIVE)
+    relinearize_skip: int = field(default=1, metadata=bound(1))
+    sigma_xy_m: float | None = field(default=None, metadata=NON_NEGATIVE_OR_NONE)
+    sigma_theta_rad: float | None = field(default=None, metadata=NON_NEGATIVE_OR_NONE)
     motion_model: MotionKind = "auto"
     association: Literal["known", "nearest"] = "known"
-    gate_probability: float = 0.99
-    prune_margin_m: float = 0.5
-    prune_margin_rad: float = 0.2
-    landmark_sigma_m: float = 0.001
+    gate_probability: float = field(default=0.99, metadata=PROBABILITY)
+    prune_margin_m: float = field(default=0.5, metadata=NON_NEGATIVE)
+    prune_margin_rad: float = field(default=0.2, metadata=NON_NEGATIVE)
+    landmark_sigma_m: float = field(default=0.001, metadata=POSITIVE)
     use_pose_fixes: bool = False
-    pose_fix_heading_sigma_rad: float = 1000.0
-    sigma_range_m: float | None = field(default=None, metadata=tunable(1e-3, 1.0, log=True))
-    sigma_bearing_rad: float | None = field(default=None, metadata=tunable(1e-3, 0.5, log=True))
-    range_only_sigma_m: float | None = field(default=None, metadata=RUN_KEY_OMIT_IF_DEFAULT)
-    range_gate_probability: float = field(default=0.99, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    pose_fix_heading_sigma_rad: float = field(default=1000.0, metadata=POSITIVE)
+    sigma_range_m: float | None = field(default=None, metadata=tunable(1e-3, 1.0, log=True, base=POSITIVE_OR_DATASET))
+    sigma_bearing_rad: float | None = field(
+        default=None, metadata=tunable(1e-3, 0.5, log=True, base=POSITIVE_OR_DATASET)
+    )
+    range_only_sigma_m: float | None = field(default=None, metadata=POSITIVE_OR_DATASET | RUN_KEY_OMIT_IF_DEFAULT)
+    range_gate_probability: float = field(
+        default=0.99, metadata=bound(0.0, 1.0, low_open=True, base=RUN_KEY_OMIT_IF_DEFAULT)
+    )
     range_robust: Literal["huber", "none"] = field(default="huber", metadata=RUN_KEY_OMIT_IF_DEFAULT)
-    range_huber_k: float = field(default=1.345, metadata=RUN_KEY_OMIT_IF_DEFAULT)
-
-    def __post_init__(self) -> None:
-        self.check_motion_noise()
-        if not self.lag_s > 0.0:
-            raise ConfigError(f"lag_s must be > 0 s, got {self.lag_s}")
-        if not 0.0 < self.gate_probability < 1.0:
-            raise ConfigError(f"gate_probability must be in (0, 1), got {self.gate_probability}")
-        if not 0.0 < self.range_gate_probability <= 1.0:
-            raise ConfigError(f"range_gate_probability must be in (0, 1], got {self.range_gate_probability}")
-        if self.relinearize_skip < 1:
-            raise ConfigError(f"relinearize_skip must be >= 1, got {self.relinearize_skip}")
-        for name in ("relinearize_threshold", "sigma_xy_m", "sigma_theta_rad", "prune_margin_m", "prune_margin_rad"):
-            v = getattr(self, name)
-            if v is not None and v < 0.0:
-                raise ConfigError(f"{name} must be >= 0, got {v}")
-        for name in ("landmark_sigma_m", "pose_fix_heading_sigma_rad", "range_huber_k"):
-            if not getattr(self, name) > 0.0:
-                raise ConfigError(f"{name} must be > 0, got {getattr(self, name)}")
-        for name in ("sigma_range_m", "sigma_bearing_rad", "wheelbase_m", "range_only_sigma_m"):
-            v = getattr(self, name)
-            if v is not None and v <= 0.0:
-                raise ConfigError(f"{name} must be > 0 (or None for the dataset's value), got {v}")
+    range_huber_k: float = field(default=1.345, metadata=POSITIVE | RUN_KEY_OMIT_IF_DEFAULT)
 
 
 def _rot3(theta: float) -> FloatArray:

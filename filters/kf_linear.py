@@ -62,7 +62,7 @@ from locbench.errors import ConfigError, FilterDiverged
 from locbench.events import LaserScan, Observation, Odometry
 from locbench.filters._motion import increment_variances, resolve_motion_noise
 from locbench.filters._scan_database import ScanDatabase, build_database, lattice_too_large, match_scan
-from locbench.filters.base import Estimate, Filter, FilterConfig, gaussian_health
+from locbench.filters.base import NON_NEGATIVE, Estimate, Filter, FilterConfig, bound, gaussian_health
 from locbench.geometry import wrap_scalar
 from locbench.tunable import tunable
 
@@ -110,39 +110,35 @@ class LinearKFConfig(FilterConfig):
         Overrides of the dataset's nominal per-distance noise (m/sqrt(m), rad/sqrt(m), rad/sqrt(rad)).
     """
 
-    grid_step_m: float = 0.25
+    grid_step_m: float = field(default=0.25, metadata=bound(0.0, low_open=True, unit="m"))
     heading_step_deg: float = 5.0
-    tolerance_m: float | None = field(default=None, metadata=tunable(0.02, 1.0, log=True))
-    max_range_m: float = 8.0
-    clearance_m: float = 0.2
-    min_bearings: int = 4
-    gate_probability: float = field(default=0.999, metadata=tunable(0.9, 0.99999))
+    tolerance_m: float | None = field(
+        default=None,
+        metadata=tunable(
+            0.02, 1.0, log=True, base=bound(0.0, low_open=True, unit="m", optional=True, none_means="the default")
+        ),
+    )
+    max_range_m: float = field(
+        default=8.0, metadata=bound(0.0, low_open=True, finite=True, unit="m", what="a finite distance")
+    )
+    clearance_m: float = field(default=0.2, metadata=bound(0.0, unit="m"))
+    min_bearings: int = field(default=4, metadata=bound(1, 8, expected="in 1..8"))
+    gate_probability: float = field(
+        default=0.999,
+        metadata=tunable(0.9, 0.99999, base=bound(0.0, 1.0, low_open=True, expected="in (0, 1] (1 = no gate)")),
+    )
     use_commands: bool = True
-    sigma_floor_xy_m: float = 0.001
-    sigma_floor_theta_rad: float = 0.0005
+    sigma_floor_xy_m: float = field(default=0.001, metadata=NON_NEGATIVE)
+    sigma_floor_theta_rad: float = field(default=0.0005, metadata=NON_NEGATIVE)
     odometry_sigma_xy_per_m: float | None = field(default=None, metadata=tunable(1e-3, 0.2, log=True))
     odometry_sigma_theta_per_m: float | None = field(default=None, metadata=tunable(1e-3, 0.5, log=True))
     odometry_sigma_theta_per_rad: float | None = None
 
     def __post_init__(self) -> None:
-        if not self.grid_step_m > 0:
-            raise ConfigError(f"grid_step_m must be > 0 m, got {self.grid_step_m}")
+        super().__post_init__()  # the bounds declared on the fields; the step rule follows
         q = 45.0 / self.heading_step_deg if self.heading_step_deg > 0 else 0.5
         if abs(q - round(q)) > 1e-9 or round(q) < 1:
             raise ConfigError(f"heading_step_deg must divide 45 deg exactly (5, 15, 45), got {self.heading_step_deg}")
-        if self.tolerance_m is not None and not self.tolerance_m > 0:
-            raise ConfigError(f"tolerance_m must be > 0 m (or None for the default), got {self.tolerance_m}")
-        if not (self.max_range_m > 0 and math.isfinite(self.max_range_m)):
-            raise ConfigError(f"max_range_m must be a finite distance > 0 m, got {self.max_range_m}")
-        if self.clearance_m < 0:
-            raise ConfigError(f"clearance_m must be >= 0 m, got {self.clearance_m}")
-        if not 1 <= self.min_bearings <= 8:
-            raise ConfigError(f"min_bearings must be in 1..8, got {self.min_bearings}")
-        if not 0.0 < self.gate_probability <= 1.0:
-            raise ConfigError(f"gate_probability must be in (0, 1] (1 = no gate), got {self.gate_probability}")
-        for name in ("sigma_floor_xy_m", "sigma_floor_theta_rad"):
-            if getattr(self, name) < 0:
-                raise ConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
 
 
 class LinearKF(Filter):

@@ -140,7 +140,18 @@ from locbench.filters._motion import (
 )
 from locbench.filters._noise import landmark_noise, process_noise, range_only_noise
 from locbench.filters._numba_rng import UIntArray, generator_addresses, generator_from
-from locbench.filters.base import CheckTolerances, Estimate, Filter, FilterConfig, gaussian_health
+from locbench.filters.base import (
+    NON_NEGATIVE,
+    NON_NEGATIVE_OR_NONE,
+    POSITIVE,
+    POSITIVE_OR_DATASET,
+    CheckTolerances,
+    Estimate,
+    Filter,
+    FilterConfig,
+    bound,
+    gaussian_health,
+)
 from locbench.geometry import wrap_angle
 from locbench.limits import (
     FREE_SPACE_BYTES_PER_CELL,
@@ -287,45 +298,51 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
         Overrides of the white noise of a measured twist (m/s, rad/s); see :mod:`locbench.filters._motion`.
     """
 
-    particles: int = 1000
-    resample_ess_fraction: float = 0.5
+    particles: int = field(default=1000, metadata=bound(2, what="an integer"))
+    resample_ess_fraction: float = field(default=0.5, metadata=bound(0.0, 1.0))
     augmented: bool = False
     alpha_slow: float = 0.001
     alpha_fast: float = 0.1
-    roughening_k: float = field(default=0.2, metadata=tunable(0.0, 1.0))
+    roughening_k: float = field(default=0.2, metadata=tunable(0.0, 1.0, base=NON_NEGATIVE))
     regularise: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)
     inject: Literal["uniform", "sensor"] = field(default="uniform", metadata=RUN_KEY_OMIT_IF_DEFAULT)
     inject_pairs: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)
-    pair_gate: float = field(default=0.0, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    pair_gate: float = field(default=0.0, metadata=bound(0.0, 1.0, high_open=True, base=RUN_KEY_OMIT_IF_DEFAULT))
     recovery_likelihood: Literal["best", "mean"] = field(default="best", metadata=RUN_KEY_OMIT_IF_DEFAULT)
     adaptive: Literal["none", "kld"] = field(default="none", metadata=RUN_KEY_OMIT_IF_DEFAULT)
     kld_err: float = field(default=0.01, metadata=RUN_KEY_OMIT_IF_DEFAULT)
     kld_z: float = field(default=0.99, metadata=RUN_KEY_OMIT_IF_DEFAULT)
     min_particles: int = field(default=100, metadata=RUN_KEY_OMIT_IF_DEFAULT)
     max_particles: int = field(default=5000, metadata=RUN_KEY_OMIT_IF_DEFAULT)
-    kld_bin_xy_m: float = field(default=0.5, metadata=RUN_KEY_OMIT_IF_DEFAULT)
-    kld_bin_theta_deg: float = field(default=10.0, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    kld_bin_xy_m: float = field(default=0.5, metadata=POSITIVE | RUN_KEY_OMIT_IF_DEFAULT)
+    kld_bin_theta_deg: float = field(default=10.0, metadata=POSITIVE | RUN_KEY_OMIT_IF_DEFAULT)
     init: Literal["belief", "uniform"] = "belief"
     use_landmarks: bool = True
     use_ranges: bool = field(default=True, metadata=RUN_KEY_OMIT_IF_DEFAULT)
-    range_only_sigma_m: float | None = field(default=None, metadata=RUN_KEY_OMIT_IF_DEFAULT)
-    range_outlier_fraction: float = field(default=0.05, metadata=RUN_KEY_OMIT_IF_DEFAULT)
-    range_outlier_span_m: float = field(default=100.0, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    range_only_sigma_m: float | None = field(default=None, metadata=POSITIVE_OR_DATASET | RUN_KEY_OMIT_IF_DEFAULT)
+    range_outlier_fraction: float = field(
+        default=0.05, metadata=bound(0.0, 1.0, high_open=True, base=RUN_KEY_OMIT_IF_DEFAULT)
+    )
+    range_outlier_span_m: float = field(
+        default=100.0, metadata=bound(0.0, low_open=True, unit="m", base=RUN_KEY_OMIT_IF_DEFAULT)
+    )
     use_laser: bool = False
-    laser_beams: int = 60
+    laser_beams: int = field(default=60, metadata=bound(1))
     z_hit: float = 0.95
     z_rand: float = 0.05
-    sigma_hit_m: float = 0.2
-    laser_max_dist_m: float = 2.0
-    sigma_x_m: float | None = None
-    sigma_y_m: float | None = None
-    sigma_theta_rad: float | None = None
+    sigma_hit_m: float = field(default=0.2, metadata=bound(0.0, low_open=True, unit="m"))
+    laser_max_dist_m: float = field(default=2.0, metadata=bound(0.0, low_open=True, unit="m"))
+    sigma_x_m: float | None = field(default=None, metadata=NON_NEGATIVE_OR_NONE)
+    sigma_y_m: float | None = field(default=None, metadata=NON_NEGATIVE_OR_NONE)
+    sigma_theta_rad: float | None = field(default=None, metadata=NON_NEGATIVE_OR_NONE)
     motion_model: MotionKind = "auto"
-    sigma_range_m: float | None = field(default=None, metadata=tunable(1e-3, 1.0, log=True))
-    sigma_bearing_rad: float | None = field(default=None, metadata=tunable(1e-3, 0.5, log=True))
+    sigma_range_m: float | None = field(default=None, metadata=tunable(1e-3, 1.0, log=True, base=POSITIVE_OR_DATASET))
+    sigma_bearing_rad: float | None = field(
+        default=None, metadata=tunable(1e-3, 0.5, log=True, base=POSITIVE_OR_DATASET)
+    )
 
     def __post_init__(self) -> None:
-        self.check_motion_noise()
+        super().__post_init__()  # the bounds declared on the fields; the rules across fields follow
         if self.adaptive not in ("none", "kld"):
             raise ConfigError(f"adaptive must be 'none' or 'kld', got {self.adaptive!r}")
         if not 2 <= self.min_particles <= self.max_particles:
@@ -335,13 +352,6 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
             )
         if not (self.kld_err > 0.0 and math.isfinite(self.kld_z)):
             raise ConfigError(f"kld_err must be > 0 and kld_z finite, got {self.kld_err}, {self.kld_z}")
-        for name in ("kld_bin_xy_m", "kld_bin_theta_deg"):
-            if not getattr(self, name) > 0.0:
-                raise ConfigError(f"{name} must be > 0, got {getattr(self, name)}")
-        if self.particles < 2:
-            raise ConfigError(f"particles must be an integer >= 2, got {self.particles}")
-        if not 0.0 <= self.resample_ess_fraction <= 1.0:
-            raise ConfigError(f"resample_ess_fraction must be in [0, 1], got {self.resample_ess_fraction}")
         if not 0.0 <= self.alpha_slow < self.alpha_fast <= 1.0:
             raise ConfigError(
                 "need 0 <= alpha_slow < alpha_fast <= 1, "
@@ -351,31 +361,12 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
             raise ConfigError(f"recovery_likelihood must be 'best' or 'mean', got {self.recovery_likelihood!r}")
         if self.inject not in ("uniform", "sensor"):
             raise ConfigError(f"inject must be 'uniform' or 'sensor', got {self.inject!r}")
-        if not 0.0 <= self.pair_gate < 1.0:
-            raise ConfigError(f"pair_gate must be in [0, 1), got {self.pair_gate}")
-        if self.roughening_k < 0.0:
-            raise ConfigError(f"roughening_k must be >= 0, got {self.roughening_k}")
-        if self.laser_beams < 1:
-            raise ConfigError(f"laser_beams must be >= 1, got {self.laser_beams}")
         check_beams("laser_beams", self.laser_beams)
         # the particle set is decided by the config alone: refused here, when the spec is parsed
         size, name = (self.max_particles, "max_particles") if self.adaptive == "kld" else (self.particles, "particles")
         check_bytes("", f"a set of {name}={size}", float(size) * PARTICLE_BYTES, f"lower {name!r}")
         if not (self.z_hit >= 0.0 and self.z_rand >= 0.0 and self.z_hit + self.z_rand > 0.0):
             raise ConfigError(f"z_hit and z_rand must be >= 0 and not both 0, got {self.z_hit}, {self.z_rand}")
-        if not 0.0 <= self.range_outlier_fraction < 1.0:
-            raise ConfigError(f"range_outlier_fraction must be in [0, 1), got {self.range_outlier_fraction}")
-        for name in ("sigma_hit_m", "laser_max_dist_m", "range_outlier_span_m"):
-            if not getattr(self, name) > 0.0:
-                raise ConfigError(f"{name} must be > 0 m, got {getattr(self, name)}")
-        for name in ("sigma_x_m", "sigma_y_m", "sigma_theta_rad"):
-            v = getattr(self, name)
-            if v is not None and v < 0.0:
-                raise ConfigError(f"{name} must be >= 0, got {v}")
-        for name in ("sigma_range_m", "sigma_bearing_rad", "wheelbase_m", "range_only_sigma_m"):
-            v = getattr(self, name)
-            if v is not None and v <= 0.0:
-                raise ConfigError(f"{name} must be > 0 (or None for the dataset's value), got {v}")
         if not (self.use_landmarks or self.use_laser or self.use_ranges):
             raise ConfigError(
                 "use_landmarks, use_ranges and use_laser are all false: the particle filter needs one of them"

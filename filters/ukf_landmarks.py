@@ -41,7 +41,7 @@ are those of filterpy's own loops to the bit.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
@@ -54,7 +54,7 @@ from locbench.errors import ConfigError, FilterDiverged
 from locbench.events import Odometry, PoseFix
 from locbench.filters._kalman import gain_update, subtract
 from locbench.filters._landmark_index import NEAR_M
-from locbench.filters.base import Estimate, FilterConfig
+from locbench.filters.base import NON_NEGATIVE, Estimate, FilterConfig, bound
 from locbench.filters.ekf_landmarks import LandmarkEKF, LandmarkEKFConfig
 from locbench.geometry import TWO_PI, wrap_angle, wrap_scalar
 
@@ -158,16 +158,12 @@ class LandmarkUKFConfig(LandmarkEKFConfig):
         Secondary scaling; 3 - n = 0 for the 3-dof pose (Julier's rule).
     """
 
-    alpha: float = 1.0
-    beta: float = 2.0
+    alpha: float = field(default=1.0, metadata=bound(0.0, 1.0, low_open=True))
+    beta: float = field(default=2.0, metadata=NON_NEGATIVE)
     kappa: float = 0.0
 
     def __post_init__(self) -> None:
-        super().__post_init__()
-        if not 0.0 < self.alpha <= 1.0:
-            raise ConfigError(f"alpha must be in (0, 1], got {self.alpha}")
-        if self.beta < 0.0:
-            raise ConfigError(f"beta must be >= 0, got {self.beta}")
+        super().__post_init__()  # the bounds declared on the fields (alpha, beta); kappa's rule joins alpha
         if self.alpha**2 * (3.0 + self.kappa) <= 0.0:
             raise ConfigError(f"kappa must be > -3 (n + lambda > 0 for the 3-dof pose), got {self.kappa}")
 

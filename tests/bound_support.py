@@ -69,3 +69,30 @@ def scan_poses(world: str, every: int = 10) -> tuple[Any, ...]:
     measured = np.stack([e.ranges for e in scans])
     return (grid.occupied(), grid.resolution, origin, ds.ground_truth.poses[idx], e0.sensor_pose, e0.angles,
             e0.range_max, e0.range_min, 0.01, measured)  # fmt: skip
+
+
+def python_covariance_recursion(
+    p0: np.ndarray, jacobians: np.ndarray, process_cov: np.ndarray, meas_info: np.ndarray
+) -> np.ndarray:
+    """:func:`locbench.pcrb.covariance_recursion` as numpy calls per step (before it was compiled)."""
+    eye = np.eye(p0.shape[0])
+    out = np.empty((jacobians.shape[0] + 1, *p0.shape))
+    p = out[0] = np.asarray(p0, dtype=np.float64)
+    for k in range(jacobians.shape[0]):
+        pp = jacobians[k] @ p @ jacobians[k].T + process_cov[k]
+        p = np.linalg.solve(eye + pp @ meas_info[k], pp)
+        p = out[k + 1] = 0.5 * (p + p.T)
+    return out
+
+
+def seven_cast_bound(dataset: Any) -> dict[str, np.ndarray]:
+    """:func:`locbench.pcrb.bound_covariances` with the laser term differenced from seven casts per scan and
+    the covariance recursion in numpy (the bound before issue 24, item 3): the whole-bound reference."""
+    from locbench import pcrb
+
+    saved = pcrb.laser_information, pcrb.covariance_recursion
+    pcrb.laser_information, pcrb.covariance_recursion = differenced_laser_information, python_covariance_recursion
+    try:
+        return pcrb.bound_covariances(dataset)
+    finally:
+        pcrb.laser_information, pcrb.covariance_recursion = saved

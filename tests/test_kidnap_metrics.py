@@ -100,7 +100,7 @@ def test_within_recovery_thresholds_position_and_wrapped_heading() -> None:
     est[1, 0] += 0.25  # on the position bound: within
     est[2, 0] += 0.26
     est[3, 2] = -np.pi + 0.2  # wrapped heading error 0.3 rad
-    got = lm.within_recovery(np.arange(4.0), est, np.arange(4.0), gt)
+    got = lm.within_recovery(lm.align(np.arange(4.0), est, np.arange(4.0), gt))
     np.testing.assert_array_equal(got, [True, True, False, False])
 
 
@@ -210,7 +210,7 @@ def test_no_kidnap_no_kidnap_metrics() -> None:
     truth = _truth(kidnaps=())
     m = lm.run_metrics(_run(truth, np.ones(truth.ground_truth.t.shape, dtype=bool)), truth)
     assert not any(k.startswith("kidnap_") for k in m)
-    assert lm.kidnap_metrics([0.0], np.zeros((1, 3)), np.eye(3)[None], [0.0], np.zeros((1, 3)), ()) == {}
+    assert lm.kidnap_metrics(lm.align([0.0], np.zeros((1, 3)), [0.0], np.zeros((1, 3)), np.eye(3)[None]), ()) == {}
 
 
 # --- global localization ------------------------------------------------------------------------
@@ -258,19 +258,21 @@ def test_smoothed_heading_wraps() -> None:
     t = np.array([0.0, 1.0])
     gt = np.array([[0.0, 0.0, np.pi - 0.05], [0.0, 0.0, np.pi - 0.05]])
     extra = {"smoothed_t": t, "smoothed_mean": np.array([[0.0, 0.0, -np.pi + 0.05]] * 2)}
-    assert lm.smoothed_metrics(extra, t, gt)["smoothed_heading_rmse_rad"] == pytest.approx(0.1)
+    run = lm.align(t, gt, t, gt)
+    assert lm.smoothed_metrics(extra, run)["smoothed_heading_rmse_rad"] == pytest.approx(0.1)
 
 
 def test_smoothed_metrics_absent_or_malformed() -> None:
     t, gt = np.array([0.0, 1.0]), np.zeros((2, 3))
-    assert lm.smoothed_metrics({}, t, gt) == {}
-    assert lm.smoothed_metrics({"smoothed_t": np.zeros(0), "smoothed_mean": np.zeros((0, 3))}, t, gt) == {}
+    run = lm.align(t, gt, t, gt)
+    assert lm.smoothed_metrics({}, run) == {}
+    assert lm.smoothed_metrics({"smoothed_t": np.zeros(0), "smoothed_mean": np.zeros((0, 3))}, run) == {}
     with pytest.raises(ValueError, match="both"):
-        lm.smoothed_metrics({"smoothed_t": t}, t, gt)
+        lm.smoothed_metrics({"smoothed_t": t}, run)
     with pytest.raises(ValueError, match=r"\(n, 3\)"):
-        lm.smoothed_metrics({"smoothed_t": t, "smoothed_mean": np.zeros((2, 2))}, t, gt)
+        lm.smoothed_metrics({"smoothed_t": t, "smoothed_mean": np.zeros((2, 2))}, run)
     with pytest.raises(ValueError, match="non-decreasing"):
-        lm.smoothed_metrics({"smoothed_t": t[::-1], "smoothed_mean": np.zeros((2, 3))}, t, gt)
+        lm.smoothed_metrics({"smoothed_t": t[::-1], "smoothed_mean": np.zeros((2, 3))}, run)
 
 
 # --- the report ---------------------------------------------------------------------------------

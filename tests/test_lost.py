@@ -7,6 +7,7 @@ import pytest
 
 from locbench import lost
 from locbench.filters.pf import BELIEF_SAMPLE_SIZE, ParticleFilter
+from locbench.metrics import align
 from locbench.registry import make_dataset
 from locbench.runner import run_filter
 from locbench.seeding import belief_rng, filter_rng
@@ -68,3 +69,18 @@ def test_particle_subsample_is_unbiased() -> None:
     assert np.all(np.abs(means.mean(axis=0) - full) < 4.0 * se + 1e-12)
     pts, wts = flt.belief_sample(rng)
     assert pts.shape == (BELIEF_SAMPLE_SIZE, 3) and wts.sum() == pytest.approx(1.0)
+
+
+def test_health_series_holds_each_signal_by_the_aligned_rows() -> None:
+    t_est = np.array([0.0, 1.0, 1.0, 2.0])
+    mean = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [3.0, 0.0, 0.0]])
+    gt_t = np.array([0.5, 1.5, 2.5])
+    a = align(t_est, mean, gt_t, np.zeros((3, 3)))
+    # the NIS is not defined after a predict (NaN): the last defined value holds; ess_fraction is turned around
+    health = {"nis": [np.nan, 4.0, np.nan, 9.0], "ess_fraction": [1.0, 0.5, 0.2, 0.1], "not_a_signal": [0.0] * 4}
+    hs = lost.health_series(a, health, 1.0)
+    np.testing.assert_array_equal(hs.t, gt_t)
+    np.testing.assert_array_equal(hs.error_m, [0.0, 1.0, 3.0])
+    np.testing.assert_array_equal(hs.signals["nis"], [np.nan, 4.0, 9.0])
+    np.testing.assert_array_equal(hs.signals["ess_fraction"], [-1.0, -0.2, -0.1])
+    assert set(hs.signals) == {"nis", "ess_fraction"} and hs.kidnap_t == 1.0

@@ -1,4 +1,4 @@
-"""Hand-computed cases for every metric of locbench.metrics and its aggregations over seeds."""
+"""Hand-computed cases for every metric of locbench.metrics (the aggregations over seeds: test_aggregate.py)."""
 
 from __future__ import annotations
 
@@ -38,6 +38,32 @@ def test_estimate_at_rejects_empty_run() -> None:
         lm.estimate_at([], np.zeros((0, 3)), [0.0])
 
 
+def _flat(xy: np.ndarray | list[list[float]]) -> np.ndarray:
+    """Poses (n, 3) at heading 0 from positions (n, 2)."""
+    p = np.asarray(xy, dtype=np.float64)
+    return np.column_stack([p, np.zeros(p.shape[0])])
+
+
+def test_aligned_view_holds_every_array_once_at_the_truth_times() -> None:
+    t_est = np.array([0.0, 1.0, 1.0, 2.0])
+    mean = np.array([[0.0, 0.0, 3.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.1], [3.0, 1.0, -3.0]])
+    cov = np.stack([np.eye(3) * k for k in (1.0, 2.0, 4.0, 8.0)])
+    gt_t = np.array([-1.0, 0.5, 1.0, 2.5])
+    truth = np.array([[0.0, 0.0, -3.0], [1.0, 0.0, 0.0], [2.0, 1.0, 0.0], [3.0, 1.0, 3.0]])
+    a = lm.align(t_est, mean, gt_t, truth, cov)
+    np.testing.assert_array_equal(a.rows, [0, 0, 2, 3])
+    np.testing.assert_array_equal(a.mean, lm.estimate_at(t_est, mean, gt_t))
+    np.testing.assert_array_equal(a.cov, lm.estimate_at(t_est, cov, gt_t))
+    # the heading error is wrapped: 3 - (-3) = 6 rad is 6 - 2 pi
+    np.testing.assert_allclose(a.error[:, 2], [6.0 - 2 * np.pi, 3.0, 0.1, -6.0 + 2 * np.pi])
+    np.testing.assert_allclose(a.position_error, [0.0, 1.0, 1.0, 0.0])
+    assert a.cov is not None
+    np.testing.assert_array_equal(a.nees, lm.nees(a.error, a.cov))
+    assert a.nees is a.nees  # computed once
+    with pytest.raises(ValueError, match="no covariance"):
+        _ = lm.align(t_est, mean, gt_t, truth).nees
+
+
 # --- errors -------------------------------------------------------------------------------------
 
 
@@ -56,21 +82,23 @@ def test_ate_uses_every_ground_truth_time_and_no_alignment() -> None:
     gt_t = np.array([0.0, 0.5, 1.0])
     gt_xy = np.array([[0.0, 0.0], [0.5, 0.0], [1.0, 0.0]])
     # errors 0, 0.5 (held estimate at x=0), 0
-    assert lm.ate(t_est, mean, gt_t, gt_xy) == pytest.approx(np.sqrt(0.25 / 3))
+    assert lm.ate(lm.align(t_est, mean, gt_t, _flat(gt_xy))) == pytest.approx(np.sqrt(0.25 / 3))
     # a constant offset (3, 4) is not aligned away
-    assert lm.ate(t_est, mean + np.array([3.0, 4.0, 0.0]), [0.0, 1.0], gt_xy[[0, 2]]) == pytest.approx(5.0)
+    shifted = lm.align(t_est, mean + np.array([3.0, 4.0, 0.0]), [0.0, 1.0], _flat(gt_xy[[0, 2]]))
+    assert lm.ate(shifted) == pytest.approx(5.0)
 
 
 def test_heading_rmse_wraps_across_pi() -> None:
     t_est = np.array([0.0])
     mean = np.array([[0.0, 0.0, np.pi - 0.1]])
-    assert lm.heading_rmse(t_est, mean, [0.0, 1.0], [-np.pi + 0.1, np.pi - 0.1]) == pytest.approx(np.sqrt(0.04 / 2))
+    truth = [[0.0, 0.0, -np.pi + 0.1], [0.0, 0.0, np.pi - 0.1]]
+    assert lm.heading_rmse(lm.align(t_est, mean, [0.0, 1.0], truth)) == pytest.approx(np.sqrt(0.04 / 2))
 
 
 def test_final_error_at_last_ground_truth_time() -> None:
     t_est = np.array([0.0, 5.0])
     mean = np.array([[0.0, 0.0, 0.0], [3.0, 4.0, 0.0]])
-    assert lm.final_error(t_est, mean, [0.0, 4.0, 9.0], np.zeros((3, 2))) == pytest.approx(5.0)
+    assert lm.final_error(lm.align(t_est, mean, [0.0, 4.0, 9.0], np.zeros((3, 3)))) == pytest.approx(5.0)
 
 
 def test_distance_pairs_on_a_unit_speed_line() -> None:
@@ -90,19 +118,20 @@ def test_rpe_on_a_known_scale_drift() -> None:
     t, gt = _line_truth()
     est = gt.copy()
     est[:, 0] *= 1.1  # odometry 10 % long: 0.1 m of error per metre travelled
-    assert lm.rpe_per_metre(t, est, t, gt) == pytest.approx(0.1)
+    assert lm.rpe_per_metre(lm.align(t, est, t, gt)) == pytest.approx(0.1)
 
 
 def test_rpe_ignores_a_global_rigid_offset_but_ate_does_not() -> None:
     t, gt = _line_truth()
     est = compose([2.0, -1.0, 0.7], gt)
-    assert lm.rpe_per_metre(t, est, t, gt) == pytest.approx(0.0, abs=1e-12)
-    assert lm.ate(t, est, t, gt[:, :2]) > 1.0
+    a = lm.align(t, est, t, gt)
+    assert lm.rpe_per_metre(a) == pytest.approx(0.0, abs=1e-12)
+    assert lm.ate(a) > 1.0
 
 
 def test_rpe_is_nan_for_a_path_shorter_than_delta() -> None:
     t, gt = _line_truth()
-    assert np.isnan(lm.rpe_per_metre(t, gt, t, gt, delta_m=50.0))
+    assert np.isnan(lm.rpe_per_metre(lm.align(t, gt, t, gt), delta_m=50.0))
 
 
 # --- consistency --------------------------------------------------------------------------------
@@ -112,7 +141,7 @@ def test_nees_hand_value_and_wrapped_heading() -> None:
     assert lm.nees(np.array([[1.0, 0.0, 0.0]]), np.diag([4.0, 1.0, 1.0])[None])[0] == pytest.approx(0.25)
     mean = np.array([[0.0, 0.0, np.pi - 0.05]])
     cov = np.diag([1.0, 1.0, 0.01])[None]
-    ne = lm.nees_at_truth([0.0], mean, cov, [0.0], [[0.0, 0.0, -np.pi + 0.05]])
+    ne = lm.nees_at_truth(lm.align([0.0], mean, [0.0], [[0.0, 0.0, -np.pi + 0.05]], cov))
     assert ne[0] == pytest.approx(1.0)  # wrapped error -0.1 rad, sigma 0.1 rad
 
 
@@ -222,39 +251,6 @@ def test_run_metrics_leaves_out_undefined_values() -> None:
     assert "rpe_m_per_m" in m
 
 
-# --- aggregations -------------------------------------------------------------------------------
-
-
-def test_mean_ci_t_interval() -> None:
-    ci = lm.mean_ci([1.0, 2.0, 3.0, np.nan])
-    h = 4.302652729911275 / np.sqrt(3)  # t_{0.975, 2} * s / sqrt(n) with s = 1
-    assert (ci.mean, ci.low, ci.high, ci.n) == pytest.approx((2.0, 2.0 - h, 2.0 + h, 3))
-    assert ci.half_width == pytest.approx(h)
-    one = lm.mean_ci([5.0])
-    assert one.mean == 5.0 and np.isnan(one.low) and one.n == 1
-    assert np.isnan(lm.mean_ci([]).mean)
-
-
-def test_waypoint_rmse_and_distance_of_the_mean() -> None:
-    e = np.array([[3.0, 0.0], [4.0, 0.0]])
-    np.testing.assert_allclose(lm.waypoint_rmse(e), [np.sqrt(12.5), 0.0])
-    # two runs symmetric about waypoint 1: large RMSE, zero distance of the mean (003 table 1)
-    est = np.array([[[1.0, 0.0], [5.0, 5.0]], [[-1.0, 0.0], [5.0, 7.0]]])
-    marked = np.array([[0.0, 0.0], [2.0, 2.0]])
-    np.testing.assert_allclose(lm.mean_estimate_distance(est, marked), [0.0, 5.0])
-    np.testing.assert_allclose(lm.mean_estimate_distance(est, np.stack([marked, marked])), [0.0, 5.0])
-
-
-def test_mean_over_runs_on_a_common_grid() -> None:
-    grid = np.array([0.0, 1.0, 2.0])
-    runs = [(np.array([0.0, 1.0, 2.0]), np.array([1.0, 2.0, 3.0])), (np.array([0.0, 2.0]), np.array([3.0, np.nan]))]
-    mean, count = lm.mean_over_runs(grid, runs)
-    np.testing.assert_allclose(mean, [2.0, 2.5, 3.0])
-    np.testing.assert_array_equal(count, [2, 2, 1])
-    empty, n0 = lm.mean_over_runs(grid, [])
-    assert np.all(np.isnan(empty)) and not n0.any()
-
-
 def test_accepted_fraction_from_diagnostics() -> None:
     from locbench.metrics import acceptance_metrics
 
@@ -285,7 +281,7 @@ def test_nll_equals_scipy_logpdf_and_wraps_the_heading() -> None:
     gt = np.array([[0.0, 0.0, np.pi - 0.01]])
     est = np.array([[0.0, 0.0, -np.pi + 0.01]])
     t = np.array([0.0])
-    v = lm.nll_at_truth(t, est, np.eye(3)[None] * 0.01, t, gt)[0]
+    v = lm.nll_at_truth(lm.align(t, est, t, gt, np.eye(3)[None] * 0.01))[0]
     assert v == pytest.approx(0.5 * (0.02**2 / 0.01 + 3 * np.log(2 * np.pi) + np.log(1e-6)))
 
 
@@ -302,13 +298,6 @@ def test_nll_is_inf_for_a_singular_covariance() -> None:
     e = np.zeros((2, 3))
     out = lm.nll(e, P)
     assert out[0] == np.inf and np.isfinite(out[1])
-
-
-def test_ate_over_pcrb_is_rms_over_runs_divided_by_the_bound() -> None:
-    assert lm.ate_over_pcrb([0.03, 0.04], 0.01) == pytest.approx(np.sqrt((0.03**2 + 0.04**2) / 2) / 0.01)
-    assert np.isnan(lm.ate_over_pcrb([], 0.01))
-    with pytest.raises(ValueError, match="pcrb_ate_m"):
-        lm.ate_over_pcrb([0.1], 0.0)
 
 
 def test_nll_of_a_collapsed_covariance_is_inf_without_a_warning() -> None:

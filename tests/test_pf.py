@@ -20,7 +20,7 @@ from locbench.filters.pf import (
     sightings_poses,
     systematic_resample,
 )
-from locbench.metrics import nees, nees_at_truth
+from locbench.metrics import align, nees, nees_at_truth
 from locbench.raycast import cast_scan
 from locbench.registry import make_dataset, resolve_filter
 from locbench.runner import run_filter
@@ -500,7 +500,7 @@ def test_pf_nees_is_finite_at_every_step_on_room() -> None:
         ds = make_dataset("room", seed)
         trace = run_filter(_pf(), ds, np.random.default_rng(seed))
         gt = ds.ground_truth
-        ne = nees_at_truth(trace.t, trace.mean, trace.cov, gt.t, np.column_stack([gt.xy, gt.theta]))
+        ne = nees_at_truth(align(trace.t, trace.mean, gt.t, gt.poses, trace.cov))
         assert np.all(np.isfinite(ne)), seed
 
 

@@ -107,25 +107,6 @@ def test_pf_claim_not_evaluated_without_pf_runs() -> None:
     assert c.evaluate(rows).verdict == "reproduced"
 
 
-def test_waypoint_stats_rmse_and_distance_of_mean() -> None:
-    rows = [
-        ("room", "pf", 0, "waypoint_1_error_m", 0.3),
-        ("room", "pf", 0, "waypoint_1_est_x_m", 0.3),
-        ("room", "pf", 0, "waypoint_1_est_y_m", 0.0),
-        ("room", "pf", 0, "waypoint_1_marked_x_m", 0.0),
-        ("room", "pf", 0, "waypoint_1_marked_y_m", 0.0),
-        ("room", "pf", 1, "waypoint_1_error_m", 0.4),
-        ("room", "pf", 1, "waypoint_1_est_x_m", -0.4),
-        ("room", "pf", 1, "waypoint_1_est_y_m", 0.0),
-        ("room", "pf", 1, "waypoint_1_marked_x_m", 0.0),
-        ("room", "pf", 1, "waypoint_1_marked_y_m", 0.0),
-    ]
-    ws = claims.waypoint_stats(pd.DataFrame(rows, columns=["dataset", "filter", "seed", "metric", "value"]))
-    assert ws.loc[0, "rmse_m"] == pytest.approx(np.sqrt(0.125))
-    assert ws.loc[0, "mean_distance_m"] == pytest.approx(0.05)
-    assert ws.loc[0, "runs"] == 2
-
-
 # --- end to end ---------------------------------------------------------------------------------
 
 DATASET = "room"

@@ -23,7 +23,7 @@ from locbench.datasets.recorded.ros_map import save_map_server_map
 from locbench.errors import ConfigError, DataNotFound
 from locbench.events import LandmarkObservations, LaserScan, Odometry, PoseFix
 from locbench.geometry import quaternion_to_yaw, wrap_angle
-from locbench.metrics import ate
+from locbench.metrics import align, ate
 from locbench.registry import DATASETS, make_dataset, make_filter
 from locbench.runner import run_filter
 
@@ -256,7 +256,7 @@ def _odometry_and_laser_only(ds: Dataset, like: Dataset) -> Dataset:
 def _ate(flt: str, ds: Dataset) -> float:
     trace = run_filter(make_filter(flt), ds, np.random.default_rng(0))
     assert trace.status == "ok", trace.message
-    return ate(trace.t, trace.mean, ds.ground_truth.t, ds.ground_truth.xy)
+    return ate(align(trace.t, trace.mean, ds.ground_truth.t, ds.ground_truth.poses))
 
 
 def test_filters_on_the_bag_match_the_synthetic_run(

@@ -7,6 +7,7 @@ import pytest
 import scoringrules as sr
 
 from locbench import scores as sc
+from locbench.metrics import align
 
 
 def test_crps_normal_matches_its_closed_form_and_scoringrules() -> None:
@@ -89,12 +90,13 @@ def test_score_metrics_use_stored_sample_scores_when_present() -> None:
     t = np.array([0.0, 1.0, 2.0])
     mean, cov = np.zeros((3, 3)), np.tile(np.eye(3), (3, 1, 1))
     gt = np.zeros((3, 3))
-    gauss = sc.score_metrics(t, mean, cov, t, gt, {})
+    a = align(t, mean, t, gt, cov)
+    gauss = sc.score_metrics(a, {})
     assert set(gauss) >= set(sc.SCORE_IDS) and all(np.isfinite(gauss[k]) for k in sc.SCORE_IDS)
     stored = {k: np.full(3, 0.5) for k in sc.SAMPLE_SCORE_KEYS}
-    assert sc.score_metrics(t, mean, cov, t, gt, stored)["energy_score_m"] == 0.5
+    assert sc.score_metrics(a, stored)["energy_score_m"] == 0.5
     with pytest.raises(ValueError, match="ground-truth times"):
-        sc.score_metrics(t, mean, cov, t, gt, {k: np.zeros(2) for k in sc.SAMPLE_SCORE_KEYS})
+        sc.score_metrics(a, {k: np.zeros(2) for k in sc.SAMPLE_SCORE_KEYS})
     lo, hi = sc.ci_ids("crps_heading_rad")
     assert (lo, hi) == ("crps_heading_ci_low_rad", "crps_heading_ci_high_rad")
 

@@ -10,7 +10,7 @@ import pytest
 from scipy import stats
 
 from locbench import significance as sg
-from locbench.metrics import METRICS
+from locbench.metric_info import METRICS
 from locbench.ranking import UNTESTED_FOOTNOTE, Column, mark_ties, tie_footnote
 from locbench.report.doc import Section, Table
 from locbench.report.significance import dataset_groups

@@ -17,7 +17,8 @@ from locbench.events import LandmarkObservations, Odometry, PoseFix, RangeObserv
 from locbench.filters._noise import DEFAULT_PROCESS_SIGMA_THETA_RAD
 from locbench.filters.ekf_landmarks import LandmarkEKF, LandmarkEKFConfig, range_bearing
 from locbench.filters.ukf_landmarks import LandmarkUKF, LandmarkUKFConfig, circular_mean
-from locbench.geometry import pose_error, wrap_angle
+from locbench.geometry import wrap_angle
+from locbench.metrics import align, ate
 from locbench.registry import FILTERS, make_dataset, resolve_filter
 from locbench.runner import run_filter
 from locbench.seeding import filter_rng
@@ -121,10 +122,7 @@ def _ate(spec: str, dataset: str, seed: int) -> float:
     fr = resolve_filter(spec)
     tr = run_filter(FILTERS.load(fr.id)(fr.params), ds, filter_rng(fr.name, ds.name, seed))
     assert tr.status == "ok", tr.message
-    gt = ds.ground_truth
-    idx = np.clip(np.searchsorted(tr.t, gt.t, side="right") - 1, 0, len(tr.t) - 1)
-    e = pose_error(tr.mean[idx], gt.poses)
-    return float(np.sqrt(np.mean(e[:, 0] ** 2 + e[:, 1] ** 2)))
+    return ate(align(tr.t, tr.mean, ds.ground_truth.t, ds.ground_truth.poses))
 
 
 @pytest.mark.parametrize("seed", [0, 1])

@@ -12,7 +12,7 @@ import sys
 
 import numpy as np
 
-from locbench.metrics import POSE_DOF, anees, ate, chi2_band, nees_at_truth, nll_at_truth
+from locbench.metrics import POSE_DOF, align, anees, ate, chi2_band, nees_at_truth, nll_at_truth
 from locbench.pcrb import pcrb_metrics
 from locbench.registry import make_dataset, make_filter
 from locbench.runner import incompatibility, run_filter
@@ -39,9 +39,10 @@ def main() -> None:
                     continue
                 gt = ds.ground_truth
                 poses = np.column_stack([gt.xy, gt.theta])
-                aneess.append(anees(nees_at_truth(tr.t, tr.mean, tr.cov, gt.t, poses)))
-                nlls.append(float(np.mean(nll_at_truth(tr.t, tr.mean, tr.cov, gt.t, poses))))
-                ates.append(ate(tr.t, tr.mean, gt.t, gt.xy))
+                aligned = align(tr.t, tr.mean, gt.t, poses, tr.cov)
+                aneess.append(anees(nees_at_truth(aligned)))
+                nlls.append(float(np.mean(nll_at_truth(aligned))))
+                ates.append(ate(aligned))
             if not ates:
                 continue
             n = len(ates)

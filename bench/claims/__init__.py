@@ -11,12 +11,12 @@ Waypoint statistics here follow the DESIGN protocol: RMSE_j = sqrt(mean_i e_ij^2
 
 from __future__ import annotations
 
-import re
 from functools import lru_cache
 
 import numpy as np
 import pandas as pd
 
+from locbench.aggregate import waypoint_stats
 from locbench.experiments import (
     VERDICTS,
     Claim,
@@ -26,6 +26,7 @@ from locbench.experiments import (
     Source,
     Verdict,
     all_claims,
+    claim_suite,
     claims_for,
     experiment_of,
     experiments,
@@ -34,7 +35,6 @@ from locbench.experiments import (
     register_section,
     sections_for,
 )
-from locbench.metrics import mean_estimate_distance, waypoint_rmse
 from locbench.significance import ALPHA, TestResult
 from locbench.spec import Spec
 
@@ -48,6 +48,7 @@ __all__ = [
     "Verdict",
     "all_claims",
     "all_found",
+    "claim_suite",
     "claims_for",
     "experiment_of",
     "experiments",
@@ -67,9 +68,6 @@ __all__ = [
     "test_text",
     "waypoint_stats",
 ]
-
-_WP_RE = re.compile(r"^waypoint_(\d+)_(error_m|est_x_m|est_y_m|marked_x_m|marked_y_m)$")
-
 
 # --- the rule for claims that compare two filters or settings (docs/protocols.md "Claims") ---------------
 
@@ -136,61 +134,6 @@ def pick_filter(df: pd.DataFrame, filter_id: str) -> str | None:
     if not names:
         return None
     return filter_id if filter_id in names else names[0]
-
-
-def waypoint_stats(df: pd.DataFrame) -> pd.DataFrame:
-    """Per filter and waypoint statistics over the ok runs of one dataset name.
-
-    Parameters
-    ----------
-    df : DataFrame
-        Tidy metrics rows (``dataset, filter, seed, metric, value``) of a single dataset name.
-
-    Returns
-    -------
-    DataFrame
-        Columns ``filter``, ``waypoint`` (int, from 1), ``rmse_m`` (RMSE_j), ``mean_distance_m``
-        (distance between the marked point and the mean estimate; NaN when the CSV lacks the
-        estimate columns) and ``runs`` (how many runs entered), sorted by filter then waypoint.
-    """
-    cols = ["filter", "waypoint", "rmse_m", "mean_distance_m", "runs"]
-    parts = df["metric"].astype(str).str.extract(_WP_RE)
-    sel = parts[0].notna()
-    if not sel.any():
-        return pd.DataFrame(columns=cols)
-    wp = df.loc[sel, ["filter", "seed", "value"]].copy()
-    wp["waypoint"] = parts.loc[sel, 0].astype(int)
-    wp["quantity"] = parts.loc[sel, 1]
-    # one table (filter, waypoint, seed) x quantity for every group at once: a pivot per group was most of the
-    # report's table time; each group's block is then what its own pivot gave (first non-missing value, the
-    # rows and columns with no value dropped), so the statistics come out bit for bit the same
-    table = wp.groupby(["filter", "waypoint", "seed", "quantity"], sort=True)["value"].first().unstack("quantity")
-    quantities = [str(c) for c in table.columns]
-    values = table.to_numpy(dtype=np.float64)
-    keys = [k[:2] for k in table.index.to_list()]  # (filter, waypoint) of each row
-    rows = []
-    start = 0
-    while start < len(keys):
-        stop = start
-        while stop < len(keys) and keys[stop] == keys[start]:
-            stop += 1
-        fname, j = keys[start]
-        block = values[start:stop]
-        start = stop
-        has_col = ~np.all(np.isnan(block), axis=0)
-        block = block[:, has_col]
-        block = block[~np.all(np.isnan(block), axis=1)]
-        q = {c: block[:, k] for k, c in enumerate(c for c, h in zip(quantities, has_col, strict=True) if h)}
-        if "error_m" not in q:
-            continue
-        rmse = float(waypoint_rmse(q["error_m"][:, None])[0])
-        dist = float("nan")
-        if {"est_x_m", "est_y_m", "marked_x_m", "marked_y_m"} <= q.keys():
-            est = np.column_stack([q["est_x_m"], q["est_y_m"]])[:, None, :]
-            marked = np.column_stack([q["marked_x_m"], q["marked_y_m"]])[:, None, :]
-            dist = float(mean_estimate_distance(est, marked)[0])
-        rows.append((str(fname), int(str(j)), rmse, dist, int(np.count_nonzero(~np.isnan(q["error_m"])))))
-    return pd.DataFrame(rows, columns=cols)
 
 
 def series(ws: pd.DataFrame, filter_name: str, column: str) -> np.ndarray:

@@ -18,6 +18,7 @@ import pandas as pd
 
 from locbench.claims import Claim, ClaimResult, Source, pick_filter, register, spec_of
 from locbench.metrics import POSE_DOF, chi2_band
+from locbench.suites import SUITES
 
 SOURCE_PROTOCOL = Source(
     "consistency",
@@ -86,6 +87,7 @@ def _claim(dataset: str) -> Claim:
         "NEES test (sec. 5.4.2): the mean NEES of a consistent filter over N runs is chi-square(nN)/N",
         check_matched_consistency,
         across_variants=True,
+        suite=SUITES["consistency"],
     )
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from locbench.claims import Experiment, register_experiment
+from locbench.suites import SUITES
 
 register_experiment(
     Experiment(
@@ -13,5 +14,6 @@ register_experiment(
         "fixes, so that every filter runs on the same data.",
         summary=True,
         order=0,
+        suite=SUITES["default"],
     )
 )

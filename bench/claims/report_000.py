@@ -30,6 +30,7 @@ from locbench.claims import (
 )
 from locbench.errors import ConfigError
 from locbench.significance import TestResult, fisher_rates, mann_whitney
+from locbench.suites import SUITES
 
 SOURCE_000 = Source(
     "000",
@@ -243,5 +244,6 @@ register_experiment(
         "small kidnaps.",
         source=SOURCE_000,
         order=20,
+        suite=SUITES["lap"],
     )
 )

@@ -37,6 +37,7 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from locbench import ranking as rk
+from locbench.aggregate import mean_ci
 from locbench.claims import (
     Claim,
     ClaimResult,
@@ -55,11 +56,12 @@ from locbench.claims import (
 )
 from locbench.docfmt import Block, Plot, Text
 from locbench.errors import LocbenchError
-from locbench.metrics import METRICS, mean_ci
+from locbench.metric_info import METRICS
 from locbench.palette import Palette
 from locbench.pcrb import is_bound_row
 from locbench.significance import ALPHA, TestResult, mann_whitney, wilcoxon_paired
 from locbench.spec import build_params
+from locbench.suites import SUITES
 
 log = logging.getLogger(__name__)
 
@@ -470,5 +472,6 @@ register_experiment(
         source=SOURCE_001,
         fold_variants=True,
         order=50,
+        suite=SUITES["landmark_geometry"],
     )
 )

@@ -22,6 +22,7 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from locbench import ranking as rk
+from locbench.aggregate import mean_ci
 from locbench.claims import (
     Claim,
     ClaimResult,
@@ -37,8 +38,9 @@ from locbench.claims import (
 )
 from locbench.docfmt import PALETTE, Block, Plot, Text
 from locbench.errors import LocbenchError
-from locbench.metrics import METRICS, mean_ci
+from locbench.metric_info import METRICS
 from locbench.significance import TestResult, wilcoxon_paired
+from locbench.suites import SUITES
 
 log = logging.getLogger(__name__)
 
@@ -338,5 +340,6 @@ register_experiment(
         "a 181-beam scan and gates them with a chi-square threshold, swept here, with the length check on and off.",
         source=SOURCE_002,
         order=30,
+        suite=SUITES["line_room"],
     )
 )

@@ -7,6 +7,7 @@ import pandas as pd
 from scipy import stats
 
 from locbench import ranking as rk
+from locbench.aggregate import waypoint_stats
 from locbench.claims import (
     Claim,
     ClaimResult,
@@ -22,11 +23,11 @@ from locbench.claims import (
     register_section,
     series,
     test_text,
-    waypoint_stats,
 )
 from locbench.docfmt import Block, Text
-from locbench.metrics import MetricInfo
+from locbench.metric_info import MetricInfo
 from locbench.significance import wilcoxon_paired
+from locbench.suites import SUITES
 
 SOURCE_003 = Source(
     "003",
@@ -260,5 +261,6 @@ register_experiment(
         source=SOURCE_003,
         summary=True,
         order=10,
+        suite=SUITES["room"],
     )
 )

@@ -26,8 +26,9 @@ from locbench.claims import (
     test_text,
 )
 from locbench.docfmt import Block
-from locbench.metrics import METRICS
+from locbench.metric_info import METRICS
 from locbench.significance import mann_whitney
+from locbench.suites import SUITES
 
 SOURCE_004 = Source("004", "Kalman Filtering with STDR Simulator and ROS", "Luc Alexandre Bettaieb")
 LINEAR = "scan_grid"
@@ -149,5 +150,6 @@ register_experiment(
         "do both.",
         source=SOURCE_004,
         order=40,
+        suite=SUITES["scan_grid"],
     )
 )

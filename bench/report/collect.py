@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 
 from locbench.lost import HealthSeries, health_series
-from locbench.metrics import nees_at_truth, run_metrics
+from locbench.metrics import align_run, nees_at_truth, run_metrics
 from locbench.pcrb import BOUND_ROWS, is_bound_row, pcrb_summary
 from locbench.spec import Spec, format_spec, params_to_dict
 from locbench.store import RunRecord, Store, TruthRecord
@@ -225,12 +225,13 @@ def _read_runs(store: Store, keep: Keep | None, run_dirs: Sequence[Path]) -> tup
                 if key not in truths:
                     truths[key] = store.read_truth(dataset, seed)
                 truth = truths[key]
-                values = run_metrics(run, truth)
-                ne = nees_at_truth(run.t, run.mean, run.cov, truth.ground_truth.t, truth.ground_truth.poses)
+                # aligned once: the metrics, the NEES series and the health series read the same view
+                aligned = align_run(run, truth)
+                values = run_metrics(run, truth, aligned=aligned)
+                ne = nees_at_truth(aligned)
                 if run.health and truth.truth_label == "ground truth":
-                    gt = truth.ground_truth
                     kt = truth.kidnaps[0].t if truth.kidnaps else float("nan")
-                    hs = health_series(run.t, run.mean, run.health, gt.t, gt.xy, kt)
+                    hs = health_series(aligned, run.health, kt)
             else:
                 values, ne = run_metrics(run, _NO_TRUTH), None
         except Exception as exc:

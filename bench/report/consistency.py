@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from locbench.metrics import METRICS
+from locbench.metric_info import METRICS
 from locbench.report import tables as tb
 from locbench.report.doc import Section, Table, Text
 from locbench.report.experiment import nees_plots

@@ -8,9 +8,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 from matplotlib.figure import Figure
 
-from locbench.claims import waypoint_stats
+from locbench.aggregate import mean_over_runs, waypoint_stats
 from locbench.experiments import Experiment, sections_for
-from locbench.metrics import CONFIDENCE, POSE_DOF, chi2_band, estimate_at, mean_over_runs
+from locbench.metrics import CONFIDENCE, POSE_DOF, chi2_band, estimate_at
 from locbench.report import figures as fg
 from locbench.report import interactive as ia
 from locbench.report import tables as tb

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from locbench.metrics import METRICS
+from locbench.metric_info import METRICS
 from locbench.report import significance as sig
 from locbench.report import tables as tb
 from locbench.report import timing as tm

@@ -28,7 +28,7 @@ import numpy as np
 import pandas as pd
 
 from locbench.errors import LocbenchError
-from locbench.metrics import METRICS
+from locbench.metric_info import METRICS
 from locbench.registry import DATASETS
 from locbench.report import tables as tb
 from locbench.report.doc import Table

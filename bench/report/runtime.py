@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from matplotlib.figure import Figure
 
-from locbench.metrics import METRICS
+from locbench.metric_info import METRICS
 from locbench.report import figures as fg
 from locbench.report import interactive as ia
 from locbench.report import tables as tb

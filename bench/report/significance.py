@@ -21,7 +21,8 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from locbench import significance as sg
-from locbench.metrics import METRICS, WITHIN_THRESHOLDS_CM
+from locbench.metric_info import METRICS
+from locbench.metrics import WITHIN_THRESHOLDS_CM
 from locbench.ranking import WAYPOINT_MEAN, Column, hover_grid, mark_ties, per_seed, samples_for, tie_footnote
 from locbench.report import tables as tb
 from locbench.report.collect import write_if_changed

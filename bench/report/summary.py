@@ -24,7 +24,8 @@ from locbench import ranking as rk
 from locbench import significance as sg
 from locbench.events import Odometry
 from locbench.lost import LOST_THRESHOLDS_M
-from locbench.metrics import METRICS, POSE_DOF
+from locbench.metric_info import METRICS
+from locbench.metrics import POSE_DOF
 from locbench.pcrb import BOUND_ALL
 from locbench.report import health as hl
 from locbench.report import significance as sig

@@ -1,6 +1,6 @@
 """Tables from the tidy metrics: pure functions from a metrics frame to :class:`~locbench.report.doc.Table`.
 
-Headers, units and which way is better come from :data:`locbench.metrics.METRICS`; no dataset or filter is
+Headers, units and which way is better come from :data:`locbench.metric_info.METRICS`; no dataset or filter is
 named here.
 """
 
@@ -13,9 +13,10 @@ import pandas as pd
 from scipy import stats
 
 from locbench import ranking as rk
-from locbench.claims import waypoint_stats
+from locbench.aggregate import ate_over_pcrb, mean_ci, waypoint_stats
 from locbench.docfmt import num
-from locbench.metrics import CONFIDENCE, METRICS, POSE_DOF, MetricInfo, ate_over_pcrb, chi2_band, mean_ci
+from locbench.metric_info import METRICS, MetricInfo
+from locbench.metrics import CONFIDENCE, POSE_DOF, chi2_band
 from locbench.pcrb import BOUND_ALL
 from locbench.report.doc import Table
 
@@ -149,7 +150,7 @@ def run_count(df: pd.DataFrame) -> int:
 
 def ate_over_bound(df: pd.DataFrame, filter_name: str) -> float:
     """A filter's efficiency ``ate_over_pcrb`` on one dataset name: sqrt(mean over seeds of ate_m^2) divided
-    by the bound's, over the seeds where both have an ATE (:func:`locbench.metrics.ate_over_pcrb`); NaN
+    by the bound's, over the seeds where both have an ATE (:func:`locbench.aggregate.ate_over_pcrb`); NaN
     without a bound."""
     ate = df[df["metric"] == "ate_m"]
     bound = ate[ate["filter"] == BOUND_ALL].set_index("seed")["value"]

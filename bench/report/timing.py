@@ -13,7 +13,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from locbench.metrics import METRICS, REF_SUFFIX
+from locbench.metric_info import METRICS
+from locbench.metrics import REF_SUFFIX
 from locbench.report import tables as tb
 
 #: The x metric of the accuracy-runtime figures: the real-time factor in reference units, where every run has it.

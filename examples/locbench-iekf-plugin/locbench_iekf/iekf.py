@@ -30,6 +30,8 @@ from typing import ClassVar
 import numpy as np
 
 from locbench.filters.api import (
+    NON_NEGATIVE,
+    POSITIVE_OR_DATASET,
     UNKNOWN_ID,
     ConfigError,
     Estimate,
@@ -44,6 +46,7 @@ from locbench.filters.api import (
     Odometry,
     SensorSpec,
     WorldMap,
+    bound,
     field_unit,
     tunable,
     wrap_angle,
@@ -51,6 +54,9 @@ from locbench.filters.api import (
 )
 from locbench.filters.motion import MotionKind, MotionModel, propagate_covariance, resolve_motion_noise
 from locbench.filters.noise import landmark_noise, process_noise
+
+#: A standard deviation that is >= 0, or None for the dataset's nominal value (checked by the config base).
+_SIGMA = bound(0.0, optional=True)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -74,32 +80,20 @@ class IteratedLandmarkEKFConfig(FilterConfig):
         Measurement noise R of one sighting; None takes the dataset's nominal value.
     """
 
-    max_iterations: int = field(default=10, metadata=tunable(1, 30, integer=True))
-    step_tolerance: float = field(default=1e-9, metadata=field_unit("m or rad"))
+    max_iterations: int = field(default=10, metadata=tunable(1, 30, integer=True, base=bound(1)))
+    step_tolerance: float = field(default=1e-9, metadata=field_unit("m or rad", base=NON_NEGATIVE))
     motion_model: MotionKind = "auto"
     # the names say what these are but not their unit (the suffix rule would read "_per_m" as 1/m): declared
-    sigma_xy_per_m: float | None = field(default=None, metadata=field_unit("m/sqrt(m)"))
-    sigma_theta_per_m: float | None = field(default=None, metadata=field_unit("rad/sqrt(m)"))
-    sigma_theta_per_rad: float | None = field(default=None, metadata=field_unit("rad/sqrt(rad)"))
-    sigma_x_m: float | None = None
-    sigma_y_m: float | None = None
-    sigma_theta_rad: float | None = None
-    sigma_range_m: float | None = field(default=None, metadata=tunable(1e-3, 1.0, log=True))
-    sigma_bearing_rad: float | None = field(default=None, metadata=tunable(1e-3, 0.5, log=True))
-
-    def __post_init__(self) -> None:
-        if self.max_iterations < 1:
-            raise ConfigError(f"max_iterations must be >= 1, got {self.max_iterations}")
-        if not self.step_tolerance >= 0.0:
-            raise ConfigError(f"step_tolerance must be >= 0, got {self.step_tolerance}")
-        for name in ("sigma_xy_per_m", "sigma_theta_per_m", "sigma_theta_per_rad", "sigma_x_m", "sigma_y_m"):
-            v = getattr(self, name)
-            if v is not None and v < 0.0:
-                raise ConfigError(f"{name} must be >= 0 (or None for the dataset's value), got {v}")
-        for name in ("sigma_range_m", "sigma_bearing_rad"):
-            v = getattr(self, name)
-            if v is not None and v <= 0.0:
-                raise ConfigError(f"{name} must be > 0 (or None for the dataset's value), got {v}")
+    sigma_xy_per_m: float | None = field(default=None, metadata=field_unit("m/sqrt(m)", base=_SIGMA))
+    sigma_theta_per_m: float | None = field(default=None, metadata=field_unit("rad/sqrt(m)", base=_SIGMA))
+    sigma_theta_per_rad: float | None = field(default=None, metadata=field_unit("rad/sqrt(rad)", base=_SIGMA))
+    sigma_x_m: float | None = field(default=None, metadata=_SIGMA)
+    sigma_y_m: float | None = field(default=None, metadata=_SIGMA)
+    sigma_theta_rad: float | None = field(default=None, metadata=_SIGMA)
+    sigma_range_m: float | None = field(default=None, metadata=tunable(1e-3, 1.0, log=True, base=POSITIVE_OR_DATASET))
+    sigma_bearing_rad: float | None = field(
+        default=None, metadata=tunable(1e-3, 0.5, log=True, base=POSITIVE_OR_DATASET)
+    )
 
 
 def range_bearing(pose: FloatArray, xy: FloatArray) -> tuple[FloatArray, FloatArray]:
