@@ -208,6 +208,43 @@ def gaussian_health(est: Estimate, nis_dof: float | None = None) -> dict[str, fl
     return out
 
 
+#: :func:`gaussian_health`'s signals in the order it reports them.
+GAUSSIAN_HEALTH_NAMES = ("cov_trace_xy_m2", "heading_var_rad2", "nis", "nis_p", "accepted_fraction")
+
+
+def gaussian_health_rows(
+    cov: npt.NDArray[np.float64], diagnostics: Mapping[str, npt.NDArray[np.float64]], nis_dof: float | None = None
+) -> dict[str, npt.NDArray[np.float64]]:
+    """:func:`gaussian_health` of every row of a run at once, from its stored covariances (n, 3, 3) and
+    diagnostics (n,) each, NaN where a row lacks one: the same values bit for bit (the same IEEE operations, and
+    ``chdtrc`` is one ufunc whether called on a scalar or an array), so the runner need not call it per event.
+
+    Returns every signal whose inputs the run has; ``accepted_fraction`` whenever both counts are diagnostics
+    (the caller drops it if no single row had both, as :func:`gaussian_health` would never report it).
+    """
+    out = {"cov_trace_xy_m2": cov[:, 0, 0] + cov[:, 1, 1], "heading_var_rad2": cov[:, 2, 2].copy()}
+    if "nis" in diagnostics:
+        from scipy import special
+
+        nis = np.array(diagnostics["nis"], dtype=np.float64)
+        if nis_dof is None:
+            dof = diagnostics.get("nis_dof", np.full(nis.shape, np.nan))
+        else:
+            dof = np.full(nis.shape, float(nis_dof))
+        ok = np.isfinite(nis) & (dof > 0)
+        nis_p = np.full(nis.shape, np.nan)
+        nis_p[ok] = special.chdtrc(dof[ok], nis[ok])
+        out["nis"], out["nis_p"] = nis, nis_p
+    if "accepted" in diagnostics and "rejected" in diagnostics:
+        acc, rej = diagnostics["accepted"], diagnostics["rejected"]
+        total = acc + rej
+        offered = total > 0  # NaN (a row without the counts) is not
+        share = np.full(acc.shape, np.nan)
+        share[offered] = acc[offered] / total[offered]
+        out["accepted_fraction"] = share
+    return out
+
+
 def accepted_share(accepted: float, rejected: float) -> float:
     """Accepted over offered measurements of one update; NaN when nothing was offered."""
     total = accepted + rejected
@@ -258,6 +295,9 @@ class Filter(abc.ABC):
         ImportError (the filter imports them inside its methods, so that its class can be read without them).
     expected_check_failures : mapping of str to str
         Conformance checks the filter fails by design, each with the reason; they run as strict xfail.
+    health_nis_dof : float or None
+        Degrees of freedom of the ``nis`` diagnostic for the default :meth:`health`; None reads the
+        ``nis_dof`` diagnostic instead.
 
     Hooks read by the conformance checks: ``expected_check_failures`` and :meth:`check_tolerances`.
     """
@@ -267,6 +307,7 @@ class Filter(abc.ABC):
     requires: ClassVar[frozenset[MapKind]] = frozenset()
     Config: ClassVar[type[FilterConfig]] = FilterConfig
     version: ClassVar[int] = 1
+    health_nis_dof: ClassVar[float | None] = None
     source: ClassVar[str] = ""
     description: ClassVar[str] = ""
     requires_modules: ClassVar[tuple[str, ...]] = ()
@@ -362,10 +403,18 @@ class Filter(abc.ABC):
     def health(self) -> dict[str, float]:
         """Named floats describing the filter's own state after the last call (:data:`HEALTH_SIGNALS`).
 
-        The default is :func:`gaussian_health` of :meth:`estimate`; a filter adds the signals it has. Must not
-        change the belief or consume the filter's random stream; the runner stores the values per event.
+        The default is :func:`gaussian_health` of :meth:`estimate` (with :attr:`health_nis_dof`) and the
+        filter's :meth:`event_health`. Must not change the belief or consume the filter's random stream; the
+        runner stores the values per event. A filter that keeps this default has the Gaussian part computed by
+        the runner from the stored rows after the run (:func:`gaussian_health_rows`, the same values); one that
+        overrides it is called after every event.
         """
-        return gaussian_health(self.estimate())
+        return gaussian_health(self.estimate(), self.health_nis_dof) | self.event_health()
+
+    def event_health(self) -> dict[str, float]:
+        """The health signals of the last call that are not functions of :meth:`estimate` (ICP residuals, the
+        particles' effective sample size, ...); none by default. Never one of :data:`GAUSSIAN_HEALTH_NAMES`."""
+        return {}
 
     def extra_results(self) -> dict[str, Any]:
         """Optional arrays stored with the run at the end (e.g. a smoother's smoothed trajectory)."""

@@ -74,7 +74,7 @@ from locbench.errors import ConfigError, FilterDiverged, ResourceLimit
 from locbench.events import LaserScan, Observation, Odometry
 from locbench.filters._icp import MIN_PAIRS, IcpResult, icp_2d
 from locbench.filters._kalman import joseph_correct_pose
-from locbench.filters.base import POSITIVE, POSITIVE_OR_DATASET, Estimate, Filter, FilterConfig, bound, gaussian_health
+from locbench.filters.base import POSITIVE, POSITIVE_OR_DATASET, Estimate, Filter, FilterConfig, bound
 from locbench.geometry import wrap_scalar
 from locbench.limits import RAYCAST_BYTES_PER_CELL, check_bytes, grid_cells
 from locbench.raycast import cast_scan
@@ -180,6 +180,7 @@ class IcpEKF(Filter):
     requires: ClassVar[frozenset[MapKind]] = frozenset({MapKind.OCCUPANCY})
     Config: ClassVar[type[FilterConfig]] = IcpEKFConfig
     version: ClassVar[int] = 3
+    health_nis_dof: ClassVar[float | None] = 3  # the H = I pose update
     cost_per_data_s: ClassVar[float] = 0.3
     source: ClassVar[str] = "000_2af74c528ee7b17b (EKF with LRF: eq. 11-18, sec. III-B, IV-B, appendix A)"
 
@@ -389,10 +390,10 @@ class IcpEKF(Filter):
             "matched_points": float(res.matched) if res is not None else 0.0,
         }
 
-    def health(self) -> dict[str, float]:
-        """:func:`gaussian_health` (NIS of the H = I pose update, 3 degrees of freedom) with the last scan's
-        ``icp_rmse_m`` and ``inlier_fraction`` (NaN before the first scan)."""
-        return gaussian_health(self.estimate(), nis_dof=3) | self._icp_health
+    def event_health(self) -> dict[str, float]:
+        """The last scan's ``icp_rmse_m`` and ``inlier_fraction`` (NaN before the first scan), beside the default
+        :meth:`health`'s Gaussian signals (NIS of the H = I pose update, ``health_nis_dof`` = 3)."""
+        return dict(self._icp_health)
 
     def estimate(self) -> Estimate:
         """The current pose and covariance with the diagnostics of the last call."""

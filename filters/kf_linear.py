@@ -62,7 +62,7 @@ from locbench.errors import ConfigError, FilterDiverged
 from locbench.events import LaserScan, Observation, Odometry
 from locbench.filters._motion import increment_variances, resolve_motion_noise
 from locbench.filters._scan_database import ScanDatabase, build_database, lattice_too_large, match_scan
-from locbench.filters.base import NON_NEGATIVE, Estimate, Filter, FilterConfig, bound, gaussian_health
+from locbench.filters.base import NON_NEGATIVE, Estimate, Filter, FilterConfig, bound
 from locbench.geometry import wrap_scalar
 from locbench.tunable import tunable
 
@@ -156,6 +156,7 @@ class LinearKF(Filter):
     requires: ClassVar[frozenset[MapKind]] = frozenset({MapKind.OCCUPANCY})
     Config: ClassVar[type[FilterConfig]] = LinearKFConfig
     version: ClassVar[int] = 1
+    health_nis_dof: ClassVar[float | None] = 3  # the pose fix
     cost_per_data_s: ClassVar[float] = 0.3
     source: ClassVar[str] = "004_2a620520509b0112 (linear KF, velocity model and scan-database sensor model, sec. I-II)"
 
@@ -281,10 +282,6 @@ class LinearKF(Filter):
             raise FilterDiverged(f"LinearKF: non-finite state at t={t:.3f} s")
 
     # --- output ----------------------------------------------------------------------------------
-
-    def health(self) -> dict[str, float]:
-        """:func:`gaussian_health` with the pose fix's 3 degrees of freedom (NaN NIS after a predict or a miss)."""
-        return gaussian_health(self.estimate(), nis_dof=3)
 
     def estimate(self) -> Estimate:
         """Current mean (x, y, theta) and covariance."""

@@ -20,7 +20,7 @@ from locbench.datasets.base import Gaussian2, SensorSpec, WorldMap
 from locbench.errors import FilterDiverged
 from locbench.events import Observation, Odometry
 from locbench.filters._motion import InputNoise, MotionKind, MotionModel, propagate_covariance, resolve_motion_noise
-from locbench.filters.base import Estimate, Filter, FilterConfig, gaussian_health
+from locbench.filters.base import Estimate, Filter, FilterConfig
 from locbench.geometry import wrap_scalar
 
 
@@ -87,9 +87,9 @@ class OdometryFilter(Filter):
         """Dead reckoning takes no observation: always ``TypeError``."""
         self.check_consumes(z)
 
-    def health(self) -> dict[str, float]:
-        """The covariance's growth (:func:`gaussian_health`, no NIS) and the path length ``distance_m``."""
-        return gaussian_health(self.estimate()) | {"distance_m": self._travelled}
+    def event_health(self) -> dict[str, float]:
+        """The path length ``distance_m``, beside the default :meth:`health`'s covariance growth (no NIS)."""
+        return {"distance_m": self._travelled}
 
     def estimate(self) -> Estimate:
         """The composed pose and its covariance; diagnostics ``distance_m`` (odometry path length so far)."""

@@ -150,7 +150,6 @@ from locbench.filters.base import (
     Filter,
     FilterConfig,
     bound,
-    gaussian_health,
 )
 from locbench.geometry import wrap_angle
 from locbench.limits import (
@@ -1631,13 +1630,13 @@ class ParticleFilter(Filter):
         m = BELIEF_SAMPLE_SIZE
         return _gather(self._x, systematic_resample(self._weights(), m, rng)), np.full(m, 1.0 / m)
 
-    def health(self) -> dict[str, float]:
-        """Covariance trace and heading variance of the particle scatter (:func:`gaussian_health`, no NIS), the
-        ``ess_fraction`` (n_eff / particles) of the last update, the ``max_weight`` and augmented MCL's
-        ``w_fast_over_w_slow`` of the sensor of the last update (NaN when off)."""
+    def event_health(self) -> dict[str, float]:
+        """The ``ess_fraction`` (n_eff / particles) of the last update, the ``max_weight`` and augmented MCL's
+        ``w_fast_over_w_slow`` of the sensor of the last update (NaN when off), beside the default
+        :meth:`health`'s covariance trace and heading variance of the particle scatter (no NIS)."""
         w = self._weights()
         n_eff = float(self._diag.get("n_eff", math.nan))
-        return gaussian_health(self.estimate()) | {
+        return {
             "ess_fraction": n_eff / float(w.shape[0]),
             "max_weight": float(np.max(w)),
             "w_fast_over_w_slow": float(self._diag.get("w_fast_over_w_slow", math.nan)),

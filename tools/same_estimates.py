@@ -7,7 +7,8 @@ main, e.g. a copy of its tree on ``PYTHONPATH``), then ``compare``::
     python tools/same_estimates.py dump after.npz "ekf_landmarks;ekf_icp" "office;lap" 2
     python tools/same_estimates.py compare before.npz after.npz
 
-Each run keeps its times, means, covariances, kinds, every diagnostic and its status (not the step times);
+Each run keeps its times, means, covariances, kinds, every diagnostic, health signal and extra array, the order of
+the diagnostics' and health signals' names, and its status (not the step times);
 ``compare`` lists the arrays that differ (NaN equal to NaN) and exits 1 if any does.
 """
 
@@ -35,6 +36,9 @@ def dump(out: str, filters: list[str], datasets: list[str], seeds: int) -> None:
                 arrays |= {f"{key}|t": trace.t, f"{key}|mean": trace.mean, f"{key}|cov": trace.cov}
                 arrays |= {f"{key}|kind": trace.kind, f"{key}|status": np.array([trace.status])}
                 arrays |= {f"{key}|d|{d}": v for d, v in trace.diagnostics.items()}
+                arrays |= {f"{key}|h|{h}": v for h, v in trace.health.items()}
+                arrays |= {f"{key}|x|{x}": v for x, v in trace.extra.items()}
+                arrays[f"{key}|order"] = np.array([",".join(trace.diagnostics), ",".join(trace.health)])
                 print(key, trace.status, len(trace.t), flush=True)
     np.savez(out, **arrays)
 
