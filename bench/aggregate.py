@@ -177,16 +177,33 @@ def waypoint_stats(df: pd.DataFrame) -> pd.DataFrame:
     wp = df.loc[sel, ["filter", "seed", "value"]].copy()
     wp["waypoint"] = parts.loc[sel, 0].astype(int)
     wp["quantity"] = parts.loc[sel, 1]
+    # one table (filter, waypoint, seed) x quantity for every group at once: a pivot per group was most of the
+    # report's table time; each group's block is then what its own pivot gave (first non-missing value, the
+    # rows and columns with no value dropped), so the statistics come out bit for bit the same
+    table = wp.groupby(["filter", "waypoint", "seed", "quantity"], sort=True)["value"].first().unstack("quantity")
+    quantities = [str(c) for c in table.columns]
+    values = table.to_numpy(dtype=np.float64)
+    keys = [k[:2] for k in table.index.to_list()]  # (filter, waypoint) of each row
     rows = []
-    for (fname, j), g in wp.groupby(["filter", "waypoint"], sort=True):
-        q = g.pivot_table(index="seed", columns="quantity", values="value", aggfunc="first")
+    start = 0
+    while start < len(keys):
+        stop = start
+        while stop < len(keys) and keys[stop] == keys[start]:
+            stop += 1
+        fname, j = keys[start]
+        block = values[start:stop]
+        start = stop
+        has_col = ~np.all(np.isnan(block), axis=0)
+        block = block[:, has_col]
+        block = block[~np.all(np.isnan(block), axis=1)]
+        q = {c: block[:, k] for k, c in enumerate(c for c, h in zip(quantities, has_col, strict=True) if h)}
         if "error_m" not in q:
             continue
-        rmse = float(waypoint_rmse(q["error_m"].to_numpy()[:, None])[0])
+        rmse = float(waypoint_rmse(q["error_m"][:, None])[0])
         dist = float("nan")
-        if {"est_x_m", "est_y_m", "marked_x_m", "marked_y_m"} <= set(q.columns):
-            est = q[["est_x_m", "est_y_m"]].to_numpy()[:, None, :]
-            marked = q[["marked_x_m", "marked_y_m"]].to_numpy()[:, None, :]
+        if {"est_x_m", "est_y_m", "marked_x_m", "marked_y_m"} <= q.keys():
+            est = np.column_stack([q["est_x_m"], q["est_y_m"]])[:, None, :]
+            marked = np.column_stack([q["marked_x_m"], q["marked_y_m"]])[:, None, :]
             dist = float(mean_estimate_distance(est, marked)[0])
-        rows.append((str(fname), int(str(j)), rmse, dist, int(q["error_m"].notna().sum())))
+        rows.append((str(fname), int(str(j)), rmse, dist, int(np.count_nonzero(~np.isnan(q["error_m"])))))
     return pd.DataFrame(rows, columns=cols)

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -104,3 +104,14 @@ def num(x: float, digits: int = 3) -> str:
 
 #: Okabe-Ito colours (black last: it is the ground truth's colour in trajectory figures).
 PALETTE: tuple[str, ...] = ("#0072B2", "#E69F00", "#009E73", "#CC79A7", "#56B4E9", "#D55E00", "#F0E442", "#000000")
+#: Nine markers (coprime with the eight colours; one per filter id in :mod:`locbench.palette`).
+MARKERS: tuple[str, ...] = ("o", "s", "^", "D", "v", "P", "X", "<", "*")
+LINESTYLES: tuple[str, ...] = ("-", "--", "-.", ":")
+
+
+class LineStyle(NamedTuple):
+    """The colour, marker and dash of one series."""
+
+    color: str
+    marker: str
+    linestyle: str

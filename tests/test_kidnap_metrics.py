@@ -14,7 +14,7 @@ from locbench.report import wilson_interval, write_report
 from locbench.report.build import Report
 from locbench.report.collect import collect
 from locbench.report.doc import Plot, Table
-from locbench.report.experiment import nees_plot
+from locbench.report.experiment import nees_plots
 from locbench.report.kidnap import kidnap_section
 from locbench.report.render import render_png
 from locbench.store import KIND_NAMES, RunRecord, Store, TruthRecord
@@ -328,8 +328,8 @@ def test_report_kidnap_and_global_sections_regenerate_identically(kidnap_store: 
     for needle in ("Kidnap: line", "![line: recovery within 30 s", "Global localization", "smoothed ATE (cm)"):
         assert needle in text, needle
     # runs started from a uniform prior are scored apart, not in the NEES figure of their dataset
-    nees = nees_plot(Report(collect(kidnap_store)), "line[kidnap_m=2]")
-    assert nees is not None and "uniform prior left out" in nees.caption
+    nees = nees_plots(Report(collect(kidnap_store)), "line[kidnap_m=2]")
+    assert nees and all("uniform prior left out" in p.caption for p in nees)
     files = sorted(p for p in kidnap_store.summary.rglob("*") if p.is_file())
     before = {p: p.read_bytes() for p in files}
     for p in files:

@@ -54,9 +54,10 @@ from locbench.claims import (
     spec_of,
     test_text,
 )
-from locbench.docfmt import PALETTE, Block, Plot, Text
+from locbench.docfmt import Block, Plot, Text
 from locbench.errors import LocbenchError
 from locbench.metric_info import METRICS
+from locbench.palette import Palette
 from locbench.pcrb import is_bound_row
 from locbench.significance import ALPHA, TestResult, mann_whitney, wilcoxon_paired
 from locbench.spec import build_params
@@ -423,8 +424,8 @@ def layout_section(df: pd.DataFrame, slug: str) -> list[Block]:
     def draw(fig: Figure) -> None:
         ax = fig.add_subplot()
         x = np.arange(len(LAYOUT_ORDER))
-        # black is the bound's (the palette's last colour)
-        colors = {f: "#000000" if is_bound_row(f) else PALETTE[i % (len(PALETTE) - 1)] for i, f in enumerate(filters)}
+        # one colour per filter id, as in every figure (the bound black)
+        colors = {f: st.color for f, st in Palette(filters).styles(filters).items()}
         markers = {"circle": "o", "star": "*", "pentagon": "p", "random": "s"}
         for f, p, means in series:
             ls = "--" if spec_id(f) == "odometry" else ":" if is_bound_row(f) else "-"

@@ -23,6 +23,7 @@ import pandas as pd
 
 from locbench.experiments import all_claims, experiments
 from locbench.metrics import CONFIDENCE
+from locbench.palette import Palette, split_by_sweep
 from locbench.pcrb import BOUND_ROWS
 from locbench.report import appendix as ap
 from locbench.report import consistency as cs
@@ -40,7 +41,7 @@ from locbench.report.doc import Section, Table, Text
 from locbench.report.names import NAN, seed_ranges, slug
 from locbench.report.reference import reference_kind as _reference_kind
 from locbench.report.reference import semi_synthetic
-from locbench.report.style import LineStyle, style_for
+from locbench.report.style import LineStyle
 from locbench.report.tuning import tuning_section
 from locbench.spec import Spec
 
@@ -65,10 +66,15 @@ class Report:
 
     # --- helpers ------------------------------------------------------------------------------------
 
-    @staticmethod
-    def styles_for(names: list[str]) -> dict[str, LineStyle]:
-        """Styles in a figure's own order, so no two of its series share colour, marker and dash."""
-        return {n: style_for(i) for i, n in enumerate(names)}
+    @cached_property
+    def palette(self) -> Palette:
+        """One style per configuration for every figure: a colour and marker per filter id, shades for sweeps."""
+        names = {r.filter for r in self.col.runs}
+        return Palette(names, self.col.filter_order(names))
+
+    def styles_for(self, names: list[str]) -> dict[str, LineStyle]:
+        """The palette's styles of a figure's series (the same in every figure)."""
+        return self.palette.styles(names)
 
     def has(self, dataset_id: str) -> bool:
         return any(info.spec.ident == dataset_id for info in self.col.datasets.values())
@@ -100,6 +106,10 @@ class Report:
         for i, b in enumerate(n for n in names if self.col.is_bound(n)):
             out[b] = LineStyle("#000000", "", ("--", ":")[i % 2])
         return out
+
+    def split(self, names: list[str], limit: int) -> list[tuple[str, list[str]]]:
+        """A crowded figure's configurations as the defaults and one group per sweep (:func:`split_by_sweep`)."""
+        return split_by_sweep(names, limit)
 
     def variants_of(self, dataset_id: str) -> list[str]:
         return sorted(n for n, info in self.col.datasets.items() if info.spec.ident == dataset_id)

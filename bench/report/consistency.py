@@ -9,7 +9,7 @@ import numpy as np
 from locbench.metric_info import METRICS
 from locbench.report import tables as tb
 from locbench.report.doc import Section, Table, Text
-from locbench.report.experiment import nees_plot
+from locbench.report.experiment import nees_plots
 from locbench.report.names import MATCHED_PARAM, NAN
 from locbench.spec import Spec
 
@@ -54,9 +54,7 @@ def consistency_section(rep: Report) -> Section:
         table, inf = shipped_matched_table(rep, shipped, twin)
         collapsed |= inf
         sec.add(table)
-        plot = nees_plot(rep, twin)
-        if plot is not None:
-            sec.add(plot)
+        sec.add(*nees_plots(rep, twin))
     rows: list[tuple[str, ...]] = []
     keys: list[tuple[float, ...]] = []
     for ds in alone:

@@ -12,16 +12,18 @@ from locbench.aggregate import mean_over_runs, waypoint_stats
 from locbench.experiments import Experiment, sections_for
 from locbench.metrics import CONFIDENCE, POSE_DOF, chi2_band, estimate_at
 from locbench.report import figures as fg
+from locbench.report import interactive as ia
 from locbench.report import tables as tb
 from locbench.report.doc import Plot, Section, Table, Text
 from locbench.report.names import slug
-from locbench.report.plotly import _plotly_tracks
 
 if TYPE_CHECKING:
     from locbench.report.build import Report
 
-#: Most panels of one trajectory figure.
+#: Most panels of one trajectory figure before it is split into defaults and one figure per sweep.
 MAX_TRACK_PANELS = 12
+#: Most series of one NEES or waypoint figure before it is split the same way.
+MAX_LINE_SERIES = 10
 #: Ellipses drawn along each track.
 ELLIPSES_PER_TRACK = 10
 #: Most series of the error-over-time figure before it shows the default configurations only.
@@ -71,14 +73,15 @@ def dataset_blocks(rep: Report, dataset: str) -> list[Table | Plot]:
     wt = tb.waypoint_table(rep.rows(dataset), filters + bounds, f"`{shown}`: RMSE at each waypoint over runs (cm)")
     if wt is not None:
         out.append(wt)
-    plots = (
-        trajectory_plot(rep, dataset),
-        error_plot(rep, dataset),
-        waypoint_plot(rep, dataset),
-        nees_plot(rep, dataset),
-        count_plot(rep, dataset),
-    )
-    out += [p for p in plots if p is not None]
+    error = error_plot(rep, dataset)
+    count = count_plot(rep, dataset)
+    out += [
+        *trajectory_plots(rep, dataset),
+        *([error] if error is not None else []),
+        *waypoint_plots(rep, dataset),
+        *nees_plots(rep, dataset),
+        *([count] if count is not None else []),
+    ]
     return out
 
 
@@ -118,14 +121,15 @@ def error_plot(rep: Report, dataset: str) -> Plot | None:
     return Plot(f"{slug(dataset)}_errors", caption, draw, size=(7.5, 4.2))
 
 
-def trajectory_plot(rep: Report, dataset: str) -> Plot | None:
+def trajectory_plots(rep: Report, dataset: str) -> list[Plot]:
+    """Every configuration's estimate on the first seed: one figure, or, past :data:`MAX_TRACK_PANELS`, one
+    of the defaults and one per sweep (:meth:`Report.split`), so that no configuration is left out."""
     keys = [k for k in rep.col.ok_dirs if k[0] == dataset and not rep.col.is_global(k[1])]
     if not keys:
-        return None
+        return []
     seed = min(k[2] for k in keys)
     truth = rep.col.truths[(dataset, seed)]
     filters = rep.col.filter_order({k[1] for k in keys if k[2] == seed})
-    shown = filters[:MAX_TRACK_PANELS]
     gt = truth.ground_truth
     world = fg.World(
         truth.map_segments,
@@ -135,40 +139,36 @@ def trajectory_plot(rep: Report, dataset: str) -> Plot | None:
         truth.waypoints.xy if truth.waypoints is not None else np.zeros((0, 2)),
     )
     t_marks = np.linspace(gt.t[0], gt.t[-1], ELLIPSES_PER_TRACK + 2)[1:-1]
-    tracks = []
-    for f in shown:
+    tracks: dict[str, fg.Track] = {}
+    for f in filters:
         run = rep.col.read_run(dataset, f, seed)
-        tracks.append(
-            fg.Track(
-                f,
-                run.mean[:, :2],
-                estimate_at(run.t, run.mean, t_marks)[:, :2],
-                estimate_at(run.t, run.cov, t_marks)[:, :2, :2],
-            )
+        tracks[f] = fg.Track(
+            f,
+            run.mean[:, :2],
+            estimate_at(run.t, run.mean, t_marks)[:, :2],
+            estimate_at(run.t, run.cov, t_marks)[:, :2, :2],
         )
-    styles = rep.styles_for(shown)
-    nrows = int(np.ceil(len(tracks) / 3))
-    more = len(filters) - len(shown)
-    caption = (
-        f"`{dataset}`, seed {seed}: each filter's estimate (colour) with 95 % position ellipses, the "
-        f"{truth.truth_label} (black), the map (grey) and the waypoints (x)"
-        + (f"; {more} more configurations are in the appendix tables" if more > 0 else "")
-    )
+    plots = []
+    for key, names in rep.split(filters, MAX_TRACK_PANELS):
+        what = {"": "each filter's", "defaults": "each filter's default"}.get(key, f"`{key}`'s configurations'")
+        caption = (
+            f"`{dataset}`, seed {seed}: {what} estimate (colour) with 95 % position ellipses, the "
+            f"{truth.truth_label} (black), the map (grey) and the waypoints (x)"
+        )
+        stem = f"{slug(dataset)}_trajectories{_stem_part(key)}"
+        title = f"{dataset}{_part(key)}, seed {seed}: trajectories"
+        plots.append(_trajectory_plot(rep, stem, caption, title, world, [tracks[f] for f in names]))
+    return plots
+
+
+def _trajectory_plot(rep: Report, stem: str, caption: str, title: str, world: fg.World, tracks: list[fg.Track]) -> Plot:
+    styles = rep.styles_for([tr.label for tr in tracks])
 
     def draw(fig: Figure) -> None:
         fg.draw_trajectories(fig, world, tracks, styles)
 
-    (x0, x1), (y0, y1) = fg.world_limits(world)
-    aspect = (y1 - y0) / max(x1 - x0, 1e-9)
-    panel_w = 3.4
-    size = (panel_w * min(3, len(tracks)), max(1.6, panel_w * aspect * 0.95 + 0.35) * nrows)
-    return Plot(
-        f"{slug(dataset)}_trajectories",
-        caption,
-        draw,
-        size=size,
-        interactive=_plotly_tracks(dataset, world, tracks, styles),
-    )
+    size = fg.trajectory_size(world, [tr.label for tr in tracks])
+    return Plot(stem, caption, draw, size=size, interactive=ia.tracks(title, world, tracks, styles))
 
 
 def count_plot(rep: Report, dataset: str) -> Plot | None:
@@ -205,38 +205,67 @@ def count_plot(rep: Report, dataset: str) -> Plot | None:
     return Plot(f"{slug(dataset)}_particle_count", title, draw)
 
 
-def waypoint_plot(rep: Report, dataset: str) -> Plot | None:
+def waypoint_plots(rep: Report, dataset: str) -> list[Plot]:
+    """RMSE at each waypoint: one figure, or the defaults and one per sweep past :data:`MAX_LINE_SERIES`."""
     ws = waypoint_stats(rep.rows(dataset))
     if not len(ws):
-        return None
-    names = rep.filters_on(dataset) + rep.bounds_on(dataset)
-    labels = [f for f in names if (ws["filter"] == f).any()]
-    series = [
-        ws[ws["filter"] == f].sort_values("waypoint")["rmse_m"].to_numpy(dtype=np.float64) * 100.0 for f in labels
-    ]
-    styles = rep.bound_styles(labels)
-    title = f"{dataset}: waypoint RMSE over runs (log scale; black: the bound)"
+        return []
+    filters = [f for f in rep.filters_on(dataset) if (ws["filter"] == f).any()]
+    bounds = [b for b in rep.bounds_on(dataset) if (ws["filter"] == b).any()]
+    plots = []
+    for key, names in rep.split(filters, MAX_LINE_SERIES):
+        labels = names + bounds
+        series = [
+            ws[ws["filter"] == f].sort_values("waypoint")["rmse_m"].to_numpy(dtype=np.float64) * 100.0 for f in labels
+        ]
+        styles = rep.bound_styles(labels)
+        title = f"{dataset}{_part(key)}: waypoint RMSE over runs (log scale; black: the bound)"
 
-    def draw(fig: Figure) -> None:
-        fg.draw_waypoint_rmse(fig.add_subplot(), labels, series, styles, title)
+        def draw(
+            fig: Figure,
+            labels: list[str] = labels,
+            series: list = series,
+            styles: dict = styles,
+            title: str = title,
+        ) -> None:
+            fg.draw_waypoint_rmse(fig.add_subplot(), labels, series, styles, title)
 
-    return Plot(f"{slug(dataset)}_waypoint_rmse", title, draw)
+        plots.append(Plot(f"{slug(dataset)}_waypoint_rmse{_stem_part(key)}", title, draw))
+    return plots
 
 
-def nees_plot(rep: Report, dataset: str) -> Plot | None:
+def nees_plots(rep: Report, dataset: str) -> list[Plot]:
+    """Mean NEES over runs: one figure, or the defaults and one per sweep past :data:`MAX_LINE_SERIES`."""
     entries = sorted((f, s) for (d, f), s in rep.col.nees.items() if d == dataset and not rep.col.is_global(f))
     if not entries:
-        return None
+        return []
     seed = min(k[2] for k in rep.col.ok_dirs if k[0] == dataset)
     grid = rep.col.truths[(dataset, seed)].ground_truth.t
     order = rep.col.filter_order({f for f, _ in entries})
     by = dict(entries)
-    series = [fg.NeesSeries(f, mean_over_runs(grid, by[f])[0], len(by[f])) for f in order]
-    bands = {n: chi2_band(POSE_DOF, n, CONFIDENCE) for n in sorted({s.runs for s in series})}
-    styles = rep.styles_for(order)
-    title = f"{dataset}: mean NEES over runs (pose, heading wrapped; runs from a uniform prior left out)"
+    mean = {f: fg.NeesSeries(f, mean_over_runs(grid, by[f])[0], len(by[f])) for f in order}
+    plots = []
+    for key, names in rep.split(order, MAX_LINE_SERIES):
+        series = [mean[f] for f in names]
+        bands = {n: chi2_band(POSE_DOF, n, CONFIDENCE) for n in sorted({s.runs for s in series})}
+        styles = rep.styles_for(names)
+        title = f"{dataset}{_part(key)}: mean NEES over runs"
+        caption = f"{title} (pose, heading wrapped; runs from a uniform prior left out)"
 
-    def draw(fig: Figure) -> None:
-        fg.draw_nees(fig.add_subplot(), grid, series, bands, styles, title)
+        def draw(
+            fig: Figure, series: list = series, bands: dict = bands, styles: dict = styles, title: str = title
+        ) -> None:
+            fg.draw_nees(fig.add_subplot(), grid, series, bands, styles, title)
 
-    return Plot(f"{slug(dataset)}_nees", title, draw, size=(7.5, 4.2))
+        plots.append(Plot(f"{slug(dataset)}_nees{_stem_part(key)}", caption, draw, size=(7.5, 4.2)))
+    return plots
+
+
+def _part(key: str) -> str:
+    """A split figure's part in its title: ``, defaults`` or ``, pf's configurations``."""
+    return {"": "", "defaults": ", defaults"}.get(key, f", {key}'s configurations")
+
+
+def _stem_part(key: str) -> str:
+    """A split figure's part in its file stem: the defaults keep the figure's own name."""
+    return f"_{slug(key)}" if key and key != "defaults" else ""

@@ -1,8 +1,8 @@
 """Figure drawing: pure functions from arrays to a matplotlib axis or figure (no I/O, no store).
 
 Each function takes the axis (or figure, for small multiples), the arrays to draw and the
-:class:`~locbench.report.style.LineStyle` of each series; callers pick the styles from one stable order
-so that a filter keeps its colour and marker in every figure.
+:class:`~locbench.report.style.LineStyle` of each series; callers take the styles from the report's one
+:class:`~locbench.palette.Palette`, so that a filter keeps its colour and marker in every figure.
 """
 
 from __future__ import annotations
@@ -26,10 +26,51 @@ def finish(ax: Axes, xlabel: str, ylabel: str, title: str) -> None:
     """Axis labels, the title, and the legend outside the axes on the right (every line figure's frame)."""
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
-    ax.set_title(title)
+    fig = ax.get_figure(root=True)
+    assert fig is not None  # an axis of the report's figures always has one
+    # left-aligned and wrapped to the figure's width: centred over axes that the legend narrows, a long
+    # title would run off the canvas on both sides
+    size = float(ax.title.get_fontsize())
+    ax.set_title(wrap_words(title, title_chars(fig.get_figwidth(), size)), loc="left", fontsize=size)
     handles, labels = ax.get_legend_handles_labels()
     labels = [wrap_label(x) for x in labels]
-    ax.legend(handles, labels, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+    ax.legend(
+        handles,
+        labels,
+        loc="upper left",
+        bbox_to_anchor=(1.01, 1.0),
+        borderaxespad=0.0,
+        ncols=legend_columns(fig.get_figheight(), labels),
+    )
+
+
+#: Mean width of a character of the report's sans-serif font, in font sizes (DejaVu Sans, mixed text).
+CHAR_EM = 0.56
+
+
+def title_chars(fig_width_in: float, fontsize_pt: float) -> int:
+    """How many characters of a title fit on one line of a figure ``fig_width_in`` inches wide (less the
+    y-axis label's margin)."""
+    return max(20, int((fig_width_in - 0.7) * 72.0 / (CHAR_EM * fontsize_pt)))
+
+
+def wrap_words(text: str, width: int) -> str:
+    """``text`` broken between words into lines of at most ``width`` characters (a longer word stays whole)."""
+    import textwrap
+
+    return "\n".join(textwrap.wrap(text, width, break_long_words=False, break_on_hyphens=False)) or text
+
+
+#: Height of one legend entry in legend font sizes (matplotlib's default label spacing and handle height).
+LEGEND_ENTRY_EM = 1.45
+
+
+def legend_columns(fig_height_in: float, labels: Sequence[str], fontsize_pt: float = 7.0) -> int:
+    """Columns a legend of ``labels`` needs to fit in a figure ``fig_height_in`` inches tall (a legend taller
+    than its figure is cut off at the canvas edge)."""
+    lines = sum(1 + label.count("\n") for label in labels)
+    per_col = max(1, int((fig_height_in - 0.4) * 72.0 / (LEGEND_ENTRY_EM * fontsize_pt)))
+    return max(1, math.ceil(lines / per_col))
 
 
 #: Legend labels longer than this (a tuned configuration's spec) are wrapped after commas.
@@ -80,26 +121,70 @@ class ParetoPoint:
     y: float
 
 
+@dataclass(frozen=True)
+class ParetoLayers:
+    """What a Pareto panel draws, in data: each group's markers and front line, and the overall front.
+
+    The PNG (:func:`draw_pareto`) and the interactive figure are both drawn from this, so they show the
+    same markers, lines and front.
+    """
+
+    #: (group, points of the group in input order, indices of the group's own front, sorted by x descending)
+    groups: tuple[tuple[str, tuple[ParetoPoint, ...], tuple[int, ...]], ...]
+    #: the overall front's points, x descending (drawn as a step, ``where="post"``)
+    front: tuple[ParetoPoint, ...]
+
+
+def pareto_layers(points: Sequence[ParetoPoint]) -> ParetoLayers:
+    """Group the points by ``group`` (sorted) and find each group's front and the overall front."""
+    groups = []
+    for g in sorted({p.group for p in points}):
+        pts = tuple(p for p in points if p.group == g)
+        fr = pareto_front(np.array([p.x for p in pts]), np.array([p.y for p in pts]))
+        groups.append((g, pts, tuple(int(i) for i in fr)))
+    fr_all = pareto_front(np.array([p.x for p in points]), np.array([p.y for p in points]))
+    return ParetoLayers(tuple(groups), tuple(points[int(i)] for i in fr_all))
+
+
 def draw_pareto(
-    ax: Axes, points: Sequence[ParetoPoint], styles: Mapping[str, LineStyle], xlabel: str, ylabel: str, title: str
+    ax: Axes,
+    points: Sequence[ParetoPoint],
+    styles: Mapping[str, LineStyle],
+    xlabel: str,
+    ylabel: str,
+    title: str,
+    per_config: bool = True,
 ) -> None:
-    """Accuracy against speed, ann-benchmarks style: a marker per configuration, each group's own front as a
-    line through its configurations, the overall front dashed; both axes logarithmic."""
-    groups = sorted({p.group for p in points})
-    for g in groups:
-        pts = [p for p in points if p.group == g]
-        x = np.array([p.x for p in pts])
-        y = np.array([p.y for p in pts])
+    """Accuracy against speed, ann-benchmarks style: a marker per configuration (its own shade of the
+    group's colour, edged in the group's colour), each group's own front as a line through its configurations,
+    the overall front dotted; both axes logarithmic.
+
+    ``styles`` holds the style of every group and of every point's label; the legend lists each
+    configuration when ``per_config``, else each group.
+    """
+    layers = pareto_layers(points)
+    for g, pts, fr in layers.groups:
         st = styles[g]
-        ax.plot(x, y, ls="none", marker=st.marker, color=st.color, ms=5, label=g)
-        fr = pareto_front(x, y)
-        if fr.size > 1:
-            ax.plot(x[fr], y[fr], color=st.color, lw=0.8, ls=st.linestyle)
-    x_all = np.array([p.x for p in points])
-    y_all = np.array([p.y for p in points])
-    fr = pareto_front(x_all, y_all)
-    if fr.size:
-        ax.step(x_all[fr], y_all[fr], where="post", color="0.3", lw=0.8, ls=":", label="front (all)")
+        for p in pts:
+            face = styles[p.label].color if p.label in styles else st.color
+            ax.plot(
+                [p.x],
+                [p.y],
+                ls="none",
+                marker=st.marker,
+                color=face,
+                mec=st.color,
+                ms=5,
+                label=p.label if per_config else None,
+            )
+        if not per_config:
+            ax.plot([], [], ls="-", marker=st.marker, color=st.color, ms=5, label=g)
+        if len(fr) > 1:
+            ax.plot([pts[i].x for i in fr], [pts[i].y for i in fr], color=st.color, lw=0.8, ls=st.linestyle)
+    if layers.front:
+        fx = [p.x for p in layers.front]
+        fy = [p.y for p in layers.front]
+        ax.step(fx, fy, where="post", color="0.3", lw=0.8, ls=":", label="front (all)")
     ax.set_xscale("log")
     ax.set_yscale("log")
     finish(ax, xlabel, ylabel, title)
@@ -146,14 +231,68 @@ def _draw_world(ax: Axes, world: World) -> None:
         ax.plot(wp[:, 0], wp[:, 1], ls="none", marker="x", ms=5, color="black")
 
 
+#: Width of one trajectory panel, inches, and the panels of one row.
+PANEL_W = 3.4
+PANEL_COLS = 3
+#: A panel title's font size, pt, and the height of one of its lines, inches.
+PANEL_TITLE_PT = 7.5
+PANEL_TITLE_LINE_IN = 0.15
+
+
+def panel_title(label: str) -> str:
+    """A trajectory panel's title: the label broken after commas to the panel's width."""
+    return wrap_label(label, title_chars(PANEL_W, PANEL_TITLE_PT) * 4 // 3)
+
+
+#: Fixed margins of a trajectory figure, inches: left (y tick labels), bottom (x tick labels), right, the gap
+#: between columns, and above each panel's title.
+PANEL_MARGINS_IN = {"left": 0.42, "bottom": 0.3, "right": 0.08, "wspace": 0.1, "title_pad": 0.1}
+
+
+def _panel_rows(world: World, labels: Sequence[str]) -> tuple[int, int, float, float]:
+    """Columns, rows, the height of a panel's axes and of its title band (inches) of a trajectory figure."""
+    n = max(len(labels), 1)
+    ncols = min(PANEL_COLS, n)
+    (x0, x1), (y0, y1) = world_limits(world)
+    aspect = (y1 - y0) / max(x1 - x0, 1e-9)
+    lines = 1 + max((panel_title(lab).count("\n") for lab in labels), default=0)
+    title = PANEL_TITLE_LINE_IN * lines + PANEL_MARGINS_IN["title_pad"]
+    return ncols, math.ceil(n / ncols), max(1.25, PANEL_W * aspect * 0.95), title
+
+
+def trajectory_size(world: World, labels: Sequence[str]) -> tuple[float, float]:
+    """The size (inches) of :func:`draw_trajectories`' figure: panels :data:`PANEL_W` wide in rows of
+    :data:`PANEL_COLS`, as tall as the world's aspect asks, each with space for the longest title."""
+    ncols, nrows, axes_h, title_h = _panel_rows(world, labels)
+    return PANEL_W * ncols, nrows * (axes_h + title_h) + PANEL_MARGINS_IN["bottom"]
+
+
+def _fixed_panel_layout(fig: Figure, world: World, labels: Sequence[str]) -> dict[str, float]:
+    """The grid of the panels by fixed margins instead of the constrained layout (about half of a trajectory
+    figure's drawing time): the sizes of everything around a panel are known in advance."""
+    ncols, _, axes_h, title_h = _panel_rows(world, labels)
+    w, h = fig.get_figwidth(), fig.get_figheight()
+    m = PANEL_MARGINS_IN
+    fig.set_layout_engine("none")
+    return {
+        "left": m["left"] / w,
+        "right": 1.0 - m["right"] / w,
+        "bottom": m["bottom"] / h,
+        "top": 1.0 - title_h / h,
+        "wspace": m["wspace"] * ncols / (w - m["left"] - m["right"] - m["wspace"] * (ncols - 1)),
+        "hspace": title_h / axes_h,
+    }
+
+
 def draw_trajectories(fig: Figure, world: World, tracks: Sequence[Track], styles: Mapping[str, LineStyle]) -> None:
     """Small multiples: one panel per filter with the world, the truth and the waypoints in each, axes fitted to
     the world (what leaves it is clipped), the estimate and its 95 % position ellipses."""
     n = max(len(tracks), 1)
-    ncols = min(3, n)
+    ncols = min(PANEL_COLS, n)
     nrows = math.ceil(n / ncols)
     (x0, x1), (y0, y1) = world_limits(world)
-    axes = fig.subplots(nrows, ncols, squeeze=False, sharex=True, sharey=True)
+    grid = _fixed_panel_layout(fig, world, [tr.label for tr in tracks])
+    axes = fig.subplots(nrows, ncols, squeeze=False, sharex=True, sharey=True, gridspec_kw=grid)
     for k, ax in enumerate(axes.flat):
         if k >= len(tracks):
             ax.set_axis_off()
@@ -182,7 +321,8 @@ def draw_trajectories(fig: Figure, world: World, tracks: Sequence[Track], styles
         ax.set_xlim(x0, x1)
         ax.set_ylim(y0, y1)
         ax.set_aspect("equal", adjustable="box")
-        ax.set_title(tr.label, fontsize=7.5)
+        # a tuned configuration's long name broken after commas to its panel's width
+        ax.set_title(panel_title(tr.label), fontsize=PANEL_TITLE_PT)
         ax.tick_params(labelsize=6.5)
 
 

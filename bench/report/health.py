@@ -25,6 +25,7 @@ from locbench.lost import (
     score_signals,
 )
 from locbench.metrics import KIDNAP_WINDOW_S
+from locbench.report import figures as fg
 from locbench.report import tables as tb
 from locbench.report.doc import Plot, Section, Table, Text
 
@@ -168,7 +169,8 @@ def _roc_plot(rep: Report, curves: dict[str, list[tuple[str, SignalScore]]]) -> 
         for ax, ds in zip(axes.ravel(), chosen, strict=False):
             for f, sig, fpr, tpr, a in lines[ds]:
                 st = styles[f]
-                ax.plot(fpr, tpr, color=st.color, ls=st.linestyle, lw=1.0, label=f"{f}: {sig} ({a:.2f})")
+                label = fg.wrap_label(f"{f}: {sig} ({a:.2f})", 48)
+                ax.plot(fpr, tpr, color=st.color, ls=st.linestyle, lw=1.0, label=label)
             ax.plot([0, 1], [0, 1], color="0.6", lw=0.6, ls=":")
             ax.set_title(col.display(ds), fontsize=8)
             ax.set_xlabel("false-positive rate", fontsize=7)

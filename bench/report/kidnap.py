@@ -12,6 +12,7 @@ from locbench.report import figures as fg
 from locbench.report import tables as tb
 from locbench.report.doc import Plot, Section, Table, Text
 from locbench.report.names import KIDNAP_PARAM, slug
+from locbench.report.style import LINESTYLES, LineStyle
 
 if TYPE_CHECKING:
     from locbench.report.build import Report
@@ -74,6 +75,7 @@ def kidnap_family_section(rep: Report, ident: str, names: list[str]) -> Section:
     dists = sorted({rep.kidnap_distance(n) for n in names})
     rows: list[tuple[str, ...]] = []
     curves: list[fg.RateCurve] = []
+    styles: dict[str, LineStyle] = {}
     families = sorted(set(fam_of.values()))
     for fam in families:
         members = sorted((n for n in names if fam_of[n] == fam), key=rep.kidnap_distance)
@@ -98,7 +100,9 @@ def kidnap_family_section(rep: Report, ident: str, names: list[str]) -> Section:
             if pts:
                 a = np.array(pts)
                 curves.append(fg.RateCurve(label, label, a[:, 0], a[:, 1], a[:, 2], a[:, 3]))
-    styles = rep.styles_for([c.style_key for c in curves])
+                # the filter's own colour and marker; a second family of worlds gets its own dash
+                st = rep.palette.style(f)
+                styles[label] = st._replace(linestyle=LINESTYLES[families.index(fam) % len(LINESTYLES)])
     title = f"{ident}: recovery within 30 s, 95 % Wilson intervals"
 
     def draw(fig: Figure) -> None:

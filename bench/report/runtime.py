@@ -10,11 +10,11 @@ from matplotlib.figure import Figure
 
 from locbench.metric_info import METRICS
 from locbench.report import figures as fg
+from locbench.report import interactive as ia
 from locbench.report import tables as tb
 from locbench.report import timing as tm
 from locbench.report.doc import Plot, Section, Text
 from locbench.report.names import slug
-from locbench.report.plotly import _plotly_pareto
 
 if TYPE_CHECKING:
     from locbench.report.build import Report
@@ -73,7 +73,9 @@ def pareto_section(rep: Report) -> Section:
 
 
 def pareto_plot(rep: Report, name: str, title: str, panels: list[tuple[str, str, list[fg.ParetoPoint]]]) -> Plot:
-    styles = rep.styles_for(sorted({p.group for _, _, pts in panels for p in pts}))
+    pts_all = [p for _, _, pts in panels for p in pts]
+    styles = rep.styles_for(sorted({p.group for p in pts_all} | {p.label for p in pts_all}))
+    xlabel = tm.pareto_xlabel(rep.pareto_x)
 
     def draw(fig: Figure) -> None:
         n = len(panels)
@@ -85,7 +87,7 @@ def pareto_plot(rep: Report, name: str, title: str, panels: list[tuple[str, str,
                 ax.set_axis_off()
                 continue
             label, ylabel, pts = panels[k]
-            fg.draw_pareto(ax, pts, styles, tm.pareto_xlabel(rep.pareto_x), ylabel, label)
+            fg.draw_pareto(ax, pts, styles, xlabel, ylabel, label, per_config=n == 1)
             if n > 1:
                 leg = ax.get_legend()
                 if leg is not None:
@@ -93,6 +95,10 @@ def pareto_plot(rep: Report, name: str, title: str, panels: list[tuple[str, str,
                 ax.legend(fontsize=5.5, loc="best")
 
     size = (7.0, 4.2) if len(panels) == 1 else (11.0, 3.2 * int(np.ceil(len(panels) / 3)))
-    interactive = _plotly_pareto(title, panels, tm.pareto_xlabel(rep.pareto_x)) if len(panels) == 1 else None
+    interactive = (
+        ia.pareto(f"{title}: ATE against real-time factor", panels[0][2], styles, panels[0][1], xlabel)
+        if len(panels) == 1
+        else None
+    )
     what = "accuracy" if len(panels) > 1 else "ATE"
     return Plot(name, f"{title}: {what} against real-time factor", draw, size=size, interactive=interactive)

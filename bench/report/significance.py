@@ -27,7 +27,6 @@ from locbench.ranking import WAYPOINT_MEAN, Column, hover_grid, mark_ties, per_s
 from locbench.report import tables as tb
 from locbench.report.collect import write_if_changed
 from locbench.report.doc import Plot, Section, Table, Text
-from locbench.report.style import style_for
 
 if TYPE_CHECKING:
     from locbench.report.build import Report
@@ -420,8 +419,8 @@ def _group_section(report: Report, gi: int, configs: Sequence[str], datasets: Se
 
         def draw_within(fig: Figure) -> None:
             ax = fig.add_subplot()
-            for i, f in enumerate(shown):
-                st = style_for(i)
+            for f in shown:
+                st = report.palette.style(f)
                 ax.plot(thresholds, 100 * curves[f], color=st.color, marker=st.marker, ls=st.linestyle, label=f, lw=1)
             ax.set_xscale("log")
             ax.minorticks_off()

@@ -1,19 +1,19 @@
-"""The report's fixed drawing style: a colour-blind-safe palette, distinct markers and matplotlib settings.
+"""The report's fixed drawing style: colours, markers, dashes and matplotlib settings.
 
-Colours are Okabe and Ito's eight (2008, "Color Universal Design"), safe for the common forms of colour
-blindness; markers are nine, so with :func:`style_for` the (colour, marker) pair of the i-th name repeats
-only after 63 names (black is kept for the truth): no two lines of one figure share both.
+:data:`PALETTE`, :data:`MARKERS`, :data:`LINESTYLES` and :class:`LineStyle` live in :mod:`locbench.docfmt`
+(the claims draw with them too and never import the report).
+
+:data:`PALETTE` is Okabe and Ito's eight (2008, "Color Universal Design"), for series that are not filters
+(the datasets of a claim's figure); a filter's colour and marker come from :mod:`locbench.palette`,
+keyed by its id, so that it is the same in every figure. :func:`style_for` gives the i-th of a figure's own
+series a (colour, marker, dash) that repeats only after 63 names (black is kept for the truth).
 """
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import Any
 
-from locbench.docfmt import PALETTE
-
-#: Nine markers (coprime with the eight colours).
-MARKERS: tuple[str, ...] = ("o", "s", "^", "D", "v", "P", "X", "<", "*")
-LINESTYLES: tuple[str, ...] = ("-", "--", "-.", ":")
+from locbench.docfmt import LINESTYLES, MARKERS, PALETTE, LineStyle
 
 FIG_DPI = 110
 #: A fixed style on top of matplotlib's defaults (a user's matplotlibrc must not change the bytes).
@@ -27,14 +27,6 @@ MPL_STYLE: dict[str, Any] = {
     "svg.hashsalt": "locbench",
     "axes.titlesize": 8.5,
 }
-
-
-class LineStyle(NamedTuple):
-    """The colour, marker and dash of one series."""
-
-    color: str
-    marker: str
-    linestyle: str
 
 
 def style_for(index: int) -> LineStyle:

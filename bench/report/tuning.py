@@ -17,10 +17,10 @@ import pandas as pd
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
+from locbench.palette import Palette
 from locbench.report import tables as tb
 from locbench.report.collect import Collected
 from locbench.report.doc import Bullets, Plot, Section, Table, Text
-from locbench.report.style import style_for
 
 NAN = float("nan")
 
@@ -164,7 +164,7 @@ def trials_plot(studies: list[dict[str, Any]]) -> Plot:
     """Best-so-far train objective against trials, one panel per world, one line per filter."""
     worlds = list(dict.fromkeys(s["world"] for s in studies))
     filters = list(dict.fromkeys(s["filter"] for s in studies))
-    styles = {f: style_for(i) for i, f in enumerate(filters)}
+    styles = Palette(filters).styles(filters)
     title = "Best train objective so far against trials"
 
     def draw(fig: Figure) -> None:
