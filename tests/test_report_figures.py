@@ -90,8 +90,8 @@ def test_every_configuration_is_in_a_trajectory_figure(report: Report, plots: li
     assert titles == set(CONFIGS)
 
 
-def test_crowded_nees_and_waypoint_figures_are_split(plots: list[Plot]) -> None:
-    for stem in ("room_nees", "room_waypoint_rmse"):
+def test_crowded_nees_waypoint_and_error_figures_are_split(plots: list[Plot]) -> None:
+    for stem in ("room_nees", "room_waypoint_rmse", "room_errors"):
         parts = [p for p in plots if p.name == stem or p.name.startswith(stem + "_")]
         assert [p.name for p in parts] == [stem, f"{stem}_ekf_landmarks", f"{stem}_pf"]
         labels: set[str] = set()

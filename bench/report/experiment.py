@@ -26,8 +26,6 @@ MAX_TRACK_PANELS = 12
 MAX_LINE_SERIES = 10
 #: Ellipses drawn along each track.
 ELLIPSES_PER_TRACK = 10
-#: Most series of the error-over-time figure before it shows the default configurations only.
-MAX_ERROR_SERIES = 8
 
 
 def experiment_section(rep: Report, e: Experiment) -> Section:
@@ -73,11 +71,10 @@ def dataset_blocks(rep: Report, dataset: str) -> list[Table | Plot]:
     wt = tb.waypoint_table(rep.rows(dataset), filters + bounds, f"`{shown}`: RMSE at each waypoint over runs (cm)")
     if wt is not None:
         out.append(wt)
-    error = error_plot(rep, dataset)
     count = count_plot(rep, dataset)
     out += [
         *trajectory_plots(rep, dataset),
-        *([error] if error is not None else []),
+        *error_plots(rep, dataset),
         *waypoint_plots(rep, dataset),
         *nees_plots(rep, dataset),
         *([count] if count is not None else []),
@@ -85,40 +82,40 @@ def dataset_blocks(rep: Report, dataset: str) -> list[Table | Plot]:
     return out
 
 
-def error_plot(rep: Report, dataset: str) -> Plot | None:
-    """Each configuration's position error over time on the first seed (log scale); on a dataset with more than
-    :data:`MAX_ERROR_SERIES` configurations, the default ones only (the sweeps are in the tables)."""
+def error_plots(rep: Report, dataset: str) -> list[Plot]:
+    """Each configuration's position error over time on the first seed (log scale): one figure, or the defaults
+    and one per sweep past :data:`MAX_LINE_SERIES`, so that no configuration is left out."""
     keys = sorted(k for k in rep.col.ok_dirs if k[0] == dataset and not rep.col.is_global(k[1]))
     if not keys:
-        return None
+        return []
     seed = keys[0][2]
     names = rep.col.filter_order({k[1] for k in keys if k[2] == seed})
-    if len(names) > MAX_ERROR_SERIES:
-        names = [f for f in names if not rep.col.filters[f].spec.params]
     truth = rep.col.truths[(dataset, seed)]
     gt = truth.ground_truth
-    series: list[tuple[str, np.ndarray]] = []
+    errors: dict[str, np.ndarray] = {}
     for f in names:
         run = rep.col.read_run(dataset, f, seed)
         est = estimate_at(run.t, run.mean, gt.t)[:, :2]
-        series.append((f, np.linalg.norm(est - gt.xy, axis=1) * 100.0))
-    if not series:
-        return None
-    styles = rep.styles_for([f for f, _ in series])
-    title = f"seed {seed}: position error over time (log scale)"
-    caption = f"`{rep.col.display(dataset)}`, {title}, against the {truth.truth_label}"
+        errors[f] = np.linalg.norm(est - gt.xy, axis=1) * 100.0
     t = gt.t - gt.t[0]
+    plots: list[Plot] = []
+    for key, part in rep.split(names, MAX_LINE_SERIES):
+        series = [(f, errors[f]) for f in part]
+        styles = rep.styles_for(part)
+        title = f"seed {seed}{_part(key)}: position error over time (log scale)"
+        caption = f"`{rep.col.display(dataset)}`, {title}, against the {truth.truth_label}"
 
-    def draw(fig: Figure) -> None:
-        ax = fig.add_subplot()
-        for f, err in series:
-            st = styles[f]
-            ok = np.isfinite(err) & (err > 0)
-            ax.plot(t[ok], err[ok], color=st.color, ls=st.linestyle, lw=0.9, label=f)
-        ax.set_yscale("log")
-        fg.finish(ax, "t from the start (s)", "position error (cm)", title)
+        def draw(fig: Figure, series: list = series, styles: dict = styles, title: str = title) -> None:
+            ax = fig.add_subplot()
+            for f, err in series:
+                st = styles[f]
+                ok = np.isfinite(err) & (err > 0)
+                ax.plot(t[ok], err[ok], color=st.color, ls=st.linestyle, lw=0.9, label=f)
+            ax.set_yscale("log")
+            fg.finish(ax, "t from the start (s)", "position error (cm)", title)
 
-    return Plot(f"{slug(dataset)}_errors", caption, draw, size=(7.5, 4.2))
+        plots.append(Plot(f"{slug(dataset)}_errors{_stem_part(key)}", caption, draw, size=(7.5, 4.2)))
+    return plots
 
 
 def trajectory_plots(rep: Report, dataset: str) -> list[Plot]:
