@@ -149,9 +149,9 @@ def test_cli_export_then_run_and_report(tmp_path: Path, capsys: pytest.CaptureFi
     # the exported numbers equal the original's for the deterministic filters
     tl = make_dataset("tiny_line", 1)
     trace = run_filter(make_filter("ekf_landmarks"), tl, np.random.default_rng(0))
-    from locbench.metrics import ate
+    from locbench.metrics import align, ate
 
-    want = ate(trace.t, trace.mean, tl.ground_truth.t, tl.ground_truth.xy)
+    want = ate(align(trace.t, trace.mean, tl.ground_truth.t, tl.ground_truth.poses))
     got = float(rows[(rows["filter"] == "ekf_landmarks") & (rows["metric"] == "ate_m")]["value"].iloc[0])
     assert got == pytest.approx(want, rel=1e-9)
 
