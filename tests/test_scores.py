@@ -117,3 +117,23 @@ def test_compiled_sample_scores_equal_the_reference_sums() -> None:
     )
     for a, b in zip(got, ref, strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-10, atol=1e-12)
+
+
+def test_compiled_gaussian_energy_term_equals_the_numpy_mean_bit_for_bit() -> None:
+    # the numpy form the compiled first term replaced (the stored energy scores must not move)
+    rng = np.random.default_rng(7)
+    n = 3001
+    d = rng.normal(size=(n, 2)) * rng.lognormal(size=(n, 1))
+    a = rng.normal(size=(n, 2, 2)) * 0.3
+    cov = a @ np.swapaxes(a, 1, 2)
+    cov[:50] = 0.0
+    cov[50:60, 1, 1] = 0.0
+    _lam, root = sc._sqrt_psd(cov)
+    z = sc._energy_draws()
+    px = d[:, 0:1] + root[:, 0, 0:1] * z[None, :, 0] + root[:, 0, 1:2] * z[None, :, 1]
+    py = d[:, 1:2] + root[:, 1, 0:1] * z[None, :, 0] + root[:, 1, 1:2] * z[None, :, 1]
+    expected = np.mean(np.hypot(px, py), axis=1)
+    assert np.array_equal(sc._energy_first_term(d, root, z), expected)
+    for m in (1, 7, 8, 9, 127, 128, 129, 300):
+        v = rng.normal(size=m) * 10.0 ** rng.integers(-8, 8, size=m)
+        assert sc._pairwise_sum(v, 0, m) == np.sum(v)
