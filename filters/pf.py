@@ -132,10 +132,10 @@ from locbench.filters._likelihood_field import (
     scan_endpoints_robot_frame,
 )
 from locbench.filters._motion import (
+    _SERIES_A,
     MotionKind,
     MotionNoiseConfig,
     increment_variances,
-    sample_twist_motion,
     wheel_variances,
 )
 from locbench.filters._noise import landmark_noise, process_noise, range_only_noise
@@ -541,6 +541,67 @@ def _move(
         finite = finite and math.isfinite(x[i, 0]) and math.isfinite(x[i, 1]) and math.isfinite(x[i, 2])
     mean, cov = _finish_stats(x, w, mx, my, sc, ss)
     return mean, cov, finite and _all_finite(logw)
+
+
+#: np.sinc's stand-in for a zero argument (float64's machine epsilon)
+_EPS = float(np.finfo(np.float64).eps)
+
+
+@njit(cache=True, inline="always")
+def _twist_arc(s: float, a: float) -> tuple[float, float, float]:
+    """:func:`locbench.filters._motion.twist_increment` of one (s m, a rad) with numpy's operations in their
+    order (``np.sinc`` scales by pi and back; the series below ``_SERIES_A``), so the same bits."""
+    y = math.pi * (a / math.pi)
+    if y == 0.0:
+        y = _EPS
+    sinc = math.sin(y) / y
+    cosc = a * (0.5 - a * a / 24.0) if abs(a) < _SERIES_A else (1.0 - math.cos(a)) / a
+    return s * sinc, s * cosc, a + 0.0 * s
+
+
+@njit(cache=True)
+def _move_twist(
+    x: FloatArray,
+    s0: float,
+    a0: float,
+    sd_s: float,
+    sd_a: float,
+    dx: float,
+    dy: float,
+    dtheta: float,
+    q_std: FloatArray,
+    gen: UIntArray,
+    w: FloatArray,
+    logw: FloatArray,
+) -> tuple[FloatArray, FloatArray, bool]:
+    """:func:`locbench.filters._motion.sample_twist_motion` in place (its draws: every arc length's normal,
+    then every turn's), then N(0, diag(q_std^2)) as :func:`_jitter` when any q_std is non-zero, then
+    :func:`_checked_stats`. ``(s0, a0)`` = (v dt, omega dt), ``(sd_s, sd_a)`` = (sigma_v dt, sigma_omega dt),
+    ``(dx, dy, dtheta)`` the event's increment; the same operations in numpy's order, so the same bits."""
+    rng = generator_from(gen)
+    n = x.shape[0]
+    noise = np.empty((2, n))
+    for r in range(2):
+        for i in range(n):
+            noise[r, i] = rng.standard_normal()
+    b0, b1, b2 = _twist_arc(s0, a0)
+    for i in range(n):
+        i0, i1, i2 = _twist_arc(s0 + sd_s * noise[0, i], a0 + sd_a * noise[1, i])
+        ix = dx + i0 - b0
+        iy = dy + i1 - b1
+        ith = dtheta + i2 - b2
+        th = x[i, 2]
+        c, s = math.cos(th), math.sin(th)
+        x[i, 0] = x[i, 0] + c * ix - s * iy
+        x[i, 1] = x[i, 1] + s * ix + c * iy
+        x[i, 2] = math.pi - ((math.pi - (th + ith)) % (2.0 * math.pi))  # wrap_angle's form
+    if q_std[0] != 0.0 or q_std[1] != 0.0 or q_std[2] != 0.0:
+        q0, q1, q2 = q_std[0], q_std[1], q_std[2]
+        for i in range(n):
+            x[i, 0] += q0 * rng.standard_normal()
+            x[i, 1] += q1 * rng.standard_normal()
+            x[i, 2] = _wrap(x[i, 2] + q2 * rng.standard_normal())
+    return _checked_stats(x, w, logw)
 
 
 @njit(cache=True)
@@ -1165,7 +1226,6 @@ class ParticleFilter(Filter):
     def predict(self, u: Odometry) -> None:
         """Move every particle by its own draw from the encoder model (report 003 eq. 1-2, 5, 10) plus Q (eq. 8)."""
         nz = self._noise
-        rng = self._rng
         if self._use_encoder and u.d_left is not None and u.d_right is not None:
             W = nz.wheelbase_m
             assert W is not None
@@ -1189,10 +1249,21 @@ class ParticleFilter(Filter):
                 self._logw,
             )
         elif (tw := nz.twist_sigmas(u)) is not None:
-            self._x = sample_twist_motion(self._x, u, tw[0], tw[1], rng)
-            if self._q_std.any():
-                _jitter(self._x, self._q_std, self._gen)
-            moved = _checked_stats(self._x, self._weights(), self._logw)
+            assert u.v is not None and u.omega is not None and u.dt is not None
+            moved = _move_twist(
+                self._x,
+                u.v * u.dt,
+                u.omega * u.dt,
+                tw[0] * u.dt,
+                tw[1] * u.dt,
+                u.dx,
+                u.dy,
+                u.dtheta,
+                self._q_std,
+                self._gen,
+                self._weights(),
+                self._logw,
+            )
         else:
             vxy, vth = increment_variances(
                 u.dx, u.dy, u.dtheta, nz.sigma_xy_per_m, nz.sigma_theta_per_m, nz.sigma_theta_per_rad
