@@ -216,3 +216,23 @@ def test_report_writes_the_split_figures(tmp_path: Path, report: Report) -> None
     md = to_markdown("t", [], report.sections())
     for stem in ("room_trajectories", "room_trajectories_pf", "room_nees_pf", "room_waypoint_rmse_pf"):
         assert md.count(f"(figures/{stem}.png)") == 1, stem
+
+
+def test_render_png_writes_savefigs_bytes(plots: list[Plot]) -> None:
+    """``render_png`` (one draw, then the buffer encoded) gives the bytes of ``savefig`` (which draws twice
+    under a layout engine) for every figure of the report: constrained layouts with legends outside, the
+    trajectory figures' fixed layout, log axes."""
+    import io
+
+    import matplotlib.style
+
+    from locbench.report.render import _PNG_META, _figure, render_png
+    from locbench.report.style import FIG_DPI
+
+    assert len(plots) > 5
+    for plot in plots:
+        with matplotlib.style.context(["default", MPL_STYLE]):
+            fig = _figure(plot)
+            buf = io.BytesIO()
+            fig.savefig(buf, format="png", dpi=FIG_DPI, metadata=_PNG_META)
+        assert render_png(plot) == buf.getvalue(), plot.name

@@ -15,6 +15,7 @@ import re
 from pathlib import Path
 from typing import Any
 
+import matplotlib.image
 import matplotlib.style
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
@@ -36,11 +37,19 @@ def _figure(plot: Plot) -> Figure:
 
 
 def render_png(plot: Plot) -> bytes:
-    """Draw a plot into PNG bytes."""
+    """Draw a plot into PNG bytes.
+
+    One draw of the canvas (the layout engine runs at its start), then the buffer encoded as ``savefig``
+    encodes it: the same bytes as ``fig.savefig(buf, format="png")``, without the complete draw with rendering
+    switched off that ``savefig`` makes first for a figure with a layout engine (a third of the time).
+    """
     with matplotlib.style.context(["default", MPL_STYLE]):
         fig = _figure(plot)
+        fig.canvas.draw()
         buf = io.BytesIO()
-        fig.savefig(buf, format="png", dpi=FIG_DPI, metadata=_PNG_META)
+        matplotlib.image.imsave(
+            buf, fig.canvas.buffer_rgba(), format="png", origin="upper", dpi=fig.dpi, metadata=_PNG_META
+        )
     return buf.getvalue()
 
 
