@@ -30,8 +30,8 @@ predicted robot frame. The observation is Z = X (+) M (eq. 2), the predicted obs
 Update (eq. 15-18). K = P (P + R)^-1, X = X + K V, with R = diag(r_x, r_y, r_theta) (eq. 16); the
 covariance uses the Joseph form (I - K) P (I - K)^T + K R K^T, equal to eq. 18 for the optimal gain but
 symmetric PSD under rounding. The prediction, both clouds with the rejection distances below and this
-update are scalar compiled kernels (:mod:`locbench.filters._ekf_icp_kernels`); version 4 (before, numpy's 3 x 3
-calls) has the same means and points and covariances equal to rounding.
+update are scalar compiled kernels (:mod:`locbench.filters._ekf_icp_kernels`); since version 4 (before, numpy's
+3 x 3 calls) the covariances, and through the gain the corrected means, differ from version 3's at rounding.
 
 Matching (sec. III-B): a scan is a mismatch, and the belief stays the prediction, when ICP did not
 converge or when fewer points matched than the threshold (``min_matched_fraction`` of the smaller of the
