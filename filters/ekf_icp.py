@@ -29,7 +29,9 @@ predicted robot frame. The observation is Z = X (+) M (eq. 2), the predicted obs
 
 Update (eq. 15-18). K = P (P + R)^-1, X = X + K V, with R = diag(r_x, r_y, r_theta) (eq. 16); the
 covariance uses the Joseph form (I - K) P (I - K)^T + K R K^T, equal to eq. 18 for the optimal gain but
-symmetric PSD under rounding.
+symmetric PSD under rounding. The prediction, both clouds with the rejection distances below and this
+update are scalar compiled kernels (:mod:`locbench.filters._ekf_icp_kernels`); since version 4 (before, numpy's
+3 x 3 calls) the covariances, and through the gain the corrected means, differ from version 3's at rounding.
 
 Matching (sec. III-B): a scan is a mismatch, and the belief stays the prediction, when ICP did not
 converge or when fewer points matched than the threshold (``min_matched_fraction`` of the smaller of the
@@ -72,8 +74,15 @@ import numpy.typing as npt
 from locbench.datasets.base import Gaussian2, MapKind, OccupancyGrid, SensorSpec, WorldMap
 from locbench.errors import ConfigError, FilterDiverged, ResourceLimit
 from locbench.events import LaserScan, Observation, Odometry
-from locbench.filters._icp import MIN_PAIRS, IcpResult, icp_2d
-from locbench.filters._kalman import joseph_correct_pose
+from locbench.filters import _icp
+from locbench.filters._ekf_icp_kernels import (
+    BUF_SIGMAS,
+    correct_pose,
+    predict_pose,
+    scan_clouds,
+    state_buffer,
+)
+from locbench.filters._icp import MIN_PAIRS, IcpResult
 from locbench.filters.base import POSITIVE, POSITIVE_OR_DATASET, Estimate, Filter, FilterConfig, bound
 from locbench.geometry import wrap_scalar
 from locbench.limits import RAYCAST_BYTES_PER_CELL, check_bytes, grid_cells
@@ -179,7 +188,7 @@ class IcpEKF(Filter):
     consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LaserScan})
     requires: ClassVar[frozenset[MapKind]] = frozenset({MapKind.OCCUPANCY})
     Config: ClassVar[type[FilterConfig]] = IcpEKFConfig
-    version: ClassVar[int] = 3
+    version: ClassVar[int] = 4
     health_nis_dof: ClassVar[float | None] = 3  # the H = I pose update
     cost_per_data_s: ClassVar[float] = 0.3
     source: ClassVar[str] = "000_2af74c528ee7b17b (EKF with LRF: eq. 11-18, sec. III-B, IV-B, appendix A)"
@@ -216,10 +225,22 @@ class IcpEKF(Filter):
         # Variance of a correct pair's distance: laser noise on both clouds' ranges plus cell quantisation.
         self._pair_var = 2.0 * sigma_l**2 + self._res**2 / 6.0
         m = np.asarray(initial.mean, dtype=np.float64)
-        self._x = np.array([m[0], m[1], wrap_scalar(float(m[2]))])
         c = np.asarray(initial.cov, dtype=np.float64)
-        self._P = 0.5 * (c + c.T)
-        self._R = np.diag([cfg.r_x_m2, cfg.r_y_m2, cfg.r_theta_rad2])
+        # mean, covariance and constants in one buffer: the compiled steps take one array argument
+        self._s = state_buffer(
+            np.array([m[0], m[1], wrap_scalar(float(m[2]))]),
+            0.5 * (c + c.T),
+            (
+                cfg.q_x_stat_m2,
+                cfg.q_y_stat_m2,
+                cfg.q_theta_stat_rad2,
+                cfg.q_x_dyn_m2_per_m,
+                cfg.q_y_dyn_m2_per_m,
+                cfg.q_theta_dyn_rad2_per_rad,
+            ),
+            (cfg.r_x_m2, cfg.r_y_m2, cfg.r_theta_rad2),
+            (self._pair_var, cfg.max_correspondence_cap_m),
+        )
         self._t = math.nan
         self._last_odo_t: float | None = None
         self._consecutive = 0
@@ -228,6 +249,7 @@ class IcpEKF(Filter):
         self._diag = self._empty_diag()
         self._icp_health = _NO_ICP_HEALTH
         self._beams: dict[tuple[float, float, int, float], tuple[FloatArray, FloatArray, FloatArray]] = {}
+        self._clouds: dict[int, tuple[FloatArray, FloatArray]] = {}
 
     def _empty_diag(self) -> dict[str, float]:
         return {
@@ -245,10 +267,6 @@ class IcpEKF(Filter):
     def predict(self, u: Odometry) -> None:
         """Add the world-frame odometry increment (eq. 11); P = F P F^T + Q (eq. 5, 12, 13)."""
         cfg = self.config
-        th = float(self._x[2])
-        c, s = math.cos(th), math.sin(th)
-        dxw = c * u.dx - s * u.dy
-        dyw = s * u.dx + c * u.dy
         if u.dt is not None and u.dt > 0.0:
             dt = float(u.dt)
         elif self._last_odo_t is not None:
@@ -256,21 +274,10 @@ class IcpEKF(Filter):
         else:
             dt = cfg.static_noise_period_s
         self._last_odo_t = u.t
-        self._x = np.array([self._x[0] + dxw, self._x[1] + dyw, wrap_scalar(th + u.dtheta)])
-        F = np.array([[1.0, 0.0, -dyw], [0.0, 1.0, dxw], [0.0, 0.0, 1.0]])
-        k = dt / cfg.static_noise_period_s
-        Q = np.diag(
-            [
-                cfg.q_x_stat_m2 * k + cfg.q_x_dyn_m2_per_m * abs(dxw),
-                cfg.q_y_stat_m2 * k + cfg.q_y_dyn_m2_per_m * abs(dyw),
-                cfg.q_theta_stat_rad2 * k + cfg.q_theta_dyn_rad2_per_rad * abs(u.dtheta),
-            ]
-        )
-        P = F @ self._P @ F.T + Q
-        self._P = 0.5 * (P + P.T)
+        finite = predict_pose(self._s, float(u.dx), float(u.dy), float(u.dtheta), dt / cfg.static_noise_period_s)
         self._t = u.t
         self._diag = self._empty_diag()
-        if not _all_finite(self._x):
+        if not finite:
             raise FilterDiverged(f"non-finite state after odometry at t={u.t:.3f}")
 
     # --- observation (sec. III-A.2, III-B) and update (eq. 14-18) ----------------------------------------
@@ -287,41 +294,38 @@ class IcpEKF(Filter):
         cfg = self.config
         angles, cos_a, sin_a = self._beam_directions(z)
         sx, sy, sth = z.sensor_pose
-        x, y, th = self._x.tolist()
+        x, y, th = self._s[0:3].tolist()
         c, s = math.cos(th), math.sin(th)
         sensor_world = np.array([x + c * sx - s * sy, y + s * sx + c * sy, th + sth])
         # the shared caster's one-scan path: its fields are cached with the grid object
         pred = cast_scan(self._grid, sensor_world, angles, z.range_max, parallel=False)
         real = np.asarray(z.ranges, dtype=np.float64)
-        ok_real = np.isfinite(real) & (real >= z.range_min) & (real <= z.range_max)
-        ok_pred = np.isfinite(pred) & (pred >= z.range_min)
-        n_real, n_pred = int(np.count_nonzero(ok_real)), int(np.count_nonzero(ok_pred))
+        src, dst = self._cloud_buffers(real.shape[0])
+        self._s[BUF_SIGMAS] = cfg.correspondence_sigmas * (cfg.kidnap_threshold_factor if self._tightened else 1.0)
+        # both clouds' points (scan_points from the beams' cached directions) and the rejection distances
+        n_real, n_pred, d_0, d_min = scan_clouds(
+            self._s, real, pred, cos_a, sin_a, (sx, sy, z.range_min, z.range_max), src, dst
+        )
         if n_real < MIN_PAIRS or n_pred < MIN_PAIRS:
             return None, n_real, n_pred
-        # scan_points of both clouds, from the beams' cached directions (the same numbers)
-        src = np.empty((n_real, 2))
-        src[:, 0] = sx + real[ok_real] * cos_a[ok_real]
-        src[:, 1] = sy + real[ok_real] * sin_a[ok_real]
-        dst = np.empty((n_pred, 2))
-        dst[:, 0] = sx + pred[ok_pred] * cos_a[ok_pred]
-        dst[:, 1] = sy + pred[ok_pred] * sin_a[ok_pred]
-        r_mean = float(np.mean(real[ok_real]))
-        lam_xy = float(np.linalg.eigvalsh(self._P[0:2, 0:2])[-1])
-        k = cfg.correspondence_sigmas * (cfg.kidnap_threshold_factor if self._tightened else 1.0)
-        d_min = k * math.sqrt(self._pair_var)
-        d_0 = min(
-            k * math.sqrt(self._pair_var + lam_xy + r_mean**2 * float(self._P[2, 2])), cfg.max_correspondence_cap_m
+        # icp_2d's loop called directly: the clouds are already contiguous (n, 2) and the gates valid
+        tx, ty, tth, converged, it, matched, rmse, gate = _icp._icp_loop(
+            src[:n_real],
+            dst[:n_pred],
+            (d_0, d_min),
+            int(cfg.max_iterations),
+            float(cfg.transformation_epsilon),
+            (0.0, 0.0, 0.0),
         )
-        d_0 = max(d_0, d_min)
-        res = icp_2d(
-            src,
-            dst,
-            max_correspondence_m=d_0,
-            min_correspondence_m=d_min,
-            max_iterations=cfg.max_iterations,
-            transformation_epsilon=cfg.transformation_epsilon,
-        )
+        res = IcpResult((tx, ty, tth), bool(converged), int(it), int(matched), float(rmse), float(gate))
         return res, n_real, n_pred
+
+    def _cloud_buffers(self, n: int) -> tuple[FloatArray, FloatArray]:
+        """Scratch (n, 2) arrays for the two clouds of an n-beam scan (reused: the ICP loop does not keep them)."""
+        bufs = self._clouds.get(n)
+        if bufs is None:
+            bufs = self._clouds[n] = (np.empty((n, 2)), np.empty((n, 2)))
+        return bufs
 
     def _beam_directions(self, z: LaserScan) -> tuple[FloatArray, FloatArray, FloatArray]:
         """The scan's beam angles (sensor frame) and cos, sin of angle + sensor heading, computed once per scan
@@ -350,19 +354,11 @@ class IcpEKF(Filter):
         if res is None or not res.converged or res.matched < needed:
             self._mismatch(z.t, res)
             return
-        tx, ty, tth = res.transform
-        th = float(self._x[2])
-        c, s = math.cos(th), math.sin(th)
-        # V = Z - Z^ with Z = X (+) M (eq. 2-3): the ICP translation rotated into the world frame.
-        V = np.array([c * tx - s * ty, s * tx + c * ty, wrap_scalar(tth)])
-        # eq. 15-18 with H = I (the ICP correction measures the pose itself, eq. 14): K = P (P + R)^-1, x + K V,
-        # Joseph form (the Kalman core's H = I form).
-        x, P, nis = joseph_correct_pose(self._x, self._P, V, self._R)
-        if not (_all_finite(x) and _all_finite(P)):
+        # V = Z - Z^ with Z = X (+) M (eq. 2-3): the ICP translation rotated into the world frame; eq. 15-18 with
+        # H = I (the ICP correction measures the pose itself, eq. 14): K = P (P + R)^-1, x + K V, Joseph form.
+        finite, nis = correct_pose(self._s, *res.transform)
+        if not finite:
             raise FilterDiverged(f"non-finite state after the scan update at t={z.t:.3f}")
-        x[2] = wrap_scalar(float(x[2]))
-        self._x = x
-        self._P = P
         self._consecutive = 0
         self._tightened = False  # the report's tighter threshold holds until the filter matches again
         self._diag = {
@@ -378,7 +374,7 @@ class IcpEKF(Filter):
         cfg = self.config
         self._consecutive += 1
         if self._consecutive >= cfg.kidnap_mismatches:
-            self._P = self._P * cfg.kidnap_cov_factor
+            self._s[3:12] *= cfg.kidnap_cov_factor
             self._tightened = True
             self._kidnap_resets += 1
             self._consecutive = 0
@@ -397,12 +393,8 @@ class IcpEKF(Filter):
 
     def estimate(self) -> Estimate:
         """The current pose and covariance with the diagnostics of the last call."""
-        return Estimate(t=self._t, mean=self._x.copy(), cov=self._P.copy(), diagnostics=dict(self._diag))
-
-
-def _all_finite(a: FloatArray) -> bool:
-    """Whether every entry of a small array is finite (scalar tests: a numpy reduction costs more here)."""
-    return all(map(math.isfinite, a.ravel().tolist()))
+        s = self._s
+        return Estimate(t=self._t, mean=s[0:3].copy(), cov=s[3:12].reshape(3, 3).copy(), diagnostics=dict(self._diag))
 
 
 def _check_raycast_tables(grid: OccupancyGrid) -> None:

@@ -180,3 +180,103 @@ def test_bucket_nearest_neighbour_is_the_kd_tree_neighbour() -> None:
         np.testing.assert_array_equal(j[within], jk[within])
         np.testing.assert_allclose(d[within], dk[within], rtol=1e-15, atol=0)
         assert np.all(np.isinf(d[~within]))
+
+
+def _random_belief(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    a = rng.standard_normal((3, 3)) * rng.uniform(1e-3, 1.0)
+    P = a @ a.T + 1e-9 * np.eye(3)
+    x = np.array([rng.uniform(-20, 20), rng.uniform(-20, 20), rng.uniform(-math.pi, math.pi)])
+    return x, 0.5 * (P + P.T)
+
+
+_Q = (0.0005, 0.0004, 0.0003, 0.001, 0.002, 0.0011)
+_R = (0.008, 0.006, 0.01)
+
+
+def test_compiled_prediction_is_the_numpy_formula() -> None:
+    """predict_pose against eq. 11-13 in numpy: the same mean bits, the covariance equal to rounding (BLAS
+    fuses multiply-adds)."""
+    from locbench.filters._ekf_icp_kernels import predict_pose, state_buffer
+    from locbench.geometry import wrap_scalar
+
+    rng = np.random.default_rng(11)
+    for _ in range(300):
+        x, P = _random_belief(rng)
+        dx, dy, dth = rng.normal(0.0, 0.1, 3)
+        k = rng.uniform(0.0, 2.0)
+        s = state_buffer(x, P, _Q, _R, (1e-4, 1.0))
+        assert predict_pose(s, dx, dy, dth, k)
+        c, sn = math.cos(x[2]), math.sin(x[2])
+        dxw, dyw = c * dx - sn * dy, sn * dx + c * dy
+        F = np.array([[1.0, 0.0, -dyw], [0.0, 1.0, dxw], [0.0, 0.0, 1.0]])
+        Q = np.diag([_Q[i] * k + _Q[i + 3] * abs(d) for i, d in enumerate((dxw, dyw, dth))])
+        Pn = F @ P @ F.T + Q
+        assert np.array_equal(s[0:3], [x[0] + dxw, x[1] + dyw, wrap_scalar(x[2] + dth)])
+        np.testing.assert_allclose(s[3:12].reshape(3, 3), 0.5 * (Pn + Pn.T), rtol=1e-13, atol=1e-16)
+        assert np.array_equal(s[3:12].reshape(3, 3), s[3:12].reshape(3, 3).T)
+
+
+def test_compiled_correction_is_joseph_correct_pose() -> None:
+    """correct_pose against the numpy H = I Joseph form (V formed as IcpEKF formed it) on random beliefs."""
+    from locbench.filters._ekf_icp_kernels import correct_pose, state_buffer
+    from locbench.filters._kalman import joseph_correct_pose
+    from locbench.geometry import wrap_scalar
+
+    rng = np.random.default_rng(12)
+    for _ in range(300):
+        x, P = _random_belief(rng)
+        tx, ty, tth = rng.normal(0.0, 0.1, 3)
+        r = tuple(rng.uniform(1e-6, 0.1, 3))
+        s = state_buffer(x, P, _Q, r, (1e-4, 1.0))
+        ok, nis = correct_pose(s, tx, ty, tth)
+        c, sn = math.cos(x[2]), math.sin(x[2])
+        V = np.array([c * tx - sn * ty, sn * tx + c * ty, wrap_scalar(tth)])
+        xn, Pn, nis_np = joseph_correct_pose(x, P, V, np.diag(r))
+        xn[2] = wrap_scalar(float(xn[2]))
+        assert ok
+        np.testing.assert_allclose(s[0:3], xn, rtol=0, atol=1e-12)
+        scale = np.sqrt(np.outer(np.diag(Pn), np.diag(Pn)))
+        np.testing.assert_allclose(s[3:12].reshape(3, 3) / scale, Pn / scale, rtol=0, atol=1e-11)
+        assert np.array_equal(s[3:12].reshape(3, 3), s[3:12].reshape(3, 3).T)
+        assert nis == pytest.approx(nis_np, rel=1e-10)
+    s = state_buffer(x, P, _Q, _R, (1e-4, 1.0))
+    before = s.copy()
+    assert not correct_pose(s, math.inf, 0.0, 0.0)[0]
+    assert np.array_equal(s, before)  # a non-finite result leaves the state
+
+
+def test_compiled_clouds_are_the_numpy_clouds() -> None:
+    """scan_clouds against IcpEKF's numpy form: the same points, counts and mean range bits; D_0 equal to
+    rounding (the closed-form eigenvalue against eigvalsh)."""
+    from locbench.filters._ekf_icp_kernels import BUF_SIGMAS, largest_position_eigenvalue, scan_clouds, state_buffer
+
+    rng = np.random.default_rng(13)
+    n = 683
+    cos_a, sin_a = np.cos(ANGLES + 0.1), np.sin(ANGLES + 0.1)
+    for trial in range(100):
+        x, P = _random_belief(rng)
+        s = state_buffer(x, P, _Q, _R, (2.0 * 0.01**2 + 0.05**2 / 6.0, 1.0 if trial % 2 else 1e3))
+        s[BUF_SIGMAS] = rng.uniform(1.0, 6.0)
+        real, pred = rng.uniform(0.0, 6.0, n), rng.uniform(0.0, 6.0, n)
+        real[rng.random(n) < 0.2], pred[rng.random(n) < 0.2] = np.inf, np.nan
+        rmin, rmax, sx, sy = 0.02, 5.6, 0.1, -0.05
+        src, dst = np.empty((n, 2)), np.empty((n, 2))
+        n_real, n_pred, d_0, d_min = scan_clouds(s, real, pred, cos_a, sin_a, (sx, sy, rmin, rmax), src, dst)
+        ok_r = np.isfinite(real) & (real >= rmin) & (real <= rmax)
+        ok_p = np.isfinite(pred) & (pred >= rmin)
+        assert (n_real, n_pred) == (np.count_nonzero(ok_r), np.count_nonzero(ok_p))
+        assert np.array_equal(
+            src[:n_real], np.column_stack([sx + real[ok_r] * cos_a[ok_r], sy + real[ok_r] * sin_a[ok_r]])
+        )
+        assert np.array_equal(
+            dst[:n_pred], np.column_stack([sx + pred[ok_p] * cos_a[ok_p], sy + pred[ok_p] * sin_a[ok_p]])
+        )
+        lam = float(np.linalg.eigvalsh(P[0:2, 0:2])[-1])
+        assert largest_position_eigenvalue(s) == pytest.approx(lam, rel=1e-14)
+        k, pv = s[BUF_SIGMAS], s[21]
+        assert d_min == k * math.sqrt(pv)
+        d0 = max(min(k * math.sqrt(pv + lam + float(np.mean(real[ok_r])) ** 2 * P[2, 2]), s[22]), d_min)
+        assert d_0 == pytest.approx(d0, rel=1e-14)
+    few = np.full(n, np.inf)
+    few[:2] = 1.0
+    assert math.isnan(scan_clouds(s, few, pred, cos_a, sin_a, (sx, sy, rmin, rmax), src, dst)[2])
