@@ -213,7 +213,7 @@ def _block_sum(v: FloatArray, lo: int, n: int) -> float:  # pragma: no cover - c
 
 
 @njit(cache=True)
-def _pairwise_sum(v: FloatArray, lo: int, n: int) -> float:  # pragma: no cover - compiled
+def pairwise_sum(v: FloatArray, lo: int, n: int) -> float:  # pragma: no cover - compiled
     # numpy's order for summing a contiguous row (halves split at a multiple of 8 down to leaves of 128), so the
     # compiled mean below equals np.mean(..., axis=1) bit for bit and the stored scores do not move; an explicit
     # stack, as a self-recursive kernel is not safe in numba's on-disk cache
@@ -257,7 +257,7 @@ def _energy_first_term(d: FloatArray, root: FloatArray, z: FloatArray) -> FloatA
             px = d[t, 0] + root[t, 0, 0] * z[j, 0] + root[t, 0, 1] * z[j, 1]
             py = d[t, 1] + root[t, 1, 0] * z[j, 0] + root[t, 1, 1] * z[j, 1]
             norms[j] = math.hypot(px, py)
-        out[t] = _pairwise_sum(norms, 0, m) / m
+        out[t] = pairwise_sum(norms, 0, m) / m
     return out
 
 

@@ -31,7 +31,7 @@ from numba import njit
 
 from locbench.filters._ekf_kernels import _propagate, _wrap
 from locbench.filters._icp import MIN_PAIRS
-from locbench.scores import _pairwise_sum
+from locbench.scores import pairwise_sum
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -143,7 +143,7 @@ def scan_clouds(
             n_pred += 1
     if n_real < MIN_PAIRS or n_pred < MIN_PAIRS:
         return n_real, n_pred, math.nan, math.nan
-    r_mean = _pairwise_sum(used, 0, n_real) / n_real
+    r_mean = pairwise_sum(used, 0, n_real) / n_real
     lam_xy = max_eig_2x2(s[3], s[4], s[7])
     pair_var, cap, k = s[BUF_GATE], s[BUF_GATE + 1], s[BUF_SIGMAS]
     d_min = k * math.sqrt(pair_var)
