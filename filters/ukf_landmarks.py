@@ -52,6 +52,7 @@ from scipy.linalg.lapack import dpotrf
 from locbench.datasets.base import Gaussian2, SensorSpec, WorldMap
 from locbench.errors import ConfigError, FilterDiverged
 from locbench.events import Odometry, PoseFix
+from locbench.filters import _ukf_kernels as kern
 from locbench.filters._kalman import gain_update, subtract
 from locbench.filters._landmark_index import NEAR_M
 from locbench.filters.base import NON_NEGATIVE, Estimate, FilterConfig, bound
@@ -206,8 +207,13 @@ class LandmarkUKF(LandmarkEKF):
             x_mean_fn=state_mean,
             residual_x=_residual_heading,
         )
-        ukf.x = np.array(self._x)
-        ukf.P = np.array(self._P)
+        # the state is the kernels' buffer (_ukf_kernels); ukf.x and ukf.P are views of it (_sync)
+        lam = points.alpha**2 * (points.n + points.kappa) - points.n  # filterpy's lambda, its n + lambda below
+        self._kb = kern.weights_buffer(ukf.Wm, ukf.Wc, lam + points.n)
+        self._kx, self._kP = self._kb[0:3], self._kb[3:12].reshape(3, 3)
+        self._kb[0:3] = self._x
+        self._kb[3:12] = np.asarray(self._P, dtype=np.float64).reshape(9)
+        ukf.x, ukf.P = self._kx, self._kP
         self._ukf = ukf
         self._R_lm = np.diag([self._rr, self._rb])
         # the k-d tree's bound (_gate_radius) needs non-negative weights (alpha = 1, beta = 2, kappa = 0 has them)
@@ -218,30 +224,50 @@ class LandmarkUKF(LandmarkEKF):
     # --- predict ---------------------------------------------------------------------------------------------
 
     def predict(self, u: Odometry) -> None:
-        """Move every sigma point with the mean motion; add the EKF's motion noise (module docstring)."""
-        ukf = self._ukf
-        step = self._motion.step(ukf.x.tolist(), u)  # noise and model choice at the mean (and the travel count)
+        """Move every sigma point with the mean motion; add the EKF's motion noise (module docstring).
+
+        One compiled call (:func:`._ukf_kernels.predict`: filterpy's arithmetic in its order); filterpy's own
+        ``predict`` when the kernel declines (a failed factorisation or a non-finite value), which raises as
+        before.
+        """
+        ukf, kb = self._ukf, self._kb
+        self._sync()
+        step = self._motion.step(self._kx.tolist(), u)  # noise and model choice at the mean (and the travel count)
         n00, n01, n02, n11, n12, n22 = step.noise
         q0, q1, q2 = self._q
-        ukf.Q = np.array([[n00 + q0, n01, n02], [n01, n11 + q1, n12], [n02, n12, n22 + q2]])
+        Q = [n00 + q0, n01, n02, n01, n11 + q1, n12, n02, n12, n22 + q2]
+        kb[kern.B_Q : kern.B_Q + 9] = Q
         if step.encoder:
             W = self._motion.noise.wheelbase_m
             assert W is not None and u.d_left is not None and u.d_right is not None  # guaranteed by step.encoder
             dd, dth = 0.5 * (u.d_left + u.d_right), (u.d_right - u.d_left) / W  # eq. 1-2
-            ukf.predict(UT=pose_transform, fx=_move_midpoint, dd=dd, dth=dth)
-        else:
+            if kern.predict(kb, True, dd, dth, 0.0) != 0:
+                ukf.Q = np.array(Q).reshape(3, 3)
+                ukf.predict(UT=pose_transform, fx=_move_midpoint, dd=dd, dth=dth)
+                self._finish(ukf.x, ukf.P)
+        elif kern.predict(kb, False, u.dx, u.dy, u.dtheta) != 0:
+            ukf.Q = np.array(Q).reshape(3, 3)
             ukf.predict(UT=pose_transform, fx=_move_increment, dx=u.dx, dy=u.dy, dth=u.dtheta)
-        self._finish(ukf.x, ukf.P)
+            self._finish(ukf.x, ukf.P)
         self._t = u.t
         self._nis, self._nis_dof, self._accepted, self._rejected = math.nan, 0, 0, 0
         self._check_finite(u.t)
 
     # --- corrections ------------------------------------------------------------------------------------------
 
+    def _sync(self) -> None:
+        """Make the buffer the state again if ``ukf.x`` or ``ukf.P`` were replaced (filterpy's ``predict``, tests)."""
+        ukf = self._ukf
+        if ukf.x is not self._kx or ukf.P is not self._kP:
+            self._kb[0:3] = np.asarray(ukf.x, dtype=np.float64).reshape(3)
+            self._kb[3:12] = np.asarray(ukf.P, dtype=np.float64).reshape(9)
+            ukf.x, ukf.P = self._kx, self._kP
+
     def _finish(self, x: FloatArray, P: FloatArray) -> None:
         x[2] = wrap_scalar(float(x[2]))
-        self._ukf.x = x
-        self._ukf.P = 0.5 * (P + P.T)
+        self._kb[0:3] = x
+        self._kb[3:12] = (0.5 * (P + P.T)).reshape(9)
+        self._ukf.x, self._ukf.P = self._kx, self._kP
 
     def _correct(
         self, z: FloatArray, R: FloatArray, h_all: Any, z_mean: Any, residual: Any, angle: int, gate: float
@@ -275,9 +301,18 @@ class LandmarkUKF(LandmarkEKF):
     def _correct_landmark(self, r: float, b: float, row: int, gate: float) -> float | None:
         """Fuse one (range, bearing) of landmark ``row``; its NIS, or None if gated out."""
         lx, ly = self._lm_list[row]
-        x = self._ukf.x
+        self._sync()
+        x = self._kx
         if math.hypot(lx - float(x[0]), ly - float(x[1])) < 1e-6:
             return None  # on top of the landmark: the bearing is undefined
+        kb = self._kb
+        if kern.landmark_sums(kb, r, b, lx, ly, self._rr, self._rb) == 0:  # the sums of _correct, compiled
+            o = kb[kern.B_S : kern.B_SIGH]
+            x_new, P_new, nis = _gain(x, self._kP, o[10:12], o[0:4].reshape(2, 2), o[4:10].reshape(3, 2))
+            if not nis <= gate:
+                return None
+            self._finish(x_new, P_new)
+            return nis
 
         def h_all(sigmas: FloatArray) -> FloatArray:
             return _range_bearing_points(sigmas, lx, ly)
@@ -292,7 +327,11 @@ class LandmarkUKF(LandmarkEKF):
         sums are taken per landmark, :func:`_weighted_sum`), so the first smallest is the same row.
         """
         ukf = self._ukf
-        sig = ukf.points_fn.sigma_points(ukf.x, ukf.P)  # (7, 3)
+        self._sync()
+        if kern.sigma_points(self._kb) == 0:  # filterpy's points, compiled
+            sig = self._kb[kern.B_SIG : kern.B_SIG + 21].reshape(7, 3).copy()
+        else:
+            sig = ukf.points_fn.sigma_points(ukf.x, ukf.P)  # (7, 3); raises as before
         rows: list[int] | None = None
         if self._index is not None and self._weights_nonnegative:
             radius = self._gate_radius(r, sig)
@@ -403,12 +442,25 @@ class LandmarkUKF(LandmarkEKF):
         ukf = self._ukf
         if ukf is None:
             return  # called by the EKF's reset before the UKF exists; checked again at the end of reset
-        if not (np.isfinite(ukf.x).all() and np.isfinite(ukf.P).all()):
+        self._sync()
+        if not all(map(math.isfinite, self._kb[0:12].tolist())):  # np.isfinite's verdict, without its calls
             raise FilterDiverged(f"LandmarkUKF state became non-finite at t={t:.3f} s")
 
     def estimate(self) -> Estimate:
         """The current mean (3,), covariance (3, 3) and the diagnostics of the last call."""
         return Estimate(t=self._t, mean=self._ukf.x.copy(), cov=self._ukf.P.copy(), diagnostics=self._diagnostics())
+
+
+def _gain(
+    x: FloatArray, P: FloatArray, y: FloatArray, S: FloatArray, Pxz: FloatArray
+) -> tuple[FloatArray, FloatArray, float]:
+    """(x+, P+, NIS) of :func:`~locbench.filters._kalman.gain_update`: its numpy operations, without the
+    log-likelihood and the record the UKF does not read."""
+    Sinv = np.linalg.inv(S)
+    K = Pxz @ Sinv
+    P_new = P - K @ S @ K.T
+    nis = float(y @ Sinv @ y)
+    return x + K @ y, 0.5 * (P_new + P_new.T), nis
 
 
 def _weighted_sum(w: FloatArray, a: FloatArray) -> FloatArray:

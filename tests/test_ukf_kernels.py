@@ -1,0 +1,151 @@
+"""The UKF's compiled kernels (filters/_ukf_kernels.py) against the filterpy/numpy forms they replace, bit for bit
+on random beliefs, and the Python path they fall back to."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+pytest.importorskip("filterpy")
+
+from filterpy.kalman import MerweScaledSigmaPoints
+
+from locbench.datasets.base import Gaussian2, Landmarks, SensorSpec, WorldMap
+from locbench.events import LandmarkObservations, Odometry
+from locbench.filters import _ukf_kernels as kern
+from locbench.filters import ukf_landmarks as ukfm
+from locbench.filters._kalman import gain_update
+
+N_BELIEFS = 400
+R_LM = (0.01, 0.0004)
+
+
+def _points(alpha: float = 1.0, beta: float = 2.0, kappa: float = 0.0) -> MerweScaledSigmaPoints:
+    return MerweScaledSigmaPoints(
+        3, alpha=alpha, beta=beta, kappa=kappa, sqrt_method=ukfm.upper_cholesky, subtract=ukfm._residual_heading
+    )
+
+
+def _buffer(pts: MerweScaledSigmaPoints, x: np.ndarray, P: np.ndarray) -> np.ndarray:
+    lam = pts.alpha**2 * (pts.n + pts.kappa) - pts.n  # filterpy's lambda
+    buf = kern.weights_buffer(pts.Wm, pts.Wc, lam + pts.n)
+    buf[0:3], buf[3:12] = x, P.reshape(9)
+    return buf
+
+
+def _beliefs(seed: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Random means (headings across +-pi) and symmetric positive-definite covariances over 7 decades."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(N_BELIEFS):
+        A = rng.normal(size=(3, 3))
+        P = A @ A.T * 10.0 ** rng.uniform(-6.0, 1.0)
+        x = np.array([rng.normal() * 10.0, rng.normal() * 10.0, rng.uniform(-math.pi, math.pi)])
+        out.append((x, 0.5 * (P + P.T)))
+    return out
+
+
+@pytest.mark.parametrize("weights", [(1.0, 2.0, 0.0), (0.5, 2.0, 1.0)])
+def test_sigma_points_equal_filterpy(weights: tuple[float, float, float]) -> None:
+    pts = _points(*weights)
+    for x, P in _beliefs(1):
+        buf = _buffer(pts, x, P)
+        assert kern.sigma_points(buf) == 0
+        assert np.array_equal(buf[kern.B_SIG : kern.B_SIG + 21].reshape(7, 3), pts.sigma_points(x, P))
+
+
+def test_sigma_points_decline_where_the_factorisation_fails() -> None:
+    pts = _points()
+    buf = _buffer(pts, np.zeros(3), -np.eye(3))
+    assert kern.sigma_points(buf) != 0
+    with pytest.raises(np.linalg.LinAlgError):
+        pts.sigma_points(np.zeros(3), -np.eye(3))
+
+
+def test_strided_dot_equals_numpy() -> None:
+    rng = np.random.default_rng(2)
+    for _ in range(2000):
+        w = rng.normal(size=7)
+        a = rng.normal(size=(7, 3)) * 10.0 ** rng.uniform(-3.0, 3.0)
+        for j in range(3):
+            assert kern._dot_strided(w, a.reshape(-1), j, 3) == float(w @ a[:, j])
+
+
+@pytest.mark.parametrize("encoder", [True, False])
+@pytest.mark.parametrize("weights", [(1.0, 2.0, 0.0), (0.5, 2.0, 1.0)])
+def test_predict_equals_filterpy_transform(encoder: bool, weights: tuple[float, float, float]) -> None:
+    pts = _points(*weights)
+    rng = np.random.default_rng(3)
+    for x, P in _beliefs(4):
+        buf = _buffer(pts, x, P)
+        Q = np.diag(rng.uniform(0.0, 1e-3, 3))
+        Q[0, 1] = Q[1, 0] = 1e-5 * rng.normal()
+        buf[kern.B_Q : kern.B_Q + 9] = Q.reshape(9)
+        d = rng.normal(size=3) * 0.2
+        sig = pts.sigma_points(x, P)
+        if encoder:
+            moved = np.array([ukfm._move_midpoint(s, 0.0, d[0], d[1]) for s in sig])
+        else:
+            moved = np.array([ukfm._move_increment(s, 0.0, d[0], d[1], d[2]) for s in sig])
+        xm, Pm = ukfm.pose_transform(moved, pts.Wm, pts.Wc, Q, ukfm.state_mean, ukfm._residual_heading)
+        xm[2] = ukfm.wrap_scalar(float(xm[2]))  # the filter's _finish
+        assert kern.predict(buf, encoder, d[0], d[1], d[2]) == 0
+        assert np.array_equal(buf[0:3], xm)
+        assert np.array_equal(buf[3:12], (0.5 * (Pm + Pm.T)).reshape(9))
+
+
+def test_landmark_sums_equal_the_numpy_correction() -> None:
+    pts = _points()
+    rng = np.random.default_rng(5)
+    R = np.diag(R_LM)
+    for x, P in _beliefs(6):
+        buf = _buffer(pts, x, P)
+        lx, ly = rng.normal(size=2) * 10.0
+        r, b = rng.uniform(0.1, 10.0), rng.uniform(-3.0, 3.0)
+        assert kern.landmark_sums(buf, r, b, lx, ly, *R_LM) == 0
+        sig = pts.sigma_points(x, P)
+        sh = ukfm._range_bearing_points(sig, lx, ly)
+        zp = ukfm.range_bearing_mean(sh, pts.Wm)
+        S = ukfm._moments(sh, pts.Wc, zp, R, 1)
+        dx = sig - x
+        dx[:, 2] = ukfm.wrap_angle(dx[:, 2])
+        dz = sh - zp
+        dz[:, 1] = ukfm.wrap_angle(dz[:, 1])
+        out = buf[kern.B_S : kern.B_SIGH]
+        assert np.array_equal(buf[kern.B_SIGH : kern.B_SIGH + 14], sh.reshape(-1))
+        assert np.array_equal(out[0:4], S.reshape(-1))
+        assert np.array_equal(out[4:10], ukfm._weighted_outer_sum(pts.Wc, dx, dz, None).reshape(-1))
+        assert np.array_equal(out[10:12], ukfm._residual_bearing(np.array([r, b]), zp))
+
+
+def test_gain_equals_gain_update() -> None:
+    rng = np.random.default_rng(7)
+    for x, P in _beliefs(8)[:100]:
+        A = rng.normal(size=(2, 2))
+        S = A @ A.T + np.eye(2) * 0.01
+        Pxz, y = rng.normal(size=(3, 2)), rng.normal(size=2)
+        c = gain_update(x, P, y, S, Pxz)
+        x_new, P_new, nis = ukfm._gain(x, P, y, S, Pxz)
+        assert np.array_equal(x_new, c.x) and np.array_equal(P_new, c.P) and nis == c.nis
+
+
+def _ukf() -> ukfm.LandmarkUKF:
+    sensors = SensorSpec(wheelbase_m=0.4, encoder_k_left=0.01, encoder_k_right=0.01,
+                         landmark_sigma_range_m=0.05, landmark_sigma_bearing_rad=0.02)  # fmt: skip
+    world = WorldMap(landmarks=Landmarks(ids=np.array([1, 2]), xy=np.array([[3.0, 1.0], [-2.0, 2.0]])))
+    flt = ukfm.LandmarkUKF(ukfm.LandmarkUKFConfig())
+    flt.reset(Gaussian2(np.array([0.1, 0.2, 3.1]), np.diag([0.04, 0.09, 0.2])), world, sensors,
+              np.random.default_rng(0))  # fmt: skip
+    return flt
+
+
+def test_a_replaced_state_is_taken_up_and_a_failed_factorisation_raises_as_before() -> None:
+    flt = _ukf()
+    flt._ukf.x, flt._ukf.P = np.array([1.0, 0.0, 0.5]), np.diag([0.01, 0.01, 0.01])  # as the tests of the index do
+    flt.update(LandmarkObservations(0.1, np.array([1]), np.array([2.2]), np.array([0.0])))
+    assert flt.estimate().diagnostics["accepted"] == 1.0
+    flt._ukf.P = -np.eye(3)
+    with pytest.raises(np.linalg.LinAlgError, match="dpotrf"):
+        flt.predict(Odometry(0.2, 0.05, 0.0, 0.01, d_left=0.048, d_right=0.052))
