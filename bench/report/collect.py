@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import io
 import logging
+import os
 import re
 from collections import defaultdict
 from collections.abc import Callable, Sequence
@@ -206,10 +207,18 @@ _RunRead = tuple[str, str, Any]
 _WORKER: dict[str, Any] = {}
 
 
-def _read_runs(store: Store, keep: Keep | None, run_dirs: Sequence[Path]) -> tuple[list[_RunRead], dict[Any, Any]]:
-    """Read ``run_dirs`` in order and compute each ok run's metrics and NEES series against its truth."""
+def _read_runs(
+    store: Store,
+    keep: Keep | None,
+    run_dirs: Sequence[Path],
+    truths: dict[tuple[str, int], TruthRecord] | None = None,
+) -> tuple[list[_RunRead], dict[Any, Any]]:
+    """Read ``run_dirs`` in order and compute each ok run's metrics and NEES series against its truth.
+
+    ``truths`` caches the truths read (a worker keeps one over all its calls); returned with the reads.
+    """
     reads: list[_RunRead] = []
-    truths: dict[tuple[str, int], TruthRecord] = {}
+    truths = {} if truths is None else truths
     for run_dir in run_dirs:
         rel = _relative(run_dir, store.root)
         try:
@@ -246,24 +255,42 @@ def _read_runs(store: Store, keep: Keep | None, run_dirs: Sequence[Path]) -> tup
     return reads, truths
 
 
-def _read_chunk(run_dirs: list[Path]) -> tuple[list[_RunRead], dict[Any, Any]]:
-    return _read_runs(_WORKER["store"], _WORKER["keep"], run_dirs)
+def _read_one(i: int) -> tuple[int, list[_RunRead], dict[Any, Any]]:
+    """Run ``i`` of the forked pool's list, with the truths this worker read first for it."""
+    cache: dict[tuple[str, int], TruthRecord] = _WORKER.setdefault("truths", {})
+    known = set(cache)
+    reads, _ = _read_runs(_WORKER["store"], _WORKER["keep"], [_WORKER["dirs"][i]], cache)
+    return i, reads, {k: v for k, v in cache.items() if k not in known}
+
+
+def _cost(run_dir: Path) -> int:
+    """Bytes of a run's files: the work of its metrics grows with its rows and its truth's times."""
+    try:
+        return sum(e.stat().st_size for e in os.scandir(run_dir) if e.is_file())
+    except OSError:
+        return 0
 
 
 def _read_parallel(store: Store, keep: Keep | None, run_dirs: list[Path], jobs: int) -> list[Any]:
-    """:func:`_read_runs` over ``jobs`` forked processes, in chunks, the results in the order of ``run_dirs``."""
+    """:func:`_read_runs` over ``jobs`` forked processes, one run per task, largest first (the recordings'
+    runs take seconds each, a synthetic one milliseconds), the results put back in the order of ``run_dirs``."""
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
-    size = max(1, -(-len(run_dirs) // (4 * jobs)))  # a few chunks per worker evens out their load
-    chunks = [run_dirs[i : i + size] for i in range(0, len(run_dirs), size)]
-    _WORKER.update(store=store, keep=keep)
+    order = sorted(range(len(run_dirs)), key=lambda i: -_cost(run_dirs[i]))
+    _WORKER.update(store=store, keep=keep, dirs=run_dirs)
+    by_index: dict[int, list[_RunRead]] = {}
+    truths: dict[Any, Any] = {}
     try:
         # fork: the workers inherit the store and the suite filter (a closure) instead of pickling them
         with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("fork")) as pool:
-            return list(pool.map(_read_chunk, chunks))
+            for i, reads, new in pool.map(_read_one, order, chunksize=1):
+                by_index[i] = reads
+                for k, v in new.items():
+                    truths.setdefault(k, v)
     finally:
         _WORKER.clear()
+    return [([r for i in range(len(run_dirs)) for r in by_index[i]], truths)]
 
 
 def collect(store: Store, keep: Keep | None = None, jobs: int = 1) -> Collected:
