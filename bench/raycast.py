@@ -235,39 +235,55 @@ def dda_face(
     if t0 >= t1 or t0 > t_lim:
         return math.inf, -1, True
     i, j, step_i, step_j, t_next_x, t_next_y, t_delta_x, t_delta_y = _dda_start(rows, cols, gx, gy, dx, dy, t0)
-    near = t0 > 0.0 or _vertex_near(occ, gx, gy, 3.0 * near0)
-    adx = abs(dx)
-    ady = abs(dy)
+    i0, j0, tx0, ty0 = i, j, t_next_x, t_next_y
     t = t0
     axis = -1
-    while True:
-        if occ[i, j]:
-            hx = gx + t * dx
-            hy = gy + t * dy
-            near = near or axis < 0 or _vertex_near(occ, hx, hy, 3.0 * (near0 + near1 * t))
-            return t, axis, near
+    # The traversal alone first (corner checks inside its loop slowed every step of every ray) ...
+    while not occ[i, j]:
         if t_next_x < t_next_y:
             t = t_next_x
             t_next_x += t_delta_x
-            line = j + 1 if step_j > 0 else j
             j += step_j
             axis = 0
             if j < 0 or j >= cols:
                 return math.inf, -1, True
-            if not near:
-                near = _crossing_near(occ, gy + t * dy, adx, near0 + near1 * t, line, True)
         else:
             t = t_next_y
             t_next_y += t_delta_y
-            line = i + 1 if step_i > 0 else i
             i += step_i
             axis = 1
             if i < 0 or i >= rows:
                 return math.inf, -1, True
-            if not near:
-                near = _crossing_near(occ, gx + t * dx, ady, near0 + near1 * t, line, False)
         if t > t_lim:
             return math.inf, -1, True
+    if t0 > 0.0 or axis < 0:
+        return t, axis, True
+    if _vertex_near(occ, gx, gy, 3.0 * near0) or _vertex_near(occ, gx + t * dx, gy + t * dy, 3.0 * (near0 + near1 * t)):
+        return t, axis, True
+    # ... then its crossings of each family of grid lines on their own: each line's ray parameter accumulates
+    # by the same additions as in the traversal, so the checks see the same numbers.
+    line_x = j0 + 1 if step_j > 0 else j0
+    line_y = i0 + 1 if step_i > 0 else i0
+    near = _lines_near(occ, tx0, t_delta_x, line_x, step_j, abs(j - j0), gy, dy, abs(dx), near0, near1, True)
+    near = near or _lines_near(occ, ty0, t_delta_y, line_y, step_i, abs(i - i0), gx, dx, abs(dy), near0, near1, False)
+    return t, axis, near
+
+
+@njit(cache=True, inline="always")
+def _lines_near(
+    occ: BoolArray, t: float, t_delta: float, line: int, step: int, count: int, g: float, d: float,
+    across: float, near0: float, near1: float, vertical: bool,
+) -> bool:  # fmt: skip
+    """Whether one of ``count`` successive crossings of the ray with the vertical (or horizontal) grid lines,
+    the first of line ``line`` at ray parameter ``t``, the next ``step`` lines and ``t_delta`` further on, is
+    near an occupied corner (:func:`_crossing_near`; ``g``, ``d``: the ray's start and direction along the
+    lines)."""
+    for _ in range(count):
+        if _crossing_near(occ, g + t * d, across, near0 + near1 * t, line, vertical):
+            return True
+        t += t_delta
+        line += step
+    return False
 
 
 @njit(cache=True, inline="always")
@@ -1017,7 +1033,7 @@ def _ray_gradient(
     ox: float,
     oy: float,
     sensors: FloatArray,
-    headings: FloatArray,
+    trig: FloatArray,
     mx: float,
     my: float,
     cb: FloatArray,
@@ -1030,7 +1046,8 @@ def _ray_gradient(
     grads: FloatArray,
     smooth: npt.NDArray[np.bool_],
 ) -> None:
-    """One ray of :func:`scan_gradients`, written into its outputs."""
+    """One ray of :func:`scan_gradients`, written into its outputs; ``trig`` (S, 4) holds the cosine and sine
+    of each sensor's and each robot's heading (:func:`_heading_trig`)."""
     inv_res = 1.0 / res
     t_lim = max_range * inv_res
     # how far a perturbed ray moves (cells): eps of translation and eps of rotation about the robot, 10x
@@ -1038,8 +1055,8 @@ def _ray_gradient(
     near1 = 10.0 * eps
     gx = (sensors[p, 0] - ox) * inv_res
     gy = (sensors[p, 1] - oy) * inv_res
-    cp = math.cos(sensors[p, 2])
-    sp = math.sin(sensors[p, 2])
+    cp = trig[p, 0]
+    sp = trig[p, 1]
     dx = cp * cb[b] - sp * sb[b]
     dy = sp * cb[b] + cp * sb[b]
     t, axis, near = dda_face(occ, gx, gy, dx, dy, t_lim, near0, near1)
@@ -1047,8 +1064,8 @@ def _ray_gradient(
     ranges[p, b] = r
     if near or axis < 0 or r > max_range - 3.0 * (near0 + near1 * t) * res:
         return
-    ct = math.cos(headings[p])
-    st = math.sin(headings[p])
+    ct = trig[p, 2]
+    st = trig[p, 3]
     dsx = -st * mx - ct * my  # d s_x / d theta
     dsy = ct * mx - st * my
     if axis == 0:
@@ -1070,6 +1087,19 @@ def _ray_gradient(
 
 
 @njit(cache=True)
+def _heading_trig(sensors: FloatArray, headings: FloatArray) -> FloatArray:
+    """cos and sin of each sensor's heading and of each robot's, (S, 4): once per scan rather than per ray
+    (the same ``math`` calls, so the same numbers)."""
+    out = np.empty((sensors.shape[0], 4))
+    for p in range(sensors.shape[0]):
+        out[p, 0] = math.cos(sensors[p, 2])
+        out[p, 1] = math.sin(sensors[p, 2])
+        out[p, 2] = math.cos(headings[p])
+        out[p, 3] = math.sin(headings[p])
+    return out
+
+
+@njit(cache=True)
 def _gradients_serial(
     occ: BoolArray, res: float, ox: float, oy: float, sensors: FloatArray, headings: FloatArray, mx: float,
     my: float, angles: FloatArray, max_range: float, eps: float, ranges: FloatArray, grads: FloatArray,
@@ -1078,10 +1108,11 @@ def _gradients_serial(
     cb = np.cos(angles)
     sb = np.sin(angles)
     nb = angles.shape[0]
+    trig = _heading_trig(sensors, headings)
     for k in range(sensors.shape[0] * nb):
         p = k // nb
-        _ray_gradient(occ, res, ox, oy, sensors, headings, mx, my, cb, sb, max_range, eps, p, k - p * nb, ranges,
-                      grads, smooth)  # fmt: skip
+        _ray_gradient(occ, res, ox, oy, sensors, trig, mx, my, cb, sb, max_range, eps, p, k - p * nb, ranges, grads,
+                      smooth)  # fmt: skip
 
 
 @njit(cache=True, parallel=True)
@@ -1093,10 +1124,11 @@ def _gradients_parallel(
     cb = np.cos(angles)
     sb = np.sin(angles)
     nb = angles.shape[0]
+    trig = _heading_trig(sensors, headings)
     for k in prange(sensors.shape[0] * nb):
         p = k // nb
-        _ray_gradient(occ, res, ox, oy, sensors, headings, mx, my, cb, sb, max_range, eps, p, k - p * nb, ranges,
-                      grads, smooth)  # fmt: skip
+        _ray_gradient(occ, res, ox, oy, sensors, trig, mx, my, cb, sb, max_range, eps, p, k - p * nb, ranges, grads,
+                      smooth)  # fmt: skip
 
 
 def cast_ray_subset(

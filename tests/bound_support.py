@@ -3,11 +3,14 @@ one-cast derivative of :func:`locbench.pcrb.laser_information` is tested and ben
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from locbench.events import LaserScan
+from locbench.raycast import _clip_to_grid, _crossing_near, _dda_start, _vertex_near, dda_face
 from locbench.registry import make_dataset
 
 
@@ -96,3 +99,58 @@ def seven_cast_bound(dataset: Any) -> dict[str, np.ndarray]:
         return pcrb.bound_covariances(dataset)
     finally:
         pcrb.laser_information, pcrb.covariance_recursion = saved
+
+
+@njit(cache=True)
+def stepwise_dda_face(
+    occ: np.ndarray, gx: float, gy: float, dx: float, dy: float, t_lim: float, near0: float, near1: float
+) -> tuple[float, int, bool]:
+    """:func:`locbench.raycast.dda_face` as it was before it split the corner checks off the traversal (bound
+    version 3): the checks at every crossing, inside the traversal's loop."""
+    rows, cols = occ.shape
+    t0, t1 = _clip_to_grid(rows, cols, gx, gy, dx, dy)
+    if t0 >= t1 or t0 > t_lim:
+        return math.inf, -1, True
+    i, j, step_i, step_j, t_next_x, t_next_y, t_delta_x, t_delta_y = _dda_start(rows, cols, gx, gy, dx, dy, t0)
+    near = t0 > 0.0 or _vertex_near(occ, gx, gy, 3.0 * near0)
+    t = t0
+    axis = -1
+    while True:
+        if occ[i, j]:
+            near = near or axis < 0 or _vertex_near(occ, gx + t * dx, gy + t * dy, 3.0 * (near0 + near1 * t))
+            return t, axis, near
+        if t_next_x < t_next_y:
+            t = t_next_x
+            t_next_x += t_delta_x
+            line = j + 1 if step_j > 0 else j
+            j += step_j
+            axis = 0
+            if j < 0 or j >= cols:
+                return math.inf, -1, True
+            if not near:
+                near = _crossing_near(occ, gy + t * dy, abs(dx), near0 + near1 * t, line, True)
+        else:
+            t = t_next_y
+            t_next_y += t_delta_y
+            line = i + 1 if step_i > 0 else i
+            i += step_i
+            axis = 1
+            if i < 0 or i >= rows:
+                return math.inf, -1, True
+            if not near:
+                near = _crossing_near(occ, gx + t * dx, abs(dy), near0 + near1 * t, line, False)
+        if t > t_lim:
+            return math.inf, -1, True
+
+
+@njit(cache=True)
+def faces_differ(occ: np.ndarray, rays: np.ndarray, t_lim: float, near0: float, near1: float) -> int:
+    """How many of ``rays`` (k, 4: start x, y and direction x, y, grid units) get another (t, axis, near) from
+    :func:`locbench.raycast.dda_face` than from :func:`stepwise_dda_face` (an infinite t equals any other)."""
+    bad = 0
+    for k in range(rays.shape[0]):
+        a = dda_face(occ, rays[k, 0], rays[k, 1], rays[k, 2], rays[k, 3], t_lim, near0, near1)
+        b = stepwise_dda_face(occ, rays[k, 0], rays[k, 1], rays[k, 2], rays[k, 3], t_lim, near0, near1)
+        same_t = a[0] == b[0] or (math.isinf(a[0]) and math.isinf(b[0]))
+        bad += not same_t or a[1] != b[1] or a[2] != b[2]
+    return bad
