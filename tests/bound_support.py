@@ -1,5 +1,8 @@
-"""The bound's laser information by central differences of full casts (its version 1), the reference the
-one-cast derivative of :func:`locbench.pcrb.laser_information` is tested and benchmarked against."""
+"""The bound's earlier forms, the references its faster parts are tested and benchmarked against: the laser
+information by central differences of full casts (its version 1), for the one-cast derivative of
+:func:`locbench.pcrb.laser_information`; the corner checks inside the traversal's loop, for
+:func:`locbench.raycast.dda_face`; one numpy call per sighting event, for the batched sightings; and the whole
+bound as it was before issue 24, item 3 (:func:`seven_cast_bound`)."""
 
 from __future__ import annotations
 
@@ -9,7 +12,8 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from locbench.events import LaserScan
+from locbench.events import UNKNOWN_ID, LandmarkObservations, LaserScan, PoseFix, RangeObservations
+from locbench.geometry import wrap_angle
 from locbench.raycast import _clip_to_grid, _crossing_near, _dda_start, _vertex_near, dda_face
 from locbench.registry import make_dataset
 
@@ -88,17 +92,78 @@ def python_covariance_recursion(
     return out
 
 
-def seven_cast_bound(dataset: Any) -> dict[str, np.ndarray]:
-    """:func:`locbench.pcrb.bound_covariances` with the laser term differenced from seven casts per scan and
-    the covariance recursion in numpy (the bound before issue 24, item 3): the whole-bound reference."""
+def associate_one(
+    e: LandmarkObservations, pose: np.ndarray, xy: np.ndarray, by_id: dict[int, int], sr: float, sb: float
+) -> list[int]:
+    """The landmark rows of one sighting event as the bound associated them before it batched the sightings
+    (bound version 3, ``pcrb._associate``): by id, else the nearest true range and bearing in Mahalanobis
+    distance."""
+    rows: list[int] = []
+    d = xy - pose[None, 0:2]
+    r_true = np.hypot(d[:, 0], d[:, 1])
+    b_true = wrap_angle(np.arctan2(d[:, 1], d[:, 0]) - pose[2])
+    for i, r, b in zip(e.ids.tolist(), e.ranges.tolist(), e.bearings.tolist(), strict=True):
+        if i != UNKNOWN_ID:
+            rows.append(by_id[int(i)])
+        else:
+            m2 = ((r_true - r) / sr) ** 2 + (wrap_angle(b_true - b) / sb) ** 2
+            rows.append(int(np.argmin(m2)))
+    return rows
+
+
+def per_event_information(
+    dataset: Any, noise: Any, gt_poses: np.ndarray, laser: bool = True, events: Any = None
+) -> np.ndarray:
+    """``pcrb._measurement_information`` as it was before the sightings were batched (bound version 3): one
+    ``range_bearing_information``, association and truth lookup per event, added in event order (``events``
+    is ignored: every row computes its own)."""
     from locbench import pcrb
 
-    saved = pcrb.laser_information, pcrb.covariance_recursion
+    gt_t = dataset.ground_truth.t
+    use_laser = laser and noise.laser_sigma_m is not None and any(isinstance(e, LaserScan) for e in dataset.events)
+    if use_laser:
+        info = pcrb._laser_information(dataset, pcrb._positive("laser sigma_m", noise.laser_sigma_m, dataset), gt_poses)
+    else:
+        info = np.zeros((gt_t.shape[0], 3, 3))
+    lm_map = dataset.world.landmarks
+    by_id: dict[int, int] = {} if lm_map is None else {int(i): r for r, i in enumerate(lm_map.ids.tolist())}
+    for e in dataset.events:
+        if not isinstance(e, LandmarkObservations | RangeObservations | PoseFix):
+            continue
+        if isinstance(e, LandmarkObservations) and use_laser and noise.sightings_from_laser:
+            continue
+        k = pcrb._truth_index(dataset, e.t)
+        pose = gt_poses[k]
+        if isinstance(e, PoseFix):
+            info[k] += pcrb.position_fix_information(pcrb._positive("fix sigma_xy_m", noise.fix_sigma_xy_m, dataset))
+            continue
+        if isinstance(e, LandmarkObservations):
+            sr = pcrb._positive("landmark sigma_range_m", noise.landmark_sigma_range_m, dataset)
+            sb = pcrb._positive("landmark sigma_bearing_rad", noise.landmark_sigma_bearing_rad, dataset)
+            rows = associate_one(e, pose, lm_map.xy, by_id, sr, sb)
+            info[k] += pcrb.range_bearing_information(pose, lm_map.xy[rows], sr, sb)
+        else:
+            sr = pcrb._positive("range sigma_m", noise.range_sigma_m, dataset)
+            info[k] += pcrb.range_information(pose, lm_map.xy[[by_id[int(i)] for i in e.ids.tolist()]], sr)
+    return info
+
+
+def seven_cast_bound(dataset: Any) -> dict[str, np.ndarray]:
+    """:func:`locbench.pcrb.bound_covariances` as it was before issue 24, item 3: the laser term differenced
+    from seven casts per scan, the covariance recursion in numpy, and each row computing its own odometry
+    terms and its sightings one event at a time (:func:`per_event_information`): the whole-bound reference."""
+    from locbench import pcrb
+
+    saved = pcrb.laser_information, pcrb.covariance_recursion, pcrb._measurement_information
     pcrb.laser_information, pcrb.covariance_recursion = differenced_laser_information, python_covariance_recursion
+    pcrb._measurement_information = per_event_information
     try:
-        return pcrb.bound_covariances(dataset)
+        out = {pcrb.BOUND_ALL: pcrb.pcrb_covariances(dataset)}
+        if any(isinstance(e, LaserScan) for e in dataset.events):
+            out[pcrb.BOUND_NO_LASER] = pcrb.pcrb_covariances(dataset, laser=False)
+        return out
     finally:
-        pcrb.laser_information, pcrb.covariance_recursion = saved
+        pcrb.laser_information, pcrb.covariance_recursion, pcrb._measurement_information = saved
 
 
 @njit(cache=True)

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 import pytest
-from bound_support import differenced_laser_information, faces_differ, scan_poses
+from bound_support import differenced_laser_information, faces_differ, per_event_information, scan_poses
 
 from locbench import pcrb
 from locbench.datasets.synthetic.robot import DriveLimits, GoTo, simulate_route
@@ -181,6 +181,21 @@ def test_withheld_identities_give_the_same_bound() -> None:
     a = pcrb.pcrb_covariances(ds)
     b = pcrb.pcrb_covariances(dataclasses.replace(ds, events=events))
     np.testing.assert_allclose(b, a, rtol=1e-10, atol=1e-18)
+
+
+@pytest.mark.parametrize("world", ["office", "landmark_geometry[known_ids=false]", "room[matched=true]"])
+def test_batched_sightings_equal_one_call_per_event(world: str) -> None:
+    """The sightings' information computed together (stacked numpy operations, one association for all rows)
+    and shared by both rows equals one ``range_bearing_information`` per event, bit for bit, with and
+    without the laser (``landmark_geometry`` leaves its scan-made sightings out of the laser row)."""
+    ds = make_dataset(world, 1)
+    noise = pcrb.true_noise(ds)
+    poses = ds.ground_truth.poses
+    shared = pcrb._event_information(ds, noise, poses)
+    for laser in (True, False):
+        want = per_event_information(ds, noise, poses, laser)
+        np.testing.assert_array_equal(pcrb._measurement_information(ds, noise, poses, laser, shared), want)
+        np.testing.assert_array_equal(pcrb._measurement_information(ds, noise, poses, laser), want)
 
 
 def test_kidnapped_and_recorded_like_datasets_are_refused() -> None:
