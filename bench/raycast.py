@@ -204,106 +204,117 @@ def _dda_one(occ: BoolArray, gx: float, gy: float, dx: float, dy: float, t_lim: 
             return math.inf
 
 
+#: Bits of :func:`face_cells`: the cell is occupied; an occupied (or off-grid) cell lies within two cells.
+CELL_OCCUPIED = 1
+CELL_NEAR_OCCUPIED = 2
+
+
+def face_cells(occupied: npt.ArrayLike) -> UInt8Array:
+    """The grid coded for :func:`dda_face`, (rows, cols) uint8: :data:`CELL_OCCUPIED` where ``occupied``
+    (rows, cols) is, plus :data:`CELL_NEAR_OCCUPIED` where an occupied or off-grid cell is within two cells
+    (Chebyshev distance), the cells whose grid lines may have a vertex touching an occupied cell."""
+    occ = np.asarray(occupied, dtype=np.bool_)
+    rows, cols = occ.shape
+    pad = np.ones((rows + 4, cols + 4), dtype=np.bool_)
+    pad[2:-2, 2:-2] = occ
+    band = np.zeros_like(occ)
+    for di in range(5):
+        for dj in range(5):
+            band |= pad[di : di + rows, dj : dj + cols]
+    out: UInt8Array = occ.astype(np.uint8) * CELL_OCCUPIED | band.astype(np.uint8) * CELL_NEAR_OCCUPIED
+    return out
+
+
 @njit(cache=True, inline="always")
-def _corner_occupied(occ: BoolArray, vi: int, vj: int) -> bool:
-    """Whether a cell touching grid vertex (row vi, column vj) is occupied or lies off the grid."""
-    rows = occ.shape[0]
-    cols = occ.shape[1]
+def _corner_occupied(cells: UInt8Array, vi: int, vj: int) -> bool:
+    """Whether a cell touching grid vertex (row vi, column vj) is occupied or lies off the grid (``cells``
+    from :func:`face_cells`)."""
+    rows = cells.shape[0]
+    cols = cells.shape[1]
     for i in (vi - 1, vi):
         for j in (vj - 1, vj):
-            if i < 0 or j < 0 or i >= rows or j >= cols or occ[i, j]:
+            if i < 0 or j < 0 or i >= rows or j >= cols or cells[i, j] & CELL_OCCUPIED:
                 return True
     return False
 
 
 @njit(cache=True)
 def dda_face(
-    occ: BoolArray, gx: float, gy: float, dx: float, dy: float, t_lim: float, near0: float, near1: float
+    cells: UInt8Array, gx: float, gy: float, dx: float, dy: float, t_lim: float, near0: float, near1: float
 ) -> tuple[float, int, bool]:
     """:func:`_dda_one`'s traversal (the same distance, bit for bit), also returning the face it enters the
     hit cell through and whether the ray passes near a corner of the occupied cells.
 
-    Returns (t, axis, near): ``axis`` 0 when the ray enters the hit cell across a vertical grid line (x =
-    const), 1 across a horizontal one, -1 when it starts in it (or nothing is hit). ``near`` is True when a
-    grid vertex that touches an occupied (or off-grid) cell lies within ``near0 + near1 * t`` cells of the
-    ray before the hit, or within three times that of its start or of the hit point: there the range may
-    not be a smooth function of the ray (a perturbed ray may hit another cell or face).
+    ``cells`` is the grid coded by :func:`face_cells`. Returns (t, axis, near): ``axis`` 0 when the ray
+    enters the hit cell across a vertical grid line (x = const), 1 across a horizontal one, -1 when it
+    starts in it (or nothing is hit). ``near`` is True when a grid vertex that touches an occupied (or
+    off-grid) cell lies within ``near0 + near1 * t`` cells of the ray before the hit, or within three times
+    that of its start or of the hit point: there the range may not be a smooth function of the ray (a
+    perturbed ray may hit another cell or face).
     """
-    rows = occ.shape[0]
-    cols = occ.shape[1]
+    rows = cells.shape[0]
+    cols = cells.shape[1]
     t0, t1 = _clip_to_grid(rows, cols, gx, gy, dx, dy)
     if t0 >= t1 or t0 > t_lim:
         return math.inf, -1, True
     i, j, step_i, step_j, t_next_x, t_next_y, t_delta_x, t_delta_y = _dda_start(rows, cols, gx, gy, dx, dy, t0)
-    i0, j0, tx0, ty0 = i, j, t_next_x, t_next_y
+    near = t0 > 0.0 or _vertex_near(cells, gx, gy, 3.0 * near0)
+    adx = abs(dx)
+    ady = abs(dy)
     t = t0
     axis = -1
-    # The traversal alone first (corner checks inside its loop slowed every step of every ray) ...
-    while not occ[i, j]:
+    cell = cells[i, j]
+    while not cell & CELL_OCCUPIED:
+        # A crossing's vertices touch only cells within two of the cell it leaves (one for the crossing's
+        # rounding): away from the occupied cells the checks cannot find a corner, so they are not made.
+        check = not near and cell & CELL_NEAR_OCCUPIED
         if t_next_x < t_next_y:
             t = t_next_x
             t_next_x += t_delta_x
+            line = j + 1 if step_j > 0 else j
             j += step_j
             axis = 0
             if j < 0 or j >= cols:
                 return math.inf, -1, True
+            if check:
+                near = _crossing_near(cells, gy + t * dy, adx, near0 + near1 * t, line, True)
         else:
             t = t_next_y
             t_next_y += t_delta_y
+            line = i + 1 if step_i > 0 else i
             i += step_i
             axis = 1
             if i < 0 or i >= rows:
                 return math.inf, -1, True
+            if check:
+                near = _crossing_near(cells, gx + t * dx, ady, near0 + near1 * t, line, False)
         if t > t_lim:
             return math.inf, -1, True
-    if t0 > 0.0 or axis < 0:
-        return t, axis, True
-    if _vertex_near(occ, gx, gy, 3.0 * near0) or _vertex_near(occ, gx + t * dx, gy + t * dy, 3.0 * (near0 + near1 * t)):
-        return t, axis, True
-    # ... then its crossings of each family of grid lines on their own: each line's ray parameter accumulates
-    # by the same additions as in the traversal, so the checks see the same numbers.
-    line_x = j0 + 1 if step_j > 0 else j0
-    line_y = i0 + 1 if step_i > 0 else i0
-    near = _lines_near(occ, tx0, t_delta_x, line_x, step_j, abs(j - j0), gy, dy, abs(dx), near0, near1, True)
-    near = near or _lines_near(occ, ty0, t_delta_y, line_y, step_i, abs(i - i0), gx, dx, abs(dy), near0, near1, False)
+        cell = cells[i, j]
+    near = near or axis < 0 or _vertex_near(cells, gx + t * dx, gy + t * dy, 3.0 * (near0 + near1 * t))
     return t, axis, near
 
 
 @njit(cache=True, inline="always")
-def _lines_near(
-    occ: BoolArray, t: float, t_delta: float, line: int, step: int, count: int, g: float, d: float,
-    across: float, near0: float, near1: float, vertical: bool,
-) -> bool:  # fmt: skip
-    """Whether one of ``count`` successive crossings of the ray with the vertical (or horizontal) grid lines,
-    the first of line ``line`` at ray parameter ``t``, the next ``step`` lines and ``t_delta`` further on, is
-    near an occupied corner (:func:`_crossing_near`; ``g``, ``d``: the ray's start and direction along the
-    lines)."""
-    for _ in range(count):
-        if _crossing_near(occ, g + t * d, across, near0 + near1 * t, line, vertical):
-            return True
-        t += t_delta
-        line += step
-    return False
-
-
-@njit(cache=True, inline="always")
-def _crossing_near(occ: BoolArray, c: float, across: float, lim: float, line: int, vertical: bool) -> bool:
+def _crossing_near(cells: UInt8Array, c: float, across: float, lim: float, line: int, vertical: bool) -> bool:
     """At the ray's crossing of grid line ``line`` (vertical: x = line, at y = ``c``; else y = line, at x =
     ``c``): whether one of the two vertices of that line beside the crossing touches an occupied cell and
     lies within ``lim`` of the ray (``across``: |direction component| normal to the line)."""
     v = math.floor(c)
-    if (c - v) * across < lim and (_corner_occupied(occ, v, line) if vertical else _corner_occupied(occ, line, v)):
+    if (c - v) * across < lim and (_corner_occupied(cells, v, line) if vertical else _corner_occupied(cells, line, v)):
         return True
     w = v + 1
-    return (w - c) * across < lim and (_corner_occupied(occ, w, line) if vertical else _corner_occupied(occ, line, w))
+    return (w - c) * across < lim and (
+        _corner_occupied(cells, w, line) if vertical else _corner_occupied(cells, line, w)
+    )
 
 
 @njit(cache=True, inline="always")
-def _vertex_near(occ: BoolArray, px: float, py: float, lim: float) -> bool:
+def _vertex_near(cells: UInt8Array, px: float, py: float, lim: float) -> bool:
     """Whether the grid vertex nearest to (px, py) (grid units) is within ``lim`` and touches an occupied cell."""
     vj = math.floor(px + 0.5)
     vi = math.floor(py + 0.5)
-    return math.hypot(px - vj, py - vi) < lim and _corner_occupied(occ, vi, vj)
+    return math.hypot(px - vj, py - vi) < lim and _corner_occupied(cells, vi, vj)
 
 
 @njit(cache=True)
@@ -1022,13 +1033,16 @@ def scan_gradients(
     grads = np.zeros((n, nb, 3))
     smooth = np.zeros((n, nb), dtype=np.bool_)
     kernel = _gradients_parallel if _use_threads(None, n * nb) else _gradients_serial
-    kernel(occ, res, ox, oy, sensors, headings, mount_xy[0], mount_xy[1], angles, max_range, eps, ranges, grads, smooth)
+    cells = face_cells(occ)
+    kernel(
+        cells, res, ox, oy, sensors, headings, mount_xy[0], mount_xy[1], angles, max_range, eps, ranges, grads, smooth
+    )
     return ranges, grads, smooth
 
 
 @njit(cache=True, inline="always")
 def _ray_gradient(
-    occ: BoolArray,
+    cells: UInt8Array,
     res: float,
     ox: float,
     oy: float,
@@ -1059,7 +1073,7 @@ def _ray_gradient(
     sp = trig[p, 1]
     dx = cp * cb[b] - sp * sb[b]
     dy = sp * cb[b] + cp * sb[b]
-    t, axis, near = dda_face(occ, gx, gy, dx, dy, t_lim, near0, near1)
+    t, axis, near = dda_face(cells, gx, gy, dx, dy, t_lim, near0, near1)
     r = t * res
     ranges[p, b] = r
     if near or axis < 0 or r > max_range - 3.0 * (near0 + near1 * t) * res:
@@ -1101,7 +1115,7 @@ def _heading_trig(sensors: FloatArray, headings: FloatArray) -> FloatArray:
 
 @njit(cache=True)
 def _gradients_serial(
-    occ: BoolArray, res: float, ox: float, oy: float, sensors: FloatArray, headings: FloatArray, mx: float,
+    cells: UInt8Array, res: float, ox: float, oy: float, sensors: FloatArray, headings: FloatArray, mx: float,
     my: float, angles: FloatArray, max_range: float, eps: float, ranges: FloatArray, grads: FloatArray,
     smooth: npt.NDArray[np.bool_],
 ) -> None:  # fmt: skip
@@ -1111,13 +1125,13 @@ def _gradients_serial(
     trig = _heading_trig(sensors, headings)
     for k in range(sensors.shape[0] * nb):
         p = k // nb
-        _ray_gradient(occ, res, ox, oy, sensors, trig, mx, my, cb, sb, max_range, eps, p, k - p * nb, ranges, grads,
+        _ray_gradient(cells, res, ox, oy, sensors, trig, mx, my, cb, sb, max_range, eps, p, k - p * nb, ranges, grads,
                       smooth)  # fmt: skip
 
 
 @njit(cache=True, parallel=True)
 def _gradients_parallel(
-    occ: BoolArray, res: float, ox: float, oy: float, sensors: FloatArray, headings: FloatArray, mx: float,
+    cells: UInt8Array, res: float, ox: float, oy: float, sensors: FloatArray, headings: FloatArray, mx: float,
     my: float, angles: FloatArray, max_range: float, eps: float, ranges: FloatArray, grads: FloatArray,
     smooth: npt.NDArray[np.bool_],
 ) -> None:  # fmt: skip
@@ -1127,7 +1141,7 @@ def _gradients_parallel(
     trig = _heading_trig(sensors, headings)
     for k in prange(sensors.shape[0] * nb):
         p = k // nb
-        _ray_gradient(occ, res, ox, oy, sensors, trig, mx, my, cb, sb, max_range, eps, p, k - p * nb, ranges, grads,
+        _ray_gradient(cells, res, ox, oy, sensors, trig, mx, my, cb, sb, max_range, eps, p, k - p * nb, ranges, grads,
                       smooth)  # fmt: skip
 
 

@@ -14,7 +14,7 @@ from numba import njit
 
 from locbench.events import UNKNOWN_ID, LandmarkObservations, LaserScan, PoseFix, RangeObservations
 from locbench.geometry import wrap_angle
-from locbench.raycast import _clip_to_grid, _crossing_near, _dda_start, _vertex_near, dda_face
+from locbench.raycast import _clip_to_grid, _dda_start, dda_face, face_cells
 from locbench.registry import make_dataset
 
 
@@ -166,12 +166,39 @@ def seven_cast_bound(dataset: Any) -> dict[str, np.ndarray]:
         pcrb.laser_information, pcrb.covariance_recursion, pcrb._measurement_information = saved
 
 
+@njit(cache=True, inline="always")
+def _corner_occupied(occ: np.ndarray, vi: int, vj: int) -> bool:
+    rows, cols = occ.shape
+    for i in (vi - 1, vi):
+        for j in (vj - 1, vj):
+            if i < 0 or j < 0 or i >= rows or j >= cols or occ[i, j]:
+                return True
+    return False
+
+
+@njit(cache=True, inline="always")
+def _crossing_near(occ: np.ndarray, c: float, across: float, lim: float, line: int, vertical: bool) -> bool:
+    v = math.floor(c)
+    if (c - v) * across < lim and (_corner_occupied(occ, v, line) if vertical else _corner_occupied(occ, line, v)):
+        return True
+    w = v + 1
+    return (w - c) * across < lim and (_corner_occupied(occ, w, line) if vertical else _corner_occupied(occ, line, w))
+
+
+@njit(cache=True, inline="always")
+def _vertex_near(occ: np.ndarray, px: float, py: float, lim: float) -> bool:
+    vj = math.floor(px + 0.5)
+    vi = math.floor(py + 0.5)
+    return math.hypot(px - vj, py - vi) < lim and _corner_occupied(occ, vi, vj)
+
+
 @njit(cache=True)
 def stepwise_dda_face(
     occ: np.ndarray, gx: float, gy: float, dx: float, dy: float, t_lim: float, near0: float, near1: float
 ) -> tuple[float, int, bool]:
     """:func:`locbench.raycast.dda_face` as it was before it split the corner checks off the traversal (bound
-    version 3): the checks at every crossing, inside the traversal's loop."""
+    version 3), on the boolean grid: the checks at every crossing, inside the traversal's loop (its helpers
+    above are the corner checks as they were then)."""
     rows, cols = occ.shape
     t0, t1 = _clip_to_grid(rows, cols, gx, gy, dx, dy)
     if t0 >= t1 or t0 > t_lim:
@@ -208,13 +235,19 @@ def stepwise_dda_face(
             return math.inf, -1, True
 
 
-@njit(cache=True)
 def faces_differ(occ: np.ndarray, rays: np.ndarray, t_lim: float, near0: float, near1: float) -> int:
     """How many of ``rays`` (k, 4: start x, y and direction x, y, grid units) get another (t, axis, near) from
     :func:`locbench.raycast.dda_face` than from :func:`stepwise_dda_face` (an infinite t equals any other)."""
+    return _faces_differ(occ, face_cells(occ), rays, t_lim, near0, near1)
+
+
+@njit(cache=True)
+def _faces_differ(
+    occ: np.ndarray, cells: np.ndarray, rays: np.ndarray, t_lim: float, near0: float, near1: float
+) -> int:
     bad = 0
     for k in range(rays.shape[0]):
-        a = dda_face(occ, rays[k, 0], rays[k, 1], rays[k, 2], rays[k, 3], t_lim, near0, near1)
+        a = dda_face(cells, rays[k, 0], rays[k, 1], rays[k, 2], rays[k, 3], t_lim, near0, near1)
         b = stepwise_dda_face(occ, rays[k, 0], rays[k, 1], rays[k, 2], rays[k, 3], t_lim, near0, near1)
         same_t = a[0] == b[0] or (math.isinf(a[0]) and math.isinf(b[0]))
         bad += not same_t or a[1] != b[1] or a[2] != b[2]
