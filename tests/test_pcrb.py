@@ -263,10 +263,10 @@ def test_laser_information_from_one_cast_equals_the_differenced_one(world: str) 
 
 @pytest.mark.parametrize("world", ["office", "lap"])
 def test_face_traversal_equals_the_stepwise_checks(world: str) -> None:
-    """``raycast.dda_face``, its corner checks after the traversal, gives the range, face and nearness of the
-    checks inside the traversal's loop, bit for bit: on every beam of a world's scans (every 10th), with the
-    bound's reach and 30 and 300 times it (where many more crossings are near a corner), and on random rays
-    from inside and outside the grid."""
+    """``raycast.dda_face``, its corner checks made only at crossings out of cells near occupied ones, gives
+    the range, face and nearness of the checks at every crossing, bit for bit: on every beam of a world's
+    scans (every 10th), with the bound's reach and 30 and 300 times it (where many more crossings are near a
+    corner), and on random rays from inside and outside the grid."""
     occ, res, origin, poses, mount, angles, max_r = scan_poses(world)[:7]
     occ = np.ascontiguousarray(occ)
     phi = (poses[:, 2] + mount[2])[:, None] + angles[None, :]
