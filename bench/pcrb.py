@@ -327,15 +327,14 @@ def laser_information(
     if rows.size:
         base = r0[rows, beams]
         good = np.ones(rows.size, dtype=np.bool_)
+        # the six perturbed casts in one call: (x+, x-, y+, y-, theta+, theta-), each step sign * eps * unit
+        steps = [sign * eps * np.eye(3)[i] for i in range(3) for sign in (1.0, -1.0)]
+        cast = cast_ray_subset(
+            occ, float(resolution_m), ox, oy, np.stack([sensor_of(poses + d) for d in steps]), a, float(max_range_m),
+            rows, beams,
+        )  # fmt: skip
         for i in range(3):
-            d = np.zeros(3)
-            d[i] = eps
-            rp, rm = (
-                cast_ray_subset(
-                    occ, float(resolution_m), ox, oy, sensor_of(poses + sign * d), a, float(max_range_m), rows, beams
-                )
-                for sign in (1.0, -1.0)
-            )
+            rp, rm = cast[2 * i], cast[2 * i + 1]
             with np.errstate(invalid="ignore"):
                 fwd, bwd = (rp - base) / eps, (base - rm) / eps
                 good &= np.isfinite(fwd) & np.isfinite(bwd) & (np.abs(fwd - bwd) <= 1e-4 * (1.0 + np.abs(fwd)))
@@ -436,12 +435,17 @@ def _positive(name: str, value: float | None, dataset: Dataset) -> float:
     return float(value)
 
 
-def _truth_index(dataset: Dataset, t: float) -> int:
+def _truth_indices(dataset: Dataset, events: list[Any]) -> npt.NDArray[np.intp]:
+    """The ground-truth index of each of ``events`` (each must fall on a ground-truth time, within 1 us), in
+    one search."""
     gt_t = dataset.ground_truth.t
-    k = int(np.searchsorted(gt_t, t - 1e-6))
-    if k >= gt_t.shape[0] or abs(gt_t[k] - t) > 1e-6:
+    ts = np.array([e.t for e in events], dtype=np.float64)
+    ks = np.searchsorted(gt_t, ts - 1e-6)
+    bad = (ks >= gt_t.shape[0]) | (np.abs(gt_t[np.minimum(ks, gt_t.shape[0] - 1)] - ts) > 1e-6)
+    if bad.any():
+        t = float(ts[np.argmax(bad)])
         raise ConfigError(f"dataset {dataset.name!r}: a measurement at t={t} s falls on no ground-truth time")
-    return k
+    return ks
 
 
 def _laser_information(dataset: Dataset, sigma_m: float, gt_poses: FloatArray) -> FloatArray:
@@ -457,7 +461,7 @@ def _laser_information(dataset: Dataset, sigma_m: float, gt_poses: FloatArray) -
         groups.setdefault(key, []).append(e)
     for group in groups.values():
         e0 = group[0]
-        idx = np.array([_truth_index(dataset, e.t) for e in group])
+        idx = _truth_indices(dataset, group)
         per_scan = laser_information(
             grid.occupied(),
             grid.resolution,
@@ -499,17 +503,9 @@ def _event_information(
     """The information of every landmark sighting (unless ``with_sightings`` is False), range observation
     and position fix of ``dataset``, in event order (both rows of the bound add the same terms, so
     :func:`bound_covariances` computes them once)."""
-    gt_t = dataset.ground_truth.t
     kinds = LandmarkObservations | RangeObservations | PoseFix if with_sightings else RangeObservations | PoseFix
     events = [e for e in dataset.events if isinstance(e, kinds)]
-    ts = np.array([e.t for e in events], dtype=np.float64)
-    # _truth_index of every event in one search: the same arithmetic, so the same indices
-    ks = np.searchsorted(gt_t, ts - 1e-6)
-    bad = (ks >= gt_t.shape[0]) | (np.abs(gt_t[np.minimum(ks, gt_t.shape[0] - 1)] - ts) > 1e-6)
-    if bad.any():
-        raise ConfigError(
-            f"dataset {dataset.name!r}: a measurement at t={ts[np.argmax(bad)]} s falls on no ground-truth time"
-        )
+    ks = _truth_indices(dataset, events)
     mats = np.empty((len(events), 3, 3))
     sighting = np.array([isinstance(e, LandmarkObservations) for e in events], dtype=np.bool_)
     lm_map = dataset.world.landmarks

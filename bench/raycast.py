@@ -1157,8 +1157,15 @@ def cast_ray_subset(
     beams: IntArray,
 ) -> FloatArray:
     """The ranges of :func:`cast_rays` (``method="dda"``) of the rays (``rows[k]``, ``beams[k]``) only, bit
-    for bit (the same arithmetic per ray), spread over numba's threads."""
-    return _ray_subset_parallel(occ, res, ox, oy, poses, angles, max_range, rows, beams)
+    for bit (the same arithmetic per ray), spread over numba's threads.
+
+    ``poses`` are the sensor poses, (S, 3), giving ranges of shape (K,); or several sets of them, (P, S, 3)
+    (the bound's six perturbed poses), cast in one call, giving (P, K).
+    """
+    p = np.asarray(poses, dtype=np.float64)
+    sets = np.ascontiguousarray(p if p.ndim == 3 else p[None])
+    out: FloatArray = _ray_subset_parallel(occ, res, ox, oy, sets, angles, max_range, rows, beams)
+    return out if p.ndim == 3 else out[0]
 
 
 @njit(cache=True, parallel=True)
@@ -1173,17 +1180,27 @@ def _ray_subset_parallel(
     rows: IntArray,
     beams: IntArray,
 ) -> FloatArray:
-    out = np.empty(rows.shape[0])
+    n_sets = poses.shape[0]
+    n = rows.shape[0]
+    out = np.empty((n_sets, n))
     inv_res = 1.0 / res
     t_lim = max_range * inv_res
     cb = np.cos(angles)
     sb = np.sin(angles)
-    for k in prange(rows.shape[0]):
+    # each pose's cos and sin once rather than per ray (the same math calls)
+    trig = np.empty((n_sets, poses.shape[1], 2))
+    for s in range(n_sets):
+        for p in range(poses.shape[1]):
+            trig[s, p, 0] = math.cos(poses[s, p, 2])
+            trig[s, p, 1] = math.sin(poses[s, p, 2])
+    for q in prange(n_sets * n):
+        s = q // n
+        k = q - s * n
         p = rows[k]
         b = beams[k]
-        gx = (poses[p, 0] - ox) * inv_res
-        gy = (poses[p, 1] - oy) * inv_res
-        cp = math.cos(poses[p, 2])
-        sp = math.sin(poses[p, 2])
-        out[k] = _dda_one(occ, gx, gy, cp * cb[b] - sp * sb[b], sp * cb[b] + cp * sb[b], t_lim) * res
+        gx = (poses[s, p, 0] - ox) * inv_res
+        gy = (poses[s, p, 1] - oy) * inv_res
+        cp = trig[s, p, 0]
+        sp = trig[s, p, 1]
+        out[s, k] = _dda_one(occ, gx, gy, cp * cb[b] - sp * sb[b], sp * cb[b] + cp * sb[b], t_lim) * res
     return out

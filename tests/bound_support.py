@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from locbench.errors import ConfigError
 from locbench.events import UNKNOWN_ID, LandmarkObservations, LaserScan, PoseFix, RangeObservations
 from locbench.geometry import wrap_angle
 from locbench.raycast import _clip_to_grid, _dda_start, dda_face, face_cells
@@ -92,6 +93,15 @@ def python_covariance_recursion(
     return out
 
 
+def truth_index(dataset: Any, t: float) -> int:
+    """The ground-truth index of one event as the bound looked it up before (bound version 3)."""
+    gt_t = dataset.ground_truth.t
+    k = int(np.searchsorted(gt_t, t - 1e-6))
+    if k >= gt_t.shape[0] or abs(gt_t[k] - t) > 1e-6:
+        raise ConfigError(f"dataset {dataset.name!r}: a measurement at t={t} s falls on no ground-truth time")
+    return k
+
+
 def associate_one(
     e: LandmarkObservations, pose: np.ndarray, xy: np.ndarray, by_id: dict[int, int], sr: float, sb: float
 ) -> list[int]:
@@ -111,6 +121,31 @@ def associate_one(
     return rows
 
 
+def grouped_laser_information(dataset: Any, sigma_m: float, gt_poses: np.ndarray) -> np.ndarray:
+    """``pcrb._laser_information`` as it was (bound version 3): :func:`locbench.pcrb.laser_information` per beam
+    layout, each scan's truth index looked up by itself."""
+    from locbench import pcrb
+
+    info = np.zeros((gt_poses.shape[0], 3, 3))
+    grid = dataset.world.occupancy
+    scans = [e for e in dataset.events if isinstance(e, LaserScan)]
+    if grid is None or not scans:
+        return info
+    groups: dict[tuple[float, ...], list[LaserScan]] = {}
+    for e in scans:
+        key = (*e.sensor_pose, e.angle_min, e.angle_increment, float(e.ranges.shape[0]), e.range_min, e.range_max)
+        groups.setdefault(key, []).append(e)
+    for group in groups.values():
+        e0 = group[0]
+        idx = np.array([truth_index(dataset, e.t) for e in group])
+        per_scan = pcrb.laser_information(
+            grid.occupied(), grid.resolution, (float(grid.origin[0]), float(grid.origin[1])), gt_poses[idx],
+            e0.sensor_pose, e0.angles, e0.range_max, e0.range_min, sigma_m, np.stack([e.ranges for e in group]),
+        )  # fmt: skip
+        np.add.at(info, idx, per_scan)
+    return info
+
+
 def per_event_information(
     dataset: Any, noise: Any, gt_poses: np.ndarray, laser: bool = True, events: Any = None
 ) -> np.ndarray:
@@ -122,7 +157,9 @@ def per_event_information(
     gt_t = dataset.ground_truth.t
     use_laser = laser and noise.laser_sigma_m is not None and any(isinstance(e, LaserScan) for e in dataset.events)
     if use_laser:
-        info = pcrb._laser_information(dataset, pcrb._positive("laser sigma_m", noise.laser_sigma_m, dataset), gt_poses)
+        info = grouped_laser_information(
+            dataset, pcrb._positive("laser sigma_m", noise.laser_sigma_m, dataset), gt_poses
+        )
     else:
         info = np.zeros((gt_t.shape[0], 3, 3))
     lm_map = dataset.world.landmarks
@@ -132,7 +169,7 @@ def per_event_information(
             continue
         if isinstance(e, LandmarkObservations) and use_laser and noise.sightings_from_laser:
             continue
-        k = pcrb._truth_index(dataset, e.t)
+        k = truth_index(dataset, e.t)
         pose = gt_poses[k]
         if isinstance(e, PoseFix):
             info[k] += pcrb.position_fix_information(pcrb._positive("fix sigma_xy_m", noise.fix_sigma_xy_m, dataset))
