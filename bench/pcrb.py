@@ -515,8 +515,7 @@ def _event_information(
         sr = _positive("landmark sigma_range_m", noise.landmark_sigma_range_m, dataset)
         sb = _positive("landmark sigma_bearing_rad", noise.landmark_sigma_bearing_rad, dataset)
         which = np.flatnonzero(sighting)
-        seen = [events[i] for i in which]
-        assert all(isinstance(e, LandmarkObservations) for e in seen)
+        seen = [e for e in events if isinstance(e, LandmarkObservations)]
         mats[which] = _sightings_information(seen, gt_poses[ks[which]], lm_map.xy, by_id, sr, sb)
     for n, e in enumerate(events):
         if isinstance(e, PoseFix):

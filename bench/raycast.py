@@ -210,9 +210,20 @@ CELL_NEAR_OCCUPIED = 2
 
 
 def face_cells(occupied: npt.ArrayLike) -> UInt8Array:
-    """The grid coded for :func:`dda_face`, (rows, cols) uint8: :data:`CELL_OCCUPIED` where ``occupied``
-    (rows, cols) is, plus :data:`CELL_NEAR_OCCUPIED` where an occupied or off-grid cell is within two cells
-    (Chebyshev distance), the cells whose grid lines may have a vertex touching an occupied cell."""
+    """The grid coded for :func:`dda_face`.
+
+    Parameters
+    ----------
+    occupied : array-like of bool, shape (rows, cols)
+        The occupancy grid.
+
+    Returns
+    -------
+    ndarray of uint8, shape (rows, cols)
+        :data:`CELL_OCCUPIED` where ``occupied`` is, plus :data:`CELL_NEAR_OCCUPIED` where an occupied or
+        off-grid cell is within two cells (Chebyshev distance): the cells out of which a crossing's grid
+        vertices may touch an occupied cell.
+    """
     occ = np.asarray(occupied, dtype=np.bool_)
     rows, cols = occ.shape
     pad = np.ones((rows + 4, cols + 4), dtype=np.bool_)
