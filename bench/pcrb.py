@@ -327,15 +327,14 @@ def laser_information(
     if rows.size:
         base = r0[rows, beams]
         good = np.ones(rows.size, dtype=np.bool_)
+        # the six perturbed casts in one call: (x+, x-, y+, y-, theta+, theta-), each step sign * eps * unit
+        steps = [sign * eps * np.eye(3)[i] for i in range(3) for sign in (1.0, -1.0)]
+        cast = cast_ray_subset(
+            occ, float(resolution_m), ox, oy, np.stack([sensor_of(poses + d) for d in steps]), a, float(max_range_m),
+            rows, beams,
+        )  # fmt: skip
         for i in range(3):
-            d = np.zeros(3)
-            d[i] = eps
-            rp, rm = (
-                cast_ray_subset(
-                    occ, float(resolution_m), ox, oy, sensor_of(poses + sign * d), a, float(max_range_m), rows, beams
-                )
-                for sign in (1.0, -1.0)
-            )
+            rp, rm = cast[2 * i], cast[2 * i + 1]
             with np.errstate(invalid="ignore"):
                 fwd, bwd = (rp - base) / eps, (base - rm) / eps
                 good &= np.isfinite(fwd) & np.isfinite(bwd) & (np.abs(fwd - bwd) <= 1e-4 * (1.0 + np.abs(fwd)))
@@ -436,12 +435,17 @@ def _positive(name: str, value: float | None, dataset: Dataset) -> float:
     return float(value)
 
 
-def _truth_index(dataset: Dataset, t: float) -> int:
+def _truth_indices(dataset: Dataset, events: list[Any]) -> npt.NDArray[np.intp]:
+    """The ground-truth index of each of ``events`` (each must fall on a ground-truth time, within 1 us), in
+    one search."""
     gt_t = dataset.ground_truth.t
-    k = int(np.searchsorted(gt_t, t - 1e-6))
-    if k >= gt_t.shape[0] or abs(gt_t[k] - t) > 1e-6:
+    ts = np.array([e.t for e in events], dtype=np.float64)
+    ks = np.searchsorted(gt_t, ts - 1e-6)
+    bad = (ks >= gt_t.shape[0]) | (np.abs(gt_t[np.minimum(ks, gt_t.shape[0] - 1)] - ts) > 1e-6)
+    if bad.any():
+        t = float(ts[np.argmax(bad)])
         raise ConfigError(f"dataset {dataset.name!r}: a measurement at t={t} s falls on no ground-truth time")
-    return k
+    return ks
 
 
 def _laser_information(dataset: Dataset, sigma_m: float, gt_poses: FloatArray) -> FloatArray:
@@ -457,7 +461,7 @@ def _laser_information(dataset: Dataset, sigma_m: float, gt_poses: FloatArray) -
         groups.setdefault(key, []).append(e)
     for group in groups.values():
         e0 = group[0]
-        idx = np.array([_truth_index(dataset, e.t) for e in group])
+        idx = _truth_indices(dataset, group)
         per_scan = laser_information(
             grid.occupied(),
             grid.resolution,
@@ -474,56 +478,125 @@ def _laser_information(dataset: Dataset, sigma_m: float, gt_poses: FloatArray) -
     return info
 
 
-def _measurement_information(
-    dataset: Dataset, noise: TrueNoise, gt_poses: FloatArray, laser: bool = True
+@dataclass(frozen=True)
+class _EventInformation:
+    """Information of a dataset's non-laser measurements, in event order (:func:`_event_information`).
+
+    Attributes
+    ----------
+    index : ndarray of int, shape (E,)
+        Ground-truth index of each event.
+    info : ndarray, shape (E, 3, 3)
+        Its information H' R^-1 H about the pose.
+    sighting : ndarray of bool, shape (E,)
+        The event is a landmark sighting (left out where the scans they were computed from are counted).
+    """
+
+    index: npt.NDArray[np.intp]
+    info: FloatArray
+    sighting: npt.NDArray[np.bool_]
+
+
+def _event_information(
+    dataset: Dataset, noise: TrueNoise, gt_poses: FloatArray, with_sightings: bool = True
+) -> _EventInformation:
+    """The information of every landmark sighting (unless ``with_sightings`` is False), range observation
+    and position fix of ``dataset``, in event order (both rows of the bound add the same terms, so
+    :func:`bound_covariances` computes them once)."""
+    kinds = LandmarkObservations | RangeObservations | PoseFix if with_sightings else RangeObservations | PoseFix
+    events = [e for e in dataset.events if isinstance(e, kinds)]
+    ks = _truth_indices(dataset, events)
+    mats = np.empty((len(events), 3, 3))
+    sighting = np.array([isinstance(e, LandmarkObservations) for e in events], dtype=np.bool_)
+    lm_map = dataset.world.landmarks
+    by_id: dict[int, int] = {} if lm_map is None else {int(i): r for r, i in enumerate(lm_map.ids.tolist())}
+    if sighting.any():
+        assert lm_map is not None
+        sr = _positive("landmark sigma_range_m", noise.landmark_sigma_range_m, dataset)
+        sb = _positive("landmark sigma_bearing_rad", noise.landmark_sigma_bearing_rad, dataset)
+        which = np.flatnonzero(sighting)
+        seen = [e for e in events if isinstance(e, LandmarkObservations)]
+        mats[which] = _sightings_information(seen, gt_poses[ks[which]], lm_map.xy, by_id, sr, sb)
+    for n, e in enumerate(events):
+        if isinstance(e, PoseFix):
+            mats[n] = position_fix_information(_positive("fix sigma_xy_m", noise.fix_sigma_xy_m, dataset))
+        elif isinstance(e, RangeObservations):
+            assert lm_map is not None
+            sr = _positive("range sigma_m", noise.range_sigma_m, dataset)
+            mats[n] = range_information(gt_poses[ks[n]], lm_map.xy[[by_id[int(i)] for i in e.ids.tolist()]], sr)
+    return _EventInformation(ks, mats, sighting)
+
+
+def _sightings_information(
+    events: list[LandmarkObservations], poses: FloatArray, xy: FloatArray, by_id: dict[int, int], sr: float, sb: float
 ) -> FloatArray:
-    """Measurement information at every ground-truth time, shape (n_truth, 3, 3)."""
+    """:func:`range_bearing_information` of each sighting event (from its true pose, ``poses`` (E, 3)), shape
+    (E, 3, 3): the events with the same number of rows at once, through the same numpy operations on stacked
+    arrays (elementwise, and one syrk per event in matmul's loop), so the same numbers as one call per event."""
+    rows = _associate_all(events, poses, xy, by_id, sr, sb)
+    counts = np.array([e.ids.size for e in events], dtype=np.intp)
+    ends = np.cumsum(counts)
+    out = np.empty((len(events), 3, 3))
+    for m in np.unique(counts).tolist():
+        which = np.flatnonzero(counts == m)
+        take = (ends[which] - m)[:, None] + np.arange(m)[None, :]
+        d = xy[rows[take]] - poses[which, None, 0:2]
+        q = np.maximum(np.einsum("ij,ij->i", d.reshape(-1, 2), d.reshape(-1, 2)), 1e-12).reshape(d.shape[:2])
+        r = np.sqrt(q)
+        zero = np.zeros_like(r)
+        hr = np.stack([-d[..., 0] / r, -d[..., 1] / r, zero], axis=-1)
+        hb = np.stack([d[..., 1] / q, -d[..., 0] / q, -np.ones_like(r)], axis=-1)
+        out[which] = hr.transpose(0, 2, 1) @ hr / sr**2 + hb.transpose(0, 2, 1) @ hb / sb**2
+    return out
+
+
+def _associate_all(
+    events: list[LandmarkObservations], poses: FloatArray, xy: FloatArray, by_id: dict[int, int], sr: float, sb: float
+) -> npt.NDArray[np.intp]:
+    """The landmark row of every sighting row of ``events`` (concatenated in event order): by id, else
+    (identity withheld) the landmark whose true range and bearing from the event's true pose (``poses``
+    (E, 3)) is nearest in Mahalanobis distance (known association)."""
+    ids = np.concatenate([e.ids for e in events]).astype(np.int64)
+    rows = np.array([by_id.get(int(i), -1) for i in ids.tolist()], dtype=np.intp)
+    unknown = np.flatnonzero(ids == UNKNOWN_ID)
+    if unknown.size:
+        of_event = np.repeat(np.arange(len(events)), [e.ids.size for e in events])[unknown]
+        r = np.concatenate([e.ranges for e in events])[unknown]
+        b = np.concatenate([e.bearings for e in events])[unknown]
+        pose = poses[of_event]
+        d = xy[None, :, :] - pose[:, None, 0:2]
+        r_true = np.hypot(d[..., 0], d[..., 1])
+        b_true = wrap_angle(np.arctan2(d[..., 1], d[..., 0]) - pose[:, 2:3])
+        m2 = ((r_true - r[:, None]) / sr) ** 2 + (wrap_angle(b_true - b[:, None]) / sb) ** 2
+        rows[unknown] = np.argmin(m2, axis=1)
+    missing = np.flatnonzero(rows < 0)
+    if missing.size:
+        raise KeyError(int(ids[missing[0]]))  # an id the map does not have, as the lookup by id raised
+    return rows
+
+
+def _measurement_information(
+    dataset: Dataset,
+    noise: TrueNoise,
+    gt_poses: FloatArray,
+    laser: bool = True,
+    events: _EventInformation | None = None,
+) -> FloatArray:
+    """Measurement information at every ground-truth time, shape (n_truth, 3, 3); ``events``: the dataset's
+    :func:`_event_information` when computed already."""
     gt_t = dataset.ground_truth.t
     use_laser = laser and noise.laser_sigma_m is not None and any(isinstance(e, LaserScan) for e in dataset.events)
     if use_laser:
         info = _laser_information(dataset, _positive("laser sigma_m", noise.laser_sigma_m, dataset), gt_poses)
     else:
         info = np.zeros((gt_t.shape[0], 3, 3))
-    lm_map = dataset.world.landmarks
-    by_id: dict[int, int] = {} if lm_map is None else {int(i): r for r, i in enumerate(lm_map.ids.tolist())}
-    for e in dataset.events:
-        if not isinstance(e, LandmarkObservations | RangeObservations | PoseFix):
-            continue
-        if isinstance(e, LandmarkObservations) and use_laser and noise.sightings_from_laser:
-            continue  # computed from the scans already counted
-        k = _truth_index(dataset, e.t)
-        pose = gt_poses[k]
-        if isinstance(e, PoseFix):
-            info[k] += position_fix_information(_positive("fix sigma_xy_m", noise.fix_sigma_xy_m, dataset))
-            continue
-        assert lm_map is not None
-        if isinstance(e, LandmarkObservations):
-            sr = _positive("landmark sigma_range_m", noise.landmark_sigma_range_m, dataset)
-            sb = _positive("landmark sigma_bearing_rad", noise.landmark_sigma_bearing_rad, dataset)
-            rows = _associate(e, pose, lm_map.xy, by_id, sr, sb)
-            info[k] += range_bearing_information(pose, lm_map.xy[rows], sr, sb)
-        else:
-            sr = _positive("range sigma_m", noise.range_sigma_m, dataset)
-            info[k] += range_information(pose, lm_map.xy[[by_id[int(i)] for i in e.ids.tolist()]], sr)
+    # sightings computed from the scans already counted carry nothing more
+    skip = use_laser and noise.sightings_from_laser
+    ev = events if events is not None else _event_information(dataset, noise, gt_poses, with_sightings=not skip)
+    keep = ~ev.sighting if skip else np.ones(ev.index.shape[0], dtype=np.bool_)
+    # added one event after the other, in event order, as info[k] += ... did
+    np.add.at(info, ev.index[keep], ev.info[keep])
     return info
-
-
-def _associate(
-    e: LandmarkObservations, pose: FloatArray, xy: FloatArray, by_id: dict[int, int], sr: float, sb: float
-) -> list[int]:
-    """Map rows of the sighting to landmarks: by id, else (identity withheld) to the landmark whose true
-    range and bearing from the true pose is nearest in Mahalanobis distance (known association)."""
-    rows: list[int] = []
-    d = xy - pose[None, 0:2]
-    r_true = np.hypot(d[:, 0], d[:, 1])
-    b_true = wrap_angle(np.arctan2(d[:, 1], d[:, 0]) - pose[2])
-    for i, r, b in zip(e.ids.tolist(), e.ranges.tolist(), e.bearings.tolist(), strict=True):
-        if i != UNKNOWN_ID:
-            rows.append(by_id[int(i)])
-        else:
-            m2 = ((r_true - r) / sr) ** 2 + (wrap_angle(b_true - b) / sb) ** 2
-            rows.append(int(np.argmin(m2)))
-    return rows
 
 
 def pcrb_covariances(dataset: Dataset, noise: TrueNoise | None = None, laser: bool = True) -> FloatArray:
@@ -534,15 +607,37 @@ def pcrb_covariances(dataset: Dataset, noise: TrueNoise | None = None, laser: bo
     synthetic world simulates it); the prior is the initial error the world realises (:func:`realised_prior`).
     ``laser`` = False leaves the laser scans out (the bound of an estimator that does not use them).
     """
+    _refuse_kidnapped(dataset)
+    noise = noise or true_noise(dataset)
+    return _covariances(dataset, noise, _step_terms(dataset, noise), laser)
+
+
+def _refuse_kidnapped(dataset: Dataset) -> None:
     if dataset.kidnaps:
         raise ConfigError(f"dataset {dataset.name!r}: a kidnapped run has no bound (the jump is outside the model)")
-    noise = noise or true_noise(dataset)
+
+
+def _step_terms(dataset: Dataset, noise: TrueNoise) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The true poses (n, 3) and the odometry's Jacobians and process covariances (:func:`odometry_step_terms`)."""
     gt = dataset.ground_truth
     poses = np.column_stack([gt.xy, gt.theta])
     f, q = odometry_step_terms(
         poses, noise.wheelbase_m, noise.k_left, noise.k_right, noise.scale_left, noise.scale_right
     )
-    info = _measurement_information(dataset, noise, poses, laser)
+    return poses, f, q
+
+
+def _covariances(
+    dataset: Dataset,
+    noise: TrueNoise,
+    steps: tuple[FloatArray, FloatArray, FloatArray],
+    laser: bool,
+    events: _EventInformation | None = None,
+) -> FloatArray:
+    """:func:`pcrb_covariances` from its parts: ``steps`` from :func:`_step_terms`, ``events`` from
+    :func:`_event_information` (None: computed here)."""
+    poses, f, q = steps
+    info = _measurement_information(dataset, noise, poses, laser, events)
     p0 = realised_prior(dataset)
     if not p0.any():
         # the initial error is zero: no measurement at step 0 can lower a zero covariance
@@ -615,7 +710,13 @@ def bound_covariances(dataset: Dataset) -> dict[str, FloatArray]:
         :data:`BOUND_ALL` (every sensor) and, when the dataset has laser scans, :data:`BOUND_NO_LASER`
         (m^2 and rad^2, world frame, at ``dataset.ground_truth.t``).
     """
-    out = {BOUND_ALL: pcrb_covariances(dataset)}
+    _refuse_kidnapped(dataset)
+    noise = true_noise(dataset)
+    steps = _step_terms(dataset, noise)
+    # both rows add the same sightings, ranges and fixes (the laser-free one even where they are computed
+    # from the scans): computed once
+    events = _event_information(dataset, noise, steps[0])
+    out = {BOUND_ALL: _covariances(dataset, noise, steps, True, events)}
     if any(isinstance(e, LaserScan) for e in dataset.events):
-        out[BOUND_NO_LASER] = pcrb_covariances(dataset, laser=False)
+        out[BOUND_NO_LASER] = _covariances(dataset, noise, steps, False, events)
     return out

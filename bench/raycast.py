@@ -204,48 +204,81 @@ def _dda_one(occ: BoolArray, gx: float, gy: float, dx: float, dy: float, t_lim: 
             return math.inf
 
 
+#: Bits of :func:`face_cells`: the cell is occupied; an occupied (or off-grid) cell lies within two cells.
+CELL_OCCUPIED = 1
+CELL_NEAR_OCCUPIED = 2
+
+
+def face_cells(occupied: npt.ArrayLike) -> UInt8Array:
+    """The grid coded for :func:`dda_face`.
+
+    Parameters
+    ----------
+    occupied : array-like of bool, shape (rows, cols)
+        The occupancy grid.
+
+    Returns
+    -------
+    ndarray of uint8, shape (rows, cols)
+        :data:`CELL_OCCUPIED` where ``occupied`` is, plus :data:`CELL_NEAR_OCCUPIED` where an occupied or
+        off-grid cell is within two cells (Chebyshev distance): the cells out of which a crossing's grid
+        vertices may touch an occupied cell.
+    """
+    occ = np.asarray(occupied, dtype=np.bool_)
+    rows, cols = occ.shape
+    pad = np.ones((rows + 4, cols + 4), dtype=np.bool_)
+    pad[2:-2, 2:-2] = occ
+    band = np.zeros_like(occ)
+    for di in range(5):
+        for dj in range(5):
+            band |= pad[di : di + rows, dj : dj + cols]
+    out: UInt8Array = occ.astype(np.uint8) * CELL_OCCUPIED | band.astype(np.uint8) * CELL_NEAR_OCCUPIED
+    return out
+
+
 @njit(cache=True, inline="always")
-def _corner_occupied(occ: BoolArray, vi: int, vj: int) -> bool:
-    """Whether a cell touching grid vertex (row vi, column vj) is occupied or lies off the grid."""
-    rows = occ.shape[0]
-    cols = occ.shape[1]
+def _corner_occupied(cells: UInt8Array, vi: int, vj: int) -> bool:
+    """Whether a cell touching grid vertex (row vi, column vj) is occupied or lies off the grid (``cells``
+    from :func:`face_cells`)."""
+    rows = cells.shape[0]
+    cols = cells.shape[1]
     for i in (vi - 1, vi):
         for j in (vj - 1, vj):
-            if i < 0 or j < 0 or i >= rows or j >= cols or occ[i, j]:
+            if i < 0 or j < 0 or i >= rows or j >= cols or cells[i, j] & CELL_OCCUPIED:
                 return True
     return False
 
 
 @njit(cache=True)
 def dda_face(
-    occ: BoolArray, gx: float, gy: float, dx: float, dy: float, t_lim: float, near0: float, near1: float
+    cells: UInt8Array, gx: float, gy: float, dx: float, dy: float, t_lim: float, near0: float, near1: float
 ) -> tuple[float, int, bool]:
     """:func:`_dda_one`'s traversal (the same distance, bit for bit), also returning the face it enters the
     hit cell through and whether the ray passes near a corner of the occupied cells.
 
-    Returns (t, axis, near): ``axis`` 0 when the ray enters the hit cell across a vertical grid line (x =
-    const), 1 across a horizontal one, -1 when it starts in it (or nothing is hit). ``near`` is True when a
-    grid vertex that touches an occupied (or off-grid) cell lies within ``near0 + near1 * t`` cells of the
-    ray before the hit, or within three times that of its start or of the hit point: there the range may
-    not be a smooth function of the ray (a perturbed ray may hit another cell or face).
+    ``cells`` is the grid coded by :func:`face_cells`. Returns (t, axis, near): ``axis`` 0 when the ray
+    enters the hit cell across a vertical grid line (x = const), 1 across a horizontal one, -1 when it
+    starts in it (or nothing is hit). ``near`` is True when a grid vertex that touches an occupied (or
+    off-grid) cell lies within ``near0 + near1 * t`` cells of the ray before the hit, or within three times
+    that of its start or of the hit point: there the range may not be a smooth function of the ray (a
+    perturbed ray may hit another cell or face).
     """
-    rows = occ.shape[0]
-    cols = occ.shape[1]
+    rows = cells.shape[0]
+    cols = cells.shape[1]
     t0, t1 = _clip_to_grid(rows, cols, gx, gy, dx, dy)
     if t0 >= t1 or t0 > t_lim:
         return math.inf, -1, True
     i, j, step_i, step_j, t_next_x, t_next_y, t_delta_x, t_delta_y = _dda_start(rows, cols, gx, gy, dx, dy, t0)
-    near = t0 > 0.0 or _vertex_near(occ, gx, gy, 3.0 * near0)
+    near = t0 > 0.0 or _vertex_near(cells, gx, gy, 3.0 * near0)
     adx = abs(dx)
     ady = abs(dy)
     t = t0
     axis = -1
-    while True:
-        if occ[i, j]:
-            hx = gx + t * dx
-            hy = gy + t * dy
-            near = near or axis < 0 or _vertex_near(occ, hx, hy, 3.0 * (near0 + near1 * t))
-            return t, axis, near
+    cell = cells[i, j]
+    while not cell & CELL_OCCUPIED:
+        # A crossing's vertices touch only cells within two of the cell it leaves (one for the crossing's
+        # rounding): away from the occupied cells the checks cannot find a corner, so they are not made.
+        check = not near and cell & CELL_NEAR_OCCUPIED
         if t_next_x < t_next_y:
             t = t_next_x
             t_next_x += t_delta_x
@@ -254,8 +287,8 @@ def dda_face(
             axis = 0
             if j < 0 or j >= cols:
                 return math.inf, -1, True
-            if not near:
-                near = _crossing_near(occ, gy + t * dy, adx, near0 + near1 * t, line, True)
+            if check:
+                near = _crossing_near(cells, gy + t * dy, adx, near0 + near1 * t, line, True)
         else:
             t = t_next_y
             t_next_y += t_delta_y
@@ -264,30 +297,35 @@ def dda_face(
             axis = 1
             if i < 0 or i >= rows:
                 return math.inf, -1, True
-            if not near:
-                near = _crossing_near(occ, gx + t * dx, ady, near0 + near1 * t, line, False)
+            if check:
+                near = _crossing_near(cells, gx + t * dx, ady, near0 + near1 * t, line, False)
         if t > t_lim:
             return math.inf, -1, True
+        cell = cells[i, j]
+    near = near or axis < 0 or _vertex_near(cells, gx + t * dx, gy + t * dy, 3.0 * (near0 + near1 * t))
+    return t, axis, near
 
 
 @njit(cache=True, inline="always")
-def _crossing_near(occ: BoolArray, c: float, across: float, lim: float, line: int, vertical: bool) -> bool:
+def _crossing_near(cells: UInt8Array, c: float, across: float, lim: float, line: int, vertical: bool) -> bool:
     """At the ray's crossing of grid line ``line`` (vertical: x = line, at y = ``c``; else y = line, at x =
     ``c``): whether one of the two vertices of that line beside the crossing touches an occupied cell and
     lies within ``lim`` of the ray (``across``: |direction component| normal to the line)."""
     v = math.floor(c)
-    if (c - v) * across < lim and (_corner_occupied(occ, v, line) if vertical else _corner_occupied(occ, line, v)):
+    if (c - v) * across < lim and (_corner_occupied(cells, v, line) if vertical else _corner_occupied(cells, line, v)):
         return True
     w = v + 1
-    return (w - c) * across < lim and (_corner_occupied(occ, w, line) if vertical else _corner_occupied(occ, line, w))
+    return (w - c) * across < lim and (
+        _corner_occupied(cells, w, line) if vertical else _corner_occupied(cells, line, w)
+    )
 
 
 @njit(cache=True, inline="always")
-def _vertex_near(occ: BoolArray, px: float, py: float, lim: float) -> bool:
+def _vertex_near(cells: UInt8Array, px: float, py: float, lim: float) -> bool:
     """Whether the grid vertex nearest to (px, py) (grid units) is within ``lim`` and touches an occupied cell."""
     vj = math.floor(px + 0.5)
     vi = math.floor(py + 0.5)
-    return math.hypot(px - vj, py - vi) < lim and _corner_occupied(occ, vi, vj)
+    return math.hypot(px - vj, py - vi) < lim and _corner_occupied(cells, vi, vj)
 
 
 @njit(cache=True)
@@ -1006,18 +1044,21 @@ def scan_gradients(
     grads = np.zeros((n, nb, 3))
     smooth = np.zeros((n, nb), dtype=np.bool_)
     kernel = _gradients_parallel if _use_threads(None, n * nb) else _gradients_serial
-    kernel(occ, res, ox, oy, sensors, headings, mount_xy[0], mount_xy[1], angles, max_range, eps, ranges, grads, smooth)
+    cells = face_cells(occ)
+    kernel(
+        cells, res, ox, oy, sensors, headings, mount_xy[0], mount_xy[1], angles, max_range, eps, ranges, grads, smooth
+    )
     return ranges, grads, smooth
 
 
 @njit(cache=True, inline="always")
 def _ray_gradient(
-    occ: BoolArray,
+    cells: UInt8Array,
     res: float,
     ox: float,
     oy: float,
     sensors: FloatArray,
-    headings: FloatArray,
+    trig: FloatArray,
     mx: float,
     my: float,
     cb: FloatArray,
@@ -1030,7 +1071,8 @@ def _ray_gradient(
     grads: FloatArray,
     smooth: npt.NDArray[np.bool_],
 ) -> None:
-    """One ray of :func:`scan_gradients`, written into its outputs."""
+    """One ray of :func:`scan_gradients`, written into its outputs; ``trig`` (S, 4) holds the cosine and sine
+    of each sensor's and each robot's heading (:func:`_heading_trig`)."""
     inv_res = 1.0 / res
     t_lim = max_range * inv_res
     # how far a perturbed ray moves (cells): eps of translation and eps of rotation about the robot, 10x
@@ -1038,17 +1080,17 @@ def _ray_gradient(
     near1 = 10.0 * eps
     gx = (sensors[p, 0] - ox) * inv_res
     gy = (sensors[p, 1] - oy) * inv_res
-    cp = math.cos(sensors[p, 2])
-    sp = math.sin(sensors[p, 2])
+    cp = trig[p, 0]
+    sp = trig[p, 1]
     dx = cp * cb[b] - sp * sb[b]
     dy = sp * cb[b] + cp * sb[b]
-    t, axis, near = dda_face(occ, gx, gy, dx, dy, t_lim, near0, near1)
+    t, axis, near = dda_face(cells, gx, gy, dx, dy, t_lim, near0, near1)
     r = t * res
     ranges[p, b] = r
     if near or axis < 0 or r > max_range - 3.0 * (near0 + near1 * t) * res:
         return
-    ct = math.cos(headings[p])
-    st = math.sin(headings[p])
+    ct = trig[p, 2]
+    st = trig[p, 3]
     dsx = -st * mx - ct * my  # d s_x / d theta
     dsy = ct * mx - st * my
     if axis == 0:
@@ -1070,33 +1112,48 @@ def _ray_gradient(
 
 
 @njit(cache=True)
+def _heading_trig(sensors: FloatArray, headings: FloatArray) -> FloatArray:
+    """cos and sin of each sensor's heading and of each robot's, (S, 4): once per scan rather than per ray
+    (the same ``math`` calls, so the same numbers)."""
+    out = np.empty((sensors.shape[0], 4))
+    for p in range(sensors.shape[0]):
+        out[p, 0] = math.cos(sensors[p, 2])
+        out[p, 1] = math.sin(sensors[p, 2])
+        out[p, 2] = math.cos(headings[p])
+        out[p, 3] = math.sin(headings[p])
+    return out
+
+
+@njit(cache=True)
 def _gradients_serial(
-    occ: BoolArray, res: float, ox: float, oy: float, sensors: FloatArray, headings: FloatArray, mx: float,
+    cells: UInt8Array, res: float, ox: float, oy: float, sensors: FloatArray, headings: FloatArray, mx: float,
     my: float, angles: FloatArray, max_range: float, eps: float, ranges: FloatArray, grads: FloatArray,
     smooth: npt.NDArray[np.bool_],
 ) -> None:  # fmt: skip
     cb = np.cos(angles)
     sb = np.sin(angles)
     nb = angles.shape[0]
+    trig = _heading_trig(sensors, headings)
     for k in range(sensors.shape[0] * nb):
         p = k // nb
-        _ray_gradient(occ, res, ox, oy, sensors, headings, mx, my, cb, sb, max_range, eps, p, k - p * nb, ranges,
-                      grads, smooth)  # fmt: skip
+        _ray_gradient(cells, res, ox, oy, sensors, trig, mx, my, cb, sb, max_range, eps, p, k - p * nb, ranges, grads,
+                      smooth)  # fmt: skip
 
 
 @njit(cache=True, parallel=True)
 def _gradients_parallel(
-    occ: BoolArray, res: float, ox: float, oy: float, sensors: FloatArray, headings: FloatArray, mx: float,
+    cells: UInt8Array, res: float, ox: float, oy: float, sensors: FloatArray, headings: FloatArray, mx: float,
     my: float, angles: FloatArray, max_range: float, eps: float, ranges: FloatArray, grads: FloatArray,
     smooth: npt.NDArray[np.bool_],
 ) -> None:  # fmt: skip
     cb = np.cos(angles)
     sb = np.sin(angles)
     nb = angles.shape[0]
+    trig = _heading_trig(sensors, headings)
     for k in prange(sensors.shape[0] * nb):
         p = k // nb
-        _ray_gradient(occ, res, ox, oy, sensors, headings, mx, my, cb, sb, max_range, eps, p, k - p * nb, ranges,
-                      grads, smooth)  # fmt: skip
+        _ray_gradient(cells, res, ox, oy, sensors, trig, mx, my, cb, sb, max_range, eps, p, k - p * nb, ranges, grads,
+                      smooth)  # fmt: skip
 
 
 def cast_ray_subset(
@@ -1111,8 +1168,15 @@ def cast_ray_subset(
     beams: IntArray,
 ) -> FloatArray:
     """The ranges of :func:`cast_rays` (``method="dda"``) of the rays (``rows[k]``, ``beams[k]``) only, bit
-    for bit (the same arithmetic per ray), spread over numba's threads."""
-    return _ray_subset_parallel(occ, res, ox, oy, poses, angles, max_range, rows, beams)
+    for bit (the same arithmetic per ray), spread over numba's threads.
+
+    ``poses`` are the sensor poses, (S, 3), giving ranges of shape (K,); or several sets of them, (P, S, 3)
+    (the bound's six perturbed poses), cast in one call, giving (P, K).
+    """
+    p = np.asarray(poses, dtype=np.float64)
+    sets = np.ascontiguousarray(p if p.ndim == 3 else p[None])
+    out: FloatArray = _ray_subset_parallel(occ, res, ox, oy, sets, angles, max_range, rows, beams)
+    return out if p.ndim == 3 else out[0]
 
 
 @njit(cache=True, parallel=True)
@@ -1127,17 +1191,27 @@ def _ray_subset_parallel(
     rows: IntArray,
     beams: IntArray,
 ) -> FloatArray:
-    out = np.empty(rows.shape[0])
+    n_sets = poses.shape[0]
+    n = rows.shape[0]
+    out = np.empty((n_sets, n))
     inv_res = 1.0 / res
     t_lim = max_range * inv_res
     cb = np.cos(angles)
     sb = np.sin(angles)
-    for k in prange(rows.shape[0]):
+    # each pose's cos and sin once rather than per ray (the same math calls)
+    trig = np.empty((n_sets, poses.shape[1], 2))
+    for s in range(n_sets):
+        for p in range(poses.shape[1]):
+            trig[s, p, 0] = math.cos(poses[s, p, 2])
+            trig[s, p, 1] = math.sin(poses[s, p, 2])
+    for q in prange(n_sets * n):
+        s = q // n
+        k = q - s * n
         p = rows[k]
         b = beams[k]
-        gx = (poses[p, 0] - ox) * inv_res
-        gy = (poses[p, 1] - oy) * inv_res
-        cp = math.cos(poses[p, 2])
-        sp = math.sin(poses[p, 2])
-        out[k] = _dda_one(occ, gx, gy, cp * cb[b] - sp * sb[b], sp * cb[b] + cp * sb[b], t_lim) * res
+        gx = (poses[s, p, 0] - ox) * inv_res
+        gy = (poses[s, p, 1] - oy) * inv_res
+        cp = trig[s, p, 0]
+        sp = trig[s, p, 1]
+        out[s, k] = _dda_one(occ, gx, gy, cp * cb[b] - sp * sb[b], sp * cb[b] + cp * sb[b], t_lim) * res
     return out

@@ -1,13 +1,21 @@
-"""The bound's laser information by central differences of full casts (its version 1), the reference the
-one-cast derivative of :func:`locbench.pcrb.laser_information` is tested and benchmarked against."""
+"""The bound's earlier forms, the references its faster parts are tested and benchmarked against: the laser
+information by central differences of full casts (its version 1), for the one-cast derivative of
+:func:`locbench.pcrb.laser_information`; the corner checks inside the traversal's loop, for
+:func:`locbench.raycast.dda_face`; one numpy call per sighting event, for the batched sightings; and the whole
+bound as it was before issue 24, item 3 (:func:`seven_cast_bound`)."""
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
+from numba import njit
 
-from locbench.events import LaserScan
+from locbench.errors import ConfigError
+from locbench.events import UNKNOWN_ID, LandmarkObservations, LaserScan, PoseFix, RangeObservations
+from locbench.geometry import wrap_angle
+from locbench.raycast import _clip_to_grid, _dda_start, dda_face, face_cells
 from locbench.registry import make_dataset
 
 
@@ -85,14 +93,199 @@ def python_covariance_recursion(
     return out
 
 
-def seven_cast_bound(dataset: Any) -> dict[str, np.ndarray]:
-    """:func:`locbench.pcrb.bound_covariances` with the laser term differenced from seven casts per scan and
-    the covariance recursion in numpy (the bound before issue 24, item 3): the whole-bound reference."""
+def truth_index(dataset: Any, t: float) -> int:
+    """The ground-truth index of one event as the bound looked it up before (bound version 3)."""
+    gt_t = dataset.ground_truth.t
+    k = int(np.searchsorted(gt_t, t - 1e-6))
+    if k >= gt_t.shape[0] or abs(gt_t[k] - t) > 1e-6:
+        raise ConfigError(f"dataset {dataset.name!r}: a measurement at t={t} s falls on no ground-truth time")
+    return k
+
+
+def associate_one(
+    e: LandmarkObservations, pose: np.ndarray, xy: np.ndarray, by_id: dict[int, int], sr: float, sb: float
+) -> list[int]:
+    """The landmark rows of one sighting event as the bound associated them before it batched the sightings
+    (bound version 3, ``pcrb._associate``): by id, else the nearest true range and bearing in Mahalanobis
+    distance."""
+    rows: list[int] = []
+    d = xy - pose[None, 0:2]
+    r_true = np.hypot(d[:, 0], d[:, 1])
+    b_true = wrap_angle(np.arctan2(d[:, 1], d[:, 0]) - pose[2])
+    for i, r, b in zip(e.ids.tolist(), e.ranges.tolist(), e.bearings.tolist(), strict=True):
+        if i != UNKNOWN_ID:
+            rows.append(by_id[int(i)])
+        else:
+            m2 = ((r_true - r) / sr) ** 2 + (wrap_angle(b_true - b) / sb) ** 2
+            rows.append(int(np.argmin(m2)))
+    return rows
+
+
+def grouped_laser_information(dataset: Any, sigma_m: float, gt_poses: np.ndarray) -> np.ndarray:
+    """``pcrb._laser_information`` as it was (bound version 3): :func:`locbench.pcrb.laser_information` per beam
+    layout, each scan's truth index looked up by itself."""
     from locbench import pcrb
 
-    saved = pcrb.laser_information, pcrb.covariance_recursion
+    info = np.zeros((gt_poses.shape[0], 3, 3))
+    grid = dataset.world.occupancy
+    scans = [e for e in dataset.events if isinstance(e, LaserScan)]
+    if grid is None or not scans:
+        return info
+    groups: dict[tuple[float, ...], list[LaserScan]] = {}
+    for e in scans:
+        key = (*e.sensor_pose, e.angle_min, e.angle_increment, float(e.ranges.shape[0]), e.range_min, e.range_max)
+        groups.setdefault(key, []).append(e)
+    for group in groups.values():
+        e0 = group[0]
+        idx = np.array([truth_index(dataset, e.t) for e in group])
+        per_scan = pcrb.laser_information(
+            grid.occupied(), grid.resolution, (float(grid.origin[0]), float(grid.origin[1])), gt_poses[idx],
+            e0.sensor_pose, e0.angles, e0.range_max, e0.range_min, sigma_m, np.stack([e.ranges for e in group]),
+        )  # fmt: skip
+        np.add.at(info, idx, per_scan)
+    return info
+
+
+def per_event_information(
+    dataset: Any, noise: Any, gt_poses: np.ndarray, laser: bool = True, events: Any = None
+) -> np.ndarray:
+    """``pcrb._measurement_information`` as it was before the sightings were batched (bound version 3): one
+    ``range_bearing_information``, association and truth lookup per event, added in event order (``events``
+    is ignored: every row computes its own)."""
+    from locbench import pcrb
+
+    gt_t = dataset.ground_truth.t
+    use_laser = laser and noise.laser_sigma_m is not None and any(isinstance(e, LaserScan) for e in dataset.events)
+    if use_laser:
+        info = grouped_laser_information(
+            dataset, pcrb._positive("laser sigma_m", noise.laser_sigma_m, dataset), gt_poses
+        )
+    else:
+        info = np.zeros((gt_t.shape[0], 3, 3))
+    lm_map = dataset.world.landmarks
+    by_id: dict[int, int] = {} if lm_map is None else {int(i): r for r, i in enumerate(lm_map.ids.tolist())}
+    for e in dataset.events:
+        if not isinstance(e, LandmarkObservations | RangeObservations | PoseFix):
+            continue
+        if isinstance(e, LandmarkObservations) and use_laser and noise.sightings_from_laser:
+            continue
+        k = truth_index(dataset, e.t)
+        pose = gt_poses[k]
+        if isinstance(e, PoseFix):
+            info[k] += pcrb.position_fix_information(pcrb._positive("fix sigma_xy_m", noise.fix_sigma_xy_m, dataset))
+            continue
+        if isinstance(e, LandmarkObservations):
+            sr = pcrb._positive("landmark sigma_range_m", noise.landmark_sigma_range_m, dataset)
+            sb = pcrb._positive("landmark sigma_bearing_rad", noise.landmark_sigma_bearing_rad, dataset)
+            rows = associate_one(e, pose, lm_map.xy, by_id, sr, sb)
+            info[k] += pcrb.range_bearing_information(pose, lm_map.xy[rows], sr, sb)
+        else:
+            sr = pcrb._positive("range sigma_m", noise.range_sigma_m, dataset)
+            info[k] += pcrb.range_information(pose, lm_map.xy[[by_id[int(i)] for i in e.ids.tolist()]], sr)
+    return info
+
+
+def seven_cast_bound(dataset: Any) -> dict[str, np.ndarray]:
+    """:func:`locbench.pcrb.bound_covariances` as it was before issue 24, item 3: the laser term differenced
+    from seven casts per scan, the covariance recursion in numpy, and each row computing its own odometry
+    terms and its sightings one event at a time (:func:`per_event_information`): the whole-bound reference."""
+    from locbench import pcrb
+
+    saved = pcrb.laser_information, pcrb.covariance_recursion, pcrb._measurement_information
     pcrb.laser_information, pcrb.covariance_recursion = differenced_laser_information, python_covariance_recursion
+    pcrb._measurement_information = per_event_information
     try:
-        return pcrb.bound_covariances(dataset)
+        out = {pcrb.BOUND_ALL: pcrb.pcrb_covariances(dataset)}
+        if any(isinstance(e, LaserScan) for e in dataset.events):
+            out[pcrb.BOUND_NO_LASER] = pcrb.pcrb_covariances(dataset, laser=False)
+        return out
     finally:
-        pcrb.laser_information, pcrb.covariance_recursion = saved
+        pcrb.laser_information, pcrb.covariance_recursion, pcrb._measurement_information = saved
+
+
+@njit(cache=True, inline="always")
+def _corner_occupied(occ: np.ndarray, vi: int, vj: int) -> bool:
+    rows, cols = occ.shape
+    for i in (vi - 1, vi):
+        for j in (vj - 1, vj):
+            if i < 0 or j < 0 or i >= rows or j >= cols or occ[i, j]:
+                return True
+    return False
+
+
+@njit(cache=True, inline="always")
+def _crossing_near(occ: np.ndarray, c: float, across: float, lim: float, line: int, vertical: bool) -> bool:
+    v = math.floor(c)
+    if (c - v) * across < lim and (_corner_occupied(occ, v, line) if vertical else _corner_occupied(occ, line, v)):
+        return True
+    w = v + 1
+    return (w - c) * across < lim and (_corner_occupied(occ, w, line) if vertical else _corner_occupied(occ, line, w))
+
+
+@njit(cache=True, inline="always")
+def _vertex_near(occ: np.ndarray, px: float, py: float, lim: float) -> bool:
+    vj = math.floor(px + 0.5)
+    vi = math.floor(py + 0.5)
+    return math.hypot(px - vj, py - vi) < lim and _corner_occupied(occ, vi, vj)
+
+
+@njit(cache=True)
+def stepwise_dda_face(
+    occ: np.ndarray, gx: float, gy: float, dx: float, dy: float, t_lim: float, near0: float, near1: float
+) -> tuple[float, int, bool]:
+    """:func:`locbench.raycast.dda_face` as it was before it split the corner checks off the traversal (bound
+    version 3), on the boolean grid: the checks at every crossing, inside the traversal's loop (its helpers
+    above are the corner checks as they were then)."""
+    rows, cols = occ.shape
+    t0, t1 = _clip_to_grid(rows, cols, gx, gy, dx, dy)
+    if t0 >= t1 or t0 > t_lim:
+        return math.inf, -1, True
+    i, j, step_i, step_j, t_next_x, t_next_y, t_delta_x, t_delta_y = _dda_start(rows, cols, gx, gy, dx, dy, t0)
+    near = t0 > 0.0 or _vertex_near(occ, gx, gy, 3.0 * near0)
+    t = t0
+    axis = -1
+    while True:
+        if occ[i, j]:
+            near = near or axis < 0 or _vertex_near(occ, gx + t * dx, gy + t * dy, 3.0 * (near0 + near1 * t))
+            return t, axis, near
+        if t_next_x < t_next_y:
+            t = t_next_x
+            t_next_x += t_delta_x
+            line = j + 1 if step_j > 0 else j
+            j += step_j
+            axis = 0
+            if j < 0 or j >= cols:
+                return math.inf, -1, True
+            if not near:
+                near = _crossing_near(occ, gy + t * dy, abs(dx), near0 + near1 * t, line, True)
+        else:
+            t = t_next_y
+            t_next_y += t_delta_y
+            line = i + 1 if step_i > 0 else i
+            i += step_i
+            axis = 1
+            if i < 0 or i >= rows:
+                return math.inf, -1, True
+            if not near:
+                near = _crossing_near(occ, gx + t * dx, abs(dy), near0 + near1 * t, line, False)
+        if t > t_lim:
+            return math.inf, -1, True
+
+
+def faces_differ(occ: np.ndarray, rays: np.ndarray, t_lim: float, near0: float, near1: float) -> int:
+    """How many of ``rays`` (k, 4: start x, y and direction x, y, grid units) get another (t, axis, near) from
+    :func:`locbench.raycast.dda_face` than from :func:`stepwise_dda_face` (an infinite t equals any other)."""
+    return _faces_differ(occ, face_cells(occ), rays, t_lim, near0, near1)
+
+
+@njit(cache=True)
+def _faces_differ(
+    occ: np.ndarray, cells: np.ndarray, rays: np.ndarray, t_lim: float, near0: float, near1: float
+) -> int:
+    bad = 0
+    for k in range(rays.shape[0]):
+        a = dda_face(cells, rays[k, 0], rays[k, 1], rays[k, 2], rays[k, 3], t_lim, near0, near1)
+        b = stepwise_dda_face(occ, rays[k, 0], rays[k, 1], rays[k, 2], rays[k, 3], t_lim, near0, near1)
+        same_t = a[0] == b[0] or (math.isinf(a[0]) and math.isinf(b[0]))
+        bad += not same_t or a[1] != b[1] or a[2] != b[2]
+    return bad

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 import pytest
-from bound_support import differenced_laser_information, scan_poses
+from bound_support import differenced_laser_information, faces_differ, per_event_information, scan_poses
 
 from locbench import pcrb
 from locbench.datasets.synthetic.robot import DriveLimits, GoTo, simulate_route
@@ -183,6 +183,21 @@ def test_withheld_identities_give_the_same_bound() -> None:
     np.testing.assert_allclose(b, a, rtol=1e-10, atol=1e-18)
 
 
+@pytest.mark.parametrize("world", ["office", "landmark_geometry[known_ids=false]", "room[matched=true]"])
+def test_batched_sightings_equal_one_call_per_event(world: str) -> None:
+    """The sightings' information computed together (stacked numpy operations, one association for all rows)
+    and shared by both rows equals one ``range_bearing_information`` per event, bit for bit, with and
+    without the laser (``landmark_geometry`` leaves its scan-made sightings out of the laser row)."""
+    ds = make_dataset(world, 1)
+    noise = pcrb.true_noise(ds)
+    poses = ds.ground_truth.poses
+    shared = pcrb._event_information(ds, noise, poses)
+    for laser in (True, False):
+        want = per_event_information(ds, noise, poses, laser)
+        np.testing.assert_array_equal(pcrb._measurement_information(ds, noise, poses, laser, shared), want)
+        np.testing.assert_array_equal(pcrb._measurement_information(ds, noise, poses, laser), want)
+
+
 def test_kidnapped_and_recorded_like_datasets_are_refused() -> None:
     with pytest.raises(ConfigError, match="kidnap"):
         pcrb.pcrb_metrics(make_dataset("room[kidnap_m=1]", 0))
@@ -244,6 +259,32 @@ def test_laser_information_from_one_cast_equals_the_differenced_one(world: str) 
         got = pcrb.laser_information(*args)
         # every beam kept or left out alike: one beam's share, ~1/sigma^2 = 1e4, is far above this tolerance
         np.testing.assert_allclose(got, want, rtol=1e-7, atol=1e-7 * float(np.abs(want).max()))
+
+
+@pytest.mark.parametrize("world", ["office", "lap"])
+def test_face_traversal_equals_the_stepwise_checks(world: str) -> None:
+    """``raycast.dda_face``, its corner checks made only at crossings out of cells near occupied ones, gives
+    the range, face and nearness of the checks at every crossing, bit for bit: on every beam of a world's
+    scans (every 10th), with the bound's reach and 30 and 300 times it (where many more crossings are near a
+    corner), and on random rays from inside and outside the grid."""
+    occ, res, origin, poses, mount, angles, max_r = scan_poses(world)[:7]
+    occ = np.ascontiguousarray(occ)
+    phi = (poses[:, 2] + mount[2])[:, None] + angles[None, :]
+    sx = poses[:, 0] + np.cos(poses[:, 2]) * mount[0] - np.sin(poses[:, 2]) * mount[1]
+    sy = poses[:, 1] + np.sin(poses[:, 2]) * mount[0] + np.cos(poses[:, 2]) * mount[1]
+    start = np.broadcast_to(np.column_stack([(sx - origin[0]) / res, (sy - origin[1]) / res])[:, None], (*phi.shape, 2))
+    scan_rays = np.column_stack([start.reshape(-1, 2), np.cos(phi).ravel(), np.sin(phi).ravel()])
+    rng = np.random.default_rng(0)
+    rows, cols = occ.shape
+    heading = rng.uniform(-math.pi, math.pi, 20_000)
+    random_rays = np.column_stack(
+        [rng.uniform(-5, cols + 5, heading.size), rng.uniform(-5, rows + 5, heading.size), np.cos(heading),
+         np.sin(heading)]
+    )  # fmt: skip
+    near0 = 10.0 * 1e-5 * (1.0 + math.hypot(mount[0], mount[1])) / res
+    for rays in (scan_rays, random_rays):
+        for scale in (1.0, 30.0, 300.0):
+            assert faces_differ(occ, np.ascontiguousarray(rays), max_r / res, scale * near0, scale * 1e-4) == 0
 
 
 def test_the_laser_tightens_the_bound_of_the_laser_worlds() -> None:
