@@ -40,7 +40,7 @@ UNTESTED_FOOTNOTE = (
 
 def per_seed(df: pd.DataFrame, metric: str) -> dict[int, float]:
     """seed -> value of one metric in the rows of one (dataset, configuration); NaN values left out."""
-    sel = df[df["metric"] == metric]
+    sel = df[df["metric"].to_numpy() == metric]
     out = {int(s): float(v) for s, v in zip(sel["seed"], sel["value"], strict=True) if not math.isnan(float(v))}
     return out
 
@@ -55,7 +55,7 @@ def samples_for(df: pd.DataFrame, filters: Sequence[str], metric: str) -> list[d
         sel = df[df["metric"].astype(str).str.match(r"^waypoint_\d+_error_m$")]
         grouped = sel.groupby(["filter", "seed"])["value"].mean()
     else:
-        sel = df[(df["metric"] == metric) & df["value"].notna()]
+        sel = df[(df["metric"].to_numpy() == metric) & df["value"].notna().to_numpy()]
         grouped = sel.groupby(["filter", "seed"])["value"].last()
     by: dict[str, dict[int, float]] = {}
     if metric == "kidnap_recovered":

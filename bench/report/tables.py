@@ -31,7 +31,9 @@ def header(metric: str) -> str:
 
 def values(df: pd.DataFrame, metric: str) -> np.ndarray:
     """The finite-or-infinite (non-NaN) values of one metric in ``df``."""
-    v = df.loc[df["metric"] == metric, "value"].to_numpy(dtype=np.float64)
+    # numpy's comparison of the names: pandas' string comparison costs a millisecond a call, the report makes
+    # thousands
+    v = df["value"].to_numpy(dtype=np.float64)[df["metric"].to_numpy() == metric]
     return v[~np.isnan(v)]
 
 
