@@ -140,11 +140,17 @@ def render_pngs(plots: list[Plot], jobs: int = 1) -> list[bytes]:
     from concurrent.futures import ProcessPoolExecutor
 
     _PLOTS[:] = plots
+    # the largest canvases first (a grid of 30 panels takes as long as a dozen single figures), so no worker
+    # is left with one at the end
+    order = sorted(range(len(plots)), key=lambda i: -plots[i].size[0] * plots[i].size[1])
+    out: list[bytes] = [b""] * len(plots)
     try:
         with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("fork")) as pool:
-            return list(pool.map(_render_nth, range(len(plots))))
+            for i, data in zip(order, pool.map(_render_nth, order), strict=True):
+                out[i] = data
     finally:
         _PLOTS.clear()
+    return out
 
 
 def write_figures(sections: list[Section], figdir: Path, jobs: int = 1) -> dict[str, bytes]:
