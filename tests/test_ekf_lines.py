@@ -178,3 +178,36 @@ def test_localizes_on_line_room() -> None:
     idx = np.clip(np.searchsorted(tr.t, ds.ground_truth.t, side="right") - 1, 0, tr.t.size - 1)
     err = tr.mean[idx, :2] - ds.ground_truth.xy
     assert float(np.sqrt(np.mean(np.sum(err**2, axis=1)))) < 0.05
+
+
+def test_joseph_correct_without_likelihood_equals_kalman_core_bit_for_bit() -> None:
+    from locbench.filters._kalman import joseph_correct
+    from locbench.filters.ekf_lines import _joseph_correct
+
+    rng = np.random.default_rng(2)
+    for _ in range(200):
+        a = rng.normal(size=(3, 3))
+        P = a @ a.T + 1e-4 * np.eye(3)
+        k = int(rng.integers(1, 6))
+        H = rng.normal(size=(2 * k, 3))
+        b = rng.normal(size=(2 * k, 2 * k)) * 0.1
+        R = b @ b.T + 1e-3 * np.eye(2 * k)
+        x, y = rng.normal(size=3), rng.normal(size=2 * k)
+        want = joseph_correct(x, P, y, H, R)
+        xn, Pn, nis = _joseph_correct(x, P, y, H, R)
+        assert np.array_equal(xn, want.x) and np.array_equal(Pn, want.P) and nis == want.nis
+
+
+def test_scalar_finite_check_matches_numpy_verdict() -> None:
+    from locbench.errors import FilterDiverged
+
+    f = LineEKF(LineEKFConfig())
+    for bad in (math.nan, math.inf, -math.inf):
+        for i in range(12):
+            x, P = np.ones(3), np.eye(3)
+            (x if i < 3 else P).ravel()[i if i < 3 else i - 3] = bad
+            f._x, f._P = x, P
+            with pytest.raises(FilterDiverged):
+                f._check_finite(0.0)
+    f._x, f._P = np.ones(3), np.eye(3)
+    f._check_finite(0.0)
