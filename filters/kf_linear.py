@@ -267,7 +267,9 @@ class LinearKF(Filter):
         self._t = z.t
         self._diag = self._empty_diag()
         x, P = self._x, self._P
-        match, _ = match_scan(self._db, z, self._tol, self.config.min_bearings, prior=(x.reshape(3), P), gate=self._gate)
+        match, _ = match_scan(
+            self._db, z, self._tol, self.config.min_bearings, prior=(x.reshape(3), P), gate=self._gate
+        )
         if match is None:
             self._no_match += 1
             self._diag.update(rejected=1.0, no_match=float(self._no_match))

@@ -164,7 +164,9 @@ def test_update_algebra_equals_filterpy_bit_for_bit(monkeypatch: pytest.MonkeyPa
 
     rng = np.random.default_rng(11)
     f = _reset_filter()
-    scan = LaserScan(t=2.0, angle_min=0.0, angle_increment=math.pi / 4, ranges=np.ones(8), range_min=0.0, range_max=10.0)
+    scan = LaserScan(
+        t=2.0, angle_min=0.0, angle_increment=math.pi / 4, ranges=np.ones(8), range_min=0.0, range_max=10.0
+    )
     for _ in range(300):
         x, P = _random_belief(rng)
         zx, R = _random_belief(rng)
