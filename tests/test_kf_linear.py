@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -109,7 +110,7 @@ def test_bad_config(cfg: dict[str, float]) -> None:
         LinearKFConfig(**cfg)  # type: ignore[arg-type]
 
 
-def _filterpy_reference(x: np.ndarray, P: np.ndarray) -> object:
+def _filterpy_reference(x: np.ndarray, P: np.ndarray) -> Any:
     from filterpy.kalman import KalmanFilter
 
     kf = KalmanFilter(dim_x=3, dim_z=3)

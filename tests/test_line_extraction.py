@@ -138,7 +138,9 @@ def _scan_points_numpy(scan: LaserScan) -> tuple[np.ndarray, np.ndarray, np.ndar
     return np.column_stack([sx + rr * np.cos(a), sy + rr * np.sin(a)]), rr, beam
 
 
-def _extract_tail_numpy(pts: np.ndarray, ranges: np.ndarray, fits: np.ndarray, min_length: float) -> tuple:
+def _extract_tail_numpy(
+    pts: np.ndarray, ranges: np.ndarray, fits: np.ndarray, min_length: float
+) -> tuple[np.ndarray, ...]:
     # the numpy form of extract_lines after the compiled segments, which _segment_ends and _assemble replaced
     rho, psi = fits[:, 0], fits[:, 1]
     t = np.array([(-math.sin(p), math.cos(p)) for p in psi.tolist()])

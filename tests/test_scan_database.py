@@ -10,7 +10,13 @@ import pytest
 from locbench.datasets.base import OccupancyGrid
 from locbench.errors import ConfigError
 from locbench.events import LaserScan
-from locbench.filters._scan_database import N_BEARINGS, build_database, match_scan, scan_bearing_ranges
+from locbench.filters._scan_database import (
+    N_BEARINGS,
+    ScanDatabase,
+    build_database,
+    match_scan,
+    scan_bearing_ranges,
+)
 from locbench.raycast import cast_rays
 
 
@@ -151,7 +157,14 @@ def test_gate_first_matching_equals_scoring_everything_then_gating(spread: float
         np.testing.assert_allclose(m.z[:2], z_xy, atol=1e-9)
 
 
-def _match_scan_numpy(db, scan, tolerance_m, min_bearings=4, prior=None, gate=math.inf):  # type: ignore[no-untyped-def]
+def _match_scan_numpy(
+    db: ScanDatabase,
+    scan: LaserScan,
+    tolerance_m: float,
+    min_bearings: int = 4,
+    prior: tuple[np.ndarray, np.ndarray] | None = None,
+    gate: float = math.inf,
+) -> tuple[tuple[np.ndarray, np.ndarray, int, float] | None, int]:
     # the numpy form of match_scan's glue around the compiled _matches (before its tail was compiled)
     from locbench.filters import _scan_database as sd
     from locbench.geometry import wrap_angle
@@ -166,8 +179,8 @@ def _match_scan_numpy(db, scan, tolerance_m, min_bearings=4, prior=None, gate=ma
     hs = db.heading_step_rad
     quant = np.diag([db.step_m**2 / 12.0, db.step_m**2 / 12.0, hs**2 / 12.0])
     gated = prior is not None and math.isfinite(gate)
-    info = np.asarray(np.linalg.inv(prior[1] + quant)) if gated else np.eye(3)
-    centre = np.asarray(prior[0], dtype=np.float64) if gated else np.zeros(3)
+    info = np.asarray(np.linalg.inv(prior[1] + quant)) if prior is not None and gated else np.eye(3)
+    centre = np.asarray(prior[0], dtype=np.float64) if prior is not None and gated else np.zeros(3)
     ii, hh, d = sd._matches(
         db.ranges, (b_idx * m).astype(np.int64), rc, float(tolerance_m), cap, db.positions, gated, centre, info,
         float(gate) if gated else 0.0, hs,
@@ -216,6 +229,7 @@ def test_compiled_match_glue_equals_numpy_form_bit_for_bit() -> None:
         want, kw = _match_scan_numpy(db, scan, tol, 4, prior=prior, gate=gate)
         assert kg == kw and (got is None) == (want is None)
         if got is not None:
+            assert want is not None
             z, cov, n, best = want
             assert np.array_equal(got.z, z) and np.array_equal(got.cov, cov)
             assert got.n_matches == n and got.best_score_m == best
