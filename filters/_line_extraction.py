@@ -134,13 +134,51 @@ def scan_points(scan: LaserScan) -> tuple[FloatArray, FloatArray, npt.NDArray[np
     beam : ndarray of int64, shape (m,)
         Their beam indices.
     """
-    r = np.asarray(scan.ranges, dtype=np.float64)
-    ok = np.isfinite(r) & (r >= scan.range_min) & (r < scan.range_max)
-    beam = np.flatnonzero(ok).astype(np.int64)
-    rr = r[beam]
     sx, sy, sth = scan.sensor_pose
-    a = scan.angle_min + scan.angle_increment * beam + sth
-    pts = np.column_stack([sx + rr * np.cos(a), sy + rr * np.sin(a)])
+    return _scan_points(
+        np.asarray(scan.ranges, dtype=np.float64),
+        float(scan.range_min),
+        float(scan.range_max),
+        float(scan.angle_min),
+        float(scan.angle_increment),
+        float(sx),
+        float(sy),
+        float(sth),
+    )
+
+
+@njit(cache=True)
+def _scan_points(
+    r: FloatArray,
+    range_min: float,
+    range_max: float,
+    angle_min: float,
+    angle_increment: float,
+    sx: float,
+    sy: float,
+    sth: float,
+) -> tuple[FloatArray, FloatArray, npt.NDArray[np.int64]]:
+    """:func:`scan_points` in one pass: the numpy form's operations per beam in its order, so the same bits
+    (angle_min + increment * beam + heading left to right; libm's cos and sin, which numpy's equal here, tested).
+    """
+    n = r.shape[0]
+    count = 0
+    for i in range(n):
+        if np.isfinite(r[i]) and r[i] >= range_min and r[i] < range_max:
+            count += 1
+    pts = np.empty((count, 2))
+    rr = np.empty(count)
+    beam = np.empty(count, dtype=np.int64)
+    j = 0
+    for i in range(n):
+        ri = r[i]
+        if np.isfinite(ri) and ri >= range_min and ri < range_max:
+            a = angle_min + angle_increment * float(i) + sth
+            pts[j, 0] = sx + ri * math.cos(a)
+            pts[j, 1] = sy + ri * math.sin(a)
+            rr[j] = ri
+            beam[j] = i
+            j += 1
     return pts, rr, beam
 
 
@@ -362,23 +400,73 @@ def extract_lines(scan: LaserScan, params: ExtractionParams | None = None) -> Ex
     )
     if ranges.shape[0] == 0:
         return empty
-    rho, psi = fits[:, 0], fits[:, 1]
-    t = np.array([(-math.sin(p), math.cos(p)) for p in psi.tolist()])  # along the line
-    nrm = np.array([(math.cos(p), math.sin(p)) for p in psi.tolist()])
-    ends_xy = pts[np.column_stack([ranges[:, 0], ranges[:, 1] - 1])]  # (k, 2, 2): first and last point
-    # their coordinates along the line (one small product per segment, as over the whole segment, to the bit)
+    t, ends_xy = _segment_ends(xs, ys, ranges, fits)
+    # their coordinates along the line (one small product per segment, as over the whole segment, to the bit):
+    # numpy's stacked matmul rounds unlike a written-out dot (tested), so it stays
     s = np.matmul(ends_xy, t[:, :, None])[:, :, 0]
-    lengths = np.abs(s[:, 1] - s[:, 0])
-    keep = ~(lengths < prm.min_length_m)
-    if not keep.any():
+    n_keep, rho_psi, cov, endpoints, lengths, n_points = _assemble(fits, ranges, s, t, prm.min_length_m)
+    if n_keep == 0:
         return empty
-    cov = np.empty((fits.shape[0], 2, 2))
-    cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 0], cov[:, 1, 1] = fits[:, 2], fits[:, 3], fits[:, 3], fits[:, 4]
-    endpoints = rho[:, None, None] * nrm[:, None, :] + s[:, :, None] * t[:, None, :]
-    return ExtractedLines(
-        rho_psi=fits[keep, :2],
-        cov=cov[keep],
-        endpoints=endpoints[keep],
-        lengths=lengths[keep],
-        n_points=(ranges[keep, 1] - ranges[keep, 0]).astype(np.int64),
-    )
+    return ExtractedLines(rho_psi=rho_psi, cov=cov, endpoints=endpoints, lengths=lengths, n_points=n_points)
+
+
+@njit(cache=True)
+def _segment_ends(
+    xs: FloatArray, ys: FloatArray, ranges: npt.NDArray[np.int64], fits: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Each segment's direction t = (-sin psi, cos psi) (k, 2) and its first and last point (k, 2, 2).
+
+    What the numpy form computed with a list of math.sin/cos and fancy indexing; libm's sin and cos, element by
+    element, so the same bits.
+    """
+    k = ranges.shape[0]
+    t = np.empty((k, 2))
+    ends = np.empty((k, 2, 2))
+    for j in range(k):
+        p = fits[j, 1]
+        t[j, 0] = -math.sin(p)
+        t[j, 1] = math.cos(p)
+        a = ranges[j, 0]
+        b = ranges[j, 1] - 1
+        ends[j, 0, 0], ends[j, 0, 1] = xs[a], ys[a]
+        ends[j, 1, 0], ends[j, 1, 1] = xs[b], ys[b]
+    return t, ends
+
+
+@njit(cache=True)
+def _assemble(
+    fits: FloatArray, ranges: npt.NDArray[np.int64], s: FloatArray, t: FloatArray, min_length: float
+) -> tuple[int, FloatArray, FloatArray, FloatArray, FloatArray, npt.NDArray[np.int64]]:
+    """The segments kept by the length check (NaN lengths kept, as ``~(lengths < min)``), as the arrays of
+    :class:`ExtractedLines`: (count, rho_psi, cov, endpoints, lengths, n_points).
+
+    Element for element the numpy form's operations (|s1 - s0|; rho n + s t with n = (cos psi, sin psi)).
+    """
+    k = ranges.shape[0]
+    n_keep = 0
+    for j in range(k):
+        if not abs(s[j, 1] - s[j, 0]) < min_length:
+            n_keep += 1
+    rho_psi = np.empty((n_keep, 2))
+    cov = np.empty((n_keep, 2, 2))
+    endpoints = np.empty((n_keep, 2, 2))
+    lengths = np.empty(n_keep)
+    n_points = np.empty(n_keep, dtype=np.int64)
+    q = 0
+    for j in range(k):
+        length = abs(s[j, 1] - s[j, 0])
+        if length < min_length:
+            continue
+        rho = fits[j, 0]
+        psi = fits[j, 1]
+        n0 = math.cos(psi)
+        n1 = math.sin(psi)
+        rho_psi[q, 0], rho_psi[q, 1] = rho, psi
+        cov[q, 0, 0], cov[q, 0, 1], cov[q, 1, 0], cov[q, 1, 1] = fits[j, 2], fits[j, 3], fits[j, 3], fits[j, 4]
+        for e in range(2):
+            endpoints[q, e, 0] = rho * n0 + s[j, e] * t[j, 0]
+            endpoints[q, e, 1] = rho * n1 + s[j, e] * t[j, 1]
+        lengths[q] = length
+        n_points[q] = ranges[j, 1] - ranges[j, 0]
+        q += 1
+    return n_keep, rho_psi, cov, endpoints, lengths, n_points

@@ -60,7 +60,7 @@ from scipy import ndimage
 from locbench.datasets.base import OccupancyGrid
 from locbench.errors import ConfigError
 from locbench.events import LaserScan
-from locbench.geometry import wrap_angle
+from locbench.geometry import TWO_PI, wrap_angle, wrap_scalar
 from locbench.limits import DATABASE_BYTES_PER_RAY, SCAN_DATABASE_BYTES_PER_CELL, check_bytes, grid_cells
 from locbench.raycast import cast_rays
 
@@ -215,6 +215,11 @@ class ScanDatabase:
     @property
     def heading_step_rad(self) -> float:
         return math.radians(self.heading_step_deg)
+
+    @functools.cached_property
+    def quantisation(self) -> FloatArray:
+        """diag(s^2 / 12, s^2 / 12, h^2 / 12): the database's quantisation covariance (module docstring), once."""
+        return np.diag([self.step_m**2 / 12.0, self.step_m**2 / 12.0, self.heading_step_rad**2 / 12.0])
 
     def __len__(self) -> int:
         """Number of (position, heading) entries."""
@@ -423,14 +428,14 @@ def match_scan(
     rc = np.minimum(np.where(np.isfinite(r), r, cap), cap)  # no return: beyond the cap
     m = db.n_headings // N_BEARINGS
     hs = db.heading_step_rad
-    quant = np.diag([db.step_m**2 / 12.0, db.step_m**2 / 12.0, hs**2 / 12.0])
+    quant = db.quantisation
     gated = prior is not None and math.isfinite(gate)
     # Gate first, then score only the entries inside the validation region (the database is tens of
     # thousands of entries, the region a few dozen).
-    info = np.eye(3)
+    info = _NO_INFO
     if prior is not None and gated:
         info = np.asarray(np.linalg.inv(prior[1] + quant), dtype=np.float64)
-    centre = np.asarray(prior[0], dtype=np.float64) if prior is not None and gated else np.zeros(3)
+    centre = np.asarray(prior[0], dtype=np.float64) if prior is not None and gated else _NO_CENTRE
     ii, hh, d = _matches(
         db.ranges,
         (b_idx * m).astype(np.int64),
@@ -445,22 +450,116 @@ def match_scan(
         hs,
     )
     if gated and ii.size:
-        # the exact gate (the compiled pre-test only has to keep everything this keeps)
-        e = np.column_stack([db.positions[ii] - centre[:2], wrap_angle(hh * hs - centre[2])])
+        # the exact gate (the compiled pre-test only has to keep everything this keeps); the product and einsum
+        # stay numpy calls (BLAS rounds a 3-term row unlike a written-out sum), the rest is compiled elementwise
+        e = _gate_offsets(db.positions, ii, hh, hs, centre)
         inside = np.einsum("ij,ij->i", e @ info, e) <= gate
-        ii, hh, d = ii[inside], hh[inside], d[inside]
+        ii, hh, d = _keep(ii, hh, d, inside)
     if ii.size == 0:
         return None, k
-    best = int(np.argmin(d))
-    w = 1.0 - d / tolerance_m if tolerance_m > 0 else np.ones_like(d)
-    if not np.sum(w) > 0:
+    best, w, xy, th = _weights(ii, hh, d, db.positions, hs, float(tolerance_m))
+    sw = np.sum(w)  # numpy's pairwise order; one sum serves the test and the division (the same value)
+    if not sw > 0:
         w = np.ones_like(d)
-    w = w / np.sum(w)
-    th = hh * hs
-    dth = wrap_angle(th - th[best])
-    xy = db.positions[ii]
-    z = np.array([w @ xy[:, 0], w @ xy[:, 1], float(wrap_angle(th[best] + w @ dth))])
-    dev = np.column_stack([xy[:, 0] - z[0], xy[:, 1] - z[1], wrap_angle(th - z[2])])
-    cov = (dev * w[:, None]).T @ dev + quant
+        sw = np.sum(w)
+    w, dth = _normalised(w, sw, th, best)
+    # the three weighted means are BLAS dots (a strided one for the columns of xy), as before
+    z = np.array([w @ xy[:, 0], w @ xy[:, 1], wrap_scalar(float(th[best] + w @ dth))])
+    dev, wdev = _deviations(xy, th, w, z[0], z[1], z[2])
+    cov = wdev.T @ dev + quant
     cov = 0.5 * (cov + cov.T)
     return ScanMatch(z=z, cov=cov, n_matches=int(ii.size), best_score_m=float(d[best]), n_bearings=k), k
+
+
+# The ungated call's unused region (read only by the compiled pre-test when gated).
+_NO_INFO = np.eye(3)
+_NO_CENTRE = np.zeros(3)
+
+
+@njit(cache=True)
+def _wrap(a: float) -> float:
+    # geometry.wrap_angle's pi - mod(pi - a, 2 pi); numba's float % has Python's (and numpy's) sign rule
+    return math.pi - ((math.pi - a) % TWO_PI)
+
+
+@njit(cache=True)
+def _gate_offsets(positions: FloatArray, ii: IntArray, hh: IntArray, hs: float, centre: FloatArray) -> FloatArray:
+    """e = (x_i - cx, y_i - cy, wrap(h hs - ctheta)) per match, (n, 3): the numpy column_stack's elements."""
+    n = ii.shape[0]
+    e = np.empty((n, 3))
+    for j in range(n):
+        e[j, 0] = positions[ii[j], 0] - centre[0]
+        e[j, 1] = positions[ii[j], 1] - centre[1]
+        e[j, 2] = _wrap(float(hh[j]) * hs - centre[2])
+    return e
+
+
+@njit(cache=True)
+def _keep(
+    ii: IntArray, hh: IntArray, d: FloatArray, inside: npt.NDArray[np.bool_]
+) -> tuple[IntArray, IntArray, FloatArray]:
+    """ii[inside], hh[inside], d[inside]."""
+    n = 0
+    for j in range(inside.shape[0]):
+        if inside[j]:
+            n += 1
+    oi = np.empty(n, dtype=np.int64)
+    oh = np.empty(n, dtype=np.int64)
+    od = np.empty(n)
+    q = 0
+    for j in range(inside.shape[0]):
+        if inside[j]:
+            oi[q], oh[q], od[q] = ii[j], hh[j], d[j]
+            q += 1
+    return oi, oh, od
+
+
+@njit(cache=True)
+def _weights(
+    ii: IntArray, hh: IntArray, d: FloatArray, positions: FloatArray, hs: float, tol: float
+) -> tuple[int, FloatArray, FloatArray, FloatArray]:
+    """(argmin d (the first), w = 1 - d / tol or ones when tol <= 0, positions[ii] (n, 2), hh * hs)."""
+    n = d.shape[0]
+    best = 0
+    for j in range(1, n):
+        if d[j] < d[best]:
+            best = j
+    w = np.empty(n)
+    xy = np.empty((n, 2))
+    th = np.empty(n)
+    for j in range(n):
+        w[j] = 1.0 - d[j] / tol if tol > 0 else 1.0
+        xy[j, 0] = positions[ii[j], 0]
+        xy[j, 1] = positions[ii[j], 1]
+        th[j] = float(hh[j]) * hs
+    return best, w, xy, th
+
+
+@njit(cache=True)
+def _normalised(w: FloatArray, sw: float, th: FloatArray, best: int) -> tuple[FloatArray, FloatArray]:
+    """(w / sw, wrap(th - th[best]))."""
+    n = w.shape[0]
+    wn = np.empty(n)
+    dth = np.empty(n)
+    for j in range(n):
+        wn[j] = w[j] / sw
+        dth[j] = _wrap(th[j] - th[best])
+    return wn, dth
+
+
+@njit(cache=True)
+def _deviations(
+    xy: FloatArray, th: FloatArray, w: FloatArray, z0: float, z1: float, z2: float
+) -> tuple[FloatArray, FloatArray]:
+    """dev = (x - z0, y - z1, wrap(th - z2)) (n, 3) and dev * w[:, None], elementwise as numpy's."""
+    n = w.shape[0]
+    dev = np.empty((n, 3))
+    wdev = np.empty((n, 3))
+    for j in range(n):
+        dev[j, 0] = xy[j, 0] - z0
+        dev[j, 1] = xy[j, 1] - z1
+        dev[j, 2] = _wrap(th[j] - z2)
+        wdev[j, 0] = dev[j, 0] * w[j]
+        wdev[j, 1] = dev[j, 1] * w[j]
+        wdev[j, 2] = dev[j, 2] * w[j]
+    return dev, wdev

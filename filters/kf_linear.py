@@ -41,8 +41,11 @@ A scan with no database entry within the tolerance (and, by default, inside a ch
 region of the predicted belief, see ``gate_probability``) gives no update and is counted (``no_match``).
 PoseFix events are **not** consumed: report 004's filter fuses only its velocity and sensor models.
 
-filterpy 2.0.0's ``KalmanFilter`` does the algebra; measurements are passed as (3, 1) columns (its
-``update(z, H=...)`` no longer reshapes a 1-D z).
+The algebra is filterpy 2.0.0's ``KalmanFilter.predict``/``update`` (measurements as (3, 1) columns) written
+out for F = H = I: the products with I that filterpy forms are exact and are left out, every other product,
+the inverse and the solve are the same numpy (BLAS/LAPACK) calls on the same shapes, so the numbers are
+filterpy's bit for bit (``tests/test_kf_linear.py`` checks both steps against ``KalmanFilter``). The commanded
+prediction x + B u is done in floats: with B's zero entries, each component of B u is one product.
 """
 
 from __future__ import annotations
@@ -54,7 +57,6 @@ from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
-from filterpy.kalman import KalmanFilter
 from scipy.stats import chi2
 
 from locbench.datasets.base import Gaussian2, MapKind, SensorSpec, WorldMap
@@ -68,6 +70,20 @@ from locbench.tunable import tunable
 
 FloatArray = npt.NDArray[np.float64]
 logger = logging.getLogger(__name__)
+
+_NAN = float("nan")
+#: The diagnostics after a predict (``no_match`` filled in per call); copied, the order is the stored one.
+_EMPTY_DIAG: dict[str, float] = {
+    "nis": _NAN,
+    "accepted": 0.0,
+    "rejected": 0.0,
+    "n_matches": _NAN,
+    "match_score_m": _NAN,
+    "no_match": 0.0,
+    "linear_input": _NAN,
+}
+#: filterpy's ``_I`` of ``I - K H`` (H = I, so K H = K exactly).
+_I3 = np.eye(3)
 
 #: Laser range noise assumed for the default tolerance when the dataset gives none, m.
 DEFAULT_LASER_SIGMA_M = 0.01
@@ -188,43 +204,30 @@ class LinearKF(Filter):
         p = cfg.gate_probability
         self._gate = math.inf if p >= 1.0 else float(chi2.ppf(p, 3))
         self._sig = (noise.sigma_xy_per_m, noise.sigma_theta_per_m, noise.sigma_theta_per_rad)
-        kf = KalmanFilter(dim_x=3, dim_z=3)
-        kf.x = np.asarray(initial.mean, dtype=np.float64).reshape(3, 1).copy()
-        kf.x[2, 0] = wrap_scalar(float(kf.x[2, 0]))
-        kf.P = np.asarray(initial.cov, dtype=np.float64).copy()
-        kf.F = np.eye(3)
-        kf.H = np.eye(3)
-        self._kf = kf
+        x = np.asarray(initial.mean, dtype=np.float64).reshape(3, 1).copy()
+        x[2, 0] = wrap_scalar(float(x[2, 0]))
+        self._x: FloatArray = x  # (3, 1), filterpy's layout; replaced, never written in place, after reset
+        self._P: FloatArray = np.asarray(initial.cov, dtype=np.float64).copy()
         self._t = 0.0
         self._no_match = 0
         self._diag: dict[str, float] = self._empty_diag()
         logger.debug("LinearKF: %d database entries, tolerance %.3f m", len(self._db), self._tol)
 
     def _empty_diag(self) -> dict[str, float]:
-        nan = float("nan")
-        return {
-            "nis": nan,
-            "accepted": 0.0,
-            "rejected": 0.0,
-            "n_matches": nan,
-            "match_score_m": nan,
-            "no_match": float(getattr(self, "_no_match", 0)),
-            "linear_input": nan,
-        }
+        d = dict(_EMPTY_DIAG)
+        d["no_match"] = float(getattr(self, "_no_match", 0))
+        return d
 
     # --- predict ---------------------------------------------------------------------------------
 
     def predict(self, u: Odometry) -> None:
         """Linear prediction x = x + B u with the estimated heading frozen in B; P = P + Q (F = I)."""
-        kf = self._kf
-        th = float(kf.x[2, 0])
+        x0, x1, th = self._x[:, 0].tolist()
         c, s = math.cos(th), math.sin(th)
         use_cmd = self.config.use_commands and u.v is not None and u.omega is not None and u.dt is not None
         if use_cmd:
-            dt = float(u.dt)  # type: ignore[arg-type]
-            B = np.array([[c * dt, 0.0], [s * dt, 0.0], [0.0, dt]])
-            uu = np.array([[float(u.v)], [float(u.omega)]])  # type: ignore[arg-type]
-            dist, turn = abs(float(u.v)) * dt, abs(float(u.omega)) * dt  # type: ignore[arg-type]
+            dt, v, om = float(u.dt), float(u.v), float(u.omega)  # type: ignore[arg-type]
+            dist, turn = abs(v) * dt, abs(om) * dt
         else:
             B = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
             uu = np.array([[u.dx], [u.dy], [u.dtheta]])
@@ -232,15 +235,24 @@ class LinearKF(Filter):
         sxy, stm, str_ = self._sig
         var_xy, var_th = increment_variances(dist, 0.0, turn, sxy, stm, str_)
         cfg = self.config
-        Q = np.diag(
+        q_xy = var_xy + cfg.sigma_floor_xy_m**2
+        q_th = var_th + cfg.sigma_floor_theta_rad**2
+        # filterpy: x = F x + B u, P = alpha^2 (F P F^T) + Q with F = I and alpha = 1 (both exact), so x + B u, P + Q
+        if use_cmd:
+            # B = [[c dt, 0], [s dt, 0], [0, dt]]: each row of B u has one nonzero product
+            x_new = [x0 + (c * dt) * v, x1 + (s * dt) * v, wrap_scalar(th + dt * om)]
+        else:
+            x_new = (self._x + np.dot(B, uu))[:, 0].tolist()  # three-term rows: BLAS's rounding kept
+            x_new[2] = wrap_scalar(x_new[2])
+        P = self._P.tolist()
+        self._x = np.array([[x_new[0]], [x_new[1]], [x_new[2]]])
+        self._P = np.array(
             [
-                var_xy + cfg.sigma_floor_xy_m**2,
-                var_xy + cfg.sigma_floor_xy_m**2,
-                var_th + cfg.sigma_floor_theta_rad**2,
+                [P[0][0] + q_xy, P[0][1] + 0.0, P[0][2] + 0.0],
+                [P[1][0] + 0.0, P[1][1] + q_xy, P[1][2] + 0.0],
+                [P[2][0] + 0.0, P[2][1] + 0.0, P[2][2] + q_th],
             ]
         )
-        kf.predict(u=uu, B=B, F=np.eye(3), Q=Q)
-        kf.x[2, 0] = wrap_scalar(float(kf.x[2, 0]))
         self._check_finite(u.t)
         self._t = u.t
         self._diag = self._empty_diag()
@@ -254,22 +266,32 @@ class LinearKF(Filter):
         assert isinstance(z, LaserScan)
         self._t = z.t
         self._diag = self._empty_diag()
-        kf = self._kf
-        prior = (kf.x.reshape(3).copy(), np.asarray(kf.P, dtype=np.float64))
-        match, _ = match_scan(self._db, z, self._tol, self.config.min_bearings, prior=prior, gate=self._gate)
+        x, P = self._x, self._P
+        match, _ = match_scan(
+            self._db, z, self._tol, self.config.min_bearings, prior=(x.reshape(3), P), gate=self._gate
+        )
         if match is None:
             self._no_match += 1
             self._diag.update(rejected=1.0, no_match=float(self._no_match))
             return
-        zc = match.z.reshape(3, 1).copy()
+        x0, x1, th = x[:, 0].tolist()
+        z0, z1, zt = match.z.tolist()
         # filterpy forms y = z - H x without wrapping: put z's heading within pi of the estimate's.
-        zc[2, 0] = float(kf.x[2, 0]) + wrap_scalar(float(zc[2, 0] - kf.x[2, 0]))
-        kf.update(zc, R=match.cov, H=np.eye(3))
-        kf.x[2, 0] = wrap_scalar(float(kf.x[2, 0]))
-        kf.P = 0.5 * (kf.P + kf.P.T)
+        zt = th + wrap_scalar(zt - th)
+        R = match.cov
+        # filterpy's update with H = I (P H^T = P, H P H^T = P, K H = K exactly); the same numpy calls otherwise
+        y = np.array([[z0 - x0], [z1 - x1], [zt - th]])
+        S = P + R
+        K = np.dot(P, np.linalg.inv(S))
+        x_new = x + np.dot(K, y)
+        I_KH = _I3 - K
+        P_new = np.dot(np.dot(I_KH, P), I_KH.T) + np.dot(np.dot(K, R), K.T)
+        x_new[2, 0] = wrap_scalar(float(x_new[2, 0]))
+        self._x = x_new
+        self._P = 0.5 * (P_new + P_new.T)
         self._check_finite(z.t)
-        y = np.asarray(kf.y, dtype=np.float64).reshape(3)
-        nis = float(y @ np.linalg.solve(np.asarray(kf.S, dtype=np.float64), y))
+        yv = y.reshape(3)
+        nis = float(yv @ np.linalg.solve(S, yv))
         self._diag.update(
             nis=nis,
             accepted=1.0,
@@ -278,16 +300,15 @@ class LinearKF(Filter):
         )
 
     def _check_finite(self, t: float) -> None:
-        if not (np.all(np.isfinite(self._kf.x)) and np.all(np.isfinite(self._kf.P))):
+        # math.isfinite over the 12 floats: the verdict of np.all(np.isfinite(...)) without two reductions
+        if not all(map(math.isfinite, self._x[:, 0].tolist() + self._P.ravel().tolist())):
             raise FilterDiverged(f"LinearKF: non-finite state at t={t:.3f} s")
 
     # --- output ----------------------------------------------------------------------------------
 
     def estimate(self) -> Estimate:
         """Current mean (x, y, theta) and covariance."""
-        kf = self._kf
-        cov = np.array(kf.P, dtype=np.float64)
-        return Estimate(t=self._t, mean=kf.x.reshape(3).copy(), cov=cov, diagnostics=dict(self._diag))
+        return Estimate(t=self._t, mean=self._x.reshape(3).copy(), cov=self._P.copy(), diagnostics=dict(self._diag))
 
     def extra_results(self) -> dict[str, Any]:
         """The number of scans without a database match and the database size."""

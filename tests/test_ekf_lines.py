@@ -178,3 +178,75 @@ def test_localizes_on_line_room() -> None:
     idx = np.clip(np.searchsorted(tr.t, ds.ground_truth.t, side="right") - 1, 0, tr.t.size - 1)
     err = tr.mean[idx, :2] - ds.ground_truth.xy
     assert float(np.sqrt(np.mean(np.sum(err**2, axis=1)))) < 0.05
+
+
+def test_joseph_correct_without_likelihood_equals_kalman_core_bit_for_bit() -> None:
+    from locbench.filters._kalman import joseph_correct
+    from locbench.filters.ekf_lines import _joseph_correct
+
+    rng = np.random.default_rng(2)
+    for _ in range(200):
+        a = rng.normal(size=(3, 3))
+        P = a @ a.T + 1e-4 * np.eye(3)
+        k = int(rng.integers(1, 6))
+        H = rng.normal(size=(2 * k, 3))
+        b = rng.normal(size=(2 * k, 2 * k)) * 0.1
+        R = b @ b.T + 1e-3 * np.eye(2 * k)
+        x, y = rng.normal(size=3), rng.normal(size=2 * k)
+        want = joseph_correct(x, P, y, H, R)
+        xn, Pn, nis = _joseph_correct(x, P, y, H, R)
+        assert np.array_equal(xn, want.x) and np.array_equal(Pn, want.P) and nis == want.nis
+
+
+def test_scalar_finite_check_matches_numpy_verdict() -> None:
+    from locbench.errors import FilterDiverged
+
+    f = LineEKF(LineEKFConfig())
+    for bad in (math.nan, math.inf, -math.inf):
+        for i in range(12):
+            x, P = np.ones(3), np.eye(3)
+            (x if i < 3 else P).ravel()[i if i < 3 else i - 3] = bad
+            f._x, f._P = x, P
+            with pytest.raises(FilterDiverged):
+                f._check_finite(0.0)
+    f._x, f._P = np.ones(3), np.eye(3)
+    f._check_finite(0.0)
+
+
+def test_compiled_stack_equals_python_loop_bit_for_bit() -> None:
+    # the compiled H, v, R of the accepted lines against the plain-float Python loop it replaced
+    from locbench.filters.ekf_lines import _accept, _stack
+    from locbench.geometry import wrap_scalar
+
+    rng = np.random.default_rng(8)
+    for _ in range(200):
+        n, k = int(rng.integers(1, 30)), int(rng.integers(1, 10))
+        rho_w, psi_w = rng.uniform(0, 10, n), rng.uniform(-math.pi, math.pi, n)
+        cos_w, sin_w = np.cos(psi_w), np.sin(psi_w)
+        z = np.column_stack([rng.uniform(0, 10, k), rng.uniform(-math.pi, math.pi, k)])
+        a = rng.normal(size=(k, 2, 2)) * 0.01
+        cov = a @ np.transpose(a, (0, 2, 1))
+        R0 = np.diag(rng.uniform(1e-4, 1e-2, 2))
+        best = rng.integers(0, n, k).astype(np.int64)
+        sign = np.where(rng.random(k) < 0.3, -1.0, 1.0)
+        d2 = rng.uniform(0, 10, k)
+        d2[rng.random(k) < 0.1] = np.nan
+        lengths, len_w = rng.uniform(0, 3, k), rng.uniform(0, 3, n)
+        px, py, pth = rng.normal(size=3)
+        acc, rg, rl = _accept(best, d2, lengths, len_w, 5.99, True, 0.3)
+        want_acc = [j for j in range(k) if d2[j] <= 5.99 and not lengths[j] > len_w[best[j]] + 0.3]
+        assert acc.tolist() == want_acc and rg == int(np.sum(~(d2 <= 5.99))) and rg + rl + len(acc) == k
+        H, v, R = _stack(acc, best, sign, rho_w, psi_w, cos_w, sin_w, z, cov, R0, px, py, pth)
+        m = len(want_acc)
+        H0, v0, Rr = np.zeros((2 * m, 3)), np.zeros(2 * m), np.zeros((2 * m, 2 * m))
+        zl, R_lines = z.tolist(), cov + R0
+        for r, j in enumerate(want_acc):
+            i, sg = int(best[j]), float(sign[j])
+            pw = float(psi_w[i])
+            H0[2 * r, 0], H0[2 * r, 1], H0[2 * r + 1, 2] = -sg * math.cos(pw), -sg * math.sin(pw), -1.0
+            rho_p = float(rho_w[i]) - (px * float(cos_w[i]) + py * float(sin_w[i]))
+            h_psi = wrap_scalar(pw - pth) + (math.pi if sg < 0 else 0.0)
+            v0[2 * r] = zl[j][0] - sg * rho_p
+            v0[2 * r + 1] = wrap_scalar(zl[j][1] - h_psi)
+            Rr[2 * r : 2 * r + 2, 2 * r : 2 * r + 2] = R_lines[j]
+        assert np.array_equal(H, H0) and np.array_equal(v, v0) and np.array_equal(R, Rr)

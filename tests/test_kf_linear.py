@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -10,7 +11,7 @@ import pytest
 pytest.importorskip("filterpy")
 
 from locbench.datasets.base import Gaussian2, SensorSpec
-from locbench.errors import ConfigError
+from locbench.errors import ConfigError, FilterDiverged
 from locbench.events import LandmarkObservations, LaserScan, Odometry
 from locbench.filters.kf_linear import LinearKF, LinearKFConfig
 from locbench.geometry import pose_error
@@ -107,3 +108,92 @@ def test_localizes_on_scan_grid_far_below_odometry() -> None:
 def test_bad_config(cfg: dict[str, float]) -> None:
     with pytest.raises(ConfigError):
         LinearKFConfig(**cfg)  # type: ignore[arg-type]
+
+
+def _filterpy_reference(x: np.ndarray, P: np.ndarray) -> Any:
+    from filterpy.kalman import KalmanFilter
+
+    kf = KalmanFilter(dim_x=3, dim_z=3)
+    kf.x = x.reshape(3, 1).copy()
+    kf.P = P.copy()
+    return kf
+
+
+def _random_belief(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    a = rng.normal(size=(3, 3)) * rng.uniform(0.01, 1.0)
+    x = rng.normal(size=3) * 5.0
+    x[2] = math.remainder(x[2], 2 * math.pi)
+    return x, a @ a.T + 1e-6 * np.eye(3)
+
+
+def test_predict_equals_filterpy_bit_for_bit() -> None:
+    # the written-out predict (F = I, B u in floats) against filterpy's KalmanFilter.predict, commands and increments
+    from locbench.geometry import wrap_scalar
+
+    rng = np.random.default_rng(7)
+    f = _reset_filter()
+    for k in range(300):
+        x, P = _random_belief(rng)
+        f._x, f._P = x.reshape(3, 1).copy(), P.copy()
+        kf = _filterpy_reference(x, P)
+        v, om, dt = rng.normal() * (k % 3 != 0), rng.normal() * (k % 4 != 0), rng.uniform(0.01, 0.5)
+        dx, dy, dth = rng.normal(size=3) * 0.1
+        cmd = k % 2 == 0
+        u = Odometry(t=1.0, dx=dx, dy=dy, dtheta=dth, v=v if cmd else None, omega=om if cmd else None, dt=dt)
+        f.predict(u)
+        c, s = math.cos(x[2]), math.sin(x[2])
+        if cmd:
+            B, uu = np.array([[c * dt, 0.0], [s * dt, 0.0], [0.0, dt]]), np.array([[v], [om]])
+        else:
+            B, uu = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), np.array([[dx], [dy], [dth]])
+        dist, turn = (abs(v) * dt, abs(om) * dt) if cmd else (math.hypot(dx, dy), abs(dth))
+        from locbench.filters._motion import increment_variances
+
+        vxy, vth = increment_variances(dist, 0.0, turn, *f._sig)
+        cfg = f.config
+        Q = np.diag([vxy + cfg.sigma_floor_xy_m**2, vxy + cfg.sigma_floor_xy_m**2, vth + cfg.sigma_floor_theta_rad**2])
+        kf.predict(u=uu, B=B, F=np.eye(3), Q=Q)
+        kf.x[2, 0] = wrap_scalar(float(kf.x[2, 0]))
+        assert np.array_equal(f._x, kf.x) and np.array_equal(f._P, kf.P)
+
+
+def test_update_algebra_equals_filterpy_bit_for_bit(monkeypatch: pytest.MonkeyPatch) -> None:
+    # the written-out update (H = I) against filterpy's KalmanFilter.update on random beliefs and pose fixes
+    import locbench.filters.kf_linear as kfl
+    from locbench.filters._scan_database import ScanMatch
+    from locbench.geometry import wrap_scalar
+
+    rng = np.random.default_rng(11)
+    f = _reset_filter()
+    scan = LaserScan(
+        t=2.0, angle_min=0.0, angle_increment=math.pi / 4, ranges=np.ones(8), range_min=0.0, range_max=10.0
+    )
+    for _ in range(300):
+        x, P = _random_belief(rng)
+        zx, R = _random_belief(rng)
+        m = ScanMatch(z=zx, cov=R, n_matches=3, best_score_m=0.01, n_bearings=8)
+        monkeypatch.setattr(kfl, "match_scan", lambda *a, m=m, **k: (m, 8))
+        f._x, f._P = x.reshape(3, 1).copy(), P.copy()
+        f.update(scan)
+        kf = _filterpy_reference(x, P)
+        zc = zx.reshape(3, 1).copy()
+        zc[2, 0] = float(kf.x[2, 0]) + wrap_scalar(float(zc[2, 0] - kf.x[2, 0]))
+        kf.update(zc, R=R, H=np.eye(3))
+        kf.x[2, 0] = wrap_scalar(float(kf.x[2, 0]))
+        kf.P = 0.5 * (kf.P + kf.P.T)
+        y = np.asarray(kf.y).reshape(3)
+        assert np.array_equal(f._x, kf.x) and np.array_equal(f._P, kf.P)
+        assert f.estimate().diagnostics["nis"] == float(y @ np.linalg.solve(kf.S, y))
+
+
+def test_finite_check_matches_numpy_verdict() -> None:
+    f = _reset_filter()
+    for bad in (math.nan, math.inf, -math.inf):
+        for i in range(12):
+            x, P = np.ones((3, 1)), np.eye(3)
+            (x if i < 3 else P).ravel()[i if i < 3 else i - 3] = bad
+            f._x, f._P = x, P
+            with pytest.raises(FilterDiverged):
+                f._check_finite(0.0)
+    f._x, f._P = np.ones((3, 1)), np.eye(3)
+    f._check_finite(0.0)

@@ -125,3 +125,87 @@ def test_noise_does_not_shatter_a_wall() -> None:
 def test_bad_params_raise(kwargs: dict[str, float]) -> None:
     with pytest.raises(ConfigError):
         ExtractionParams(**kwargs)  # type: ignore[arg-type]
+
+
+def _scan_points_numpy(scan: LaserScan) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    # the numpy form that the compiled scan_points replaced
+    r = np.asarray(scan.ranges, dtype=np.float64)
+    ok = np.isfinite(r) & (r >= scan.range_min) & (r < scan.range_max)
+    beam = np.flatnonzero(ok).astype(np.int64)
+    rr = r[beam]
+    sx, sy, sth = scan.sensor_pose
+    a = scan.angle_min + scan.angle_increment * beam + sth
+    return np.column_stack([sx + rr * np.cos(a), sy + rr * np.sin(a)]), rr, beam
+
+
+def _extract_tail_numpy(
+    pts: np.ndarray, ranges: np.ndarray, fits: np.ndarray, min_length: float
+) -> tuple[np.ndarray, ...]:
+    # the numpy form of extract_lines after the compiled segments, which _segment_ends and _assemble replaced
+    rho, psi = fits[:, 0], fits[:, 1]
+    t = np.array([(-math.sin(p), math.cos(p)) for p in psi.tolist()])
+    nrm = np.array([(math.cos(p), math.sin(p)) for p in psi.tolist()])
+    ends_xy = pts[np.column_stack([ranges[:, 0], ranges[:, 1] - 1])]
+    s = np.matmul(ends_xy, t[:, :, None])[:, :, 0]
+    lengths = np.abs(s[:, 1] - s[:, 0])
+    keep = ~(lengths < min_length)
+    cov = np.empty((fits.shape[0], 2, 2))
+    cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 0], cov[:, 1, 1] = fits[:, 2], fits[:, 3], fits[:, 3], fits[:, 4]
+    endpoints = rho[:, None, None] * nrm[:, None, :] + s[:, :, None] * t[:, None, :]
+    return fits[keep, :2], cov[keep], endpoints[keep], lengths[keep], (ranges[keep, 1] - ranges[keep, 0])
+
+
+def _random_scan(rng: np.random.Generator) -> LaserScan:
+    n = int(rng.integers(1, 400))
+    r = rng.uniform(0.0, 12.0, n)
+    r[rng.random(n) < 0.1] = np.inf
+    r[rng.random(n) < 0.02] = np.nan
+    return LaserScan(
+        t=0.0,
+        angle_min=float(rng.uniform(-math.pi, 0.0)),
+        angle_increment=float(rng.uniform(1e-3, 0.05)) * (1 if rng.random() < 0.8 else -1),
+        ranges=r,
+        range_min=float(rng.uniform(0.0, 0.5)),
+        range_max=float(rng.uniform(5.0, 12.0)),
+        sensor_pose=(float(rng.normal() * 0.1), float(rng.normal() * 0.1), float(rng.uniform(-math.pi, math.pi))),
+    )
+
+
+def test_compiled_scan_points_equal_numpy_form_bit_for_bit() -> None:
+    from locbench.filters._line_extraction import scan_points
+
+    rng = np.random.default_rng(3)
+    for _ in range(300):
+        scan = _random_scan(rng)
+        got, want = scan_points(scan), _scan_points_numpy(scan)
+        for g, w in zip(got, want, strict=True):
+            assert g.dtype == w.dtype and g.shape == w.shape and np.array_equal(g, w)
+
+
+def test_compiled_extraction_tail_equals_numpy_form_bit_for_bit() -> None:
+    from locbench.filters import _line_extraction as le
+
+    rng = np.random.default_rng(5)
+    checked = 0
+    for _ in range(200):
+        scan = _random_scan(rng)
+        pts, _, _ = le.scan_points(scan)
+        m = pts.shape[0]
+        if m < 4:
+            continue
+        cuts = np.sort(rng.choice(np.arange(1, m), size=min(m - 1, int(rng.integers(1, 8))), replace=False))
+        lo = np.concatenate([[0], cuts])
+        ranges = np.column_stack([lo, np.concatenate([cuts, [m]])]).astype(np.int64)
+        k = ranges.shape[0]
+        fits = np.column_stack([rng.uniform(0, 5, k), rng.uniform(-math.pi, math.pi, k), rng.random((k, 3))])
+        xs, ys = np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1])
+        t, ends = le._segment_ends(xs, ys, ranges, fits)
+        s = np.matmul(ends, t[:, :, None])[:, :, 0]
+        min_length = float(rng.uniform(0.0, 1.0))
+        n_keep, *got = le._assemble(fits, ranges, s, t, min_length)
+        want = _extract_tail_numpy(pts, ranges, fits, min_length)
+        assert n_keep == want[0].shape[0]
+        for g, w in zip(got, want, strict=True):
+            assert g.dtype == w.dtype and g.shape == w.shape and np.array_equal(g, w)
+        checked += n_keep
+    assert checked > 100

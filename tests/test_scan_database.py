@@ -10,7 +10,13 @@ import pytest
 from locbench.datasets.base import OccupancyGrid
 from locbench.errors import ConfigError
 from locbench.events import LaserScan
-from locbench.filters._scan_database import N_BEARINGS, build_database, match_scan, scan_bearing_ranges
+from locbench.filters._scan_database import (
+    N_BEARINGS,
+    ScanDatabase,
+    build_database,
+    match_scan,
+    scan_bearing_ranges,
+)
 from locbench.raycast import cast_rays
 
 
@@ -149,3 +155,95 @@ def test_gate_first_matching_equals_scoring_everything_then_gating(spread: float
         w = 1.0 - d / 0.15
         z_xy = (w / w.sum()) @ db.positions[ii]
         np.testing.assert_allclose(m.z[:2], z_xy, atol=1e-9)
+
+
+def _match_scan_numpy(
+    db: ScanDatabase,
+    scan: LaserScan,
+    tolerance_m: float,
+    min_bearings: int = 4,
+    prior: tuple[np.ndarray, np.ndarray] | None = None,
+    gate: float = math.inf,
+) -> tuple[tuple[np.ndarray, np.ndarray, int, float] | None, int]:
+    # the numpy form of match_scan's glue around the compiled _matches (before its tail was compiled)
+    from locbench.filters import _scan_database as sd
+    from locbench.geometry import wrap_angle
+
+    b_idx, r = scan_bearing_ranges(scan)
+    k = int(b_idx.shape[0])
+    if k < min_bearings:
+        return None, k
+    cap = min(float(scan.range_max), db.max_range_m)
+    rc = np.minimum(np.where(np.isfinite(r), r, cap), cap)
+    m = db.n_headings // N_BEARINGS
+    hs = db.heading_step_rad
+    quant = np.diag([db.step_m**2 / 12.0, db.step_m**2 / 12.0, hs**2 / 12.0])
+    gated = prior is not None and math.isfinite(gate)
+    info = np.asarray(np.linalg.inv(prior[1] + quant)) if prior is not None and gated else np.eye(3)
+    centre = np.asarray(prior[0], dtype=np.float64) if prior is not None and gated else np.zeros(3)
+    ii, hh, d = sd._matches(
+        db.ranges, (b_idx * m).astype(np.int64), rc, float(tolerance_m), cap, db.positions, gated, centre, info,
+        float(gate) if gated else 0.0, hs,
+    )  # fmt: skip
+    if gated and ii.size:
+        e = np.column_stack([db.positions[ii] - centre[:2], wrap_angle(hh * hs - centre[2])])
+        inside = np.einsum("ij,ij->i", e @ info, e) <= gate
+        ii, hh, d = ii[inside], hh[inside], d[inside]
+    if ii.size == 0:
+        return None, k
+    best = int(np.argmin(d))
+    w = 1.0 - d / tolerance_m if tolerance_m > 0 else np.ones_like(d)
+    if not np.sum(w) > 0:
+        w = np.ones_like(d)
+    w = w / np.sum(w)
+    th = hh * hs
+    dth = wrap_angle(th - th[best])
+    xy = db.positions[ii]
+    z = np.array([w @ xy[:, 0], w @ xy[:, 1], float(wrap_angle(th[best] + w @ dth))])
+    dev = np.column_stack([xy[:, 0] - z[0], xy[:, 1] - z[1], wrap_angle(th - z[2])])
+    cov = (dev * w[:, None]).T @ dev + quant
+    return (z, 0.5 * (cov + cov.T), int(ii.size), float(d[best])), k
+
+
+def test_compiled_match_glue_equals_numpy_form_bit_for_bit() -> None:
+    # match_scan's compiled offsets, selection, weights and deviations against the numpy form, gated and not,
+    # on noisy scans at random poses with random priors (many matches each, loose tolerances included)
+    grid = _room()
+    db = build_database(grid, 0.25, 5.0, 8.0, 0.2)
+    rng = np.random.default_rng(9)
+    compared = 0
+    for _ in range(150):
+        pose = np.array([rng.uniform(0.4, 3.4), rng.uniform(0.4, 2.4), rng.uniform(-math.pi, math.pi)])
+        scan = _scan(
+            grid, pose, beams=int(rng.choice([181, 361])), fov=float(rng.choice([math.pi * 4 / 3, 2 * math.pi]))
+        )
+        scan = LaserScan(
+            t=0.0, angle_min=scan.angle_min, angle_increment=scan.angle_increment,
+            ranges=scan.ranges + rng.normal(0, 0.02, scan.ranges.shape), range_min=0.0, range_max=8.0,
+        )  # fmt: skip
+        a = rng.normal(size=(3, 3)) * rng.uniform(0.05, 1.0)
+        prior = (pose + rng.normal(0, 0.2, 3), a @ a.T + 1e-3 * np.eye(3))
+        tol = float(rng.choice([0.0, 0.1, 0.3, 0.6]))
+        gate = float(rng.choice([math.inf, 16.27, 100.0]))
+        got, kg = match_scan(db, scan, tol, 4, prior=prior, gate=gate)
+        want, kw = _match_scan_numpy(db, scan, tol, 4, prior=prior, gate=gate)
+        assert kg == kw and (got is None) == (want is None)
+        if got is not None:
+            assert want is not None
+            z, cov, n, best = want
+            assert np.array_equal(got.z, z) and np.array_equal(got.cov, cov)
+            assert got.n_matches == n and got.best_score_m == best
+            compared += n > 1
+    assert compared > 50
+
+
+def test_compiled_wrap_equals_wrap_angle_bit_for_bit() -> None:
+    from locbench.filters._scan_database import _wrap
+    from locbench.geometry import wrap_angle
+
+    rng = np.random.default_rng(4)
+    a = np.concatenate(
+        [rng.uniform(-20, 20, 5000), np.arange(-8, 9) * math.pi, np.arange(-72, 73) * math.radians(5.0), [0.0, -0.0]]
+    )
+    got = np.array([_wrap(float(v)) for v in a])
+    assert np.array_equal(got, wrap_angle(a)) and np.array_equal(np.signbit(got), np.signbit(wrap_angle(a)))
