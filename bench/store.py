@@ -315,18 +315,27 @@ class Store:
         """
         marker = self.root / MARKER
         if marker.is_file():
+            _makedirs(self.runs)  # a concurrent claimer may not have made it yet
             return
         if self.root.exists() and not self.root.is_dir():
             raise NotADirectoryError(errno.ENOTDIR, os.strerror(errno.ENOTDIR), str(self.root))
-        if self.root.is_dir() and any(self.root.iterdir()):
+        # The mark is the first thing written into a new folder, so another locbench process claiming the same
+        # folder at once (the tuned suite's studies share results/tuning) has written it before anything else:
+        # a folder seen non-empty is ours if the mark is there by now.
+        if self.root.is_dir() and any(self.root.iterdir()) and not marker.is_file():
             raise ConfigError(
                 f"{self.root}: not empty and not a locbench results folder (no {MARKER} file); give a new or "
                 f"empty folder, or add the file {MARKER} if this folder is one"
             )
+        _makedirs(self.root)
+        try:
+            fd = os.open(marker, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666)
+        except FileExistsError:
+            pass  # claimed by another process meanwhile
+        else:
+            with os.fdopen(fd, "w") as fh:
+                fh.write("locbench results folder: runs/ and summary/ are written by locbench\n")
         _makedirs(self.runs)
-        _atomic_write(
-            marker, lambda p: p.write_text("locbench results folder: runs/ and summary/ are written by locbench\n")
-        )
 
     def check_space(self, runs: int) -> None:
         """Raise ``OSError(ENOSPC)`` when the results folder's disk has less room than ``runs`` new runs need

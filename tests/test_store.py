@@ -7,11 +7,13 @@ import multiprocessing
 import os
 import stat
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
 from locbench import store as store_mod
+from locbench.errors import ConfigError
 from locbench.store import RunRecord, Store
 
 
@@ -149,3 +151,53 @@ def test_disk_full_raises_and_leaves_nothing(tmp_path: Path, monkeypatch: pytest
     with pytest.raises(OSError, match="No space left"):
         st.write_run(_record("room"))
     assert [p.name for p in tmp_path.rglob("*") if p.is_file() or p.name.startswith(".tmp-")] == []
+
+
+def _claim_at_barrier(root: str, barrier: Any) -> str:
+    barrier.wait()
+    try:
+        Store(Path(root)).claim()
+    except Exception as exc:  # reported to the parent, which fails the test
+        return f"{type(exc).__name__}: {exc}"
+    return ""
+
+
+def test_concurrent_claims_of_a_new_folder_all_succeed(tmp_path: Path) -> None:
+    """Two processes claiming the same new folder at once (the tuned suite's studies share results/tuning): both
+    succeed, and the folder is marked, whoever wrote first."""
+    ctx = multiprocessing.get_context("fork")
+    with ctx.Manager() as manager:
+        barrier = manager.Barrier(2)
+        with ctx.Pool(2) as pool:
+            for k in range(25):
+                root = str(tmp_path / f"r{k}" / "tuning")
+                errors = pool.starmap(_claim_at_barrier, [(root, barrier)] * 2)
+                assert errors == ["", ""], errors
+                assert (Path(root) / ".locbench").is_file() and (Path(root) / "runs").is_dir()
+
+
+def test_a_mark_written_between_the_checks_is_accepted(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The interleaving the concurrent test may miss: the first look finds no mark, another process then marks
+    the folder (and starts filling it) before the listing."""
+    root = tmp_path / "tuning"
+    root.mkdir()
+    (root / ".locbench").write_text("x\n")
+    (root / "runs").mkdir()
+    real = Path.is_file
+    seen: list[Path] = []
+
+    def first_miss(self: Path) -> bool:
+        if self.name == ".locbench" and not seen:
+            seen.append(self)
+            return False
+        return real(self)
+
+    monkeypatch.setattr(Path, "is_file", first_miss)
+    Store(root).claim()
+    assert seen
+
+
+def test_a_foreign_folder_is_still_refused(tmp_path: Path) -> None:
+    (tmp_path / "notes.txt").write_text("someone else's\n")
+    with pytest.raises(ConfigError, match="not a locbench results folder"):
+        Store(tmp_path).claim()
