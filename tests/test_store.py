@@ -146,7 +146,7 @@ def test_disk_full_raises_and_leaves_nothing(tmp_path: Path, monkeypatch: pytest
     def full(*args: object, **kwargs: object) -> None:
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(store_mod.np, "savez_compressed", full)
+    monkeypatch.setattr(store_mod.np, "savez", full)
     st = Store(tmp_path)
     with pytest.raises(OSError, match="No space left"):
         st.write_run(_record("room"))

@@ -80,14 +80,14 @@ def test_a_run_whose_files_do_not_load_is_rerun_and_said_so(tmp_path: Path, caps
 def test_disk_full_is_an_error_and_a_nonzero_status(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    real = np.savez_compressed
+    real = np.savez
 
     def full(path: object, **arrays: object) -> None:
         if "mean" in arrays:  # the runs, not the truth
             raise OSError(errno.ENOSPC, "No space left on device")
         real(path, **arrays)  # type: ignore[arg-type]
 
-    monkeypatch.setattr(store_mod.np, "savez_compressed", full)
+    monkeypatch.setattr(store_mod.np, "savez", full)
     argv = ["run", "--filter", "bad[fail_at_s=100]", "--dataset", "line", "--seeds", "3", "--results", str(tmp_path)]
     assert main([*argv, "--no-progress"]) == 1
     cap = capsys.readouterr()
