@@ -31,7 +31,7 @@ from numba import njit
 
 from locbench.filters._ekf_kernels import _propagate, _wrap
 from locbench.filters._icp import MIN_PAIRS
-from locbench.scores import pairwise_sum
+from locbench.pairwise import pairwise_sum
 
 FloatArray = npt.NDArray[np.float64]
 

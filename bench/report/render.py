@@ -13,7 +13,7 @@ import io
 import json
 import re
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import matplotlib.image
 import matplotlib.style
@@ -45,11 +45,13 @@ def render_png(plot: Plot) -> bytes:
     """
     with matplotlib.style.context(["default", MPL_STYLE]):
         fig = _figure(plot)
-        fig.canvas.draw()
+        canvas = fig.canvas
+        assert isinstance(canvas, FigureCanvasAgg)  # _figure attaches one
+        canvas.draw()
         buf = io.BytesIO()
-        matplotlib.image.imsave(
-            buf, fig.canvas.buffer_rgba(), format="png", origin="upper", dpi=fig.dpi, metadata=_PNG_META
-        )
+        # a None value drops the key ("Software"), as for savefig; imsave's annotation does not say so
+        meta = cast(dict[str, str], _PNG_META)
+        matplotlib.image.imsave(buf, canvas.buffer_rgba(), format="png", origin="upper", dpi=fig.dpi, metadata=meta)
     return buf.getvalue()
 
 
