@@ -327,15 +327,23 @@ class Store:
                 f"{self.root}: not empty and not a locbench results folder (no {MARKER} file); give a new or "
                 f"empty folder, or add the file {MARKER} if this folder is one"
             )
-        _makedirs(self.root)
+        if not self.root.is_dir():
+            _makedirs(self.root)
+        created = False
         try:
             fd = os.open(marker, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666)
         except FileExistsError:
             pass  # claimed by another process meanwhile
         else:
+            created = True
             with os.fdopen(fd, "w") as fh:
                 fh.write("locbench results folder: runs/ and summary/ are written by locbench\n")
-        _makedirs(self.runs)
+        try:
+            _makedirs(self.runs)
+        except BaseException:
+            if created:  # nothing of ours is left in a folder we cannot write into
+                marker.unlink(missing_ok=True)
+            raise
 
     def check_space(self, runs: int) -> None:
         """Raise ``OSError(ENOSPC)`` when the results folder's disk has less room than ``runs`` new runs need
