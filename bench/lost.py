@@ -97,10 +97,16 @@ def auroc(score: npt.ArrayLike, positive: npt.ArrayLike) -> float:
     p = np.asarray(positive, dtype=bool)
     keep = ~np.isnan(s)
     s, p = s[keep], p[keep]
+    if p.all() or not p.any():
+        return float("nan")
+    return _auroc_of_ranks(stats.rankdata(s), p)
+
+
+def _auroc_of_ranks(ranks: FloatArray, p: npt.NDArray[np.bool_]) -> float:
+    """:func:`auroc` from the scores' ranks (NaN scores already left out): one ranking serves every threshold."""
     n_pos, n_neg = int(p.sum()), int((~p).sum())
     if n_pos == 0 or n_neg == 0:
         return float("nan")
-    ranks = stats.rankdata(s)
     return float((ranks[p].sum() - n_pos * (n_pos + 1) / 2.0) / (n_pos * n_neg))
 
 
@@ -178,10 +184,12 @@ def score_signals(series: list[HealthSeries], thresholds: tuple[float, ...] = LO
     for name in names:
         v = np.concatenate([s.signals[name] for s in series])
         lost = [err > th for th in thresholds]
+        keep = ~np.isnan(v)
+        ranks = stats.rankdata(v[keep])
         out.append(
             SignalScore(
                 name,
-                tuple(auroc(v, lo) for lo in lost),
+                tuple(_auroc_of_ranks(ranks, lo[keep]) for lo in lost),
                 precision_at_recall(v, lost[0]),
                 float(np.mean(lost[0])),
             )

@@ -55,6 +55,20 @@ def test_score_signals_ranks_the_informative_signal_first() -> None:
     assert best.signal == "nis" and best.auroc[0] == 1.0 and best.lost_share == pytest.approx(99 / 200)
 
 
+def test_score_signals_aurocs_equal_auroc_at_every_threshold() -> None:
+    # the signals are ranked once for all thresholds: the same numbers as auroc() per threshold, NaN left out
+    rng = np.random.default_rng(4)
+    t = np.arange(3000.0)
+    err = rng.gamma(1.0, 0.4, size=t.size)
+    sig = err + rng.normal(size=t.size)
+    sig[::17] = np.nan
+    sig[5::9] = np.round(sig[5::9], 1)  # ties
+    s = lost.HealthSeries(t, err, {"nis": sig})
+    (score,) = lost.score_signals([s])
+    assert score.auroc == tuple(lost.auroc(sig, err > th) for th in lost.LOST_THRESHOLDS_M)
+    assert len(set(score.auroc)) == len(lost.LOST_THRESHOLDS_M)
+
+
 def test_particle_subsample_is_unbiased() -> None:
     """The 64-particle systematic subsample's mean matches the weighted full set's within its standard error."""
     ds = make_dataset("tiny_line", 0)

@@ -650,3 +650,17 @@ def test_a_dataset_no_suite_runs_gets_the_whole_report(
         assert needle in text, needle
     figs = sorted(p.name for p in (st.summary / "figures").glob("*.png"))
     assert figs == [f"{name}_{k}.png" for k in ("errors", "nees", "pareto", "trajectories", "waypoint_rmse")]
+
+
+def test_html_sort_keys_carry_ten_significant_digits() -> None:
+    # a rounding-level change of a number (the 16th digit) must not change the page's bytes
+    from locbench.report.doc import Table
+    from locbench.report.render import _table_html
+
+    def page(x: float) -> str:
+        return _table_html(Table(("a", "b"), (("x", "y"),), sort_keys=((x, float("inf")),)))
+
+    assert 'data-sort="0.3333333333"' in page(1.0 / 3.0)
+    assert 'data-sort="1e308"' in page(1.0 / 3.0)
+    assert page(1859.4070732575253) == page(1859.407073257525)
+    assert page(1859.40707) != page(1859.40708)

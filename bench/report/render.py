@@ -246,7 +246,8 @@ def _table_html(t: Table) -> str:
         for j, c in enumerate(row):
             k = keys[j] if j < len(keys) else float("nan")
             attr = (
-                f' data-sort="{k!r}"'
+                # 10 significant digits as in metrics.csv: a rounding-level change of a number leaves the page's bytes
+                f' data-sort="{k:.10g}"'
                 if k == k and abs(k) != float("inf")
                 else (' data-sort="1e308"' if k == float("inf") else "")
             )
