@@ -96,10 +96,7 @@ def auroc(score: npt.ArrayLike, positive: npt.ArrayLike) -> float:
     s = np.asarray(score, dtype=np.float64)
     p = np.asarray(positive, dtype=bool)
     keep = ~np.isnan(s)
-    s, p = s[keep], p[keep]
-    if p.all() or not p.any():
-        return float("nan")
-    return _auroc_of_ranks(stats.rankdata(s), p)
+    return _auroc_of_ranks(stats.rankdata(s[keep]), p[keep])
 
 
 def _auroc_of_ranks(ranks: FloatArray, p: npt.NDArray[np.bool_]) -> float:
