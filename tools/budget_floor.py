@@ -22,23 +22,12 @@ import statistics
 import time
 from pathlib import Path
 
-from locbench.suites import suite_pairs
+from locbench.suites import _SUITES_IN_ALL, suite_pairs
 from locbench.tuning import suite_studies
 
 #: The suites ``nox -s bench`` runs (suite ``all``'s parts, then ``consistency``); ``tuned``'s test runs are
 #: what is left over.
-SUITE_ORDER = (
-    "default",
-    "lap",
-    "line_room",
-    "scan_grid",
-    "landmark_geometry",
-    "kidnap",
-    "global",
-    "recorded",
-    "pareto",
-    "consistency",
-)
+SUITE_ORDER = (*_SUITES_IN_ALL, "consistency")
 
 
 def _metas(root: Path) -> list[dict]:
