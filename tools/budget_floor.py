@@ -76,12 +76,12 @@ def belief_share(dataset: str, filters: list[str], rounds: int = 7) -> None:
         print(f"{spec:50s} run {run:.3f} steps {steps:.3f} around {around:.3f} belief scores {scores:.3f} CPU-s")
 
 
-def main() -> int:
+def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("results", type=Path, nargs="?", default=Path("results"))
     ap.add_argument("--cores", type=int, default=2)
     ap.add_argument("--belief", nargs="+", metavar="DATASET FILTER", help="measure the belief scores' share instead")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     if args.belief:
         belief_share(args.belief[0], args.belief[1:])
         return 0
