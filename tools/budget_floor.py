@@ -22,6 +22,7 @@ import statistics
 import time
 from pathlib import Path
 
+from locbench.store import TRUTH_DIR, Store
 from locbench.suites import _SUITES_IN_ALL, suite_pairs
 from locbench.tuning import suite_studies
 
@@ -30,13 +31,15 @@ from locbench.tuning import suite_studies
 SUITE_ORDER = (*_SUITES_IN_ALL, "consistency")
 
 
-def _metas(root: Path) -> list[dict]:
-    return [json.loads(p.read_text()) for p in sorted(root.glob("*/*/*/meta.json"))]
+def _metas(results: Path) -> list[dict]:
+    """The ``meta.json`` of every run of the store at ``results`` (its leftovers left out, as the report does)."""
+    return [json.loads((run / "meta.json").read_text()) for run in Store(results).iter_runs()]
 
 
-def _truth_seconds(root: Path) -> tuple[float, float]:
+def _truth_seconds(results: Path) -> tuple[float, float]:
+    """The dataset builds' and the bounds' seconds of the store at ``results``, each realisation once."""
     build = bound = 0.0
-    for p in root.glob("*/_truth/*.json"):
+    for p in Store(results).runs.glob(f"*/{TRUTH_DIR}/*.json"):
         d = json.loads(p.read_text())
         if p.name.endswith(".bound.json"):
             bound += d.get("compute_s") or 0.0
@@ -94,19 +97,19 @@ def main(argv: list[str] | None = None) -> int:
     runs: collections.Counter[str] = collections.Counter()
     by_filter: collections.Counter[str] = collections.Counter()
     by_filter_step: collections.Counter[str] = collections.Counter()
-    for m in _metas(args.results / "runs"):
+    for m in _metas(args.results):
         suite = owner.get((m["filter"], m["dataset"]), "tuned (test runs)")
         wall[suite] += m.get("wall_s") or 0.0
         step[suite] += m.get("compute_s") or 0.0
         runs[suite] += 1
         by_filter[m["filter_id"]] += m.get("wall_s") or 0.0
         by_filter_step[m["filter_id"]] += m.get("compute_s") or 0.0
-    tuning_runs = _metas(args.results / "tuning" / "runs")
+    tuning_runs = _metas(args.results / "tuning")
     wall["tuned (trials)"] = sum(m.get("wall_s") or 0.0 for m in tuning_runs)
     step["tuned (trials)"] = sum(m.get("compute_s") or 0.0 for m in tuning_runs)
     runs["tuned (trials)"] = len(tuning_runs)
-    build, bound = _truth_seconds(args.results / "runs")
-    t_build, t_bound = _truth_seconds(args.results / "tuning" / "runs")
+    build, bound = _truth_seconds(args.results)
+    t_build, t_bound = _truth_seconds(args.results / "tuning")
 
     print(f"{'suite':22s} {'runs':>5s} {'run-s':>8s} {'steps-s':>8s} {'around-s':>8s}")
     for name in (*SUITE_ORDER, "tuned (test runs)", "tuned (trials)"):
