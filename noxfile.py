@@ -57,7 +57,7 @@ def tests(session: nox.Session) -> None:
 
 
 #: The tests that race the machine (executors, Ctrl-C, child processes, dask's ports): run again under load by CI.
-BUSY_TESTS = ("tests/test_sweeps.py", "tests/test_runner.py", "tests/test_store.py", "tests/test_untrusted_inputs.py")
+BUSY_TESTS = ("tests/test_sweeps.py", "tests/test_runner.py", "tests/test_store.py", "tests/malformed/test_untrusted_inputs.py")
 #: The dask signal tests among the slow ones (a LocalCluster's start is where a Ctrl-C used to be dropped).
 BUSY_DASK = "dask and (ctrl_c or sigint or no_process)"
 
@@ -164,5 +164,5 @@ def fuzz(session: nox.Session) -> None:
     (the tests session runs the short one)."""
     _install(session, "all,test")
     args = session.posargs or ["--hypothesis-profile=fuzz", "--hypothesis-show-statistics"]
-    fuzzed = ("tests/test_fuzz_loaders.py", "tests/test_fuzz_store_cli.py")
+    fuzzed = ("tests/fuzz/",)
     session.run("pytest", "--benchmark-disable", "-p", "no:cacheprovider", *fuzzed, *args)

@@ -9,7 +9,7 @@ from hypothesis import HealthCheck, settings
 
 from locbench.registry import DATASETS, FILTERS
 
-# Hypothesis profiles of the loader fuzzing (tests/test_fuzz_loaders.py): "ci" (the default) keeps the module near
+# Hypothesis profiles of the loader fuzzing (tests/fuzz/test_fuzz_loaders.py): "ci" (the default) keeps the module near
 # a minute on 2 cores (100 examples a test, about 15 s measured); "fuzz" (nox -s fuzz, or pytest
 # --hypothesis-profile=fuzz) runs 10 000 a test, random each time (11 min measured on the shared 2 cores).
 _FUZZ_SETTINGS = {

@@ -43,7 +43,7 @@ FloatArray = npt.NDArray[np.float64]
 #: Longest quoted value inside a message, characters.
 MAX_QUOTE_CHARS = 200
 #: Largest occupancy grid a loader builds, cells (4096 x 4096: 134 MB of float64 occupancy; a map read at this size
-#: stays under 1 GB in all, measured in tests/test_fuzz_loaders.py).
+#: stays under 1 GB in all, measured in tests/fuzz/test_fuzz_loaders.py).
 MAX_GRID_CELLS = 1 << 24
 #: Largest count of derived items (waypoints, database poses ...) a single parameter may ask for.
 MAX_DERIVED_ITEMS = 1_000_000

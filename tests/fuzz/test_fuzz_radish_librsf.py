@@ -1,5 +1,5 @@
 """Property-based fuzzing of the two loaders of issue 22 (Radish corrected logs, libRSF files), as
-tests/test_fuzz_loaders.py does for the others: any mutation of a small valid file is a clean one-line locbench
+tests/fuzz/test_fuzz_loaders.py does for the others: any mutation of a small valid file is a clean one-line locbench
 error naming the file, or a dataset that passes the contract, under the same address-space limit."""
 
 from __future__ import annotations

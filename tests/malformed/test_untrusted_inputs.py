@@ -22,7 +22,7 @@ from locbench.errors import ConfigError
 from locbench.runner import run_many
 from locbench.store import MARKER, Store
 
-TESTS = Path(__file__).resolve().parent
+TESTS = Path(__file__).resolve().parents[1]
 SMOKE = ["run", "--filter", "odometry", "--dataset", "tiny_line", "--no-progress"]
 
 
