@@ -643,6 +643,8 @@ def _realisation(task: Task) -> tuple[Dataset, TruthRecord] | _BuildFailed:
             "metadata": ds.metadata,
             "versions": provenance.versions(),
         }
+        if ds.flagged:
+            truth_meta["flagged"] = [s.record() for s in ds.flagged]
         built = (ds, TruthRecord.from_dataset(ds, task.seed, truth_meta))
     _REALISATION[key] = built
     return built
@@ -693,6 +695,10 @@ def _trace_record(
         "dataset_duration_s": ds.duration,
         "n_rows": int(trace.t.shape[0]),
     }
+    if ds.flagged:
+        # Recorded samples the loader left out (isolated glitches): counted with their times, so a reader sees what
+        # the metrics did not (the truth record holds each one's file, line, quantity and bound).
+        meta |= {"flagged_samples": len(ds.flagged), "flagged_t": [s.t for s in ds.flagged]}
     if trace.status != "ok":
         log.warning("%s on %s: %s: %s", job.filter.name, task.label, trace.status, trace.message)
     arrays = (trace.t, trace.mean, trace.cov, trace.kind, trace.step_ns)

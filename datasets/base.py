@@ -8,6 +8,7 @@ from __future__ import annotations
 import abc
 import enum
 import itertools
+import math
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -285,6 +286,54 @@ class SensorSpec:
     process_sigma_theta_rad: float | None = None
 
 
+@dataclass(frozen=True)
+class FlaggedSample:
+    """A recorded sample that broke a physical bound and was left out (:mod:`~locbench.datasets.recorded.plausibility`).
+
+    Attributes
+    ----------
+    source : str
+        The file it was read from.
+    line : int or None
+        Its 1-based line in the file (None in a binary format).
+    t : float
+        Its time, s.
+    stream : str
+        What the sample is ("ground-truth", "odometry", "UWB range").
+    quantity : str
+        The quantity that broke its bound, with its unit ("apparent speed, m/s").
+    value : float
+        The sample's value of that quantity.
+    bound : str
+        The bound, in words.
+    """
+
+    source: str
+    line: int | None
+    t: float
+    stream: str
+    quantity: str
+    value: float
+    bound: str
+
+    def describe(self) -> str:
+        """One line: where, when, what and which bound."""
+        where = f"{self.source}:{self.line}" if self.line is not None else self.source
+        return f"{where} at t={self.t:.6g} s: {self.stream} {self.quantity} {self.value:.4g}, expected {self.bound}"
+
+    def record(self) -> dict[str, Any]:
+        """JSON-friendly form for a run's provenance."""
+        return {
+            "source": self.source,
+            "line": self.line,
+            "t": self.t,
+            "stream": self.stream,
+            "quantity": self.quantity,
+            "value": self.value if math.isfinite(self.value) else repr(self.value),
+            "bound": self.bound,
+        }
+
+
 #: Labels of :attr:`Dataset.truth_label`: what the "ground truth" trajectory really is.
 TRUTH_LABELS = ("ground truth", "SLAM reference")
 
@@ -326,6 +375,9 @@ class Dataset:
         The observation event types the dataset says it provides (a recorded format's sensors); the contract
         requires at least one event of each, so a stream lost to trimming or a bad file is an error, not a
         silently sensor-less run.
+    flagged : tuple of FlaggedSample
+        Recorded samples left out because they broke a physical bound (isolated glitches; see
+        :mod:`locbench.datasets.recorded.plausibility`); neither the filters nor the metrics see them.
     """
 
     id: str
@@ -343,6 +395,7 @@ class Dataset:
     truth_label: str = "ground truth"
     sources: tuple[str, ...] = ()
     declared: frozenset[type] = frozenset()
+    flagged: tuple[FlaggedSample, ...] = ()
 
     @property
     def duration(self) -> float:
