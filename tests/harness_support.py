@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import signal
 import time
@@ -13,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from locbench.datasets.base import (
+    FlaggedSample,
     Dataset,
     DatasetBuilder,
     Gaussian2,
@@ -139,3 +141,14 @@ class TunableBadFilter(BadFilter):
     """:class:`BadFilter` whose failure time is tunable: a tuner must score its diverging trials as the worst."""
 
     Config = TunableBadConfig
+
+
+class GlitchyLineBuilder(LineBuilder):
+    """The straight line with one truth sample a loader flagged (as a recorded loader reports a Vicon glitch)."""
+
+    description = "test-only straight line with one flagged sample"
+
+    def build(self, params: Any, rng: np.random.Generator) -> Dataset:
+        ds = super().build(params, rng)
+        glitch = FlaggedSample("line.dat", 7, 2.5, "ground-truth", "apparent speed, m/s", 4.4, "at most 1 m/s")
+        return dataclasses.replace(ds, id="glitchy", flagged=(glitch,))

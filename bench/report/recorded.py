@@ -128,4 +128,38 @@ def input_warnings_section(rep: Report) -> Section:
             rows.append((f"`{rep.col.display(d)}`", str(w)))
     if rows:
         sec.add(Text("The loaders' warnings about these datasets' input:"), Table(("dataset", "warning"), tuple(rows)))
+    flagged = _flagged_rows(rep)
+    if flagged:
+        sec.add(
+            Text(
+                "Samples the loaders flagged and left out (each broke a physical bound of the plausibility policy, "
+                "docs/datasets.md; neither the filters nor the metrics saw them):"
+            ),
+            Table(("dataset", "stream", "quantity", "samples", "times, s", "bound"), tuple(flagged)),
+        )
     return sec
+
+
+#: Flagged times listed per row of the input-warnings table (the run's provenance has them all).
+FLAGGED_TIMES_SHOWN = 5
+
+
+def _flagged_rows(rep: Report) -> list[tuple[str, ...]]:
+    """One row per dataset, stream and quantity of the flagged samples in the truth records."""
+    rows: list[tuple[str, ...]] = []
+    seen: set[str] = set()
+    for (d, _), tr in sorted(rep.col.truths.items()):
+        found = tr.meta.get("flagged")
+        if d in seen or not isinstance(found, list) or not found:
+            continue
+        seen.add(d)  # the same recording under every seed: its flags once
+        groups: dict[tuple[str, str, str], list[float]] = {}
+        for s in found:
+            if isinstance(s, dict):
+                key = (str(s.get("stream", "")), str(s.get("quantity", "")), str(s.get("bound", "")))
+                groups.setdefault(key, []).append(float(s.get("t", float("nan"))))
+        for (stream, quantity, bound), times in sorted(groups.items()):
+            shown = ", ".join(f"{t:.3f}" for t in times[:FLAGGED_TIMES_SHOWN])
+            more = f" and {len(times) - FLAGGED_TIMES_SHOWN} more" if len(times) > FLAGGED_TIMES_SHOWN else ""
+            rows.append((f"`{rep.col.display(d)}`", stream, quantity, str(len(times)), shown + more, bound))
+    return rows
