@@ -14,9 +14,9 @@ from typing import Any
 import numpy as np
 
 from locbench.datasets.base import (
-    FlaggedSample,
     Dataset,
     DatasetBuilder,
+    FlaggedSample,
     Gaussian2,
     Landmarks,
     SensorSpec,
