@@ -446,10 +446,10 @@ def test_ros2_bag_storage_truncated(base: Path, bag_template: dict[str, Any], da
 def test_a_map_at_the_pixel_limit_loads_within_the_memory_limit(base: Path) -> None:
     """A 4096 x 4096 PNG (the default limit, a few KB on disk) is read inside the module's 1 GB headroom."""
     pytest.importorskip("PIL")
-    from test_malformed_inputs import _png
+    from input_support import grey_png
 
     folder = _fresh_dir(base)
-    _png(folder / "m.png", 4096, 4096)
+    grey_png(folder / "m.png", 4096, 4096)
     (folder / "m.yaml").write_text("image: m.png\nresolution: 0.05\norigin: [0, 0, 0]\n")
     assert load_map_server_map(folder / "m.yaml").shape == (4096, 4096)
 

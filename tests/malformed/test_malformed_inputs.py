@@ -9,14 +9,13 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
-import struct
-import zlib
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 import scipy.io
+from input_support import grey_png
 from test_recorded_intel import write_small_intel
 from test_recorded_lost_in_the_woods import _small_mat
 from test_recorded_mrclam import _small_folder
@@ -162,22 +161,9 @@ def test_vicon_jump_of_1e9_m_is_refused(tmp_path: Path) -> None:
     clean(info, f"{gt}:{k + 1}", "x [m]")
 
 
-def _png(path: Path, width: int, height: int) -> Path:
-    """A grey PNG of ``width`` x ``height`` zero pixels, compressed to a few hundred KB at most."""
-    row = b"\x00" + b"\x00" * width
-    data = zlib.compress(row * height, 9)
-
-    def chunk(kind: bytes, body: bytes) -> bytes:
-        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body) & 0xFFFFFFFF)
-
-    ihdr = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
-    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", data) + chunk(b"IEND", b""))
-    return path
-
-
 def test_a_13000_px_square_png_map_is_refused_before_decoding(tmp_path: Path) -> None:
     pytest.importorskip("PIL")
-    png = _png(tmp_path / "big.png", 13000, 13000)
+    png = grey_png(tmp_path / "big.png", 13000, 13000)
     assert png.stat().st_size < 1_000_000
     y = tmp_path / "big.yaml"
     y.write_text("image: big.png\nresolution: 0.05\norigin: [0, 0, 0]\n")
@@ -185,7 +171,7 @@ def test_a_13000_px_square_png_map_is_refused_before_decoding(tmp_path: Path) ->
         load_map_server_map(y)
     clean(info, png, "decompression bomb")  # Pillow's own guard, on and turned into an error
     # the limit is a parameter: a smaller one refuses a smaller image
-    small = _png(tmp_path / "small.png", 300, 300)
+    small = grey_png(tmp_path / "small.png", 300, 300)
     y.write_text("image: small.png\nresolution: 0.05\norigin: [0, 0, 0]\n")
     assert load_map_server_map(y).shape == (300, 300)
     with pytest.raises(RecordedDataError) as info:

@@ -1,0 +1,20 @@
+"""Hand-made input files the malformed-input and fuzz tests share (importable as ``input_support``)."""
+
+from __future__ import annotations
+
+import struct
+import zlib
+from pathlib import Path
+
+
+def grey_png(path: Path, width: int, height: int) -> Path:
+    """A grey PNG of ``width`` x ``height`` zero pixels, compressed to a few hundred KB at most."""
+    row = b"\x00" + b"\x00" * width
+    data = zlib.compress(row * height, 9)
+
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body) & 0xFFFFFFFF)
+
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", data) + chunk(b"IEND", b""))
+    return path
