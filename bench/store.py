@@ -20,10 +20,12 @@ folder name is sanitised and given a hash of the full spec (:func:`_safe`), so t
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import functools
 import hashlib
 import json
+import logging
 import os
 import re
 import shutil
@@ -32,7 +34,7 @@ import time
 import uuid
 import zipfile
 import zlib
-from collections.abc import Iterator
+from collections.abc import Collection, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -45,8 +47,12 @@ from locbench.errors import ConfigError, one_line
 from locbench.spec import Spec
 
 FloatArray = npt.NDArray[np.float64]
+log = logging.getLogger(__name__)
 
 TRUTH_DIR = "_truth"
+#: The files locbench writes in a run folder: ``meta.json`` names ``estimates.npz`` and its sha256 (``files``).
+#: Anything else a run folder holds is someone else's: replacing the run carries it over into the new folder.
+RUN_FILES = frozenset({"meta.json", "estimates.npz"})
 #: Event kinds stored in ``RunRecord.kind``: the index into this tuple.
 # Codes are stored in runs: append new kinds at the end, never reorder.
 KIND_NAMES = ("Odometry", "LaserScan", "LandmarkObservations", "PoseFix", "reset", "RangeObservations")
@@ -283,8 +289,9 @@ class Store:
         """Remove temporary and replaced entries an interrupted write left behind; returns what was removed.
 
         Only entries under ``runs/<dataset>/<folder>/`` whose names this module creates (:data:`_TMP_NAME`,
-        :data:`_OLD_NAME`) and older than ``older_than_s`` go, so another process's write in progress and any
-        file locbench did not write are left alone.
+        :data:`_OLD_NAME`) and older than ``older_than_s`` go, so another process's write in progress is left
+        alone; of a folder, only the files locbench writes there (:data:`RUN_FILES`) go, and the folder only
+        when nothing else is left in it.
         """
         removed: list[Path] = []
         if not self.runs.is_dir():
@@ -298,7 +305,8 @@ class Store:
                     if now - p.lstat().st_mtime < older_than_s:
                         continue
                     if p.is_dir() and not p.is_symlink():
-                        shutil.rmtree(p)
+                        if not remove_own(p, RUN_FILES):
+                            continue  # it still holds a file locbench did not write: kept
                     else:
                         p.unlink()
                 except FileNotFoundError:
@@ -736,12 +744,16 @@ def _makedirs(path: Path) -> None:
 _SWAP_ATTEMPTS = 100
 
 
-def _swap_into_place(tmp: Path, final: Path) -> None:
-    """Rename folder ``tmp`` to ``final``, moving any folder already there aside (unique name) and removing it."""
+def _swap_into_place(tmp: Path, final: Path, own: frozenset[str] = RUN_FILES) -> None:
+    """Rename folder ``tmp`` to ``final``, moving any folder already there aside (unique name); then carry what
+    the old folder holds beyond ``own`` (paths relative to it) into the new one and remove the old folder's own
+    files (:func:`carry_over`, :func:`remove_own`). A foreign entry that cannot be carried over stays in the
+    moved-aside folder, which is then kept (logged)."""
+    aside: list[Path] = []
     for _ in range(_SWAP_ATTEMPTS):
         try:
             tmp.rename(final)
-            return
+            break
         except OSError as exc:
             if exc.errno not in (errno.ENOTEMPTY, errno.EEXIST, errno.EISDIR):
                 raise
@@ -750,8 +762,68 @@ def _swap_into_place(tmp: Path, final: Path) -> None:
             final.rename(old)
         except FileNotFoundError:
             continue  # another writer moved it away first: try our rename again
-        shutil.rmtree(old, ignore_errors=True)
-    raise OSError(errno.EBUSY, f"could not replace the run folder after {_SWAP_ATTEMPTS} attempts", str(final))
+        aside.append(old)
+    else:
+        raise OSError(errno.EBUSY, f"could not replace the run folder after {_SWAP_ATTEMPTS} attempts", str(final))
+    for old in aside:
+        left = carry_over(old, final, own)
+        if not remove_own(old, own):
+            log.warning("%s: kept, it holds files locbench did not write that %s already has: %s", old, final, left)
+
+
+def _own_dirs(own: Collection[str]) -> set[str]:
+    """The folders (relative paths) that hold the files ``own`` names."""
+    return {"/".join(parts[:i]) for rel in own for parts in [rel.split("/")] for i in range(1, len(parts))}
+
+
+def carry_over(old: Path, new: Path, own: Collection[str]) -> list[Path]:
+    """Move every entry under folder ``old`` that is not one of ``own`` (files, as paths relative to ``old``)
+    to the same place under ``new``; returns the entries left behind because ``new`` has that name already.
+
+    A folder that holds own files (``figures/``) is entered; any other entry (a file, a symlink, a folder of
+    someone else's) is moved whole, by a rename (no copy: nothing is lost when the disk is full).
+    """
+    dirs = _own_dirs(own)
+    left: list[Path] = []
+
+    def walk(rel_dir: str) -> None:
+        here = old / rel_dir if rel_dir else old
+        for entry in sorted(here.iterdir()):
+            rel = f"{rel_dir}/{entry.name}" if rel_dir else entry.name
+            if rel in own:
+                continue
+            if rel in dirs and entry.is_dir() and not entry.is_symlink():
+                walk(rel)
+                continue
+            target = new / rel
+            if os.path.lexists(target):
+                left.append(entry)
+                continue
+            _makedirs(target.parent)
+            entry.rename(target)
+
+    if old.is_dir():
+        walk("")
+    return left
+
+
+def remove_own(folder: Path, own: Collection[str]) -> bool:
+    """Remove the files ``own`` names under ``folder``, then the folders they leave empty and ``folder`` itself
+    when it is empty; whether ``folder`` is gone. Nothing else is removed."""
+    for rel in own:
+        p = folder / rel
+        if p.is_file() and not p.is_symlink():
+            p.unlink(missing_ok=True)
+    for rel in sorted(_own_dirs(own), key=lambda r: -r.count("/")):
+        with contextlib.suppress(OSError):  # not empty (a foreign file), or not there
+            (folder / rel).rmdir()
+    try:
+        folder.rmdir()
+    except FileNotFoundError:
+        return True
+    except OSError:
+        return False
+    return True
 
 
 def _atomic_write(path: Path, writer: Any) -> None:
