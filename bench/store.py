@@ -375,34 +375,14 @@ class Store:
     def write_truth(self, rec: TruthRecord) -> None:
         path = self.truth_path(rec.dataset, rec.seed)
         _makedirs(path.parent)
-        wp_t = rec.waypoints.t if rec.waypoints is not None else np.zeros(0)
-        wp_xy = rec.waypoints.xy if rec.waypoints is not None else np.zeros((0, 2))
-        arrays = {
-            "gt_t": rec.ground_truth.t,
-            "gt_xy": rec.ground_truth.xy,
-            "gt_theta": rec.ground_truth.theta,
-            "wp_t": wp_t,
-            "wp_xy": wp_xy,
-            "has_waypoints": np.array(rec.waypoints is not None),
-            "kidnap_t": np.array([k.t for k in rec.kidnaps], dtype=np.float64),
-            "kidnap_delta": np.array([k.delta for k in rec.kidnaps], dtype=np.float64).reshape(-1, 3),
-            "duration_s": np.array(rec.duration_s),
-            "map_segments": np.asarray(rec.map_segments, dtype=np.float64).reshape(-1, 4),
-            "map_landmarks": np.asarray(rec.map_landmarks, dtype=np.float64).reshape(-1, 2),
-        }
-        if rec.relations is not None:
-            arrays.update(rel_t1=rec.relations.t1, rel_t2=rec.relations.t2, rel_delta=rec.relations.delta)
-        meta = {"dataset": rec.dataset, "seed": rec.seed, "truth_label": rec.truth_label, **rec.meta}
-        _write_npz_and_record(path, arrays, meta)
+        _write_npz_and_record(path, truth_arrays(rec), truth_meta(rec))
 
     def write_bound(self, rec: BoundRecord) -> None:
         """Write a realisation's bound beside its truth (arrays first, then the record that names them)."""
         path = self.bound_path(rec.dataset, rec.seed)
         _makedirs(path.parent)
-        names = sorted(rec.covs)
-        arrays = {"t": rec.t} | {f"cov_{i}": rec.covs[n] for i, n in enumerate(names)}
-        meta = {"dataset": rec.dataset, "seed": rec.seed, "rows": names, **rec.meta}
-        _write_npz_and_record(path, arrays, meta)
+        meta = {"dataset": rec.dataset, "seed": rec.seed, "rows": sorted(rec.covs), **rec.meta}
+        _write_npz_and_record(path, bound_arrays(rec), meta)
 
     def write_run(self, rec: RunRecord) -> Path:
         """Write a run folder atomically: a uniquely named temporary folder, then renamed into place.
@@ -471,6 +451,21 @@ class Store:
             return str(exc)
         return None
 
+    def truth_files(self, dataset: str | Spec, seed: int) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        """The stored truth's record and arrays as stored, after every check (:func:`_load_verified`): what
+        ``locbench verify`` compares with a rebuilt truth. A :class:`StaleRecord` when missing or stale."""
+        path = self.truth_path(dataset, seed)
+        if not path.is_file():
+            raise StaleRecord(f"{path}: missing")
+        return _load_verified(path, path.with_suffix(".json"), truth_problem, required_record=True)
+
+    def bound_files(self, dataset: str | Spec, seed: int) -> tuple[dict[str, Any], dict[str, np.ndarray]] | None:
+        """The stored bound's record and arrays as stored, verified; None when there is none."""
+        path = self.bound_path(dataset, seed)
+        if not (path.is_file() or path.with_suffix(".json").is_file()):
+            return None
+        return _load_verified(path, path.with_suffix(".json"), bound_problem, required_record=True)
+
     def has_truth(self, dataset: str | Spec, seed: int) -> bool:
         return self.truth_path(dataset, seed).is_file()
 
@@ -519,6 +514,40 @@ class Store:
         extra = {k[6:]: v for k, v in z.items() if k.startswith("extra_")}
         health = {k[7:]: v for k, v in z.items() if k.startswith("health_")}
         return RunRecord(meta, z["t"], z["mean"], z["cov"], z["kind"], z["step_ns"], diag, extra, health)
+
+
+def truth_arrays(rec: TruthRecord) -> dict[str, np.ndarray]:
+    """The arrays of a realisation's truth as :meth:`Store.write_truth` stores them (``gt_*``, ``wp_*``, ...)."""
+    wp_t = rec.waypoints.t if rec.waypoints is not None else np.zeros(0)
+    wp_xy = rec.waypoints.xy if rec.waypoints is not None else np.zeros((0, 2))
+    arrays = {
+        "gt_t": rec.ground_truth.t,
+        "gt_xy": rec.ground_truth.xy,
+        "gt_theta": rec.ground_truth.theta,
+        "wp_t": wp_t,
+        "wp_xy": wp_xy,
+        "has_waypoints": np.array(rec.waypoints is not None),
+        "kidnap_t": np.array([k.t for k in rec.kidnaps], dtype=np.float64),
+        "kidnap_delta": np.array([k.delta for k in rec.kidnaps], dtype=np.float64).reshape(-1, 3),
+        "duration_s": np.array(rec.duration_s),
+        "map_segments": np.asarray(rec.map_segments, dtype=np.float64).reshape(-1, 4),
+        "map_landmarks": np.asarray(rec.map_landmarks, dtype=np.float64).reshape(-1, 2),
+    }
+    if rec.relations is not None:
+        arrays.update(rel_t1=rec.relations.t1, rel_t2=rec.relations.t2, rel_delta=rec.relations.delta)
+    return arrays
+
+
+def truth_meta(rec: TruthRecord) -> dict[str, Any]:
+    """The JSON record of a realisation's truth as :meth:`Store.write_truth` stores it (before its checksums)."""
+    return {"dataset": rec.dataset, "seed": rec.seed, "truth_label": rec.truth_label, **rec.meta}
+
+
+def bound_arrays(rec: BoundRecord) -> dict[str, np.ndarray]:
+    """The arrays of a bound as :meth:`Store.write_bound` stores them: ``t`` and ``cov_<i>`` of the rows sorted
+    by name (the record's ``rows``)."""
+    names = sorted(rec.covs)
+    return {"t": rec.t} | {f"cov_{i}": rec.covs[n] for i, n in enumerate(names)}
 
 
 class StaleRecord(ConfigError):
