@@ -809,8 +809,9 @@ def carry_over(old: Path, new: Path, own: Collection[str]) -> list[Path]:
     """Move every entry under folder ``old`` that is not one of ``own`` (files, as paths relative to ``old``)
     to the same place under ``new``; returns the entries left behind because ``new`` has that name already.
 
-    A folder that holds own files (``figures/``) is entered; any other entry (a file, a symlink, a folder of
-    someone else's) is moved whole, by a rename (no copy: nothing is lost when the disk is full).
+    A folder that holds own files (``figures/``) or that ``new`` has too is entered; any other entry (a file, a
+    symlink, a folder of someone else's) is moved whole, by a rename (no copy: nothing is lost when the disk is
+    full).
     """
     dirs = _own_dirs(own)
     left: list[Path] = []
@@ -821,10 +822,17 @@ def carry_over(old: Path, new: Path, own: Collection[str]) -> list[Path]:
             rel = f"{rel_dir}/{entry.name}" if rel_dir else entry.name
             if rel in own:
                 continue
-            if rel in dirs and entry.is_dir() and not entry.is_symlink():
-                walk(rel)
-                continue
             target = new / rel
+            if (
+                entry.is_dir()
+                and not entry.is_symlink()
+                and (rel in dirs or (target.is_dir() and not target.is_symlink()))
+            ):
+                walk(rel)  # a folder both have: carry over what it holds
+                if rel not in dirs:
+                    with contextlib.suppress(OSError):  # now empty: the new folder has it
+                        entry.rmdir()
+                continue
             if os.path.lexists(target):
                 left.append(entry)
                 continue

@@ -110,11 +110,10 @@ def owned(folder: Path, listed: dict[str, tuple[int, str]]) -> frozenset[str]:
     return frozenset(own)
 
 
-def _not_empty(folder: Path) -> bool:
-    try:
-        return any(folder.iterdir())
-    except FileNotFoundError:
-        return False
+def _holds_files(folder: Path) -> bool:
+    """Whether anything but folders lies under ``folder`` (a folder of empty folders holds nothing to keep)."""
+    # os.walk lists a symlink to a folder among the folders, without entering it: it counts as an entry
+    return any(files or any(os.path.islink(os.path.join(top, d)) for d in dirs) for top, dirs, files in os.walk(folder))
 
 
 class OutputFolder:
@@ -145,7 +144,7 @@ class OutputFolder:
         self.files: dict[str, tuple[int, str]] = {}
         if os.path.lexists(final) and not final.is_dir():
             raise ConfigError(f"{final}: a file is in the way of the report's folder; give a folder")
-        if read_manifest(final) is None and _not_empty(final) and not legacy:
+        if read_manifest(final) is None and _holds_files(final) and not legacy:
             raise ConfigError(
                 f"{final}: not empty and not written by 'locbench report' (no {MANIFEST}); give a new or empty "
                 "folder, or one 'locbench report' wrote"
