@@ -249,23 +249,30 @@ def _cmd_report(args: argparse.Namespace) -> int:
 
 
 def _cmd_verify(args: argparse.Namespace) -> int:
-    from locbench.store import Store
+    from locbench.store import MARKER, Store
     from locbench.verify import verify, write_record
 
+    if not 0.0 < args.fraction <= 1.0:
+        raise ConfigError(f"--fraction: expected a share of the runs in (0, 1], got {args.fraction}")
+    if args.seed < 0:
+        raise ConfigError(f"--seed: expected a non-negative integer (the sample's seed), got {args.seed}")
+    if not 1 <= args.jobs <= MAX_JOBS:
+        raise ConfigError(f"--jobs: expected 1-{MAX_JOBS} processes, got {args.jobs}")
     store = Store(args.results)
     if not store.runs.is_dir():
         raise ConfigError(f"{store.runs}: no stored runs; run 'locbench run' first")
-    if not 0.0 < args.fraction <= 1.0:
-        raise ConfigError(f"--fraction: expected a share of the runs in (0, 1], got {args.fraction}")
-    if not 1 <= args.jobs <= MAX_JOBS:
-        raise ConfigError(f"--jobs: expected 1-{MAX_JOBS} processes, got {args.jobs}")
+    if not (store.root / MARKER).is_file():  # verify.json is written there: only into locbench's own folder
+        raise ConfigError(
+            f"{store.root}: not a locbench results folder (no {MARKER} file); expected a folder 'locbench run' wrote"
+        )
     res = verify(store, args.fraction, args.seed, jobs=args.jobs)
     record = write_record(store, res)
-    for run, why in res.differ:
-        print(f"differs: {run.label()}: {why}")
+    for line in res.problems():
+        print(f"differs: {line}")
     state = "passed" if res.passed else "FAILED"
     print(
-        f"verify {state}: {len(res.checked)} of {res.stored} stored runs re-run, {len(res.differ)} differ "
+        f"verify {state}: {len(res.checked)} of {res.stored} stored runs re-run with the truth and bound of "
+        f"{res.realisations} realisation(s), {len(res.differ) + len(res.artefacts)} differ "
         f"(fraction {args.fraction:g}, seed {args.seed}); record {record}"
     )
     return 0 if res.passed else 1

@@ -20,10 +20,12 @@ folder name is sanitised and given a hash of the full spec (:func:`_safe`), so t
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import functools
 import hashlib
 import json
+import logging
 import os
 import re
 import shutil
@@ -32,7 +34,7 @@ import time
 import uuid
 import zipfile
 import zlib
-from collections.abc import Iterator
+from collections.abc import Collection, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -45,8 +47,12 @@ from locbench.errors import ConfigError, one_line
 from locbench.spec import Spec
 
 FloatArray = npt.NDArray[np.float64]
+log = logging.getLogger(__name__)
 
 TRUTH_DIR = "_truth"
+#: The files locbench writes in a run folder: ``meta.json`` names ``estimates.npz`` and its sha256 (``files``).
+#: Anything else a run folder holds is someone else's: replacing the run carries it over into the new folder.
+RUN_FILES = frozenset({"meta.json", "estimates.npz"})
 #: Event kinds stored in ``RunRecord.kind``: the index into this tuple.
 # Codes are stored in runs: append new kinds at the end, never reorder.
 KIND_NAMES = ("Odometry", "LaserScan", "LandmarkObservations", "PoseFix", "reset", "RangeObservations")
@@ -283,8 +289,9 @@ class Store:
         """Remove temporary and replaced entries an interrupted write left behind; returns what was removed.
 
         Only entries under ``runs/<dataset>/<folder>/`` whose names this module creates (:data:`_TMP_NAME`,
-        :data:`_OLD_NAME`) and older than ``older_than_s`` go, so another process's write in progress and any
-        file locbench did not write are left alone.
+        :data:`_OLD_NAME`) and older than ``older_than_s`` go, so another process's write in progress is left
+        alone; of a folder, only the files locbench writes there (:data:`RUN_FILES`) go, and the folder only
+        when nothing else is left in it.
         """
         removed: list[Path] = []
         if not self.runs.is_dir():
@@ -298,7 +305,8 @@ class Store:
                     if now - p.lstat().st_mtime < older_than_s:
                         continue
                     if p.is_dir() and not p.is_symlink():
-                        shutil.rmtree(p)
+                        if not remove_own(p, RUN_FILES):
+                            continue  # it still holds a file locbench did not write: kept
                     else:
                         p.unlink()
                 except FileNotFoundError:
@@ -367,34 +375,14 @@ class Store:
     def write_truth(self, rec: TruthRecord) -> None:
         path = self.truth_path(rec.dataset, rec.seed)
         _makedirs(path.parent)
-        wp_t = rec.waypoints.t if rec.waypoints is not None else np.zeros(0)
-        wp_xy = rec.waypoints.xy if rec.waypoints is not None else np.zeros((0, 2))
-        arrays = {
-            "gt_t": rec.ground_truth.t,
-            "gt_xy": rec.ground_truth.xy,
-            "gt_theta": rec.ground_truth.theta,
-            "wp_t": wp_t,
-            "wp_xy": wp_xy,
-            "has_waypoints": np.array(rec.waypoints is not None),
-            "kidnap_t": np.array([k.t for k in rec.kidnaps], dtype=np.float64),
-            "kidnap_delta": np.array([k.delta for k in rec.kidnaps], dtype=np.float64).reshape(-1, 3),
-            "duration_s": np.array(rec.duration_s),
-            "map_segments": np.asarray(rec.map_segments, dtype=np.float64).reshape(-1, 4),
-            "map_landmarks": np.asarray(rec.map_landmarks, dtype=np.float64).reshape(-1, 2),
-        }
-        if rec.relations is not None:
-            arrays.update(rel_t1=rec.relations.t1, rel_t2=rec.relations.t2, rel_delta=rec.relations.delta)
-        meta = {"dataset": rec.dataset, "seed": rec.seed, "truth_label": rec.truth_label, **rec.meta}
-        _write_npz_and_record(path, arrays, meta)
+        _write_npz_and_record(path, truth_arrays(rec), truth_meta(rec))
 
     def write_bound(self, rec: BoundRecord) -> None:
         """Write a realisation's bound beside its truth (arrays first, then the record that names them)."""
         path = self.bound_path(rec.dataset, rec.seed)
         _makedirs(path.parent)
-        names = sorted(rec.covs)
-        arrays = {"t": rec.t} | {f"cov_{i}": rec.covs[n] for i, n in enumerate(names)}
-        meta = {"dataset": rec.dataset, "seed": rec.seed, "rows": names, **rec.meta}
-        _write_npz_and_record(path, arrays, meta)
+        meta = {"dataset": rec.dataset, "seed": rec.seed, "rows": sorted(rec.covs), **rec.meta}
+        _write_npz_and_record(path, bound_arrays(rec), meta)
 
     def write_run(self, rec: RunRecord) -> Path:
         """Write a run folder atomically: a uniquely named temporary folder, then renamed into place.
@@ -463,6 +451,21 @@ class Store:
             return str(exc)
         return None
 
+    def truth_files(self, dataset: str | Spec, seed: int) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        """The stored truth's record and arrays as stored, after every check (:func:`_load_verified`): what
+        ``locbench verify`` compares with a rebuilt truth. A :class:`StaleRecord` when missing or stale."""
+        path = self.truth_path(dataset, seed)
+        if not path.is_file():
+            raise StaleRecord(f"{path}: missing")
+        return _load_verified(path, path.with_suffix(".json"), truth_problem, required_record=True)
+
+    def bound_files(self, dataset: str | Spec, seed: int) -> tuple[dict[str, Any], dict[str, np.ndarray]] | None:
+        """The stored bound's record and arrays as stored, verified; None when there is none."""
+        path = self.bound_path(dataset, seed)
+        if not (path.is_file() or path.with_suffix(".json").is_file()):
+            return None
+        return _load_verified(path, path.with_suffix(".json"), bound_problem, required_record=True)
+
     def has_truth(self, dataset: str | Spec, seed: int) -> bool:
         return self.truth_path(dataset, seed).is_file()
 
@@ -511,6 +514,40 @@ class Store:
         extra = {k[6:]: v for k, v in z.items() if k.startswith("extra_")}
         health = {k[7:]: v for k, v in z.items() if k.startswith("health_")}
         return RunRecord(meta, z["t"], z["mean"], z["cov"], z["kind"], z["step_ns"], diag, extra, health)
+
+
+def truth_arrays(rec: TruthRecord) -> dict[str, np.ndarray]:
+    """The arrays of a realisation's truth as :meth:`Store.write_truth` stores them (``gt_*``, ``wp_*``, ...)."""
+    wp_t = rec.waypoints.t if rec.waypoints is not None else np.zeros(0)
+    wp_xy = rec.waypoints.xy if rec.waypoints is not None else np.zeros((0, 2))
+    arrays = {
+        "gt_t": rec.ground_truth.t,
+        "gt_xy": rec.ground_truth.xy,
+        "gt_theta": rec.ground_truth.theta,
+        "wp_t": wp_t,
+        "wp_xy": wp_xy,
+        "has_waypoints": np.array(rec.waypoints is not None),
+        "kidnap_t": np.array([k.t for k in rec.kidnaps], dtype=np.float64),
+        "kidnap_delta": np.array([k.delta for k in rec.kidnaps], dtype=np.float64).reshape(-1, 3),
+        "duration_s": np.array(rec.duration_s),
+        "map_segments": np.asarray(rec.map_segments, dtype=np.float64).reshape(-1, 4),
+        "map_landmarks": np.asarray(rec.map_landmarks, dtype=np.float64).reshape(-1, 2),
+    }
+    if rec.relations is not None:
+        arrays.update(rel_t1=rec.relations.t1, rel_t2=rec.relations.t2, rel_delta=rec.relations.delta)
+    return arrays
+
+
+def truth_meta(rec: TruthRecord) -> dict[str, Any]:
+    """The JSON record of a realisation's truth as :meth:`Store.write_truth` stores it (before its checksums)."""
+    return {"dataset": rec.dataset, "seed": rec.seed, "truth_label": rec.truth_label, **rec.meta}
+
+
+def bound_arrays(rec: BoundRecord) -> dict[str, np.ndarray]:
+    """The arrays of a bound as :meth:`Store.write_bound` stores them: ``t`` and ``cov_<i>`` of the rows sorted
+    by name (the record's ``rows``)."""
+    names = sorted(rec.covs)
+    return {"t": rec.t} | {f"cov_{i}": rec.covs[n] for i, n in enumerate(names)}
 
 
 class StaleRecord(ConfigError):
@@ -736,12 +773,16 @@ def _makedirs(path: Path) -> None:
 _SWAP_ATTEMPTS = 100
 
 
-def _swap_into_place(tmp: Path, final: Path) -> None:
-    """Rename folder ``tmp`` to ``final``, moving any folder already there aside (unique name) and removing it."""
+def _swap_into_place(tmp: Path, final: Path, own: frozenset[str] = RUN_FILES) -> None:
+    """Rename folder ``tmp`` to ``final``, moving any folder already there aside (unique name); then carry what
+    the old folder holds beyond ``own`` (paths relative to it) into the new one and remove the old folder's own
+    files (:func:`carry_over`, :func:`remove_own`). A foreign entry that cannot be carried over stays in the
+    moved-aside folder, which is then kept (logged)."""
+    aside: list[Path] = []
     for _ in range(_SWAP_ATTEMPTS):
         try:
             tmp.rename(final)
-            return
+            break
         except OSError as exc:
             if exc.errno not in (errno.ENOTEMPTY, errno.EEXIST, errno.EISDIR):
                 raise
@@ -750,8 +791,76 @@ def _swap_into_place(tmp: Path, final: Path) -> None:
             final.rename(old)
         except FileNotFoundError:
             continue  # another writer moved it away first: try our rename again
-        shutil.rmtree(old, ignore_errors=True)
-    raise OSError(errno.EBUSY, f"could not replace the run folder after {_SWAP_ATTEMPTS} attempts", str(final))
+        aside.append(old)
+    else:
+        raise OSError(errno.EBUSY, f"could not replace the run folder after {_SWAP_ATTEMPTS} attempts", str(final))
+    for old in aside:
+        left = carry_over(old, final, own)
+        if not remove_own(old, own):
+            log.warning("%s: kept, it holds files locbench did not write that %s already has: %s", old, final, left)
+
+
+def _own_dirs(own: Collection[str]) -> set[str]:
+    """The folders (relative paths) that hold the files ``own`` names."""
+    return {"/".join(parts[:i]) for rel in own for parts in [rel.split("/")] for i in range(1, len(parts))}
+
+
+def carry_over(old: Path, new: Path, own: Collection[str]) -> list[Path]:
+    """Move every entry under folder ``old`` that is not one of ``own`` (files, as paths relative to ``old``)
+    to the same place under ``new``; returns the entries left behind because ``new`` has that name already.
+
+    A folder that holds own files (``figures/``) or that ``new`` has too is entered; any other entry (a file, a
+    symlink, a folder of someone else's) is moved whole, by a rename (no copy: nothing is lost when the disk is
+    full).
+    """
+    dirs = _own_dirs(own)
+    left: list[Path] = []
+
+    def walk(rel_dir: str) -> None:
+        here = old / rel_dir if rel_dir else old
+        for entry in sorted(here.iterdir()):
+            rel = f"{rel_dir}/{entry.name}" if rel_dir else entry.name
+            if rel in own:
+                continue
+            target = new / rel
+            if (
+                entry.is_dir()
+                and not entry.is_symlink()
+                and (rel in dirs or (target.is_dir() and not target.is_symlink()))
+            ):
+                walk(rel)  # a folder both have: carry over what it holds
+                if rel not in dirs:
+                    with contextlib.suppress(OSError):  # now empty: the new folder has it
+                        entry.rmdir()
+                continue
+            if os.path.lexists(target):
+                left.append(entry)
+                continue
+            _makedirs(target.parent)
+            entry.rename(target)
+
+    if old.is_dir():
+        walk("")
+    return left
+
+
+def remove_own(folder: Path, own: Collection[str]) -> bool:
+    """Remove the files ``own`` names under ``folder``, then the folders they leave empty and ``folder`` itself
+    when it is empty; whether ``folder`` is gone. Nothing else is removed."""
+    for rel in own:
+        p = folder / rel
+        if p.is_file() and not p.is_symlink():
+            p.unlink(missing_ok=True)
+    for rel in sorted(_own_dirs(own), key=lambda r: -r.count("/")):
+        with contextlib.suppress(OSError):  # not empty (a foreign file), or not there
+            (folder / rel).rmdir()
+    try:
+        folder.rmdir()
+    except FileNotFoundError:
+        return True
+    except OSError:
+        return False
+    return True
 
 
 def _atomic_write(path: Path, writer: Any) -> None:

@@ -84,7 +84,8 @@ def test_report_into_a_read_only_folder(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     res = _stored_results(tmp_path)
-    _refuse_writes_under(monkeypatch, res / "summary", errno.EROFS)
+    # the summary is written in a new folder beside it, then swapped in: the results folder is written into
+    _refuse_writes_under(monkeypatch, res, errno.EROFS)
     capsys.readouterr()
     assert main(["report", "--results", str(res)]) == 2
     _one_line(capsys, "summary", "Read-only file system")

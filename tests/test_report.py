@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import hashlib
 import os
 import shutil
 import sys
@@ -310,14 +311,21 @@ def test_report_suite_restricts_the_cells(store: Store) -> None:
 
 
 def test_report_regenerates_identical_bytes(store: Store) -> None:
+    from locbench.report.output import MANIFEST, manifest_bytes, read_manifest
+
     write_report(store)
     files = sorted(p for p in store.summary.rglob("*") if p.is_file())
     before = {p: p.read_bytes() for p in files}
-    # a stale figure from a dataset no longer stored is removed
-    (store.summary / "figures" / "old_nees.png").write_bytes(b"stale")
-    for p in files:
-        p.unlink()
+    # a stale figure an earlier report wrote (its manifest lists it) is removed; one of someone else's is kept
+    stale, mine = store.summary / "figures" / "old_nees.png", store.summary / "figures" / "mine.png"
+    stale.write_bytes(b"stale")
+    mine.write_bytes(b"mine")
+    listed = read_manifest(store.summary) or {}
+    listed["figures/old_nees.png"] = (5, hashlib.sha256(b"stale").hexdigest())
+    (store.summary / MANIFEST).write_bytes(manifest_bytes(listed))
     write_report(store)
+    assert not stale.exists() and mine.read_bytes() == b"mine"
+    mine.unlink()
     after = {p: p.read_bytes() for p in sorted(p for p in store.summary.rglob("*") if p.is_file())}
     assert after.keys() == before.keys()
     for p, data in before.items():

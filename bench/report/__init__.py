@@ -14,10 +14,10 @@ import logging
 from dataclasses import dataclass
 from pathlib import Path
 
-from locbench.report.collect import Keep, collect, collect_metrics, write_if_changed, write_metrics_csv
+from locbench.report.collect import Keep, collect, collect_metrics, metrics_csv, write_metrics_csv
 from locbench.report.doc import Table
 from locbench.report.tables import wilson_interval
-from locbench.store import Store
+from locbench.store import MARKER, Store
 
 __all__ = [
     "ReportPaths",
@@ -45,7 +45,8 @@ class ReportPaths:
 
 
 def write_report(store: Store, keep: Keep | None = None, out: Path | None = None, jobs: int = 1) -> ReportPaths:
-    """Write ``metrics.csv``, ``REPORT.md``, ``figures/*.png`` and ``index.html``.
+    """Write ``metrics.csv``, ``comparisons.csv``, ``REPORT.md``, ``figures/*.png``, ``index.html`` and the
+    folder's manifest, whole: into a temporary sibling folder, then swapped in (:mod:`locbench.report.output`).
 
     Parameters
     ----------
@@ -54,27 +55,40 @@ def write_report(store: Store, keep: Keep | None = None, out: Path | None = None
     keep : callable, optional
         ``keep(dataset, filter)`` restricts the report to some cells (a suite's, see :func:`suite_filter`).
     out : Path, optional
-        The folder to write; default ``store.summary``. Stale figures there are removed.
+        The folder to write; default ``store.summary``. What the last report wrote there is replaced; any other
+        file is kept; a folder that is not empty and was not written by the report is refused.
     jobs : int
         Processes that read the runs and draw the figures (1: this process); the files do not depend on it.
+
+    Raises
+    ------
+    ConfigError
+        The output folder is someone else's, or holds a file of a name the report writes that it did not write.
+    OSError
+        A write failed (a full disk): the error names the file; the folder is left as it was.
     """
     from locbench.report.build import Report
-    from locbench.report.render import to_html, to_markdown, write_figures
-    from locbench.report.significance import write_comparisons_csv
+    from locbench.report.output import OutputFolder
+    from locbench.report.render import figure_pngs, to_html, to_markdown
+    from locbench.report.significance import comparisons_csv
 
+    summary = Path(out) if out is not None else store.summary
+    # the summary of a results folder 'locbench run' marked is the report's, manifest or not (older reports)
+    legacy = summary.absolute() == store.summary.absolute() and (store.root / MARKER).is_file()
+    folder = OutputFolder(summary, legacy=legacy)  # refuses someone else's folder before anything is computed
     col = collect(store, keep, jobs)
-    summary = out if out is not None else store.summary
-    summary.mkdir(parents=True, exist_ok=True)
-    metrics = write_metrics_csv(col.metrics, summary / "metrics.csv")
     report = Report(col)
     sections = report.sections()
     intro = report.how_to_read()
-    write_comparisons_csv(report.comparisons, summary / "comparisons.csv")
-    pngs = write_figures(sections, summary / "figures", jobs)
-    md = summary / "REPORT.md"
-    write_if_changed(md, to_markdown(TITLE, intro, sections).encode())
-    page = summary / "index.html"
-    write_if_changed(page, to_html(TITLE, intro, sections, pngs).encode())
+    with folder:
+        metrics = folder.write("metrics.csv", metrics_csv(col.metrics))
+        folder.write("comparisons.csv", comparisons_csv(report.comparisons))
+        pngs = figure_pngs(sections, jobs)
+        for name, data in pngs.items():
+            folder.write(f"figures/{name}.png", data)
+        md = folder.write("REPORT.md", to_markdown(TITLE, intro, sections).encode())
+        page = folder.write("index.html", to_html(TITLE, intro, sections, pngs).encode())
+        folder.commit()
     tables = tuple(
         b for s in sections if s.anchor == "summary" for c in s.children for b in c.blocks if isinstance(b, Table)
     )

@@ -414,8 +414,13 @@ def write_metrics_csv(df: pd.DataFrame, path: str | Path) -> Path:
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    write_if_changed(path, metrics_csv(df))
+    return path
+
+
+def metrics_csv(df: pd.DataFrame) -> bytes:
+    """The bytes of ``metrics.csv`` (:func:`write_metrics_csv`)."""
     tidy = frame(list(df[list(COLUMNS)].itertuples(index=False, name=None)))
     buf = io.StringIO()
     tidy.to_csv(buf, index=False, float_format=FLOAT_FORMAT, na_rep="nan", lineterminator="\n")
-    write_if_changed(path, buf.getvalue().encode())
-    return path
+    return buf.getvalue().encode()

@@ -12,7 +12,6 @@ import html
 import io
 import json
 import re
-from pathlib import Path
 from typing import Any, cast
 
 import matplotlib.image
@@ -21,7 +20,6 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.text import Text as MplText
 
-from locbench.report.collect import write_if_changed
 from locbench.report.doc import Bullets, Plot, Section, Table, Text
 from locbench.report.style import FIG_DPI, MPL_STYLE
 
@@ -125,7 +123,7 @@ def plots_of(sections: list[Section]) -> list[Plot]:
     return [b for s in sections for _, sec in s.walk() for b in sec.blocks if isinstance(b, Plot)]
 
 
-#: The plots a forked worker of :func:`write_figures` draws (set before the pool forks).
+#: The plots a forked worker of :func:`figure_pngs` draws (set before the pool forks).
 _PLOTS: list[Plot] = []
 
 
@@ -155,25 +153,16 @@ def render_pngs(plots: list[Plot], jobs: int = 1) -> list[bytes]:
     return out
 
 
-def write_figures(sections: list[Section], figdir: Path, jobs: int = 1) -> dict[str, bytes]:
-    """Draw every plot to ``figdir/<name>.png`` (unchanged files untouched), remove stale PNGs; name -> bytes.
-
-    ``jobs`` processes draw them (:func:`render_pngs`)."""
-    figdir.mkdir(parents=True, exist_ok=True)
+def figure_pngs(sections: list[Section], jobs: int = 1) -> dict[str, bytes]:
+    """Every plot of the sections drawn to PNG bytes, by name (the file ``figures/<name>.png``); ``jobs``
+    processes draw them (:func:`render_pngs`)."""
     plots = plots_of(sections)
     names: set[str] = set()
     for plot in plots:
         if plot.name in names:
             raise ValueError(f"two figures named {plot.name!r}")
         names.add(plot.name)
-    out: dict[str, bytes] = {}
-    for plot, data in zip(plots, render_pngs(plots, jobs), strict=True):
-        write_if_changed(figdir / f"{plot.name}.png", data)
-        out[plot.name] = data
-    for stale in sorted(figdir.glob("*.png")):
-        if stale.stem not in out:
-            stale.unlink()
-    return out
+    return {plot.name: data for plot, data in zip(plots, render_pngs(plots, jobs), strict=True)}
 
 
 # --- HTML -------------------------------------------------------------------------------------------

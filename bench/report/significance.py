@@ -12,7 +12,6 @@ import io
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -25,7 +24,6 @@ from locbench.metric_info import METRICS
 from locbench.metrics import WITHIN_THRESHOLDS_CM
 from locbench.ranking import WAYPOINT_MEAN, Column, hover_grid, mark_ties, per_seed, samples_for, tie_footnote
 from locbench.report import tables as tb
-from locbench.report.collect import write_if_changed
 from locbench.report.doc import Plot, Section, Table, Text
 
 if TYPE_CHECKING:
@@ -126,15 +124,13 @@ def all_comparisons(report: Report) -> list[ComparisonRecord]:
     return out
 
 
-def write_comparisons_csv(records: Sequence[ComparisonRecord], path: Path) -> Path:
-    """Write the tidy pairwise results (identical bytes on rerun: sorted, ``%.10g``)."""
+def comparisons_csv(records: Sequence[ComparisonRecord]) -> bytes:
+    """The tidy pairwise results as ``comparisons.csv`` bytes (identical bytes on rerun: sorted, ``%.10g``)."""
     frame = pd.DataFrame([r.__dict__ for r in records], columns=list(CSV_COLUMNS))
     frame = frame.sort_values(["dataset", "metric", "configuration"], kind="stable")
     buf = io.StringIO()
     frame.to_csv(buf, index=False, float_format="%.10g", na_rep="nan", lineterminator="\n")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    write_if_changed(path, buf.getvalue().encode())
-    return path
+    return buf.getvalue().encode()
 
 
 def effects_table(records: Sequence[ComparisonRecord], dataset: str) -> Table | None:
