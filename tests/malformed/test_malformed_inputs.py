@@ -79,7 +79,7 @@ def test_mrclam_odometry_all_at_one_time_is_an_error(tmp_path: Path) -> None:
     odo.write_text("".join(head) + "".join("105.000 \t 0.500 \t 0.000 \r\n" for _ in body))
     with pytest.raises(RecordedDataError) as info:
         load_mrclam(folder, 1, verify=False)
-    clean(info, odo, "same time", "expected increasing times")
+    clean(info, f"{odo}:6", "every odometry sample has the time 105.0", "expected times that advance")
 
 
 def test_carmen_odom_stamps_all_equal_is_an_error(tmp_path: Path) -> None:
@@ -657,14 +657,14 @@ def test_mrclam_speed_of_9_9_m_per_s_is_refused(tmp_path: Path) -> None:
     _edit_rows(odo, lambda k, f: [f[0], "9.900", f[2]])
     with pytest.raises(RecordedDataError) as info:
         load_mrclam(folder, 1, verify=False)
-    clean(info, f"{odo}:5", "forward velocity", "9.9", "[-1.0, 1.0]")
+    clean(info, f"{odo}:5", "forward velocity", "9.9", "[-1, 1]", "break the plausibility bounds")
     # the truth moving at that speed is refused as well
     folder = _small_folder(tmp_path / "truth")
     gt = folder / "Robot1_Groundtruth.dat"
     _edit_rows(gt, lambda k, f: [f[0], f"{9.9 * (float(f[0]) - 100.0):.8f}", *f[2:]])
     with pytest.raises(RecordedDataError) as info:
         load_mrclam(folder, 1, verify=False)
-    clean(info, f"{gt}:6", "the truth moves", "1.0 m/s")
+    clean(info, f"{gt}:6", "ground-truth apparent speed, m/s 9.9", "at most 1 m/s plus 0.05 m")
 
 
 @pytest.mark.parametrize("name", ["v_var", "om_var", "r_var", "b_var"])
