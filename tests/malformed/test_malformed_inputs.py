@@ -613,7 +613,7 @@ def _a_gt_gap(d: dict[str, np.ndarray]) -> None:
     [
         (_one_odometry_row_for_410_s, ("variable 'DR'", "409.5 s short", "(1 odometry row(s))")),
         (_all_ranges_at_one_instant, ("variable 'TD'", "4 ranges at the one time 0.6 s", "one per beacon")),
-        (_a_50_m_step_in_a_tenth_of_a_second, ("variable 'DR' row 2", "50 m in 0.1 s", "10.0 m/s")),
+        (_a_50_m_step_in_a_tenth_of_a_second, ("odometry (variable 'DR')", "t=0.6 s", "speed, m/s 500", "5 m/s")),
         (_a_gt_gap, ("variable 'GT' row 5", "18.5 s", "at most 5.0 s")),
     ],
 )
