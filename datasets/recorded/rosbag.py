@@ -581,9 +581,8 @@ def _read_streams_cached(
     arrays = (odom_t, odom_pose, odom_twist, truth_t, truth_pose, *fix_arrays)
     for a in arrays:
         a.setflags(write=False)  # shared through the cache
-    return BagStreams(
-        odom_t, odom_pose, odom_twist, scans, truth_t, truth_pose, truth_type, topics, *arrays[5:], flagged=flagged
-    )
+    streams = BagStreams(odom_t, odom_pose, odom_twist, scans, truth_t, truth_pose, truth_type, topics, *arrays[5:])
+    return dataclasses.replace(streams, flagged=flagged)
 
 
 def _fix_arrays(fixes: list[tuple[float, Any]]) -> tuple[npt.NDArray[Any], ...]:
