@@ -319,7 +319,7 @@ class FlaggedSample:
     def describe(self) -> str:
         """One line: where, when, what and which bound."""
         where = f"{self.source}:{self.line}" if self.line is not None else self.source
-        return f"{where} at t={self.t:.6g} s: {self.stream} {self.quantity} {self.value:.4g}, expected {self.bound}"
+        return f"{where} at t={self.t!r} s: {self.stream} {self.quantity} {self.value:.4g}, expected {self.bound}"
 
     def record(self) -> dict[str, Any]:
         """JSON-friendly form for a run's provenance."""

@@ -262,8 +262,8 @@ def _broken(name: str) -> tuple[dict[str, Any], str, str]:
         return mat, "true_valid", "expected 0 or 1"
     if name == "negative range":
         mat["r"] = mat["r"].copy()
-        mat["r"][2, 0] = -1.0
-        return mat, "r", "at (3, 1) is -1.0, expected in [0.0, 100.0]"
+        mat["r"][2:, 0] = -1.0  # one sighting alone is flagged; this many are refused
+        return mat, "r", "at t=0.2 s: sighting (variable 'r' and 'b') range, m -1, expected in [0, 100]"
     if name == "zero variance":
         mat["b_var"] = np.array([[0.0]])
         return mat, "b_var", "expected bearing variance in rad^2 > 0"

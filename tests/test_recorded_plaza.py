@@ -187,7 +187,7 @@ def test_tiny_file_events_truth_and_odometry_model(tmp_path: Path) -> None:
         (lambda d: d["DR"].__setitem__((2, 0), 0.2), r"variable 'DR' column 1 \(t s\): time goes backwards at row 3"),
         (lambda d: d["GT"].__setitem__((1, 0), 1.7), r"variable 'GT' column 1 \(t s\): time goes backwards at row 3"),
         (lambda d: d["TD"].__setitem__((1, 2), 9.0), r"variable 'TD' row 2: beacon_id 9.0 is not in TL"),
-        (lambda d: d["TD"].__setitem__((0, 3), -1.0), r"variable 'TD' column 4 \(range m\) at \(1\) is -1.0"),
+        (lambda d: d["TD"].__setitem__((0, 3), -1.0), r"range \(variable 'TD'\) range, m -1, expected in \[0, 1000\]"),
         (lambda d: d.__setitem__("TL", np.array([[4.0, 0.0, 5.0], [4.0, 3.0, -2.0]])), r"'TL' column 1 \(id\)"),
     ],
 )

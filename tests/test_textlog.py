@@ -238,7 +238,7 @@ BAD_EVENTS = [
     ("id unknown", '{"t": 0.1, "type": "ranges", "ids": [7], "ranges": [1.0]}', ("id 7 is not a known landmark",)),
     ("id count", '{"t": 0.1, "type": "ranges", "ids": [1, 2], "ranges": [1.0]}', ("2 ids for 1 measurements",)),
     ("bearings", '{"t": 0.1, "type": "landmarks", "ids": [1], "ranges": [1.0], "bearings": []}', ("'bearings'",)),
-    ("range < 0", '{"t": 0.1, "type": "ranges", "ids": [1], "ranges": [-1.0]}', ("'ranges': item 0 is -1.0",)),
+    ("range < 0", '{"t": 0.1, "type": "ranges", "ids": [1], "ranges": [-1.0]}', ("jsonl:2", "range, m -1,")),
     ("fix cov", '{"t": 0.1, "type": "fix", "z": [0, 0], "cov": [[1, 2], [2, 1]]}', ("'cov'", "positive semi")),
     ("fix both", '{"t": 0.1, "type": "fix", "z": [0, 0], "cov": [[1, 0], [0, 1]], "sigma": [1, 1]}', ("either",)),
     (

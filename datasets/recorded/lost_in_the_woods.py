@@ -31,12 +31,14 @@ variable       shape     meaning
 =============  ========  =====================================================================================
 
 Validation: every variable must be a real float array (``true_valid`` may also be integer or logical, holding 0
-or 1) of the shape above with finite values; ``t`` strictly increasing; positions (``l``, ``x_true``,
-``y_true``) within :data:`~locbench.datasets.recorded.files.MAX_POSITION_M`; ``v`` within :data:`MAX_SPEED_MPS`,
-``om`` within :data:`MAX_TURN_RATE_RADPS`, headings and bearings within +-2 pi; ranges in [0,
-:data:`MAX_RANGE_M`]; ``d`` in [0, :data:`MAX_RANGE_M`]; variances > 0 and at most the square of
-their quantity's bound (speed, turn rate, range; pi rad for the bearing). The robot must move and turn (the
-per-metre noise divides by the mean speed and turn rate) and see at least one tube.
+or 1) of the shape above with finite values; ``t`` strictly increasing; every number within
+:data:`~locbench.datasets.recorded.files.MAX_POSITION_M`; ``d`` in [0, :data:`MAX_RANGE_M`]; variances > 0 and at
+most the square of their quantity's bound (speed, turn rate, range; pi rad for the bearing). The robot must move and
+turn (the per-metre noise divides by the mean speed and turn rate) and see at least one tube. Flagged by the
+plausibility policy (:func:`plausible_masks`; left out and listed in ``Dataset.flagged``, a stream with more than
+1 % flagged or a 2 s stretch refused): a twist beyond the policy's speed or turn rate, a valid Vicon pose with a
+heading beyond 2 pi or off the reachable track (a flagged pose is dropped as an invalid one is), a sighting with a
+range outside [0, :data:`MAX_RANGE_M`] or a bearing beyond 2 pi.
 
 Frames and identities
 ---------------------
@@ -119,6 +121,7 @@ import numpy.typing as npt
 
 from locbench.datasets.base import (
     Dataset,
+    FlaggedSample,
     Gaussian2,
     Landmarks,
     SensorSpec,
@@ -126,6 +129,7 @@ from locbench.datasets.base import (
     WorldMap,
     sort_events,
 )
+from locbench.datasets.recorded import plausibility
 from locbench.datasets.recorded.base import RecordedDataset
 from locbench.datasets.recorded.files import (
     MAX_POSITION_M,
@@ -216,10 +220,14 @@ class LostInTheWoodsData:
     b_var: float
 
 
-#: Bounds of the validation (generous: the robot drives below 0.6 m/s among tubes a few metres away).
+#: Bounds of the validation (generous: the robot drives below 0.6 m/s among tubes a few metres away). The speed and
+#: turn rate are looser than the plausibility policy's, whose 5 m/s and 10 rad/s apply (:data:`BOUNDS`).
 MAX_SPEED_MPS = 10.0
 MAX_TURN_RATE_RADPS = 50.0
 MAX_RANGE_M = 100.0
+#: The plausibility bounds of this loader: the policy's, ranges tightened to :data:`MAX_RANGE_M` and headings and
+#: bearings to 2 pi.
+BOUNDS = plausibility.BOUNDS.tightened(range_m=MAX_RANGE_M, heading_abs_rad=2 * math.pi)
 #: The variances and the largest standard deviation each may have: the bound of its own quantity (a speed sigma of
 #: at most MAX_SPEED_MPS ...; the file's are 0.066 m/s, 0.090 rad/s, 0.030 m and 0.026 rad).
 _VARIANCES = (
@@ -287,11 +295,13 @@ def _read_cached(path_str: str, size: int, mtime_ns: int) -> LostInTheWoodsData:
     if n < 2:
         raise RecordedDataError(path, f"variable 't': {n} sample(s), expected at least 2")
     check_increasing(path, "variable 't'", t, strict=True)
-    v = _vector(path, mat, "v", n, "speed in m/s", bound=MAX_SPEED_MPS)
-    om = _vector(path, mat, "om", n, "turn rate in rad/s", bound=MAX_TURN_RATE_RADPS)
+    # speeds, turn rates, headings, ranges and bearings beyond their physical bounds are flagged (plausible_masks);
+    # beyond MAX_POSITION_M a number is no measurement at all and refused
+    v = _vector(path, mat, "v", n, "speed in m/s", bound=MAX_POSITION_M)
+    om = _vector(path, mat, "om", n, "turn rate in rad/s", bound=MAX_POSITION_M)
     x_true = _vector(path, mat, "x_true", n, "true x in m", bound=MAX_POSITION_M)
     y_true = _vector(path, mat, "y_true", n, "true y in m", bound=MAX_POSITION_M)
-    th_true = _vector(path, mat, "th_true", n, "true heading in rad", bound=2 * math.pi)
+    th_true = _vector(path, mat, "th_true", n, "true heading in rad", bound=MAX_POSITION_M)
     valid = _vector(path, mat, "true_valid", n, "validity flag 0/1", kinds="fiub")
     for name, arr, what in (("v", v, "speed"), ("om", om, "turn rate")):
         if not np.any(arr[:-1] != 0.0):
@@ -315,8 +325,8 @@ def _read_cached(path_str: str, size: int, mtime_ns: int) -> LostInTheWoodsData:
                 path, f"variable {name!r}: shape {arr.shape}, expected {what}, N x L = {n} x {n_lm} (t by l)"
             )
         meas[name] = arr
-    check_range(path, "variable 'r' (range in m, 0 = not seen)", meas["r"], 0.0, MAX_RANGE_M)
-    check_range(path, "variable 'b' (bearing in rad)", meas["b"], -2 * math.pi, 2 * math.pi)
+    check_range(path, "variable 'r' (range in m, 0 = not seen)", meas["r"], -MAX_POSITION_M, MAX_POSITION_M)
+    check_range(path, "variable 'b' (bearing in rad)", meas["b"], -MAX_POSITION_M, MAX_POSITION_M)
     if not np.any(meas["r"] > 0.0):
         raise RecordedDataError(path, "variable 'r': no sighting (every range is 0), expected at least one")
     d = _scalar(path, mat, "d", "laser offset in m", positive=False)
@@ -341,6 +351,37 @@ def _read_cached(path_str: str, size: int, mtime_ns: int) -> LostInTheWoodsData:
         d=d,
         **variances,
     )
+
+
+def plausible_masks(
+    data: LostInTheWoodsData,
+) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_], npt.NDArray[np.bool_], tuple[FlaggedSample, ...]]:
+    """The plausibility policy on the whole file (:data:`BOUNDS`): which samples' twist (N,), truth (N,) and
+    sightings (N x L) are kept, and the flagged ones.
+
+    A twist beyond the speed or turn-rate bound, a valid Vicon pose whose heading exceeds 2 pi or that the robot
+    could not have reached from the last accepted one, and a sighting whose range lies outside [0,
+    :data:`MAX_RANGE_M`] (0: not seen) or whose bearing exceeds 2 pi are flagged; a stream with more than 1 % of its
+    samples flagged, or a 2 s stretch, is refused.
+    """
+    path, t, b = data.path, data.t, BOUNDS
+    twist = plausibility.Flags(path, "twist (variable 'v' and 'om')", t)
+    twist.flag_outside(data.v, "speed, m/s", -b.speed_mps, b.speed_mps)
+    twist.flag_outside(data.om, "turn rate, rad/s", -b.turn_rate_radps, b.turn_rate_radps)
+    valid = np.flatnonzero(data.true_valid)
+    truth = plausibility.Flags(path, "truth (variable 'x_true', 'y_true', 'th_true')", t[valid])
+    truth.flag_outside(data.th_true[valid], "heading, rad", -b.heading_abs_rad, b.heading_abs_rad)
+    truth.flag_track(np.column_stack([data.x_true[valid], data.y_true[valid]]), data.th_true[valid], b)
+    row, col = np.nonzero(data.r != 0.0)  # 0 = not seen
+    sight = plausibility.Flags(path, "sighting (variable 'r' and 'b')", t[row])
+    sight.flag_outside(data.r[row, col], "range, m", 0.0, b.range_m)
+    sight.flag_outside(data.b[row, col], "bearing, rad", -b.heading_abs_rad, b.heading_abs_rad)
+    flagged = plausibility.merge(twist.finish(), truth.finish(), sight.finish())
+    truth_ok = np.ones(t.shape[0], dtype=bool)
+    truth_ok[valid[truth.mask]] = False
+    sight_ok = np.ones(data.r.shape, dtype=bool)
+    sight_ok[row[sight.mask], col[sight.mask]] = False
+    return twist.kept, truth_ok, sight_ok, flagged
 
 
 # --- the geometry ----------------------------------------------------------------------------------------
@@ -442,8 +483,9 @@ def load_lost_in_the_woods(
     p = params if params is not None else LostInTheWoodsParams()
     data = read_lost_in_the_woods(path)
     t = data.t
+    twist_ok, truth_ok, sight_ok, flagged = plausible_masks(data)
     t_end = math.inf if p.t_end_s is None else p.t_end_s
-    keep = data.true_valid & (t >= p.t_start_s) & (t <= t_end)
+    keep = data.true_valid & truth_ok & (t >= p.t_start_s) & (t <= t_end)
     idx = np.flatnonzero(keep)
     if idx.size < 2:
         raise ConfigError(
@@ -452,10 +494,12 @@ def load_lost_in_the_woods(
         )
     first, last = int(idx[0]), int(idx[-1])
 
-    # Odometry: intervals (t[k-1], t[k]] for k in first+1 .. last.
-    ks = np.arange(first + 1, last + 1)
-    src = ks - 1 if p.twist_sample == "previous" else ks
-    dt = t[ks] - t[ks - 1]
+    # Odometry: intervals (t[k-1], t[k]] for k in first+1 .. last, over the samples whose twist is not flagged (a
+    # flagged twist's interval joins its neighbour's).
+    kept = np.r_[first, np.flatnonzero(twist_ok[first + 1 : last + 1]) + first + 1]
+    ks, before = kept[1:], kept[:-1]
+    src = before if p.twist_sample == "previous" else ks
+    dt = t[ks] - t[before]
     v, om = data.v[src], data.om[src]
     dx, dy, dth = twist_increment(v, om, dt)
     events: list[Event] = [
@@ -468,7 +512,7 @@ def load_lost_in_the_woods(
     # Landmark sightings, converted from the laser to the robot centre.
     r_span, b_span = data.r[first : last + 1], data.b[first : last + 1]
     big_r, big_b = laser_to_centre(r_span, b_span, data.d)
-    seen = r_span > 0.0
+    seen = (r_span > 0.0) & sight_ok[first : last + 1]
     lm_ids = np.arange(1, data.l.shape[0] + 1, dtype=np.int64)
     for row in np.flatnonzero(seen.any(axis=1)).tolist():
         cols = np.flatnonzero(seen[row])
@@ -506,6 +550,7 @@ def load_lost_in_the_woods(
         "span_s": [float(t[first]), float(t[last])],
         "truth_samples_in_span": int(last - first + 1),
         "truth_samples_invalid_dropped": int(np.count_nonzero(~data.true_valid[in_span])),
+        "truth_samples_flagged": int(np.count_nonzero(data.true_valid[in_span] & ~truth_ok[in_span])),
         "noise_mapping": stats,
     }
     return Dataset(
@@ -521,6 +566,7 @@ def load_lost_in_the_woods(
         truth_label="ground truth",
         sources=(str(data.path),),
         declared=frozenset({LandmarkObservations}),
+        flagged=flagged,
     )
 
 

@@ -39,15 +39,17 @@ samples/s on average (63-69 per robot), not the 100 Hz sometimes quoted; the odo
 10 ms and 68 samples/s on average.
 
 Validation (besides the table checks of :func:`~locbench.datasets.recorded.files.read_table`: field count,
-numbers, integer ids, finite values, a last line without its line end refused as cut): truth, odometry and
-sighting times must not go backwards (repeated stamps are allowed: they move nothing); positions lie within
-:data:`~locbench.datasets.recorded.files.MAX_POSITION_M`; speeds within :data:`MAX_SPEED_MPS`, turn rates within
-:data:`MAX_TURN_RATE_RADPS`; ranges in [0, :data:`MAX_RANGE_M`]; bearings and headings within +-2 pi; a truth
-jump between two samples above :data:`MAX_TRUTH_STEP_M` is refused, and so is a truth step faster than
-:data:`MAX_SPEED_MPS` plus :data:`TRUTH_JITTER_M`; a gap above :data:`MAX_GAP_S` between two odometry or two truth
-samples anywhere in the file is refused (an odometry sample is held over its interval and the truth interpolated
-between its samples: a gap is never bridged); the run needs at least one odometry interval with dt > 0 inside the
-truth span.
+numbers, integer ids, finite values, a last line without its line end refused as cut). Refused (structural or a
+limit): truth, odometry and sighting times going backwards (repeated stamps are allowed: they move nothing), every
+truth or odometry time equal, positions beyond :data:`~locbench.datasets.recorded.files.MAX_POSITION_M`, a gap above
+:data:`MAX_GAP_S` between two odometry or two truth samples anywhere in the file (an odometry sample is held over its
+interval and the truth interpolated between its samples: a gap is never bridged), a run without one odometry
+interval with dt > 0 inside the truth span. Flagged (:mod:`~locbench.datasets.recorded.plausibility`: left out,
+listed in ``Dataset.flagged``, the file refused beyond 1 % or a 2 s stretch): a Vicon sample the robot could not
+have reached from the last accepted one (faster than :data:`MAX_SPEED_MPS` plus :data:`TRUTH_JITTER_M`, or than
+the policy's turn rate plus its heading jitter), a speed beyond :data:`MAX_SPEED_MPS` or a turn rate beyond
+:data:`MAX_TURN_RATE_RADPS` in the odometry, a range outside [0, :data:`MAX_RANGE_M`], a bearing or heading beyond
++-2 pi, a line that repeats the one before it in every field.
 
 Time is Unix seconds (NTP-synchronised between robots and Vicon); it is kept as is (no shift). The world frame is
 the Vicon frame; the robot frame has x forward; bearings are counter-clockwise from x, measured from the robot
@@ -121,6 +123,7 @@ import numpy.typing as npt
 
 from locbench.datasets.base import (
     Dataset,
+    FlaggedSample,
     Gaussian2,
     Landmarks,
     SensorSpec,
@@ -129,6 +132,7 @@ from locbench.datasets.base import (
     WorldMap,
     sort_events,
 )
+from locbench.datasets.recorded import plausibility
 from locbench.datasets.recorded.base import RecordedDataset
 from locbench.datasets.recorded.files import (
     MAX_DERIVED_ITEMS,
@@ -204,8 +208,14 @@ MAX_GAP_S = 10.0
 #: ``MAX_SPEED_MPS * dt + TRUTH_JITTER_M`` (Dataset 6: at most 0.025 m in one 16 ms step).
 TRUTH_JITTER_M = 0.05
 MAX_RANGE_M = 100.0
-#: Largest truth displacement between two consecutive Vicon samples, m (the robots move about 1 cm).
-MAX_TRUTH_STEP_M = 10.0
+#: The plausibility bounds tightened with the platform's limits (an iRobot Create in a 15 m hall).
+BOUNDS = plausibility.BOUNDS.tightened(
+    speed_mps=MAX_SPEED_MPS,
+    turn_rate_radps=MAX_TURN_RATE_RADPS,
+    range_m=MAX_RANGE_M,
+    heading_abs_rad=2 * math.pi,
+    position_jitter_m=TRUTH_JITTER_M,
+)
 
 # --- the nominal noise: frozen output of tools/derive_mrclam_noise.py (Dataset 6, robots 1-5) -----------------------
 
@@ -335,33 +345,32 @@ def read_landmarks(path: str | os.PathLike[str]) -> Landmarks:
 
 
 def read_groundtruth(path: str | os.PathLike[str]) -> Trajectory2D:
-    """The Vicon poses of one robot (headings wrapped to (-pi, pi]); time must not go backwards."""
+    """The Vicon poses of one robot (headings wrapped to (-pi, pi]) without the flagged ones (:func:`groundtruth`)."""
+    return groundtruth(path)[0]
+
+
+def groundtruth(path: str | os.PathLike[str]) -> tuple[Trajectory2D, tuple[FlaggedSample, ...]]:
+    """The Vicon poses of one robot (headings wrapped to (-pi, pi]) and the samples flagged and left out.
+
+    Time must not go backwards nor be the same everywhere, and no gap may exceed :data:`MAX_GAP_S` (refused); a
+    heading beyond +-2 pi, an exact repeat of the previous line, or a pose the robot could not have reached from
+    the last accepted one (:data:`BOUNDS`) is flagged.
+    """
     tab = _table(path, _GT_COLUMNS)
     tab.check_rows("ground-truth", 2)
     tab.check_time_non_decreasing(0, "time [s]")
+    plausibility.refuse_all_times_equal(tab.path, "ground-truth", tab.rows[:, 0], int(tab.lines[1]))
     for col in (1, 2):
         tab.check_range(col, _GT_COLUMNS[col], -MAX_POSITION_M, MAX_POSITION_M)
-    tab.check_range(3, _GT_COLUMNS[3], -2 * math.pi, 2 * math.pi)
-    step = np.hypot(np.diff(tab.rows[:, 1]), np.diff(tab.rows[:, 2]))
-    jump = np.flatnonzero(step > MAX_TRUTH_STEP_M)
-    if jump.size:
-        k = int(jump[0]) + 1
-        raise tab.fail(
-            k,
-            f"the truth jumps {float(step[k - 1]):.4g} m from the previous sample, "
-            f"expected at most {MAX_TRUTH_STEP_M} m",
-        )
     _check_gaps(tab, "ground-truth")
-    dt = np.diff(tab.rows[:, 0])
-    fast = np.flatnonzero(step > MAX_SPEED_MPS * dt + TRUTH_JITTER_M)
-    if fast.size:
-        k = int(fast[0]) + 1
-        raise tab.fail(
-            k,
-            f"the truth moves {float(step[k - 1]):.4g} m in {float(dt[k - 1]):.4g} s, expected at most "
-            f"{MAX_SPEED_MPS} m/s (the robot's physical bound) plus {TRUTH_JITTER_M} m of Vicon noise",
-        )
-    return Trajectory2D(t=tab.rows[:, 0].copy(), xy=tab.rows[:, 1:3].copy(), theta=wrap_angle(tab.rows[:, 3]))
+    flags = plausibility.Flags(tab.path, "ground-truth", tab.rows[:, 0], tab.lines)
+    h = BOUNDS.heading_abs_rad
+    flags.flag_outside(tab.rows[:, 3], "heading, rad", -h, h)
+    flags.flag_duplicates(tab.rows)
+    flags.flag_track(tab.rows[:, 1:3], tab.rows[:, 3], BOUNDS)
+    kept = tab.rows[flags.kept]
+    truth = Trajectory2D(t=kept[:, 0].copy(), xy=kept[:, 1:3].copy(), theta=wrap_angle(kept[:, 3]))
+    return truth, flags.finish()
 
 
 def _check_gaps(tab: Table, what: str) -> None:
@@ -378,23 +387,52 @@ def _check_gaps(tab: Table, what: str) -> None:
 
 
 def read_odometry(path: str | os.PathLike[str]) -> Table:
-    """The velocity commands (t s, v m/s, omega rad/s); time must not go backwards."""
+    """The velocity commands (t s, v m/s, omega rad/s) without the flagged rows (:func:`odometry`)."""
+    return odometry(path)[0]
+
+
+def odometry(path: str | os.PathLike[str]) -> tuple[Table, tuple[FlaggedSample, ...]]:
+    """The velocity commands (t s, v m/s, omega rad/s) and the rows flagged and left out.
+
+    Time must not go backwards nor be the same everywhere, and no gap may exceed :data:`MAX_GAP_S` (refused); a
+    speed beyond :data:`MAX_SPEED_MPS`, a turn rate beyond :data:`MAX_TURN_RATE_RADPS` or an exact repeat of the
+    previous line is flagged (a left-out command: the one before it is held over both intervals).
+    """
     tab = _table(path, _ODO_COLUMNS)
     tab.check_rows("odometry", 2)
     tab.check_time_non_decreasing(0, "time [s]")
-    tab.check_range(1, _ODO_COLUMNS[1], -MAX_SPEED_MPS, MAX_SPEED_MPS)
-    tab.check_range(2, _ODO_COLUMNS[2], -MAX_TURN_RATE_RADPS, MAX_TURN_RATE_RADPS)
+    plausibility.refuse_all_times_equal(tab.path, "odometry", tab.rows[:, 0], int(tab.lines[1]))
     _check_gaps(tab, "odometry")
-    return tab
+    flags = plausibility.Flags(tab.path, "odometry", tab.rows[:, 0], tab.lines)
+    flags.flag_outside(tab.rows[:, 1], _ODO_COLUMNS[1], -BOUNDS.speed_mps, BOUNDS.speed_mps)
+    flags.flag_outside(tab.rows[:, 2], _ODO_COLUMNS[2], -BOUNDS.turn_rate_radps, BOUNDS.turn_rate_radps)
+    flags.flag_duplicates(tab.rows)
+    return _kept(tab, flags), flags.finish()
 
 
 def read_measurements(path: str | os.PathLike[str]) -> Table:
-    """The camera's barcode sightings (t s, barcode #, range m, bearing rad); time must not go backwards."""
+    """The camera's barcode sightings (t s, barcode #, range m, bearing rad) without the flagged rows."""
+    return measurements(path)[0]
+
+
+def measurements(path: str | os.PathLike[str]) -> tuple[Table, tuple[FlaggedSample, ...]]:
+    """The camera's barcode sightings (t s, barcode #, range m, bearing rad) and the rows flagged and left out.
+
+    Time must not go backwards (refused); a range outside [0, :data:`MAX_RANGE_M`], a bearing beyond +-2 pi or an
+    exact repeat of the previous line is flagged.
+    """
     tab = _table(path, _MEAS_COLUMNS, (1,))
     tab.check_time_non_decreasing(0, "time [s]")
-    tab.check_range(2, _MEAS_COLUMNS[2], 0.0, MAX_RANGE_M)
-    tab.check_range(3, _MEAS_COLUMNS[3], -2 * math.pi, 2 * math.pi)
-    return tab
+    flags = plausibility.Flags(tab.path, "sighting", tab.rows[:, 0], tab.lines)
+    flags.flag_outside(tab.rows[:, 2], _MEAS_COLUMNS[2], 0.0, BOUNDS.range_m)
+    flags.flag_outside(tab.rows[:, 3], _MEAS_COLUMNS[3], -BOUNDS.heading_abs_rad, BOUNDS.heading_abs_rad)
+    flags.flag_duplicates(tab.rows)
+    return _kept(tab, flags), flags.finish()
+
+
+def _kept(tab: Table, flags: plausibility.Flags) -> Table:
+    """``tab`` without its flagged rows (each kept row keeps its line number)."""
+    return Table(tab.path, tab.rows[flags.kept], tab.lines[flags.kept])
 
 
 # --- derived quantities -----------------------------------------------------------------------------------
@@ -536,6 +574,8 @@ class RobotRun:
         {barcode: count} of rows whose barcode is not in ``Barcodes.dat`` (whole file).
     world : Landmarks
         The surveyed landmark map.
+    flagged : tuple of FlaggedSample
+        The truth, odometry and sighting rows left out by the plausibility bounds (whole files), in time order.
     """
 
     truth: Trajectory2D
@@ -544,6 +584,7 @@ class RobotRun:
     robots: Sightings
     unknown_barcodes: dict[int, int]
     world: Landmarks
+    flagged: tuple[FlaggedSample, ...] = ()
 
 
 def _resolve_paths(folder: str | os.PathLike[str], robot: int) -> dict[str, Path]:
@@ -576,9 +617,9 @@ def parse_robot_run(paths: dict[str, Path]) -> RobotRun:
     """Parse one robot's files (keys as in :func:`file_names`) and trim everything to the truth span."""
     barcodes = read_barcodes(paths["barcodes"])
     world = read_landmarks(paths["landmarks"])
-    gt = read_groundtruth(paths["groundtruth"])
-    odo = read_odometry(paths["odometry"])
-    meas = read_measurements(paths["measurement"])
+    gt, gt_flags = groundtruth(paths["groundtruth"])
+    odo, odo_flags = odometry(paths["odometry"])
+    meas, meas_flags = measurements(paths["measurement"])
     t, v, om = odo.rows[:, 0], odo.rows[:, 1], odo.rows[:, 2]
     g0, g1 = float(gt.t[0]), float(gt.t[-1])
     inside = np.flatnonzero((t >= g0) & (t <= g1))
@@ -605,7 +646,7 @@ def parse_robot_run(paths: dict[str, Path]) -> RobotRun:
     lms, robots, unknown = split_sightings(meas, barcodes)
     lms = lms.select((lms.t >= t0) & (lms.t <= g1))
     robots = robots.select((robots.t >= t0) & (robots.t <= g1))
-    return RobotRun(truth, events, lms, robots, unknown, world)
+    return RobotRun(truth, events, lms, robots, unknown, world, plausibility.merge(gt_flags, odo_flags, meas_flags))
 
 
 def dataset_from_run(
@@ -646,6 +687,7 @@ def dataset_from_run(
         metadata=meta,
         sources=tuple(sources),
         declared=frozenset({LandmarkObservations}),
+        flagged=run.flagged,
     )
 
 

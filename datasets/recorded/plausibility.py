@@ -155,10 +155,12 @@ class Flags:
 
     def flag_duplicates(self, rows: npt.ArrayLike, quantity: str = "a repeat of the previous sample") -> None:
         """Flag a sample equal in every column to the one before it (a doubled line): counted once, not twice."""
-        r = np.asarray(rows, dtype=np.float64).reshape(self.t.shape[0], -1)
-        dup = np.zeros(r.shape[0], dtype=bool)
-        if r.shape[0] > 1:
-            dup[1:] = np.all(r[1:] == r[:-1], axis=1)
+        n = self.t.shape[0]
+        if n < 2:  # nothing to repeat (and an empty array has no row length to reshape by)
+            return
+        r = np.asarray(rows, dtype=np.float64).reshape(n, -1)
+        dup = np.zeros(n, dtype=bool)
+        dup[1:] = np.all(r[1:] == r[:-1], axis=1)
         self.flag(dup, quantity, self.t, "one sample per line")
 
     def flag_track(
@@ -166,32 +168,43 @@ class Flags:
         xy: npt.ArrayLike,
         theta: npt.ArrayLike | None = None,
         bounds: Bounds = BOUNDS,
+        breaks: npt.ArrayLike = (),
     ) -> None:
         """Flag the pose samples a robot could not have reached from the last accepted one.
 
         Sample ``k`` is accepted when, against the last accepted sample ``g``, it moved at most
         ``speed_mps * (t_k - t_g) + position_jitter_m`` and turned at most
         ``turn_rate_radps * (t_k - t_g) + heading_jitter_rad``; else it is flagged and ``g`` stays. Comparing with
-        the last accepted sample (not the previous one) flags a glitch alone, not the good sample after it.
+        the last accepted sample (not the previous one) flags a glitch alone, not the good sample after it. Samples
+        flagged before this call (a duplicate, a heading out of bounds) take no part: neither judged nor a reference.
+        ``breaks`` are times (s) at which the pose may jump (a kidnap): the first sample at or after a break is
+        accepted as the new reference.
         """
-        p = np.asarray(xy, dtype=np.float64)
-        th = None if theta is None else np.asarray(theta, dtype=np.float64)
+        idx = np.flatnonzero(~self.mask)
+        p = np.asarray(xy, dtype=np.float64)[idx]
+        th = None if theta is None else np.asarray(theta, dtype=np.float64)[idx]
+        t = self.t[idx]
         if p.shape[0] < 2:
             return
+        segment = np.searchsorted(np.sort(np.asarray(breaks, dtype=np.float64)), t, side="right")
         # One vectorised pass decides the common case (no violation at all) without the walk.
-        dt = np.diff(self.t)
+        dt = np.diff(t)
         step = np.hypot(np.diff(p[:, 0]), np.diff(p[:, 1]))
         fast = step > bounds.speed_mps * dt + bounds.position_jitter_m
         if th is not None:
             turn = np.abs(wrap_angle(np.diff(th)))
             fast |= turn > bounds.turn_rate_radps * dt + bounds.heading_jitter_rad
+        fast &= segment[1:] == segment[:-1]
         if not fast.any():
             return
-        bad = np.zeros(p.shape[0], dtype=bool)
-        speed = np.zeros(p.shape[0])
+        bad = np.zeros(self.t.shape[0], dtype=bool)
+        speed = np.zeros(self.t.shape[0])
         g = int(np.flatnonzero(fast)[0])  # every sample up to here passed the one-step check
         for k in range(g + 1, p.shape[0]):
-            span = self.t[k] - self.t[g]
+            if segment[k] != segment[g]:
+                g = k
+                continue
+            span = t[k] - t[g]
             moved = math.hypot(p[k, 0] - p[g, 0], p[k, 1] - p[g, 1])
             ok = moved <= bounds.speed_mps * span + bounds.position_jitter_m
             if ok and th is not None:
@@ -200,8 +213,8 @@ class Flags:
             if ok:
                 g = k
             else:
-                bad[k] = True
-                speed[k] = moved / span if span > 0 else math.inf
+                bad[idx[k]] = True
+                speed[idx[k]] = moved / span if span > 0 else math.inf
         bound = f"at most {bounds.speed_mps:g} m/s plus {bounds.position_jitter_m:g} m"
         if th is not None:
             bound += f" and {bounds.turn_rate_radps:g} rad/s plus {bounds.heading_jitter_rad:g} rad"

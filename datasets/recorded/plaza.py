@@ -68,13 +68,17 @@ What the dataset is made of, and why
 Errors: a missing file, a file that is not MATLAB v5, a missing variable, a variable not stored as float (an
 int32 ``DR`` has already lost its centimetres), a wrong shape, a non-finite value, ``GT`` with fewer than 2 rows,
 time not strictly increasing in ``GT``, ``DR`` or ``DRp``, a position beyond
-:data:`~locbench.datasets.recorded.files.MAX_POSITION_M`, a ``DR`` step outside [0, :data:`MAX_STEP_M`] m or a
-turn beyond +-2 pi rad, a beacon id in ``TD`` that is not in ``TL``, a range outside [0, :data:`MAX_RANGE_M`] m
-(also after subtracting ``range_offset_m``), no ``DR`` row inside the ``GT`` span, a gap above :data:`MAX_GAP_S`
-(between ``GT`` rows, ``DR`` rows, or from an end of ``GT`` to the nearest ``DR`` row), a ``DR`` or ``GT`` step
-faster than :data:`MAX_SPEED_MPS`, more ranges at one time stamp than beacons, and a checksum mismatch
-raise :class:`~locbench.datasets.recorded.files.RecordedDataError` naming the file, the
-variable (and row) and what was expected. Parsed files are cached per (path, size, mtime).
+:data:`~locbench.datasets.recorded.files.MAX_POSITION_M`, a beacon id in ``TD`` that is not in ``TL``, a range
+below 0 after subtracting ``range_offset_m``, no ``DR`` row inside the ``GT`` span, a gap above :data:`MAX_GAP_S`
+(between ``GT`` rows, ``DR`` rows, or from an end of ``GT`` to the nearest ``DR`` row), more ranges at one time
+stamp than beacons, and a checksum mismatch raise :class:`~locbench.datasets.recorded.files.RecordedDataError`
+naming the file, the variable (and row) and what was expected. Parsed files are cached per (path, size, mtime).
+
+Flagged by the plausibility policy (:mod:`~locbench.datasets.recorded.plausibility`, :data:`BOUNDS`; the row is
+left out and listed in ``Dataset.flagged``, a variable with more than 1 % of its rows flagged or a 2 s stretch is
+refused): a ``GT`` row the robot could not have reached from the last accepted one; a ``DR`` step outside [0,
+:data:`MAX_STEP_M`] m, a turn beyond +-2 pi rad, or a step or turn faster than the bounds over its interval; a
+``TD`` range outside [0, :data:`MAX_RANGE_M`] m or a ``TD`` row repeating the one before it.
 """
 
 from __future__ import annotations
@@ -92,6 +96,7 @@ import numpy.typing as npt
 
 from locbench.datasets.base import (
     Dataset,
+    FlaggedSample,
     Gaussian2,
     Landmarks,
     SensorSpec,
@@ -99,6 +104,7 @@ from locbench.datasets.base import (
     WorldMap,
     sort_events,
 )
+from locbench.datasets.recorded import plausibility
 from locbench.datasets.recorded.base import RecordedDataset
 from locbench.datasets.recorded.files import (
     MAX_POSITION_M,
@@ -144,8 +150,12 @@ MAX_RANGE_M = 1000.0
 #: covers its whole interval, so a longer gap is refused, never bridged.
 MAX_GAP_S = 5.0
 #: Physical speed bound of the Plaza robot (a lawn-mower-sized vehicle; both files: at most 4.8 m/s over a 0.1-0.35 s
-#: row): a ``DR`` step over its interval and a ``GT`` step over its interval faster than this are refused.
+#: row). The plausibility policy's 5 m/s is tighter and applies: a ``DR`` step over its interval and a ``GT`` step
+#: from the last accepted row faster than that (plus its jitter) are flagged.
 MAX_SPEED_MPS = 10.0
+#: The plausibility bounds of this loader: the policy's, the range bound tightened to :data:`MAX_RANGE_M`, headings
+#: (``d_heading``) to 2 pi.
+BOUNDS = plausibility.BOUNDS.tightened(range_m=MAX_RANGE_M, heading_abs_rad=2 * math.pi)
 #: Path length of the chord whose direction is the ground-truth heading, m (half behind, half ahead).
 HEADING_CHORD_M = 2.0
 #: Initial belief standard deviations: position (m) and heading (rad).
@@ -189,7 +199,8 @@ RANGE_RESIDUAL_MEDIAN_M: dict[int, float] = {1: 2.838651029880637, 2: 2.80432808
 
 @dataclass(frozen=True)
 class PlazaArrays:
-    """The checked variables of one file (``DRp`` None when absent); ``TD`` sorted by time (stable)."""
+    """The checked variables of one file (``DRp`` None when absent); ``TD`` sorted by time (stable); ``GT``, ``DR``
+    and ``TD`` without the rows flagged by the plausibility bounds (``flagged``)."""
 
     path: Path
     GT: FloatArray
@@ -198,6 +209,7 @@ class PlazaArrays:
     TL: FloatArray
     TD: FloatArray
     td_rows_out_of_order: int
+    flagged: tuple[FlaggedSample, ...] = ()
 
 
 def _variable(path: Path, mat: dict[str, Any], name: str) -> FloatArray:
@@ -216,8 +228,7 @@ def _check_time(path: Path, name: str, a: FloatArray) -> None:
 
 
 def _check_motion(p: Path, gt: FloatArray, dr: FloatArray) -> None:
-    """Refuse gaps above :data:`MAX_GAP_S` in ``GT`` and ``DR`` (and ``DR`` not reaching the ends of ``GT``) and
-    steps faster than :data:`MAX_SPEED_MPS`."""
+    """Refuse gaps above :data:`MAX_GAP_S` in ``GT`` and ``DR`` (and ``DR`` not reaching the ends of ``GT``)."""
     for name, a in (("GT", gt), ("DR", dr)):
         dt = np.diff(a[:, 0])
         gap = np.flatnonzero(dt > MAX_GAP_S)
@@ -237,19 +248,20 @@ def _check_motion(p: Path, gt: FloatArray, dr: FloatArray) -> None:
             f"end of the GT span [{float(gt[0, 0])!r}, {float(gt[-1, 0])!r}] s, expected at most {MAX_GAP_S} s "
             f"({dr.shape[0]} odometry row(s))",
         )
-    steps = {
-        "DR": (dr[1:, 1], np.diff(dr[:, 0])),
-        "GT": (np.hypot(np.diff(gt[:, 1]), np.diff(gt[:, 2])), np.diff(gt[:, 0])),
-    }
-    for name, (d, dt) in steps.items():
-        fast = np.flatnonzero(d > MAX_SPEED_MPS * dt)
-        if fast.size:
-            r = int(fast[0]) + 1
-            raise RecordedDataError(
-                p,
-                f"variable {name!r} row {r + 1}: a step of {float(d[r - 1]):.6g} m in {float(dt[r - 1]):.6g} s, "
-                f"expected at most {MAX_SPEED_MPS} m/s (the robot's physical bound)",
-            )
+
+
+def _flag(p: Path, gt: FloatArray, dr: FloatArray, td: FloatArray) -> tuple[plausibility.Flags, ...]:
+    """The flags of the ``GT``, ``DR`` and ``TD`` rows (the plausibility policy with :data:`BOUNDS`)."""
+    f_gt = plausibility.Flags(p, "truth (variable 'GT')", gt[:, 0])
+    f_gt.flag_track(gt[:, 1:3], None, BOUNDS)
+    f_dr = plausibility.Flags(p, "odometry (variable 'DR')", dr[:, 0])
+    f_dr.flag_outside(dr[:, 1], "d_dist, m", 0.0, MAX_STEP_M)
+    f_dr.flag_outside(dr[:, 2], "d_heading, rad", -BOUNDS.heading_abs_rad, BOUNDS.heading_abs_rad)
+    f_dr.flag_increments(dr[:, 1], dr[:, 2], np.r_[math.inf, np.diff(dr[:, 0])], BOUNDS)
+    f_td = plausibility.Flags(p, "range (variable 'TD')", td[:, 0])
+    f_td.flag_outside(td[:, 3], "range, m", 0.0, BOUNDS.range_m)
+    f_td.flag_duplicates(td)
+    return f_gt, f_dr, f_td
 
 
 @functools.lru_cache(maxsize=8)
@@ -264,10 +276,7 @@ def _read_cached(path: str, size: int, mtime_ns: int) -> PlazaArrays:
         _check_time(p, "DRp", drp)
     if v["GT"].shape[0] < 2:
         raise RecordedDataError(p, f"variable 'GT' has {v['GT'].shape[0]} row(s), expected at least 2 truth poses")
-    check_range(p, "variable 'DR' column 2 (d_dist m)", v["DR"][:, 1], 0.0, MAX_STEP_M)
-    check_range(p, "variable 'DR' column 3 (d_heading rad)", v["DR"][:, 2], -2 * math.pi, 2 * math.pi)
     check_range(p, "variable 'TL' columns 2-3 (x m, y m)", v["TL"][:, 1:3], -MAX_POSITION_M, MAX_POSITION_M)
-    check_range(p, "variable 'TD' column 4 (range m)", v["TD"][:, 3], 0.0, MAX_RANGE_M)
     tl, td = v["TL"], v["TD"]
     ids = tl[:, 0]
     if np.any(ids != np.round(ids)) or len(np.unique(ids)) != len(ids):
@@ -278,14 +287,10 @@ def _read_cached(path: str, size: int, mtime_ns: int) -> PlazaArrays:
         raise RecordedDataError(
             p, f"variable 'TD' row {r + 1}: beacon_id {float(td[r, 2])!r} is not in TL (expected one of {ids.tolist()})"
         )
-    neg = td[:, 3] < 0.0
-    if neg.any():
-        r = int(np.flatnonzero(neg)[0])
-        raise RecordedDataError(p, f"variable 'TD' row {r + 1}: range {float(td[r, 3])!r} m, expected >= 0")
-    if np.any(v["DR"][:, 1] < 0.0):
-        r = int(np.flatnonzero(v["DR"][:, 1] < 0.0)[0])
-        raise RecordedDataError(p, f"variable 'DR' row {r + 1}: d_dist {float(v['DR'][r, 1])!r} m, expected >= 0")
     _check_motion(p, v["GT"], v["DR"])
+    flags = _flag(p, v["GT"], v["DR"], td)
+    flagged = plausibility.merge(*(f.finish() for f in flags))
+    v["GT"], v["DR"], td = (a[f.kept] for a, f in zip((v["GT"], v["DR"], td), flags, strict=True))
     # one range per beacon and radio at an instant: more rows at one stamp than beacons is a stamp lost
     stamps, counts = np.unique(td[:, 0], return_counts=True)
     crowded = np.flatnonzero(counts > tl.shape[0])
@@ -298,7 +303,7 @@ def _read_cached(path: str, size: int, mtime_ns: int) -> PlazaArrays:
         )
     out_of_order = int(np.sum(np.diff(td[:, 0]) < 0))
     order = np.argsort(td[:, 0], kind="stable")
-    return PlazaArrays(p, v["GT"], v["DR"], drp, tl, td[order], out_of_order)
+    return PlazaArrays(p, v["GT"], v["DR"], drp, tl, td[order], out_of_order, flagged)
 
 
 def read_plaza_mat(path: str | os.PathLike[str], sha256: str | None = None) -> PlazaArrays:
@@ -520,6 +525,7 @@ def load_plaza(
         truth_label="ground truth",
         sources=(str(arrays.path),),
         declared=frozenset({RangeObservations}),
+        flagged=arrays.flagged,
     )
 
 

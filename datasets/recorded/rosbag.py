@@ -65,8 +65,11 @@ twists finite and within :data:`MAX_TWIST`; each scan needs a non-zero ``angle_i
 spanning at most 2 pi and 0 <= ``range_min`` < ``range_max`` <= 1000 m
 (:func:`~locbench.datasets.recorded.files.scan_problem`); every odometry and truth orientation a unit quaternion
 tilted at most 10 degrees from the vertical (:func:`~locbench.datasets.recorded.files.quaternion_problem`);
-odometry and truth stamps that advance, with gaps of at most :data:`MAX_GAP_S` and steps within
-:data:`MAX_SPEED_MPS` / :data:`MAX_TURN_RATE_RADPS` (plus a noise allowance); ``truth_topic`` not ``odom_topic``.
+odometry and truth stamps that advance, with gaps of at most :data:`MAX_GAP_S`; ``truth_topic`` not ``odom_topic``.
+Flagged by the plausibility policy (:mod:`~locbench.datasets.recorded.plausibility`, :data:`BOUNDS`: left out and
+listed in ``Dataset.flagged``, a topic with more than 1 % flagged or a 2 s stretch refused): an odometry or truth
+pose the robot could not have reached from the last accepted one (a frame reset, a pose at a repeated stamp), a
+twist beyond the speed or turn-rate bound, a message repeating the previous one; and the sidecar events' flags.
 Scans outside the truth span are counted in ``metadata["scans_outside_truth_span"]``; when a scan topic is read and
 has messages, at least one scan must fall inside the truth span (the dataset contract's declared stream).
 """
@@ -88,6 +91,7 @@ import numpy.typing as npt
 from locbench.datasets.base import (
     Dataset,
     DatasetBuilder,
+    FlaggedSample,
     Gaussian2,
     LineMap,
     OccupancyGrid,
@@ -97,6 +101,7 @@ from locbench.datasets.base import (
     check_dataset_contract,
     sort_events,
 )
+from locbench.datasets.recorded import plausibility
 from locbench.datasets.recorded.files import (
     MAX_POSITION_M,
     RecordedDataError,
@@ -131,11 +136,14 @@ MAX_TWIST = 100.0
 MAX_GAP_S = 60.0
 #: Physical bound of a user's ground robot (m/s, rad/s): an odometry or truth step may move at most
 #: ``MAX_SPEED_MPS * dt + MAX_JITTER_M`` and turn at most ``MAX_TURN_RATE_RADPS * dt + MAX_JITTER_RAD`` (the
-#: allowances absorb a pose's noise between close stamps); a frame reset or a pose at a repeated stamp fails it.
+#: allowances absorb a pose's noise between close stamps); a frame reset or a pose at a repeated stamp fails it. The
+#: speed and turn rate are looser than the plausibility policy's, whose 5 m/s and 10 rad/s apply (:data:`BOUNDS`).
 MAX_SPEED_MPS = 20.0
 MAX_TURN_RATE_RADPS = 20.0
 MAX_JITTER_M = 0.05
 MAX_JITTER_RAD = 0.05
+#: The plausibility bounds of this loader: the policy's, the heading jitter tightened to :data:`MAX_JITTER_RAD`.
+BOUNDS = plausibility.BOUNDS.tightened(heading_jitter_rad=MAX_JITTER_RAD)
 SCAN_TYPES = ("sensor_msgs/msg/LaserScan",)
 FIX_TYPES = ("sensor_msgs/msg/NavSatFix",)
 TRUTH_TYPES = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped")
@@ -289,6 +297,8 @@ class BagStreams:
         Latitude, longitude (deg) and altitude (m) of each fix.
     fix_cov : ndarray (k, 9)
         ``position_covariance`` (ENU, m^2, row-major) of each fix.
+    flagged : tuple of FlaggedSample
+        Odometry and truth messages left out by the plausibility policy (:func:`_flag_streams`).
     fix_cov_type, fix_status : ndarray (k,) of int64
         ``position_covariance_type`` (0 unknown ... 3 known) and ``status.status`` (-1 = no fix).
     """
@@ -306,6 +316,7 @@ class BagStreams:
     fix_cov: FloatArray = dataclasses.field(default_factory=lambda: np.zeros((0, 9)))
     fix_cov_type: npt.NDArray[np.int64] = dataclasses.field(default_factory=lambda: np.zeros(0, np.int64))
     fix_status: npt.NDArray[np.int64] = dataclasses.field(default_factory=lambda: np.zeros(0, np.int64))
+    flagged: tuple[FlaggedSample, ...] = ()
 
 
 def _stamp(msg: Any, recorded_ns: int, stamps: str) -> float:
@@ -338,7 +349,7 @@ def _planar_poses(poses: list[Any], path: Path, topic: str) -> FloatArray:
 
 
 def _check_motion(path: Path, topic: str, name: str, t: FloatArray, pose: FloatArray) -> None:
-    """Refuse a gap above :data:`MAX_GAP_S` and a step faster than the robot's physical bound (module constants)."""
+    """Refuse every stamp equal and a gap above :data:`MAX_GAP_S` (too fast a step is flagged later)."""
     if t.size < 2:
         return
     if t[-1] == t[0]:
@@ -356,20 +367,24 @@ def _check_motion(path: Path, topic: str, name: str, t: FloatArray, pose: FloatA
             f"topic {topic!r} message {k + 1} of {t.size}: {name} stamp jumps {float(dt[k - 1]):.6g} s from the "
             f"previous message, expected gaps of at most {MAX_GAP_S} s (a clock jump is not bridged)",
         )
-    step = np.hypot(np.diff(pose[:, 0]), np.diff(pose[:, 1]))
-    turn = np.abs(wrap_angle(np.diff(pose[:, 2])))
-    fast = np.flatnonzero(
-        (step > MAX_SPEED_MPS * dt + MAX_JITTER_M) | (turn > MAX_TURN_RATE_RADPS * dt + MAX_JITTER_RAD)
-    )
-    if fast.size:
-        k = int(fast[0]) + 1
-        raise RecordedDataError(
-            path,
-            f"topic {topic!r} message {k + 1} of {t.size}: {name} pose moves {float(step[k - 1]):.6g} m and turns "
-            f"{float(turn[k - 1]):.4g} rad in {float(dt[k - 1]):.6g} s, expected at most {MAX_SPEED_MPS} m/s and "
-            f"{MAX_TURN_RATE_RADPS} rad/s (plus {MAX_JITTER_M} m, {MAX_JITTER_RAD} rad of noise): a frame reset, a "
-            "repeated stamp or a wrong topic",
-        )
+
+
+def _flag_streams(
+    path: Path, odom_topic: str, truth_topic: str, odom: tuple[FloatArray, ...], truth: tuple[FloatArray, ...]
+) -> tuple[tuple[FloatArray, ...], tuple[FloatArray, ...], tuple[FlaggedSample, ...]]:
+    """The odometry (t, pose, twist) and truth (t, pose) without the messages flagged by the plausibility policy
+    (:data:`BOUNDS`: a pose off the track reachable from the last accepted one, a twist beyond the speed or turn
+    bound, a message repeating the previous one), and the flagged ones."""
+    f_odom = plausibility.Flags(path, f"odometry (topic {odom_topic!r})", odom[0])
+    f_odom.flag_duplicates(np.column_stack([odom[0], odom[1], odom[2]]))
+    f_odom.flag_outside(odom[2][:, 0], "twist speed, m/s", -BOUNDS.speed_mps, BOUNDS.speed_mps)
+    f_odom.flag_outside(odom[2][:, 1], "twist turn rate, rad/s", -BOUNDS.turn_rate_radps, BOUNDS.turn_rate_radps)
+    f_odom.flag_track(odom[1][:, :2], odom[1][:, 2], BOUNDS)
+    f_truth = plausibility.Flags(path, f"ground truth (topic {truth_topic!r})", truth[0])
+    f_truth.flag_duplicates(np.column_stack([truth[0], truth[1]]))
+    f_truth.flag_track(truth[1][:, :2], truth[1][:, 2], BOUNDS)
+    flagged = plausibility.merge(f_odom.finish(), f_truth.finish())
+    return tuple(a[f_odom.kept] for a in odom), tuple(a[f_truth.kept] for a in truth), flagged
 
 
 def resolve_bag_path(path: str | os.PathLike[str], what: str = "bag") -> Path:
@@ -559,11 +574,15 @@ def _read_streams_cached(
             f"topic {odom_topic!r} message {k + 1}: twist (linear.x, angular.z) = ({float(odom_twist[k, 0])!r}, "
             f"{float(odom_twist[k, 1])!r}), expected finite values within +-{MAX_TWIST} (m/s, rad/s)",
         )
+    (odom_t, odom_pose, odom_twist), (truth_t, truth_pose), flagged = _flag_streams(
+        p, odom_topic, truth_topic, (odom_t, odom_pose, odom_twist), (truth_t, truth_pose)
+    )
     fix_arrays = _fix_arrays(by_topic[fix_topic] if fix_topic else [])
     arrays = (odom_t, odom_pose, odom_twist, truth_t, truth_pose, *fix_arrays)
     for a in arrays:
         a.setflags(write=False)  # shared through the cache
-    return BagStreams(odom_t, odom_pose, odom_twist, scans, truth_t, truth_pose, truth_type, topics, *arrays[5:])
+    streams = BagStreams(odom_t, odom_pose, odom_twist, scans, truth_t, truth_pose, truth_type, topics, *arrays[5:])
+    return dataclasses.replace(streams, flagged=flagged)
 
 
 def _fix_arrays(fixes: list[tuple[float, Any]]) -> tuple[npt.NDArray[Any], ...]:
@@ -699,12 +718,15 @@ def _fixes(params: RosbagParams, streams: BagStreams, bag: Path, t0: float, t1: 
     return out, int(np.sum(~valid))
 
 
-def _sidecar_events(params: RosbagParams, known: frozenset[int] | None, t0: float, t1: float) -> list[Event]:
-    """The events of the ``events`` sidecar (textlog JSON lines) inside [t0, t1]: sightings, ranges, fixes only."""
-    from locbench.datasets.recorded.textlog import read_events
+def _sidecar_events(
+    params: RosbagParams, known: frozenset[int] | None, t0: float, t1: float
+) -> tuple[list[Event], tuple[FlaggedSample, ...]]:
+    """The events of the ``events`` sidecar (textlog JSON lines) inside [t0, t1]: sightings, ranges, fixes only; and
+    the events flagged by the plausibility policy."""
+    from locbench.datasets.recorded.textlog import read_events_flagged
 
     path = resolve_bag_path(params.events, "events")
-    events = read_events(path, known)
+    events, flagged = read_events_flagged(path, known)
     other = sorted({type(e).__name__ for e in events if isinstance(e, (Odometry, LaserScan))})
     if other:
         raise RecordedDataError(
@@ -712,7 +734,7 @@ def _sidecar_events(params: RosbagParams, known: frozenset[int] | None, t0: floa
             f"has {', '.join(other)} events, expected only landmarks, ranges and fix events (the bag gives "
             "odometry and scans)",
         )
-    return [e for e in events if t0 <= e.t <= t1]
+    return [e for e in events if t0 <= e.t <= t1], flagged
 
 
 def _twist_warning(inc: FloatArray, twist: FloatArray, t: FloatArray, topic: str) -> str:
@@ -800,7 +822,7 @@ def build_rosbag_dataset(params: RosbagParams) -> Dataset:
 
         landmarks = read_landmarks(resolve_bag_path(params.landmarks, "landmarks"))
     known = frozenset(int(i) for i in landmarks.ids) if landmarks is not None else None
-    extra: list[Event] = _sidecar_events(params, known, t0, t1) if params.events else []
+    extra, side_flags = _sidecar_events(params, known, t0, t1) if params.events else ([], ())
     fixes, no_fix = _fixes(params, streams, bag, t0, t1) if params.fix_topic else ([], 0)
     extra += fixes
     sensor_pose = (params.laser_x_m, params.laser_y_m, params.laser_yaw_rad)
@@ -859,6 +881,7 @@ def build_rosbag_dataset(params: RosbagParams) -> Dataset:
         sources=(str(bag),) + ((params.map,) if params.map else ()) + sidecars,
         declared=(frozenset({LaserScan}) if params.scan_topic and streams.scans else frozenset())
         | frozenset(type(e) for e in extra),
+        flagged=plausibility.merge(streams.flagged, side_flags),
     )
     check_dataset_contract(ds)
     return ds

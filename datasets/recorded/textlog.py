@@ -27,7 +27,18 @@ was expected (:class:`~locbench.datasets.recorded.files.RecordedDataError`). Bou
 :data:`~locbench.datasets.recorded.files.MAX_POSITION_M`; scans as a bag's
 (:func:`~locbench.datasets.recorded.files.scan_problem`) with at most :data:`~locbench.limits.MAX_LASER_BEAMS`
 beams; at most :data:`MAX_ITEMS` sightings or ranges per event, ids -1 (unknown) or in the landmark file; fix
-covariances symmetric PSD; no unknown field anywhere (a typo is an error, not a silently default value).
+covariances symmetric PSD; no unknown field anywhere and no key given twice in one object (a typo is an error, not
+a silently default value); not every event at one time; kidnaps inside the truth's span.
+
+Plausibility (:mod:`~locbench.datasets.recorded.plausibility`, the policy's :data:`~locbench.datasets.recorded.\
+plausibility.BOUNDS`): these samples are flagged, left out and listed in ``Dataset.flagged`` (a stream with more
+than 1 % of them, or a 2 s stretch, is refused): an events line that repeats the previous one exactly (a doubled
+line: counted once); an odometry increment faster than the speed or turn-rate bound over its interval (``dt``, else
+the time since the previous odometry event), or a twist beyond them; a sighting or range event with a range outside
+[0, range bound] or a bearing beyond the heading bound; a fix whose position variance exceeds the variance bound; a
+truth pose repeating the previous one, a second pose at the previous one's time, or a pose the robot could not have
+reached from the last accepted one (speed and turn-rate bounds plus their jitter; the track restarts at each
+kidnap).
 """
 
 from __future__ import annotations
@@ -49,6 +60,7 @@ from locbench.datasets.base import (
     TRUTH_LABELS,
     Dataset,
     DatasetBuilder,
+    FlaggedSample,
     Gaussian2,
     Kidnap,
     Landmarks,
@@ -62,6 +74,7 @@ from locbench.datasets.base import (
     check_dataset_contract,
     sort_events,
 )
+from locbench.datasets.recorded import plausibility
 from locbench.datasets.recorded.files import (
     MAX_INTEGER_FIELD,
     MAX_POSITION_M,
@@ -313,7 +326,8 @@ def _initial(m: _Manifest, truth: Trajectory2D) -> Gaussian2:
     return Gaussian2(truth.poses[0].copy(), np.diag([sxy**2, sxy**2, sth**2]))
 
 
-def _kidnaps(m: _Manifest) -> tuple[Kidnap, ...]:
+def _kidnaps(m: _Manifest, span: tuple[float, float]) -> tuple[Kidnap, ...]:
+    """The manifest's kidnaps; each time must lie inside the truth's ``span`` (s): a kidnap is part of the run."""
     raw = m.data.get("kidnaps", [])
     if not isinstance(raw, list):
         raise m.fail("kidnaps", f'is {quote(raw, 60)}, expected a list of {{"t": s, "delta": [dx, dy, dtheta]}}')
@@ -322,6 +336,9 @@ def _kidnaps(m: _Manifest) -> tuple[Kidnap, ...]:
         if not (isinstance(k, dict) and set(k) == {"t", "delta"}):
             raise m.fail("kidnaps", f'kidnaps[{i}] is {quote(k, 80)}, expected {{"t": s, "delta": [dx, dy, dtheta]}}')
         t = m.number(f"kidnaps[{i}].t", k["t"], -MAX_TIME_S, MAX_TIME_S, "s")
+        if not span[0] <= t <= span[1]:
+            inside = f"[{span[0]!r}, {span[1]!r}] s"
+            raise m.fail("kidnaps", f"kidnaps[{i}].t is {t!r} s, expected a time inside the recording {inside}")
         d = m.vector(f"kidnaps[{i}].delta", k["delta"], 3, MAX_POSITION_M, "m, m, rad")
         out.append(Kidnap(t, (d[0], d[1], d[2])))
     return tuple(out)
@@ -484,13 +501,14 @@ def _event(ln: _Line, t: float, ctx: _Context) -> Event:
         return _scan(ln, t, ctx.scan_pose)
     if kind == "fix":
         return _fix(ln, t)
-    r = ln.array("ranges", 0.0, MAX_SCAN_RANGE_M, "m", MAX_ITEMS)
+    # a range outside [0, the range bound] or a bearing beyond 2 pi is flagged (_flag_events), not refused
+    r = ln.array("ranges", -MAX_POSITION_M, MAX_POSITION_M, "m", MAX_ITEMS)
     ids = ln.ids(int(r.shape[0]), ctx.landmark_ids)
     r.setflags(write=False)
     ids.setflags(write=False)
     if kind == "ranges":
         return RangeObservations(t, ids, r)
-    b = ln.array("bearings", -_TWO_PI, _TWO_PI, "rad", MAX_ITEMS)
+    b = ln.array("bearings", -MAX_POSITION_M, MAX_POSITION_M, "rad", MAX_ITEMS)
     if b.shape != r.shape:
         raise ln.fail("bearings", f"has {b.shape[0]} values for {r.shape[0]} ranges, expected one per range")
     b.setflags(write=False)
@@ -505,7 +523,14 @@ class _Context:
 
 
 def read_events(path: str | os.PathLike[str], landmark_ids: frozenset[int] | None = None) -> tuple[Event, ...]:
-    """Parse a textlog events file (JSON lines) into events, in file order.
+    """The events of a textlog events file without the flagged ones (:func:`read_events_flagged`)."""
+    return read_events_flagged(path, landmark_ids)[0]
+
+
+def read_events_flagged(
+    path: str | os.PathLike[str], landmark_ids: frozenset[int] | None = None
+) -> tuple[tuple[Event, ...], tuple[FlaggedSample, ...]]:
+    """Parse a textlog events file (JSON lines) into events, in file order, and the events flagged and left out.
 
     Parameters
     ----------
@@ -515,19 +540,30 @@ def read_events(path: str | os.PathLike[str], landmark_ids: frozenset[int] | Non
         The landmark map's ids: a sighting or range of another id (except -1, unknown) is an error. None accepts
         any id in [0, 2^31 - 1].
 
+    Returns
+    -------
+    events : tuple of Event
+        The accepted events.
+    flagged : tuple of FlaggedSample
+        The events that broke a plausibility bound (see the module docstring), in time order.
+
     Raises
     ------
     RecordedDataError
-        Naming the line and the field: not a JSON object, an unknown type or field, a missing or out-of-bounds
-        value, time going backwards, a line longer than :data:`MAX_LINE_CHARS`, a last line without its line end.
+        Naming the line and the field: not a JSON object, an unknown type or field, a key given twice, a missing or
+        out-of-bounds value, time going backwards, every event at one time, a line longer than
+        :data:`MAX_LINE_CHARS`, a last line without its line end; or too many flagged events of one type.
     """
     p = Path(path)
     check_input_file(p, "textlog events file", MAX_EVENTS_BYTES)
     ctx = _Context(landmark_ids)
     out: list[Event] = []
+    lines: list[int] = []
+    repeats: list[bool] = []
+    previous: Any = None
     last_t = -math.inf
     hooks = _json_hooks(p)
-    decoder = json.JSONDecoder(parse_int=hooks[0], parse_constant=hooks[1])
+    decoder = json.JSONDecoder(object_pairs_hook=_no_duplicates(p), parse_int=hooks[0], parse_constant=hooks[1])
     with open(p, encoding="utf-8", newline="") as fh:
         lineno = 0
         while True:
@@ -561,6 +597,12 @@ def read_events(path: str | os.PathLike[str], landmark_ids: frozenset[int] | Non
                 raise RecordedDataError(p, "JSON nested too deeply, expected a flat event object", lineno) from None
             if not isinstance(obj, dict):
                 raise RecordedDataError(p, f"a JSON {type(obj).__name__}, expected an event object", lineno)
+            if out and obj == previous:  # a doubled line: the same event once more (flagged below)
+                out.append(out[-1])
+                lines.append(lineno)
+                repeats.append(True)
+                continue
+            previous = obj
             kind = obj.get("type")
             if kind not in _EVENT_KEYS:
                 raise RecordedDataError(
@@ -575,25 +617,113 @@ def read_events(path: str | os.PathLike[str], landmark_ids: frozenset[int] | Non
                 raise ln.fail("t", f"is {t!r}, before the previous event's {last_t!r} (expected events in time order)")
             last_t = t
             out.append(_event(ln, t, ctx))
-    return tuple(out)
+            lines.append(lineno)
+            repeats.append(False)
+    if len(out) > 1:
+        plausibility.refuse_all_times_equal(p, "event", [e.t for e in out], lines[1])
+    return _flag_events(p, out, np.array(lines, dtype=np.int64), np.array(repeats, dtype=bool))
+
+
+_KIND_OF = {Odometry: "odometry", LaserScan: "scan", LandmarkObservations: "landmarks", RangeObservations: "ranges"}
+
+
+def _flag_events(
+    p: Path, events: list[Event], lines: npt.NDArray[np.int64], repeats: npt.NDArray[np.bool_]
+) -> tuple[tuple[Event, ...], tuple[FlaggedSample, ...]]:
+    """The events without those breaking the plausibility bounds, and those, per event type (module docstring)."""
+    b = plausibility.BOUNDS
+    kinds = np.array([_KIND_OF.get(type(e), "fix") for e in events])
+    t = np.array([e.t for e in events], dtype=np.float64)
+    keep = np.ones(len(events), dtype=bool)
+    found = []
+    for kind in _EVENT_KEYS:
+        at = np.flatnonzero(kinds == kind)
+        if not at.size:
+            continue
+        of = [events[i] for i in at]
+        flags = plausibility.Flags(p, f"{kind} event", t[at], lines[at])
+        flags.flag(repeats[at], "a repeat of the previous line", t[at], "one event per line")
+        if kind == "odometry":
+            _flag_odometry(flags, of, b)
+        elif kind in ("landmarks", "ranges"):
+            worst = np.array([_worst(np.asarray(e.ranges), 0.0, b.range_m) for e in of])  # type: ignore[attr-defined]
+            flags.flag_outside(worst, "range, m", 0.0, b.range_m)
+            if kind == "landmarks":
+                worst = np.array([_worst(np.asarray(e.bearings), -_TWO_PI, _TWO_PI) for e in of])  # type: ignore[attr-defined]
+                flags.flag_outside(worst, "bearing, rad", -_TWO_PI, _TWO_PI)
+        elif kind == "fix":
+            var = np.array([float(np.max(np.diag(e.cov)[:2])) for e in of])  # type: ignore[attr-defined]
+            flags.flag_outside(var, "position variance, m^2", 0.0, b.variance_m2)
+        keep[at[flags.mask]] = False
+        found.append(flags.finish())
+    return tuple(e for e, k in zip(events, keep.tolist(), strict=True) if k), plausibility.merge(*found)
+
+
+def _worst(a: FloatArray, lo: float, hi: float) -> float:
+    """The value of ``a`` farthest outside [lo, hi] (its first value when all lie inside; lo when empty)."""
+    if a.size == 0:
+        return lo
+    out = np.maximum(lo - a, a - hi)
+    return float(a[int(np.argmax(out))])
+
+
+def _flag_odometry(flags: plausibility.Flags, events: list[Event], b: plausibility.Bounds) -> None:
+    """Flag odometry increments faster than the bounds over their interval, and twists beyond them."""
+    odo = [e for e in events if isinstance(e, Odometry)]
+    t = np.array([e.t for e in odo], dtype=np.float64)
+    # the interval of an increment: its dt, else the time since the previous odometry event (unknown for the first)
+    since = np.r_[math.inf, np.diff(t)]
+    dt = np.array([e.dt if e.dt is not None else since[i] for i, e in enumerate(odo)], dtype=np.float64)
+    inc = np.array([(e.dx, e.dy, e.dtheta) for e in odo], dtype=np.float64).reshape(-1, 3)
+    flags.flag_increments(np.hypot(inc[:, 0], inc[:, 1]), inc[:, 2], dt, b)
+    v = np.array([0.0 if e.v is None else e.v for e in odo], dtype=np.float64)
+    omega = np.array([0.0 if e.omega is None else e.omega for e in odo], dtype=np.float64)
+    flags.flag_outside(v, "twist speed, m/s", -b.speed_mps, b.speed_mps)
+    flags.flag_outside(omega, "twist turn rate, rad/s", -b.turn_rate_radps, b.turn_rate_radps)
 
 
 # --- tables --------------------------------------------------------------------------------------
 
 
 def read_truth(path: Path) -> Trajectory2D:
-    """A TUM trajectory as the ground truth: times non-decreasing, positions within bounds, planar unit rotations."""
+    """A TUM trajectory as the ground truth: times non-decreasing, positions within bounds, planar unit rotations
+    (every sample: :func:`flag_truth` leaves out the implausible ones)."""
+    return _truth_table(path)[0]
+
+
+def _truth_table(path: Path) -> tuple[Trajectory2D, npt.NDArray[np.int64]]:
+    """:func:`read_truth` and each sample's line."""
     check_input_file(path, "TUM truth file", MAX_TABLE_FILE_BYTES)
     table = read_table(path, TUM_COLUMNS)
     table.check_rows("pose", 1)
     table.check_time_non_decreasing(0, "timestamp")
+    if table.rows.shape[0] > 1:
+        plausibility.refuse_all_times_equal(path, "truth", table.rows[:, 0], int(table.lines[1]))
     for c, name in ((1, "tx [m]"), (2, "ty [m]"), (3, "tz [m]")):
         table.check_range(c, name, -MAX_POSITION_M, MAX_POSITION_M)
     rows = table.rows
     problem = quaternion_problem(rows[:, 4:8])
     if problem is not None:
         raise table.fail(problem[0], problem[1])
-    return Trajectory2D(rows[:, 0].copy(), rows[:, 1:3].copy(), quaternion_to_yaw(rows[:, 4:8]))
+    return Trajectory2D(rows[:, 0].copy(), rows[:, 1:3].copy(), quaternion_to_yaw(rows[:, 4:8])), table.lines
+
+
+def flag_truth(
+    path: Path, truth: Trajectory2D, lines: npt.ArrayLike, kidnaps: tuple[Kidnap, ...] = ()
+) -> tuple[Trajectory2D, tuple[FlaggedSample, ...]]:
+    """The truth without its implausible samples, and those (the module docstring lists them).
+
+    A pose repeating the previous one, a second pose at the previous one's time, and a pose the robot could not
+    have reached from the last accepted one are flagged; the track restarts at each kidnap's time.
+    """
+    flags = plausibility.Flags(path, "truth", truth.t, lines)
+    rows = np.column_stack([truth.t, truth.xy, truth.theta])
+    flags.flag_duplicates(rows)
+    again = np.r_[False, (truth.t[1:] == truth.t[:-1]) & ~flags.mask[1:]]
+    flags.flag(again, "time of the previous pose, s", truth.t, "one pose per time")
+    flags.flag_track(truth.xy, truth.theta, plausibility.BOUNDS, breaks=[k.t for k in kidnaps])
+    kept = flags.kept
+    return Trajectory2D(truth.t[kept], truth.xy[kept], truth.theta[kept]), flags.finish()
 
 
 def read_landmarks(path: Path) -> Landmarks:
@@ -709,14 +839,16 @@ def build_textlog_dataset(params: TextlogParams) -> Dataset:
     m = read_manifest(folder)
     truth_path, events_path = _required(m, "truth", folder), _required(m, "events", folder)
     sources: list[str] = [str(m.path), str(events_path), str(truth_path)]
-    truth = _cached_truth(str(truth_path.resolve()), *_version(truth_path))
+    full, truth_lines = _cached_truth(str(truth_path.resolve()), *_version(truth_path))
+    kidnaps = _kidnaps(m, (float(full.t[0]), float(full.t[-1])))
+    truth, truth_flags = flag_truth(truth_path, full, truth_lines, kidnaps)
     landmarks = None
     lm_path = m.file("landmarks", folder)
     if lm_path is not None:
         landmarks = read_landmarks(lm_path)
         sources.append(str(lm_path))
     known = frozenset(int(i) for i in landmarks.ids) if landmarks is not None else None
-    events = _cached_events(str(events_path.resolve()), *_version(events_path), known)
+    events, event_flags = _cached_events(str(events_path.resolve()), *_version(events_path), known)
     grid, lines, map_path = _grid(m, folder)
     sources += [str(q) for q in (map_path, m.file("lines", folder)) if q is not None]
     waypoints = relations = None
@@ -759,13 +891,14 @@ def build_textlog_dataset(params: TextlogParams) -> Dataset:
         world=WorldMap(occupancy=grid, landmarks=landmarks, lines=lines),
         sensors=_sensors(m),
         waypoints=waypoints,
-        kidnaps=_kidnaps(m),
+        kidnaps=kidnaps,
         name="textlog",
         metadata=metadata,
         relations=relations,
         truth_label=truth_label,
         sources=tuple(sources),
         declared=frozenset(type(e) for e in events) - {Odometry},
+        flagged=plausibility.merge(truth_flags, event_flags),
     )
     check_dataset_contract(ds)
     return ds
@@ -803,19 +936,22 @@ def _version(p: Path) -> tuple[int, int]:
 
 
 @functools.lru_cache(maxsize=4)
-def _cached_events(path: str, size: int, mtime_ns: int, known: frozenset[int] | None) -> tuple[Event, ...]:
-    """The parsed events, once per file version (the runner builds a dataset per seed; arrays are read-only)."""
+def _cached_events(
+    path: str, size: int, mtime_ns: int, known: frozenset[int] | None
+) -> tuple[tuple[Event, ...], tuple[FlaggedSample, ...]]:
+    """The parsed events and the flagged ones, once per file version (the runner builds a dataset per seed; arrays
+    are read-only)."""
     del size, mtime_ns  # cache key only
-    return read_events(path, known)
+    return read_events_flagged(path, known)
 
 
 @functools.lru_cache(maxsize=4)
-def _cached_truth(path: str, size: int, mtime_ns: int) -> Trajectory2D:
+def _cached_truth(path: str, size: int, mtime_ns: int) -> tuple[Trajectory2D, npt.NDArray[np.int64]]:
     del size, mtime_ns  # cache key only
-    tr = read_truth(Path(path))
-    for a in (tr.t, tr.xy, tr.theta):
+    tr, lines = _truth_table(Path(path))
+    for a in (tr.t, tr.xy, tr.theta, lines):
         a.setflags(write=False)
-    return tr
+    return tr, lines
 
 
 def load_textlog(path: str | os.PathLike[str]) -> Dataset:
