@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from numpy._core import _multiarray_umath
+from numpy._core import _multiarray_umath  # type: ignore[attr-defined]  # numpy ships no stub for it
 
 #: The exported names of OpenBLAS's core-name query: plain OpenBLAS, and the prefixed builds of numpy and scipy wheels.
 _CORENAME_SYMBOLS = ("openblas_get_corename", "scipy_openblas_get_corename64_", "scipy_openblas_get_corename")
