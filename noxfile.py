@@ -2,6 +2,7 @@
 
 nox                 the tests (the default session)
 nox -s tests_busy   the sweep, executor and signal tests (with the slow ones); .ci/run runs it with both cores busy
+nox -s tests_dispatch  the numeric tests on other numpy, OpenBLAS and numba kernels than the machine's default
 nox -s lint         ruff, mypy and the import contracts (lint-imports)
 nox -s bench        run every experiment, verify a sample, write results/summary (posargs go to 'locbench run')
 nox -s report       regenerate results/summary from the stored runs, no re-run
@@ -57,7 +58,12 @@ def tests(session: nox.Session) -> None:
 
 
 #: The tests that race the machine (executors, Ctrl-C, child processes, dask's ports): run again under load by CI.
-BUSY_TESTS = ("tests/test_sweeps.py", "tests/test_runner.py", "tests/test_store.py", "tests/malformed/test_untrusted_inputs.py")
+BUSY_TESTS = (
+    "tests/test_sweeps.py",
+    "tests/test_runner.py",
+    "tests/test_store.py",
+    "tests/malformed/test_untrusted_inputs.py",
+)
 #: The dask signal tests among the slow ones (a LocalCluster's start is where a Ctrl-C used to be dropped).
 BUSY_DASK = "dask and (ctrl_c or sigint or no_process)"
 
@@ -69,6 +75,41 @@ def tests_busy(session: nox.Session) -> None:
     common = ("pytest", "--benchmark-disable", "-p", "no:cacheprovider")
     session.run(*common, "-m", "not slow", *(session.posargs or BUSY_TESTS), env=_data_env())
     session.run(*common, "-m", "slow", "-k", BUSY_DASK, "tests/test_sweeps.py", env=_data_env())
+
+
+#: The numeric tests: every comparison with numpy, OpenBLAS, LAPACK, scipy, filterpy, gtsam or Stone Soup (filters,
+#: kernels, metrics, scores, bound, ray casting, datasets), led by the check that the dispatch below took effect.
+DISPATCH_TESTS = (
+    "tests/test_cpu_dispatch.py",
+    *(f"tests/test_{name}.py" for name in (
+        "ukf_kernels", "ukf_landmarks", "kf_linear", "kalman", "ekf_landmarks", "ekf_lines", "ekf_icp", "pf",
+        "gtsam_fls", "odometry_filter", "motion", "line_extraction", "scan_database", "landmark_index", "raycast",
+        "scan_grid", "metrics", "scores", "kidnap_metrics", "lost", "pcrb", "pcrb_stonesoup", "bound_rows",
+        "health_rows", "aggregate", "significance", "synthetic", "line_room", "landmark_geometry", "matched",
+        "textlog", "recorded_scores", "recorded_lost_in_the_woods", "recorded_mrclam", "recorded_plaza",
+        "recorded_librsf",
+    )),
+)  # fmt: skip
+#: Kernels other than a current x86-64 CPU's default: numpy without its X86_V3/X86_V4 loops (AVX2, FMA3, AVX-512:
+#: the SSE4.2 baseline), OpenBLAS's Katmai kernels (plain C, they run on every x86-64 CPU; their sums round unlike
+#: Haswell's and SkylakeX's), numba compiling for a generic x86-64. tests/test_cpu_dispatch.py fails when numpy or
+#: OpenBLAS did not take the setting, so the session cannot pass on the default dispatch unnoticed.
+DISPATCH_ENV = {
+    "NPY_DISABLE_CPU_FEATURES": "X86_V3 X86_V4 AVX512_ICL AVX512_SPR",
+    "OPENBLAS_CORETYPE": "Katmai",
+    "NUMBA_CPU_NAME": "generic",
+}
+
+
+@nox.session(python=PYTHON, default=False)
+def tests_dispatch(session: nox.Session) -> None:
+    """The numeric tests with numpy's, OpenBLAS's and numba's CPU dispatch changed (:data:`DISPATCH_ENV`): what
+    compares with another library must hold on any CPU, not only this one (docs/design.md, "Reproducibility")."""
+    _install(session, "all,test,stonesoup")
+    session.run(
+        "pytest", "--benchmark-disable", "-p", "no:cacheprovider", "-m", "not slow", "-rs",
+        *(session.posargs or DISPATCH_TESTS), env={**_data_env(), **DISPATCH_ENV},
+    )  # fmt: skip
 
 
 @nox.session(python=PYTHON, default=False)

@@ -110,6 +110,22 @@ def test_bad_config(cfg: dict[str, float]) -> None:
         LinearKFConfig(**cfg)  # type: ignore[arg-type]
 
 
+#: The filter against filterpy agrees to rounding, not bit for bit: both go through numpy and OpenBLAS/LAPACK, whose
+#: kernels are chosen per CPU, and a product or layout that differs between the two codes can round differently
+#: there. Each element within REL of its array's largest magnitude (normwise); a wrong term is off by O(1).
+REL = 1e-12
+
+
+def _same_as_filterpy(f: LinearKF, kf: Any) -> None:
+    """The filter's state equals filterpy's within :data:`REL`, the heading as a wrapped difference."""
+    from locbench.geometry import wrap_scalar
+
+    x, want = f._x.copy(), np.asarray(kf.x, dtype=np.float64)
+    x[2, 0] = want[2, 0] + wrap_scalar(float(x[2, 0] - want[2, 0]))  # near +-pi one side may wrap to the other end
+    np.testing.assert_allclose(x, want, rtol=REL, atol=REL * float(np.max(np.abs(want))))
+    np.testing.assert_allclose(f._P, kf.P, rtol=REL, atol=REL * float(np.max(np.abs(kf.P))))
+
+
 def _filterpy_reference(x: np.ndarray, P: np.ndarray) -> Any:
     from filterpy.kalman import KalmanFilter
 
@@ -126,7 +142,7 @@ def _random_belief(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     return x, a @ a.T + 1e-6 * np.eye(3)
 
 
-def test_predict_equals_filterpy_bit_for_bit() -> None:
+def test_predict_equals_filterpy() -> None:
     # the written-out predict (F = I, B u in floats) against filterpy's KalmanFilter.predict, commands and increments
     from locbench.geometry import wrap_scalar
 
@@ -154,10 +170,10 @@ def test_predict_equals_filterpy_bit_for_bit() -> None:
         Q = np.diag([vxy + cfg.sigma_floor_xy_m**2, vxy + cfg.sigma_floor_xy_m**2, vth + cfg.sigma_floor_theta_rad**2])
         kf.predict(u=uu, B=B, F=np.eye(3), Q=Q)
         kf.x[2, 0] = wrap_scalar(float(kf.x[2, 0]))
-        assert np.array_equal(f._x, kf.x) and np.array_equal(f._P, kf.P)
+        _same_as_filterpy(f, kf)
 
 
-def test_update_algebra_equals_filterpy_bit_for_bit(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_update_algebra_equals_filterpy(monkeypatch: pytest.MonkeyPatch) -> None:
     # the written-out update (H = I) against filterpy's KalmanFilter.update on random beliefs and pose fixes
     import locbench.filters.kf_linear as kfl
     from locbench.filters._scan_database import ScanMatch
@@ -182,8 +198,8 @@ def test_update_algebra_equals_filterpy_bit_for_bit(monkeypatch: pytest.MonkeyPa
         kf.x[2, 0] = wrap_scalar(float(kf.x[2, 0]))
         kf.P = 0.5 * (kf.P + kf.P.T)
         y = np.asarray(kf.y).reshape(3)
-        assert np.array_equal(f._x, kf.x) and np.array_equal(f._P, kf.P)
-        assert f.estimate().diagnostics["nis"] == float(y @ np.linalg.solve(kf.S, y))
+        _same_as_filterpy(f, kf)
+        assert f.estimate().diagnostics["nis"] == pytest.approx(float(y @ np.linalg.solve(kf.S, y)), rel=1e-9)
 
 
 def test_finite_check_matches_numpy_verdict() -> None:

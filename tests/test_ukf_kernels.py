@@ -1,5 +1,5 @@
-"""The UKF's compiled kernels (filters/_ukf_kernels.py) against the filterpy/numpy forms they replace, bit for bit
-on random beliefs, and the Python path they fall back to."""
+"""The UKF's compiled kernels (filters/_ukf_kernels.py) against the filterpy/numpy forms they replace, on random
+beliefs (to rounding: numpy, OpenBLAS and LAPACK pick their kernels per CPU), and the Python path they fall back to."""
 
 from __future__ import annotations
 
@@ -20,6 +20,21 @@ from locbench.filters._kalman import gain_update
 
 N_BELIEFS = 400
 R_LM = (0.01, 0.0004)
+#: The kernels against numpy, OpenBLAS, LAPACK and filterpy agree to rounding, not bit for bit: those libraries pick
+#: their dot, factorisation and transcendental kernels per CPU at run time (SIMD width, FMA, AVX-512). Each element
+#: must lie within REL of its array's largest magnitude (normwise, as the error bounds of sums and Cholesky factors
+#: are). 1e-9 leaves room for the cancellation in sigma-point deviations (spreads down to ~1e-5 of means ~10, which
+#: turns 1-ulp differences into ~1e-10 relative ones); a wrong weight or term is off by O(1).
+REL = 1e-9
+
+
+def _close(got: np.ndarray, want: np.ndarray, heading: int | None = None) -> None:
+    """``got`` equals ``want`` within :data:`REL` normwise; element ``heading`` compared as a wrapped difference."""
+    got, want = np.array(got, dtype=np.float64), np.array(want, dtype=np.float64)
+    if heading is not None:  # an angle near +-pi may wrap to the other end on one side
+        got[heading] = want[heading] + ukfm.wrap_scalar(float(got[heading] - want[heading]))
+    scale = float(np.max(np.abs(want)))
+    np.testing.assert_allclose(got, want, rtol=REL, atol=REL * scale)
 
 
 def _points(alpha: float = 1.0, beta: float = 2.0, kappa: float = 0.0) -> MerweScaledSigmaPoints:
@@ -33,6 +48,12 @@ def _buffer(pts: MerweScaledSigmaPoints, x: np.ndarray, P: np.ndarray) -> np.nda
     buf = kern.weights_buffer(pts.Wm, pts.Wc, lam + pts.n)
     buf[0:3], buf[3:12] = x, P.reshape(9)
     return buf
+
+
+def _on_the_wrap(angles: np.ndarray) -> bool:
+    """Whether a wrapped residual lies within 1e-6 rad of +-pi: a belief spread around the whole circle puts a sigma
+    point opposite its circular mean, where a 1-ulp difference flips the residual by 2 pi (both sides are right)."""
+    return bool(np.any(math.pi - np.abs(ukfm.wrap_angle(angles)) < 1e-6))
 
 
 def _beliefs(seed: int) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -53,7 +74,7 @@ def test_sigma_points_equal_filterpy(weights: tuple[float, float, float]) -> Non
     for x, P in _beliefs(1):
         buf = _buffer(pts, x, P)
         assert kern.sigma_points(buf) == 0
-        assert np.array_equal(buf[kern.B_SIG : kern.B_SIG + 21].reshape(7, 3), pts.sigma_points(x, P))
+        _close(buf[kern.B_SIG : kern.B_SIG + 21].reshape(7, 3), pts.sigma_points(x, P))  # against LAPACK's factor
 
 
 def test_sigma_points_decline_where_the_factorisation_fails() -> None:
@@ -65,12 +86,16 @@ def test_sigma_points_decline_where_the_factorisation_fails() -> None:
 
 
 def test_strided_dot_equals_numpy() -> None:
+    # against OpenBLAS's ddot, whose summation order depends on the CPU's kernel: the dot product's error bound,
+    # 2 n eps sum |w_i a_ij| for either side (n = 7)
     rng = np.random.default_rng(2)
+    eps = np.finfo(np.float64).eps
     for _ in range(2000):
         w = rng.normal(size=7)
         a = rng.normal(size=(7, 3)) * 10.0 ** rng.uniform(-3.0, 3.0)
         for j in range(3):
-            assert kern._dot_strided(w, a.reshape(-1), j, 3) == float(w @ a[:, j])
+            bound = 2 * 7 * eps * float(np.abs(w) @ np.abs(a[:, j]))
+            assert abs(kern._dot_strided(w, a.reshape(-1), j, 3) - float(w @ a[:, j])) <= bound
 
 
 @pytest.mark.parametrize("encoder", [True, False])
@@ -78,6 +103,7 @@ def test_strided_dot_equals_numpy() -> None:
 def test_predict_equals_filterpy_transform(encoder: bool, weights: tuple[float, float, float]) -> None:
     pts = _points(*weights)
     rng = np.random.default_rng(3)
+    skipped = 0
     for x, P in _beliefs(4):
         buf = _buffer(pts, x, P)
         Q = np.diag(rng.uniform(0.0, 1e-3, 3))
@@ -90,16 +116,21 @@ def test_predict_equals_filterpy_transform(encoder: bool, weights: tuple[float, 
         else:
             moved = np.array([ukfm._move_increment(s, 0.0, d[0], d[1], d[2]) for s in sig])
         xm, Pm = ukfm.pose_transform(moved, pts.Wm, pts.Wc, Q, ukfm.state_mean, ukfm._residual_heading)
-        xm[2] = ukfm.wrap_scalar(float(xm[2]))  # the filter's _finish
         assert kern.predict(buf, encoder, d[0], d[1], d[2]) == 0
-        assert np.array_equal(buf[0:3], xm)
-        assert np.array_equal(buf[3:12], (0.5 * (Pm + Pm.T)).reshape(9))
+        if _on_the_wrap(moved[:, 2] - xm[2]):
+            skipped += 1
+            continue
+        xm[2] = ukfm.wrap_scalar(float(xm[2]))  # the filter's _finish
+        _close(buf[0:3], xm, heading=2)
+        _close(buf[3:12], (0.5 * (Pm + Pm.T)).reshape(9))
+    assert skipped < N_BELIEFS // 4  # about 10 % of the random beliefs span the whole circle
 
 
 def test_landmark_sums_equal_the_numpy_correction() -> None:
     pts = _points()
     rng = np.random.default_rng(5)
     R = np.diag(R_LM)
+    skipped = 0
     for x, P in _beliefs(6):
         buf = _buffer(pts, x, P)
         lx, ly = rng.normal(size=2) * 10.0
@@ -114,10 +145,15 @@ def test_landmark_sums_equal_the_numpy_correction() -> None:
         dz = sh - zp
         dz[:, 1] = ukfm.wrap_angle(dz[:, 1])
         out = buf[kern.B_S : kern.B_SIGH]
-        assert np.array_equal(buf[kern.B_SIGH : kern.B_SIGH + 14], sh.reshape(-1))
-        assert np.array_equal(out[0:4], S.reshape(-1))
-        assert np.array_equal(out[4:10], ukfm._weighted_outer_sum(pts.Wc, dx, dz, None).reshape(-1))
-        assert np.array_equal(out[10:12], ukfm._residual_bearing(np.array([r, b]), zp))
+        if _on_the_wrap(dx[:, 2]) or _on_the_wrap(dz[:, 1]):
+            skipped += 1
+            continue
+        for k in range(7):  # (range, bearing) per sigma point: the bearing from numpy's arctan2
+            _close(buf[kern.B_SIGH + 2 * k : kern.B_SIGH + 2 * k + 2], sh[k], heading=1)
+        _close(out[0:4], S.reshape(-1))
+        _close(out[4:10], ukfm._weighted_outer_sum(pts.Wc, dx, dz, None).reshape(-1))
+        _close(out[10:12], ukfm._residual_bearing(np.array([r, b]), zp), heading=1)
+    assert skipped < N_BELIEFS // 4  # about 10 % of the random beliefs span the whole circle
 
 
 def test_gain_equals_gain_update() -> None:
@@ -128,6 +164,7 @@ def test_gain_equals_gain_update() -> None:
         Pxz, y = rng.normal(size=(3, 2)), rng.normal(size=2)
         c = gain_update(x, P, y, S, Pxz)
         x_new, P_new, nis = ukfm._gain(x, P, y, S, Pxz)
+        # both ours, the same numpy calls in one process: the same bits on any CPU
         assert np.array_equal(x_new, c.x) and np.array_equal(P_new, c.P) and nis == c.nis
 
 
