@@ -5,7 +5,7 @@ locbench run [--suite NAME|FILE.toml | --filter SPEC ... --dataset SPEC ...]
              [--seeds N] [--results DIR] [--jobs N] [--executor local|dask [--scheduler ADDRESS]] [--force]
              [--connect-timeout S] [--max-configs N] [--max-seeds N] [--interleave [S]]
 locbench tune FILTER --dataset SPEC [SPEC ...] --trials N --seeds K [--results DIR] [--objective ate|nll]
-              [--jobs N] [--executor local|dask [--scheduler ADDRESS]]
+              [--jobs N] [--executor local|dask [--scheduler ADDRESS]] [--max-seeds N]
 locbench report [--results DIR] [--suite NAME ...] [--out DIR] [--jobs N]
 locbench verify [--results DIR] [--fraction F] [--seed S]
 locbench check [ID ...]
@@ -279,12 +279,19 @@ def _cmd_verify(args: argparse.Namespace) -> int:
 
 
 def _cmd_tune(args: argparse.Namespace) -> int:
-    from locbench.tuning import tune
+    from locbench.executors import check_scheduler_address
+    from locbench.tuning import check_trials, train_seeds, tune
 
-    if args.jobs < 1:
-        raise ConfigError(f"--jobs must be >= 1, got {args.jobs}")
-    if args.scheduler and args.executor != "dask":
+    # every argument is bounded as for 'run', before the study's journal is opened or anything runs
+    check_trials(args.trials)
+    if args.max_seeds < 1:
+        raise ConfigError(f"--max-seeds must be >= 1, got {args.max_seeds}")
+    train_seeds(args.seeds, args.max_seeds)
+    if not 1 <= args.jobs <= MAX_JOBS:
+        raise ConfigError(f"--jobs: expected 1-{MAX_JOBS} processes, got {args.jobs}")
+    if args.scheduler is not None and args.executor != "dask":
         raise ConfigError("--scheduler needs --executor dask")
+    scheduler = check_scheduler_address(args.scheduler) if args.scheduler is not None else None
 
     def show(t: Any) -> None:
         value = f"{t.value:.6g}" if t.value != float("inf") else "worst (" + t.message + ")"
@@ -298,8 +305,9 @@ def _cmd_tune(args: argparse.Namespace) -> int:
         args.results,
         executor=args.executor,
         jobs=args.jobs,
-        scheduler=args.scheduler,
+        scheduler=scheduler,
         objective=args.objective,
+        max_seeds=args.max_seeds,
         progress=show,
     )
     if res.interrupted:
@@ -515,6 +523,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--seeds", type=int, required=True, help="train seeds per dataset (1000 .. 1000+K-1, apart from test seeds)"
     )
     tu.add_argument("--objective", choices=("ate", "nll"), default="ate", help="mean ATE (default) or NLL")
+    tu.add_argument(
+        "--max-seeds", type=int, default=MAX_SEEDS, metavar="N", help=f"most train seeds (default {MAX_SEEDS})"
+    )
     tu.add_argument("--results", default=_results_default(), help="results folder; runs and study go to RESULTS/tuning")
     tu.add_argument("--jobs", type=int, default=1, help="worker processes for each trial's runs (default 1)")
     tu.add_argument("--executor", choices=("local", "dask"), default="local", help="as for 'locbench run'")

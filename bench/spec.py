@@ -16,12 +16,100 @@ import math
 import re
 import types
 import typing
+from collections.abc import Mapping
+from types import MappingProxyType
 from typing import Any, Literal, TypeVar, Union, get_args, get_origin
 
 from locbench.errors import ConfigError, UnknownIdError, shown
 from locbench.tunable import UNIT_KEY
 
 P = TypeVar("P")
+
+
+#: The field-metadata key of a config field's accepted values (:func:`bound`).
+BOUND_KEY = "bound"
+
+
+@dataclasses.dataclass(frozen=True)
+class Bound:
+    """The values a numeric config field accepts: an interval, either end open or closed, and None if optional.
+
+    Declared on the field (``metadata=bound(0.0, low_open=True, unit="m")``) of a filter config or a dataset's
+    parameters, so each states its limits beside each field instead of looping over names. Checked when a spec
+    is parsed (:func:`build_params`, with infinite ends capped at :data:`MAX_MAGNITUDE`) and, for a filter config,
+    on every construction (:class:`locbench.filters.base.FilterConfig`). NaN is never accepted.
+
+    Attributes
+    ----------
+    low, high : float
+        The interval's ends, in the field's unit (infinite: no limit on that side).
+    low_open, high_open : bool
+        The end itself is excluded.
+    optional : bool
+        None is accepted too (the dataset's or the filter's default takes its place).
+    finite : bool
+        An infinite value is refused even where the interval would hold it.
+    unit : str
+        Unit printed after a one-sided limit (``> 0 m``).
+    what : str
+        Printed before the limit (``a variance >= 0``).
+    none_means : str
+        What None stands for, printed after the limit of an optional field (``(or None for the dataset's value)``;
+        empty: not printed).
+    expected : str
+        The whole expectation as printed, when the generated text does not say it (``in 1..8``).
+    """
+
+    low: float = -math.inf
+    high: float = math.inf
+    low_open: bool = False
+    high_open: bool = False
+    optional: bool = False
+    finite: bool = False
+    unit: str = ""
+    what: str = ""
+    none_means: str = "the dataset's value"
+    expected: str = ""
+
+    def accepts(self, value: Any) -> bool:
+        """Whether ``value`` lies in the bound (None only when optional; NaN never)."""
+        if value is None:
+            return self.optional
+        # an int is compared as it is: float() of a huge one overflows
+        v = value if isinstance(value, int) else float(value)
+        if math.isnan(v) or (self.finite and not math.isfinite(v)):
+            return False
+        above = v > self.low if self.low_open else v >= self.low
+        below = v < self.high if self.high_open else v <= self.high
+        return bool(above and below)
+
+    def describe(self) -> str:
+        """The expectation of the error message: ``> 0 m``, ``in (0, 1]``, ``a variance >= 0``."""
+        if self.expected:
+            return self.expected
+        if math.isinf(self.high):
+            text = f"{'>' if self.low_open else '>='} {self.low:g}" + (f" {self.unit}" if self.unit else "")
+        elif math.isinf(self.low):
+            text = f"{'<' if self.high_open else '<='} {self.high:g}" + (f" {self.unit}" if self.unit else "")
+        else:
+            text = f"in {'(' if self.low_open else '['}{self.low:g}, {self.high:g}{')' if self.high_open else ']'}"
+            text += f" {self.unit}" if self.unit else ""
+        if self.what:
+            text = f"{self.what} {text}"
+        return f"{text} (or None for {self.none_means})" if self.optional and self.none_means else text
+
+
+def bound(
+    low: float = -math.inf,
+    high: float = math.inf,
+    *,
+    base: Mapping[str, Any] | None = None,
+    **options: Any,
+) -> MappingProxyType[str, Any]:
+    """Field metadata of a :class:`Bound` (keyword ``options`` as its attributes); ``base`` merges other metadata
+    (the run key's, a tunable range's)."""
+    return MappingProxyType({**(base or {}), BOUND_KEY: Bound(float(low), float(high), **options)})
+
 
 _SPEC_RE = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_\-]*)\s*(?:\[(.*)\])?\s*$")
 
@@ -226,6 +314,42 @@ def param_fields(cls: type) -> dict[str, Any]:
     return {f.name: hints[f.name] for f in dataclasses.fields(cls) if f.init}
 
 
+#: Largest magnitude a numeric parameter takes where its field declares no finite limit on that side: every number
+#: a spec gives is bounded when it is parsed, so a build or a reset never meets 1e308, an overflowing product or
+#: an allocation of that many elements. A field whose sane range is wider declares it (:func:`bound`).
+MAX_MAGNITUDE = 1e6
+
+
+def _scalar_kind(tp: Any) -> tuple[type | None, bool]:
+    """The numeric type of an ``int``, ``float`` or ``X | None`` annotation and whether None is allowed."""
+    if tp is bool:
+        return None, False
+    if tp in (int, float):
+        return tp, False
+    if get_origin(tp) in (Union, types.UnionType):
+        args = [a for a in get_args(tp) if a is not type(None)]
+        if len(args) == 1 and args[0] in (int, float):
+            return args[0], type(None) in get_args(tp)
+    return None, False
+
+
+def parse_bound(f: dataclasses.Field[Any], tp: Any) -> Bound | None:
+    """The values a numeric field accepts when a spec is parsed: its declared :class:`Bound` with each infinite end
+    capped at :data:`MAX_MAGNITUDE` (finite), or ``[-MAX_MAGNITUDE, MAX_MAGNITUDE]`` when it declares none; None
+    for a field that is not a number (``int``, ``float`` or either or None)."""
+    kind, optional = _scalar_kind(tp)
+    if kind is None:
+        return None
+    declared = f.metadata.get(BOUND_KEY)
+    if not isinstance(declared, Bound):
+        declared = Bound(optional=optional, none_means="")
+    low = max(declared.low, -MAX_MAGNITUDE) if math.isinf(declared.low) else declared.low
+    high = min(declared.high, MAX_MAGNITUDE) if math.isinf(declared.high) else declared.high
+    capped = (low, high) != (declared.low, declared.high)
+    # a one-sided limit printed as "> 0 m" would hide the cap: print the interval then
+    return dataclasses.replace(declared, low=low, high=high, finite=True, expected="" if capped else declared.expected)
+
+
 def build_params(cls: type[P], values: dict[str, Any], owner: str) -> P:
     """Build the parameter dataclass ``cls`` from ``values`` (strings from a spec, or typed values).
 
@@ -237,6 +361,9 @@ def build_params(cls: type[P], values: dict[str, Any], owner: str) -> P:
         Key -> value; unknown keys are an error that lists the valid ones.
     owner : str
         The filter or dataset id, for error messages.
+
+    Every numeric value given is checked against its field's bound (:func:`parse_bound`) before the class is
+    built: a one-line :class:`ConfigError` names the spec, the field, the value and the bound.
     """
     fields = param_fields(cls)
     unknown = sorted(set(values) - set(fields))
@@ -245,12 +372,20 @@ def build_params(cls: type[P], values: dict[str, Any], owner: str) -> P:
             f"unknown parameter {', '.join(map(repr, unknown))} for {owner!r}; "
             f"valid: {', '.join(sorted(fields)) or '(none)'}"
         )
-    kwargs = {k: _convert(v, fields[k], f"{owner}: parameter {k!r}") for k, v in values.items()}
+    spec = format_spec(owner, values)
+    kwargs = {k: _convert(v, fields[k], f"{spec}: parameter {k!r}") for k, v in values.items()}
     try:
         obj = cls(**kwargs)
-    except (TypeError, ValueError) as exc:
-        text = str(exc)
-        raise ConfigError(text if text.startswith(f"{owner}:") else f"{owner}: {text}") from None
+    except (TypeError, ValueError, ArithmeticError) as exc:
+        # the rules across fields (a class's own __post_init__) name the spec as given, too
+        text = str(exc).removeprefix(f"{owner}:").strip()
+        raise ConfigError(f"{spec}: {text}") from None
+    # then the bound every number has when parsed (the class's own checks first: their messages say more)
+    declared = {f.name: f for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+    for k, v in kwargs.items():
+        b = parse_bound(declared[k], fields[k])
+        if b is not None and not b.accepts(v):
+            raise ConfigError(f"{spec}: {k} must be {b.describe()}, got {shown(values[k])}")
     return obj
 
 

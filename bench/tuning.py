@@ -14,7 +14,11 @@ non-finite value, scores :data:`WORST` (+inf), worse than any finite one.
 The study lives in an optuna journal file under ``<results>/tuning/studies/`` that several processes may share:
 rerunning the same command resumes it. The sampler is re-seeded before each trial from the number of trials
 finished or running, so an interrupted and resumed study asks the same trials as one run straight through
-(an interrupted trial is marked failed, which the sampler ignores, and asked again).
+(an interrupted trial is marked failed, which the sampler ignores, and asked again). A trial left running by a
+process that is gone (killed by SIGKILL, a crash) is marked failed when the study resumes and a replacement is
+asked, so the study reaches its budget. A resumed journal is trusted only as far as the stored runs confirm it:
+each finished trial's value is derived again from its runs (any run missing from the store is run again first) and
+a journal whose value differs, or that is not an optuna journal at all, is refused with one line naming the file.
 
 The protocol (docs/protocols.md, "Tuning"): train seeds start at :data:`TRAIN_SEED_START`, disjoint from the test
 seeds 0 .. N-1 of the comparison; recordings are split by robot (MRCLAM Dataset 6 robots 1-3 tune, 4-5 test); every
@@ -31,6 +35,7 @@ import logging
 import math
 import os
 import signal
+import socket
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -38,10 +43,11 @@ from typing import Any
 
 import numpy as np
 
-from locbench.errors import ConfigError, DependencyNotInstalled, LocbenchError
+from locbench.errors import ConfigError, DependencyNotInstalled, LocbenchError, one_line, shown
 from locbench.registry import FILTERS, resolve_dataset, resolve_filter
 from locbench.spec import format_spec, non_default_params, parse_spec
 from locbench.store import Store
+from locbench.suites import MAX_SEEDS, check_seeds
 from locbench.tunable import TunableRange, tunable_fields
 
 log = logging.getLogger(__name__)
@@ -62,6 +68,11 @@ SUMMARY_FILE = "tuned.json"
 STUDY_VERSION = 2
 #: The user attribute that marks a study's default trial (the plain spec, evaluated first).
 DEFAULT_ATTR = "default"
+#: The user attribute naming the process that runs a trial (host, pid, start time): a trial left running by a
+#: process that is gone is failed when the study resumes.
+OWNER_ATTR = "owner"
+#: Most trials a study may hold (``--trials``).
+MAX_TRIALS = 10_000
 
 
 def _optuna() -> Any:
@@ -73,11 +84,16 @@ def _optuna() -> Any:
     return optuna
 
 
-def train_seeds(k: int) -> list[int]:
-    """The ``k`` train seeds: TRAIN_SEED_START .. TRAIN_SEED_START + k - 1."""
-    if k < 1:
-        raise ConfigError(f"--seeds must be >= 1, got {k}")
-    return list(range(TRAIN_SEED_START, TRAIN_SEED_START + k))
+def train_seeds(k: int, limit: int = MAX_SEEDS) -> list[int]:
+    """The ``k`` train seeds: TRAIN_SEED_START .. TRAIN_SEED_START + k - 1 (``k`` in 1 .. ``limit``, as ``run``)."""
+    return list(range(TRAIN_SEED_START, TRAIN_SEED_START + check_seeds(k, limit, "--seeds")))
+
+
+def check_trials(trials: object) -> int:
+    """``trials`` when it is an integer 1 .. :data:`MAX_TRIALS`; a one-line :class:`ConfigError` otherwise."""
+    if not isinstance(trials, int) or isinstance(trials, bool) or not 1 <= trials <= MAX_TRIALS:
+        raise ConfigError(f"--trials must be an integer in 1..{MAX_TRIALS}, got {shown(trials)}")
+    return trials
 
 
 def search_space(filter_spec: str) -> tuple[str, dict[str, str], dict[str, TunableRange]]:
@@ -209,6 +225,130 @@ def score_trial(
     return float(np.mean(values)), ""
 
 
+def _process_start(pid: int) -> str:
+    """When process ``pid`` started, in clock ticks since boot (Linux ``/proc``), or "" where that is not known."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text(encoding="ascii", errors="replace")
+    except OSError:
+        return ""
+    # the command name (field 2) may hold spaces and brackets: the fields after its last ')' are fixed
+    fields = stat.rsplit(")", 1)[-1].split()
+    return fields[19] if len(fields) > 19 else ""
+
+
+def _owner() -> dict[str, Any]:
+    """This process as a trial's owner: host name, pid and start time (the pair tells a reused pid apart)."""
+    return {"host": socket.gethostname(), "pid": os.getpid(), "start": _process_start(os.getpid())}
+
+
+def _owner_gone(owner: Any) -> bool:
+    """Whether the process that owns a running trial is gone: on this host, its pid is free or now names another
+    process (a different start time). A trial of another host, or with no owner recorded, is never judged gone."""
+    if not isinstance(owner, dict) or owner.get("host") != socket.gethostname():
+        return False
+    pid = owner.get("pid")
+    if not isinstance(pid, int) or isinstance(pid, bool) or pid <= 0:
+        return False
+    if pid == os.getpid():
+        return True  # this process has only just started: the trial's owner was an earlier one with the same pid
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    except PermissionError:
+        pass  # a process of another user holds the pid: alive, and not ours unless it started at our owner's time
+    start = _process_start(pid)
+    return bool(start and owner.get("start") and start != owner.get("start"))
+
+
+def fail_dead_trials(optuna: Any, study: Any, storage: Any, path: Path, every: bool = False) -> list[int]:
+    """Mark failed each trial left running by a process that is gone (``every``: each running trial); their numbers.
+
+    A trial that is running when a study resumes was either killed with its process (SIGKILL, a crash, the machine
+    stopped) or belongs to another process tuning the same study now; only the first is failed, so the study asks
+    a replacement and reaches its budget. Judged by the owner each trial records (:data:`OWNER_ATTR`).
+    """
+    states = optuna.trial.TrialState
+    failed = []
+    for t in study.get_trials(deepcopy=False, states=(states.RUNNING,)):
+        if every or _owner_gone(t.user_attrs.get(OWNER_ATTR)):
+            storage.set_trial_user_attr(t._trial_id, "message", "its process died; failed when the study resumed")
+            storage.set_trial_state_values(t._trial_id, states.FAIL)
+            failed.append(t.number)
+    if failed:
+        log.warning("%s: trial(s) %s left running by a process that is gone: marked failed", path, failed)
+    return failed
+
+
+#: The operations an optuna journal holds (its ``op_code``), 0 .. this - 1.
+_JOURNAL_OPS = 9
+
+
+def open_journal(optuna: Any, path: Path, name: str) -> tuple[Any, Any]:
+    """The storage and study of the journal ``path`` (created when absent); a one-line :class:`ConfigError` naming
+    the file when it is not an optuna journal: a line that is not a JSON operation, a last line without its newline
+    (optuna would glue its next operation to it), or operations optuna cannot replay."""
+    from optuna.storages import JournalStorage
+    from optuna.storages.journal import JournalFileBackend
+
+    expected = "expected an optuna journal (one JSON operation per line); delete it to start the study again"
+    try:
+        lines = path.read_bytes().split(b"\n") if path.exists() else [b""]
+    except OSError as exc:
+        raise ConfigError(f"{path}: unreadable study journal ({exc.strerror or exc})") from None
+    if lines[-1]:
+        raise ConfigError(f"{path}: line {len(lines)} has no newline (a write cut short, or not text); {expected}")
+    for number, line in enumerate(lines[:-1], start=1):
+        try:
+            op = json.loads(line)
+        except (UnicodeDecodeError, json.JSONDecodeError):
+            raise ConfigError(f"{path}: line {number} is not JSON; {expected}") from None
+        code = op.get("op_code") if isinstance(op, dict) else None
+        if not isinstance(code, int) or isinstance(code, bool) or not 0 <= code < _JOURNAL_OPS:
+            raise ConfigError(f"{path}: line {number} is not a journal operation (no valid op_code); {expected}")
+    try:
+        storage = JournalStorage(JournalFileBackend(str(path)))
+        study = optuna.create_study(study_name=name, storage=storage, direction="minimize", load_if_exists=True)
+        study.get_trials(deepcopy=False)
+    except (KeyError, IndexError, TypeError, ValueError, AttributeError) as exc:
+        reason = one_line(f"{type(exc).__name__}: {exc}", 200)
+        raise ConfigError(f"{path}: optuna cannot replay it ({reason}); {expected}") from None
+    return storage, study
+
+
+def check_journal(
+    optuna: Any,
+    study: Any,
+    path: Path,
+    trusted: set[int],
+    expected_spec: Callable[[Any], str],
+    rescore: Callable[[str], tuple[float, str]],
+) -> None:
+    """Refuse a journal whose finished trials do not match their stored runs; ``trusted`` (trial numbers) grows.
+
+    Each finished trial's spec must be the one its parameters give (``expected_spec``), and its value the one its
+    runs give now (``rescore``, which first re-runs any run that is not stored: runs are deterministic, so a run
+    lost from the store comes back as it was). A mismatch is a :class:`ConfigError` naming the journal, the
+    trial and the two values: the journal was edited, or its runs changed since.
+    """
+    done = study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.COMPLETE,))
+    advice = "the journal was edited or its runs changed; delete it to tune again"
+    for t in sorted(done, key=lambda t: t.number):
+        if t.number in trusted:
+            continue
+        recorded = t.user_attrs.get("spec")
+        spec = expected_spec(t)
+        if recorded != spec:
+            raise ConfigError(f"{path}: trial {t.number} records spec {shown(recorded)}, its parameters give {spec}")
+        value, _ = rescore(spec)
+        if not (value == t.value or (math.isnan(value) and math.isnan(t.value))):
+            raise ConfigError(
+                f"{path}: trial {t.number} ({spec}) has value {t.value!r} in the journal but {value!r} from its "
+                f"stored runs; {advice}"
+            )
+        trusted.add(t.number)
+
+
 def _outcomes(optuna: Any, study: Any) -> list[TrialOutcome]:
     done = study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.COMPLETE,))
     return [
@@ -230,6 +370,7 @@ def tune(
     objective: str = "ate",
     sampler_seed: int = 0,
     fail_stale: bool = False,
+    max_seeds: int = MAX_SEEDS,
     progress: Callable[[TrialOutcome], None] | None = None,
 ) -> TuneResult:
     """Tune the free tunable fields of ``filter_spec`` on ``datasets`` x ``seeds`` train seeds, to ``trials`` trials.
@@ -253,24 +394,23 @@ def tune(
     sampler_seed : int
         The TPE sampler's base seed: the same command asks the same trials.
     fail_stale : bool
-        Mark trials left running by a killed process as failed before resuming (only for a study no other process
-        is working on, as the tuned suite's own).
+        Mark every trial left running as failed before resuming (only for a study no other process is working on,
+        as the tuned suite's own); without it, only the trials whose process is gone (:func:`fail_dead_trials`).
+    max_seeds : int
+        Most train seeds per dataset (``--max-seeds``), as for ``locbench run``.
     progress : callable, optional
         Called with each trial as it finishes.
     """
     # long: the study's lifecycle (claim the folder, resume, trials through the executor, best spec) in order; numpydoc
     if objective not in OBJECTIVES:
         raise ConfigError(f"unknown objective {objective!r}; valid: {', '.join(OBJECTIVES)}")
-    if trials < 1:
-        raise ConfigError(f"--trials must be >= 1, got {trials}")
+    check_trials(trials)
     if not datasets:
         raise ConfigError("tuning needs at least one --dataset")
     ident, fixed, space = search_space(filter_spec)
-    seed_list = train_seeds(seeds)
+    seed_list = train_seeds(seeds, max_seeds)
     dnames = tuple(resolve_dataset(d).name for d in datasets)
     optuna = _optuna()
-    from optuna.storages import JournalStorage
-    from optuna.storages.journal import JournalFileBackend
 
     from locbench.runner import plan_sweep, run_sweep
 
@@ -280,17 +420,33 @@ def tune(
     Store(results).claim()
     Store(Path(results) / TUNING_DIR).claim()
     path.parent.mkdir(parents=True, exist_ok=True)
-    storage = JournalStorage(JournalFileBackend(str(path)))
-    study = optuna.create_study(study_name=name, storage=storage, direction="minimize", load_if_exists=True)
+    storage, study = open_journal(optuna, path, name)
     states = optuna.trial.TrialState
-    if fail_stale:
-        for t in study.get_trials(deepcopy=False, states=(states.RUNNING,)):
-            storage.set_trial_state_values(t._trial_id, states.FAIL)
+    fail_dead_trials(optuna, study, storage, path, every=fail_stale)
     dists = {k: _distribution(optuna, r) for k, r in space.items()}
     train_root = Path(results) / TUNING_DIR
     store = Store(train_root)
     plain = resolve_filter(filter_spec).name
     result = TuneResult(name, plain, dnames, tuple(seed_list), objective)
+
+    def run_trial(spec: str, checking: bool = False) -> tuple[float, str]:
+        """Run what is not stored of ``spec``'s train runs, then score it from the store (``checking``: a finished
+        trial's value re-derived, which runs nothing when its runs are stored and counts in no tally)."""
+        plan = plan_sweep([([spec], dnames, seed_list)], str(train_root))
+        if not plan.tasks and not checking:
+            result.reused += 1
+        if (plan.tasks or not checking) and run_sweep(plan, executor, jobs, scheduler).interrupted:
+            raise KeyboardInterrupt
+        return score_trial(store, spec, dnames, seed_list, objective)
+
+    def rescore(spec: str) -> tuple[float, str]:
+        return run_trial(spec, checking=True)
+
+    def expected_spec(t: Any) -> str:
+        return plain if t.user_attrs.get(DEFAULT_ATTR) else trial_spec(ident, fixed, t.params)
+
+    trusted: set[int] = set()  # finished trials whose value was checked against their runs, or computed here
+    check_journal(optuna, study, path, trusted, expected_spec, rescore)
     while True:
         live = study.get_trials(deepcopy=False, states=(states.COMPLETE, states.RUNNING))
         if len(live) >= trials:
@@ -309,17 +465,12 @@ def tune(
             )
             trial = study.ask(dists)
         try:
+            trial.set_user_attr(OWNER_ATTR, _owner())
             spec = plain if with_default else trial_spec(ident, fixed, trial.params)
             trial.set_user_attr("spec", spec)
             if with_default:
                 trial.set_user_attr(DEFAULT_ATTR, True)
-            plan = plan_sweep([([spec], dnames, seed_list)], str(train_root))
-            if not plan.tasks:
-                result.reused += 1
-            sweep = run_sweep(plan, executor, jobs, scheduler)
-            if sweep.interrupted:
-                raise KeyboardInterrupt
-            value, message = score_trial(store, spec, dnames, seed_list, objective)
+            value, message = run_trial(spec)
         except BaseException as exc:
             # Ctrl-C or an error of the command: the trial is failed (the sampler ignores it), never left running
             trial.set_user_attr("message", "interrupted" if isinstance(exc, KeyboardInterrupt) else str(exc))
@@ -331,8 +482,11 @@ def tune(
         if message:
             trial.set_user_attr("message", message)
         study.tell(trial, value)
+        trusted.add(trial.number)
         if progress is not None:
             progress(TrialOutcome(trial.number, spec, value, message))
+    # trials other processes finished meanwhile are checked like the journal's earlier ones
+    check_journal(optuna, study, path, trusted, expected_spec, rescore)
     result.trials = _outcomes(optuna, study)
     return result
 

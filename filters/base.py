@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import abc
 import dataclasses
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -22,90 +21,9 @@ import numpy.typing as npt
 from locbench.datasets.base import Gaussian2, MapKind, SensorSpec, WorldMap
 from locbench.errors import ConfigError
 from locbench.events import Event, Observation, Odometry
+from locbench.spec import BOUND_KEY, Bound, bound
 
 FloatArray = npt.NDArray[np.float64]
-
-
-#: The field-metadata key of a config field's accepted values (:func:`bound`).
-BOUND_KEY = "bound"
-
-
-@dataclass(frozen=True)
-class Bound:
-    """The values a numeric config field accepts: an interval, either end open or closed, and None if optional.
-
-    Declared on the field (``metadata=bound(0.0, low_open=True, unit="m")``) and checked once for every field by
-    :meth:`FilterConfig.__post_init__`, so a filter config states its limits beside each field instead of looping
-    over names. NaN is never accepted.
-
-    Attributes
-    ----------
-    low, high : float
-        The interval's ends, in the field's unit (infinite: no limit on that side).
-    low_open, high_open : bool
-        The end itself is excluded.
-    optional : bool
-        None is accepted too (the dataset's or the filter's default takes its place).
-    finite : bool
-        An infinite value is refused even where the interval would hold it.
-    unit : str
-        Unit printed after a one-sided limit (``> 0 m``).
-    what : str
-        Printed before the limit (``a variance >= 0``).
-    none_means : str
-        What None stands for, printed after the limit of an optional field (``(or None for the dataset's value)``;
-        empty: not printed).
-    expected : str
-        The whole expectation as printed, when the generated text does not say it (``in 1..8``).
-    """
-
-    low: float = -math.inf
-    high: float = math.inf
-    low_open: bool = False
-    high_open: bool = False
-    optional: bool = False
-    finite: bool = False
-    unit: str = ""
-    what: str = ""
-    none_means: str = "the dataset's value"
-    expected: str = ""
-
-    def accepts(self, value: Any) -> bool:
-        """Whether ``value`` lies in the bound (None only when optional; NaN never)."""
-        if value is None:
-            return self.optional
-        v = float(value)
-        if math.isnan(v) or (self.finite and not math.isfinite(v)):
-            return False
-        above = v > self.low if self.low_open else v >= self.low
-        below = v < self.high if self.high_open else v <= self.high
-        return above and below
-
-    def describe(self) -> str:
-        """The expectation of the error message: ``> 0 m``, ``in (0, 1]``, ``a variance >= 0``."""
-        if self.expected:
-            return self.expected
-        if math.isinf(self.high):
-            text = f"{'>' if self.low_open else '>='} {self.low:g}" + (f" {self.unit}" if self.unit else "")
-        elif math.isinf(self.low):
-            text = f"{'<' if self.high_open else '<='} {self.high:g}" + (f" {self.unit}" if self.unit else "")
-        else:
-            text = f"in {'(' if self.low_open else '['}{self.low:g}, {self.high:g}{')' if self.high_open else ']'}"
-        if self.what:
-            text = f"{self.what} {text}"
-        return f"{text} (or None for {self.none_means})" if self.optional and self.none_means else text
-
-
-def bound(
-    low: float = -math.inf,
-    high: float = math.inf,
-    *,
-    base: Mapping[str, Any] | None = None,
-    **options: Any,
-) -> MappingProxyType[str, Any]:
-    """Field metadata of a :class:`Bound` (keyword ``options`` as its attributes); ``base`` merges other metadata
-    (the run key's, a tunable range's)."""
-    return MappingProxyType({**(base or {}), BOUND_KEY: Bound(float(low), float(high), **options)})
 
 
 #: The bounds most config fields declare (field metadata; merge others with ``|``): > 0, >= 0, in (0, 1) ...

@@ -45,6 +45,8 @@ MAX_QUOTE_CHARS = 200
 #: Largest occupancy grid a loader builds, cells (4096 x 4096: 134 MB of float64 occupancy; a map read at this size
 #: stays under 1 GB in all, measured in tests/fuzz/test_fuzz_loaders.py).
 MAX_GRID_CELLS = 1 << 24
+#: The most a dataset's ``max_grid_cells`` parameter may raise that to (a 2 GiB grid of float64).
+MAX_GRID_CELLS_BOUND = 1 << 28
 #: Largest count of derived items (waypoints, database poses ...) a single parameter may ask for.
 MAX_DERIVED_ITEMS = 1_000_000
 #: Largest id or count in an integer field of a text table (ids and barcodes are small; 2**31 - 1 keeps int64

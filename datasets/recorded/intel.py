@@ -93,7 +93,7 @@ import functools
 import logging
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -117,6 +117,7 @@ from locbench.datasets.recorded.base import RecordedDataset
 from locbench.datasets.recorded.carmen import CarmenLog, read_carmen
 from locbench.datasets.recorded.files import (
     MAX_GRID_CELLS,
+    MAX_GRID_CELLS_BOUND,
     RecordedDataError,
     RemoteFile,
     check_cells,
@@ -127,6 +128,7 @@ from locbench.datasets.recorded.files import (
 from locbench.errors import ConfigError
 from locbench.events import Event, LaserScan, Odometry
 from locbench.geometry import between, wrap_angle
+from locbench.spec import bound
 
 FloatArray = npt.NDArray[np.float64]
 logger = logging.getLogger(__name__)
@@ -194,7 +196,7 @@ class IntelParams:
 
     root: str = ""
     map_resolution_m: float = 0.05
-    max_grid_cells: int = MAX_GRID_CELLS
+    max_grid_cells: int = field(default=MAX_GRID_CELLS, metadata=bound(1, MAX_GRID_CELLS_BOUND, what="a cell count"))
 
     def __post_init__(self) -> None:
         if not MIN_RESOLUTION_M <= self.map_resolution_m <= MAX_RESOLUTION_M:

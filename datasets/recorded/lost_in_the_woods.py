@@ -112,7 +112,7 @@ from __future__ import annotations
 import functools
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar, Literal
 
@@ -144,7 +144,7 @@ from locbench.datasets.recorded.files import (
 from locbench.errors import ConfigError
 from locbench.events import Event, LandmarkObservations, Odometry
 from locbench.geometry import twist_increment, wrap_angle
-from locbench.spec import params_to_dict
+from locbench.spec import bound, params_to_dict
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -162,6 +162,10 @@ _VECTORS = ("t", "v", "om", "x_true", "y_true", "th_true", "true_valid")
 _SCALARS = ("d", "v_var", "om_var", "r_var", "b_var")
 
 
+#: The span of ``dataset2.mat``'s time base, s (it runs 0 .. 1260.8 s), rounded up: the window's ends lie in it.
+TIME_SPAN_S = 1261.0
+
+
 @dataclass(frozen=True, kw_only=True)
 class LostInTheWoodsParams:
     """Parameters of ``lost_in_the_woods``.
@@ -169,7 +173,8 @@ class LostInTheWoodsParams:
     Attributes
     ----------
     t_start_s, t_end_s : float, float or None
-        Keep only [t_start_s, t_end_s] of the file's time base, s (None: to the end). Default: everything.
+        Keep only [t_start_s, t_end_s] of the file's time base, s (None: to the end), both within [0,
+        :data:`TIME_SPAN_S`]. Default: everything.
     twist_sample : {"previous", "current"}
         Which sample's (v, om) drives the interval (t[k-1], t[k]]: the one at t[k-1] (causal zero-order hold,
         the better fit to the Vicon motion) or the one at t[k] (the course's motion-model convention).
@@ -177,8 +182,10 @@ class LostInTheWoodsParams:
         Standard deviations of the initial belief around the first valid Vicon pose, m and rad.
     """
 
-    t_start_s: float = 0.0
-    t_end_s: float | None = None
+    t_start_s: float = field(default=0.0, metadata=bound(0.0, TIME_SPAN_S, unit="s", what="a time"))
+    t_end_s: float | None = field(
+        default=None, metadata=bound(0.0, TIME_SPAN_S, optional=True, unit="s", what="a time", none_means="the end")
+    )
     twist_sample: Literal["previous", "current"] = "previous"
     initial_sigma_xy_m: float = 0.01
     initial_sigma_theta_rad: float = 0.01

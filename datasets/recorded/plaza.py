@@ -87,7 +87,7 @@ import functools
 import itertools
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -120,6 +120,7 @@ from locbench.datasets.recorded.files import (
 from locbench.errors import ConfigError
 from locbench.events import Event, Odometry, RangeObservations
 from locbench.geometry import wrap_angle
+from locbench.spec import bound
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -529,6 +530,11 @@ def load_plaza(
     )
 
 
+#: The largest range calibration ``range_offset_m`` takes, m: several times the recorded bias (a median residual
+#: of +2.8 m), far below the ranges themselves (tens of metres).
+MAX_RANGE_OFFSET_M = 10.0
+
+
 @dataclass(frozen=True, kw_only=True)
 class PlazaParams:
     """Parameters of ``plaza``.
@@ -538,11 +544,14 @@ class PlazaParams:
     run : int
         1 (Plaza1_.mat, 1933 s) or 2 (Plaza2_.mat, 410 s).
     range_offset_m : float
-        Subtracted from every range, m (0: the recorded ranges; see the module docstring on their offset).
+        Subtracted from every range, m (0: the recorded ranges; see the module docstring on their offset), within
+        +-:data:`MAX_RANGE_OFFSET_M`.
     """
 
     run: int = 1
-    range_offset_m: float = 0.0
+    range_offset_m: float = field(
+        default=0.0, metadata=bound(-MAX_RANGE_OFFSET_M, MAX_RANGE_OFFSET_M, unit="m", what="a range calibration")
+    )
 
     def __post_init__(self) -> None:
         if self.run not in (1, 2):

@@ -98,7 +98,7 @@ import os
 import re
 import zlib
 from collections import defaultdict
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -119,6 +119,7 @@ from locbench.datasets.recorded.base import RecordedDataset
 from locbench.datasets.recorded.carmen import CarmenLog, parse_carmen_bytes, read_carmen
 from locbench.datasets.recorded.files import (
     MAX_GRID_CELLS,
+    MAX_GRID_CELLS_BOUND,
     MissingDataFile,
     RecordedDataError,
     RemoteFile,
@@ -140,6 +141,7 @@ from locbench.datasets.recorded.intel import (
 from locbench.errors import ConfigError
 from locbench.events import Event, LaserScan, Odometry
 from locbench.geometry import between, wrap_angle
+from locbench.spec import bound
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -241,7 +243,7 @@ class RadishParams:
     site: str = "intel"
     root: str = ""
     map_resolution_m: float = DEFAULT_RESOLUTION_M
-    max_grid_cells: int = MAX_GRID_CELLS
+    max_grid_cells: int = field(default=MAX_GRID_CELLS, metadata=bound(1, MAX_GRID_CELLS_BOUND, what="a cell count"))
     max_scans: int = DEFAULT_MAX_SCANS
 
     def __post_init__(self) -> None:

@@ -827,7 +827,10 @@ def _grid(m: _Manifest, folder: Path) -> tuple[OccupancyGrid | None, LineMap | N
 
 def _required(m: _Manifest, key: str, folder: Path) -> Path:
     p = m.file(key, folder)
-    assert p is not None  # events and truth have defaults
+    if p is None:  # the key is present but null: its default does not apply
+        raise m.fail(
+            key, f"is null, expected the {key} file's name (relative to the folder; default {DEFAULT_FILES[key]})"
+        )
     if not p.exists():
         raise RecordedDataError(p, f"missing {key} file (named by {m.path}), expected the textlog's {key}")
     return p

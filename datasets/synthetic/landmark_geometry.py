@@ -80,6 +80,7 @@ from locbench.datasets.synthetic.toolkit import (
     assemble,
     check_kidnap_params,
     encoder_model,
+    kidnap_distance,
     nominal_sensor_spec,
     true_wheelbase,
 )
@@ -388,7 +389,7 @@ class LandmarkGeometryParams:
     gps: bool = False
     pose_fix_sigma_m: float = 0.5
     initial_offset_m: float = 0.0
-    kidnap_m: float = 0.0
+    kidnap_m: float = field(default=0.0, metadata=kidnap_distance(2 * ARENA_HALF_M, 2 * ARENA_HALF_M))
     kidnap_rad: float = 0.5
     circuits: int = 2
     matched: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)

@@ -71,6 +71,7 @@ from locbench.datasets.synthetic.toolkit import (
     check_laser_beams,
     drive,
     execution_stream,
+    kidnap_distance,
     matched_encoder_model,
     matched_stream,
     nominal_sensor_spec,
@@ -300,7 +301,7 @@ class LapParams:
     """
 
     people: int = 4
-    kidnap_m: float = 0.0
+    kidnap_m: float = field(default=0.0, metadata=kidnap_distance(20.0, 15.0))
     kidnap_rad: float = 0.5
     laser_beams: int = 683
     matched: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)

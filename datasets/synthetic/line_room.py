@@ -40,6 +40,7 @@ from locbench.datasets.synthetic.toolkit import (
     check_kidnap_params,
     drive,
     encoder_model,
+    kidnap_distance,
     nominal_sensor_spec,
     scenario_streams,
     true_wheelbase,
@@ -115,7 +116,7 @@ class LineRoomParams:
 
     laser_sigma_m: float = 0.01
     laser_beams: int = 181
-    kidnap_m: float = 0.0
+    kidnap_m: float = field(default=0.0, metadata=kidnap_distance(11.0, 6.5))
     kidnap_rad: float = 0.5
     matched: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)
 

@@ -58,6 +58,7 @@ from locbench.datasets.synthetic.toolkit import (
     check_kidnap_params,
     encoder_model,
     kidnap_chooser,
+    kidnap_distance,
     matched_initial_mean,
     matched_stream,
     nominal_sensor_spec,
@@ -158,7 +159,7 @@ class ScanGridParams:
 
     grid_step_m: float = 0.25
     mixed_commands: bool = False
-    kidnap_m: float = 0.0
+    kidnap_m: float = field(default=0.0, metadata=kidnap_distance(8.0, 6.0))
     kidnap_rad: float = 0.5
     matched: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)
 

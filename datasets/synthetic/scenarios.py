@@ -39,6 +39,7 @@ from locbench.datasets.synthetic.toolkit import (
     drive,
     encoder_model,
     execution_stream,
+    kidnap_distance,
     nominal_sensor_spec,
     robot_encoder_model,
     scenario_streams,
@@ -98,7 +99,7 @@ class RoomParams:
     """
 
     known_ids: bool = True
-    kidnap_m: float = 0.0
+    kidnap_m: float = field(default=0.0, metadata=kidnap_distance(7.0, 2.0))
     kidnap_rad: float = 0.5
     laser_beams: int = 0
     matched: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)
@@ -272,7 +273,7 @@ class OfficeParams:
     """
 
     known_ids: bool = True
-    kidnap_m: float = 0.0
+    kidnap_m: float = field(default=0.0, metadata=kidnap_distance(20.0, 15.0))
     kidnap_rad: float = 0.5
     laser_beams: int = 181
     pose_fix_sigma_m: float = 0.7

@@ -18,6 +18,7 @@ import logging
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
@@ -46,7 +47,7 @@ from locbench.datasets.synthetic.world import World
 from locbench.errors import ConfigError
 from locbench.events import Event, LandmarkObservations, LaserScan, PoseFix
 from locbench.limits import check_beams
-from locbench.spec import params_to_dict
+from locbench.spec import bound, params_to_dict
 
 logger = logging.getLogger(__name__)
 
@@ -349,6 +350,13 @@ def assemble(
     )
     ds.check()
     return ds
+
+
+def kidnap_distance(width_m: float, height_m: float) -> MappingProxyType[str, Any]:
+    """Field metadata of a world's ``kidnap_m``: a distance in [0, the diagonal of its ``width_m`` x ``height_m``
+    bounds] m, checked when the spec is parsed: no two poses of the world lie further apart. A distance inside
+    the bound may still find no free landing; the build says so in one line."""
+    return bound(0.0, math.hypot(width_m, height_m), unit="m", what="a kidnap distance")
 
 
 def check_kidnap_params(kidnap_m: float, kidnap_rad: float) -> None:
