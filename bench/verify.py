@@ -28,13 +28,16 @@ import os
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from locbench import provenance
 from locbench.errors import ConfigError, LocbenchError
 from locbench.store import BoundRecord, RunRecord, StaleRecord, Store, TruthRecord, bound_arrays, truth_arrays
+
+if TYPE_CHECKING:
+    from locbench.runner import Task
 
 log = logging.getLogger(__name__)
 
@@ -238,38 +241,25 @@ def compare_bound(
     return [(where, ", ".join(why))] if why else []
 
 
-def verify(store: Store, fraction: float = DEFAULT_FRACTION, seed: int = 0, jobs: int = 1) -> VerifyResult:
-    """Re-run a sample of the stored runs (:func:`sample`) and compare everything stored of them (module docstring).
+@dataclass
+class _Plan:
+    """The re-runs of a verification: the tasks, the stored records they are compared with, each realisation's
+    bound key and the stored runs' dataset name under each task's canonical one."""
 
-    A run whose key no longer matches what the current code would store (a filter's or dataset's version was
-    bumped) differs by definition: the store is stale for it. So does a run whose folder is not the one its
-    record names (a run folder copied over another). The re-runs go through the sweep's local executor (``jobs``
-    worker processes); nothing is written to the store. A re-run that fails to return (its worker died) differs
-    too.
+    tasks: list[Task] = field(default_factory=list)
+    stored_recs: dict[RunId, RunRecord] = field(default_factory=dict)
+    bound_keys: dict[tuple[str, int], str | None] = field(default_factory=dict)
+    stored_name: dict[tuple[str, int], str] = field(default_factory=dict)
 
-    Raises
-    ------
-    ConfigError
-        The store holds no run to verify.
-    """
-    from locbench import executors
+
+def _plan(store: Store, groups: dict[tuple[str, int], list[RunId]], result: VerifyResult) -> _Plan:
+    """One task per sampled realisation with the jobs still current; a run that cannot be re-run (stale, another
+    run's folder, an unknown spec) is recorded in ``result`` as differing instead."""
     from locbench.registry import DATASETS, FILTERS, resolve_dataset, resolve_filter
-    from locbench.runner import Job, Task, TaskResult, bound_key, run_key
+    from locbench.runner import Job, Task, bound_key, run_key
 
-    runs = stored_runs(store)
-    if not runs:
-        raise ConfigError(
-            f"{store.runs}: no stored run to verify (none, or every one skipped); run 'locbench run' first"
-        )
-    result = VerifyResult(fraction, seed, len(runs), store_digest=store_digest(r.run_key for r in runs))
-    chosen = sample(runs, fraction, seed)
-    groups: dict[tuple[str, int], list[RunId]] = {}
-    for r in chosen:
-        groups.setdefault((r.dataset, r.seed), []).append(r)
-    stored_recs: dict[RunId, RunRecord] = {}
-    tasks: list[Task] = []
-    bound_keys: dict[tuple[str, int], str | None] = {}
-    stored_name: dict[tuple[str, int], str] = {}  # the task's canonical dataset name -> the stored runs' name
+    plan = _Plan()
+    stored_recs, tasks, bound_keys, stored_name = plan.stored_recs, plan.tasks, plan.bound_keys, plan.stored_name
     for (dataset, s), members in sorted(groups.items()):
         jobs_of_task: list[Job] = []
         try:
@@ -304,6 +294,38 @@ def verify(store: Store, fraction: float = DEFAULT_FRACTION, seed: int = 0, jobs
             wanted = bkey if stored_bound is not None and stored_bound[0].get("bound_key") == bkey else None
             tasks.append(Task(dr, DATASETS.load(dr.id), s, tuple(jobs_of_task), bound_key=wanted))
             stored_name[(dr.name, s)] = dataset
+    return plan
+
+
+def verify(store: Store, fraction: float = DEFAULT_FRACTION, seed: int = 0, jobs: int = 1) -> VerifyResult:
+    """Re-run a sample of the stored runs (:func:`sample`) and compare everything stored of them (module docstring).
+
+    A run whose key no longer matches what the current code would store (a filter's or dataset's version was
+    bumped) differs by definition: the store is stale for it. So does a run whose folder is not the one its
+    record names (a run folder copied over another). The re-runs go through the sweep's local executor (``jobs``
+    worker processes); nothing is written to the store. A re-run that fails to return (its worker died) differs
+    too.
+
+    Raises
+    ------
+    ConfigError
+        The store holds no run to verify.
+    """
+    from locbench import executors
+    from locbench.runner import TaskResult
+
+    runs = stored_runs(store)
+    if not runs:
+        raise ConfigError(
+            f"{store.runs}: no stored run to verify (none, or every one skipped); run 'locbench run' first"
+        )
+    result = VerifyResult(fraction, seed, len(runs), store_digest=store_digest(r.run_key for r in runs))
+    chosen = sample(runs, fraction, seed)
+    groups: dict[tuple[str, int], list[RunId]] = {}
+    for r in chosen:
+        groups.setdefault((r.dataset, r.seed), []).append(r)
+    plan = _plan(store, groups, result)
+    stored_recs, tasks, bound_keys, stored_name = plan.stored_recs, plan.tasks, plan.bound_keys, plan.stored_name
     fresh: dict[tuple[str, int, str], RunRecord] = {}
     truths: dict[tuple[str, int], TruthRecord] = {}
     bounds: dict[tuple[str, int], BoundRecord] = {}

@@ -48,7 +48,7 @@ import json
 import logging
 import math
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any, ClassVar
@@ -527,6 +527,51 @@ def read_events(path: str | os.PathLike[str], landmark_ids: frozenset[int] | Non
     return read_events_flagged(path, landmark_ids)[0]
 
 
+def _json_objects(p: Path, decoder: json.JSONDecoder) -> Iterator[tuple[int, dict[str, Any]]]:
+    """Each event line of a textlog events file as (1-based line, decoded object); blank and ``#`` lines skipped.
+
+    Raises
+    ------
+    RecordedDataError
+        Naming the line: not UTF-8, longer than :data:`MAX_LINE_CHARS`, a last line without its line end, not
+        JSON, a key given twice, nested too deeply, or not a JSON object.
+    """
+    with open(p, encoding="utf-8", newline="") as fh:
+        lineno = 0
+        while True:
+            try:
+                raw = fh.readline(MAX_LINE_CHARS + 1)
+            except UnicodeDecodeError:
+                raise RecordedDataError(p, "not UTF-8 text, expected JSON lines", lineno + 1) from None
+            if not raw:
+                return
+            lineno += 1
+            if len(raw) > MAX_LINE_CHARS:
+                raise RecordedDataError(p, f"line longer than {MAX_LINE_CHARS} characters, expected one event", lineno)
+            text = raw.strip()
+            if not text or text.startswith("#"):
+                continue
+            if not raw.endswith("\n"):
+                raise RecordedDataError(
+                    p,
+                    "truncated line: the last line has no line end (expected a complete event ending in a newline)",
+                    lineno,
+                )
+            try:
+                obj = decoder.decode(text)
+            except json.JSONDecodeError as exc:
+                raise RecordedDataError(
+                    p, f"not JSON ({exc.msg} at column {exc.colno}), expected an event object", lineno
+                ) from None
+            except RecordedDataError as exc:
+                raise RecordedDataError(p, str(exc).split(": ", 1)[-1], lineno) from None
+            except RecursionError:
+                raise RecordedDataError(p, "JSON nested too deeply, expected a flat event object", lineno) from None
+            if not isinstance(obj, dict):
+                raise RecordedDataError(p, f"a JSON {type(obj).__name__}, expected an event object", lineno)
+            yield lineno, obj
+
+
 def read_events_flagged(
     path: str | os.PathLike[str], landmark_ids: frozenset[int] | None = None
 ) -> tuple[tuple[Event, ...], tuple[FlaggedSample, ...]]:
@@ -564,61 +609,29 @@ def read_events_flagged(
     last_t = -math.inf
     hooks = _json_hooks(p)
     decoder = json.JSONDecoder(object_pairs_hook=_no_duplicates(p), parse_int=hooks[0], parse_constant=hooks[1])
-    with open(p, encoding="utf-8", newline="") as fh:
-        lineno = 0
-        while True:
-            try:
-                raw = fh.readline(MAX_LINE_CHARS + 1)
-            except UnicodeDecodeError:
-                raise RecordedDataError(p, "not UTF-8 text, expected JSON lines", lineno + 1) from None
-            if not raw:
-                break
-            lineno += 1
-            if len(raw) > MAX_LINE_CHARS:
-                raise RecordedDataError(p, f"line longer than {MAX_LINE_CHARS} characters, expected one event", lineno)
-            text = raw.strip()
-            if not text or text.startswith("#"):
-                continue
-            if not raw.endswith("\n"):
-                raise RecordedDataError(
-                    p,
-                    "truncated line: the last line has no line end (expected a complete event ending in a newline)",
-                    lineno,
-                )
-            try:
-                obj = decoder.decode(text)
-            except json.JSONDecodeError as exc:
-                raise RecordedDataError(
-                    p, f"not JSON ({exc.msg} at column {exc.colno}), expected an event object", lineno
-                ) from None
-            except RecordedDataError as exc:
-                raise RecordedDataError(p, str(exc).split(": ", 1)[-1], lineno) from None
-            except RecursionError:
-                raise RecordedDataError(p, "JSON nested too deeply, expected a flat event object", lineno) from None
-            if not isinstance(obj, dict):
-                raise RecordedDataError(p, f"a JSON {type(obj).__name__}, expected an event object", lineno)
-            if out and obj == previous:  # a doubled line: the same event once more (flagged below)
-                out.append(out[-1])
-                lines.append(lineno)
-                repeats.append(True)
-                continue
-            previous = obj
-            kind = obj.get("type")
-            if kind not in _EVENT_KEYS:
-                raise RecordedDataError(
-                    p, f"field 'type' is {quote(kind, 60)}, expected one of {', '.join(_EVENT_KEYS)}", lineno
-                )
-            ln = _Line(p, lineno, obj, kind)
-            for k in obj:
-                if k not in ("t", "type") and k not in _EVENT_KEYS[kind]:
-                    raise ln.fail(k, f"unknown field, expected t, type, {', '.join(_EVENT_KEYS[kind])}")
-            t = ln.number("t", -MAX_TIME_S, MAX_TIME_S, "s")
-            if t < last_t:
-                raise ln.fail("t", f"is {t!r}, before the previous event's {last_t!r} (expected events in time order)")
-            last_t = t
-            out.append(_event(ln, t, ctx))
+    for lineno, obj in _json_objects(p, decoder):
+        if out and obj == previous:  # a doubled line: the same event once more (flagged below)
+            out.append(out[-1])
             lines.append(lineno)
-            repeats.append(False)
+            repeats.append(True)
+            continue
+        previous = obj
+        kind = obj.get("type")
+        if kind not in _EVENT_KEYS:
+            raise RecordedDataError(
+                p, f"field 'type' is {quote(kind, 60)}, expected one of {', '.join(_EVENT_KEYS)}", lineno
+            )
+        ln = _Line(p, lineno, obj, kind)
+        for k in obj:
+            if k not in ("t", "type") and k not in _EVENT_KEYS[kind]:
+                raise ln.fail(k, f"unknown field, expected t, type, {', '.join(_EVENT_KEYS[kind])}")
+        t = ln.number("t", -MAX_TIME_S, MAX_TIME_S, "s")
+        if t < last_t:
+            raise ln.fail("t", f"is {t!r}, before the previous event's {last_t!r} (expected events in time order)")
+        last_t = t
+        out.append(_event(ln, t, ctx))
+        lines.append(lineno)
+        repeats.append(False)
     if len(out) > 1:
         plausibility.refuse_all_times_equal(p, "event", [e.t for e in out], lines[1])
     return _flag_events(p, out, np.array(lines, dtype=np.int64), np.array(repeats, dtype=bool))
