@@ -351,8 +351,8 @@ def read_set(input_path: Path, gt_path: Path, differential: bool) -> LibrsfArray
         k = int(moved[0])
         raise rng_.fail(
             k,
-            f"anchor id {int(ids[k])} at ({rng_.rows[k, 3]!r}, {rng_.rows[k, 4]!r}), expected its first position "
-            f"({pos[lookup[k], 0]!r}, {pos[lookup[k], 1]!r}) (the anchors are fixed)",
+            f"anchor id {int(ids[k])} at ({float(rng_.rows[k, 3])!r}, {float(rng_.rows[k, 4])!r}), expected its "
+            f"first position ({float(pos[lookup[k], 0])!r}, {float(pos[lookup[k], 1])!r}) (the anchors are fixed)",
         )
     bounds = UWB_BOUNDS if differential else BOUNDS
     _refuse_far_anchors(rng_, first, pt.rows[:, 1:3], bounds.range_m)
@@ -402,9 +402,9 @@ def _refuse_far_anchors(rng_: Records, first: npt.NDArray[np.int64], truth_xy: F
         k = int(far[0])
         raise rng_.fail(
             int(first[k]),
-            f"anchor id {int(rng_.rows[first[k], 5])} at ({xy[k, 0]!r}, {xy[k, 1]!r}) is {near[k]:.6g} m from the "
-            f"nearest truth position, expected within the {range_m:g} m range bound (anchors are fixed, within "
-            "reach of the robot's track)",
+            f"anchor id {int(rng_.rows[first[k], 5])} at ({float(xy[k, 0])!r}, {float(xy[k, 1])!r}) is "
+            f"{near[k]:.6g} m from the nearest truth position, expected within the {range_m:g} m range bound "
+            "(anchors are fixed, within reach of the robot's track)",
         )
 
 
