@@ -38,7 +38,11 @@ def write_sim(folder: Path, n: int = 12, name: str = "M3500", noise: str = "skew
     sim = folder / "librsf" / "Ranging_Simulation"
     sim.mkdir(parents=True, exist_ok=True)
     tr = _truth(n)
-    gt = "".join(f"point2 {t:g} {x:.9f} {y:.9f} 0 0 0 0 \nangle {t:g} {th:.9f} 0 \n" for t, x, y, th in tr)
+    # the heading as the M3500 files write it, within one turn (the odometry turns by the unwrapped differences)
+    gt = "".join(
+        f"point2 {t:g} {x:.9f} {y:.9f} 0 0 0 0 \nangle {t:g} {math.remainder(th, 2 * math.pi):.9f} 0 \n"
+        for t, x, y, th in tr
+    )
     (sim / f"{name}_GT.txt").write_text(gt, encoding="ascii")
     lines = []
     for k in range(n):
@@ -197,7 +201,8 @@ def test_malformed_simulated_input(tmp_path: Path, edit: str, words: tuple[str, 
     ("edit", "words"),
     [
         ("odom2diff 9 0.3 0.3 0 0 0.0001 0.0001 0.0001\n", ("wheel distance",)),
-        ("range2 9 -1.0 0.01 0 0 105 0\n", ("field 3 (range m)",)),
+        # flagged (outside [0, 300] m), and one flag of 21 ranges is beyond the policy's 1 %
+        ("range2 9 -1.0 0.01 0 0 105 0\n", ("1 of 21 range2 (UWB) samples", "value, m -1, expected in [0, 300]")),
         ("odom2 9 1 0 0 1 1 1\n", ("measurement type 'odom2'",)),
     ],
 )

@@ -12,15 +12,19 @@ Every message ends with three fields: ``ipc_timestamp`` (s, Unix time of the IPC
   (x m, y m, theta rad; in a raw log the odometry pose, in a corrected log such as GMapping's
   ``*.gfs.log`` the corrected pose) and the odometry pose of the robot at the scan.
 
-``PARAM name value ...`` lines are kept as a name -> value mapping; every other message type (RLASER,
-TRUEPOS, NEFF, ROBOTLASER1, SYNC, ...) is skipped and counted per type in :attr:`CarmenLog.skipped`.
+``PARAM name value ...`` lines are kept as a name -> value mapping (a name given again: the later value), with the
+lines of each name in :attr:`CarmenLog.param_lines` and the lines of the logger's header comments
+(``# message formats defined: ...``, one per logging session) in :attr:`CarmenLog.header_lines`, so that a
+caller can refuse a parameter given twice; every other message type (RLASER, TRUEPOS, NEFF, ROBOTLASER1, SYNC,
+...) is skipped and counted per type in :attr:`CarmenLog.skipped`.
 The number of beams must be the same in every FLASER of one file (the beam geometry is not in the
 message; a consumer gives it once per log).
 
 Checks (each a :class:`~locbench.datasets.recorded.files.RecordedDataError` naming the file and the
 1-based line): a missing file; a non-ASCII byte; a wrong field count (for FLASER: a count that does not
-match its own ``n``; a last line without its newline is reported as truncated, even with a full field
-count, since its last field may be cut); a non-integer beam count; a field that is not a finite number
+match its own ``n``, or above a caller's ``max_beams``, refused before the line's ranges are read; a last
+line without its newline is reported as truncated, even with a full field count, since its last field may be
+cut); a non-integer beam count; a field that is not a finite number
 (named by its position and meaning); a position (ODOM x, y; FLASER pose and odometry pose) beyond
 :data:`~locbench.datasets.recorded.files.MAX_POSITION_M` or a negative range; the time going backwards
 within a message stream by more than ``max_backstep_s`` (default 0: strictly non-decreasing).
@@ -132,13 +136,19 @@ class LaserMessages:
 
 @dataclass(frozen=True, eq=False)
 class CarmenLog:
-    """A parsed CARMEN log: ODOM and FLASER messages, PARAM values and counts of the skipped message types."""
+    """A parsed CARMEN log: ODOM and FLASER messages, PARAM values and counts of the skipped message types.
+
+    ``param_lines`` holds the 1-based lines of each PARAM name in file order; ``header_lines`` the lines of the
+    logger's header comments (``# message formats defined``), each of which starts a logging session.
+    """
 
     path: Path
     odom: OdomMessages
     flaser: LaserMessages
     params: dict[str, str] = field(default_factory=dict)
     skipped: dict[str, int] = field(default_factory=dict)
+    param_lines: dict[str, tuple[int, ...]] = field(default_factory=dict)
+    header_lines: tuple[int, ...] = ()
 
 
 def read_carmen(
@@ -146,6 +156,7 @@ def read_carmen(
     *,
     max_backstep_s: float = 0.0,
     time_checked: Sequence[str] = ("ODOM", "FLASER"),
+    max_beams: int | None = None,
 ) -> CarmenLog:
     """Parse a CARMEN log (cached per resolved path, size, mtime and options).
 
@@ -159,6 +170,8 @@ def read_carmen(
     time_checked : sequence of str
         The streams (``"ODOM"``, ``"FLASER"``) whose time is checked. A GMapping ``*.gfs.log`` writes ODOM
         lines stamped 0 after each scan, so only its FLASER times are meaningful.
+    max_beams : int or None
+        Most ranges a FLASER may hold (None: no bound); a larger count is refused before its ranges are read.
 
     Returns
     -------
@@ -178,14 +191,16 @@ def read_carmen(
     for name in time_checked:
         if name not in ("ODOM", "FLASER"):
             raise ValueError(f"time_checked holds {name!r}; expected 'ODOM' and/or 'FLASER'")
-    return _read_cached(str(p.resolve()), st.st_size, st.st_mtime_ns, float(max_backstep_s), tuple(time_checked))
+    return _read_cached(
+        str(p.resolve()), st.st_size, st.st_mtime_ns, float(max_backstep_s), tuple(time_checked), max_beams
+    )
 
 
 @functools.lru_cache(maxsize=8)
 def _read_cached(
-    path: str, size: int, mtime_ns: int, max_backstep_s: float, time_checked: tuple[str, ...]
+    path: str, size: int, mtime_ns: int, max_backstep_s: float, time_checked: tuple[str, ...], max_beams: int | None
 ) -> CarmenLog:
-    log = _parse(Path(path))
+    log = _parse(Path(path), max_beams=max_beams)
     for name in time_checked:
         msgs: OdomMessages | LaserMessages = log.odom if name == "ODOM" else log.flaser
         _check_time(log.path, name, msgs.ipc_t, msgs.lines, max_backstep_s)
@@ -213,15 +228,16 @@ def _readonly(a: np.ndarray) -> np.ndarray:
     return a
 
 
-def parse_carmen_bytes(path: str | os.PathLike[str], raw: bytes) -> CarmenLog:
+def parse_carmen_bytes(path: str | os.PathLike[str], raw: bytes, *, max_beams: int | None = None) -> CarmenLog:
     """Parse the bytes of a CARMEN log read elsewhere (a decompressed ``*.log.gz``); errors name ``path``.
 
-    No time check and no cache: the caller checks the streams it uses and caches by content.
+    No time check and no cache: the caller checks the streams it uses and caches by content. ``max_beams``: as in
+    :func:`read_carmen`.
     """
-    return _parse(Path(path), raw)
+    return _parse(Path(path), raw, max_beams=max_beams)
 
 
-def _parse(p: Path, raw: bytes | None = None) -> CarmenLog:
+def _parse(p: Path, raw: bytes | None = None, max_beams: int | None = None) -> CarmenLog:
     # long: one pass over the log's lines whose record kinds share the parser's state and line numbers for errors
     if raw is None:
         raw = p.read_bytes()
@@ -248,10 +264,14 @@ def _parse(p: Path, raw: bytes | None = None) -> CarmenLog:
     las_ln: list[int] = []
     n_beams = -1
     params: dict[str, str] = {}
+    param_lines: dict[str, list[int]] = {}
+    header_lines: list[int] = []
     skipped: dict[str, int] = {}
     for k, line in enumerate(text_lines):
         parts = line.split()
         if not parts or parts[0].startswith("#"):
+            if parts and "message formats defined" in line:
+                header_lines.append(k + 1)
             continue
         kind = parts[0]
         lineno = k + 1
@@ -272,6 +292,10 @@ def _parse(p: Path, raw: bytes | None = None) -> CarmenLog:
                 ) from None
             if n <= 0:
                 raise RecordedDataError(p, f"field 2 (n, the number of ranges) is {n}, expected > 0", lineno)
+            if max_beams is not None and n > max_beams:
+                raise RecordedDataError(
+                    p, f"field 2 (n, the number of ranges) is {n}, expected at most {max_beams} beams per scan", lineno
+                )
             if len(parts) != n + 11:
                 _count_error(
                     p, lineno, k == last, len(parts), n + 11, f"FLASER n={n} r_1..r_{n} " + " ".join(FLASER_TAIL)
@@ -288,6 +312,7 @@ def _parse(p: Path, raw: bytes | None = None) -> CarmenLog:
         elif kind == "PARAM":
             if len(parts) >= 3:
                 params[parts[1]] = parts[2]
+                param_lines.setdefault(parts[1], []).append(lineno)
             skipped["PARAM"] = skipped.get("PARAM", 0) + 1
         else:
             skipped[kind] = skipped.get(kind, 0) + 1
@@ -317,7 +342,8 @@ def _parse(p: Path, raw: bytes | None = None) -> CarmenLog:
     _check_bounds(p, "FLASER", f[:, nb : nb + 2], las_ln, nb + 2, ("x", "y"), MAX_POSITION_M)
     _check_bounds(p, "FLASER", f[:, nb + 3 : nb + 5], las_ln, nb + 5, ("odom_x", "odom_y"), MAX_POSITION_M)
     _check_bounds(p, "FLASER", f[:, :nb], las_ln, 2, tuple(f"r_{j + 1}" for j in range(nb)), MAX_POSITION_M, lo=0.0)
-    return CarmenLog(p, odom, las, params, skipped)
+    lines_of = {name: tuple(at) for name, at in param_lines.items()}
+    return CarmenLog(p, odom, las, params, skipped, lines_of, tuple(header_lines))
 
 
 def _check_bounds(

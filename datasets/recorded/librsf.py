@@ -64,15 +64,39 @@ What the dataset is made of
 Window (CPU budget): ``max_steps`` keeps the truth and events up to the first N odometry samples (0: all; default
 :data:`DEFAULT_MAX_STEPS`, the same for every filter; README "Recorded data" says why).
 
+Plausibility (:mod:`~locbench.datasets.recorded.plausibility`)
+--------------------------------------------------------------
+The policy's bounds; for the Labyrinth's UWB ranges the range bound is tightened to 300 m (:data:`UWB_BOUNDS`):
+UWB ranging under its emission limit (-41.3 dBm/MHz) reaches a few hundred metres at most in line of sight (the
+policy's own figure for UWB), and the Labyrinth's ranges lie in [0.19, 3.37] m. Flagged and left out (the row is
+listed in :attr:`Dataset.flagged <locbench.datasets.base.Dataset.flagged>`):
+
+* a UWB range outside [0, 300] m; a range variance above ``variance_m2`` (1e4 m^2); a range2 row repeating the one
+  before it;
+* an odometry sample whose speed (``odom2diff``: (v_r + v_l) / 2; ``odom2``: |(vx, vy)|) or yaw rate is beyond the
+  speed or turn bound, or repeating the one before it. The next kept sample covers the flagged one's interval (its
+  velocity is held over both: velocities are continuous, and leaving the interval out would stop the robot);
+* a truth row off the track (:meth:`~.plausibility.Flags.flag_track`: two positions 5 m apart at one time are an
+  infinite speed), with a heading (``angle``) beyond ``heading_abs_rad`` before wrapping, or repeating the one
+  before it; its ``angle`` row goes with it.
+
+The simulated files' pseudoranges are not held to the range bound: their outliers (M3500 heavy-tailed: 25 rows
+outside [0, 1000] m, multimodal 8, W3500 heavy-tailed 11, from -629 m to 2620 m) are the noise those files were made
+with, what the robustness table measures; a pseudorange beyond +-MAX_POSITION_M is still refused. Refused
+(structural): range and variance columns swapped (the variance at least the squared range in more than half the
+rows: a range no larger than its own standard deviation tells nothing; the shared files have 0 such UWB rows and at
+most 4 of 28000 simulated), and an anchor farther than the range bound from every truth position (the anchors are
+fixed; nothing beyond the sensor's reach could have been ranged; the shared anchors are within 0.81 m (UWB) and
+46.1 m (simulated) of the track).
+
 Errors (:class:`~locbench.datasets.recorded.files.RecordedDataError`, naming the file and line): a missing file, a
 checksum mismatch, a file above :data:`MAX_FILE_BYTES`, a non-ASCII byte, an unknown measurement type, a wrong
 field count (a last line without its line end is reported as truncated), a field that is not a finite number, an
-anchor id that is not an integer, a variance <= 0 where the model divides by it (range, odometry) or < 0, a UWB range
-outside [0, :data:`~locbench.datasets.recorded.plaza.MAX_RANGE_M`] (a simulated pseudorange outside
-+-MAX_POSITION_M: the heavy-tailed files hold outliers from -706 m to 2619 m, 43 of them negative), a position beyond
-:data:`~locbench.datasets.recorded.files.MAX_POSITION_M`, a wheel distance <= 0, time going backwards within a
-stream, an anchor id with two positions, fewer than 2 truth rows or 2 odometry samples, and no range or odometry
-inside the truth's span.
+anchor id that is not an integer, a variance <= 0 where the model divides by it (range, odometry) or < 0, a range or
+pseudorange beyond +-MAX_POSITION_M, a position beyond :data:`~locbench.datasets.recorded.files.MAX_POSITION_M`, a
+wheel distance <= 0, time going backwards within a stream, an anchor id with two positions, the two structural
+refusals above, fewer than 2 truth rows or 2 odometry samples, a stream whose flags are not isolated (the policy's
+fraction and span), and no range or odometry inside the truth's span.
 """
 
 from __future__ import annotations
@@ -89,6 +113,7 @@ import numpy.typing as npt
 
 from locbench.datasets.base import (
     Dataset,
+    FlaggedSample,
     Gaussian2,
     Landmarks,
     SensorSpec,
@@ -107,7 +132,8 @@ from locbench.datasets.recorded.files import (
     locate,
     quote,
 )
-from locbench.datasets.recorded.plaza import MAX_RANGE_M, heading_from_track
+from locbench.datasets.recorded.plausibility import BOUNDS, Bounds, Flags, merge
+from locbench.datasets.recorded.plaza import heading_from_track
 from locbench.errors import ConfigError
 from locbench.events import Event, Odometry, RangeObservations
 from locbench.geometry import wrap_angle
@@ -143,6 +169,8 @@ INITIAL_SIGMA = (0.1, 0.1, 0.05)
 INITIAL_SIGMA_DERIVED = (0.1, 0.1, 0.2)
 #: Default window: the first N odometry samples.
 DEFAULT_MAX_STEPS = 0
+#: The policy's bounds for the Labyrinth's UWB ranges (module docstring "Plausibility").
+UWB_BOUNDS = BOUNDS.tightened(range_m=300.0)
 NOISES = ("heavy-tailed", "multimodal", "skewed")
 GENERATED = "gaussian"
 SETS = ("indoor_uwb", "m3500", "w3500")
@@ -190,6 +218,10 @@ class Records:
             raise self.fail(
                 k, f"field {col + 2} ({FIELDS[self.kind][col]}) is {float(a[k])!r}, expected in {low}{lo!r}, {hi!r}]"
             )
+
+    def subset(self, keep: npt.NDArray[np.bool_]) -> Records:
+        """The rows where ``keep`` is true (the flagged ones left out)."""
+        return Records(self.path, self.kind, self.rows[keep], self.lines[keep])
 
     def check_time(self) -> None:
         t = self.rows[:, 0]
@@ -266,10 +298,11 @@ class LibrsfArrays:
     point: Records
     angle: Records | None
     anchors: Landmarks
+    flagged: tuple[FlaggedSample, ...] = ()
 
 
 def read_set(input_path: Path, gt_path: Path, differential: bool) -> LibrsfArrays:
-    """Read and check one Input / GT pair (module docstring)."""
+    """Read and check one Input / GT pair (module docstring); the flagged rows are left out of what it returns."""
     okind = "odom2diff" if differential else "odom2"
     inp = read_librsf(input_path, ("range2", okind))
     gt = read_librsf(gt_path, ("point2",) if differential else ("point2", "angle"))
@@ -283,11 +316,9 @@ def read_set(input_path: Path, gt_path: Path, differential: bool) -> LibrsfArray
         raise RecordedDataError(input_path, "no range2 row, expected ranges to the anchors")
     for rec in (rng_, od, pt) + ((ang,) if ang is not None else ()):
         rec.check_time()
-    # a simulated pseudorange may be negative (43 of the heavy-tailed files' outliers are); a UWB range may not
-    if differential:
-        rng_.check(1, 0.0, MAX_RANGE_M)
-    else:
-        rng_.check(1, -MAX_POSITION_M, MAX_POSITION_M)
+    _refuse_swapped_range_columns(rng_)
+    # a UWB range outside its bound is flagged below; a simulated pseudorange may be negative (its outliers are)
+    rng_.check(1, -MAX_POSITION_M, MAX_POSITION_M)
     rng_.check(2, 0.0, math.inf, open_lo=True)
     rng_.check(3, -MAX_POSITION_M, MAX_POSITION_M)
     rng_.check(4, -MAX_POSITION_M, MAX_POSITION_M)
@@ -320,11 +351,91 @@ def read_set(input_path: Path, gt_path: Path, differential: bool) -> LibrsfArray
         k = int(moved[0])
         raise rng_.fail(
             k,
-            f"anchor id {int(ids[k])} at ({rng_.rows[k, 3]!r}, {rng_.rows[k, 4]!r}), expected its first position "
-            f"({pos[lookup[k], 0]!r}, {pos[lookup[k], 1]!r}) (the anchors are fixed)",
+            f"anchor id {int(ids[k])} at ({float(rng_.rows[k, 3])!r}, {float(rng_.rows[k, 4])!r}), expected its "
+            f"first position ({float(pos[lookup[k], 0])!r}, {float(pos[lookup[k], 1])!r}) (the anchors are fixed)",
         )
+    bounds = UWB_BOUNDS if differential else BOUNDS
+    _refuse_far_anchors(rng_, first, pt.rows[:, 1:3], bounds.range_m)
     anchors = Landmarks(ids=uid.astype(np.int64), xy=pos.copy())
-    return LibrsfArrays(input_path, gt_path, rng_, od, pt, ang, anchors)
+    flags = _flags(rng_, od, pt, ang, bounds, differential)
+    kept = [f.kept for f in flags]
+    return LibrsfArrays(
+        input_path,
+        gt_path,
+        rng_.subset(kept[0]),
+        od.subset(kept[1]),
+        pt.subset(kept[2]),
+        None if ang is None else ang.subset(kept[2]),
+        anchors,
+        merge(*(f.finish() for f in flags)),
+    )
+
+
+def _refuse_swapped_range_columns(rng_: Records) -> None:
+    """Refuse range2 rows whose range and variance columns are swapped.
+
+    A range no larger than its own standard deviation (variance >= range^2) says nothing about where the robot is;
+    where that holds in more than half of a file's rows, the columns are swapped (the shared files: 0 of 233 UWB
+    rows, at most 4 of 28000 simulated pseudoranges, all outliers).
+    """
+    r, var = rng_.rows[:, 1], rng_.rows[:, 2]
+    with np.errstate(over="ignore"):
+        vague = var >= r * r
+    if vague.sum() > 0.5 * len(rng_):
+        k = int(np.flatnonzero(vague)[0])
+        raise rng_.fail(
+            k,
+            f"field 3 (range m) is {float(r[k])!r} and field 4 (range variance m^2) {float(var[k])!r}: in "
+            f"{int(vague.sum())} of {len(rng_)} rows the variance is at least the squared range, expected ranges "
+            "larger than their standard deviation (range and variance columns swapped?)",
+        )
+
+
+def _refuse_far_anchors(rng_: Records, first: npt.NDArray[np.int64], truth_xy: FloatArray, range_m: float) -> None:
+    """Refuse an anchor farther than the sensor's range bound from every truth position: nothing could range it."""
+    xy = rng_.rows[first, 3:5]
+    near = np.full(xy.shape[0], np.inf)
+    for k in range(xy.shape[0]):  # a few anchors: one row of distances each
+        near[k] = np.hypot(truth_xy[:, 0] - xy[k, 0], truth_xy[:, 1] - xy[k, 1]).min()
+    far = np.flatnonzero(near > range_m)
+    if far.size:
+        k = int(far[0])
+        raise rng_.fail(
+            int(first[k]),
+            f"anchor id {int(rng_.rows[first[k], 5])} at ({float(xy[k, 0])!r}, {float(xy[k, 1])!r}) is "
+            f"{near[k]:.6g} m from the nearest truth position, expected within the {range_m:g} m range bound "
+            "(anchors are fixed, within reach of the robot's track)",
+        )
+
+
+def _flags(
+    rng_: Records, od: Records, pt: Records, ang: Records | None, bounds: Bounds, differential: bool
+) -> tuple[Flags, Flags, Flags]:
+    """The flags of the ranges, the odometry and the truth (module docstring "Plausibility")."""
+    r = rng_.rows
+    ranges = Flags(rng_.path, "range2 (UWB)" if differential else "range2 (pseudorange)", r[:, 0], rng_.lines)
+    ranges.flag_duplicates(r)
+    if differential:  # a simulated pseudorange's outliers are the sets' content (module docstring)
+        ranges.flag_outside(r[:, 1], "value, m", 0.0, bounds.range_m)
+    ranges.flag_outside(r[:, 2], "range variance, m^2", 0.0, bounds.variance_m2)
+    o = od.rows
+    odo = Flags(od.path, f"odometry ({od.kind})", o[:, 0], od.lines)
+    odo.flag_duplicates(o)
+    if differential:
+        v, w = 0.5 * (o[:, 1] + o[:, 2]), (o[:, 2] - o[:, 1]) / (2.0 * o[:, 4])
+    else:
+        v, w = np.hypot(o[:, 1], o[:, 2]), o[:, 3]
+    odo.flag_outside(v, "speed, m/s", -bounds.speed_mps, bounds.speed_mps)
+    odo.flag_outside(w, "yaw rate, rad/s", -bounds.turn_rate_radps, bounds.turn_rate_radps)
+    truth = Flags(pt.path, "ground-truth (point2)", pt.rows[:, 0], pt.lines)
+    truth.flag_duplicates(pt.rows)
+    theta = None
+    if ang is not None:
+        theta = ang.rows[:, 1]
+        h = bounds.heading_abs_rad
+        truth.flag_outside(theta, "heading before wrapping, rad", -h, h)
+    truth.flag_track(pt.rows[:, 1:3], theta, bounds)
+    return ranges, odo, truth
 
 
 # --- the dataset ---------------------------------------------------------------------------------------
@@ -478,6 +589,7 @@ def load_librsf(
         truth_label="ground truth",
         sources=(str(p_in), str(p_gt)),
         declared=frozenset({RangeObservations}),
+        flagged=arrays.flagged,
     )
 
 

@@ -23,8 +23,9 @@ them.
 Beam geometry: n beams over the field of view ``PARAM laser_front_laser_fov`` (pi when absent), the first at
 -fov / 2; an even n is spaced fov / n (180 or 360 beams: 1 or 0.5 deg), an odd n spans both ends, fov / (n - 1)
 (181 or 361 beams). No-return readings: each log writes a saturation value for a beam without a return (81.91 m,
-81.83 m, 50 m, 32.767 m ...); a reading at or above :data:`NO_RETURN_FRACTION` of the log's largest reading is a
-no-return (``inf`` in the scans, nothing in the map), and that threshold is the scan's ``range_max``. The laser
+81.83 m, 50 m, 32.767 m ...); a reading at or above :data:`NO_RETURN_FRACTION` of the log's largest plausible reading
+(at most :data:`RADISH_BOUNDS` ``range_m``, below) is a no-return (``inf`` in the scans, nothing in the map), and that
+threshold is the scan's ``range_max``. The laser
 sits ``PARAM robot_frontlaser_offset`` ahead of the robot (-0.04 m on the Freiburg logs, 0 elsewhere); the
 corrected pose is taken as the robot pose.
 
@@ -78,6 +79,38 @@ Window (CPU budget)
 up to the last of them), the same window for every filter; 0 keeps the whole log. README and docs/datasets.md say
 why (the recorded suite's CPU time).
 
+Plausibility (:mod:`~locbench.datasets.recorded.plausibility`)
+--------------------------------------------------------------
+The policy's bounds, with the range tightened to 100 m (:data:`RADISH_BOUNDS`): the scanners of these logs are SICK
+LMS / PLS units, whose range field holds at most 8191 cm (81.91 m, also their no-return value; the other logs write
+50, 51.25 or 32.767 m); 100 m leaves room for another 2-D scanner's log and none for a corrupted number.
+
+* A **beam** beyond the range bound is no measurement at all: it is read as a no-return (``inf``, nothing in the
+  map), like the scanner's own saturation value, and listed as a flagged "laser beam" sample (the scan keeps its other
+  beams); the no-return threshold is taken from the plausible readings only, so one absurd range cannot turn every
+  saturated beam into a wall at the saturation distance. The whole scan is not dropped: its other beams are good
+  measurements.
+* A **reference pose** (one FLASER message: its scan and its pose) is flagged when its heading is beyond
+  ``heading_abs_rad`` before wrapping, or when the track bound (:meth:`~.plausibility.Flags.flag_track`) finds it
+  unreachable from the last accepted pose. The track is judged in file order on a scan clock of
+  :data:`SCAN_PERIOD_S` a scan (at most 5.05 m and 10.1 rad from the last accepted pose, a scan before): the
+  corrected logs keep a scan per stretch of travel (the shared logs' largest step between consecutive scans is
+  3.28 m, orebro), their stamps are unusable on several sites, and intel's raw scan stamps jitter by up to 0.9 s
+  (judged on them, 8 of its poses would look faster than 5 m/s). It is the clock the semi-synthetic sites run on; a
+  flag of a paired site carries its raw scan's stamp. A flagged pose is left out of the events, the reference and
+  the map; the fraction and span rules count scans of the whole log.
+* A **raw odometry increment** (paired sites; between consecutive ODOM messages by stamp) faster than the speed or
+  turn bound over its interval is flagged and left out (a 50 m spike drops its increment and the one back). The
+  interval is widened by the log's stamp uncertainty, the largest step back of its ODOM stamps in file order
+  (intel.clf: 0.90 s; aces and fr079: 0): ordered by such stamps, intel's consecutive increments step up to 0.92 m
+  back and forth within milliseconds (191 of 26915 beyond the bound over the bare interval), which is the stamps'
+  jitter, not the robot's motion.
+* Refused (structural): a FLASER with more than :data:`~locbench.limits.MAX_LASER_BEAMS` beams (at parse, before
+  its ranges are read), and a PARAM given twice within one logging session (its lines between two
+  ``# message formats defined`` header comments), naming both lines. A PARAM restated by a later session's header
+  takes that session's value: belgioioso's log starts with a two-line header (``robot_frontlaser_offset 0.0``) and
+  then the robot's own (-0.04 m).
+
 Errors: a missing file (naming where it was looked for), a checksum mismatch of a published site, a file that is
 not gzip or decompresses beyond :data:`MAX_LOG_BYTES`, a last FLASER line without its line end (a last line of
 another type without one is left out and named in ``metadata``: freiburg-101 ends in a cut ODOM line), every
@@ -93,12 +126,13 @@ from __future__ import annotations
 import functools
 import gzip
 import hashlib
+import itertools
 import math
 import os
 import re
 import zlib
 from collections import defaultdict
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -107,6 +141,7 @@ import numpy.typing as npt
 
 from locbench.datasets.base import (
     Dataset,
+    FlaggedSample,
     Gaussian2,
     LineMap,
     OccupancyGrid,
@@ -138,9 +173,11 @@ from locbench.datasets.recorded.intel import (
     derive_odometry_noise,
     extract_map_lines,
 )
+from locbench.datasets.recorded.plausibility import BOUNDS, Flags, merge
 from locbench.errors import ConfigError
 from locbench.events import Event, LaserScan, Odometry
 from locbench.geometry import between, wrap_angle
+from locbench.limits import MAX_LASER_BEAMS
 from locbench.spec import bound
 
 FloatArray = npt.NDArray[np.float64]
@@ -188,6 +225,8 @@ SCAN_PERIOD_S = 1.0
 DEFAULT_MAX_SCANS = 0
 #: Default cell side of every site's map, m.
 DEFAULT_RESOLUTION_M = 0.1
+#: The plausibility policy's bounds with the range tightened to the scanners' (module docstring "Plausibility").
+RADISH_BOUNDS = BOUNDS.tightened(range_m=100.0)
 
 
 @dataclass(frozen=True)
@@ -321,6 +360,10 @@ class CorrectedLog:
     laser_offset_m: float
     #: The message type of a last line without its line end that was left out (freiburg-101 ends in a cut ODOM).
     dropped_last_line: str = ""
+    #: Per FLASER message: False where its reference pose is flagged (module docstring "Plausibility").
+    scan_kept: npt.NDArray[np.bool_] = field(default_factory=lambda: np.ones(0, dtype=bool))
+    #: The flagged reference poses and beams, timed on the scan clock (scan k at k * SCAN_PERIOD_S, file order).
+    flagged: tuple[FlaggedSample, ...] = ()
 
 
 @functools.lru_cache(maxsize=4)
@@ -334,7 +377,8 @@ def _read_corrected(digest: str) -> CorrectedLog:
         if tail[:1] != [b"FLASER"]:  # a cut ODOM/NEFF line is not read; a cut scan still is an error below
             unterminated = tail[0].decode("ascii", "replace") if tail else ""
             raw = raw[:cut]
-    log = parse_carmen_bytes(p, raw)
+    log = parse_carmen_bytes(p, raw, max_beams=MAX_LASER_BEAMS)
+    _refuse_repeated_params(p, log)
     las = log.flaser
     if len(las) < 2:
         raise RecordedDataError(p, f"{len(las)} FLASER message(s), expected the corrected scans (at least 2)")
@@ -344,10 +388,38 @@ def _read_corrected(digest: str) -> CorrectedLog:
         raise RecordedDataError(p, f"PARAM laser_front_laser_fov is {fov!r}, expected a field of view in (0, 2 pi]")
     inc = fov / n if n % 2 == 0 or n == 1 else fov / (n - 1)
     offset = _param_number(p, log, "robot_frontlaser_offset", 0.0, -10.0, 10.0, "the laser's offset in m (within 10 m)")
-    top = float(las.ranges.max())
+    # the saturation value from the plausible readings: one absurd range must not move it (module docstring)
+    plausible = las.ranges[las.ranges <= RADISH_BOUNDS.range_m]
+    top = float(plausible.max()) if plausible.size else 0.0
     if not top > 0.0:
-        raise RecordedDataError(p, "every FLASER range is 0, expected laser readings")
-    return CorrectedLog(p, digest, log, -0.5 * fov, inc, NO_RETURN_FRACTION * top, offset, unterminated)
+        raise RecordedDataError(
+            p, f"every FLASER range is 0 or beyond {RADISH_BOUNDS.range_m:g} m, expected laser readings"
+        )
+    kept, flagged = _log_flags(p, log)
+    return CorrectedLog(p, digest, log, -0.5 * fov, inc, NO_RETURN_FRACTION * top, offset, unterminated, kept, flagged)
+
+
+def _log_flags(p: Path, log: CarmenLog) -> tuple[npt.NDArray[np.bool_], tuple[FlaggedSample, ...]]:
+    """The kept reference poses and the flagged samples of a corrected log (module docstring "Plausibility").
+
+    Judged in file order on the scan clock (scan k at k * :data:`SCAN_PERIOD_S`): the corrected logs keep a scan per
+    stretch of travel and their stamps are unusable on several sites (and jitter by up to 0.9 s on intel), so a
+    pose is reachable when it lies within 5.05 m and 10.1 rad of the last accepted one, a scan before.
+    """
+    las = log.flaser
+    clock = SCAN_PERIOD_S * np.arange(len(las), dtype=np.float64)
+    pose = np.asarray(las.pose)
+    ref = Flags(p, "reference pose", clock, las.lines)
+    h = RADISH_BOUNDS.heading_abs_rad
+    ref.flag_outside(pose[:, 2], "heading before wrapping, rad", -h, h)
+    ref.flag_track(pose[:, :2], pose[:, 2], RADISH_BOUNDS)
+    flagged = [ref.finish()]
+    if (las.ranges > RADISH_BOUNDS.range_m).any():  # else no per-beam arrays (the common case)
+        beams = las.ranges.shape[1]
+        per_beam = Flags(p, "laser beam", np.repeat(clock, beams), np.repeat(las.lines, beams))
+        per_beam.flag_outside(las.ranges.ravel(), "range (read as a no-return), m", 0.0, RADISH_BOUNDS.range_m)
+        flagged.append(per_beam.finish())
+    return ref.kept, merge(*flagged)
 
 
 def read_corrected(path: str | os.PathLike[str], sha256: str | None = None) -> CorrectedLog:
@@ -360,6 +432,19 @@ def read_corrected(path: str | os.PathLike[str], sha256: str | None = None) -> C
     digest = content_sha256(p)
     _PATHS[digest] = str(p.resolve())
     return _read_corrected(digest)
+
+
+def _refuse_repeated_params(p: Path, log: CarmenLog) -> None:
+    """Refuse a PARAM given twice within one logging session (no header comment between its lines)."""
+    for name, at in log.param_lines.items():
+        for a, b in itertools.pairwise(at):
+            if not any(a < h < b for h in log.header_lines):
+                raise RecordedDataError(
+                    p,
+                    f"PARAM {name} given twice, on lines {a} and {b}, expected each parameter once per logging "
+                    "session (a '# message formats defined' header starts a session)",
+                    b,
+                )
 
 
 def _param_number(p: Path, log: CarmenLog, name: str, default: float, lo: float, hi: float, what: str) -> float:
@@ -430,7 +515,7 @@ def paired_raw(
     if spec is None:
         return None
     raw_path = locate(spec, root, verify=verify)
-    raw = read_carmen(raw_path, max_backstep_s=MAX_BACKSTEP_S)
+    raw = read_carmen(raw_path, max_backstep_s=MAX_BACKSTEP_S, max_beams=MAX_LASER_BEAMS)
     idx = pair_scans(corrected.log.flaser.ranges, raw.flaser.ranges)
     pairing = Pairing(raw, idx)
     need = math.ceil(MIN_PAIRED_FRACTION * len(corrected.log.flaser))
@@ -534,18 +619,19 @@ def _site_map(digest: str, resolution_m: float, max_cells: int) -> tuple[Occupan
     path = _PATHS[digest]
     cl = _read_corrected(digest)
     las = cl.log.flaser
+    use = np.flatnonzero(cl.scan_kept)  # a flagged reference pose paints nothing
     angles = cl.angle_min + cl.angle_increment * np.arange(las.ranges.shape[1])
-    pose = _laser_poses(np.asarray(las.pose), cl.laser_offset_m)
+    pose = _laser_poses(np.asarray(las.pose)[use], cl.laser_offset_m)
     with np.errstate(over="ignore"):  # exp(-l) of a cell missed thousands of times overflows to inf: p = 0 exactly
         grid = build_occupancy_grid(
-            pose, las.ranges, angles, resolution_m, max_range_m=cl.no_return_m, max_cells=max_cells, source=path
+            pose, las.ranges[use], angles, resolution_m, max_range_m=cl.no_return_m, max_cells=max_cells, source=path
         )
     grid.occupancy.setflags(write=False)
     stats: dict[str, Any] = {
         "resolution_m": resolution_m,
         "rows": grid.shape[0],
         "cols": grid.shape[1],
-        "scans": len(las),
+        "scans": int(use.shape[0]),
         "sha256_input": digest,
     }
     lines: LineMap | None
@@ -612,12 +698,22 @@ def load_radish(
     spec = RemoteFile(f"{FOLDER}/{site}{SUFFIX}", sha256=KNOWN_SHA256.get(site) if verify else None)
     path = locate(spec, root, verify=verify)
     cl = read_corrected(path)
-    grid, lines, map_stats = site_map(path, map_resolution_m, max_grid_cells)
     las = cl.log.flaser
     n_all = len(las)
-    ref_all = np.column_stack([np.asarray(las.pose)[:, :2], wrap_angle(np.asarray(las.pose)[:, 2])])
+    pose_all = np.asarray(las.pose)
+    ref_all = np.column_stack([pose_all[:, :2], wrap_angle(pose_all[:, 2])])
     ranges_all = np.where(las.ranges >= cl.no_return_m, np.inf, las.ranges)
     pairing = paired_raw(site, cl, root, verify)
+    # the run's scans in time order and their times: the raw scan's stamp, or SCAN_PERIOD_S a scan
+    if pairing is not None:
+        scans = np.flatnonzero(pairing.index >= 0)
+        scan_t = pairing.raw.flaser.ipc_t[pairing.index[scans]]
+        order = np.argsort(scan_t, kind="stable")
+        scans, scan_t = scans[order], scan_t[order]
+    else:
+        scans = np.arange(n_all)
+        scan_t = SCAN_PERIOD_S * scans.astype(np.float64)
+    grid, lines, map_stats = site_map(path, map_resolution_m, max_grid_cells)
     metadata: dict[str, Any] = {
         "source": f"Radish corrected CARMEN log {path.name} (Howard & Roy 2003); copy of acschaefer/ple cfcb5a7",
         "file": str(path),
@@ -633,23 +729,29 @@ def load_radish(
     sources = [str(path)]
     events: list[Event] = []
     err = encoder_error if encoder_error is not None else ENCODER_ERROR
+    # the log's flags carry the run's times: the paired raw stamp, else the corrected log's own stamp
+    when = dict(zip(las.lines.tolist(), las.ipc_t.tolist(), strict=True)) if pairing is not None else {}
+    when.update(zip(las.lines[scans].tolist(), scan_t.tolist(), strict=True))
+    flagged = [tuple(replace(f, t=when[f.line]) for f in cl.flagged)]
+    kept = cl.scan_kept[scans]
+    keep, ref_t = scans[kept], scan_t[kept]
+    if max_scans:
+        keep, ref_t = keep[:max_scans], ref_t[:max_scans]
+    ref = ref_all[keep]
     if pairing is not None:
-        keep = np.flatnonzero(pairing.index >= 0)
-        if max_scans:
-            keep = keep[:max_scans]
         raw = pairing.raw
-        raw_idx = pairing.index[keep]
-        t_unsorted = raw.flaser.ipc_t[raw_idx]
-        order = np.argsort(t_unsorted, kind="stable")
-        keep, raw_idx = keep[order], raw_idx[order]
-        ref_t = raw.flaser.ipc_t[raw_idx]
-        ref = ref_all[keep]
         t0, t1 = float(ref_t[0]), float(ref_t[-1])
         od = raw.odom
         o_order = np.argsort(od.ipc_t, kind="stable")
         ot, op = od.ipc_t[o_order], od.pose[o_order]
         inc = between(op[:-1], op[1:])
-        for k in np.flatnonzero((ot[1:] >= t0) & (ot[1:] <= t1)):
+        # a spike in the odometry pose: its increment and the one back are flagged and left out; each interval is
+        # widened by the stamps' own uncertainty, the largest step back in file order (intel: 0.90 s)
+        slack_s = max(0.0, -float(np.diff(od.ipc_t).min(initial=0.0)))
+        odo_flags = Flags(raw.path, "odometry", ot[1:], od.lines[o_order][1:])
+        odo_flags.flag_increments(np.hypot(inc[:, 0], inc[:, 1]), inc[:, 2], np.diff(ot) + slack_s, RADISH_BOUNDS)
+        flagged.append(odo_flags.finish())
+        for k in np.flatnonzero((ot[1:] >= t0) & (ot[1:] <= t1) & odo_flags.kept):
             events.append(Odometry(float(ot[k + 1]), float(inc[k, 0]), float(inc[k, 1]), float(inc[k, 2])))
         if not events:
             raise RecordedDataError(raw.path, f"no ODOM message inside the paired scans' span [{t0!r}, {t1!r}] s")
@@ -660,9 +762,6 @@ def load_radish(
         metadata["pairing"] = {"corrected_scans": n_all, "paired": pairing.paired, "raw_scans": len(raw.flaser)}
         sources.append(str(raw.path))
     else:
-        keep = np.arange(min(n_all, max_scans) if max_scans else n_all)
-        ref = ref_all[keep]
-        ref_t = SCAN_PERIOD_S * keep.astype(np.float64)
         u = between(ref[:-1], ref[1:])
         gen = rng if rng is not None else np.random.default_rng(0)
         noisy = simulate_encoder_error(u, err, gen)
@@ -697,6 +796,7 @@ def load_radish(
         truth_label="SLAM reference",
         sources=tuple(sources),
         declared=frozenset({LaserScan}),
+        flagged=merge(*flagged),
     )
 
 
