@@ -9,22 +9,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from input_support import one_line as _one_line
 from test_recorded_intel import T0, box_ranges, flaser_line
 
 from locbench.datasets.recorded.carmen import read_carmen, read_carmen_flagged
 from locbench.datasets.recorded.files import RecordedDataError
 from locbench.datasets.recorded.intel import load_intel
 from locbench.datasets.recorded.tum import read_tum, read_tum_flagged
-from locbench.errors import MAX_MESSAGE_CHARS
 from locbench.events import LaserScan, Odometry
-
-
-def _one_line(info: pytest.ExceptionInfo[BaseException], *words: str) -> str:
-    msg = str(info.value)
-    assert "\n" not in msg and len(msg) <= MAX_MESSAGE_CHARS, msg
-    for w in words:
-        assert w in msg, msg
-    return msg
 
 
 def pose_at(t: float) -> np.ndarray:
@@ -309,14 +301,9 @@ def test_intel_too_many_negative_ranges_are_refused(tmp_path: Path) -> None:
 def test_intel_reference_scans_all_at_one_time_are_refused(tmp_path: Path) -> None:
     folder = write_intel(tmp_path)
     gfs = folder / "intel.gfs.log"
-    out = []
-    for ln in gfs.read_text().splitlines(keepends=True):
-        if ln.startswith("FLASER"):
-            f = ln.split()
-            f[-3] = f[-1] = "1.000000"
-            ln = " ".join(f) + "\n"
-        out.append(ln)
-    gfs.write_text("".join(out))
+    lines = gfs.read_text().splitlines()
+    restamped = (" ".join([*ln.split()[:-3], "1.0 nohost 1.0"]) if ln.startswith("FLASER") else ln for ln in lines)
+    gfs.write_text("".join(ln + "\n" for ln in restamped))
     with pytest.raises(RecordedDataError) as info:
         load_intel(tmp_path, verify=False)
     _one_line(info, f"{gfs}:3:", "every FLASER sample has the time 1.0", "expected times that advance")
