@@ -378,3 +378,11 @@ def test_tum_recorded_quaternion_that_is_no_rotation_is_refused(tmp_path: Path) 
     with pytest.raises(RecordedDataError) as info:
         read_tum_flagged(write_tum_file(tmp_path, lines))
     _one_line(info, "ref.tum:12:", "expected a unit quaternion")
+
+
+def test_a_negative_stamp_uncertainty_is_refused() -> None:
+    from locbench.datasets.recorded.plausibility import Flags
+
+    f = Flags("x.log", "pose", [0.0, 1.0, 2.0])
+    with pytest.raises(ValueError, match=r"stamp_uncertainty_s must be >= 0 s, got -1\.0"):
+        f.flag_track(np.zeros((3, 2)), None, stamp_uncertainty_s=-1.0)
