@@ -1,10 +1,15 @@
-"""Hand-made input files the malformed-input and fuzz tests share (importable as ``input_support``)."""
+"""Hand-made input files and message checks the malformed-input and fuzz tests share (importable as
+``input_support``)."""
 
 from __future__ import annotations
 
 import struct
 import zlib
 from pathlib import Path
+
+import pytest
+
+from locbench.errors import MAX_MESSAGE_CHARS
 
 
 def grey_png(path: Path, width: int, height: int) -> Path:
@@ -18,3 +23,12 @@ def grey_png(path: Path, width: int, height: int) -> Path:
     ihdr = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
     path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", data) + chunk(b"IEND", b""))
     return path
+
+
+def one_line(info: pytest.ExceptionInfo[BaseException], *words: str) -> str:
+    """The error's message, after checking it is one bounded line holding every word."""
+    msg = str(info.value)
+    assert "\n" not in msg and len(msg) <= MAX_MESSAGE_CHARS, msg
+    for w in words:
+        assert w in msg, msg
+    return msg

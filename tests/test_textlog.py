@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from input_support import one_line as _clean
 from range_only_support import INITIAL, SENSORS, WORLD, scenario
 
 from locbench.cli import main
@@ -216,14 +217,6 @@ def test_a_twist_that_contradicts_the_increments_is_a_warning(tmp_path: Path) ->
     assert len(warnings) == 2 and ds.metadata["events_outside_truth_span"] == 1
     assert "1 of 21 events lie outside the ground truth's span" in warnings[0]
     assert "odometry twist contradicts its pose: the twist is zero in 20 of the 20 steps" in warnings[1]
-
-
-def _clean(info: pytest.ExceptionInfo[BaseException], *words: str) -> str:
-    msg = str(info.value)
-    assert "\n" not in msg and len(msg) <= MAX_MESSAGE_CHARS, msg
-    for w in words:
-        assert w in msg, msg
-    return msg
 
 
 BAD_EVENTS = [

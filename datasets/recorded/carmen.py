@@ -26,8 +26,20 @@ match its own ``n``, or above a caller's ``max_beams``, refused before the line'
 line without its newline is reported as truncated, even with a full field count, since its last field may be
 cut); a non-integer beam count; a field that is not a finite number
 (named by its position and meaning); a position (ODOM x, y; FLASER pose and odometry pose) beyond
-:data:`~locbench.datasets.recorded.files.MAX_POSITION_M` or a negative range; the time going backwards
-within a message stream by more than ``max_backstep_s`` (default 0: strictly non-decreasing).
+:data:`~locbench.datasets.recorded.files.MAX_POSITION_M` or a negative range (:func:`read_carmen`); the time
+going backwards within a message stream by more than ``max_backstep_s`` (default 0: strictly non-decreasing).
+
+Plausibility (:func:`read_carmen_flagged`, the policy of :mod:`~locbench.datasets.recorded.plausibility`):
+besides the structural checks above, a stream (ODOM or FLASER) of two or more messages all stamped alike is
+refused, and these messages are flagged, to be left out by the caller (:class:`CarmenFlags`; a stream with more
+than 1 % of them, or a 2 s stretch, is refused): a message repeating the previous one in every field (a doubled
+line); an ODOM ``theta`` beyond the heading bound, a ``tv`` beyond the speed bound or an ``rv`` beyond the
+turn-rate bound; a FLASER with a range outside [0, range bound] (a negative range is one bad reading, not a
+broken file), or a laser or odometry ``theta`` beyond the heading bound; an ODOM pose, FLASER laser pose or
+FLASER odometry pose the robot could not have reached from the last accepted one (speed and turn-rate bounds
+over the time between the stamps plus ``max_backstep_s``: a log whose stamps may step back by that much carries
+that much uncertainty in each stamp; in stamp order). A position or range beyond ``MAX_POSITION_M`` is still
+refused (a limit, not a sample).
 
 Time stamps that go backwards in real logs: in ``intel.clf`` 631 FLASER and 602 ODOM messages carry an
 ``ipc_timestamp`` smaller than the message before them in the file, by up to 0.90 s (the
@@ -50,6 +62,8 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from locbench.datasets.base import FlaggedSample
+from locbench.datasets.recorded import plausibility
 from locbench.datasets.recorded.files import (
     MAX_POSITION_M,
     MissingDataFile,
@@ -60,6 +74,7 @@ from locbench.datasets.recorded.files import (
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
+BoolArray = npt.NDArray[np.bool_]
 
 #: Field names of an ODOM message after the message name (the host, a word, is not stored).
 ODOM_FIELDS = ("x", "y", "theta", "tv", "rv", "accel", "ipc_timestamp", "ipc_host", "logger_timestamp")
@@ -183,6 +198,13 @@ def read_carmen(
     RecordedDataError
         Naming the file and line: see the module docstring.
     """
+    return _read_cached(*_cache_key(path, max_backstep_s, time_checked), max_beams)
+
+
+def _cache_key(
+    path: str | os.PathLike[str], max_backstep_s: float, time_checked: Sequence[str]
+) -> tuple[str, int, int, float, tuple[str, ...]]:
+    """(resolved path, size, mtime, max_backstep_s, time_checked) of a log, after checking the options."""
     p = Path(path)
     try:
         st = p.stat()
@@ -191,9 +213,7 @@ def read_carmen(
     for name in time_checked:
         if name not in ("ODOM", "FLASER"):
             raise ValueError(f"time_checked holds {name!r}; expected 'ODOM' and/or 'FLASER'")
-    return _read_cached(
-        str(p.resolve()), st.st_size, st.st_mtime_ns, float(max_backstep_s), tuple(time_checked), max_beams
-    )
+    return str(p.resolve()), st.st_size, st.st_mtime_ns, float(max_backstep_s), tuple(time_checked)
 
 
 @functools.lru_cache(maxsize=8)
@@ -201,10 +221,133 @@ def _read_cached(
     path: str, size: int, mtime_ns: int, max_backstep_s: float, time_checked: tuple[str, ...], max_beams: int | None
 ) -> CarmenLog:
     log = _parse(Path(path), max_beams=max_beams)
+    _check_times(log, max_backstep_s, time_checked)
+    return log
+
+
+def _check_times(log: CarmenLog, max_backstep_s: float, time_checked: tuple[str, ...]) -> None:
     for name in time_checked:
         msgs: OdomMessages | LaserMessages = log.odom if name == "ODOM" else log.flaser
         _check_time(log.path, name, msgs.ipc_t, msgs.lines, max_backstep_s)
-    return log
+
+
+@dataclass(frozen=True, eq=False)
+class CarmenFlags:
+    """The messages of a CARMEN log that break the plausibility bounds (:func:`read_carmen_flagged`).
+
+    Attributes
+    ----------
+    odom_kept, flaser_kept : ndarray of bool, shape (n,)
+        True for each ODOM or FLASER message (file order, as :class:`CarmenLog`) that is not flagged; all True for
+        a stream that was not checked.
+    flagged : tuple of FlaggedSample
+        The flagged messages, in time order.
+    """
+
+    odom_kept: BoolArray
+    flaser_kept: BoolArray
+    flagged: tuple[FlaggedSample, ...]
+
+
+def read_carmen_flagged(
+    path: str | os.PathLike[str],
+    *,
+    max_backstep_s: float = 0.0,
+    time_checked: Sequence[str] = ("ODOM", "FLASER"),
+    bounds: plausibility.Bounds = plausibility.BOUNDS,
+) -> tuple[CarmenLog, CarmenFlags]:
+    """Parse a CARMEN log and apply the plausibility policy to its checked streams (cached like :func:`read_carmen`).
+
+    Parameters
+    ----------
+    path, max_backstep_s, time_checked
+        As :func:`read_carmen`; only the streams in ``time_checked`` are judged (a GMapping ``*.gfs.log``'s ODOM
+        lines are stamped 0 and say nothing).
+    bounds : Bounds
+        The policy's bounds, or a loader's tightened ones.
+
+    Returns
+    -------
+    log : CarmenLog
+        Every message, in file order (a negative range kept as read).
+    flags : CarmenFlags
+        Which messages to leave out, and why (the module docstring lists the bounds).
+
+    Raises
+    ------
+    RecordedDataError
+        As :func:`read_carmen` except for a negative range; a checked stream all stamped alike; more than 1 % of
+        a stream flagged, or a 2 s stretch of it.
+    """
+    return _read_flagged_cached(*_cache_key(path, max_backstep_s, time_checked), bounds)
+
+
+@functools.lru_cache(maxsize=8)
+def _read_flagged_cached(
+    path: str,
+    size: int,
+    mtime_ns: int,
+    max_backstep_s: float,
+    time_checked: tuple[str, ...],
+    bounds: plausibility.Bounds,
+) -> tuple[CarmenLog, CarmenFlags]:
+    log = _parse(Path(path), ranges_lo=-MAX_POSITION_M)  # a negative range is flagged below, not refused
+    _check_times(log, max_backstep_s, time_checked)
+    kept: dict[str, BoolArray] = {}
+    found = []
+    for name in ("ODOM", "FLASER"):
+        msgs: OdomMessages | LaserMessages = log.odom if name == "ODOM" else log.flaser
+        if name in time_checked:
+            kept[name], flagged = _flag_stream(log.path, msgs, bounds, max_backstep_s)
+            found.append(flagged)
+        else:
+            kept[name] = np.ones(len(msgs), dtype=bool)
+    for a in kept.values():
+        a.setflags(write=False)
+    return log, CarmenFlags(kept["ODOM"], kept["FLASER"], plausibility.merge(*found))
+
+
+def _flag_stream(
+    path: Path, msgs: OdomMessages | LaserMessages, b: plausibility.Bounds, stamp_uncertainty_s: float
+) -> tuple[BoolArray, tuple[FlaggedSample, ...]]:
+    """Which messages of one stream (file order) are kept, and the flagged ones (the module docstring's bounds)."""
+    name = "ODOM" if isinstance(msgs, OdomMessages) else "FLASER"
+    n = len(msgs)
+    if n > 1:
+        plausibility.refuse_all_times_equal(path, name, msgs.ipc_t, int(msgs.lines[1]))
+    # judged in stamp order (equal stamps keep file order): the order a consumer uses the messages in
+    order = np.argsort(msgs.ipc_t, kind="stable")
+    flags = plausibility.Flags(path, name, msgs.ipc_t[order], msgs.lines[order])
+    h = b.heading_abs_rad
+    tracks = [msgs.pose[order]]
+    if isinstance(msgs, OdomMessages):
+        flags.flag_duplicates(
+            np.column_stack([msgs.pose, msgs.tv, msgs.rv, msgs.accel, msgs.ipc_t, msgs.logger_t])[order]
+        )
+        flags.flag_outside(msgs.pose[order, 2], "theta, rad", -h, h)
+        flags.flag_outside(msgs.tv[order], "tv, m/s", -b.speed_mps, b.speed_mps)
+        flags.flag_outside(msgs.rv[order], "rv, rad/s", -b.turn_rate_radps, b.turn_rate_radps)
+    else:
+        flags.flag_duplicates(
+            np.column_stack([msgs.ranges, msgs.pose, msgs.odom_pose, msgs.ipc_t, msgs.logger_t])[order]
+        )
+        flags.flag_outside(_worst(msgs.ranges[order], 0.0, b.range_m), "range, m", 0.0, b.range_m)
+        flags.flag_outside(msgs.pose[order, 2], "theta, rad", -h, h)
+        flags.flag_outside(msgs.odom_pose[order, 2], "odom_theta, rad", -h, h)
+        tracks.append(msgs.odom_pose[order])
+    for pose in tracks:
+        flags.flag_track(pose[:, :2], pose[:, 2], b, stamp_uncertainty_s=stamp_uncertainty_s)
+    kept = np.empty(n, dtype=bool)
+    kept[order] = flags.kept
+    return kept, flags.finish()
+
+
+def _worst(block: FloatArray, lo: float, hi: float) -> FloatArray:
+    """Per row of ``block``, the value farthest outside [lo, hi] (a value inside when all are)."""
+    if block.shape[1] == 0:
+        return np.full(block.shape[0], lo)
+    k = np.argmax(np.maximum(lo - block, block - hi), axis=1)
+    return block[np.arange(block.shape[0]), k]
 
 
 def _check_time(path: Path, name: str, t: FloatArray, lines: IntArray, max_backstep_s: float) -> None:
@@ -237,7 +380,7 @@ def parse_carmen_bytes(path: str | os.PathLike[str], raw: bytes, *, max_beams: i
     return _parse(Path(path), raw, max_beams=max_beams)
 
 
-def _parse(p: Path, raw: bytes | None = None, max_beams: int | None = None) -> CarmenLog:
+def _parse(p: Path, raw: bytes | None = None, ranges_lo: float = 0.0, max_beams: int | None = None) -> CarmenLog:
     # long: one pass over the log's lines whose record kinds share the parser's state and line numbers for errors
     if raw is None:
         raw = p.read_bytes()
@@ -341,7 +484,9 @@ def _parse(p: Path, raw: bytes | None = None, max_beams: int | None = None) -> C
     _check_bounds(p, "ODOM", o[:, 0:2], odom_ln, 1, ("x", "y"), MAX_POSITION_M)
     _check_bounds(p, "FLASER", f[:, nb : nb + 2], las_ln, nb + 2, ("x", "y"), MAX_POSITION_M)
     _check_bounds(p, "FLASER", f[:, nb + 3 : nb + 5], las_ln, nb + 5, ("odom_x", "odom_y"), MAX_POSITION_M)
-    _check_bounds(p, "FLASER", f[:, :nb], las_ln, 2, tuple(f"r_{j + 1}" for j in range(nb)), MAX_POSITION_M, lo=0.0)
+    _check_bounds(
+        p, "FLASER", f[:, :nb], las_ln, 2, tuple(f"r_{j + 1}" for j in range(nb)), MAX_POSITION_M, lo=ranges_lo
+    )
     lines_of = {name: tuple(at) for name, at in param_lines.items()}
     return CarmenLog(p, odom, las, params, skipped, lines_of, tuple(header_lines))
 

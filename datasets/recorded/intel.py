@@ -67,6 +67,19 @@ Validation beyond the CARMEN parser's: each of ``intel.clf`` and ``intel.gfs.log
 180 beams (the message names the file that does not); ``intel.clf`` needs ODOM messages at more than one time and
 inside the reference's span; ``PARAM robot_frontlaser_offset`` must be a number within 10 m.
 
+Plausibility (:func:`~locbench.datasets.recorded.carmen.read_carmen_flagged` on the ODOM and FLASER messages of
+``intel.clf`` and the FLASER messages of ``intel.gfs.log``, with :data:`BOUNDS`: the policy's, the range bound
+tightened to the SICK's no-return reading :data:`NO_RETURN_M` and the heading bound to 2 pi, CARMEN's headings being
+wrapped): a flagged message is left out and listed in ``Dataset.flagged``: a flagged ODOM gives no pose (the
+increment spans from the pose before it to the one after), a flagged raw FLASER no scan, a flagged reference scan
+no reference pose and no part in the map; the odometry noise is derived from the reference scans whose reference
+and raw scan are both kept. The pose track is judged over the time between stamps plus :data:`MAX_BACKSTEP_S`: the
+stamps are the IPC delivery times, which come in bursts (half the consecutive ODOM stamps lie less than 1 ms apart
+while the pose moved 3 cm, then none for up to 3.5 s): on the stamps alone the bound flags 323 ODOM and 2348 FLASER
+poses of the shared log, with 0.1 s of slack still 10 and 4; with 1 s the speed bound catches a jump of more than
+5 m, and the turn-rate bound no turn (1 s at 10 rad/s exceeds pi). The shared files flag nothing. Relation times are checked against every FLASER of the log, flagged or not
+(a relation is the benchmark's, not the scan's).
+
 Map lines (for ``ekf_lines``): a Hough transform of the occupied cells (1 deg x one cell), taken greedily:
 at the strongest bin, the cells within one cell of its line are fitted by total least squares, the cells
 within one cell of the fitted line are split into runs wherever two neighbours lie more than 0.3 m apart,
@@ -113,8 +126,9 @@ from locbench.datasets.base import (
     WorldMap,
     sort_events,
 )
+from locbench.datasets.recorded import plausibility
 from locbench.datasets.recorded.base import RecordedDataset
-from locbench.datasets.recorded.carmen import CarmenLog, read_carmen
+from locbench.datasets.recorded.carmen import CarmenFlags, CarmenLog, read_carmen_flagged
 from locbench.datasets.recorded.files import (
     MAX_GRID_CELLS,
     MAX_GRID_CELLS_BOUND,
@@ -167,8 +181,12 @@ MAX_RESOLUTION_M = 10.0
 #: Beam geometry of the Intel FLASER messages: 180 beams, first at -90 deg, 1 deg apart.
 ANGLE_MIN_RAD = -math.pi / 2
 ANGLE_INCREMENT_RAD = math.pi / 180
-#: Largest tolerated step back of a stream's stamps, s (the log's worst is 0.90 s).
+#: Largest tolerated step back of a stream's stamps, s (the log's worst is 0.90 s); also each stamp's uncertainty
+#: when the pose track is judged.
 MAX_BACKSTEP_S = 1.0
+#: The plausibility bounds tightened with the scanner's limit (no reading beyond its no-return value) and CARMEN's
+#: wrapped headings.
+BOUNDS = plausibility.BOUNDS.tightened(range_m=NO_RETURN_M, heading_abs_rad=2 * math.pi)
 #: Largest |logger time difference| between a reference scan and its raw scan, s (SOURCES.md).
 MATCH_TOLERANCE_S = 0.005
 #: GMapping's default endpoint-matching sigma, m (ROS gmapping ``~sigma``).
@@ -545,11 +563,12 @@ def derive_odometry_noise(odom_poses: npt.ArrayLike, ref_poses: npt.ArrayLike) -
 def _reference_map(
     gfs_path: str, size: int, mtime_ns: int, resolution_m: float, max_cells: int
 ) -> tuple[OccupancyGrid, LineMap, dict]:
-    gfs = read_carmen(gfs_path, max_backstep_s=MAX_BACKSTEP_S, time_checked=("FLASER",))
+    gfs, flags = _read_reference(Path(gfs_path))
     beams = gfs.flaser.ranges.shape[1]
     angles = ANGLE_MIN_RAD + ANGLE_INCREMENT_RAD * np.arange(beams)
+    kept = flags.flaser_kept  # a flagged reference scan has no part in the map
     grid = build_occupancy_grid(
-        gfs.flaser.pose, gfs.flaser.ranges, angles, resolution_m, max_cells=max_cells, source=gfs_path
+        gfs.flaser.pose[kept], gfs.flaser.ranges[kept], angles, resolution_m, max_cells=max_cells, source=gfs_path
     )
     grid.occupancy.setflags(write=False)
     lines, stats = extract_map_lines(grid)
@@ -558,11 +577,21 @@ def _reference_map(
     return grid, lines, stats
 
 
+def _read_raw(path: Path) -> tuple[CarmenLog, CarmenFlags]:
+    """The raw log and its flagged messages (module docstring)."""
+    return read_carmen_flagged(path, max_backstep_s=MAX_BACKSTEP_S, bounds=BOUNDS)
+
+
+def _read_reference(path: Path) -> tuple[CarmenLog, CarmenFlags]:
+    """The GMapping log and its flagged FLASER messages (its ODOM lines are stamped 0: not read)."""
+    return read_carmen_flagged(path, max_backstep_s=MAX_BACKSTEP_S, time_checked=("FLASER",), bounds=BOUNDS)
+
+
 def reference_map(
     gfs_path: str | os.PathLike[str], resolution_m: float = 0.05, max_cells: int = MAX_GRID_CELLS
 ) -> tuple[OccupancyGrid, LineMap, dict]:
     """The occupancy grid and map lines built from a corrected CARMEN log (cached per file and resolution);
-    a grid above ``max_cells`` cells is refused before it is allocated."""
+    a grid above ``max_cells`` cells is refused before it is allocated; flagged scans are left out."""
     p = Path(gfs_path)
     st = p.stat()
     return _reference_map(str(p.resolve()), st.st_size, st.st_mtime_ns, float(resolution_m), int(max_cells))
@@ -608,31 +637,31 @@ def _assemble(
     clf_path: Path, gfs_path: Path, rel_path: Path, map_resolution_m: float, max_grid_cells: int = MAX_GRID_CELLS
 ) -> Dataset:
     # long: the checks of the three files and their cross-checks, in the order the errors should be reported
-    clf = read_carmen(clf_path, max_backstep_s=MAX_BACKSTEP_S)
-    gfs = read_carmen(gfs_path, max_backstep_s=MAX_BACKSTEP_S, time_checked=("FLASER",))
+    clf, clf_flags = _read_raw(clf_path)
+    gfs, gfs_flags = _read_reference(gfs_path)
     for path, log in ((clf_path, clf), (gfs_path, gfs)):
         if len(log.flaser) == 0:
             raise RecordedDataError(path, "no FLASER message, expected 180-beam laser scans (Intel)")
         if log.flaser.ranges.shape[1] != 180:
             raise RecordedDataError(path, f"FLASER has {log.flaser.ranges.shape[1]} ranges, expected 180 (Intel)")
-    if len(gfs.flaser) < 2:
+    if int(gfs_flags.flaser_kept.sum()) < 2:
         raise RecordedDataError(gfs_path, "fewer than 2 FLASER messages (expected the 910 corrected scans)")
-    if len(clf.odom) < 2 or float(np.ptp(clf.odom.ipc_t)) == 0.0:
-        stamp = f" all stamped {float(clf.odom.ipc_t[0])!r}" if len(clf.odom) else ""
-        raise RecordedDataError(
-            clf_path, f"{len(clf.odom)} ODOM message(s){stamp}, expected odometry at increasing times"
-        )
+    if int(clf_flags.odom_kept.sum()) < 2:  # every ODOM stamped alike is refused by the reader
+        raise RecordedDataError(clf_path, f"{len(clf.odom)} ODOM message(s), expected odometry at increasing times")
     match = match_reference(clf, gfs)
-    ref_t_unsorted = clf.flaser.ipc_t[match]
+    # a flagged reference scan gives no reference pose
+    ref_kept = gfs_flags.flaser_kept
+    ref_t_unsorted = clf.flaser.ipc_t[match][ref_kept]
     order = np.argsort(ref_t_unsorted, kind="stable")
     ref_t = ref_t_unsorted[order]
-    ref_pose = np.asarray(gfs.flaser.pose)[order]
+    ref_pose = np.asarray(gfs.flaser.pose)[ref_kept][order]
     ref_pose = np.column_stack([ref_pose[:, :2], wrap_angle(ref_pose[:, 2])])
     t0, t1 = float(ref_t[0]), float(ref_t[-1])
 
     events: list[Event] = []
     od = clf.odom
     o_order = np.argsort(od.ipc_t, kind="stable")
+    o_order = o_order[clf_flags.odom_kept[o_order]]  # a flagged pose is skipped: the increment spans it
     ot = od.ipc_t[o_order]
     op = od.pose[o_order]
     inc = between(op[:-1], op[1:])
@@ -647,7 +676,7 @@ def _assemble(
     las = clf.flaser
     offset = _laser_offset(clf_path, clf.params.get("robot_frontlaser_offset", "0.0"))
     ranges = np.where(las.ranges >= NO_RETURN_M, np.inf, las.ranges)
-    for k in np.flatnonzero((las.ipc_t >= t0) & (las.ipc_t <= t1)):
+    for k in np.flatnonzero((las.ipc_t >= t0) & (las.ipc_t <= t1) & clf_flags.flaser_kept):
         events.append(
             LaserScan(
                 float(las.ipc_t[k]),
@@ -662,8 +691,10 @@ def _assemble(
 
     grid, lines, map_stats = reference_map(gfs_path, map_resolution_m, max_grid_cells)
     relations = read_relations(rel_path, las.ipc_t)
-    odo_at_ref = np.asarray(las.odom_pose)[match][order]
-    sxy, stm, str_ = derive_odometry_noise(odo_at_ref, ref_pose)
+    # the noise pairs: reference scans whose raw scan (its odometry pose) is kept as well
+    raw_kept = clf_flags.flaser_kept[match][ref_kept][order]
+    odo_at_ref = np.asarray(las.odom_pose)[match][ref_kept][order][raw_kept]
+    sxy, stm, str_ = derive_odometry_noise(odo_at_ref, ref_pose[raw_kept])
     sensors = SensorSpec(
         laser_sigma_m=LASER_SIGMA_M,
         odometry_sigma_xy_per_m=sxy,
@@ -690,7 +721,7 @@ def _assemble(
             "sigma_xy_per_m": sxy,
             "sigma_theta_per_m": stm,
             "sigma_theta_per_rad": str_,
-            "pairs": len(gfs.flaser) - 1,
+            "pairs": int(raw_kept.sum()) - 1,
         },
     }
     return Dataset(
@@ -706,6 +737,7 @@ def _assemble(
         truth_label="SLAM reference",
         sources=(str(clf_path), str(gfs_path), str(rel_path)),
         declared=frozenset({LaserScan}),
+        flagged=plausibility.merge(clf_flags.flagged, gfs_flags.flagged),
     )
 
 

@@ -169,6 +169,7 @@ class Flags:
         theta: npt.ArrayLike | None = None,
         bounds: Bounds = BOUNDS,
         breaks: npt.ArrayLike = (),
+        stamp_uncertainty_s: float = 0.0,
     ) -> None:
         """Flag the pose samples a robot could not have reached from the last accepted one.
 
@@ -178,7 +179,9 @@ class Flags:
         the last accepted sample (not the previous one) flags a glitch alone, not the good sample after it. Samples
         flagged before this call (a duplicate, a heading out of bounds) take no part: neither judged nor a reference.
         ``breaks`` are times (s) at which the pose may jump (a kidnap): the first sample at or after a break is
-        accepted as the new reference.
+        accepted as the new reference. ``stamp_uncertainty_s`` is how far a recording's stamps may lie from the
+        instant they describe, s (a log stamped when a message was delivered, in bursts): it is added to every
+        ``t_k - t_g``, so the bounds judge the time that may really have passed.
         """
         idx = np.flatnonzero(~self.mask)
         p = np.asarray(xy, dtype=np.float64)[idx]
@@ -186,9 +189,11 @@ class Flags:
         t = self.t[idx]
         if p.shape[0] < 2:
             return
+        if not stamp_uncertainty_s >= 0.0:  # also NaN
+            raise ValueError(f"stamp_uncertainty_s must be >= 0 s, got {stamp_uncertainty_s!r}")
         segment = np.searchsorted(np.sort(np.asarray(breaks, dtype=np.float64)), t, side="right")
         # One vectorised pass decides the common case (no violation at all) without the walk.
-        dt = np.diff(t)
+        dt = np.diff(t) + stamp_uncertainty_s
         step = np.hypot(np.diff(p[:, 0]), np.diff(p[:, 1]))
         fast = step > bounds.speed_mps * dt + bounds.position_jitter_m
         if th is not None:
@@ -204,7 +209,7 @@ class Flags:
             if segment[k] != segment[g]:
                 g = k
                 continue
-            span = t[k] - t[g]
+            span = t[k] - t[g] + stamp_uncertainty_s
             moved = math.hypot(p[k, 0] - p[g, 0], p[k, 1] - p[g, 1])
             ok = moved <= bounds.speed_mps * span + bounds.position_jitter_m
             if ok and th is not None:
@@ -218,6 +223,8 @@ class Flags:
         bound = f"at most {bounds.speed_mps:g} m/s plus {bounds.position_jitter_m:g} m"
         if th is not None:
             bound += f" and {bounds.turn_rate_radps:g} rad/s plus {bounds.heading_jitter_rad:g} rad"
+        if stamp_uncertainty_s:
+            bound += f" over the time between stamps plus {stamp_uncertainty_s:g} s of stamp uncertainty"
         self.flag(bad, "apparent speed, m/s", speed, bound)
 
     def flag_increments(

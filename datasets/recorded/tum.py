@@ -1,5 +1,15 @@
 """The TUM trajectory format (``timestamp tx ty tz qx qy qz qw``, one pose per line) for planar poses: written by
-``locbench export`` and the textlog writer, read as a textlog's truth and by tools that compare with evo."""
+``locbench export`` and the textlog writer, read as a textlog's truth and by tools that compare with evo.
+
+Reading (the plausibility policy of :mod:`~locbench.datasets.recorded.plausibility`): :func:`read_tum` reads any
+trajectory, a filter's estimate included, and refuses only what makes the file no trajectory (a bad line, time
+going backwards, two or more poses all at one time); it bounds no motion, since a filter's jump is a result to
+compare, not a glitch of a recording. :func:`read_tum_flagged` reads a trajectory that is a recording (a reference
+from another tool) and, besides those refusals and a quaternion that is no planar unit rotation or a position beyond
+:data:`~locbench.datasets.recorded.files.MAX_POSITION_M`, flags a pose repeating the previous line, a second pose
+at the previous pose's time, and a pose the robot could not have reached from the last accepted one (the policy's
+speed and turn-rate bounds plus their jitter); a file with more than 1 % of them, or a 2 s stretch, is refused.
+"""
 
 from __future__ import annotations
 
@@ -11,8 +21,9 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import Trajectory2D
-from locbench.datasets.recorded.files import read_table
+from locbench.datasets.base import FlaggedSample, Trajectory2D
+from locbench.datasets.recorded import plausibility
+from locbench.datasets.recorded.files import MAX_POSITION_M, Table, quaternion_problem, read_table
 from locbench.errors import ConfigError
 from locbench.geometry import quaternion_to_yaw, yaw_to_quaternion
 
@@ -102,13 +113,68 @@ def write_tum(
 def read_tum(path: str | os.PathLike[str]) -> Trajectory2D:
     """Read a TUM trajectory file as planar poses (the yaw of each quaternion; z and roll/pitch are dropped).
 
+    Every pose is kept: an estimate's jump is what a comparison measures (:func:`read_tum_flagged` for a recording).
+
     Raises
     ------
     RecordedDataError
-        Naming the line: a wrong column count, a field that is not a number, time going backwards.
+        Naming the line: a wrong column count, a field that is not a number, time going backwards, two or more
+        poses all at one time.
     """
+    return _trajectory(_table(path))
+
+
+def read_tum_flagged(
+    path: str | os.PathLike[str], bounds: plausibility.Bounds = plausibility.BOUNDS
+) -> tuple[Trajectory2D, tuple[FlaggedSample, ...]]:
+    """Read a TUM file that is a recorded trajectory: the poses without the implausible ones, and those.
+
+    Parameters
+    ----------
+    path : path-like
+        The file.
+    bounds : Bounds
+        The policy's bounds, or a platform's tightened ones.
+
+    Returns
+    -------
+    trajectory : Trajectory2D
+        The accepted poses (x m, y m, theta rad).
+    flagged : tuple of FlaggedSample
+        The poses left out (the module docstring lists why), in time order.
+
+    Raises
+    ------
+    RecordedDataError
+        As :func:`read_tum`; a position beyond ``MAX_POSITION_M``, a quaternion that is no planar unit rotation;
+        more than 1 % of the poses flagged, or a 2 s stretch of them.
+    """
+    table = _table(path)
+    for c in (1, 2, 3):
+        table.check_range(c, TUM_COLUMNS[c], -MAX_POSITION_M, MAX_POSITION_M)
+    problem = quaternion_problem(table.rows[:, 4:8])
+    if problem is not None:
+        raise table.fail(problem[0], problem[1])
+    traj = _trajectory(table)
+    flags = plausibility.Flags(table.path, "trajectory", traj.t, table.lines)
+    flags.flag_duplicates(table.rows)
+    again = np.r_[False, (traj.t[1:] == traj.t[:-1]) & ~flags.mask[1:]]
+    flags.flag(again, "time of the previous pose, s", traj.t, "one pose per time")
+    flags.flag_track(traj.xy, traj.theta, bounds)
+    kept = flags.kept
+    return Trajectory2D(traj.t[kept], traj.xy[kept], traj.theta[kept]), flags.finish()
+
+
+def _table(path: str | os.PathLike[str]) -> Table:
+    """The file's rows, after refusing time going backwards or standing still throughout."""
     table = read_table(path, TUM_COLUMNS)
     table.check_time_non_decreasing(0, "timestamp")
+    if table.rows.shape[0] > 1:
+        plausibility.refuse_all_times_equal(table.path, "pose", table.rows[:, 0], int(table.lines[1]))
+    return table
+
+
+def _trajectory(table: Table) -> Trajectory2D:
     rows = table.rows
     return Trajectory2D(rows[:, 0].copy(), rows[:, 1:3].copy(), quaternion_to_yaw(rows[:, 4:8]))
 

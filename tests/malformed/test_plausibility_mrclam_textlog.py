@@ -10,22 +10,13 @@ from typing import Any
 
 import numpy as np
 import pytest
+from input_support import one_line as _one_line
 from test_recorded_mrclam import _small_folder, _write
 
 from locbench.datasets.recorded.files import RecordedDataError
 from locbench.datasets.recorded.mrclam import load_mrclam
 from locbench.datasets.recorded.textlog import MANIFEST, load_textlog
-from locbench.errors import MAX_MESSAGE_CHARS
 from locbench.events import Odometry
-
-
-def _one_line(info: pytest.ExceptionInfo[BaseException], *words: str) -> str:
-    msg = str(info.value)
-    assert "\n" not in msg and len(msg) <= MAX_MESSAGE_CHARS, msg
-    for w in words:
-        assert w in msg, msg
-    return msg
-
 
 # --- MRCLAM: a Vicon glitch of 15 ms -------------------------------------------------------------------------
 
