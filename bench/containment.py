@@ -31,6 +31,15 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
+# numba's GNU OpenMP threading layer is not fork-safe: a child forked from a process that ran a parallel kernel
+# (the ray casting of a dataset's build) is killed by numba as soon as it runs one. "forksafe" picks TBB when
+# installed, else numba's workqueue (same kernels, same results); an explicit NUMBA_THREADING_LAYER is kept.
+if "numba" in sys.modules:
+    _numba_config = sys.modules["numba"].config
+    if os.environ.get("NUMBA_THREADING_LAYER") is None and _numba_config.THREADING_LAYER == "default":
+        _numba_config.THREADING_LAYER = "forksafe"
+os.environ.setdefault("NUMBA_THREADING_LAYER", "forksafe")
+
 #: The default time limit of a run is ``max(RUN_TIMEOUT_FLOOR_S, RUN_TIMEOUT_PER_DATA_S x duration)``, s. The
 #: slowest run of the committed benchmark computes at 1/44 of real time (ekf_icp on lap[kidnap_m=2]), so a
 #: limit of 10x real time leaves it a margin of 400.
