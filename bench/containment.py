@@ -70,11 +70,13 @@ def run_timeout(seconds: float | None) -> Iterator[None]:
         _RUN_TIMEOUT = old
 
 
-def parse_run_timeout(text: str) -> float | None:
+def parse_run_timeout(text: str) -> float:
     """``--run-timeout``'s value: seconds > 0, or ``0``/``none`` for no limit (``inf``); a ValueError otherwise."""
-    if text.strip().lower() in ("none", "0", "0.0", "inf"):
+    if text.strip().lower() in ("none", "inf"):
         return math.inf
     value = float(text)
+    if value == 0:
+        return math.inf
     if not (math.isfinite(value) and value > 0):
         raise ValueError(f"expected seconds > 0, or 0/none for no limit, got {text!r}")
     return value
