@@ -333,45 +333,21 @@ def test_a_result_comes_back_and_an_escaped_exception_is_reported() -> None:
     assert not raised.ok and raised.kind == "raised" and raised.message.startswith("JSONDecodeError:")
 
 
+#: ``locbench run`` of the baseline on the tiny dataset: the command the option tests add to.
+RUN_ODOMETRY = ["run", "--filter", "odometry", "--dataset", "tiny_line", "--no-progress"]
+
+
 @pytest.mark.parametrize("value", ["-1", "nan", "soon"])
 def test_a_malformed_run_timeout_is_refused_in_one_line(
     value: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     with pytest.raises(SystemExit) as exc:
-        main(
-            [
-                "run",
-                "--filter",
-                "odometry",
-                "--dataset",
-                "tiny_line",
-                "--run-timeout",
-                value,
-                "--results",
-                str(tmp_path),
-            ]
-        )
+        main([*RUN_ODOMETRY, "--run-timeout", value, "--results", str(tmp_path)])
     assert exc.value.code == 2
     assert "argument --run-timeout: expected seconds > 0, or 0/none for no limit" in capsys.readouterr().err
 
 
 def test_run_timeout_0_removes_the_limit_and_says_so(tmp_path: Path) -> None:
-    assert (
-        main(
-            [
-                "run",
-                "--filter",
-                "odometry",
-                "--dataset",
-                "tiny_line",
-                "--run-timeout",
-                "0",
-                "--results",
-                str(tmp_path),
-                "--no-progress",
-            ]
-        )
-        == 0
-    )
+    assert main([*RUN_ODOMETRY, "--run-timeout", "0", "--results", str(tmp_path)]) == 0
     meta = _metas(tmp_path)["odometry"]
     assert meta["run_timeout_s"] is None and meta["run_timeout_rule"] == "--run-timeout"
