@@ -440,6 +440,11 @@ def run_checks(ids: list[str] | None = None) -> Iterator[CheckResult]:
         else:
             valid = ", ".join(FILTERS.ids() + DATASETS.ids())
             raise UnknownIdError(f"unknown filter or dataset {ident!r}; valid: {valid}")
+        broken = registry.load_error(ident)
+        if broken is not None:
+            # a plugin that does not import or is not a valid class fails, with its entry point and the cause
+            yield CheckResult(spec, "check_loads", "failed", broken)
+            continue
         reason = registry.unavailable_reason(ident)
         if reason is not None:
             for name in checks:

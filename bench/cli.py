@@ -3,11 +3,11 @@
 locbench list [FILTER|DATASET ...]
 locbench run [--suite NAME|FILE.toml | --filter SPEC ... --dataset SPEC ...]
              [--seeds N] [--results DIR] [--jobs N] [--executor local|dask [--scheduler ADDRESS]] [--force]
-             [--connect-timeout S] [--max-configs N] [--max-seeds N] [--interleave [S]]
+             [--connect-timeout S] [--max-configs N] [--max-seeds N] [--interleave [S]] [--run-timeout S]
 locbench tune FILTER --dataset SPEC [SPEC ...] --trials N --seeds K [--results DIR] [--objective ate|nll]
-              [--jobs N] [--executor local|dask [--scheduler ADDRESS]] [--max-seeds N]
+              [--jobs N] [--executor local|dask [--scheduler ADDRESS]] [--max-seeds N] [--run-timeout S]
 locbench report [--results DIR] [--suite NAME ...] [--out DIR] [--jobs N]
-locbench verify [--results DIR] [--fraction F] [--seed S]
+locbench verify [--results DIR] [--fraction F] [--seed S] [--run-timeout S]
 locbench check [ID ...]
 locbench fetch SPEC [SPEC ...]
 locbench export [--results DIR] [--out DIR] [--dataset SPEC ...] [--filter SPEC ...] [--smoothed]
@@ -485,6 +485,7 @@ def build_parser() -> argparse.ArgumentParser:
         f"(default {INTERLEAVE_SLICE_S:g}), so a busy moment slows them alike; the same estimates, more memory",
     )
     r.add_argument("--no-progress", action="store_true", help="no progress bar")
+    _add_run_timeout(r)
     r.set_defaults(func=_cmd_run)
 
     rep = sub.add_parser("report", help="write summary/metrics.csv, REPORT.md and figures from stored runs")
@@ -509,6 +510,7 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--fraction", type=float, default=0.02, help="share of the stored runs to re-run (default 0.02)")
     v.add_argument("--seed", type=int, default=0, help="seed of the random sample (default 0)")
     v.add_argument("--jobs", type=int, default=1, help="worker processes that re-run the sample (default 1)")
+    _add_run_timeout(v)
     v.set_defaults(func=_cmd_verify)
     tu = sub.add_parser(
         "tune",
@@ -530,6 +532,7 @@ def build_parser() -> argparse.ArgumentParser:
     tu.add_argument("--jobs", type=int, default=1, help="worker processes for each trial's runs (default 1)")
     tu.add_argument("--executor", choices=("local", "dask"), default="local", help="as for 'locbench run'")
     tu.add_argument("--scheduler", default=None, metavar="ADDRESS", help="with --executor dask: a running scheduler")
+    _add_run_timeout(tu)
     tu.set_defaults(func=_cmd_tune)
 
     c = sub.add_parser("check", help="conformance checks for filters and datasets")
@@ -562,14 +565,40 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _run_timeout_arg(text: str) -> float:
+    """``--run-timeout``'s value (:func:`locbench.containment.parse_run_timeout`) as argparse reads it."""
+    from locbench.containment import parse_run_timeout
+
+    try:
+        return parse_run_timeout(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected seconds > 0, or 0/none for no limit, got {text!r}") from None
+
+
+def _add_run_timeout(p: argparse.ArgumentParser) -> None:
+    from locbench.containment import DEFAULT_RULE
+
+    p.add_argument(
+        "--run-timeout",
+        type=_run_timeout_arg,
+        default=None,
+        metavar="S",
+        help=f"time limit of each run, s; 0 or none: no limit (default {DEFAULT_RULE}); a run past it is an "
+        "error run and the sweep goes on",
+    )
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``locbench`` console script."""
     args = build_parser().parse_args(argv)
     logging.basicConfig(
         level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s"
     )
+    from locbench.containment import run_timeout
+
     try:
-        return int(args.func(args))
+        with run_timeout(getattr(args, "run_timeout", None)):  # the runs planned by the command get the limit
+            return int(args.func(args))
     except LocbenchError as exc:
         # one line that says what is valid; the traceback would hide it
         print(f"locbench: error: {one_line(str(exc))}", file=sys.stderr)

@@ -2,9 +2,11 @@
 
 Every executor goes through one loop (:class:`_Schedule`) over ``concurrent.futures`` executors: this
 process's, a ``ProcessPoolExecutor``, or the dask client's (``Client.get_executor``). It splits the plan's
-tasks (longest first) into one part per filter (:func:`parts`), runs :func:`locbench.runner.execute_task` on
+tasks (longest first) into one part per filter (:func:`parts`), runs :func:`locbench.runner.execute_contained` on
 each somewhere, and hands each result back to the caller, which writes the store in this process as each
-filter finishes; so a dask worker on another machine needs locbench installed but no shared folder. A part
+filter finishes; so a dask worker on another machine needs locbench installed but no shared folder. Wherever
+a part runs, its filter runs in a child process of that worker under the run time limit
+(:mod:`locbench.containment`): a filter that exits, crashes or hangs is an error run, never a dead sweep. A part
 whose worker died is retried, one that raised or kept killing its worker is handed to ``lost`` with the
 reason, which records an error run for its filter, and the sweep goes on. SIGINT (Ctrl-C) and SIGTERM stop
 the loop: parts not started are not submitted, running ones abandoned (their workers killed), and it returns
@@ -17,7 +19,6 @@ import asyncio
 import collections
 import concurrent.futures as cf
 import contextlib
-import ctypes
 import dataclasses
 import importlib.util
 import ipaddress
@@ -26,7 +27,6 @@ import multiprocessing
 import os
 import re
 import signal
-import sys
 import threading
 import time
 import types
@@ -34,8 +34,9 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from locbench.containment import die_with_parent
 from locbench.errors import ConfigError, DependencyNotInstalled, one_line
-from locbench.runner import Task, TaskResult, execute_task, forget_realisations
+from locbench.runner import Task, TaskResult, execute_contained, forget_realisations
 
 log = logging.getLogger(__name__)
 
@@ -407,7 +408,7 @@ class _Schedule:
                     return False
                 i, part = nxt, self.todo[nxt].popleft()
             try:
-                fut = executor.submit(execute_task, part)
+                fut = executor.submit(execute_contained, part)
             except cf.BrokenExecutor:
                 if alone:
                     self.suspects.appendleft((i, part))
@@ -484,11 +485,7 @@ def _end_with_parent() -> None:
     also polls the parent's pid (a dead parent's children are re-parented) and exits, as a fallback.
     """
     parent = os.getppid()
-    if sys.platform.startswith("linux"):
-        with contextlib.suppress(OSError, AttributeError):
-            libc = ctypes.CDLL(None, use_errno=True)
-            libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
-    if os.getppid() != parent or parent == 1:  # the parent died before the request above took effect
+    if not die_with_parent(parent):  # the parent died before the request took effect
         os._exit(1)
 
     def watch() -> None:
@@ -498,10 +495,6 @@ def _end_with_parent() -> None:
                 os._exit(1)
 
     threading.Thread(target=watch, name="locbench-parent-watchdog", daemon=True).start()
-
-
-#: ``prctl`` option: the signal this process receives when its parent dies (linux/prctl.h).
-_PR_SET_PDEATHSIG = 1
 
 
 def _pool_worker_init() -> None:

@@ -4,6 +4,14 @@ Entries are import paths (``"locbench.filters.ekf_landmarks:LandmarkEKF"``), imp
 filter or dataset is made, so a missing optional dependency shows as "unavailable: install ..."
 instead of an ImportError at start-up. Third-party packages can add entries through the
 ``locbench.filters`` and ``locbench.datasets`` entry-point groups.
+
+A plugin (an entry of those groups) is code locbench does not control: before its module is imported here,
+it is imported and its class checked (:func:`check_class`) in a child Python process under a time limit
+(:data:`PLUGIN_IMPORT_TIMEOUT_S`, ``$LOCBENCH_PLUGIN_TIMEOUT``); the plugins of a group share one child,
+which reports each as it is done. A plugin whose import raises anything (not only ImportError), hangs,
+exits or crashes, or whose class is not what its group expects, is *unavailable* with its entry point and
+the reason on one line (:meth:`Registry.load_error`): ``locbench list`` shows it so, making it raises
+:class:`PluginUnavailable`, and every other entry works as before.
 """
 
 from __future__ import annotations
@@ -11,13 +19,20 @@ from __future__ import annotations
 import dataclasses
 import importlib
 import importlib.metadata
+import json
+import os
+import select
+import subprocess
+import sys
+import time
+import traceback
 from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
 import numpy as np
 
-from locbench.errors import DependencyNotInstalled, UnknownIdError
+from locbench.errors import DependencyNotInstalled, UnknownIdError, one_line
 from locbench.seeding import dataset_rng
 from locbench.spec import Spec, build_params, format_spec, non_default_params, params_to_dict, parse_spec
 
@@ -39,6 +54,33 @@ class Entry:
     #: The distribution that registered the entry through an entry-point group, and its version ("" for ours).
     distribution: str = ""
     distribution_version: str = ""
+    #: Registered through an entry-point group (a plugin: imported in a child process first).
+    plugin: bool = False
+
+    def origin(self) -> str:
+        """``entry point NAME = module:attr (distribution version)``: where a plugin came from, for messages."""
+        dist = f" ({self.distribution} {self.distribution_version})" if self.distribution else ""
+        return f"entry point {self.id} = {self.entry_point}{dist}"
+
+
+class PluginUnavailable(DependencyNotInstalled):
+    """A plugin that failed to import or is not a valid filter or dataset class; the message names its entry
+    point and the cause."""
+
+
+#: Seconds a plugin's import (and class check) may take in the probing child process; ``$LOCBENCH_PLUGIN_TIMEOUT``
+#: overrides it (seconds > 0).
+PLUGIN_IMPORT_TIMEOUT_S = 60.0
+
+
+def plugin_import_timeout() -> float:
+    """The time limit of a plugin's import, s: ``$LOCBENCH_PLUGIN_TIMEOUT`` when set, else the default."""
+    raw = os.environ.get("LOCBENCH_PLUGIN_TIMEOUT", "")
+    try:
+        value = float(raw)
+    except ValueError:
+        return PLUGIN_IMPORT_TIMEOUT_S
+    return value if value > 0 and value == value else PLUGIN_IMPORT_TIMEOUT_S
 
 
 class Registry(Generic[T]):
@@ -49,6 +91,8 @@ class Registry(Generic[T]):
         self.group = group
         self._entries: dict[str, Entry] = {}
         self._plugins_loaded = False
+        #: id -> why the plugin does not load ("" when it does), from the probing child process
+        self._probed: dict[str, str] = {}
 
     def register(
         self,
@@ -74,19 +118,27 @@ class Registry(Generic[T]):
     def restore(self, snap: dict[str, Entry]) -> None:
         self._entries = dict(snap)
 
+    def forget_plugins(self) -> None:
+        """Drop the plugin entries and what their probes found: the next use reads the entry points again (a
+        distribution installed or removed meanwhile, a test's temporary one)."""
+        self._entries = {k: e for k, e in self._entries.items() if not e.plugin}
+        self._plugins_loaded = False
+        self._probed.clear()
+
     def _load_plugins(self) -> None:
         if self._plugins_loaded:
             return
         self._plugins_loaded = True
         for ep in importlib.metadata.entry_points(group=self.group):
             if ep.name not in self._entries:
-                self.register(ep.name, ep.value)
                 dist = ep.dist
-                if dist is not None:
-                    e = self._entries[ep.name]
-                    self._entries[ep.name] = dataclasses.replace(
-                        e, distribution=dist.name, distribution_version=dist.version
-                    )
+                self._entries[ep.name] = Entry(
+                    ep.name,
+                    ep.value,
+                    distribution=dist.name if dist is not None else "",
+                    distribution_version=dist.version if dist is not None else "",
+                    plugin=True,
+                )
 
     def ids(self) -> list[str]:
         """Every registered id, sorted."""
@@ -127,18 +179,45 @@ class Registry(Generic[T]):
         return _missing_module(tuple(getattr(cls, "requires_modules", ())), getattr(cls, "install_hint", "") or "")
 
     def _import(self, e: Entry) -> tuple[type[T] | None, str | None]:
-        """The entry's class, or None and why its module does not import (a missing optional dependency)."""
+        """The entry's class, or None and why it does not load (a missing optional dependency, a broken plugin)."""
+        if e.plugin:
+            broken = self.load_error(e.id)
+            if broken is not None:
+                return None, broken
         module_name, attr = e.entry_point.split(":", 1)
         try:
             module = importlib.import_module(module_name)
         except ImportError as exc:
             missing = getattr(exc, "name", None) or ""
-            if missing.split(".")[0] == "locbench":
+            if missing.split(".")[0] == "locbench" and not e.plugin:
                 raise  # a broken entry point of our own is a bug, not a missing dependency
             hint = e.install_hint or "pip install 'locbench[all]'"
-            return None, f"unavailable: {exc}; install with: {hint}"
+            where = f"{e.origin()}: " if e.plugin else ""
+            return None, f"unavailable: {where}{exc}; install with: {hint}"
+        except Exception as exc:
+            if not e.plugin:
+                raise
+            # it imported in the probing child: a failure here is one that depends on the moment
+            return None, self._broken(e, describe_error(exc))
         cls: type[T] = getattr(module, attr)
         return cls, None
+
+    def load_error(self, id: str) -> str | None:
+        """Why the plugin ``id`` does not load ("unavailable: entry point ... failed to load: ..."), else None
+        (also for an entry of our own); the plugins of the group are probed in a child process on first need
+        (:func:`probe_plugins`). A missing module is not a load error but a missing dependency
+        (:meth:`missing_dependency`)."""
+        e = self.entry(id)
+        if not e.plugin:
+            return None
+        if id not in self._probed:
+            todo = [x for x in self._entries.values() if x.plugin and x.id not in self._probed]
+            self._probed |= probe_plugins(self.kind, todo, plugin_import_timeout())
+        reason = self._probed.get(id, "")
+        return self._broken(e, reason) if reason else None
+
+    def _broken(self, e: Entry, reason: str) -> str:
+        return one_line(f"unavailable: {e.origin()} failed to load: {reason}")
 
     def unavailable_reason(self, id: str) -> str | None:
         """Why the entry cannot run here with its default parameters: a missing dependency or missing data.
@@ -156,7 +235,8 @@ class Registry(Generic[T]):
         """Import and return the registered class; ``DependencyNotInstalled`` when an optional dependency is missing."""
         reason = self.missing_dependency(id)
         if reason is not None:
-            raise DependencyNotInstalled(f"{self.kind} {id!r} is {reason}")
+            error = PluginUnavailable if self.load_error(id) is not None else DependencyNotInstalled
+            raise error(f"{self.kind} {id!r} is {reason}")
         cls, _ = self._import(self.entry(id))
         assert cls is not None  # it imported in missing_dependency
         return cls
@@ -176,6 +256,156 @@ def _missing_module(modules: tuple[str, ...], hint: str) -> str | None:
         except ImportError:
             return f"unavailable: {mod} is not installed; install it with: {hint or 'pip install ' + mod}"
     return None
+
+
+class PluginClassError(TypeError):
+    """A plugin's entry point names no attribute, or not a class of its group (:func:`check_class`)."""
+
+
+def describe_error(exc: BaseException) -> str:
+    """``Type: message (file.py:line)`` of an exception raised by a plugin's import, on one line; the line is the
+    innermost one of the plugin's code (not of locbench, which raised on its behalf, nor of importlib). The
+    findings of :func:`check_class` and a ``SyntaxError`` (whose message has its line) have no location."""
+    text = " ".join(str(exc).split())
+    if isinstance(exc, PluginClassError):
+        return text
+    if isinstance(exc, SyntaxError):
+        return f"SyntaxError: {text}"
+    frames = [f for f in traceback.extract_tb(exc.__traceback__) if not f.filename.startswith("<frozen")]
+    theirs = [f for f in frames if not f.filename.startswith(_PACKAGE_DIR)] or frames
+    where = f" ({theirs[-1].filename.rsplit('/', 1)[-1]}:{theirs[-1].lineno})" if theirs else ""
+    return f"{type(exc).__name__}: {text}{where}" if text else f"{type(exc).__name__}{where}"
+
+
+#: The folder of the locbench package (frames in it are not a plugin's).
+_PACKAGE_DIR = os.path.dirname(os.path.abspath(__file__)) + os.sep
+
+
+def check_class(kind: str, cls: object) -> None:
+    """Raise :class:`PluginClassError` (or the config's own error) unless ``cls`` is what a plugin of ``kind``
+    registers.
+
+    A filter: a subclass of :class:`~locbench.filters.base.Filter` whose ``Config`` is a
+    :class:`~locbench.filters.base.FilterConfig` dataclass that builds with its defaults and whose tuning ranges
+    are valid; a dataset: a :class:`~locbench.datasets.base.DatasetBuilder` whose ``Params`` is a dataclass (a
+    dataset's defaults may need a path given).
+    """
+    if kind == "filter":
+        from locbench.filters.base import Filter, FilterConfig
+        from locbench.tunable import tunable_fields
+
+        base, params, params_base = Filter, "Config", FilterConfig
+    else:
+        from locbench.datasets.base import DatasetBuilder
+
+        base, params, params_base, tunable_fields = DatasetBuilder, "Params", object, None  # type: ignore[assignment]
+    if not isinstance(cls, type) or not issubclass(cls, base):
+        raise PluginClassError(f"{_name(cls)} is not a subclass of {base.__module__}.{base.__name__}")
+    config = getattr(cls, params, None)
+    if not (isinstance(config, type) and issubclass(config, params_base) and dataclasses.is_dataclass(config)):
+        raise PluginClassError(f"{cls.__name__}.{params} must be a dataclass deriving from {params_base.__name__}")
+    if tunable_fields is not None:
+        config()  # a filter runs with its default config: the defaults must pass its own checks
+        tunable_fields(config)  # every tuning range well-formed
+
+
+def _name(obj: object) -> str:
+    """``module.Name`` of a class or function, else its type's: how a wrong registration is named."""
+    named = obj if isinstance(obj, type) or callable(obj) else type(obj)
+    return f"{getattr(named, '__module__', '?')}.{getattr(named, '__qualname__', repr(named))}" + (
+        "" if named is obj else " instance"
+    )
+
+
+#: The code the probing child runs: ``python -c PROBE KIND ENTRY_POINT ...``; one JSON line per entry point.
+_PROBE = "import sys; from locbench.registry import _probe_main; _probe_main(sys.argv[1], sys.argv[2:])"
+
+
+def _probe_main(kind: str, entry_points: list[str]) -> None:
+    """In the probing child: import each entry point and check its class, printing ``{"error": ...}`` for each
+    ("" when it loads) as soon as it is done, so the parent knows which one hangs or kills the child. The reports
+    go to the original stdout; what a plugin prints goes to stderr (discarded by the parent)."""
+    report = os.fdopen(os.dup(1), "w")
+    os.dup2(2, 1)
+    for ep in entry_points:
+        module_name, attr = ep.split(":", 1)
+        error = ""
+        try:
+            module = importlib.import_module(module_name)
+            if not hasattr(module, attr):
+                raise PluginClassError(f"module {module_name!r} has no attribute {attr!r}")
+            check_class(kind, getattr(module, attr))
+        except ImportError:
+            error = ""  # a missing module: the parent reports it as a missing dependency, with its install hint
+        except BaseException as exc:  # SystemExit too: reported, and the next entry point is probed
+            error = describe_error(exc)
+        report.write(json.dumps({"error": error}) + "\n")
+        report.flush()
+
+
+def probe_plugins(kind: str, entries: list[Entry], timeout_s: float) -> dict[str, str]:
+    """Import and check each plugin entry in a child Python process: id -> why it does not load, "" if it does.
+
+    One child for all of them; each entry gets ``timeout_s`` seconds (the child's start included for the first),
+    after which the child is killed, the entry is recorded as hanging and the rest go to a fresh child. A child
+    that dies takes the entry it was on with it, with its exit status. A ``KeyboardInterrupt`` kills the child
+    and propagates. The child sees this process's ``sys.path``.
+    """
+    verdicts: dict[str, str] = {}
+    left = list(entries)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+    while left:
+        argv = [sys.executable, "-c", _PROBE, kind, *(e.entry_point for e in left)]
+        proc = subprocess.Popen(
+            argv, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL, env=env
+        )
+        try:
+            assert proc.stdout is not None
+            buf = b""
+            deadline = time.monotonic() + timeout_s
+            while left:
+                wait = deadline - time.monotonic()
+                ready = select.select([proc.stdout], [], [], max(0.0, min(wait, 1.0)))[0] if wait > 0 else []
+                if not ready:
+                    if time.monotonic() < deadline:
+                        continue
+                    verdicts[left.pop(0).id] = f"its import did not finish within {timeout_s:g} s"
+                    break
+                chunk = os.read(proc.stdout.fileno(), 65536)
+                if not chunk:  # the child ended before reporting the entry it was on
+                    code = proc.wait()
+                    how = f"signal {_signal_name(-code)}" if code < 0 else f"exit code {code}"
+                    verdicts[left.pop(0).id] = f"its import ended the process ({how})"
+                    break
+                buf += chunk
+                while b"\n" in buf and left:
+                    line, buf = buf.split(b"\n", 1)
+                    verdicts[left.pop(0).id] = _verdict(line)
+                    deadline = time.monotonic() + timeout_s
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+            proc.wait()
+            if proc.stdout is not None:
+                proc.stdout.close()
+    return verdicts
+
+
+def _verdict(line: bytes) -> str:
+    """The error of one report line of the probing child ("" when the entry loads)."""
+    try:
+        return str(json.loads(line)["error"])
+    except (ValueError, KeyError, TypeError):
+        return f"the probing process reported {line[:200]!r}"
+
+
+def _signal_name(sig: int) -> str:
+    import signal
+
+    try:
+        return signal.Signals(sig).name
+    except ValueError:
+        return str(sig)
 
 
 FILTERS: Registry[Any] = Registry("filter", "locbench.filters")

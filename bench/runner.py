@@ -30,6 +30,8 @@ from typing import Any
 import numpy as np
 
 from locbench import provenance
+from locbench.containment import DEFAULT_RULE, call_in_child, current_run_timeout, run_time_limit
+from locbench.contract import EstimateContractError, check_shapes, first_violation
 from locbench.datasets.base import Dataset
 from locbench.divergence import left_world, world_box
 from locbench.errors import DataNotFound, FilterDiverged
@@ -195,6 +197,7 @@ class FilterPass:
     def _record(self, tt: float, k: int, ns: int) -> None:
         flt, row, n_max = self._flt, self.row, self._n_max
         est = flt.estimate()
+        check_shapes(est.mean, est.cov, tt)  # a wrong shape would be broadcast into the rows, or fail as numpy's
         self.t[row], self.kind[row], self.step_ns[row] = tt, k, ns
         self.mean[row] = est.mean
         self.cov[row] = est.cov
@@ -217,6 +220,9 @@ class FilterPass:
         self.row += 1
 
     def _fail(self, exc: Exception) -> None:
+        if isinstance(exc, EstimateContractError):
+            self.status, self.message = "error", str(exc)
+            return
         if isinstance(exc, FilterDiverged):
             self.status, self.message = "diverged", str(exc)
             self.diverged_t = float(self.t[self.row - 1]) if self.row else float(self._t0)
@@ -264,6 +270,7 @@ class FilterPass:
 
     def finish(self) -> FilterTrace:
         """The pass's trace (after its filter's extra results and the belief scores, when it ended ok)."""
+        self._check_contract()
         row = self.row
         if self._deferred:
             self.health = _gaussian_health_after(
@@ -289,6 +296,16 @@ class FilterPass:
             extra,
             {k: v[:row] for k, v in self.health.items()},
         )
+
+    def _check_contract(self) -> None:
+        """The estimate contract's values over the rows recorded (:func:`locbench.contract.first_violation`): the
+        first violation, when it comes before the pass's own end, fails the run there (its rows end with it)."""
+        found = first_violation(self.t[: self.row], self.mean[: self.row], self.cov[: self.row])
+        if found is None:
+            return
+        i, message = found
+        self.row = i + 1
+        self.status, self.message, self.diverged_t = "error", message, None
 
 
 _BOTH_COUNTS = " accepted+rejected"  # run_filter's key of the first row with both counts (no name has a space)
@@ -407,6 +424,9 @@ class Task:
     #: Interleaved timing: the seconds of data each filter runs before the next takes over (:func:`_interleaved`);
     #: 0 runs each filter over the whole dataset in turn.
     slice_s: float = 0.0
+    #: The time limit of each run, s: None for the default rule on the dataset's duration
+    #: (:func:`locbench.containment.run_time_limit`), ``inf`` for none; by default the command's ``--run-timeout``.
+    run_timeout_s: float | None = field(default_factory=current_run_timeout)
 
     @property
     def label(self) -> str:
@@ -661,8 +681,51 @@ def execute_task(task: Task) -> TaskResult:
         return failed_result(task, built.status, built.message)
     ds, truth = built
     bound = _bound(task, ds)
-    runs = _interleaved(task, ds) if task.slice_s > 0 else [_run_job(task, job, ds) for job in task.jobs]
+    return TaskResult(truth, _runs(task, ds), bound)
+
+
+def execute_contained(task: Task) -> TaskResult:
+    """:func:`execute_task`, its filters run in a child process under the run time limit; what executors run.
+
+    The dataset is built (or taken) and the bound computed here, in the worker, and the child forked from it
+    shares them; the child runs the filters (:func:`locbench.containment.call_in_child`) and returns their
+    records. A child that exits, dies by a signal, lets an exception such as ``SystemExit`` escape or passes
+    the limit (``len(task.jobs)`` times the limit of a run, for an interleaved part) is an error run for each
+    of the part's filters, with the reason; a death or a timeout is marked transient (the next sweep runs it
+    again). Every record carries its limit in ``run_timeout_s`` (None: no limit) and ``run_timeout_rule``.
+    """
+    built = _realisation(task)
+    if isinstance(built, _BuildFailed):
+        return failed_result(task, built.status, built.message)
+    ds, truth = built
+    bound = _bound(task, ds)
+    # the provenance every record takes, computed here once: a child's caches die with it
+    provenance.versions()
+    provenance.git_state()
+    limit = run_time_limit(ds.duration, task.run_timeout_s)
+    rule = DEFAULT_RULE if task.run_timeout_s is None else "--run-timeout"
+    outcome = call_in_child(lambda: _runs(task, ds), limit * max(1, len(task.jobs)))
+    if outcome.ok:
+        runs: list[RunRecord] = outcome.value
+    else:
+        if outcome.kind == "timeout":
+            how = "set by --run-timeout" if task.run_timeout_s is not None else f"{DEFAULT_RULE} on {ds.duration:.1f} s"
+            message = f"timed out: the run passed its time limit of {limit:g} s ({how}; change it with --run-timeout)"
+        else:
+            message = outcome.message
+        log.error("%s: %s", task.label, message)
+        runs = failed_result(task, "error", message, transient=outcome.kind != "raised").runs
+        for rec in runs:
+            rec.meta["wall_s"] = outcome.wall_s
+    for rec in runs:
+        rec.meta["run_timeout_s"] = limit if math.isfinite(limit) else None
+        rec.meta["run_timeout_rule"] = rule
     return TaskResult(truth, runs, bound)
+
+
+def _runs(task: Task, ds: Dataset) -> list[RunRecord]:
+    """The records of the task's filters on its built dataset (what :func:`execute_task` runs after the build)."""
+    return _interleaved(task, ds) if task.slice_s > 0 else [_run_job(task, job, ds) for job in task.jobs]
 
 
 def _rngs(task: Task, job: Job) -> tuple[np.random.Generator, np.random.Generator]:

@@ -77,8 +77,8 @@ and raw scan are both kept. The pose track is judged over the time between stamp
 stamps are the IPC delivery times, which come in bursts (half the consecutive ODOM stamps lie less than 1 ms apart
 while the pose moved 3 cm, then none for up to 3.5 s): on the stamps alone the bound flags 323 ODOM and 2348 FLASER
 poses of the shared log, with 0.1 s of slack still 10 and 4; with 1 s the speed bound catches a jump of more than
-5 m, and the turn-rate bound no turn (1 s at 10 rad/s exceeds pi). The shared files flag nothing. Relation times are checked against every FLASER of the log, flagged or not
-(a relation is the benchmark's, not the scan's).
+5 m, and the turn-rate bound no turn (1 s at 10 rad/s exceeds pi). The shared files flag nothing. Relation times
+are checked against every FLASER of the log, flagged or not (a relation is the benchmark's, not the scan's).
 
 Map lines (for ``ekf_lines``): a Hough transform of the occupied cells (1 deg x one cell), taken greedily:
 at the strongest bin, the cells within one cell of its line are fitted by total least squares, the cells
