@@ -581,8 +581,23 @@ def _read_streams_cached(
     arrays = (odom_t, odom_pose, odom_twist, truth_t, truth_pose, *fix_arrays)
     for a in arrays:
         a.setflags(write=False)  # shared through the cache
-    streams = BagStreams(odom_t, odom_pose, odom_twist, scans, truth_t, truth_pose, truth_type, topics, *arrays[5:])
-    return dataclasses.replace(streams, flagged=flagged)
+    fix_t, fix_llh, fix_cov, fix_cov_type, fix_status = fix_arrays
+    return BagStreams(
+        odom_t,
+        odom_pose,
+        odom_twist,
+        scans,
+        truth_t,
+        truth_pose,
+        truth_type,
+        topics,
+        fix_t=fix_t,
+        fix_llh=fix_llh,
+        fix_cov=fix_cov,
+        fix_cov_type=fix_cov_type,
+        fix_status=fix_status,
+        flagged=flagged,
+    )
 
 
 def _fix_arrays(fixes: list[tuple[float, Any]]) -> tuple[npt.NDArray[Any], ...]:

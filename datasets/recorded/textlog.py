@@ -659,13 +659,13 @@ def _flag_events(
         if kind == "odometry":
             _flag_odometry(flags, of, b)
         elif kind in ("landmarks", "ranges"):
-            worst = np.array([_worst(np.asarray(e.ranges), 0.0, b.range_m) for e in of])  # type: ignore[attr-defined]
+            worst = np.array([_worst(np.asarray(e.ranges), 0.0, b.range_m) for e in of])  # type: ignore[union-attr]
             flags.flag_outside(worst, "range, m", 0.0, b.range_m)
             if kind == "landmarks":
-                worst = np.array([_worst(np.asarray(e.bearings), -_TWO_PI, _TWO_PI) for e in of])  # type: ignore[attr-defined]
+                worst = np.array([_worst(np.asarray(e.bearings), -_TWO_PI, _TWO_PI) for e in of])  # type: ignore[union-attr]
                 flags.flag_outside(worst, "bearing, rad", -_TWO_PI, _TWO_PI)
         elif kind == "fix":
-            var = np.array([float(np.max(np.diag(e.cov)[:2])) for e in of])  # type: ignore[attr-defined]
+            var = np.array([float(np.max(np.diag(e.cov)[:2])) for e in of])  # type: ignore[union-attr]
             flags.flag_outside(var, "position variance, m^2", 0.0, b.variance_m2)
         keep[at[flags.mask]] = False
         found.append(flags.finish())
