@@ -127,13 +127,17 @@ def describe_exception(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {text}{where}" if text else f"{type(exc).__name__}{where}"
 
 
-def _child(fn: Callable[[], Any], write_fd: int, parent: int) -> None:
-    """The child's whole life: run ``fn``, write its pickled outcome, exit without returning to the caller."""
+def _child(fn: Callable[[], Any], write_fd: int, parent: int, mask: set[signal.Signals]) -> None:
+    """The child's whole life: run ``fn``, write its pickled outcome, exit without returning to the caller.
+
+    ``mask``: the signal mask to restore once the child's own handlers are in place (the fork blocked SIGINT).
+    """
     code = 0
     try:
         with contextlib.suppress(ValueError, OSError):  # not the main thread of a platform without it: keep going
             signal.signal(signal.SIGINT, signal.SIG_IGN)
             signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
         if not die_with_parent(parent):
             os._exit(1)
         try:
@@ -171,10 +175,16 @@ def call_in_child(fn: Callable[[], Any], timeout_s: float) -> ChildOutcome:
     read_fd, write_fd = os.pipe()
     start = time.perf_counter()
     parent = os.getpid()
-    pid = os.fork()
-    if pid == 0:  # the child
-        os.close(read_fd)
-        _child(fn, write_fd, parent)
+    # A Ctrl-C during the fork would raise inside an at-fork hook, where Python prints it and drops it: it is held
+    # until the fork is done, then delivered in the parent (the child ignores it).
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    try:
+        pid = os.fork()
+        if pid == 0:  # the child
+            os.close(read_fd)
+            _child(fn, write_fd, parent, mask)
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
     os.close(write_fd)
     reaped = False
     try:
