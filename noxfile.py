@@ -51,7 +51,7 @@ def tests(session: nox.Session) -> None:
     """Run the test suite (recorded-data tests read $LOCBENCH_DATA and skip without it); with Stone Soup, so
     that the bound's recursion is compared with its PCRB metric, and with the example plugin package."""
     _install(session, "all,test,stonesoup")
-    # the example plugin package, so that tests/test_plugin_example.py checks the entry-point path (without it
+    # the example plugin package, so that tests/run/test_plugin_example.py checks the entry-point path (without it
     # that file skips); --no-deps: locbench is the checkout's, never an index's
     session.install("--no-deps", EXAMPLE_PLUGIN)
     session.run("pytest", "--benchmark-disable", *session.posargs, env=_data_env())
@@ -59,9 +59,9 @@ def tests(session: nox.Session) -> None:
 
 #: The tests that race the machine (executors, Ctrl-C, child processes, dask's ports): run again under load by CI.
 BUSY_TESTS = (
-    "tests/test_sweeps.py",
-    "tests/test_runner.py",
-    "tests/test_store.py",
+    "tests/run/test_sweeps.py",
+    "tests/run/test_runner.py",
+    "tests/run/test_store.py",
     "tests/malformed/test_untrusted_inputs.py",
 )
 #: The dask signal tests among the slow ones (a LocalCluster's start is where a Ctrl-C used to be dropped).
@@ -74,22 +74,50 @@ def tests_busy(session: nox.Session) -> None:
     _install(session, "all,test")
     common = ("pytest", "--benchmark-disable", "-p", "no:cacheprovider")
     session.run(*common, "-m", "not slow", *(session.posargs or BUSY_TESTS), env=_data_env())
-    session.run(*common, "-m", "slow", "-k", BUSY_DASK, "tests/test_sweeps.py", env=_data_env())
+    session.run(*common, "-m", "slow", "-k", BUSY_DASK, "tests/run/test_sweeps.py", env=_data_env())
 
 
 #: The numeric tests: every comparison with numpy, OpenBLAS, LAPACK, scipy, filterpy, gtsam or Stone Soup (filters,
 #: kernels, metrics, scores, bound, ray casting, datasets), led by the check that the dispatch below took effect.
 DISPATCH_TESTS = (
     "tests/test_cpu_dispatch.py",
-    *(f"tests/test_{name}.py" for name in (
-        "ukf_kernels", "ukf_landmarks", "kf_linear", "kalman", "ekf_landmarks", "ekf_lines", "ekf_icp", "pf",
-        "gtsam_fls", "odometry_filter", "motion", "line_extraction", "scan_database", "landmark_index", "raycast",
-        "scan_grid", "metrics", "scores", "kidnap_metrics", "lost", "pcrb", "pcrb_stonesoup", "bound_rows",
-        "health_rows", "aggregate", "significance", "synthetic", "line_room", "landmark_geometry", "matched",
-        "textlog", "recorded_scores", "recorded_lost_in_the_woods", "recorded_mrclam", "recorded_plaza",
-        "recorded_librsf",
-    )),
-)  # fmt: skip
+    "tests/filters/test_ukf_kernels.py",
+    "tests/filters/test_ukf_landmarks.py",
+    "tests/filters/test_kf_linear.py",
+    "tests/filters/test_kalman.py",
+    "tests/filters/test_ekf_landmarks.py",
+    "tests/filters/test_ekf_lines.py",
+    "tests/filters/test_ekf_icp.py",
+    "tests/filters/test_pf.py",
+    "tests/filters/test_gtsam_fls.py",
+    "tests/filters/test_odometry_filter.py",
+    "tests/filters/test_motion.py",
+    "tests/filters/test_line_extraction.py",
+    "tests/filters/test_scan_database.py",
+    "tests/filters/test_landmark_index.py",
+    "tests/raycast/test_raycast.py",
+    "tests/datasets/synthetic/test_scan_grid.py",
+    "tests/evaluate/test_metrics.py",
+    "tests/evaluate/test_scores.py",
+    "tests/report/test_kidnap_metrics.py",
+    "tests/evaluate/test_lost.py",
+    "tests/evaluate/test_pcrb.py",
+    "tests/evaluate/test_pcrb_stonesoup.py",
+    "tests/report/test_bound_rows.py",
+    "tests/report/test_health_rows.py",
+    "tests/evaluate/test_aggregate.py",
+    "tests/evaluate/test_significance.py",
+    "tests/datasets/synthetic/test_synthetic.py",
+    "tests/datasets/synthetic/test_line_room.py",
+    "tests/datasets/synthetic/test_landmark_geometry.py",
+    "tests/datasets/synthetic/test_matched.py",
+    "tests/datasets/recorded/test_textlog.py",
+    "tests/report/test_recorded_scores.py",
+    "tests/datasets/recorded/test_recorded_lost_in_the_woods.py",
+    "tests/datasets/recorded/test_recorded_mrclam.py",
+    "tests/datasets/recorded/test_recorded_plaza.py",
+    "tests/datasets/recorded/test_recorded_librsf.py",
+)
 #: Kernels other than a current x86-64 CPU's default: numpy without its X86_V3/X86_V4 loops (AVX2, FMA3, AVX-512:
 #: the SSE4.2 baseline), OpenBLAS's Katmai kernels (plain C, they run on every x86-64 CPU; their sums round unlike
 #: Haswell's and SkylakeX's), numba compiling for a generic x86-64. tests/test_cpu_dispatch.py fails when numpy or
@@ -181,7 +209,7 @@ def html(session: nox.Session) -> None:
         "LOCBENCH_SCREENSHOTS": os.path.abspath("results/summary"),
     }
     session.run(
-        "pytest", "--benchmark-disable", "tests/test_report.py", "-k", "html", "-p", "no:cacheprovider", env=env
+        "pytest", "--benchmark-disable", "tests/report/test_report.py", "-k", "html", "-p", "no:cacheprovider", env=env
     )
 
 

@@ -1,7 +1,7 @@
 """Conformance checks for filters and datasets, after scikit-learn's ``check_estimator``.
 
 A filter check takes a filter class or instance (so a filter can be checked before it is registered), runs it
-through the runner's own loop (:func:`locbench.runner.run_filter`, which resets it, routes each event to
+through the runner's own loop (:func:`locbench.run.runner.run_filter`, which resets it, routes each event to
 ``predict`` or ``update`` and reads ``estimate()`` after every call) and raises :class:`CheckFailed` when the
 filter breaks the contract. Each check declares when it applies, from the filter's declared capabilities
 (``consumes``, ``requires``, ``routed_events()``); :func:`yield_filter_checks` yields the ones that apply and
@@ -21,15 +21,15 @@ from typing import Any
 
 import numpy as np
 
-from locbench.datasets.base import Dataset, MapKind, check_dataset_contract
-from locbench.errors import DependencyNotInstalled, LocbenchError, UnknownIdError
-from locbench.events import EVENT_TYPES, OBSERVATION_TYPES, LandmarkObservations, Odometry, RangeObservations
+from locbench.core.errors import DependencyNotInstalled, LocbenchError, UnknownIdError
+from locbench.core.events import EVENT_TYPES, OBSERVATION_TYPES, LandmarkObservations, Odometry, RangeObservations
+from locbench.core.geometry import is_symmetric_psd, pose_error
+from locbench.core.seeding import belief_rng, filter_rng
+from locbench.core.spec import Spec
+from locbench.datasets.dataset import Dataset, MapKind, check_dataset_contract
 from locbench.filters.base import HEALTH_SIGNALS, Filter, FilterConfig
-from locbench.geometry import is_symmetric_psd, pose_error
 from locbench.registry import DATASETS, FILTERS, make_dataset, make_filter, resolve_dataset, resolve_filter
-from locbench.runner import FilterTrace, incompatibility, run_filter
-from locbench.seeding import belief_rng, filter_rng
-from locbench.spec import Spec
+from locbench.run.runner import FilterTrace, incompatibility, run_filter
 
 #: What a filter check accepts: a filter instance, or a class (checked with its default config).
 FilterLike = Filter | type[Filter]
@@ -274,8 +274,8 @@ def check_empty_observation(flt: Filter) -> None:
 def check_health_and_scores(flt: Filter) -> None:
     """``health()`` gives named floats from :data:`HEALTH_SIGNALS` at every step; drawing belief samples (the
     runner's generator) changes no estimate; the four proper scores of the run are finite."""
-    from locbench.metrics import align
-    from locbench.scores import SCORE_IDS, score_metrics
+    from locbench.evaluate.metrics import align
+    from locbench.evaluate.scores import SCORE_IDS, score_metrics
 
     ds = _tiny("tiny_circle")
     plain = _run(_fresh(flt), ds)

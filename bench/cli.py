@@ -27,16 +27,16 @@ from pathlib import Path
 from typing import Any
 
 from locbench import __version__
-from locbench.errors import ConfigError, LocbenchError, one_line
-from locbench.spec import MAX_CONFIGS
+from locbench.core.errors import ConfigError, LocbenchError, one_line
+from locbench.core.spec import MAX_CONFIGS
 from locbench.suites import MAX_SEEDS
 
 #: ``locbench run --interleave`` without a value: seconds of data each filter of a task runs before the next
-#: (:attr:`locbench.runner.Task.slice_s`); and the longest slice accepted.
+#: (:attr:`locbench.run.runner.Task.slice_s`); and the longest slice accepted.
 INTERLEAVE_SLICE_S = 5.0
 MAX_INTERLEAVE_S = 3600.0
 
-#: The suite that tunes (``locbench run --suite tuned``), run by :mod:`locbench.tuning`, not as blocks of runs.
+#: The suite that tunes (``locbench run --suite tuned``), run by :mod:`locbench.run.tuning`, not as blocks of runs.
 TUNED_SUITE = "tuned"
 
 log = logging.getLogger("locbench")
@@ -68,10 +68,10 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
 def _list_params(ids: Sequence[str]) -> int:
     """Each parameter of the named filters and datasets: type, default, unit and meaning."""
-    from locbench.errors import UnknownIdError
+    from locbench.core.errors import UnknownIdError
+    from locbench.core.spec import describe_params
+    from locbench.core.tunable import tunable_fields
     from locbench.registry import DATASETS, FILTERS
-    from locbench.spec import describe_params
-    from locbench.tunable import tunable_fields
 
     for ident in ids:
         if ident in FILTERS:
@@ -108,9 +108,9 @@ def _list_params(ids: Sequence[str]) -> int:
 def _cmd_run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from locbench.executors import check_scheduler_address
-    from locbench.runner import plan_sweep, run_sweep
-    from locbench.store import Store
+    from locbench.run.executors import check_scheduler_address
+    from locbench.run.runner import plan_sweep, run_sweep
+    from locbench.run.store import Store
     from locbench.suites import Block, check_seeds, get_suite
 
     # every input is checked here, before anything is expanded, run or written
@@ -168,8 +168,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 def _run_tuned(args: argparse.Namespace) -> int:
     """Suite ``tuned``: every study (tuning on train data), then the tuned and default configurations on test data."""
-    from locbench.runner import SweepResult
-    from locbench.tuning import run_tuned_suite
+    from locbench.run.runner import SweepResult
+    from locbench.run.tuning import run_tuned_suite
 
     res = run_tuned_suite(args.results, executor=args.executor, jobs=args.jobs, scheduler=args.scheduler)
     for s, reason in res.skipped:
@@ -194,7 +194,7 @@ MAX_CONNECT_TIMEOUT_S = 3600.0
 
 def _print_summary(sweep: Any, results: str) -> int:
     """Counts by status, then one line per (status, filter, dataset, reason) with a count; 1 if any run failed."""
-    from locbench.runner import NOT_STORED
+    from locbench.run.runner import NOT_STORED
 
     outcomes = sweep.outcomes
     counts = Counter(o.status for o in outcomes)
@@ -233,7 +233,7 @@ def _print_summary(sweep: Any, results: str) -> int:
 
 def _cmd_report(args: argparse.Namespace) -> int:
     from locbench.report import suite_filter, summary_text, write_report
-    from locbench.store import Store
+    from locbench.run.store import Store
 
     store = Store(args.results)
     if not store.runs.is_dir():
@@ -249,8 +249,8 @@ def _cmd_report(args: argparse.Namespace) -> int:
 
 
 def _cmd_verify(args: argparse.Namespace) -> int:
-    from locbench.store import MARKER, Store
-    from locbench.verify import verify, write_record
+    from locbench.run.store import MARKER, Store
+    from locbench.run.verify import verify, write_record
 
     if not 0.0 < args.fraction <= 1.0:
         raise ConfigError(f"--fraction: expected a share of the runs in (0, 1], got {args.fraction}")
@@ -279,8 +279,8 @@ def _cmd_verify(args: argparse.Namespace) -> int:
 
 
 def _cmd_tune(args: argparse.Namespace) -> int:
-    from locbench.executors import check_scheduler_address
-    from locbench.tuning import check_trials, train_seeds, tune
+    from locbench.run.executors import check_scheduler_address
+    from locbench.run.tuning import check_trials, train_seeds, tune
 
     # every argument is bounded as for 'run', before the study's journal is opened or anything runs
     check_trials(args.trials)
@@ -371,8 +371,8 @@ def _cmd_fetch(args: argparse.Namespace) -> int:
 def _cmd_export(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from locbench.export import export_results, export_textlog
     from locbench.registry import resolve_dataset, resolve_filter
+    from locbench.run.export import export_results, export_textlog
 
     if args.format == "textlog":
         if len(args.dataset) != 1 or args.filter or args.smoothed or not args.out:
@@ -566,8 +566,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _run_timeout_arg(text: str) -> float:
-    """``--run-timeout``'s value (:func:`locbench.containment.parse_run_timeout`) as argparse reads it."""
-    from locbench.containment import parse_run_timeout
+    """``--run-timeout``'s value (:func:`locbench.run.containment.parse_run_timeout`) as argparse reads it."""
+    from locbench.run.containment import parse_run_timeout
 
     try:
         return parse_run_timeout(text)
@@ -576,7 +576,7 @@ def _run_timeout_arg(text: str) -> float:
 
 
 def _add_run_timeout(p: argparse.ArgumentParser) -> None:
-    from locbench.containment import DEFAULT_RULE
+    from locbench.run.containment import DEFAULT_RULE
 
     p.add_argument(
         "--run-timeout",
@@ -594,7 +594,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(
         level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s"
     )
-    from locbench.containment import run_timeout
+    from locbench.run.containment import run_timeout
 
     try:
         with run_timeout(getattr(args, "run_timeout", None)):  # the runs planned by the command get the limit

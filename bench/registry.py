@@ -32,9 +32,9 @@ from typing import Any, Generic, TypeVar
 
 import numpy as np
 
-from locbench.errors import DependencyNotInstalled, UnknownIdError, one_line
-from locbench.seeding import dataset_rng
-from locbench.spec import Spec, build_params, format_spec, non_default_params, params_to_dict, parse_spec
+from locbench.core.errors import DependencyNotInstalled, UnknownIdError, one_line
+from locbench.core.seeding import dataset_rng
+from locbench.core.spec import Spec, build_params, format_spec, non_default_params, params_to_dict, parse_spec
 
 T = TypeVar("T")
 
@@ -287,16 +287,16 @@ def check_class(kind: str, cls: object) -> None:
 
     A filter: a subclass of :class:`~locbench.filters.base.Filter` whose ``Config`` is a
     :class:`~locbench.filters.base.FilterConfig` dataclass that builds with its defaults and whose tuning ranges
-    are valid; a dataset: a :class:`~locbench.datasets.base.DatasetBuilder` whose ``Params`` is a dataclass (a
+    are valid; a dataset: a :class:`~locbench.datasets.dataset.DatasetBuilder` whose ``Params`` is a dataclass (a
     dataset's defaults may need a path given).
     """
     if kind == "filter":
+        from locbench.core.tunable import tunable_fields
         from locbench.filters.base import Filter, FilterConfig
-        from locbench.tunable import tunable_fields
 
         base, params, params_base = Filter, "Config", FilterConfig
     else:
-        from locbench.datasets.base import DatasetBuilder
+        from locbench.datasets.dataset import DatasetBuilder
 
         base, params, params_base, tunable_fields = DatasetBuilder, "Params", object, None  # type: ignore[assignment]
     if not isinstance(cls, type) or not issubclass(cls, base):
@@ -595,13 +595,13 @@ def make_filter(spec: str | Resolved) -> Any:
 def make_dataset(spec: str | Resolved, seed: int | np.random.Generator = 0) -> Any:
     """Build the dataset for ``spec``.
 
-    With an integer ``seed`` the randomness comes from :func:`locbench.seeding.dataset_rng`, exactly as in
+    With an integer ``seed`` the randomness comes from :func:`locbench.core.seeding.dataset_rng`, exactly as in
     the runner, so ``make_dataset("room", 3)`` is the data every filter saw for seed 3.
 
     Raises
     ------
     ConfigError
-        The built dataset breaks the contract (:meth:`locbench.datasets.base.Dataset.check`: no odometry, events
+        The built dataset breaks the contract (:meth:`locbench.datasets.dataset.Dataset.check`: no odometry, events
         out of order, truth not spanning the events, a declared sensor stream empty ...); the message names the
         dataset and, for recorded data, its files.
     """

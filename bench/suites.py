@@ -19,10 +19,10 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from locbench.errors import ConfigError, UnknownIdError, one_line, shown
-from locbench.limits import check_input_file
+from locbench.core.errors import ConfigError, UnknownIdError, one_line, shown
+from locbench.core.limits import check_input_file
+from locbench.core.spec import MAX_CONFIGS, Spec, expand_grid, grid_size
 from locbench.registry import BUILTIN_FILTERS
-from locbench.spec import MAX_CONFIGS, Spec, expand_grid, grid_size
 
 #: Most seeds a block may run (``--max-seeds`` raises it; a suite file's ``seeds`` too).
 MAX_SEEDS = 10_000
@@ -34,7 +34,7 @@ MAX_SUITE_BYTES = 1 << 20
 class Block:
     """Every filter on every dataset for seeds 0 .. seeds-1.
 
-    Grid specs (``pf[particles=100|300]``, :func:`locbench.spec.expand_grid`) are expanded when the block is
+    Grid specs (``pf[particles=100|300]``, :func:`locbench.core.spec.expand_grid`) are expanded when the block is
     made, so ``filters`` and ``datasets`` hold one spec per run configuration. The block's size (filter
     configurations x dataset configurations) is counted before anything is expanded and refused above
     ``max_configs``, and ``seeds`` above ``max_seeds``.
@@ -271,7 +271,7 @@ _SUITES: tuple[Suite, ...] = (
         "accuracy against runtime: the main cost knob of each filter on office (pf particles, ekf_icp ICP "
         "iterations, gtsam_fls lag, ekf_landmarks' association gate)",
     ),
-    # Run by locbench.tuning (locbench run --suite tuned), not as blocks: each tunable filter tuned on train seeds
+    # Run by locbench.run.tuning (locbench run --suite tuned), not as blocks: each tunable filter tuned on train seeds
     # and recordings, then its tuned configuration and its default on the test data (docs/protocols.md, Tuning).
     Suite(
         "tuned",

@@ -29,9 +29,9 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
+from locbench.core.pairwise import pairwise_sum
 from locbench.filters._ekf_kernels import _propagate, _wrap
 from locbench.filters._icp import MIN_PAIRS
-from locbench.pairwise import pairwise_sum
 
 FloatArray = npt.NDArray[np.float64]
 

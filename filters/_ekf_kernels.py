@@ -41,7 +41,7 @@ BUF_STATE, BUF_OUT, BUF_ENC, BUF_LM, BUF_LIM, BUF_XY = 0, 12, 17, 26, 32, 36
 
 @njit(cache=True, inline="always")
 def _wrap(a: float) -> float:
-    """:func:`locbench.geometry.wrap_scalar`: the same expression (Python's float modulo, as numba's)."""
+    """:func:`locbench.core.geometry.wrap_scalar`: the same expression (Python's float modulo, as numba's)."""
     return math.pi - ((math.pi - a) % _TWO_PI)
 
 

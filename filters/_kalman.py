@@ -27,7 +27,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.stats import chi2
 
-from locbench.geometry import wrap_scalar
+from locbench.core.geometry import wrap_scalar
 
 FloatArray = npt.NDArray[np.float64]
 #: residual(z, h) -> y, the innovation (filterpy's ``residual`` argument).

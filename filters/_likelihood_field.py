@@ -17,7 +17,7 @@ every seed of a dataset rebuilds an identical grid. The per-cell log-likelihood 
 (grid, model parameters), so scoring a beam is one table look-up; the scoring loop over particles and
 beams is compiled with numba.
 
-Grid conventions are those of :class:`locbench.datasets.base.OccupancyGrid` (ROS map_server): row ``i``
+Grid conventions are those of :class:`locbench.datasets.dataset.OccupancyGrid` (ROS map_server): row ``i``
 spans y in [oy + i*res, oy + (i+1)*res), column ``j`` spans x likewise.
 """
 
@@ -35,7 +35,7 @@ import numpy.typing as npt
 from numba import njit
 from scipy import ndimage
 
-from locbench.datasets.base import OccupancyGrid
+from locbench.datasets.dataset import OccupancyGrid
 
 logger = logging.getLogger(__name__)
 

@@ -22,7 +22,7 @@ Steps 2-5 run as one compiled (numba) function over a scan's points; the end poi
 formed for all segments at once with numpy.
 
 Line parameters: a line is {p : p . (cos psi, sin psi) = rho} in the robot frame with ``rho`` >= 0 (m) and
-``psi`` in (-pi, pi] (rad), the convention of :meth:`locbench.datasets.base.LineMap.rho_psi`. For a line
+``psi`` in (-pi, pi] (rad), the convention of :meth:`locbench.datasets.dataset.LineMap.rho_psi`. For a line
 passing (nearly) through the robot, rho is near 0 and the sign of the normal, hence psi, may flip by pi
 between scans; the consumer must compare lines modulo that flip (``ekf_lines`` does).
 
@@ -45,8 +45,8 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
-from locbench.errors import ConfigError
-from locbench.events import LaserScan
+from locbench.core.errors import ConfigError
+from locbench.core.events import LaserScan
 
 FloatArray = npt.NDArray[np.float64]
 logger = logging.getLogger(__name__)

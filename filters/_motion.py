@@ -1,6 +1,6 @@
 """Wheel-encoder motion model of report 003 and the odometry-increment fallback, shared by the filters.
 
-Two ways to move a pose with one :class:`~locbench.events.Odometry` event:
+Two ways to move a pose with one :class:`~locbench.core.events.Odometry` event:
 
 * **encoder** (report 003 eq. 1-5, 10): the wheel travel (delta_l, delta_r) gives the travel of the
   mid-axis point delta_d and the heading change delta_theta; the pose moves along the chord at the midpoint
@@ -55,12 +55,12 @@ from typing import Literal
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import SensorSpec
-from locbench.events import Odometry
+from locbench.core.events import Odometry
+from locbench.core.geometry import wrap_angle, wrap_scalar
+from locbench.core.runkey import RUN_KEY_OMIT_IF_DEFAULT
+from locbench.core.tunable import tunable
+from locbench.datasets.dataset import SensorSpec
 from locbench.filters.base import POSITIVE_OR_DATASET, bound
-from locbench.geometry import wrap_angle, wrap_scalar
-from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
-from locbench.tunable import tunable
 
 FloatArray = npt.NDArray[np.float64]
 InputNoise = Literal["per_step", "cumulative"]

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import logging
 
-from locbench.datasets.base import SensorSpec
+from locbench.datasets.dataset import SensorSpec
 
 logger = logging.getLogger(__name__)
 

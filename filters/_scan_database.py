@@ -12,7 +12,7 @@ Database
     ``heading_step_deg`` (a divisor of 45 deg). The eight bearings are 0, 45, ..., 315 deg in the robot
     frame. Because a heading change of 45 deg is a cyclic shift of the eight bearings, the database stores
     per position the ranges of ``360 / heading_step_deg`` world-frame directions (one ray-cast with
-    :mod:`locbench.raycast`); the eight ranges of (position, heading h) are columns h, h + m, ..., h + 7m
+    :mod:`locbench.raycast.cast`); the eight ranges of (position, heading h) are columns h, h + m, ..., h + 7m
     (mod 360 / heading_step_deg) with m = 45 / heading_step_deg.
 
 Matching
@@ -57,12 +57,12 @@ import numpy.typing as npt
 from numba import njit
 from scipy import ndimage
 
-from locbench.datasets.base import OccupancyGrid
-from locbench.errors import ConfigError
-from locbench.events import LaserScan
-from locbench.geometry import TWO_PI, wrap_angle, wrap_scalar
-from locbench.limits import DATABASE_BYTES_PER_RAY, SCAN_DATABASE_BYTES_PER_CELL, check_bytes, grid_cells
-from locbench.raycast import cast_rays
+from locbench.core.errors import ConfigError
+from locbench.core.events import LaserScan
+from locbench.core.geometry import TWO_PI, wrap_angle, wrap_scalar
+from locbench.core.limits import DATABASE_BYTES_PER_RAY, SCAN_DATABASE_BYTES_PER_CELL, check_bytes, grid_cells
+from locbench.datasets.dataset import OccupancyGrid
+from locbench.raycast.cast import cast_rays
 
 logger = logging.getLogger(__name__)
 
@@ -268,7 +268,7 @@ def build_database(
     max_range_m: float,
     clearance_m: float,
 ) -> ScanDatabase:
-    """Record the database on ``grid`` (ray-cast with :func:`locbench.raycast.cast_rays`).
+    """Record the database on ``grid`` (ray-cast with :func:`locbench.raycast.cast.cast_rays`).
 
     Parameters
     ----------

@@ -50,7 +50,7 @@ _KIND_D, _UPLO_U = ord("d"), ord("U")
 
 @njit(cache=True, inline="always")
 def _wrap(a: float) -> float:
-    """:func:`locbench.geometry.wrap_scalar` (and ``wrap_angle`` elementwise): the same expression."""
+    """:func:`locbench.core.geometry.wrap_scalar` (and ``wrap_angle`` elementwise): the same expression."""
     return math.pi - ((math.pi - a) % _TWO_PI)
 
 

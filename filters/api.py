@@ -21,9 +21,8 @@ adds rules across fields after calling ``super().__post_init__()``).
 
 from __future__ import annotations
 
-from locbench.datasets.base import Gaussian2, Landmarks, LineMap, MapKind, OccupancyGrid, SensorSpec, WorldMap
-from locbench.errors import ConfigError, FilterDiverged
-from locbench.events import (
+from locbench.core.errors import ConfigError, FilterDiverged
+from locbench.core.events import (
     EVENT_TYPES,
     OBSERVATION_TYPES,
     UNKNOWN_ID,
@@ -35,6 +34,10 @@ from locbench.events import (
     PoseFix,
     RangeObservations,
 )
+from locbench.core.geometry import compose, wrap_angle, wrap_scalar
+from locbench.core.runkey import RUN_KEY_OMIT_IF_DEFAULT
+from locbench.core.tunable import field_unit, tunable, tunable_choice
+from locbench.datasets.dataset import Gaussian2, Landmarks, LineMap, MapKind, OccupancyGrid, SensorSpec, WorldMap
 from locbench.filters import motion, noise
 from locbench.filters.base import (
     HEALTH_SIGNALS,
@@ -54,9 +57,6 @@ from locbench.filters.base import (
     bound,
     gaussian_health,
 )
-from locbench.geometry import compose, wrap_angle, wrap_scalar
-from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
-from locbench.tunable import field_unit, tunable, tunable_choice
 
 __all__ = [
     "EVENT_TYPES",

@@ -18,10 +18,10 @@ from typing import Any, ClassVar
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import Gaussian2, MapKind, SensorSpec, WorldMap
-from locbench.errors import ConfigError
-from locbench.events import Event, Observation, Odometry
-from locbench.spec import BOUND_KEY, Bound, bound
+from locbench.core.errors import ConfigError
+from locbench.core.events import Event, Observation, Odometry
+from locbench.core.spec import BOUND_KEY, Bound, bound
+from locbench.datasets.dataset import Gaussian2, MapKind, SensorSpec, WorldMap
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -81,7 +81,7 @@ class HealthSignal:
 
     ``lost_when`` is ``"high"`` (a large value should mean the filter is lost: NIS, covariance trace, maximum
     weight) or ``"low"`` (a small value should: the NIS p-value, the effective sample size, inlier and accepted
-    fractions, w_fast / w_slow); the lost-detection scores (:mod:`locbench.lost`) orient each signal by it.
+    fractions, w_fast / w_slow); the lost-detection scores (:mod:`locbench.evaluate.lost`) orient each signal by it.
     """
 
     description: str
@@ -310,7 +310,7 @@ class Filter(abc.ABC):
         """The current belief; cheap to call after every event."""
 
     def belief_sample(self, rng: np.random.Generator) -> tuple[FloatArray, FloatArray] | None:
-        """A weighted sample of the current belief, for the proper scores (:mod:`locbench.scores`); optional.
+        """A weighted sample of the current belief, for the proper scores (:mod:`locbench.evaluate.scores`); optional.
 
         Returns poses (m, 3) (x m, y m, theta rad) and weights (m,) summing to 1, or None (the default) when the
         belief is the Gaussian of :meth:`estimate`, which is scored in closed form. ``rng`` is the runner's own

@@ -17,7 +17,7 @@ per 100 ms SIP cycle, 10 Hz); here they are scaled by dt / ``static_noise_period
 the same variance per second at any odometry rate (the synthetic robots report at 20 Hz).
 
 Observation (sec. III-A.2, eq. 2-3, 14). At each LaserScan a scan is ray-cast from the occupancy grid
-(:func:`locbench.raycast.cast_scan`, which marches on fields cached with the grid; version 1 used the plain
+(:func:`locbench.raycast.cast.cast_scan`, which marches on fields cached with the grid; version 1 used the plain
 traversal, whose ranges differ only by rounding) at the predicted sensor pose with the real scan's geometry
 (angle_min, angle_increment, beam count, range_max, sensor_pose). Both scans become points in the robot
 frame, and point-to-point ICP (:mod:`locbench.filters._icp`) aligns the real points (source) onto the
@@ -71,9 +71,12 @@ from typing import ClassVar
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import Gaussian2, MapKind, OccupancyGrid, SensorSpec, WorldMap
-from locbench.errors import ConfigError, FilterDiverged, ResourceLimit
-from locbench.events import LaserScan, Observation, Odometry
+from locbench.core.errors import ConfigError, FilterDiverged, ResourceLimit
+from locbench.core.events import LaserScan, Observation, Odometry
+from locbench.core.geometry import wrap_scalar
+from locbench.core.limits import RAYCAST_BYTES_PER_CELL, check_bytes, grid_cells
+from locbench.core.tunable import tunable
+from locbench.datasets.dataset import Gaussian2, MapKind, OccupancyGrid, SensorSpec, WorldMap
 from locbench.filters import _icp
 from locbench.filters._ekf_icp_kernels import (
     BUF_SIGMAS,
@@ -84,10 +87,7 @@ from locbench.filters._ekf_icp_kernels import (
 )
 from locbench.filters._icp import MIN_PAIRS, IcpResult
 from locbench.filters.base import POSITIVE, POSITIVE_OR_DATASET, Estimate, Filter, FilterConfig, bound
-from locbench.geometry import wrap_scalar
-from locbench.limits import RAYCAST_BYTES_PER_CELL, check_bytes, grid_cells
-from locbench.raycast import cast_scan
-from locbench.tunable import tunable
+from locbench.raycast.cast import cast_scan
 
 FloatArray = npt.NDArray[np.float64]
 logger = logging.getLogger(__name__)

@@ -23,7 +23,7 @@ in the tests.
 GPS-like pose fixes (report 001): H = [[1, 0, 0], [0, 1, 0]] (or I_3 with a heading) with the fix's own
 covariance.
 
-Range-only beacons (:class:`~locbench.events.RangeObservations`, e.g. the CMU Plaza radios; Djugash et al.
+Range-only beacons (:class:`~locbench.core.events.RangeObservations`, e.g. the CMU Plaza radios; Djugash et al.
 2009): a beacon at (x_B, y_B) of ``world.landmarks`` is measured at range r = |B - p| + noise from the robot
 origin, R = sigma^2 with sigma = ``range_only_sigma_m`` (else ``SensorSpec.range_sigma_m``), and
 
@@ -58,9 +58,12 @@ from typing import ClassVar, Literal
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import Gaussian2, MapKind, SensorSpec, WorldMap
-from locbench.errors import ConfigError, FilterDiverged
-from locbench.events import UNKNOWN_ID, LandmarkObservations, Observation, Odometry, PoseFix, RangeObservations
+from locbench.core.errors import ConfigError, FilterDiverged
+from locbench.core.events import UNKNOWN_ID, LandmarkObservations, Observation, Odometry, PoseFix, RangeObservations
+from locbench.core.geometry import wrap_angle, wrap_scalar
+from locbench.core.runkey import RUN_KEY_OMIT_IF_DEFAULT
+from locbench.core.tunable import tunable
+from locbench.datasets.dataset import Gaussian2, MapKind, SensorSpec, WorldMap
 from locbench.filters import _ekf_kernels as kern
 from locbench.filters._kalman import (
     chi2_1dof_quantile,
@@ -87,9 +90,6 @@ from locbench.filters.base import (
     FilterConfig,
     bound,
 )
-from locbench.geometry import wrap_angle, wrap_scalar
-from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
-from locbench.tunable import tunable
 
 FloatArray = npt.NDArray[np.float64]
 logger = logging.getLogger(__name__)

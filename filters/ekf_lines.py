@@ -12,7 +12,7 @@ diagonal per step (report 002: "Q initially contains the sigma of noise in its d
 
 Observation: lines extracted from the laser scan by split-and-merge (:mod:`locbench.filters._line_extraction`),
 each (rho, psi) in the robot frame with the covariance of its fit. A map line (rho_w, psi_w) in the world
-frame (:meth:`locbench.datasets.base.LineMap.rho_psi`) seen from the pose (x, y, theta) is (eq. 3)
+frame (:meth:`locbench.datasets.dataset.LineMap.rho_psi`) seen from the pose (x, y, theta) is (eq. 3)
 
     rho_r = rho_w - sqrt(x^2 + y^2) cos(atan2(y, x) - psi_w) = rho_w - (x cos psi_w + y sin psi_w),
     psi_r = psi_w - theta,
@@ -52,14 +52,14 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
-from locbench.datasets.base import Gaussian2, MapKind, SensorSpec, WorldMap
-from locbench.errors import ConfigError, FilterDiverged
-from locbench.events import LaserScan, Observation, Odometry
+from locbench.core.errors import ConfigError, FilterDiverged
+from locbench.core.events import LaserScan, Observation, Odometry
+from locbench.core.geometry import TWO_PI, wrap_angle, wrap_scalar
+from locbench.core.tunable import tunable
+from locbench.datasets.dataset import Gaussian2, MapKind, SensorSpec, WorldMap
 from locbench.filters._line_extraction import ExtractedLines, ExtractionParams, extract_lines
 from locbench.filters._motion import MotionModel, propagate_covariance, resolve_motion_noise
 from locbench.filters.base import NON_NEGATIVE, Estimate, Filter, FilterConfig, bound
-from locbench.geometry import TWO_PI, wrap_angle, wrap_scalar
-from locbench.tunable import tunable
 
 FloatArray = npt.NDArray[np.float64]
 logger = logging.getLogger(__name__)

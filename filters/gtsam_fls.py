@@ -23,7 +23,7 @@ Factors
   sighting; one not seen for ``lag_s`` leaves the window with the poses, and its next sighting makes a
   fresh variable with a fresh prior (so the map prior is counted once more, harmless at 1 mm).
 * **Beacon ranges** (``RangeFactor2D``, gtsam's pose-to-point range factor, for
-  :class:`~locbench.events.RangeObservations`): the distance from the robot origin to a beacon of
+  :class:`~locbench.core.events.RangeObservations`): the distance from the robot origin to a beacon of
   ``world.landmarks``, attached to the same landmark variables as the sightings. Ranging radios produce gross
   outliers, so two defences, both configured: (1) a gate on the innovation against the current filtered
   belief, nu^2 / (H P H^T + sigma^2) inside the chi-square (1 dof) quantile of ``range_gate_probability``
@@ -70,9 +70,12 @@ from typing import Any, ClassVar, Literal
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import Gaussian2, MapKind, SensorSpec, WorldMap
-from locbench.errors import ConfigError, DependencyNotInstalled, FilterDiverged
-from locbench.events import UNKNOWN_ID, LandmarkObservations, Observation, Odometry, PoseFix, RangeObservations
+from locbench.core.errors import ConfigError, DependencyNotInstalled, FilterDiverged
+from locbench.core.events import UNKNOWN_ID, LandmarkObservations, Observation, Odometry, PoseFix, RangeObservations
+from locbench.core.geometry import wrap_angle, wrap_scalar
+from locbench.core.runkey import RUN_KEY_OMIT_IF_DEFAULT
+from locbench.core.tunable import tunable
+from locbench.datasets.dataset import Gaussian2, MapKind, SensorSpec, WorldMap
 from locbench.filters._kalman import chi2_1dof_quantile, chi2_2dof_quantile
 from locbench.filters._landmark_index import INDEX_MIN_LANDMARKS, LandmarkIndex, gate_radius
 from locbench.filters._motion import (
@@ -93,9 +96,6 @@ from locbench.filters.base import (
     FilterConfig,
     bound,
 )
-from locbench.geometry import wrap_angle, wrap_scalar
-from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
-from locbench.tunable import tunable
 
 try:
     import gtsam

@@ -44,7 +44,7 @@ PoseFix events are **not** consumed: report 004's filter fuses only its velocity
 The algebra is filterpy 2.0.0's ``KalmanFilter.predict``/``update`` (measurements as (3, 1) columns) written
 out for F = H = I: the products with I that filterpy forms are exact and are left out, every other product,
 the inverse and the solve are the same numpy (BLAS/LAPACK) calls on the same shapes, so the numbers are
-filterpy's bit for bit (``tests/test_kf_linear.py`` checks both steps against ``KalmanFilter``). The commanded
+filterpy's bit for bit (``tests/filters/test_kf_linear.py`` checks both steps against ``KalmanFilter``). The commanded
 prediction x + B u is done in floats: with B's zero entries, each component of B u is one product.
 """
 
@@ -59,14 +59,14 @@ import numpy as np
 import numpy.typing as npt
 from scipy.stats import chi2
 
-from locbench.datasets.base import Gaussian2, MapKind, SensorSpec, WorldMap
-from locbench.errors import ConfigError, FilterDiverged
-from locbench.events import LaserScan, Observation, Odometry
+from locbench.core.errors import ConfigError, FilterDiverged
+from locbench.core.events import LaserScan, Observation, Odometry
+from locbench.core.geometry import wrap_scalar
+from locbench.core.tunable import tunable
+from locbench.datasets.dataset import Gaussian2, MapKind, SensorSpec, WorldMap
 from locbench.filters._motion import increment_variances, resolve_motion_noise
 from locbench.filters._scan_database import ScanDatabase, build_database, lattice_too_large, match_scan
 from locbench.filters.base import NON_NEGATIVE, Estimate, Filter, FilterConfig, bound
-from locbench.geometry import wrap_scalar
-from locbench.tunable import tunable
 
 FloatArray = npt.NDArray[np.float64]
 logger = logging.getLogger(__name__)

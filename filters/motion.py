@@ -2,7 +2,7 @@
 
 The wheel-encoder model of report 003 (eq. 1-5, 10), the odometry-increment model and the twist noise of
 recorded odometry, their Jacobians, covariances and samplers, and :class:`MotionModel`, which picks one of
-them per :class:`~locbench.events.Odometry` event. The models, their equations, frames and units are
+them per :class:`~locbench.core.events.Odometry` event. The models, their equations, frames and units are
 documented in the implementation module (``locbench.filters._motion``, where the built-in filters import them
 from); this module is the stable name a plugin imports: ``from locbench.filters.motion import MotionModel``.
 

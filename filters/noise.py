@@ -2,7 +2,7 @@
 filters resolve it.
 
 Each value is the filter's config override, else the dataset's nominal value
-(:class:`~locbench.datasets.base.SensorSpec`), else a module default that is logged because the user did not
+(:class:`~locbench.datasets.dataset.SensorSpec`), else a module default that is logged because the user did not
 choose it. The implementation is ``locbench.filters._noise`` (where the built-in filters import it from); this
 module is the stable name a plugin imports.
 """

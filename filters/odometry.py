@@ -16,12 +16,12 @@ from typing import ClassVar
 
 import numpy as np
 
-from locbench.datasets.base import Gaussian2, SensorSpec, WorldMap
-from locbench.errors import FilterDiverged
-from locbench.events import Observation, Odometry
+from locbench.core.errors import FilterDiverged
+from locbench.core.events import Observation, Odometry
+from locbench.core.geometry import wrap_scalar
+from locbench.datasets.dataset import Gaussian2, SensorSpec, WorldMap
 from locbench.filters._motion import InputNoise, MotionKind, MotionModel, propagate_covariance, resolve_motion_noise
 from locbench.filters.base import Estimate, Filter, FilterConfig
-from locbench.geometry import wrap_scalar
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -18,7 +18,7 @@ Prediction (report 003 eq. 1-2, 5, 10, 8)
     and moves by eq. 5; then the additive system noise Q = diag(sigma_x^2, sigma_y^2, sigma_theta^2) of
     eq. 8 is added, as in the EKF ("the same encoder model"). An event without wheel travel uses the
     (dx, dy, dtheta) increment model instead. Noise constants come from the dataset's nominal
-    :class:`~locbench.datasets.base.SensorSpec` unless overridden.
+    :class:`~locbench.datasets.dataset.SensorSpec` unless overridden.
 
 Correction
     * Landmarks (report 003 eq. 7, 9): each sighting (range, bearing) is a Gaussian in range and wrapped
@@ -28,7 +28,7 @@ Correction
       log-sum-exp), not by the maximum: it is the exact likelihood under an unknown correspondence, it
       never throws away a second plausible landmark, and its values stay comparable between particles.
       Identities not in the map are ignored.
-    * Beacon ranges (:class:`~locbench.events.RangeObservations`, range-only radios such as the CMU Plaza
+    * Beacon ranges (:class:`~locbench.core.events.RangeObservations`, range-only radios such as the CMU Plaza
       data): the same structure as the landmark model with the range term only, made robust to the gross
       outliers of ranging radios by a mixture with a uniform floor (the z_hit / z_rand form of PR table 6.3):
 
@@ -122,9 +122,20 @@ import numpy.typing as npt
 from numba import njit, types
 from numba.typed import Dict
 
-from locbench.datasets.base import Gaussian2, MapKind, OccupancyGrid, SensorSpec, WorldMap
-from locbench.errors import ConfigError, FilterDiverged, ResourceLimit
-from locbench.events import UNKNOWN_ID, LandmarkObservations, LaserScan, Observation, Odometry, RangeObservations
+from locbench.core.errors import ConfigError, FilterDiverged, ResourceLimit
+from locbench.core.events import UNKNOWN_ID, LandmarkObservations, LaserScan, Observation, Odometry, RangeObservations
+from locbench.core.geometry import wrap_angle
+from locbench.core.limits import (
+    FREE_SPACE_BYTES_PER_CELL,
+    LIKELIHOOD_FIELD_BYTES_PER_CELL,
+    PARTICLE_BYTES,
+    check_beams,
+    check_bytes,
+    grid_cells,
+)
+from locbench.core.runkey import RUN_KEY_OMIT_IF_DEFAULT
+from locbench.core.tunable import tunable
+from locbench.datasets.dataset import Gaussian2, MapKind, OccupancyGrid, SensorSpec, WorldMap
 from locbench.filters._likelihood_field import (
     LikelihoodField,
     log_likelihood,
@@ -151,17 +162,6 @@ from locbench.filters.base import (
     FilterConfig,
     bound,
 )
-from locbench.geometry import wrap_angle
-from locbench.limits import (
-    FREE_SPACE_BYTES_PER_CELL,
-    LIKELIHOOD_FIELD_BYTES_PER_CELL,
-    PARTICLE_BYTES,
-    check_beams,
-    check_bytes,
-    grid_cells,
-)
-from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
-from locbench.tunable import tunable
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]

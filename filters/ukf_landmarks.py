@@ -49,15 +49,15 @@ import numpy.typing as npt
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 from scipy.linalg.lapack import dpotrf
 
-from locbench.datasets.base import Gaussian2, SensorSpec, WorldMap
-from locbench.errors import ConfigError, FilterDiverged
-from locbench.events import Odometry, PoseFix
+from locbench.core.errors import ConfigError, FilterDiverged
+from locbench.core.events import Odometry, PoseFix
+from locbench.core.geometry import TWO_PI, wrap_angle, wrap_scalar
+from locbench.datasets.dataset import Gaussian2, SensorSpec, WorldMap
 from locbench.filters import _ukf_kernels as kern
 from locbench.filters._kalman import gain_update, subtract
 from locbench.filters._landmark_index import NEAR_M
 from locbench.filters.base import NON_NEGATIVE, Estimate, FilterConfig, bound
 from locbench.filters.ekf_landmarks import LandmarkEKF, LandmarkEKFConfig
-from locbench.geometry import TWO_PI, wrap_angle, wrap_scalar
 
 FloatArray = npt.NDArray[np.float64]
 

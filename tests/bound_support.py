@@ -1,7 +1,7 @@
 """The bound's earlier forms, the references its faster parts are tested and benchmarked against: the laser
 information by central differences of full casts (its version 1), for the one-cast derivative of
-:func:`locbench.pcrb.laser_information`; the corner checks inside the traversal's loop, for
-:func:`locbench.raycast.dda_face`; one numpy call per sighting event, for the batched sightings; and the whole
+:func:`locbench.evaluate.pcrb.laser_information`; the corner checks inside the traversal's loop, for
+:func:`locbench.raycast.cast.dda_face`; one numpy call per sighting event, for the batched sightings; and the whole
 bound as it was before issue 24, item 3 (:func:`seven_cast_bound`)."""
 
 from __future__ import annotations
@@ -12,10 +12,10 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from locbench.errors import ConfigError
-from locbench.events import UNKNOWN_ID, LandmarkObservations, LaserScan, PoseFix, RangeObservations
-from locbench.geometry import wrap_angle
-from locbench.raycast import _clip_to_grid, _dda_start, dda_face, face_cells
+from locbench.core.errors import ConfigError
+from locbench.core.events import UNKNOWN_ID, LandmarkObservations, LaserScan, PoseFix, RangeObservations
+from locbench.core.geometry import wrap_angle
+from locbench.raycast.cast import _clip_to_grid, _dda_start, dda_face, face_cells
 from locbench.registry import make_dataset
 
 
@@ -33,7 +33,7 @@ def differenced_laser_information(
     eps: float = 1e-5,
 ) -> np.ndarray:
     """The laser information by central differences of seven full casts per scan (the bound's version 1)."""
-    from locbench.raycast import cast_rays
+    from locbench.raycast.cast import cast_rays
 
     def cast(p: np.ndarray) -> np.ndarray:
         c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
@@ -82,7 +82,7 @@ def scan_poses(world: str, every: int = 10) -> tuple[Any, ...]:
 def python_covariance_recursion(
     p0: np.ndarray, jacobians: np.ndarray, process_cov: np.ndarray, meas_info: np.ndarray
 ) -> np.ndarray:
-    """:func:`locbench.pcrb.covariance_recursion` as numpy calls per step (before it was compiled)."""
+    """:func:`locbench.evaluate.pcrb.covariance_recursion` as numpy calls per step (before it was compiled)."""
     eye = np.eye(p0.shape[0])
     out = np.empty((jacobians.shape[0] + 1, *p0.shape))
     p = out[0] = np.asarray(p0, dtype=np.float64)
@@ -122,9 +122,10 @@ def associate_one(
 
 
 def grouped_laser_information(dataset: Any, sigma_m: float, gt_poses: np.ndarray) -> np.ndarray:
-    """``pcrb._laser_information`` as it was (bound version 3): :func:`locbench.pcrb.laser_information` per beam
+    """``pcrb._laser_information`` as it was (bound version 3): :func:`locbench.evaluate.pcrb.laser_information` per
+    beam
     layout, each scan's truth index looked up by itself."""
-    from locbench import pcrb
+    from locbench.evaluate import pcrb
 
     info = np.zeros((gt_poses.shape[0], 3, 3))
     grid = dataset.world.occupancy
@@ -152,7 +153,7 @@ def per_event_information(
     """``pcrb._measurement_information`` as it was before the sightings were batched (bound version 3): one
     ``range_bearing_information``, association and truth lookup per event, added in event order (``events``
     is ignored: every row computes its own)."""
-    from locbench import pcrb
+    from locbench.evaluate import pcrb
 
     gt_t = dataset.ground_truth.t
     use_laser = laser and noise.laser_sigma_m is not None and any(isinstance(e, LaserScan) for e in dataset.events)
@@ -186,10 +187,10 @@ def per_event_information(
 
 
 def seven_cast_bound(dataset: Any) -> dict[str, np.ndarray]:
-    """:func:`locbench.pcrb.bound_covariances` as it was before issue 24, item 3: the laser term differenced
+    """:func:`locbench.evaluate.pcrb.bound_covariances` as it was before issue 24, item 3: the laser term differenced
     from seven casts per scan, the covariance recursion in numpy, and each row computing its own odometry
     terms and its sightings one event at a time (:func:`per_event_information`): the whole-bound reference."""
-    from locbench import pcrb
+    from locbench.evaluate import pcrb
 
     saved = pcrb.laser_information, pcrb.covariance_recursion, pcrb._measurement_information
     pcrb.laser_information, pcrb.covariance_recursion = differenced_laser_information, python_covariance_recursion
@@ -233,7 +234,7 @@ def _vertex_near(occ: np.ndarray, px: float, py: float, lim: float) -> bool:
 def stepwise_dda_face(
     occ: np.ndarray, gx: float, gy: float, dx: float, dy: float, t_lim: float, near0: float, near1: float
 ) -> tuple[float, int, bool]:
-    """:func:`locbench.raycast.dda_face` as it was before it split the corner checks off the traversal (bound
+    """:func:`locbench.raycast.cast.dda_face` as it was before it split the corner checks off the traversal (bound
     version 3), on the boolean grid: the checks at every crossing, inside the traversal's loop (its helpers
     above are the corner checks as they were then)."""
     rows, cols = occ.shape
@@ -274,7 +275,7 @@ def stepwise_dda_face(
 
 def faces_differ(occ: np.ndarray, rays: np.ndarray, t_lim: float, near0: float, near1: float) -> int:
     """How many of ``rays`` (k, 4: start x, y and direction x, y, grid units) get another (t, axis, near) from
-    :func:`locbench.raycast.dda_face` than from :func:`stepwise_dda_face` (an infinite t equals any other)."""
+    :func:`locbench.raycast.cast.dda_face` than from :func:`stepwise_dda_face` (an infinite t equals any other)."""
     return _faces_differ(occ, face_cells(occ), rays, t_lim, near0, near1)
 
 

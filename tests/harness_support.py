@@ -13,7 +13,10 @@ from typing import Any
 
 import numpy as np
 
-from locbench.datasets.base import (
+from locbench.core.errors import FilterDiverged
+from locbench.core.events import LandmarkObservations, Odometry
+from locbench.core.tunable import tunable
+from locbench.datasets.dataset import (
     Dataset,
     DatasetBuilder,
     FlaggedSample,
@@ -25,10 +28,7 @@ from locbench.datasets.base import (
     WorldMap,
     sort_events,
 )
-from locbench.errors import FilterDiverged
-from locbench.events import LandmarkObservations, Odometry
 from locbench.filters.base import Estimate, Filter, FilterConfig
-from locbench.tunable import tunable
 
 # --- a hand-made dataset: straight line at 1 m/s, one landmark, 10 Hz ------------------------------
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from locbench.errors import MAX_MESSAGE_CHARS
+from locbench.core.errors import MAX_MESSAGE_CHARS
 
 
 def grey_png(path: Path, width: int, height: int) -> Path:

@@ -12,8 +12,8 @@ import math
 
 import numpy as np
 
-from locbench.datasets.base import Gaussian2, Landmarks, SensorSpec, WorldMap
-from locbench.events import Odometry, RangeObservations
+from locbench.core.events import Odometry, RangeObservations
+from locbench.datasets.dataset import Gaussian2, Landmarks, SensorSpec, WorldMap
 from locbench.filters.base import Filter
 
 BEACON_IDS = np.array([3, 5, 8, 13], dtype=np.int64)

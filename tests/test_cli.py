@@ -100,8 +100,8 @@ def test_fetch_without_an_official_download_is_a_one_line_error(
 def test_list_filter_prints_every_parameter_with_type_default_unit_and_meaning(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
+    from locbench.core.spec import param_fields
     from locbench.filters.pf import ParticleFilterConfig
-    from locbench.spec import param_fields
 
     assert main(["list", "pf"]) == 0
     lines = capsys.readouterr().out.splitlines()

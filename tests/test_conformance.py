@@ -10,8 +10,8 @@ from __future__ import annotations
 import pytest
 
 from locbench.checks import DATASET_CHECKS, FILTER_CHECKS, check_specs, marking
+from locbench.core.spec import Spec
 from locbench.registry import DATASETS, FILTERS, make_filter
-from locbench.spec import Spec
 
 
 def _filter_cases() -> list[object]:

@@ -8,10 +8,10 @@ from typing import Literal
 import numpy as np
 import pytest
 
-from locbench.errors import ConfigError, DependencyNotInstalled, UnknownIdError
+from locbench.core.errors import ConfigError, DependencyNotInstalled, UnknownIdError
+from locbench.core.seeding import dataset_rng, filter_rng
+from locbench.core.spec import build_params, format_spec, parse_spec, stable_hash
 from locbench.registry import DATASETS, FILTERS, resolve_dataset, resolve_filter
-from locbench.seeding import dataset_rng, filter_rng
-from locbench.spec import build_params, format_spec, parse_spec, stable_hash
 
 
 @dataclass(frozen=True, kw_only=True)

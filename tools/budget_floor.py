@@ -22,9 +22,9 @@ import statistics
 import time
 from pathlib import Path
 
-from locbench.store import TRUTH_DIR, Store
+from locbench.run.store import TRUTH_DIR, Store
+from locbench.run.tuning import suite_studies
 from locbench.suites import _SUITES_IN_ALL, suite_pairs
-from locbench.tuning import suite_studies
 
 #: The suites ``nox -s bench`` runs (suite ``all``'s parts, then ``consistency``); ``tuned``'s test runs are
 #: what is left over.
@@ -52,9 +52,9 @@ def belief_share(dataset: str, filters: list[str], rounds: int = 7) -> None:
     """Per filter, the CPU seconds of a run on ``dataset`` seed 0 (one process, median of ``rounds``), its steps,
     the time around them, and the part of a run the runner's belief scores take (a run without the runner's
     belief generator, in turn with one with it)."""
+    from locbench.core.seeding import belief_rng, filter_rng
     from locbench.registry import FILTERS, make_dataset, resolve_filter
-    from locbench.runner import run_filter
-    from locbench.seeding import belief_rng, filter_rng
+    from locbench.run.runner import run_filter
 
     ds = make_dataset(dataset, 0)
     for spec in filters:

@@ -6,7 +6,8 @@ Usage: python tools/calibrate_odometry.py [room|lap]
 (``locbench.datasets.synthetic.toolkit``) to report 003's table 1; ``calibrate_lap_odometry`` fitted
 ``LAP_SYSTEMATIC_SCALE`` (``locbench.datasets.synthetic.lap``) to a 15 cm median end-of-lap error. Both frozen
 results and what they achieve are constants of those modules (``ROOM_CALIBRATION_ACHIEVED_CM``,
-``LAP_CALIBRATION_ACHIEVED_M``); ``tests/test_synthetic.py`` checks that the error functions below still give
+``LAP_CALIBRATION_ACHIEVED_M``); ``tests/datasets/synthetic/test_synthetic.py`` checks that the error functions below
+still give
 them.
 """
 
@@ -19,6 +20,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from locbench.core.errors import ConfigError
 from locbench.datasets.synthetic.lap import LAP_TARGET_FINAL_ERROR_M, lap_encoder_model, lap_motion
 from locbench.datasets.synthetic.scenarios import (
     room_motion,
@@ -31,7 +33,6 @@ from locbench.datasets.synthetic.toolkit import (
     WHEELBASE_NOMINAL_M,
     split_streams,
 )
-from locbench.errors import ConfigError
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -51,7 +52,7 @@ def room_dead_reckoning_errors(
     true motion and the encoder noise). ``z`` (one (n_seed, 2) array of encoder draws per seed) may hold
     the encoder draws precomputed.
     """
-    from locbench.seeding import dataset_rng
+    from locbench.core.seeding import dataset_rng
 
     model = EncoderModel(
         wheelbase_nominal_m=WHEELBASE_NOMINAL_M, scale_left=scale_left, scale_right=scale_right, k_left=k, k_right=k
@@ -84,7 +85,7 @@ def calibrate_room_odometry(seeds: Sequence[int] = tuple(range(20))) -> dict[str
     """
     from scipy.optimize import least_squares
 
-    from locbench.seeding import dataset_rng
+    from locbench.core.seeding import dataset_rng
 
     target = np.asarray(ROOM_TABLE1_ODOMETRY_CM) / 100.0
     # Encoder draws for more steps than any tour takes (a prefix of the stream is what a dataset uses).
@@ -120,7 +121,7 @@ def lap_dead_reckoning_final_errors(
     Uses the same noise draws as ``make_dataset(dataset_name, seed)`` (the execution noise of the true
     motion and the odometry stream).
     """
-    from locbench.seeding import dataset_rng
+    from locbench.core.seeding import dataset_rng
 
     model = lap_encoder_model(scale)
     out = []

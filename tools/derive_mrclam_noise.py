@@ -3,11 +3,13 @@
 Usage: python tools/derive_mrclam_noise.py FOLDER   (an MRCLAM dataset folder, e.g. .../MRCLAM_Dataset6)
 
 The constants of ``locbench.datasets.recorded.mrclam`` (``TWIST_SIGMA_V_MPS`` ...) were computed once by
-:func:`derive_nominal_noise` on Dataset 6, robots 1-5 (pooled); ``tests/test_recorded_mrclam.py`` reruns it on
+:func:`derive_nominal_noise` on Dataset 6, robots 1-5 (pooled); ``tests/datasets/recorded/test_recorded_mrclam.py``
+reruns it on
 the shared files and checks the frozen values within 10 %.
 The dataset publishes no noise figures. The constants below (:data:`TWIST_SIGMA_V_MPS` ...) were computed ONCE
 by :func:`derive_nominal_noise` on Dataset 6, robots 1-5 (pooled), against the Vicon truth and the surveyed
-map, and frozen here; ``tests/test_recorded_mrclam.py`` recomputes them from the shared files and checks they
+map, and frozen here; ``tests/datasets/recorded/test_recorded_mrclam.py`` recomputes them from the shared files and
+checks they
 agree within 10 %. They were not chosen by looking at any filter's error. The procedure (robust std
 s(e) = 1.4826 median |e|, taken about zero so that a bias counts as noise, since the filters model none):
 
@@ -43,7 +45,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import Trajectory2D
+from locbench.core.geometry import twist_increment, wrap_angle
+from locbench.datasets.dataset import Trajectory2D
 from locbench.datasets.recorded.files import Table
 from locbench.datasets.recorded.mrclam import (
     ROBOTS,
@@ -56,7 +59,6 @@ from locbench.datasets.recorded.mrclam import (
     read_odometry,
     split_sightings,
 )
-from locbench.geometry import twist_increment, wrap_angle
 
 FloatArray = npt.NDArray[np.float64]
 

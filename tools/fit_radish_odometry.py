@@ -4,7 +4,8 @@ Run: ``LOCBENCH_DATA=../shared/datasets python tools/fit_radish_odometry.py``. I
 intel, aces and freiburg-079 with the raw scan of identical ranges
 (:func:`locbench.datasets.recorded.radish.pair_scans`), and fits the increment model by the pooled method of
 moments (:func:`~locbench.datasets.recorded.radish.fit_encoder_error`); the printed constant is
-``ENCODER_ERROR`` in ``datasets/recorded/radish.py`` (tests/test_recorded_radish.py checks that they agree).
+``ENCODER_ERROR`` in ``datasets/recorded/radish.py`` (tests/datasets/recorded/test_recorded_radish.py checks that they
+agree).
 """
 
 from __future__ import annotations

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from locbench.events import LaserScan, Odometry
+from locbench.core.events import LaserScan, Odometry
 from locbench.filters import _icp
 from locbench.registry import make_dataset, make_filter
 

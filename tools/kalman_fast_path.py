@@ -11,10 +11,10 @@ import sys
 
 import numpy as np
 
-from locbench.datasets.base import Gaussian2, Landmarks, SensorSpec, WorldMap
+from locbench.core.geometry import wrap_scalar
+from locbench.datasets.dataset import Gaussian2, Landmarks, SensorSpec, WorldMap
 from locbench.filters._kalman import joseph_update, wrapped_residual
 from locbench.filters.ekf_landmarks import LandmarkEKF, range_bearing, range_bearing_jacobian
-from locbench.geometry import wrap_scalar
 
 SENSORS = SensorSpec(landmark_sigma_range_m=0.05, landmark_sigma_bearing_rad=0.02)
 WORLD = WorldMap(landmarks=Landmarks(ids=np.array([1], dtype=np.int64), xy=np.array([[3.0, 1.0]])))

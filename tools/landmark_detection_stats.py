@@ -5,7 +5,8 @@ Usage: python tools/landmark_detection_stats.py
 Builds every (path, layout, seed 0-2) of ``landmark_geometry`` and compares each reported sighting with the
 true range and bearing of the disc centre at its time. :data:`locbench.datasets.synthetic.landmark_geometry.
 NOMINAL_SIGMA_RANGE_M` (5 cm) and ``NOMINAL_SIGMA_BEARING_RAD`` (0.007 rad) are these RMS errors rounded up;
-:data:`RECORDED` is what this measured, and ``tests/test_landmark_geometry.py`` checks that it still does.
+:data:`RECORDED` is what this measured, and ``tests/datasets/synthetic/test_landmark_geometry.py`` checks that it still
+does.
 """
 
 from __future__ import annotations
@@ -14,9 +15,9 @@ import math
 
 import numpy as np
 
+from locbench.core.events import LandmarkObservations
+from locbench.core.geometry import wrap_scalar
 from locbench.datasets.synthetic.landmark_geometry import LAYOUTS, PATHS
-from locbench.events import LandmarkObservations
-from locbench.geometry import wrap_scalar
 from locbench.registry import make_dataset
 
 #: What :func:`detection_error_stats` measured with its defaults (generator version of 2026-12).

@@ -12,11 +12,11 @@ import sys
 
 import numpy as np
 
-from locbench.metrics import POSE_DOF, align, anees, ate, chi2_band, nees_at_truth, nll_at_truth
-from locbench.pcrb import pcrb_metrics
+from locbench.core.seeding import filter_rng
+from locbench.evaluate.metrics import POSE_DOF, align, anees, ate, chi2_band, nees_at_truth, nll_at_truth
+from locbench.evaluate.pcrb import pcrb_metrics
 from locbench.registry import make_dataset, make_filter
-from locbench.runner import incompatibility, run_filter
-from locbench.seeding import filter_rng
+from locbench.run.runner import incompatibility, run_filter
 
 
 def main() -> None:

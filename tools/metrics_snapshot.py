@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from locbench.store import Store
+from locbench.run.store import Store
 
 # the module, not the function of the same name that locbench.report re-exports
 collect = importlib.import_module("locbench.report.collect")

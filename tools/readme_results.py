@@ -9,7 +9,7 @@ Usage::
 A generated block in README.md lies between ``<!-- gen:NAME -->`` and ``<!-- /gen:NAME -->`` (a table on lines of
 its own, or a value inside a sentence); :func:`blocks` makes every one from the tidy metrics, with the report's
 own formatting and aggregation (:mod:`locbench.report.tables`), so the README and the summary cannot disagree:
-``tests/test_readme_results.py`` regenerates them from the committed ``metrics.csv`` and compares. A number
+``tests/tools/test_readme_results.py`` regenerates them from the committed ``metrics.csv`` and compares. A number
 that only REPORT.md holds (what the report computes from the stored runs rather than from ``metrics.csv``:
 run counts by status, the lost-detection AUROC, the claims' measured values and verdicts, the ranks across
 datasets, the tuned studies, the Wilcoxon ties) is cut from the committed REPORT.md's own tables, and a change
@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from locbench.pcrb import BOUND_ALL, BOUND_NO_LASER
+from locbench.evaluate.pcrb import BOUND_ALL, BOUND_NO_LASER
 from locbench.report.collect import describe_filter
 from locbench.report.tables import (
     ate_over_bound,

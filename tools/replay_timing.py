@@ -20,9 +20,9 @@ import statistics
 import sys
 import time
 
-from locbench.events import Odometry
+from locbench.core.events import Odometry
+from locbench.core.seeding import filter_rng
 from locbench.registry import FILTERS, make_dataset, resolve_filter
-from locbench.seeding import filter_rng
 
 
 def main(argv: list[str] | None = None) -> int:

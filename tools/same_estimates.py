@@ -19,9 +19,9 @@ import sys
 
 import numpy as np
 
+from locbench.core.seeding import filter_rng
 from locbench.registry import make_dataset, make_filter, resolve_filter
-from locbench.runner import run_filter
-from locbench.seeding import filter_rng
+from locbench.run.runner import run_filter
 
 
 def dump(out: str, filters: list[str], datasets: list[str], seeds: int) -> None:

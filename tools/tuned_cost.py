@@ -18,8 +18,8 @@ import resource
 import sys
 import time
 
-from locbench import tuning
-from locbench.runner import plan_sweep, run_sweep
+from locbench.run import tuning
+from locbench.run.runner import plan_sweep, run_sweep
 
 
 def _cpu_all() -> float:

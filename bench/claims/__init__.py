@@ -1,5 +1,5 @@
 """Experiments, source reports and their claims: the modules of this package register them at import in
-:mod:`locbench.experiments` (whose names this package re-exports for them), and hold the helpers claims share.
+:mod:`locbench.present.experiments` (whose names this package re-exports for them), and hold the helpers claims share.
 
 The report itself knows no dataset or filter by name. Filters are matched by id: the plain ``id`` when
 it has runs, otherwise the first parameterised variant in sorted order, named in the measured text.
@@ -16,8 +16,10 @@ from functools import lru_cache
 import numpy as np
 import pandas as pd
 
-from locbench.aggregate import waypoint_stats
-from locbench.experiments import (
+from locbench.core.spec import Spec
+from locbench.evaluate.aggregate import waypoint_stats
+from locbench.evaluate.significance import ALPHA, TestResult
+from locbench.present.experiments import (
     VERDICTS,
     Claim,
     ClaimResult,
@@ -35,8 +37,6 @@ from locbench.experiments import (
     register_section,
     sections_for,
 )
-from locbench.significance import ALPHA, TestResult
-from locbench.spec import Spec
 
 __all__ = [
     "VERDICTS",
@@ -119,7 +119,7 @@ def per_seed_mean(df: pd.DataFrame, filter_name: str, pattern: str) -> pd.Series
 
 @lru_cache(maxsize=4096)
 def spec_of(name: str) -> Spec:
-    """The typed :class:`~locbench.spec.Spec` of a stored filter or dataset name, parsed once per name."""
+    """The typed :class:`~locbench.core.spec.Spec` of a stored filter or dataset name, parsed once per name."""
     return Spec.parse(name)
 
 

@@ -4,7 +4,7 @@ figures, ``index.html``.
 The package is split by job: :mod:`~locbench.report.collect` reads the store (the only I/O on runs),
 :mod:`~locbench.report.tables` and :mod:`~locbench.report.figures` turn arrays into tables and drawings,
 :mod:`~locbench.report.build` orders them into sections from the experiments and claims registered in
-:mod:`locbench.experiments` (by :mod:`locbench.claims`), and :mod:`~locbench.report.render` writes Markdown,
+:mod:`locbench.present.experiments` (by :mod:`locbench.claims`), and :mod:`~locbench.report.render` writes Markdown,
 PNG and HTML. Regenerating from the same runs gives identical bytes.
 """
 
@@ -17,7 +17,7 @@ from pathlib import Path
 from locbench.report.collect import Keep, collect, collect_metrics, metrics_csv, write_metrics_csv
 from locbench.report.doc import Table
 from locbench.report.tables import wilson_interval
-from locbench.store import MARKER, Store
+from locbench.run.store import MARKER, Store
 
 __all__ = [
     "ReportPaths",
@@ -70,7 +70,7 @@ def write_report(store: Store, keep: Keep | None = None, out: Path | None = None
     from locbench.report.build import Report
     from locbench.report.output import OutputFolder
     from locbench.report.render import figure_pngs, to_html, to_markdown
-    from locbench.report.significance import comparisons_csv
+    from locbench.report.sections.paired_tests import comparisons_csv
 
     summary = Path(out) if out is not None else store.summary
     # the summary of a results folder 'locbench run' marked is the report's, manifest or not (older reports)
@@ -115,10 +115,10 @@ def suite_filter(*suite_names: str, results: str | Path | None = None) -> Keep:
     """``keep(dataset, filter)`` for the cells of named suites or suite files (grids expanded, canonical names).
 
     Suite ``tuned`` has its cells in the results folder (its tuned configurations on the test data,
-    :func:`locbench.tuning.tuned_cells`), so it needs ``results``.
+    :func:`locbench.run.tuning.tuned_cells`), so it needs ``results``.
     """
+    from locbench.run.tuning import tuned_cells
     from locbench.suites import suite_pairs
-    from locbench.tuning import tuned_cells
 
     cells = {(d.name, f.name) for name in suite_names for f, d in suite_pairs(name)}
     if "tuned" in suite_names and results is not None:

@@ -3,14 +3,17 @@
 Order: how to read this, summary tables (one per summary experiment), claims, accuracy against runtime,
 consistency, kidnap and global localization, recorded data, one section per experiment, appendix (detail
 tables, failed and skipped runs, provenance). Which datasets are main comparisons, which sections and
-claims an experiment has, comes from :mod:`locbench.experiments` (registered by :mod:`locbench.claims`); the
+claims an experiment has, comes from :mod:`locbench.present.experiments` (registered by :mod:`locbench.claims`); the
 report names no dataset or filter.
 
 :class:`Report` holds what every section reads (the rows of a dataset name, the configurations run on it, the
-figure styles); each section is a function of it in its own module (:mod:`~locbench.report.summary`,
-:mod:`~locbench.report.runtime`, :mod:`~locbench.report.consistency`, :mod:`~locbench.report.kidnap`,
-:mod:`~locbench.report.recorded`, :mod:`~locbench.report.experiment`, :mod:`~locbench.report.appendix`, and
-:mod:`~locbench.report.health`, :mod:`~locbench.report.significance`, :mod:`~locbench.report.tuning`).
+figure styles); each section is a function of it in its own module (:mod:`~locbench.report.sections.summary`,
+:mod:`~locbench.report.sections.runtime`, :mod:`~locbench.report.sections.consistency`,
+:mod:`~locbench.report.sections.kidnap`,
+:mod:`~locbench.report.sections.recorded`, :mod:`~locbench.report.sections.experiment`,
+:mod:`~locbench.report.sections.appendix`, and
+:mod:`~locbench.report.sections.health`, :mod:`~locbench.report.sections.paired_tests`,
+:mod:`~locbench.report.sections.tuned`).
 """
 
 from __future__ import annotations
@@ -21,29 +24,29 @@ from functools import cached_property
 import numpy as np
 import pandas as pd
 
-from locbench.experiments import all_claims, experiments
-from locbench.metrics import CONFIDENCE
-from locbench.palette import Palette, split_by_sweep
-from locbench.pcrb import BOUND_ROWS
-from locbench.report import appendix as ap
-from locbench.report import consistency as cs
-from locbench.report import experiment as ex
-from locbench.report import health as hl
-from locbench.report import kidnap as kd
-from locbench.report import recorded as rc
-from locbench.report import runtime as rt
-from locbench.report import significance as sig
-from locbench.report import summary as sm
+from locbench.core.spec import Spec
+from locbench.evaluate.metrics import CONFIDENCE
+from locbench.evaluate.pcrb import BOUND_ROWS
+from locbench.present.experiments import all_claims, experiments
+from locbench.present.palette import Palette, split_by_sweep
 from locbench.report import tables as tb
 from locbench.report import timing as tm
 from locbench.report.collect import Collected
 from locbench.report.doc import Section, Table, Text
 from locbench.report.names import NAN, seed_ranges, slug
-from locbench.report.reference import reference_kind as _reference_kind
-from locbench.report.reference import semi_synthetic
+from locbench.report.sections import appendix as ap
+from locbench.report.sections import consistency as cs
+from locbench.report.sections import experiment as ex
+from locbench.report.sections import health as hl
+from locbench.report.sections import kidnap as kd
+from locbench.report.sections import paired_tests as sig
+from locbench.report.sections import recorded as rc
+from locbench.report.sections import runtime as rt
+from locbench.report.sections import summary as sm
+from locbench.report.sections.reference import reference_kind as _reference_kind
+from locbench.report.sections.reference import semi_synthetic
+from locbench.report.sections.tuned import tuning_section
 from locbench.report.style import LineStyle
-from locbench.report.tuning import tuning_section
-from locbench.spec import Spec
 
 
 class Report:
@@ -164,7 +167,7 @@ class Report:
         return self.col.datasets[dataset].spec.ident if dataset in self.col.datasets else "", {}, "ground truth"
 
     def reference_kind(self, dataset: str) -> str:
-        """Motion capture, GPS, survey, not stated, SLAM or simulation (:mod:`locbench.report.reference`)."""
+        """Motion capture, GPS, survey, not stated, SLAM or simulation (:mod:`locbench.report.sections.reference`)."""
         ident, meta, label = self.truth_meta(dataset)
         return _reference_kind(ident or self.col.datasets[dataset].spec.ident, meta, label)
 

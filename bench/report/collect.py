@@ -1,7 +1,7 @@
 """Reading the store once: the tidy metrics, each run's status, and what the figures need.
 
 This is the report's only I/O on stored runs. Every dataset and filter name is parsed here, once, into a
-:class:`~locbench.spec.Spec` and the facts the report needs about it (recorded or synthetic, the name to
+:class:`~locbench.core.spec.Spec` and the facts the report needs about it (recorded or synthetic, the name to
 print, whether a filter configuration starts without a pose, which filter is the baseline), asked of the
 registry's classes, so the rest of the report never looks inside a name.
 """
@@ -21,11 +21,11 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from locbench.lost import HealthSeries, health_series
-from locbench.metrics import align_run, nees_at_truth, run_metrics
-from locbench.pcrb import BOUND_ROWS, is_bound_row, pcrb_summary
-from locbench.spec import Spec, format_spec, params_to_dict
-from locbench.store import RunRecord, Store, TruthRecord
+from locbench.core.spec import Spec, format_spec, params_to_dict
+from locbench.evaluate.lost import HealthSeries, health_series
+from locbench.evaluate.metrics import align_run, nees_at_truth, run_metrics
+from locbench.evaluate.pcrb import BOUND_ROWS, is_bound_row, pcrb_summary
+from locbench.run.store import RunRecord, Store, TruthRecord
 
 log = logging.getLogger(__name__)
 
@@ -64,7 +64,7 @@ class FilterInfo:
     spec: Spec
     baseline: bool
     global_start: bool
-    #: A row of the posterior Cramer-Rao bound, not a filter (:mod:`locbench.pcrb`).
+    #: A row of the posterior Cramer-Rao bound, not a filter (:mod:`locbench.evaluate.pcrb`).
     bound: bool = False
     #: The canonical name of its kidnap configuration as its class declares it (``Filter.kidnap_params``).
     kidnap_name: str | None = None
@@ -173,7 +173,7 @@ def describe_filter(name: str) -> FilterInfo:
 
 def describe_dataset(name: str) -> DatasetInfo:
     """Parse a stored dataset name; recorded datasets get their identifying parameters spelled out."""
-    from locbench.datasets.recorded.base import RecordedDataset
+    from locbench.datasets.recorded.common import RecordedDataset
     from locbench.registry import DATASETS, resolve_dataset
 
     spec = Spec.parse(name)
@@ -393,7 +393,7 @@ def collect_metrics(store: Store) -> pd.DataFrame:
     -------
     DataFrame
         Columns ``dataset, filter, seed, metric, value`` (names with their parameters), sorted by
-        dataset, filter, seed and metric. An ok run gives :func:`locbench.metrics.run_metrics`; a failed
+        dataset, filter, seed and metric. An ok run gives :func:`locbench.evaluate.metrics.run_metrics`; a failed
         or diverged run ``failed`` = 1; a skipped run nothing. A run folder that cannot be read (or whose
         ground truth is missing) is logged and left out.
     """

@@ -2,7 +2,7 @@
 
 Each function takes the axis (or figure, for small multiples), the arrays to draw and the
 :class:`~locbench.report.style.LineStyle` of each series; callers take the styles from the report's one
-:class:`~locbench.palette.Palette`, so that a filter keeps its colour and marker in every figure.
+:class:`~locbench.present.palette.Palette`, so that a filter keeps its colour and marker in every figure.
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from locbench.palette import plotly_line, plotly_marker
+from locbench.present.palette import plotly_line, plotly_marker
 from locbench.report import figures as fg
 from locbench.report.style import LineStyle
 

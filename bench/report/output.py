@@ -5,7 +5,7 @@ folder, its size in bytes and its sha256). What a manifest lists and still holds
 next report replaces it. Anything else in the folder (a screenshot, a figure of another tool, a file edited by
 hand since) is someone else's: it is never deleted or overwritten; the new folder takes it over as it is, and a
 report that would write a file of the same name is refused before anything changes. A folder that is not empty
-and has no manifest is refused too (:class:`~locbench.errors.ConfigError`), except the summary of a results folder
+and has no manifest is refused too (:class:`~locbench.core.errors.ConfigError`), except the summary of a results folder
 that ``locbench run`` marked, from before manifests: there the files of the report's own names are its own.
 
 The new summary is written to ``.<name>.tmp-XXXXXXXX`` beside the folder; only when every file is written is
@@ -27,8 +27,8 @@ import time
 from pathlib import Path
 from types import TracebackType
 
-from locbench.errors import ConfigError, one_line
-from locbench.store import MAX_RECORD_BYTES, STALE_AFTER_S, _follow_umask, carry_over, remove_own
+from locbench.core.errors import ConfigError, one_line
+from locbench.run.store import MAX_RECORD_BYTES, STALE_AFTER_S, _follow_umask, carry_over, remove_own
 
 #: The manifest of an output folder: the files locbench wrote there, with their sizes and sha256.
 MANIFEST = ".locbench-manifest.json"

@@ -1,6 +1,6 @@
 """Tables from the tidy metrics: pure functions from a metrics frame to :class:`~locbench.report.doc.Table`.
 
-Headers, units and which way is better come from :data:`locbench.metric_info.METRICS`; no dataset or filter is
+Headers, units and which way is better come from :data:`locbench.present.metric_info.METRICS`; no dataset or filter is
 named here.
 """
 
@@ -12,12 +12,12 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from locbench import ranking as rk
-from locbench.aggregate import ate_over_pcrb, mean_ci, waypoint_stats
-from locbench.docfmt import num
-from locbench.metric_info import METRICS, MetricInfo
-from locbench.metrics import CONFIDENCE, POSE_DOF, chi2_band
-from locbench.pcrb import BOUND_ALL
+from locbench.evaluate.aggregate import ate_over_pcrb, mean_ci, waypoint_stats
+from locbench.evaluate.metrics import CONFIDENCE, POSE_DOF, chi2_band
+from locbench.evaluate.pcrb import BOUND_ALL
+from locbench.present import ranking as rk
+from locbench.present.docfmt import num
+from locbench.present.metric_info import METRICS, MetricInfo
 from locbench.report.doc import Table
 
 NAN = float("nan")
@@ -152,7 +152,7 @@ def run_count(df: pd.DataFrame) -> int:
 
 def ate_over_bound(df: pd.DataFrame, filter_name: str) -> float:
     """A filter's efficiency ``ate_over_pcrb`` on one dataset name: sqrt(mean over seeds of ate_m^2) divided
-    by the bound's, over the seeds where both have an ATE (:func:`locbench.aggregate.ate_over_pcrb`); NaN
+    by the bound's, over the seeds where both have an ATE (:func:`locbench.evaluate.aggregate.ate_over_pcrb`); NaN
     without a bound."""
     ate = df[df["metric"] == "ate_m"]
     bound = ate[ate["filter"] == BOUND_ALL].set_index("seed")["value"]
@@ -182,7 +182,7 @@ def comparison_table(
     """Mean ± 95 % t-interval over seeds of every comparison metric present, a row per filter; with rows of
     the bound (``bounds``, shown after the filters), the column ``ate_over_pcrb``. With ``eligible`` (per
     filter: may be marked best), each ranked column marks its best and the rows tied with it
-    (:func:`locbench.report.significance.mark_ties`)."""
+    (:func:`locbench.report.sections.paired_tests.mark_ties`)."""
     present = [m for m in COMPARISON if (df["metric"] == m).any()]
     with_bound = bool(bounds) and bool((df["filter"] == BOUND_ALL).any())
     rows: list[tuple[str, ...]] = []

@@ -1,7 +1,8 @@
 """Runtimes in the report both raw and in reference units, and the machine they were measured on.
 
 A metric in reference units is its raw value over the reference workload's time on the same machine under the same
-load (:func:`locbench.metrics.reference_units`): id ``<metric>_ref``. Runs stored before ``reference_s`` was recorded
+load (:func:`locbench.evaluate.metrics.reference_units`): id ``<metric>_ref``. Runs stored before ``reference_s`` was
+recorded
 have no such rows; a cell then shows the raw value alone and the accuracy-runtime figures stay on the raw axis.
 """
 
@@ -13,8 +14,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from locbench.metric_info import METRICS
-from locbench.metrics import REF_SUFFIX
+from locbench.evaluate.metrics import REF_SUFFIX
+from locbench.present.metric_info import METRICS
 from locbench.report import tables as tb
 
 #: The x metric of the accuracy-runtime figures: the real-time factor in reference units, where every run has it.
@@ -26,7 +27,7 @@ REF_FOOTNOTE = (
     "Values as (ref ...): in reference units, the raw value with the time of a fixed reference workload, measured "
     "on the same machine under the same load, divided out (`reference_s` in each run's provenance; its CPU time "
     "`reference_cpu_s` for the medians): the time, or real-time factor, on a machine whose reference workload takes "
-    "1 s. `python -m locbench.reference_workload` measures it on yours; docs/protocols.md, Runtime."
+    "1 s. `python -m locbench.run.reference_workload` measures it on yours; docs/protocols.md, Runtime."
 )
 
 

@@ -62,7 +62,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import FlaggedSample
+from locbench.datasets.dataset import FlaggedSample
 from locbench.datasets.recorded import plausibility
 from locbench.datasets.recorded.files import (
     MAX_POSITION_M,

@@ -10,10 +10,10 @@ Every recorded loader resolves its files through :func:`locate`:
 A file whose sha256 is known is verified once per (path, size, mtime) in a process, so that a file that
 was edited or truncated after it was published is reported as a checksum mismatch rather than parsed.
 
-Errors are :class:`RecordedDataError` (a :class:`~locbench.errors.ConfigError`): the message names the
+Errors are :class:`RecordedDataError` (a :class:`~locbench.core.errors.ConfigError`): the message names the
 file, the line (1-based, counting every line of the file) or the variable and index where there is one, the
 field, what was found and what was expected, on one line of at most
-:data:`~locbench.errors.MAX_MESSAGE_CHARS` characters (a quoted value is cut by :func:`quote`).
+:data:`~locbench.core.errors.MAX_MESSAGE_CHARS` characters (a quoted value is cut by :func:`quote`).
 
 The shared checks of every loader live here: :func:`read_table` (text tables: field count, numbers, integers,
 finiteness, a last record cut inside a field), :meth:`Table.check_range` and :meth:`Table.check_time_increasing`
@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from locbench.errors import ConfigError, DataNotFound, DependencyNotInstalled, one_line
+from locbench.core.errors import ConfigError, DataNotFound, DependencyNotInstalled, one_line
 
 FloatArray = npt.NDArray[np.float64]
 

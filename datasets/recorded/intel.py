@@ -115,7 +115,11 @@ import numpy.typing as npt
 from numba import njit
 from scipy.optimize import nnls
 
-from locbench.datasets.base import (
+from locbench.core.errors import ConfigError
+from locbench.core.events import Event, LaserScan, Odometry
+from locbench.core.geometry import between, wrap_angle
+from locbench.core.spec import bound
+from locbench.datasets.dataset import (
     Dataset,
     Gaussian2,
     LineMap,
@@ -127,8 +131,8 @@ from locbench.datasets.base import (
     sort_events,
 )
 from locbench.datasets.recorded import plausibility
-from locbench.datasets.recorded.base import RecordedDataset
 from locbench.datasets.recorded.carmen import CarmenFlags, CarmenLog, read_carmen_flagged
+from locbench.datasets.recorded.common import RecordedDataset
 from locbench.datasets.recorded.files import (
     MAX_GRID_CELLS,
     MAX_GRID_CELLS_BOUND,
@@ -139,10 +143,6 @@ from locbench.datasets.recorded.files import (
     quote,
     read_table,
 )
-from locbench.errors import ConfigError
-from locbench.events import Event, LaserScan, Odometry
-from locbench.geometry import between, wrap_angle
-from locbench.spec import bound
 
 FloatArray = npt.NDArray[np.float64]
 logger = logging.getLogger(__name__)

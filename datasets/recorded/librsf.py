@@ -46,7 +46,7 @@ What the dataset is made of
   (heading pi) with omega = (v_r - v_l) / wheel_distance strays 1.9 m (RMS) from the truth over the 30 s, while (v_l -
   v_r) / (2 wheel_distance) follows it to 0.04 m RMS over the first 10 s (the readme's column order of the two wheels
   and the meaning of "distance between wheels", half the track, are what that implies; a test checks it).
-* **Ranges** (:class:`~locbench.events.RangeObservations`): grouped per identical time, ids = the anchor ids;
+* **Ranges** (:class:`~locbench.core.events.RangeObservations`): grouped per identical time, ids = the anchor ids;
   anchors (``world.landmarks``) from the lines' anchor positions (an id with two positions is an error).
 * **Truth**: ``point2`` positions; heading from ``angle`` where the file has it (M3500, W3500), else (Indoor UWB)
   the direction of travel over a :data:`HEADING_CHORD_M` chord
@@ -69,7 +69,7 @@ Plausibility (:mod:`~locbench.datasets.recorded.plausibility`)
 The policy's bounds; for the Labyrinth's UWB ranges the range bound is tightened to 300 m (:data:`UWB_BOUNDS`):
 UWB ranging under its emission limit (-41.3 dBm/MHz) reaches a few hundred metres at most in line of sight (the
 policy's own figure for UWB), and the Labyrinth's ranges lie in [0.19, 3.37] m. Flagged and left out (the row is
-listed in :attr:`Dataset.flagged <locbench.datasets.base.Dataset.flagged>`):
+listed in :attr:`Dataset.flagged <locbench.datasets.dataset.Dataset.flagged>`):
 
 * a UWB range outside [0, 300] m; a range variance above ``variance_m2`` (1e4 m^2); a range2 row repeating the one
   before it;
@@ -111,7 +111,10 @@ from typing import Any, ClassVar
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import (
+from locbench.core.errors import ConfigError
+from locbench.core.events import Event, Odometry, RangeObservations
+from locbench.core.geometry import wrap_angle
+from locbench.datasets.dataset import (
     Dataset,
     FlaggedSample,
     Gaussian2,
@@ -121,7 +124,7 @@ from locbench.datasets.base import (
     WorldMap,
     sort_events,
 )
-from locbench.datasets.recorded.base import RecordedDataset
+from locbench.datasets.recorded.common import RecordedDataset
 from locbench.datasets.recorded.files import (
     MAX_INTEGER_FIELD,
     MAX_POSITION_M,
@@ -134,9 +137,6 @@ from locbench.datasets.recorded.files import (
 )
 from locbench.datasets.recorded.plausibility import BOUNDS, Bounds, Flags, merge
 from locbench.datasets.recorded.plaza import heading_from_track
-from locbench.errors import ConfigError
-from locbench.events import Event, Odometry, RangeObservations
-from locbench.geometry import wrap_angle
 
 FloatArray = npt.NDArray[np.float64]
 

@@ -48,19 +48,19 @@ kept (no shift): event and truth times are the file's ``t``.
 
 How the dataset is derived
 --------------------------
-* **Odometry.** One :class:`~locbench.events.Odometry` per sample k >= 1 at ``t[k]``, carrying the measured
+* **Odometry.** One :class:`~locbench.core.events.Odometry` per sample k >= 1 at ``t[k]``, carrying the measured
   twist (``v``, ``omega``) held over ``dt = t[k] - t[k-1]`` and its exact constant-twist increment in the frame
   of the pose at ``t[k-1]``, with a = omega dt::
 
       dx = v dt sin(a) / a,   dy = v dt (1 - cos a) / a,   dtheta = a      (a -> 0: dx = v dt, dy = 0)
 
-  evaluated through sinc (:func:`locbench.geometry.twist_increment`) so that it is exact and stable for any a.
+  evaluated through sinc (:func:`locbench.core.geometry.twist_increment`) so that it is exact and stable for any a.
   Which sample's twist drives the interval (t[k-1], t[k]] is the parameter ``twist_sample``: ``"previous"``
   (default) holds the sample taken at ``t[k-1]`` forward (causal zero-order hold); ``"current"`` uses the sample
   at ``t[k]``, the convention of the course's motion model x_k = f(x_{k-1}, v_k, om_k). On this file the
   default fits the Vicon motion better: the RMS difference between the Vicon speed (turn rate) over an interval
   and the twist is 0.063 m/s (0.067 rad/s) with ``"previous"`` and 0.065 m/s (0.088 rad/s) with ``"current"``.
-* **Landmark observations.** One :class:`~locbench.events.LandmarkObservations` per sample with at least one
+* **Landmark observations.** One :class:`~locbench.core.events.LandmarkObservations` per sample with at least one
   tube seen (``r > 0``), ids as above. The laser measures (r, b) from a point d ahead of the robot centre, but
   our observations are from the robot origin; each sighting is therefore converted exactly: the tube lies at
   p = (d + r cos b, r sin b) in the robot frame, so the range and bearing from the centre are R = |p| and
@@ -74,7 +74,7 @@ How the dataset is derived
 * **Initial belief.** The first valid truth pose of the span, with covariance
   diag(``initial_sigma_xy_m``^2, ``initial_sigma_xy_m``^2, ``initial_sigma_theta_rad``^2).
 
-Nominal noise (:class:`~locbench.datasets.base.SensorSpec`)
+Nominal noise (:class:`~locbench.datasets.dataset.SensorSpec`)
 --------------------------------------------------------------
 All of it comes from the dataset's own variances and is computed over the whole file (so it does not change
 with the sub-interval):
@@ -119,7 +119,11 @@ from typing import Any, ClassVar, Literal
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import (
+from locbench.core.errors import ConfigError
+from locbench.core.events import Event, LandmarkObservations, Odometry
+from locbench.core.geometry import twist_increment, wrap_angle
+from locbench.core.spec import bound, params_to_dict
+from locbench.datasets.dataset import (
     Dataset,
     FlaggedSample,
     Gaussian2,
@@ -130,7 +134,7 @@ from locbench.datasets.base import (
     sort_events,
 )
 from locbench.datasets.recorded import plausibility
-from locbench.datasets.recorded.base import RecordedDataset
+from locbench.datasets.recorded.common import RecordedDataset
 from locbench.datasets.recorded.files import (
     MAX_POSITION_M,
     MissingDataFile,
@@ -141,10 +145,6 @@ from locbench.datasets.recorded.files import (
     load_mat,
     mat_numbers,
 )
-from locbench.errors import ConfigError
-from locbench.events import Event, LandmarkObservations, Odometry
-from locbench.geometry import twist_increment, wrap_angle
-from locbench.spec import bound, params_to_dict
 
 FloatArray = npt.NDArray[np.float64]
 

@@ -63,25 +63,25 @@ How the dataset is derived
   apart) followed by every Vicon sample after t0, so the truth covers every event and its first pose is the
   pose at the start of the odometry. Sightings before t0 are dropped (nothing moves the filters there).
 * **Odometry.** Sample k = (t_k, v_k, omega_k) is a command held until the next sample (causal zero-order hold):
-  one :class:`~locbench.events.Odometry` at t_{k+1} carries ``v = v_k``, ``omega = omega_k``,
+  one :class:`~locbench.core.events.Odometry` at t_{k+1} carries ``v = v_k``, ``omega = omega_k``,
   ``dt = t_{k+1} - t_k`` and the exact constant-twist increment in the frame of the pose at t_k, with
   a = omega dt::
 
       dx = v dt sin(a) / a,   dy = v dt (1 - cos a) / a,   dtheta = a      (a -> 0: dx = v dt, dy = 0)
 
-  (:func:`locbench.geometry.twist_increment`, through ``sinc`` so it is exact and stable at a = 0). The exact
+  (:func:`locbench.core.geometry.twist_increment`, through ``sinc`` so it is exact and stable at a = 0). The exact
   arc is chosen over a first-order step because it is what the twist says happened; at 10 ms steps the two differ
   by far less than the twist's own error. Samples with a repeated time stamp (dt = 0, 10 in Robot 4's file)
   move nothing and give no event.
 * **Observations.** The barcode column maps to a subject through ``Barcodes.dat``. Subjects 6-20 (landmarks)
-  become :class:`~locbench.events.LandmarkObservations` with ``ids`` = subject numbers, one event per time
+  become :class:`~locbench.core.events.LandmarkObservations` with ``ids`` = subject numbers, one event per time
   stamp (all rows of one camera frame together). Sightings of the other robots (subjects 1-5) are NOT given to
   the filters: they are counted in ``metadata["robot_sightings"]`` and returned in full by
   :func:`read_robot_sightings` (a side array: time, subject, range, bearing). Barcodes missing from
   ``Barcodes.dat`` (misreads, e.g. 43, 34 and 50 in Dataset 6) are dropped and counted per barcode in
   ``metadata["unknown_barcodes"]``.
 * **Map.** ``Landmark_Groundtruth.dat``: ids = subjects, positions and their Vicon standard deviations
-  (:attr:`~locbench.datasets.base.Landmarks.std_xy`).
+  (:attr:`~locbench.datasets.dataset.Landmarks.std_xy`).
 * **Initial belief.** Mean = the truth pose at t0. Covariance diag(0.01 m, 0.01 m, 0.02 rad)^2
   (:data:`INITIAL_SIGMA_XY_M`, :data:`INITIAL_SIGMA_THETA_RAD`): ten times Vicon's ~1 mm for position, and a
   heading margin that covers the offsets between the Vicon body frame and the camera's axis seen in Dataset 6
@@ -99,7 +99,8 @@ Nominal noise: how the frozen constants were derived
 The dataset publishes no noise figures. The constants below (:data:`TWIST_SIGMA_V_MPS` ...) were computed ONCE
 by ``tools/derive_mrclam_noise.py`` on Dataset 6, robots 1-5 (pooled), against the Vicon truth and the surveyed
 map (robust standard deviations of the camera residuals and of the twist's error over 1 s windows; the procedure
-is in the tool's docstring), and frozen here; ``tests/test_recorded_mrclam.py`` reruns the tool on the shared
+is in the tool's docstring), and frozen here; ``tests/datasets/recorded/test_recorded_mrclam.py`` reruns the tool on
+the shared
 files and checks they agree within 10 %. They were not chosen by looking at any filter's error.
 
 Known caveats: the camera has outliers (misread barcodes mapped to a wrong landmark, reflections) that a robust
@@ -121,7 +122,10 @@ from typing import Any, ClassVar
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import (
+from locbench.core.errors import ConfigError, DependencyNotInstalled
+from locbench.core.events import Event, LandmarkObservations, Odometry
+from locbench.core.geometry import twist_increment, wrap_angle
+from locbench.datasets.dataset import (
     Dataset,
     FlaggedSample,
     Gaussian2,
@@ -133,7 +137,7 @@ from locbench.datasets.base import (
     sort_events,
 )
 from locbench.datasets.recorded import plausibility
-from locbench.datasets.recorded.base import RecordedDataset
+from locbench.datasets.recorded.common import RecordedDataset
 from locbench.datasets.recorded.files import (
     MAX_DERIVED_ITEMS,
     MAX_POSITION_M,
@@ -145,9 +149,6 @@ from locbench.datasets.recorded.files import (
     read_table,
     verify_sha256,
 )
-from locbench.errors import ConfigError, DependencyNotInstalled
-from locbench.events import Event, LandmarkObservations, Odometry
-from locbench.geometry import twist_increment, wrap_angle
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -442,7 +443,7 @@ def odometry_events(t: FloatArray, v: FloatArray, omega: FloatArray) -> list[Odo
     """One :class:`Odometry` per interval between consecutive samples with dt > 0 (zero-order hold of sample k).
 
     ``t``, ``v``, ``omega`` are the samples (n,) in s, m/s, rad/s; the event of interval (t_k, t_{k+1}] is stamped
-    t_{k+1} and carries (v_k, omega_k, dt) and the exact increment of :func:`locbench.geometry.twist_increment`.
+    t_{k+1} and carries (v_k, omega_k, dt) and the exact increment of :func:`locbench.core.geometry.twist_increment`.
     """
     dt = np.diff(t)
     keep = np.flatnonzero(dt > 0)

@@ -9,7 +9,8 @@ expectation (:class:`~locbench.datasets.recorded.files.RecordedDataError`).
 
 *Physical-bound* violations of single samples (a speed, a turn rate, a range, a variance, a heading magnitude, an
 exact duplicate) are *flagged*: the sample is left out of what the filters and the metrics see, and recorded as a
-:class:`~locbench.datasets.base.FlaggedSample` in :attr:`Dataset.flagged <locbench.datasets.base.Dataset.flagged>`,
+:class:`~locbench.datasets.dataset.FlaggedSample` in :attr:`Dataset.flagged
+<locbench.datasets.dataset.Dataset.flagged>`,
 which the runner stores in the run's provenance and the report counts. A file is accepted with flags only while they
 stay isolated: at most :data:`MAX_FLAGGED_FRACTION` of one quantity's samples in one file, and no stretch of
 consecutive flagged samples longer than :data:`MAX_FLAGGED_SPAN_S`; beyond either it is refused, naming the first
@@ -30,9 +31,9 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import FlaggedSample
+from locbench.core.geometry import wrap_angle
+from locbench.datasets.dataset import FlaggedSample
 from locbench.datasets.recorded.files import RecordedDataError
-from locbench.geometry import wrap_angle
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]

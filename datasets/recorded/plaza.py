@@ -19,7 +19,7 @@ Times are seconds of the recording's clock; x-y is the GPS-derived local frame (
 
 What the dataset is made of, and why
 ------------------------------------
-* **Odometry** (:class:`~locbench.events.Odometry`, one per ``DR`` row at its time): the robot moves
+* **Odometry** (:class:`~locbench.core.events.Odometry`, one per ``DR`` row at its time): the robot moves
   d = ``d_dist`` along the heading at mid-rotation, theta + d_heading / 2, then has turned d_heading, i.e. in
   the previous robot frame dx = d cos(d_heading / 2), dy = d sin(d_heading / 2), dtheta = d_heading. Checked
   against ``DRp`` (see :func:`dead_reckoning_check`): integrated from ``DRp``'s first pose this reproduces Plaza2's
@@ -29,12 +29,12 @@ What the dataset is made of, and why
   step lengths equal d_dist exactly, the direction of each step turning away from ``DRp``'s own heading by up
   to 0.55 rad over the run): the positions of Plaza1's ``DRp`` were made with another heading source, and
   ``DRp`` is not used as odometry. No twist is given (the log has distances, not speeds).
-* **Ranges** (:class:`~locbench.events.RangeObservations`): the ``TD`` rows, sorted by time (a stable sort:
+* **Ranges** (:class:`~locbench.core.events.RangeObservations`): the ``TD`` rows, sorted by time (a stable sort:
   Plaza1's ``TD`` holds two blocks out of time order, -64 s and -50 s, which the sort puts back; counted in
   ``metadata["td_rows_out_of_order"]``) and grouped per identical time stamp; ids are the beacon ids. The
   sender id is the robot's radio (one per file; kept in metadata).
 * **Beacons**: ``TL`` as ``world.landmarks`` (surveyed; no standard deviation given).
-* **Ground truth** (:class:`~locbench.datasets.base.Trajectory2D`): ``GT``'s positions. Its heading column is
+* **Ground truth** (:class:`~locbench.datasets.dataset.Trajectory2D`): ``GT``'s positions. Its heading column is
   not used: in Plaza1 it equals ``DRp``'s odometry heading exactly (so it is not independent of the odometry),
   and in Plaza2 it points backwards (the direction of travel minus pi, median deviation 0.018 rad; GTSAM's
   example adds pi to it). The true heading is taken as the GPS direction of travel
@@ -94,7 +94,11 @@ from typing import Any, ClassVar
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import (
+from locbench.core.errors import ConfigError
+from locbench.core.events import Event, Odometry, RangeObservations
+from locbench.core.geometry import wrap_angle
+from locbench.core.spec import bound
+from locbench.datasets.dataset import (
     Dataset,
     FlaggedSample,
     Gaussian2,
@@ -105,7 +109,7 @@ from locbench.datasets.base import (
     sort_events,
 )
 from locbench.datasets.recorded import plausibility
-from locbench.datasets.recorded.base import RecordedDataset
+from locbench.datasets.recorded.common import RecordedDataset
 from locbench.datasets.recorded.files import (
     MAX_POSITION_M,
     MissingDataFile,
@@ -117,10 +121,6 @@ from locbench.datasets.recorded.files import (
     mat_numbers,
     verify_sha256,
 )
-from locbench.errors import ConfigError
-from locbench.events import Event, Odometry, RangeObservations
-from locbench.geometry import wrap_angle
-from locbench.spec import bound
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -436,7 +436,7 @@ def load_plaza(
     sha256: str | None = None,
     noise: NominalNoise | None = None,
 ) -> Dataset:
-    """Load a Plaza MAT file as a :class:`~locbench.datasets.base.Dataset` (module docstring).
+    """Load a Plaza MAT file as a :class:`~locbench.datasets.dataset.Dataset` (module docstring).
 
     Parameters
     ----------

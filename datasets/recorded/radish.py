@@ -105,7 +105,7 @@ LMS / PLS units, whose range field holds at most 8191 cm (81.91 m, also their no
   (intel.clf: 0.90 s; aces and fr079: 0): ordered by such stamps, intel's consecutive increments step up to 0.92 m
   back and forth within milliseconds (191 of 26915 beyond the bound over the bare interval), which is the stamps'
   jitter, not the robot's motion.
-* Refused (structural): a FLASER with more than :data:`~locbench.limits.MAX_LASER_BEAMS` beams (at parse, before
+* Refused (structural): a FLASER with more than :data:`~locbench.core.limits.MAX_LASER_BEAMS` beams (at parse, before
   its ranges are read), and a PARAM given twice within one logging session (its lines between two
   ``# message formats defined`` header comments), naming both lines. A PARAM restated by a later session's header
   takes that session's value: belgioioso's log starts with a two-line header (``robot_frontlaser_offset 0.0``) and
@@ -139,7 +139,12 @@ from typing import Any, ClassVar
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import (
+from locbench.core.errors import ConfigError
+from locbench.core.events import Event, LaserScan, Odometry
+from locbench.core.geometry import between, wrap_angle
+from locbench.core.limits import MAX_LASER_BEAMS
+from locbench.core.spec import bound
+from locbench.datasets.dataset import (
     Dataset,
     FlaggedSample,
     Gaussian2,
@@ -150,8 +155,8 @@ from locbench.datasets.base import (
     WorldMap,
     sort_events,
 )
-from locbench.datasets.recorded.base import RecordedDataset
 from locbench.datasets.recorded.carmen import CarmenLog, parse_carmen_bytes, read_carmen
+from locbench.datasets.recorded.common import RecordedDataset
 from locbench.datasets.recorded.files import (
     MAX_GRID_CELLS,
     MAX_GRID_CELLS_BOUND,
@@ -174,11 +179,6 @@ from locbench.datasets.recorded.intel import (
     extract_map_lines,
 )
 from locbench.datasets.recorded.plausibility import BOUNDS, Flags, merge
-from locbench.errors import ConfigError
-from locbench.events import Event, LaserScan, Odometry
-from locbench.geometry import between, wrap_angle
-from locbench.limits import MAX_LASER_BEAMS
-from locbench.spec import bound
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -252,7 +252,7 @@ class EncoderError:
 
 
 #: Output of ``tools/fit_radish_odometry.py`` (:func:`fit_encoder_error` on intel, aces and freiburg-079 over their
-#: whole logs); tests/test_recorded_radish.py reruns the fit and compares.
+#: whole logs); tests/datasets/recorded/test_recorded_radish.py reruns the fit and compares.
 ENCODER_ERROR = EncoderError(
     sigma_xy_per_m=0.08102589100709597,
     sigma_theta_per_m=0.0574425450998974,

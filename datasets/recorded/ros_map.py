@@ -1,4 +1,4 @@
-"""ROS map_server maps (a YAML file naming a PGM image) as :class:`~locbench.datasets.base.OccupancyGrid`.
+"""ROS map_server maps (a YAML file naming a PGM image) as :class:`~locbench.datasets.dataset.OccupancyGrid`.
 
 Format (ROS ``map_server`` / nav2 ``map_server``, http://wiki.ros.org/map_server#Map_format): a YAML file
 
@@ -55,7 +55,7 @@ import numpy as np
 import numpy.typing as npt
 import yaml
 
-from locbench.datasets.base import OccupancyGrid
+from locbench.datasets.dataset import OccupancyGrid
 from locbench.datasets.recorded.files import (
     MAX_GRID_CELLS,
     MAX_POSITION_M,

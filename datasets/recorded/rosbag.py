@@ -88,7 +88,12 @@ from typing import Any, ClassVar, Literal
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import (
+from locbench.core.errors import ConfigError, DependencyNotInstalled
+from locbench.core.events import Event, LaserScan, Odometry, PoseFix
+from locbench.core.geometry import is_symmetric_psd, quaternion_to_yaw, wrap_angle
+from locbench.core.limits import check_input_file
+from locbench.core.spec import params_to_dict
+from locbench.datasets.dataset import (
     Dataset,
     DatasetBuilder,
     FlaggedSample,
@@ -113,11 +118,6 @@ from locbench.datasets.recorded.files import (
 )
 from locbench.datasets.recorded.intel import extract_map_lines
 from locbench.datasets.recorded.ros_map import MAX_YAML_BYTES, load_map_server_map
-from locbench.errors import ConfigError, DependencyNotInstalled
-from locbench.events import Event, LaserScan, Odometry, PoseFix
-from locbench.geometry import is_symmetric_psd, quaternion_to_yaw, wrap_angle
-from locbench.limits import check_input_file
-from locbench.spec import params_to_dict
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -169,7 +169,7 @@ class RosbagParams:
     laser_sigma_m : float
         Nominal range noise of the scanner, m.
     odometry_sigma_xy_per_m, odometry_sigma_theta_per_m, odometry_sigma_theta_per_rad : float
-        Nominal odometry increment noise (see :class:`~locbench.datasets.base.SensorSpec`).
+        Nominal odometry increment noise (see :class:`~locbench.datasets.dataset.SensorSpec`).
     initial_sigma_xy_m, initial_sigma_theta_rad : float
         Standard deviations of the initial belief around the first truth pose, m and rad.
     truth_label : {"ground truth", "SLAM reference"}

@@ -3,7 +3,7 @@
 A textlog is a folder (docs/datasets.md, section 8, is the full specification; this is its summary):
 
 - ``textlog.json``: the manifest, a JSON object with ``"format": "locbench-textlog"`` and ``"version": 1``, the
-  file names below, the nominal noise (``sensors``: fields of :class:`~locbench.datasets.base.SensorSpec`), the
+  file names below, the nominal noise (``sensors``: fields of :class:`~locbench.datasets.dataset.SensorSpec`), the
   initial belief (``initial``: ``mean`` and ``cov``, or ``sigma_xy_m`` / ``sigma_theta_rad`` around the first truth
   pose), ``truth_label``, ``reference_kind``, ``kidnaps`` and free-form ``metadata``;
 - ``events.jsonl``: one JSON object per line, in time order, each with ``t`` (s) and ``type``: ``odometry``
@@ -19,13 +19,13 @@ rad). Events outside the truth's time span are left out and counted (``metadata[
 with a warning). An odometry stream whose twist contradicts its increments is loaded with a warning in
 ``metadata["warnings"]`` (:func:`~locbench.datasets.recorded.files.twist_contradiction`).
 
-Validation: each file is a regular file of bounded size (:func:`~locbench.limits.check_input_file`), events lines
+Validation: each file is a regular file of bounded size (:func:`~locbench.core.limits.check_input_file`), events lines
 at most :data:`MAX_LINE_CHARS` long; every error is one line naming the file, the 1-based line, the field and what
 was expected (:class:`~locbench.datasets.recorded.files.RecordedDataError`). Bounds: times finite within
 +-:data:`MAX_TIME_S` and non-decreasing in file order; increments within :data:`MAX_STEP_M` and 2 pi; twists within
 :data:`MAX_TWIST`, ``dt`` in (0, :data:`MAX_DT_S`]; positions within
 :data:`~locbench.datasets.recorded.files.MAX_POSITION_M`; scans as a bag's
-(:func:`~locbench.datasets.recorded.files.scan_problem`) with at most :data:`~locbench.limits.MAX_LASER_BEAMS`
+(:func:`~locbench.datasets.recorded.files.scan_problem`) with at most :data:`~locbench.core.limits.MAX_LASER_BEAMS`
 beams; at most :data:`MAX_ITEMS` sightings or ranges per event, ids -1 (unknown) or in the landmark file; fix
 covariances symmetric PSD; no unknown field anywhere and no key given twice in one object (a typo is an error, not
 a silently default value); not every event at one time; kidnaps inside the truth's span.
@@ -56,7 +56,20 @@ from typing import Any, ClassVar
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import (
+from locbench.core.errors import ConfigError
+from locbench.core.events import (
+    UNKNOWN_ID,
+    Event,
+    LandmarkObservations,
+    LaserScan,
+    Odometry,
+    PoseFix,
+    RangeObservations,
+)
+from locbench.core.geometry import is_symmetric_psd, quaternion_to_yaw, twist_increment
+from locbench.core.limits import MAX_LASER_BEAMS, check_input_file
+from locbench.core.spec import params_to_dict
+from locbench.datasets.dataset import (
     TRUTH_LABELS,
     Dataset,
     DatasetBuilder,
@@ -88,19 +101,6 @@ from locbench.datasets.recorded.files import (
     user_path_candidates,
 )
 from locbench.datasets.recorded.tum import TUM_COLUMNS, atomic_write_text, write_tum
-from locbench.errors import ConfigError
-from locbench.events import (
-    UNKNOWN_ID,
-    Event,
-    LandmarkObservations,
-    LaserScan,
-    Odometry,
-    PoseFix,
-    RangeObservations,
-)
-from locbench.geometry import is_symmetric_psd, quaternion_to_yaw, twist_increment
-from locbench.limits import MAX_LASER_BEAMS, check_input_file
-from locbench.spec import params_to_dict
 
 FloatArray = npt.NDArray[np.float64]
 

@@ -21,11 +21,11 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import FlaggedSample, Trajectory2D
+from locbench.core.errors import ConfigError
+from locbench.core.geometry import quaternion_to_yaw, yaw_to_quaternion
+from locbench.datasets.dataset import FlaggedSample, Trajectory2D
 from locbench.datasets.recorded import plausibility
 from locbench.datasets.recorded.files import MAX_POSITION_M, Table, quaternion_problem, read_table
-from locbench.errors import ConfigError
-from locbench.geometry import quaternion_to_yaw, yaw_to_quaternion
 
 log = logging.getLogger(__name__)
 

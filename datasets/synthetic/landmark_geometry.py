@@ -39,7 +39,7 @@ Sensors:
   fig. 1's velocity-noise model, so that every synthetic world has the same robot; 20 Hz;
 * a laser of 151 beams over [-2, 2] rad (report 001 sec. IV-B), 5 Hz, 12 m range (so that the far square
   stays in range from every point of every path: report 001's micro-simulator saw every landmark),
-  1 cm range noise, 1 % dropouts, ray-cast on the 0.05 m occupancy grid by :mod:`locbench.raycast`;
+  1 cm range noise, 1 % dropouts, ray-cast on the 0.05 m occupancy grid by :mod:`locbench.raycast.cast`;
 * landmark detection from each scan (report 001 fig. 3): a beam hit landmark j when its end point is
   within the disc radius plus :data:`HIT_TOLERANCE_M` of the disc centre (the simulator knows which
   object a beam hit); each landmark hit by at least one beam is reported with bearing = mean bearing of
@@ -71,7 +71,11 @@ from typing import Any, ClassVar, Literal
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import Dataset, Gaussian2, Kidnap, SyntheticBuilder, sort_events
+from locbench.core.errors import ConfigError
+from locbench.core.events import UNKNOWN_ID, Event, LandmarkObservations, LaserScan
+from locbench.core.geometry import wrap_angle, wrap_scalar
+from locbench.core.runkey import RUN_KEY_OMIT_IF_DEFAULT
+from locbench.datasets.dataset import Dataset, Gaussian2, Kidnap, SyntheticBuilder, sort_events
 from locbench.datasets.synthetic.robot import Arc, DriveLimits, GoTo, Leg, Motion, simulate_route
 from locbench.datasets.synthetic.sensors import LandmarkSensor, LaserSensor, PoseFixSensor, laser_scans
 from locbench.datasets.synthetic.toolkit import (
@@ -85,10 +89,6 @@ from locbench.datasets.synthetic.toolkit import (
     true_wheelbase,
 )
 from locbench.datasets.synthetic.world import World
-from locbench.errors import ConfigError
-from locbench.events import UNKNOWN_ID, Event, LandmarkObservations, LaserScan
-from locbench.geometry import wrap_angle, wrap_scalar
-from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
 
 logger = logging.getLogger(__name__)
 

@@ -13,7 +13,7 @@ Here:
   south-middle room and north through its corridor door, back to the start at (12, 7.25) heading east;
   24.5 m, about 70 s. The four corners and the return to the start are marked waypoints (2 s stops).
 * **Laser.** Hokuyo URG-04LX-like: 240 deg, 683 beams (``laser_beams``), 5.6 m, 10 Hz, 1 cm range noise,
-  1 % dropouts, ray-cast on the grid by :mod:`locbench.raycast`.
+  1 % dropouts, ray-cast on the grid by :mod:`locbench.raycast.cast`.
 * **People** (``people``, default 4) are not on the map: discs of radius 0.25-0.3 m walking back and forth
   at 0.6-1.2 m/s along straight free paths drawn from the seed in the lap's part of the floor. Each beam
   is cast against the grid and intersected analytically with the discs; the nearer range is kept. A disc
@@ -47,7 +47,11 @@ from typing import Any, ClassVar
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import Dataset, SyntheticBuilder, sort_events
+from locbench.core.errors import ConfigError
+from locbench.core.events import Event, LaserScan
+from locbench.core.limits import check_bytes
+from locbench.core.runkey import RUN_KEY_OMIT_IF_DEFAULT
+from locbench.datasets.dataset import Dataset, SyntheticBuilder, sort_events
 from locbench.datasets.synthetic.robot import DriveLimits, GoTo, Leg, Motion, simulate_route
 from locbench.datasets.synthetic.scenarios import (
     office_world,
@@ -78,11 +82,7 @@ from locbench.datasets.synthetic.toolkit import (
     split_streams,
 )
 from locbench.datasets.synthetic.world import World
-from locbench.errors import ConfigError
-from locbench.events import Event, LaserScan
-from locbench.limits import check_bytes
-from locbench.raycast import cast_rays
-from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
+from locbench.raycast.cast import cast_rays
 
 logger = logging.getLogger(__name__)
 
@@ -154,7 +154,7 @@ def lap_motion(scale: float = LAP_SYSTEMATIC_SCALE, seed: int | None = None, dat
     limits = dataclasses.replace(LAP_LIMITS, wheelbase_m=lap_wheelbase(scale))
     if seed is None:
         return simulate_route(LAP_START, lap_route(), limits)
-    from locbench.seeding import dataset_rng
+    from locbench.core.seeding import dataset_rng
 
     slip_rng = lap_streams(dataset_rng(dataset_name, seed))[2]
     return simulate_route(LAP_START, lap_route(), limits, slip_k=SLIP_K_TRUE, slip_rng=slip_rng)

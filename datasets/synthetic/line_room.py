@@ -31,7 +31,10 @@ from typing import ClassVar
 
 import numpy as np
 
-from locbench.datasets.base import Dataset, SyntheticBuilder
+from locbench.core.errors import ConfigError
+from locbench.core.limits import check_beams
+from locbench.core.runkey import RUN_KEY_OMIT_IF_DEFAULT
+from locbench.datasets.dataset import Dataset, SyntheticBuilder
 from locbench.datasets.synthetic.robot import DriveLimits, GoTo, Leg
 from locbench.datasets.synthetic.sensors import LaserSensor
 from locbench.datasets.synthetic.toolkit import (
@@ -46,9 +49,6 @@ from locbench.datasets.synthetic.toolkit import (
     true_wheelbase,
 )
 from locbench.datasets.synthetic.world import World, wall_with_doors
-from locbench.errors import ConfigError
-from locbench.limits import check_beams
-from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
 
 logger = logging.getLogger(__name__)
 

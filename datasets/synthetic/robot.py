@@ -50,9 +50,9 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import Kidnap
-from locbench.errors import ConfigError
-from locbench.geometry import wrap_scalar
+from locbench.core.errors import ConfigError
+from locbench.core.geometry import wrap_scalar
+from locbench.datasets.dataset import Kidnap
 
 logger = logging.getLogger(__name__)
 

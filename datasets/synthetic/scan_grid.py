@@ -40,7 +40,12 @@ from typing import ClassVar
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import (
+from locbench.core.errors import ConfigError
+from locbench.core.events import Event, LaserScan, Odometry
+from locbench.core.geometry import wrap_angle, wrap_scalar
+from locbench.core.runkey import RUN_KEY_OMIT_IF_DEFAULT
+from locbench.core.spec import params_to_dict
+from locbench.datasets.dataset import (
     Dataset,
     Gaussian2,
     Kidnap,
@@ -66,12 +71,7 @@ from locbench.datasets.synthetic.toolkit import (
     true_wheelbase,
 )
 from locbench.datasets.synthetic.world import World
-from locbench.errors import ConfigError
-from locbench.events import Event, LaserScan, Odometry
-from locbench.geometry import wrap_angle, wrap_scalar
-from locbench.raycast import cast_rays
-from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
-from locbench.spec import params_to_dict
+from locbench.raycast.cast import cast_rays
 
 logger = logging.getLogger(__name__)
 

@@ -1,7 +1,7 @@
 """The named synthetic scenarios: ``room`` (report 003), ``office``, ``tiny_line`` and ``tiny_circle``, built
 with the shared toolkit (:mod:`locbench.datasets.synthetic.toolkit`).
 
-Each scenario is a :class:`~locbench.datasets.base.DatasetBuilder` whose ``build(params, rng)`` depends
+Each scenario is a :class:`~locbench.datasets.dataset.DatasetBuilder` whose ``build(params, rng)`` depends
 only on its arguments. The generator is split into one child stream per noise source (odometry,
 landmarks, laser, fixes, kidnap), so that e.g. ``laser_beams`` or ``known_ids`` does not change the
 odometry realisation of a seed.
@@ -25,7 +25,9 @@ from typing import ClassVar
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import Dataset, DatasetBuilder, SyntheticBuilder
+from locbench.core.errors import ConfigError
+from locbench.core.runkey import RUN_KEY_OMIT_IF_DEFAULT
+from locbench.datasets.dataset import Dataset, DatasetBuilder, SyntheticBuilder
 from locbench.datasets.synthetic.robot import Arc, DriveLimits, GoTo, Leg, Motion, simulate_route
 from locbench.datasets.synthetic.sensors import LandmarkSensor, LaserSensor, PoseFixSensor
 from locbench.datasets.synthetic.toolkit import (
@@ -47,8 +49,6 @@ from locbench.datasets.synthetic.toolkit import (
     true_wheelbase,
 )
 from locbench.datasets.synthetic.world import World, wall_with_doors
-from locbench.errors import ConfigError
-from locbench.runkey import RUN_KEY_OMIT_IF_DEFAULT
 
 logger = logging.getLogger(__name__)
 
@@ -169,7 +169,7 @@ def room_motion_for(wheelbase_ratio: float, seed: int | None = None) -> Motion:
     legs = [GoTo(w) for w in ROOM_WAYPOINTS]
     if seed is None:
         return simulate_route(ROOM_START, legs, limits)
-    from locbench.seeding import dataset_rng
+    from locbench.core.seeding import dataset_rng
 
     rng = dataset_rng("room", seed)
     split_streams(rng)

@@ -4,7 +4,7 @@
   eq. 1, 2, 5 and 10);
 - a range-bearing landmark sensor with range limits, field of view, optional wall occlusion and
   optional withheld identities;
-- a planar laser ray-cast in the occupancy grid (:mod:`locbench.raycast`);
+- a planar laser ray-cast in the occupancy grid (:mod:`locbench.raycast.cast`);
 - GPS-like position fixes.
 
 Every function draws all its randomness from the Generator it is given, always the same number of draws
@@ -20,14 +20,14 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import OccupancyGrid
+from locbench.core.errors import ConfigError
+from locbench.core.events import UNKNOWN_ID, LandmarkObservations, LaserScan, Odometry, PoseFix
+from locbench.core.geometry import wrap_angle
+from locbench.core.limits import SCAN_SAMPLE_BYTES, check_bytes
+from locbench.datasets.dataset import OccupancyGrid
 from locbench.datasets.synthetic.robot import Motion
 from locbench.datasets.synthetic.world import World
-from locbench.errors import ConfigError
-from locbench.events import UNKNOWN_ID, LandmarkObservations, LaserScan, Odometry, PoseFix
-from locbench.geometry import wrap_angle
-from locbench.limits import SCAN_SAMPLE_BYTES, check_bytes
-from locbench.raycast import cast_rays
+from locbench.raycast.cast import cast_rays
 
 logger = logging.getLogger(__name__)
 

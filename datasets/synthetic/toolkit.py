@@ -24,7 +24,11 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import (
+from locbench.core.errors import ConfigError
+from locbench.core.events import Event, LandmarkObservations, LaserScan, PoseFix
+from locbench.core.limits import check_beams
+from locbench.core.spec import bound, params_to_dict
+from locbench.datasets.dataset import (
     Dataset,
     Gaussian2,
     SensorSpec,
@@ -44,10 +48,6 @@ from locbench.datasets.synthetic.sensors import (
     wheel_odometry,
 )
 from locbench.datasets.synthetic.world import World
-from locbench.errors import ConfigError
-from locbench.events import Event, LandmarkObservations, LaserScan, PoseFix
-from locbench.limits import check_beams
-from locbench.spec import bound, params_to_dict
 
 logger = logging.getLogger(__name__)
 

@@ -1,9 +1,9 @@
 """A synthetic world's geometry, from which every map kind handed to filters is derived.
 
 The geometry is a set of wall segments (zero thickness, world frame, m), point landmarks and a bounding
-box. :meth:`World.world_map` turns it into the :class:`~locbench.datasets.base.WorldMap` that filters
+box. :meth:`World.world_map` turns it into the :class:`~locbench.datasets.dataset.WorldMap` that filters
 get: an occupancy grid made by rasterising the walls (every cell a wall passes through is occupied),
-a :class:`~locbench.datasets.base.LineMap` holding the same segments, and the landmarks with ids
+a :class:`~locbench.datasets.dataset.LineMap` holding the same segments, and the landmarks with ids
 0..n-1. Because all three come from one geometry, every filter localizes in the same world.
 
 The grid origin is offset by half a cell from the bounds, so walls drawn on multiples of the resolution
@@ -21,8 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from locbench.datasets.base import Landmarks, LineMap, OccupancyGrid, WorldMap
-from locbench.errors import ConfigError
+from locbench.core.errors import ConfigError
+from locbench.datasets.dataset import Landmarks, LineMap, OccupancyGrid, WorldMap
 
 logger = logging.getLogger(__name__)
 

@@ -1,7 +1,7 @@
 """Property-based fuzzing of every recorded-data parser and loader (issue 13).
 
 The property, for any mutation of a small valid file: the loader either raises a clean locbench error (a
-:class:`~locbench.errors.LocbenchError` whose message is one line of bounded length naming the file) or returns
+:class:`~locbench.core.errors.LocbenchError` whose message is one line of bounded length naming the file) or returns
 a dataset that passes the contract check. Any other exception, a multi-line or unbounded message, or running out
 of the memory limit fails the test.
 
@@ -34,13 +34,13 @@ from test_recorded_intel import write_small_intel
 from test_recorded_lost_in_the_woods import _small_mat
 from test_recorded_plaza import _tiny
 
-from locbench.datasets.base import OccupancyGrid
+from locbench.core.errors import MAX_MESSAGE_CHARS, LocbenchError
+from locbench.datasets.dataset import OccupancyGrid
 from locbench.datasets.recorded.intel import load_intel
 from locbench.datasets.recorded.lost_in_the_woods import load_lost_in_the_woods
 from locbench.datasets.recorded.mrclam import load_mrclam
 from locbench.datasets.recorded.plaza import load_plaza
 from locbench.datasets.recorded.ros_map import load_map_server_map, save_map_server_map
-from locbench.errors import MAX_MESSAGE_CHARS, LocbenchError
 
 #: Address space the loaders may add to the test process, bytes (issue 13: no small input may take 1 GB).
 MEMORY_HEADROOM = 1 << 30
@@ -382,7 +382,7 @@ def bag_template(base: Path) -> dict[str, Any]:
     pytest.importorskip("rosbags")
     from test_rosbag import _Bag
 
-    from locbench.datasets.base import sort_events
+    from locbench.datasets.dataset import sort_events
     from locbench.registry import make_dataset
 
     ds = make_dataset("tiny_line", 0)
@@ -391,7 +391,7 @@ def bag_template(base: Path) -> dict[str, Any]:
     keep = ds.ground_truth.t <= t0 + 2.0
     from dataclasses import replace
 
-    from locbench.datasets.base import Trajectory2D
+    from locbench.datasets.dataset import Trajectory2D
 
     gt = ds.ground_truth
     ds = replace(
@@ -470,9 +470,9 @@ def test_a_map_at_the_pixel_limit_loads_within_the_memory_limit(base: Path) -> N
 def test_grid_filters_refuse_or_run_within_the_memory_limit(rows: int, cols: int, spec: str) -> None:
     import dataclasses
 
-    from locbench.limits import LIKELIHOOD_FIELD_BYTES_PER_CELL, MAX_TABLE_BYTES, RAYCAST_BYTES_PER_CELL
+    from locbench.core.limits import LIKELIHOOD_FIELD_BYTES_PER_CELL, MAX_TABLE_BYTES, RAYCAST_BYTES_PER_CELL
     from locbench.registry import make_dataset, make_filter
-    from locbench.runner import run_filter
+    from locbench.run.runner import run_filter
 
     occ = np.zeros((rows, cols))
     occ[::37, ::41] = 1.0

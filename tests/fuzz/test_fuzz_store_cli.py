@@ -2,8 +2,8 @@
 
 Store readers: for any mutation of a stored run (``estimates.npz`` bytes, ``meta.json`` text, or arrays and record
 fields rewritten with valid checksums, so that the shape contracts are what is tested), truth or bound, reading
-either succeeds with a record that satisfies its contract or raises :class:`~locbench.store.StaleRecord` /
-:class:`~locbench.errors.ConfigError` with a one-line message of bounded length. Any other exception fails.
+either succeeds with a record that satisfies its contract or raises :class:`~locbench.run.store.StaleRecord` /
+:class:`~locbench.core.errors.ConfigError` with a one-line message of bounded length. Any other exception fails.
 
 CLI: random argument lists for ``locbench run/report/verify/tune/list`` built from the real option names (read from
 the parser) and random values end with exit code 0, 1 or 2, no traceback and at most one error line on stderr.
@@ -30,11 +30,11 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from locbench import store as store_mod
 from locbench.cli import build_parser, main
-from locbench.datasets.base import Trajectory2D
-from locbench.errors import MAX_MESSAGE_CHARS, ConfigError
-from locbench.store import BoundRecord, RunRecord, StaleRecord, Store, TruthRecord
+from locbench.core.errors import MAX_MESSAGE_CHARS, ConfigError
+from locbench.datasets.dataset import Trajectory2D
+from locbench.run import store as store_mod
+from locbench.run.store import BoundRecord, RunRecord, StaleRecord, Store, TruthRecord
 
 _COUNTER = itertools.count()
 N = 4

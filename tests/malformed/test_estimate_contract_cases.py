@@ -1,4 +1,4 @@
-"""The estimate contract's checks (locbench.contract) at their tolerances: what passes, what fails, which row is
+"""The estimate contract's checks (locbench.run.contract) at their tolerances: what passes, what fails, which row is
 named."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import re
 import numpy as np
 import pytest
 
-from locbench.contract import (
+from locbench.run.contract import (
     HEADING_ATOL,
     PSD_RTOL,
     SYMMETRY_RTOL,

@@ -21,14 +21,14 @@ from test_recorded_lost_in_the_woods import _small_mat
 from test_recorded_mrclam import _small_folder
 from test_recorded_plaza import _tiny
 
-from locbench.datasets.base import OccupancyGrid
+from locbench.core.errors import MAX_MESSAGE_CHARS, ConfigError, DataNotFound
+from locbench.datasets.dataset import OccupancyGrid
 from locbench.datasets.recorded.files import RecordedDataError
 from locbench.datasets.recorded.intel import IntelParams, load_intel
 from locbench.datasets.recorded.lost_in_the_woods import load_lost_in_the_woods
 from locbench.datasets.recorded.mrclam import MrclamParams, load_mrclam
 from locbench.datasets.recorded.plaza import load_plaza
 from locbench.datasets.recorded.ros_map import load_map_server_map, save_map_server_map
-from locbench.errors import MAX_MESSAGE_CHARS, ConfigError, DataNotFound
 
 
 def clean(info: pytest.ExceptionInfo[BaseException], path: Path | str, *words: str) -> str:
@@ -491,7 +491,7 @@ def test_mrclam_vicon_rate_is_about_65_hz_not_100() -> None:
 @pytest.mark.usefixtures("harness_registry")
 def test_make_dataset_runs_the_contract_for_every_dataset(tmp_path: Path) -> None:
     from locbench.registry import make_dataset
-    from locbench.runner import run_group
+    from locbench.run.runner import run_group
 
     make_dataset("line", 0)  # a good one passes
     with pytest.raises(ConfigError, match=r"dataset 'line\[steps=0\]': no events"):

@@ -12,11 +12,11 @@ import pytest
 from input_support import one_line as _one_line
 from test_recorded_intel import T0, box_ranges, flaser_line
 
+from locbench.core.events import LaserScan, Odometry
 from locbench.datasets.recorded.carmen import read_carmen, read_carmen_flagged
 from locbench.datasets.recorded.files import RecordedDataError
 from locbench.datasets.recorded.intel import load_intel
 from locbench.datasets.recorded.tum import read_tum, read_tum_flagged
-from locbench.events import LaserScan, Odometry
 
 
 def pose_at(t: float) -> np.ndarray:

@@ -13,10 +13,10 @@ import pytest
 from input_support import one_line as _one_line
 from test_recorded_mrclam import _small_folder, _write
 
+from locbench.core.events import Odometry
 from locbench.datasets.recorded.files import RecordedDataError
 from locbench.datasets.recorded.mrclam import load_mrclam
 from locbench.datasets.recorded.textlog import MANIFEST, load_textlog
-from locbench.events import Odometry
 
 # --- MRCLAM: a Vicon glitch of 15 ms -------------------------------------------------------------------------
 

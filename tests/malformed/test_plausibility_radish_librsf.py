@@ -12,13 +12,13 @@ from test_recorded_intel import box_ranges
 from test_recorded_librsf import write_uwb
 from test_recorded_radish import ANGLES, NO_RETURN, _flaser, _path, corrected_text, write_raw, write_site
 
-from locbench.datasets.base import Dataset, FlaggedSample
+from locbench.core.events import LaserScan, Odometry, RangeObservations
+from locbench.core.limits import MAX_LASER_BEAMS
+from locbench.datasets.dataset import Dataset, FlaggedSample
 from locbench.datasets.recorded import radish
 from locbench.datasets.recorded.files import RecordedDataError
 from locbench.datasets.recorded.librsf import load_librsf
 from locbench.datasets.recorded.radish import SCAN_PERIOD_S, load_radish
-from locbench.events import LaserScan, Odometry, RangeObservations
-from locbench.limits import MAX_LASER_BEAMS
 
 #: Scans of a written log: enough that one flagged sample stays within the policy's 1 %.
 N = 120

@@ -19,10 +19,10 @@ import numpy as np
 import pytest
 
 from locbench.cli import main
-from locbench.containment import DEFAULT_RULE, call_in_child, run_time_limit
 from locbench.registry import FILTERS, make_dataset
-from locbench.runner import execute_contained, execute_task, plan_sweep, run_many
-from locbench.store import Store
+from locbench.run.containment import DEFAULT_RULE, call_in_child, run_time_limit
+from locbench.run.runner import execute_contained, execute_task, plan_sweep, run_many
+from locbench.run.store import Store
 
 DIST, VERSION = "lbtest-plugins", "1.0"
 

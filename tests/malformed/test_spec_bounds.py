@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from locbench.cli import main
-from locbench.errors import ConfigError, LocbenchError
+from locbench.core.errors import ConfigError, LocbenchError
+from locbench.core.spec import MAX_MAGNITUDE, param_fields, parse_bound
 from locbench.registry import DATASETS, FILTERS, make_dataset, make_filter, resolve_dataset, resolve_filter
-from locbench.spec import MAX_MAGNITUDE, param_fields, parse_bound
 
 #: Values no physical parameter takes; an integer field also gets integers too large for a float or a C long.
 EXTREMES = ("1e308", "-1e308", "1e300", "nan", "inf", "-inf")

@@ -18,16 +18,16 @@ import numpy as np
 import pytest
 
 from locbench.cli import main
-from locbench.datasets.base import Gaussian2, SensorSpec, WorldMap
-from locbench.events import Odometry
+from locbench.core.events import Odometry
+from locbench.core.tunable import tunable
+from locbench.datasets.dataset import Gaussian2, SensorSpec, WorldMap
 from locbench.filters.base import Estimate, Filter, FilterConfig
 from locbench.registry import FILTERS
-from locbench.store import Store
-from locbench.tunable import tunable
+from locbench.run.store import Store
 
 optuna = pytest.importorskip("optuna", reason="tuning needs optuna (pip install 'locbench[tune]')")
 
-from locbench import tuning  # noqa: E402 - after the skip: the module needs optuna to tune
+from locbench.run import tuning  # noqa: E402 - after the skip: the module needs optuna to tune
 
 #: The entry point of the blocking filter, the same in the test process and in the child it kills.
 BLOCKER = f"{Path(__file__).stem}:BlockingFilter"
@@ -100,7 +100,7 @@ def test_a_trial_killed_with_sigkill_is_failed_on_resume_and_replaced(
     script = textwrap.dedent(
         f"""
         from locbench.registry import FILTERS
-        from locbench import tuning
+        from locbench.run import tuning
         FILTERS.register("blocker", {BLOCKER!r})
         tuning.tune("blocker", ["tiny_line"], 3, 1, {str(results)!r})
         """

@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 
 from locbench.cli import main
+from locbench.core.errors import ConfigError
 from locbench.datasets.recorded.ros_map import MAX_YAML_BYTES
 from locbench.datasets.recorded.rosbag import MAX_BAG_BYTES, resolve_bag_path
-from locbench.errors import ConfigError
-from locbench.runner import run_many
-from locbench.store import MARKER, Store
+from locbench.run.runner import run_many
+from locbench.run.store import MARKER, Store
 
 TESTS = Path(__file__).resolve().parents[1]
 SMOKE = ["run", "--filter", "odometry", "--dataset", "tiny_line", "--no-progress"]
@@ -117,7 +117,7 @@ def test_a_bound_of_the_wrong_shape_does_not_crash_the_report(tmp_path: Path) ->
     run_many(["odometry"], ["tiny_line"], [0], res)
     st = Store(tmp_path)
     from locbench.report.collect import collect
-    from locbench.store import BoundRecord
+    from locbench.run.store import BoundRecord
 
     t = st.read_truth("tiny_line", 0).ground_truth.t
     st.write_bound(BoundRecord("tiny_line", 0, t, {"PCRB": np.tile(np.eye(3), (t.size, 1, 1))}, {"bound_key": "k"}))
@@ -331,14 +331,14 @@ def test_a_long_spec_error_is_capped(tmp_path: Path, capsys: pytest.CaptureFixtu
 def test_a_full_disk_is_found_before_anything_is_computed(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from locbench import store as store_mod
+    from locbench.run import store as store_mod
 
     class Usage:
         free = 10 * 2**20
 
     monkeypatch.setattr(store_mod.shutil, "disk_usage", lambda p: Usage())
     computed = []
-    import locbench.runner as runner_mod
+    import locbench.run.runner as runner_mod
 
     real = runner_mod.execute_task
     monkeypatch.setattr(runner_mod, "execute_task", lambda task: computed.append(task) or real(task))
@@ -354,7 +354,7 @@ def test_not_stored_lines_name_the_run_and_its_folder(
 ) -> None:
     import errno
 
-    from locbench import store as store_mod
+    from locbench.run import store as store_mod
 
     real = store_mod.np.savez
 
@@ -377,7 +377,7 @@ def test_not_stored_lines_name_the_run_and_its_folder(
 WORKER_PARENT = """
 import os, sys, time
 from concurrent.futures import ProcessPoolExecutor
-from locbench.executors import _pool_worker_init
+from locbench.run.executors import _pool_worker_init
 pool = ProcessPoolExecutor(max_workers=2, initializer=_pool_worker_init)
 futs = [pool.submit(os.getpid) for _ in range(4)]
 print(" ".join(str(p) for p in sorted({f.result() for f in futs})), flush=True)

@@ -15,10 +15,10 @@ from typing import Any
 import numpy as np
 import pytest
 
-from locbench.datasets.base import Dataset, Landmarks
-from locbench.events import Odometry
+from locbench.core.events import Odometry
+from locbench.core.seeding import filter_rng
+from locbench.datasets.dataset import Dataset, Landmarks
 from locbench.registry import FILTERS, make_dataset, make_filter
-from locbench.seeding import filter_rng
 
 _DATA: dict[int, Dataset] = {}
 

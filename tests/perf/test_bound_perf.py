@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 from bound_support import differenced_laser_information, scan_poses, seven_cast_bound
 
-from locbench import pcrb
+from locbench.evaluate import pcrb
 from locbench.registry import make_dataset
 
 

@@ -19,9 +19,9 @@ from typing import Any
 import numpy as np
 import pytest
 
+from locbench.core.geometry import wrap_scalar
 from locbench.filters._ekf_icp_kernels import correct_pose, predict_pose, state_buffer
 from locbench.filters._kalman import joseph_correct_pose
-from locbench.geometry import wrap_scalar
 
 _Q = (0.0005, 0.0005, 0.0005, 0.001, 0.001, 0.0011)
 _R = (0.008, 0.008, 0.01)

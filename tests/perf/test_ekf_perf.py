@@ -22,10 +22,10 @@ import numpy as np
 import pytest
 from numba import njit
 
-from locbench.datasets.base import Dataset
-from locbench.events import LandmarkObservations, Odometry
+from locbench.core.events import LandmarkObservations, Odometry
+from locbench.core.seeding import filter_rng
+from locbench.datasets.dataset import Dataset
 from locbench.registry import make_dataset, make_filter
-from locbench.seeding import filter_rng
 
 _DATA: dict[str, Dataset] = {}
 

@@ -11,10 +11,10 @@ from typing import Any
 
 import pytest
 
-from locbench.datasets.base import Dataset
-from locbench.events import Odometry
+from locbench.core.events import Odometry
+from locbench.core.seeding import filter_rng
+from locbench.datasets.dataset import Dataset
 from locbench.registry import FILTERS, make_dataset, resolve_filter
-from locbench.seeding import filter_rng
 
 _DATA: dict[str, Dataset] = {}
 

@@ -36,12 +36,12 @@ import pytest
 
 gtsam = pytest.importorskip("gtsam")
 
-from locbench.datasets.base import Dataset  # noqa: E402
-from locbench.events import Odometry  # noqa: E402
+from locbench.core.events import Odometry  # noqa: E402
+from locbench.core.geometry import wrap_scalar  # noqa: E402
+from locbench.datasets.dataset import Dataset  # noqa: E402
 from locbench.filters._motion import MotionModel, propagate_covariance  # noqa: E402
 from locbench.filters._noise import process_noise  # noqa: E402
 from locbench.filters.gtsam_fls import MIN_PROCESS_SIGMA, GtsamFixedLagSmoother, _rotate_cov  # noqa: E402
-from locbench.geometry import wrap_scalar  # noqa: E402
 from locbench.registry import make_dataset, resolve_filter  # noqa: E402
 
 _X = gtsam.symbol_shorthand.X

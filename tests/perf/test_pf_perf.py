@@ -22,8 +22,8 @@ import numpy as np
 import pytest
 from numba import njit
 
-from locbench.datasets.base import Dataset
-from locbench.events import LandmarkObservations, LaserScan, Odometry
+from locbench.core.events import LandmarkObservations, LaserScan, Odometry
+from locbench.datasets.dataset import Dataset
 from locbench.filters import pf as pf_mod
 from locbench.filters._motion import wheel_variances
 from locbench.filters._numba_rng import generator_from

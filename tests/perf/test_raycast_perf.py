@@ -13,7 +13,7 @@ rooms and 60 boxes of clutter), max range 10 m, serial kernels (``parallel=False
 ``march`` is :func:`cast_scan`'s default (distance-field jumps, fields cached with the grid: the scan marches
 on the per-octant planes, the particles on the isotropic field, both in the vector pool kernel); ``dda`` is
 the plain exact traversal, kept for comparison. The issue's target is 10 M rays/s on one core for both
-``march`` workloads; the module docstring of :mod:`locbench.raycast` has the measured rates and their
+``march`` workloads; the module docstring of :mod:`locbench.raycast.cast` has the measured rates and their
 conditions.
 """
 
@@ -26,8 +26,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from locbench.datasets.base import OccupancyGrid
-from locbench.raycast import cast_scan
+from locbench.datasets.dataset import OccupancyGrid
+from locbench.raycast.cast import cast_scan
 
 RES = 0.05
 MAX_RANGE_M = 10.0

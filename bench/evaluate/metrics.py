@@ -1,0 +1,883 @@
+"""Metrics of localization runs: pure functions on arrays (no I/O), as the DESIGN protocols define them.
+
+Conventions shared by every function here:
+
+- **Zero-order hold.** A run stores a belief after each predict/update call. The estimate in force at a
+  time ``t`` is the last stored row with ``t_row <= t`` (a real-time filter reports its latest belief);
+  a query before the first row gets the first row (the reset belief, which holds from the start).
+  At equal times the later row wins, so a predict and an update at the same ``t`` score the update.
+- Errors are taken at the **ground-truth times** (and at the waypoint times for waypoint errors), never
+  at the filter's own times, so that filters with different update rates are scored on the same grid.
+- **Align once, then compute** (as evo associates estimate and reference before any metric): :func:`align`
+  holds a run's estimates at the ground-truth times once, giving an :class:`Aligned` view (times, held
+  means and covariances, truth, wrapped errors, NEES); every per-time metric takes that view.
+- Position errors in m, headings in rad wrapped to (-pi, pi], times in s, runtimes in microseconds.
+- No alignment of the estimate to the truth: a localization filter works in the map frame.
+
+Metric ids returned by :func:`run_metrics` are the DESIGN names (``results/summary/metrics.csv``); an id
+never changes meaning. Undefined values (no update calls, a path shorter than the RPE distance) are
+left out of the returned dict rather than stored as NaN.
+
+**Recovery criterion** (DESIGN "Kidnap recovery"): at a ground-truth time the filter is *within* when
+its position error is <= :data:`RECOVERY_POSITION_M` (0.25 m) and its wrapped heading error is
+<= :data:`RECOVERY_HEADING_RAD` (0.25 rad). It *recovers* at the first ground-truth time t_s from which
+it is within at every ground-truth sample of [t_s, t_s + :data:`RECOVERY_HOLD_S`] (2 s); the hold must
+end inside the ground truth, so a run that ends during the hold has not recovered. Errors are taken by
+the zero-order hold like every other metric.
+
+Metric ids added on top of the DESIGN list (each documented here, none changes an existing id):
+
+- ``kidnap_distance_m``, ``kidnap_recovered``, ``kidnap_time_to_recover_s``,
+  ``kidnap_false_confidence_fraction``: only when the truth has kidnap events, and always about the
+  **first** kidnap (a later kidnap only cuts its window short). ``kidnap_distance_m`` is |(dx, dy)|
+  of the jump, m, from the truth record. ``kidnap_recovered`` is 1 when the recovery t_s lies in
+  [t_k, t_k + :data:`KIDNAP_WINDOW_S`] (30 s; the 2 s hold may run past the window) and before the
+  next kidnap, else 0; ``kidnap_time_to_recover_s`` = t_s - t_k, s, present only when recovered.
+  ``kidnap_false_confidence_fraction`` is the fraction of the time from t_k to the recovery (not
+  recovered: to the end of the 30 s window, the next kidnap or the end of the truth, whichever is
+  first) during which the NEES exceeds the one-sided :data:`FALSE_CONFIDENCE_PROBABILITY` (99.9 %)
+  chi-square(3) quantile, 16.27: the filter is wrong and does not know it. Each ground-truth sample's
+  NEES holds until the next sample; an empty window (recovered at t_k itself) gives 0.
+- ``converged`` (1/0) and ``time_to_converge_s``, for every ok run (global localization): the
+  recovery criterion searched from the first ground-truth time over the whole run;
+  ``time_to_converge_s`` = t_s - t_0, s, present only when converged. A filter started at the true
+  pose typically has ``converged`` = 1 and ``time_to_converge_s`` = 0.
+- ``smoothed_ate_m``, ``smoothed_heading_rmse_rad``: when the run's ``extra`` holds a smoothed
+  trajectory (``smoothed_t`` (n,), s, and ``smoothed_mean`` (n, 3), world frame), its ATE and wrapped
+  heading RMSE, defined exactly as ``ate_m`` and ``heading_rmse_rad`` (zero-order hold of the
+  smoothed poses at the ground-truth times).
+- ``particles_mean``: the mean particle count over the run's steps, from the ``particles`` diagnostic
+  (particle filters; with KLD sampling the count adapts).
+- ``accepted_fraction``: measurements fused over measurements offered, over the run, from the
+  ``accepted``/``rejected`` diagnostics (gated landmark sightings, extracted lines, ICP matches).
+- ``relation_error_m``, ``relation_error_rad``: when the dataset has reference relations (Intel), the
+  relation-based error of Kuemmerle et al. 2009 ("On measuring the accuracy of SLAM algorithms", Auton.
+  Robots 27(4), eq. 1-2): for each relation (t1, t2, delta*) the estimated relation delta =
+  x_hat(t1)^-1 (+) x_hat(t2) (zero-order hold) is compared with delta* through e = delta*^-1 (+) delta;
+  the metrics are the mean absolute translational error |e_xy| (m) and rotational error |e_theta| (rad)
+  over the relations whose two times lie within the run (the paper's "abs" columns);
+  ``relation_count`` is how many were used.
+- ``crps_x_m``, ``crps_y_m``, ``crps_heading_rad``, ``energy_score_m`` and each one's block-bootstrap interval
+  ``<stem>_ci_low_<unit>``, ``<stem>_ci_high_<unit>`` (``crps_x_ci_low_m`` ...): the proper scores of the
+  filter's own belief, mean over the ground-truth times (:mod:`locbench.evaluate.scores`).
+- On a dataset whose trajectory is a *SLAM reference* (``TruthRecord.truth_label``), ``ate_m`` and the
+  other trajectory errors measure agreement with that reference, not with the truth; the report labels them.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from functools import cached_property
+from typing import TYPE_CHECKING
+
+import numpy as np
+import numpy.typing as npt
+from scipy import stats
+
+from locbench.core.geometry import between, pose_error, wrap_angle
+from locbench.evaluate.scores import score_metrics
+
+if TYPE_CHECKING:
+    from locbench.datasets.dataset import Kidnap
+    from locbench.run.store import RunRecord, TruthRecord
+
+log = logging.getLogger(__name__)
+
+FloatArray = npt.NDArray[np.float64]
+
+#: Coverage of the NEES consistency band (two-sided) and of the confidence intervals over seeds.
+CONFIDENCE = 0.95
+#: Travelled distance between the two poses of a relative-pose-error pair, m.
+RPE_DELTA_M = 1.0
+#: Degrees of freedom of the pose error (x, y, theta).
+POSE_DOF = 3
+#: Recovery criterion (DESIGN "Kidnap recovery"): largest position error, m ...
+RECOVERY_POSITION_M = 0.25
+#: ... largest wrapped heading error, rad ...
+RECOVERY_HEADING_RAD = 0.25
+#: ... held without a break for this long, s.
+RECOVERY_HOLD_S = 2.0
+#: A kidnap counts as recovered only when the hold starts within this time after the kidnap, s.
+KIDNAP_WINDOW_S = 30.0
+#: One-sided chi-square(3) probability whose quantile marks false confidence after a kidnap.
+FALSE_CONFIDENCE_PROBABILITY = 0.999
+#: Tolerance on time comparisons, s (ground-truth times are sums of float steps).
+_T_EPS = 1e-6
+
+
+# --- zero-order hold ----------------------------------------------------------------------------
+
+
+def hold_indices(t_est: npt.ArrayLike, t_query: npt.ArrayLike) -> npt.NDArray[np.intp]:
+    """Row of the estimate in force at each query time (zero-order hold).
+
+    Parameters
+    ----------
+    t_est : array-like, shape (n,)
+        Times of the stored estimates, s, non-decreasing.
+    t_query : array-like, shape (m,)
+        Query times, s.
+
+    Returns
+    -------
+    ndarray of intp, shape (m,)
+        Index of the last row with ``t_est[row] <= t_query``; 0 for a query before the first row.
+    """
+    t = np.asarray(t_est, dtype=np.float64)
+    if t.ndim != 1 or t.shape[0] == 0:
+        raise ValueError("t_est must be a non-empty 1-d array of estimate times")
+    idx = np.searchsorted(t, np.asarray(t_query, dtype=np.float64), side="right") - 1
+    return np.clip(idx, 0, t.shape[0] - 1)
+
+
+def estimate_at(t_est: npt.ArrayLike, values: npt.ArrayLike, t_query: npt.ArrayLike) -> np.ndarray:
+    """The stored values in force at the query times (zero-order hold, see the module docstring).
+
+    Parameters
+    ----------
+    t_est : array-like, shape (n,)
+        Times of the stored estimates, s, non-decreasing.
+    values : array-like, shape (n, ...)
+        Anything stored per row: means (n, 3), covariances (n, 3, 3), diagnostics (n,).
+    t_query : array-like, shape (m,)
+        Query times, s.
+
+    Returns
+    -------
+    ndarray, shape (m, ...)
+        ``values[row]`` of the last row with ``t_est[row] <= t_query`` (the first row before it).
+    """
+    v = np.asarray(values)
+    return v[hold_indices(t_est, t_query)]
+
+
+# --- the aligned view: a run held at the ground-truth times, once ------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class Aligned:
+    """A run's estimates held at the ground-truth times (zero-order hold), made once by :func:`align`.
+
+    Every per-time metric reads this view instead of re-running the hold on the raw arrays (evo associates
+    estimate and reference once, then computes). Derived arrays are computed on first use and kept.
+
+    Attributes
+    ----------
+    t : ndarray, shape (k,)
+        Ground-truth times, s.
+    rows : ndarray of intp, shape (k,)
+        Row of the stored estimates in force at each time (:func:`hold_indices`); other per-row series of the
+        run (its health signals) are held by indexing with it.
+    mean : ndarray, shape (k, 3)
+        Held estimate (x m, y m, theta rad), world frame.
+    truth : ndarray, shape (k, 3)
+        Ground-truth poses at ``t``, world frame.
+    cov : ndarray, shape (k, 3, 3), or None
+        Held covariance (None for a trajectory without one: a smoothed trajectory).
+    """
+
+    t: FloatArray
+    rows: npt.NDArray[np.intp]
+    mean: FloatArray
+    truth: FloatArray
+    cov: FloatArray | None = None
+
+    @cached_property
+    def error(self) -> FloatArray:
+        """Estimate minus truth with the heading difference wrapped to (-pi, pi], shape (k, 3) (m, m, rad)."""
+        return pose_error(self.mean, self.truth)
+
+    @cached_property
+    def position_error(self) -> FloatArray:
+        """|p_hat(t_k) - p(t_k)|, shape (k,), m."""
+        e = self.error
+        return np.hypot(e[:, 0], e[:, 1])
+
+    @cached_property
+    def nees(self) -> FloatArray:
+        """NEES of the pose at every time (:func:`nees`), shape (k,); needs ``cov``."""
+        if self.cov is None:
+            raise ValueError("this aligned trajectory has no covariance: no NEES")
+        return nees(self.error, self.cov)
+
+
+def align(
+    t_est: npt.ArrayLike,
+    mean: npt.ArrayLike,
+    gt_t: npt.ArrayLike,
+    gt_poses: npt.ArrayLike,
+    cov: npt.ArrayLike | None = None,
+) -> Aligned:
+    """The :class:`Aligned` view of stored estimates at the ground-truth times (zero-order hold).
+
+    Parameters
+    ----------
+    t_est : array-like, shape (n,)
+        Times of the stored estimates, s, non-decreasing.
+    mean : array-like, shape (n, 3)
+        Estimated poses (x m, y m, theta rad), world frame.
+    gt_t : array-like, shape (k,)
+        Ground-truth times, s.
+    gt_poses : array-like, shape (k, 3)
+        Ground-truth poses, world frame.
+    cov : array-like, shape (n, 3, 3), optional
+        The estimates' covariances.
+    """
+    rows = hold_indices(t_est, gt_t)
+    held_cov = None if cov is None else np.asarray(cov, dtype=np.float64)[rows]
+    return Aligned(
+        np.asarray(gt_t, dtype=np.float64),
+        rows,
+        np.asarray(mean, dtype=np.float64)[rows],
+        np.asarray(gt_poses, dtype=np.float64),
+        held_cov,
+    )
+
+
+def align_run(run: RunRecord, truth: TruthRecord) -> Aligned:
+    """The :class:`Aligned` view of a stored run (means and covariances) at its truth's ground-truth times."""
+    gt = truth.ground_truth
+    return align(run.t, run.mean, gt.t, gt.poses, run.cov)
+
+
+# --- errors of one run --------------------------------------------------------------------------
+
+
+def waypoint_errors(
+    t_est: npt.ArrayLike, mean: npt.ArrayLike, wp_t: npt.ArrayLike, wp_xy: npt.ArrayLike
+) -> tuple[FloatArray, FloatArray]:
+    """Error at each waypoint against the marked point, e_j = |p_hat(t_j) - p_j| (report 003).
+
+    Parameters
+    ----------
+    t_est : array-like, shape (n,)
+        Estimate times, s.
+    mean : array-like, shape (n, 3)
+        Estimated poses (x m, y m, theta rad).
+    wp_t : array-like, shape (m,)
+        Times at which the robot stands on the waypoints, s.
+    wp_xy : array-like, shape (m, 2)
+        The marked points, m (not the ground truth at ``wp_t``: the report measures against the marks).
+
+    Returns
+    -------
+    errors : ndarray, shape (m,)
+        e_j in m.
+    est_xy : ndarray, shape (m, 2)
+        The estimated position p_hat(t_j) at each waypoint, m (zero-order hold).
+    """
+    est_xy = estimate_at(t_est, np.asarray(mean, dtype=np.float64)[:, :2], wp_t)
+    errors = np.hypot(*(est_xy - np.asarray(wp_xy, dtype=np.float64)).T)
+    return errors, est_xy
+
+
+def ate(a: Aligned) -> float:
+    """Absolute trajectory error: position RMSE over every ground-truth time, no alignment.
+
+    ATE = sqrt(mean_k |p_hat(t_k) - p(t_k)|^2) over the ground-truth times t_k, m.
+    """
+    d2 = np.sum(a.error[:, :2] ** 2, axis=1)
+    return float(np.sqrt(np.mean(d2)))
+
+
+#: Position-error thresholds of the accuracy-at-threshold metrics ``within_<k>cm_fraction``, cm.
+WITHIN_THRESHOLDS_CM = (5, 10, 25, 50)
+
+
+def within_fractions(a: Aligned) -> dict[str, float]:
+    """Accuracy at thresholds: the fraction of ground-truth times whose position error is at most each of
+    :data:`WITHIN_THRESHOLDS_CM`, as ``within_<k>cm_fraction`` (zero-order hold, no alignment)."""
+    err = a.position_error
+    return {f"within_{k}cm_fraction": float(np.mean(err <= k / 100.0)) for k in WITHIN_THRESHOLDS_CM}
+
+
+def heading_rmse(a: Aligned) -> float:
+    """Heading RMSE over every ground-truth time with the difference wrapped to (-pi, pi], rad."""
+    return float(np.sqrt(np.mean(a.error[:, 2] ** 2)))
+
+
+def final_error(a: Aligned) -> float:
+    """Position error at the last ground-truth time, m."""
+    return float(a.position_error[-1])
+
+
+def distance_pairs(gt_xy: npt.ArrayLike, delta_m: float = RPE_DELTA_M) -> tuple[npt.NDArray[np.intp], FloatArray]:
+    """Pairs of ground-truth samples a fixed travelled distance apart (for the RPE).
+
+    For each sample i, j(i) is the first later sample whose travelled distance along the ground-truth
+    path from i is at least ``delta_m``; samples with no such j are dropped.
+
+    Parameters
+    ----------
+    gt_xy : array-like, shape (n, 2)
+        Ground-truth positions, m.
+    delta_m : float
+        Travelled distance of a pair, m (> 0).
+
+    Returns
+    -------
+    pairs : ndarray of intp, shape (k, 2)
+        (i, j) index pairs.
+    dist : ndarray, shape (k,)
+        Travelled distance s_j - s_i of each pair, m (>= ``delta_m``).
+    """
+    if delta_m <= 0:
+        raise ValueError(f"delta_m must be > 0, got {delta_m}")
+    xy = np.asarray(gt_xy, dtype=np.float64)
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))]) if len(xy) else np.zeros(0)
+    # A small tolerance so that an exact 1 m step counts despite rounding in the cumulative sum.
+    j = np.searchsorted(s, s + delta_m - 1e-9 * max(1.0, delta_m), side="left")
+    i = np.arange(s.shape[0])
+    ok = j < s.shape[0]
+    pairs = np.column_stack([i[ok], j[ok]]).astype(np.intp)
+    return pairs, s[pairs[:, 1]] - s[pairs[:, 0]]
+
+
+def rpe_per_metre(a: Aligned, delta_m: float = RPE_DELTA_M) -> float:
+    """Relative pose error per metre travelled (metric id ``rpe_m_per_m``).
+
+    Definition: take the pairs (i, j) of ground-truth times from :func:`distance_pairs` (j is the first
+    sample at least ``delta_m`` of travelled path after i). For each pair compare the relative motions
+    R_true = between(x_i, x_j) and R_est = between(x_hat(t_i), x_hat(t_j)) (each in its own start
+    frame, estimates by zero-order hold); the translational error is |xy(between(R_true, R_est))| =
+    |xy(R_est) - xy(R_true)|, divided by the travelled distance s_j - s_i. RPE is the mean of these
+    ratios over all pairs, m/m (dimensionless drift; 0.01 = 1 cm per metre).
+
+    Parameters
+    ----------
+    a : Aligned
+        The run at the ground-truth times.
+    delta_m : float
+        Travelled distance per pair, m.
+
+    Returns
+    -------
+    float
+        Mean translational drift per metre; NaN when the path is shorter than ``delta_m``.
+    """
+    gt = a.truth
+    pairs, dist = distance_pairs(gt[:, :2], delta_m)
+    if pairs.shape[0] == 0:
+        return float("nan")
+    est = a.mean
+    rel_true = between(gt[pairs[:, 0]], gt[pairs[:, 1]])
+    rel_est = between(est[pairs[:, 0]], est[pairs[:, 1]])
+    err = between(rel_true, rel_est)
+    return float(np.mean(np.hypot(err[:, 0], err[:, 1]) / dist))
+
+
+# --- consistency --------------------------------------------------------------------------------
+
+
+def nees(errors: npt.ArrayLike, cov: npt.ArrayLike) -> FloatArray:
+    """Normalised estimation error squared, e^T P^-1 e, per row.
+
+    Parameters
+    ----------
+    errors : array-like, shape (n, d)
+        Estimate minus truth with any angle already wrapped (:func:`locbench.core.geometry.pose_error`).
+    cov : array-like, shape (n, d, d)
+        The filter's covariance at the same rows.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        NEES (dimensionless, chi-square(d) for a consistent filter). A singular covariance claims
+        certainty: its NEES is +inf unless the error is exactly zero (then 0). A covariance that is
+        singular to rounding (a collapsed particle set) can make the solve return a negative value;
+        that is not a NEES but the same claim of certainty, so it is +inf as well.
+    """
+    e = np.asarray(errors, dtype=np.float64)
+    P = np.asarray(cov, dtype=np.float64)
+    out = np.empty(e.shape[0])
+    try:
+        sol = np.linalg.solve(P, e[..., None])[..., 0]
+        out[:] = np.einsum("ni,ni->n", e, sol)
+    except np.linalg.LinAlgError:
+        # Row by row so that one singular covariance does not spoil the others.
+        for k in range(e.shape[0]):
+            try:
+                out[k] = float(e[k] @ np.linalg.solve(P[k], e[k]))
+            except np.linalg.LinAlgError:
+                out[k] = 0.0 if not np.any(e[k]) else np.inf
+    out[out < 0.0] = np.inf
+    return out
+
+
+def nees_at_truth(a: Aligned) -> FloatArray:
+    """NEES of the pose (x, y, theta) at every ground-truth time, heading error wrapped, shape (k,)."""
+    return a.nees
+
+
+def nll(errors: npt.ArrayLike, cov: npt.ArrayLike) -> FloatArray:
+    """Negative log-likelihood of the truth under the filter's Gaussian, per row.
+
+    NLL = 0.5 (e^T P^-1 e + log det(2 pi P)), with e the estimate minus the truth (angles already wrapped,
+    :func:`locbench.core.geometry.pose_error`) and P the filter's covariance: the negative log of the Gaussian
+    density N(truth; estimate, P). Dimensionless for the density in the state's SI units (m, m, rad); lower
+    is better, and unlike the NEES it also penalises a covariance much larger than the error.
+
+    Parameters
+    ----------
+    errors : array-like, shape (n, d)
+        Estimate minus truth.
+    cov : array-like, shape (n, d, d)
+        The filter's covariance at the same rows.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        NLL per row; +inf where P is singular or not positive definite (to rounding), the rows whose NEES
+        is +inf (:func:`nees`).
+    """
+    e = np.asarray(errors, dtype=np.float64)
+    P = np.asarray(cov, dtype=np.float64)
+    maha = nees(e, P)
+    sign, logdet = np.linalg.slogdet(P)
+    bad = (sign <= 0) | ~np.isfinite(maha) | ~np.isfinite(logdet)
+    # a collapsed P gives +inf + (-inf): the row is +inf by definition, computed without a warning
+    with np.errstate(invalid="ignore", over="ignore"):
+        out = 0.5 * (maha + e.shape[1] * np.log(2.0 * np.pi) + logdet)
+    out[bad] = np.inf
+    return out
+
+
+def nll_at_truth(a: Aligned) -> FloatArray:
+    """NLL of the pose (x, y, theta) at every ground-truth time, heading error wrapped, shape (k,)."""
+    if a.cov is None:
+        raise ValueError("this aligned trajectory has no covariance: no NLL")
+    return nll(a.error, a.cov)
+
+
+def chi2_band(dof: int = POSE_DOF, n_runs: int = 1, confidence: float = CONFIDENCE) -> tuple[float, float]:
+    """Two-sided chi-square bounds of the mean of ``n_runs`` independent NEES values.
+
+    If each NEES is chi-square(dof), the sum over N runs is chi-square(dof*N), so the mean lies in
+    [chi2.ppf(a/2, dof*N) / N, chi2.ppf(1 - a/2, dof*N) / N] with probability ``confidence`` = 1 - a.
+    For dof = 3, N = 1 and 95 %: [0.216, 9.348].
+    """
+    if n_runs < 1:
+        raise ValueError(f"n_runs must be >= 1, got {n_runs}")
+    a = 1.0 - confidence
+    k = dof * n_runs
+    return float(stats.chi2.ppf(a / 2, k) / n_runs), float(stats.chi2.ppf(1 - a / 2, k) / n_runs)
+
+
+def anees(nees_values: npt.ArrayLike) -> float:
+    """Average NEES over time of one run (dimensionless; 3 for a consistent 3-DOF filter)."""
+    return float(np.mean(np.asarray(nees_values, dtype=np.float64)))
+
+
+def fraction_in_band(values: npt.ArrayLike, band: tuple[float, float]) -> float:
+    """Fraction of values inside the closed interval ``band`` (0..1); NaN for no values."""
+    v = np.asarray(values, dtype=np.float64)
+    if v.size == 0:
+        return float("nan")
+    return float(np.mean((v >= band[0]) & (v <= band[1])))
+
+
+# --- recovery: kidnap and global localization ----------------------------------------------------
+
+
+def within_recovery(a: Aligned) -> npt.NDArray[np.bool_]:
+    """Whether the estimate meets the recovery criterion at each ground-truth time.
+
+    Returns
+    -------
+    ndarray of bool, shape (k,)
+        Position error <= :data:`RECOVERY_POSITION_M` and |wrapped heading error| <=
+        :data:`RECOVERY_HEADING_RAD` (zero-order hold of the estimate).
+    """
+    e = a.error
+    with np.errstate(invalid="ignore"):
+        return (a.position_error <= RECOVERY_POSITION_M) & (np.abs(e[:, 2]) <= RECOVERY_HEADING_RAD)
+
+
+def first_hold(
+    t: npt.ArrayLike,
+    ok: npt.ArrayLike,
+    t_from: float,
+    latest_start: float = np.inf,
+    hold_s: float = RECOVERY_HOLD_S,
+) -> float | None:
+    """The first time from which a condition holds at every sample for ``hold_s`` seconds.
+
+    Parameters
+    ----------
+    t : array-like, shape (k,)
+        Sample times, s, increasing.
+    ok : array-like of bool, shape (k,)
+        The condition at each sample.
+    t_from : float
+        Only samples at or after this time count, s.
+    latest_start : float
+        The hold must start at or before this time, s (it may end later).
+    hold_s : float
+        Required duration, s: every sample in [t_s, t_s + hold_s] is ok and a sample at or after
+        t_s + hold_s exists.
+
+    Returns
+    -------
+    float or None
+        t_s, a sample time, or None when the condition never holds long enough in time.
+    """
+    tt = np.asarray(t, dtype=np.float64)
+    good = np.asarray(ok, dtype=bool) & (tt >= t_from - _T_EPS)
+    if not good.any():
+        return None
+    # Runs of consecutive ok samples: the earliest start of a long-enough run is the answer, since a
+    # later start inside the same run only shortens it.
+    edges = np.diff(np.concatenate([[0], good.astype(np.int8), [0]]))
+    starts = np.flatnonzero(edges == 1)
+    ends = np.flatnonzero(edges == -1) - 1
+    long_enough = (tt[ends] - tt[starts] >= hold_s - _T_EPS) & (tt[starts] <= latest_start + _T_EPS)
+    if not long_enough.any():
+        return None
+    return float(tt[starts[np.argmax(long_enough)]])
+
+
+def time_fraction(t: npt.ArrayLike, flag: npt.ArrayLike, t0: float, t1: float) -> float:
+    """Fraction of [t0, t1] during which a per-sample flag, held until the next sample, is set.
+
+    The flag in force at a time is that of the last sample at or before it (the first sample before
+    the first). Returns 0 for an empty interval (t1 <= t0).
+    """
+    if t1 - t0 <= _T_EPS:
+        return 0.0
+    tt = np.asarray(t, dtype=np.float64)
+    inner = tt[(tt > t0) & (tt < t1)]
+    edges = np.concatenate([[t0], inner, [t1]])
+    on = np.asarray(estimate_at(tt, np.asarray(flag, dtype=bool), edges[:-1]), dtype=bool)
+    return float(np.sum(np.diff(edges)[on]) / (t1 - t0))
+
+
+def false_confidence_bound(probability: float = FALSE_CONFIDENCE_PROBABILITY, dof: int = POSE_DOF) -> float:
+    """One-sided chi-square quantile above which the NEES counts as false confidence (16.27 for 99.9 %, 3)."""
+    return float(stats.chi2.ppf(probability, dof))
+
+
+def kidnap_metrics(a: Aligned, kidnaps: Sequence[Kidnap]) -> dict[str, float]:
+    """Recovery from the first kidnap of a run (definitions in the module docstring).
+
+    Parameters
+    ----------
+    a : Aligned
+        The run at the ground-truth times, with its covariances (after a kidnap the truth is the pose after
+        the jump).
+    kidnaps : sequence of Kidnap
+        The truth's kidnap events (time s, world-frame jump (dx m, dy m, dtheta rad)); only the first
+        (earliest) is scored.
+
+    Returns
+    -------
+    dict of str to float
+        ``kidnap_distance_m``, ``kidnap_recovered``, ``kidnap_time_to_recover_s`` (only when recovered)
+        and ``kidnap_false_confidence_fraction``; empty without kidnaps.
+    """
+    if not kidnaps:
+        return {}
+    ordered = sorted(kidnaps, key=lambda k: k.t)
+    first = ordered[0]
+    tt = a.t
+    t_k = float(first.t)
+    # the window ends at 30 s, at the next kidnap (which would score a different jump) or with the truth
+    t_next = float(ordered[1].t) if len(ordered) > 1 else np.inf
+    window_end = min(t_k + KIDNAP_WINDOW_S, t_next, float(tt[-1]))
+    ok = within_recovery(a)
+    if np.isfinite(t_next):
+        ok = ok & (tt < t_next - _T_EPS)  # a hold must not straddle the next jump
+    t_s = first_hold(tt, ok, t_k, latest_start=min(t_k + KIDNAP_WINDOW_S, t_next))
+    out = {"kidnap_distance_m": float(np.hypot(first.delta[0], first.delta[1]))}
+    out["kidnap_recovered"] = 1.0 if t_s is not None else 0.0
+    if t_s is not None:
+        out["kidnap_time_to_recover_s"] = t_s - t_k
+    confident = a.nees > false_confidence_bound()
+    out["kidnap_false_confidence_fraction"] = time_fraction(tt, confident, t_k, window_end if t_s is None else t_s)
+    return out
+
+
+def convergence_metrics(a: Aligned) -> dict[str, float]:
+    """Global localization: ``converged`` (1/0) and ``time_to_converge_s`` (only when converged).
+
+    The recovery criterion (module docstring) searched from the first ground-truth time t_0 over the
+    whole run; ``time_to_converge_s`` = t_s - t_0, s.
+    """
+    tt = a.t
+    t_s = first_hold(tt, within_recovery(a), float(tt[0]))
+    if t_s is None:
+        return {"converged": 0.0}
+    return {"converged": 1.0, "time_to_converge_s": t_s - float(tt[0])}
+
+
+def smoothed_metrics(extra: Mapping[str, np.ndarray], a: Aligned) -> dict[str, float]:
+    """ATE and heading RMSE of a smoothed trajectory stored in a run's ``extra``, if there is one.
+
+    Parameters
+    ----------
+    extra : mapping
+        The run's filter-specific arrays; uses ``smoothed_t`` (n,), s, and ``smoothed_mean`` (n, 3),
+        world frame.
+    a : Aligned
+        The run at the ground-truth times: its times and truth (the smoothed poses are held there).
+
+    Returns
+    -------
+    dict of str to float
+        ``smoothed_ate_m`` and ``smoothed_heading_rmse_rad``; empty when the run has no smoothed
+        trajectory or an empty one.
+
+    Raises
+    ------
+    ValueError
+        When only one of the two arrays is present or their shapes do not match.
+    """
+    has_t, has_m = "smoothed_t" in extra, "smoothed_mean" in extra
+    if not (has_t or has_m):
+        return {}
+    if not (has_t and has_m):
+        raise ValueError("a run's extra must hold both 'smoothed_t' (n,) and 'smoothed_mean' (n, 3), or neither")
+    st = np.asarray(extra["smoothed_t"], dtype=np.float64)
+    sm = np.asarray(extra["smoothed_mean"], dtype=np.float64)
+    if st.ndim != 1 or sm.shape != (st.shape[0], 3):
+        raise ValueError(
+            f"smoothed trajectory: expected 'smoothed_t' (n,) and 'smoothed_mean' (n, 3), got {st.shape} and {sm.shape}"
+        )
+    if st.shape[0] == 0:
+        return {}
+    if np.any(np.diff(st) < 0):
+        raise ValueError("smoothed trajectory: 'smoothed_t' must be non-decreasing")
+    smoothed = align(st, sm, a.t, a.truth)
+    return {"smoothed_ate_m": ate(smoothed), "smoothed_heading_rmse_rad": heading_rmse(smoothed)}
+
+
+# --- runtime ------------------------------------------------------------------------------------
+
+
+def runtime_stats(times_us: npt.ArrayLike) -> dict[str, float]:
+    """Mean, median and 95th percentile (linear interpolation) of per-call times, microseconds.
+
+    Returns an empty dict when there are no calls.
+    """
+    x = np.asarray(times_us, dtype=np.float64)
+    if x.size == 0:
+        return {}
+    return {"mean": float(np.mean(x)), "median": float(np.median(x)), "p95": float(np.percentile(x, 95.0))}
+
+
+def realtime_factor(duration_s: float, compute_ns: npt.ArrayLike) -> float:
+    """Dataset duration divided by the total compute time of all predict and update calls.
+
+    Parameters
+    ----------
+    duration_s : float
+        Time spanned by the dataset's ground truth, s.
+    compute_ns : array-like
+        Per-call times, ns (the reset row's 0 may be included).
+
+    Returns
+    -------
+    float
+        > 1 means faster than real time; +inf when no compute time was recorded.
+    """
+    total_s = float(np.sum(np.asarray(compute_ns, dtype=np.float64))) * 1e-9
+    return float(duration_s / total_s) if total_s > 0 else float("inf")
+
+
+#: The runtime metrics of :func:`run_metrics` with a twin in reference units (``<id>_ref``, :func:`reference_units`).
+REFERENCE_TIMES = tuple(f"{call}_us_{stat}" for call in ("predict", "update") for stat in ("mean", "median", "p95"))
+#: The suffix of a metric id in reference units.
+REF_SUFFIX = "_ref"
+
+
+def reference_units(
+    metrics: Mapping[str, float], reference_s: float, reference_cpu_s: float | None = None
+) -> dict[str, float]:
+    """The runtime metrics of one run in reference units, from its raw ones and the reference workload's times.
+
+    A time in reference units is the raw time over the reference workload's time on the same machine under the
+    same load (:mod:`locbench.run.reference_workload`): what it would be on a machine whose reference workload takes
+    1 s. So ``<call>_us_<stat>_ref`` = ``<call>_us_<stat>`` / reference (us on that machine) and
+    ``realtime_factor_ref`` = ``realtime_factor`` * ``reference_s`` (its real-time factor there). Totals (the
+    real-time factor, the mean and p95 per call) take the wall time ``reference_s``, which holds the turns other
+    processes took, as the totals do; the per-call medians take the CPU time ``reference_cpu_s`` when given: a
+    call of microseconds is rarely interrupted, so its median hardly moves with the load (docs/performance.md,
+    issue 25).
+
+    Parameters
+    ----------
+    metrics : mapping of str to float
+        A run's metrics (:func:`run_metrics`); the runtime ones present are converted.
+    reference_s, reference_cpu_s : float
+        The reference workload's wall and CPU time, s; > 0 and finite (``reference_cpu_s`` None: ``reference_s``).
+    """
+    cpu_s = reference_s if reference_cpu_s is None else reference_cpu_s
+    for name, value in (("reference_s", reference_s), ("reference_cpu_s", cpu_s)):
+        if not (np.isfinite(value) and value > 0):
+            raise ValueError(f"{name} must be a positive finite time in s, got {value!r}")
+    out = {
+        f"{k}{REF_SUFFIX}": metrics[k] / (cpu_s if k.endswith("_median") else reference_s)
+        for k in REFERENCE_TIMES
+        if k in metrics
+    }
+    if "realtime_factor" in metrics:
+        out[f"realtime_factor{REF_SUFFIX}"] = metrics["realtime_factor"] * reference_s
+    return out
+
+
+def _positive(x: object) -> float | None:
+    """``x`` as a float when it is a positive finite number (not a bool), else None."""
+    if isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) and x > 0:
+        return float(x)
+    return None
+
+
+def relation_errors(
+    t_est: npt.ArrayLike, mean: npt.ArrayLike, t1: npt.ArrayLike, t2: npt.ArrayLike, delta_ref: npt.ArrayLike
+) -> tuple[FloatArray, FloatArray]:
+    """Per-relation translational and rotational errors (Kuemmerle et al. 2009, eq. 1-2).
+
+    Parameters
+    ----------
+    t_est : array-like, shape (n,)
+        Times of the stored estimates, s.
+    mean : array-like, shape (n, 3)
+        Estimated poses (x m, y m, theta rad), world frame.
+    t1, t2 : array-like, shape (m,)
+        Times of the two poses of each relation, s.
+    delta_ref : array-like, shape (m, 3)
+        Reference pose of t2 in the frame of the pose at t1 (dx m, dy m, dtheta rad).
+
+    Returns
+    -------
+    trans, rot : ndarray, shape (k,)
+        |e_xy| (m) and |wrap(e_theta)| (rad) of e = delta_ref^-1 (+) delta_est, for the k relations whose
+        two times lie inside [t_est[0], t_est[-1]].
+    """
+    t = np.asarray(t_est, dtype=np.float64)
+    a = np.asarray(t1, dtype=np.float64)
+    b = np.asarray(t2, dtype=np.float64)
+    ref = np.asarray(delta_ref, dtype=np.float64).reshape(-1, 3)
+    inside = (a >= t[0] - _T_EPS) & (b >= t[0] - _T_EPS) & (a <= t[-1] + _T_EPS) & (b <= t[-1] + _T_EPS)
+    m = np.asarray(mean, dtype=np.float64)
+    est = between(estimate_at(t, m, a[inside]), estimate_at(t, m, b[inside]))
+    e = between(ref[inside], est)
+    return np.hypot(e[:, 0], e[:, 1]), np.abs(wrap_angle(e[:, 2]))
+
+
+# --- one run ------------------------------------------------------------------------------------
+
+
+def run_metrics(
+    run: RunRecord, truth: TruthRecord, rpe_delta_m: float = RPE_DELTA_M, aligned: Aligned | None = None
+) -> dict[str, float]:
+    """Every metric of one stored run, keyed by its DESIGN metric id.
+
+    Parameters
+    ----------
+    run : RunRecord
+        The stored run.
+    truth : TruthRecord
+        The ground truth of the same dataset and seed.
+    rpe_delta_m : float
+        Travelled distance of the RPE pairs, m (``rpe_m_per_m`` is defined with the default 1 m).
+    aligned : Aligned, optional
+        ``align_run(run, truth)`` when the caller has it already (the report keeps its NEES series); made
+        here otherwise.
+
+    Returns
+    -------
+    dict of str to float
+        For a run with status "skipped": empty. For any other status except "ok": ``{"failed": 1}``.
+        For an ok run: ``failed`` = 0 and ``waypoint_<j>_error_m``, ``waypoint_<j>_est_x_m``,
+        ``waypoint_<j>_est_y_m``, ``waypoint_<j>_marked_x_m``, ``waypoint_<j>_marked_y_m`` (j from 1,
+        when the dataset has waypoints), ``ate_m``, ``heading_rmse_rad``, ``rpe_m_per_m``,
+        ``final_error_m``, ``within_<k>cm_fraction`` (:func:`within_fractions`), ``anees``,
+        ``nees_in_band_fraction`` (single-run two-sided 95 % chi-square(3) band), ``nll`` (mean over the
+        truth times of :func:`nll`, +inf if any is),
+        ``predict_us_{mean,median,p95}``, ``update_us_{mean,median,p95}``,
+        ``realtime_factor``, the same in reference units (``<id>_ref``, :func:`reference_units`) when the run's
+        meta has ``reference_s`` (and ``reference_cpu_s``), ``converged`` and ``time_to_converge_s``; with kidnaps
+        in the truth
+        ``kidnap_distance_m``, ``kidnap_recovered``, ``kidnap_time_to_recover_s`` and
+        ``kidnap_false_confidence_fraction`` (first kidnap); with a smoothed trajectory in
+        ``run.extra`` ``smoothed_ate_m`` and ``smoothed_heading_rmse_rad``; with reference relations in the
+        truth ``relation_error_m``, ``relation_error_rad`` and ``relation_count``. Undefined values are left out.
+    """
+    # long: the metrics table of one run: each metric family appended in the order of metrics.csv from one aligned view
+    status = run.status
+    if status == "skipped":
+        return {}
+    if status != "ok":
+        return {"failed": 1.0}
+    if run.t.shape[0] == 0:
+        raise ValueError("an ok run has no estimates")
+    a = aligned if aligned is not None else align_run(run, truth)
+    out: dict[str, float] = {"failed": 0.0}
+    if truth.waypoints is not None and len(truth.waypoints):
+        err, est_xy = waypoint_errors(run.t, run.mean, truth.waypoints.t, truth.waypoints.xy)
+        for j in range(err.shape[0]):
+            out[f"waypoint_{j + 1}_error_m"] = float(err[j])
+            out[f"waypoint_{j + 1}_est_x_m"] = float(est_xy[j, 0])
+            out[f"waypoint_{j + 1}_est_y_m"] = float(est_xy[j, 1])
+            # The marked point itself, so that the distance of the mean estimate needs only the CSV.
+            out[f"waypoint_{j + 1}_marked_x_m"] = float(truth.waypoints.xy[j, 0])
+            out[f"waypoint_{j + 1}_marked_y_m"] = float(truth.waypoints.xy[j, 1])
+    out["ate_m"] = ate(a)
+    out.update(within_fractions(a))
+    out["heading_rmse_rad"] = heading_rmse(a)
+    out["rpe_m_per_m"] = rpe_per_metre(a, rpe_delta_m)
+    out["final_error_m"] = final_error(a)
+    out["anees"] = anees(a.nees)
+    out["nees_in_band_fraction"] = fraction_in_band(a.nees, chi2_band(POSE_DOF, 1))
+    # +inf when any time's covariance is singular, as the ANEES.
+    out["nll"] = float(np.mean(nll_at_truth(a)))
+    for call in ("predict", "update"):
+        for stat, value in runtime_stats(run.step_times_us(call)).items():
+            out[f"{call}_us_{stat}"] = value
+    out["realtime_factor"] = realtime_factor(truth.duration_s, run.step_ns)
+    ref, ref_cpu = (_positive(run.meta.get(k)) for k in ("reference_s", "reference_cpu_s"))
+    if ref is not None:  # runs stored before reference_s was recorded have none
+        out.update(reference_units(out, ref, ref_cpu))
+    out.update(convergence_metrics(a))
+    out.update(kidnap_metrics(a, truth.kidnaps))
+    out.update(smoothed_metrics(run.extra, a))
+    out.update(score_metrics(a, run.extra))
+    out.update(acceptance_metrics(run.diagnostics))
+    out.update(particle_count_metrics(run.diagnostics))
+    if truth.relations is not None and len(truth.relations):
+        trans, rot = relation_errors(run.t, run.mean, truth.relations.t1, truth.relations.t2, truth.relations.delta)
+        out["relation_count"] = float(trans.shape[0])
+        if trans.shape[0]:
+            out["relation_error_m"] = float(np.mean(trans))
+            out["relation_error_rad"] = float(np.mean(rot))
+    return {k: v for k, v in out.items() if not np.isnan(v)}
+
+
+def particle_count_metrics(diagnostics: dict[str, FloatArray]) -> dict[str, float]:
+    """``particles_mean``: the mean particle count over a run's steps, from the ``particles`` diagnostic.
+
+    Only filters that report a count (the particle filter; with ``adaptive=kld`` it varies) have it; rows
+    without a count (NaN) are ignored.
+    """
+    count = diagnostics.get("particles")
+    if count is None:
+        return {}
+    c = np.asarray(count, dtype=np.float64)
+    c = c[np.isfinite(c)]
+    return {"particles_mean": float(np.mean(c))} if c.size else {}
+
+
+def acceptance_metrics(diagnostics: dict[str, FloatArray]) -> dict[str, float]:
+    """``accepted_fraction``: measurements a filter fused over those it was offered, over the whole run.
+
+    Read from the per-step ``accepted`` and ``rejected`` diagnostics (counts per update; NaN or 0 on
+    predict rows, so summing every row is right). Left out when a filter reports neither or was offered
+    nothing. For ``ekf_lines`` it is the fraction of extracted lines that passed the gate (report 002).
+    """
+    acc, rej = diagnostics.get("accepted"), diagnostics.get("rejected")
+    if acc is None or rej is None:
+        return {}
+    total = float(np.nansum(acc) + np.nansum(rej))
+    return {"accepted_fraction": float(np.nansum(acc)) / total} if total > 0 else {}

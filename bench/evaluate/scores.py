@@ -1,0 +1,350 @@
+"""Proper scores of a filter's own belief against the truth: pure functions on arrays (no I/O).
+
+A proper scoring rule is minimised in expectation only by the distribution the truth is drawn from, so unlike
+the ANEES (which asks only whether a Gaussian's spread matches the error) it rewards a belief that is both
+sharp and right, and it scores a particle filter by its particles rather than by a Gaussian it does not use.
+Definitions (docs/protocols.md "Proper scores"; Gneiting & Raftery 2007, "Strictly proper scoring rules,
+prediction, and estimation", JASA 102(477), eq. 20-22):
+
+- **CRPS** of a scalar belief F at the truth y: E|X - y| - 0.5 E|X - X'| with X, X' independent draws of F
+  (the unit of y). A Gaussian N(mu, sigma^2) has the closed form sigma [z (2 Phi(z) - 1) + 2 phi(z) - 1/sqrt(pi)],
+  z = (y - mu) / sigma; a weighted sample (x_i, w_i) gives sum_i w_i |x_i - y| - 0.5 sum_ij w_i w_j |x_i - x_j|.
+  A point mass scores its absolute error.
+- **Heading**: each belief's heading is unwrapped onto the branch nearest the true heading (the error
+  wrap(theta - theta_true) in (-pi, pi]) and scored against 0; a Gaussian's mean error is wrapped the same way.
+- **Energy score** of a belief on the position (x, y) at the truth y: E||X - y|| - 0.5 E||X - X'|| (m). For a
+  Gaussian the second term is closed form, sqrt(lambda_1 / pi) E(1 - lambda_2 / lambda_1) with lambda_1 >=
+  lambda_2 the eigenvalues of the position covariance and E the complete elliptic integral of the second kind;
+  the first term has none and is a quasi-Monte Carlo mean over :data:`ENERGY_DRAWS` fixed scrambled-Sobol normal
+  draws (seed :data:`ENERGY_SEED`), the same draws at every time, so the score is deterministic. A point mass
+  scores its Euclidean error exactly.
+- Scores are taken at every ground-truth time with the belief in force there (the run's aligned view,
+  :func:`locbench.evaluate.metrics.align`, as every metric in :mod:`locbench.evaluate.metrics`), then averaged; the
+  interval of
+  that mean is a circular block bootstrap over time (:func:`block_bootstrap_ci`) with blocks of
+  :data:`BLOCK_S` seconds of ground truth.
+- A particle filter exposes a fixed-size unbiased subsample of its particles (:meth:`Filter.belief_sample`);
+  the runner scores it at each ground-truth time while the filter runs (:func:`sample_scores`) and stores the
+  per-time scores, not the samples (:data:`SAMPLE_SCORE_KEYS` in the run's ``extra``).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Mapping
+from typing import TYPE_CHECKING
+
+import numpy as np
+import numpy.typing as npt
+from numba import njit
+from scipy import special, stats
+
+from locbench.core.geometry import wrap_angle
+from locbench.core.pairwise import pairwise_sum
+
+if TYPE_CHECKING:
+    from locbench.evaluate.metrics import Aligned
+
+FloatArray = npt.NDArray[np.float64]
+
+#: The four per-run score ids (``metrics.csv``), each the mean over the ground-truth times.
+SCORE_IDS = ("crps_x_m", "crps_y_m", "crps_heading_rad", "energy_score_m")
+#: Keys of the per-ground-truth-time scores a sampled belief leaves in a run's ``extra``, in SCORE_IDS order.
+SAMPLE_SCORE_KEYS = tuple(f"belief_{s}" for s in SCORE_IDS)
+#: Quasi-Monte Carlo draws for the first term of a Gaussian's energy score, and their seed.
+ENERGY_DRAWS = 1024
+ENERGY_SEED = 0
+#: Block length of the bootstrap over time, s of ground truth (about the time between a filter's corrections
+#: and a few of its error's correlation times on the synthetic worlds; at least one sample).
+BLOCK_S = 5.0
+#: Bootstrap resamples and the generator's seed (fixed: the interval is part of the reproducible record).
+BOOTSTRAP_RESAMPLES = 1000
+BOOTSTRAP_SEED = 0
+#: Coverage of the interval.
+CONFIDENCE = 0.95
+#: Rows scored at once by the pairwise energy term (bounds memory: rows x m x m x 2 doubles).
+_CHUNK = 256
+
+
+def crps_normal(y: npt.ArrayLike, mu: npt.ArrayLike, sigma: npt.ArrayLike) -> FloatArray:
+    """CRPS of N(mu, sigma^2) at y in closed form (Gneiting & Raftery 2007, eq. 21), the unit of y.
+
+    ``sigma`` = 0 is the point mass at mu (score |y - mu|); broadcasting as numpy.
+    """
+    y, mu, s = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (y, mu, sigma)))
+    d = y - mu
+    out = np.atleast_1d(np.abs(d)).astype(np.float64)
+    s, d = np.atleast_1d(s), np.atleast_1d(d)
+    pos = s > 0
+    z = d[pos] / s[pos]
+    out[pos] = s[pos] * (z * (2.0 * special.ndtr(z) - 1.0) + 2.0 * stats.norm.pdf(z) - 1.0 / np.sqrt(np.pi))
+    return out.reshape(y.shape)
+
+
+def crps_sample(y: npt.ArrayLike, x: npt.ArrayLike, w: npt.ArrayLike | None = None) -> FloatArray:
+    """CRPS of a weighted sample at y: sum_i w_i |x_i - y| - 0.5 sum_ij w_i w_j |x_i - x_j|.
+
+    Parameters
+    ----------
+    y : array-like, shape (n,)
+        Truth.
+    x : array-like, shape (n, m)
+        Members (same unit as y).
+    w : array-like, shape (n, m), optional
+        Weights, normalised per row here (default equal).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        The score, unit of y (the "energy form" estimator, exact for the discrete distribution given).
+    """
+    xs = np.asarray(x, dtype=np.float64)
+    ws = np.full(xs.shape, 1.0 / xs.shape[1]) if w is None else np.asarray(w, dtype=np.float64)
+    ws = ws / ws.sum(axis=1, keepdims=True)
+    yy = np.asarray(y, dtype=np.float64)
+    first = np.sum(ws * np.abs(xs - yy[:, None]), axis=1)
+    # sum_ij w_i w_j |x_i - x_j| = 2 sum_i w_i x_i (W_below_i - W_above_i) over the sorted members
+    order = np.argsort(xs, axis=1, kind="stable")
+    xo = np.take_along_axis(xs, order, axis=1)
+    wo = np.take_along_axis(ws, order, axis=1)
+    below = np.cumsum(wo, axis=1) - wo
+    above = 1.0 - below - wo
+    spread = 2.0 * np.sum(wo * xo * (below - above), axis=1)
+    return first - 0.5 * spread
+
+
+def energy_score_sample(y: npt.ArrayLike, x: npt.ArrayLike, w: npt.ArrayLike | None = None) -> FloatArray:
+    """Energy score of a weighted sample at y: sum_i w_i ||x_i - y|| - 0.5 sum_ij w_i w_j ||x_i - x_j||.
+
+    Parameters
+    ----------
+    y : array-like, shape (n, d)
+        Truth.
+    x : array-like, shape (n, m, d)
+        Members.
+    w : array-like, shape (n, m), optional
+        Weights, normalised per row here (default equal).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        The score, unit of y.
+    """
+    xs = np.asarray(x, dtype=np.float64)
+    ws = np.full(xs.shape[:2], 1.0 / xs.shape[1]) if w is None else np.asarray(w, dtype=np.float64)
+    ws = ws / ws.sum(axis=1, keepdims=True)
+    yy = np.asarray(y, dtype=np.float64)
+    out = np.empty(xs.shape[0])
+    for a in range(0, xs.shape[0], _CHUNK):
+        b = min(a + _CHUNK, xs.shape[0])
+        xc, wc = xs[a:b], ws[a:b]
+        first = np.sum(wc * np.linalg.norm(xc - yy[a:b, None, :], axis=2), axis=1)
+        pair = np.linalg.norm(xc[:, :, None, :] - xc[:, None, :, :], axis=3)
+        spread = np.einsum("ni,nij,nj->n", wc, pair, wc)
+        out[a:b] = first - 0.5 * spread
+    return out
+
+
+@functools.cache
+def _energy_draws() -> FloatArray:
+    """The fixed standard-normal draws (ENERGY_DRAWS, 2) of a Gaussian's energy score (scrambled Sobol)."""
+    u = stats.qmc.Sobol(d=2, scramble=True, seed=ENERGY_SEED).random(ENERGY_DRAWS)
+    return np.asarray(stats.norm.ppf(u), dtype=np.float64)
+
+
+def _sqrt_psd(cov: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Eigenvalues (n, 2) ascending (negative rounding clipped to 0) and a square root L (n, 2, 2), L L^T = cov."""
+    c = 0.5 * (cov + np.swapaxes(cov, 1, 2))
+    lam, vec = np.linalg.eigh(c)
+    lam = np.clip(lam, 0.0, None)
+    return lam, vec * np.sqrt(lam)[:, None, :]
+
+
+def energy_score_gaussian(y: npt.ArrayLike, mu: npt.ArrayLike, cov: npt.ArrayLike) -> FloatArray:
+    """Energy score of N(mu, cov) on the plane at y, m (module docstring; deterministic).
+
+    Parameters
+    ----------
+    y, mu : array-like, shape (n, 2)
+        Truth and mean, m.
+    cov : array-like, shape (n, 2, 2)
+        Covariance, m^2 (a singular one is a point mass along its null directions).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+    """
+    yy = np.asarray(y, dtype=np.float64)
+    d = np.asarray(mu, dtype=np.float64) - yy
+    lam, root = _sqrt_psd(np.asarray(cov, dtype=np.float64))
+    out = _energy_first_term(np.ascontiguousarray(d), np.ascontiguousarray(root), _energy_draws())
+    big, small = lam[:, 1], lam[:, 0]
+    ratio = np.divide(small, big, out=np.ones_like(big), where=big > 0)
+    half_spread = np.sqrt(big / np.pi) * special.ellipe(1.0 - ratio)
+    return out - half_spread
+
+
+@njit(cache=True)
+def _energy_first_term(d: FloatArray, root: FloatArray, z: FloatArray) -> FloatArray:  # pragma: no cover - compiled
+    # E||d + L z|| over the fixed draws z, per time: one pass without the (times x draws) temporaries. The norm is
+    # sqrt(px^2 + py^2), which vectorises where libm's hypot does not; the two agree to rounding
+    n, m = d.shape[0], z.shape[0]
+    out = np.empty(n)
+    norms = np.empty(m)
+    zx = np.ascontiguousarray(z[:, 0])
+    zy = np.ascontiguousarray(z[:, 1])
+    for t in range(n):
+        dx, dy = d[t, 0], d[t, 1]
+        a, b, c, e = root[t, 0, 0], root[t, 0, 1], root[t, 1, 0], root[t, 1, 1]
+        for j in range(m):
+            px = dx + a * zx[j] + b * zy[j]
+            py = dy + c * zx[j] + e * zy[j]
+            norms[j] = math.sqrt(px * px + py * py)
+        out[t] = pairwise_sum(norms, 0, m) / m
+    return out
+
+
+def gaussian_scores(
+    mean: npt.ArrayLike, cov: npt.ArrayLike, truth: npt.ArrayLike
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """The four per-time scores of Gaussian beliefs (pose mean (n, 3), covariance (n, 3, 3)) at truth (n, 3).
+
+    Returns CRPS of x (m), of y (m), of the wrapped heading (rad) and the position energy score (m), each (n,).
+    """
+    m = np.asarray(mean, dtype=np.float64)
+    p = np.asarray(cov, dtype=np.float64)
+    g = np.asarray(truth, dtype=np.float64)
+    sd = np.sqrt(np.clip(np.diagonal(p, axis1=1, axis2=2), 0.0, None))
+    cx = crps_normal(g[:, 0], m[:, 0], sd[:, 0])
+    cy = crps_normal(g[:, 1], m[:, 1], sd[:, 1])
+    ch = crps_normal(0.0, wrap_angle(m[:, 2] - g[:, 2]), sd[:, 2])
+    es = energy_score_gaussian(g[:, :2], m[:, :2], p[:, :2, :2])
+    return cx, cy, ch, es
+
+
+def sample_scores(
+    points: npt.ArrayLike, weights: npt.ArrayLike, truth: npt.ArrayLike
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """The four scores of one weighted pose sample (m, 3) with weights (m,) at each of k truth poses (k, 3).
+
+    The same sums as :func:`crps_sample` and :func:`energy_score_sample` (tested equal), in one compiled pass:
+    the runner calls it at every ground-truth time of a particle filter's run.
+    """
+    p = np.ascontiguousarray(points, dtype=np.float64)
+    w = np.asarray(weights, dtype=np.float64)
+    w = np.ascontiguousarray(w / w.sum())
+    g = np.ascontiguousarray(np.asarray(truth, dtype=np.float64).reshape(-1, 3))
+    out = _sample_scores_kernel(p, w, g)
+    return out[0], out[1], out[2], out[3]
+
+
+@njit(cache=True)
+def _sample_scores_kernel(p: FloatArray, w: FloatArray, g: FloatArray) -> FloatArray:  # pragma: no cover - compiled
+    m, k = p.shape[0], g.shape[0]
+    # the spread terms do not depend on the truth (except the heading, unwrapped about it): once per sample
+    sx = sy = se = 0.0
+    for i in range(m):
+        for j in range(i + 1, m):
+            ww = w[i] * w[j]
+            dx, dy = p[i, 0] - p[j, 0], p[i, 1] - p[j, 1]
+            sx += ww * abs(dx)
+            sy += ww * abs(dy)
+            se += ww * math.sqrt(dx * dx + dy * dy)
+    out = np.empty((4, k))
+    for r in range(k):
+        fx = fy = fh = fe = sh = 0.0
+        for i in range(m):
+            dx, dy = p[i, 0] - g[r, 0], p[i, 1] - g[r, 1]
+            fx += w[i] * abs(dx)
+            fy += w[i] * abs(dy)
+            fe += w[i] * math.sqrt(dx * dx + dy * dy)
+            hi = _wrap(p[i, 2] - g[r, 2])
+            fh += w[i] * abs(hi)
+            for j in range(i + 1, m):
+                sh += w[i] * w[j] * abs(hi - _wrap(p[j, 2] - g[r, 2]))
+        # each unordered pair once: 0.5 * sum_ij = sum_{i<j}
+        out[0, r], out[1, r], out[2, r], out[3, r] = fx - sx, fy - sy, fh - sh, fe - se
+    return out
+
+
+@njit(cache=True)
+def _wrap(a: float) -> float:  # pragma: no cover - compiled
+    """An angle wrapped to (-pi, pi] (as :func:`locbench.core.geometry.wrap_angle`)."""
+    return math.pi - ((math.pi - a) % (2.0 * math.pi))
+
+
+def block_length(t: npt.ArrayLike, block_s: float = BLOCK_S) -> int:
+    """Samples per bootstrap block: ``block_s`` over the median spacing of ``t``, at least 1, at most len(t)."""
+    tt = np.asarray(t, dtype=np.float64)
+    if tt.size < 2:
+        return 1
+    dt = float(np.median(np.diff(tt)))
+    n = round(block_s / dt) if dt > 0 else 1
+    return int(min(max(n, 1), tt.size))
+
+
+def block_bootstrap_ci(
+    values: npt.ArrayLike,
+    block: int,
+    resamples: int = BOOTSTRAP_RESAMPLES,
+    confidence: float = CONFIDENCE,
+    seed: int = BOOTSTRAP_SEED,
+) -> tuple[float, float]:
+    """Percentile interval of the mean of a time series by the circular block bootstrap (Politis & Romano 1992).
+
+    Each resample joins ceil(n / block) blocks of ``block`` consecutive values whose starts are drawn
+    uniformly (the series wrapped end to start, so every value is equally likely), the last block cut so that
+    the resample has n values; the interval is the (1 -+ confidence) / 2 quantiles of the resampled means.
+    (nan, nan) for no values or a non-finite value.
+    """
+    v = np.asarray(values, dtype=np.float64)
+    n = v.size
+    if n == 0 or not np.all(np.isfinite(v)):
+        return float("nan"), float("nan")
+    size = int(min(max(block, 1), n))
+    k = -(-n // size)
+    last = n - (k - 1) * size
+    # sums of every circular block from its start, by one cumulative sum over the series twice
+    c = np.concatenate([[0.0], np.cumsum(np.concatenate([v, v]))])
+    s0 = np.arange(n)
+    full, part = c[s0 + size] - c[s0], c[s0 + last] - c[s0]
+    rng = np.random.default_rng(seed)
+    starts = rng.integers(0, n, size=(resamples, k))
+    means = (full[starts[:, :-1]].sum(axis=1) + part[starts[:, -1]]) / n
+    a = (1.0 - confidence) / 2.0
+    lo, hi = np.quantile(means, [a, 1.0 - a])
+    return float(lo), float(hi)
+
+
+def ci_ids(score_id: str) -> tuple[str, str]:
+    """The ``metrics.csv`` ids of a score's interval: ``crps_x_m`` -> ``crps_x_ci_low_m``, ``crps_x_ci_high_m``."""
+    stem, unit = score_id.rsplit("_", 1)
+    return f"{stem}_ci_low_{unit}", f"{stem}_ci_high_{unit}"
+
+
+def score_metrics(a: Aligned, extra: Mapping[str, np.ndarray]) -> dict[str, float]:
+    """The proper-score rows of one run: each of :data:`SCORE_IDS` and its block-bootstrap interval.
+
+    A run whose ``extra`` holds the per-time scores of its own samples (:data:`SAMPLE_SCORE_KEYS`, one per
+    ground-truth time) is scored by those; any other by its Gaussian (mean, covariance) held at the truth times,
+    read from the run's aligned view ``a`` (:func:`locbench.evaluate.metrics.align`, with covariances).
+    """
+    gt_t = a.t
+    if all(k in extra for k in SAMPLE_SCORE_KEYS):
+        per = [np.asarray(extra[k], dtype=np.float64) for k in SAMPLE_SCORE_KEYS]
+        if any(p.shape != gt_t.shape for p in per):
+            raise ValueError(
+                f"stored belief scores have {per[0].shape[0]} rows for {gt_t.shape[0]} ground-truth times; re-run"
+            )
+    else:
+        if a.cov is None:
+            raise ValueError("a Gaussian belief's scores need the aligned covariances")
+        per = list(gaussian_scores(a.mean, a.cov, a.truth))
+    size = block_length(gt_t)
+    out: dict[str, float] = {}
+    for sid, s in zip(SCORE_IDS, per, strict=True):
+        out[sid] = float(np.mean(s))
+        lo_id, hi_id = ci_ids(sid)
+        out[lo_id], out[hi_id] = block_bootstrap_ci(s, size)
+    return out

@@ -1,0 +1,128 @@
+"""The runner: stored runs, caching, pairing, and failures recorded as results."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from locbench.registry import DATASETS, FILTERS, resolve_filter
+from locbench.run.runner import _BOUND_COST_S, plan_sweep, run_many
+from locbench.run.store import Store
+
+
+@pytest.mark.usefixtures("harness_registry")
+def test_runs_are_stored_with_provenance(tmp_path: Path) -> None:
+    out = run_many(["bad[fail_at_s=100]"], ["line"], [0, 1], str(tmp_path))
+    assert [o.status for o in out] == ["ok", "ok"]
+    store = Store(tmp_path)
+    runs = list(store.iter_runs())
+    assert len(runs) == 2
+    rec = store.read_run(runs[0])
+    for key in ("run_key", "seed", "versions", "git_commit", "filter_config", "dataset_params", "status"):
+        assert key in rec.meta
+    assert rec.meta["versions"]["numpy"] == np.__version__
+    assert rec.t.shape[0] == rec.mean.shape[0] == rec.cov.shape[0] == 51  # reset row + 50 odometry
+    assert np.allclose(rec.mean[-1], [5.0, 0.0, 0.0])
+    truth = store.read_truth(rec.meta["dataset"], rec.meta["seed"])
+    assert len(truth.waypoints) == 2  # type: ignore[arg-type]
+    assert np.array_equal(truth.map_landmarks, [[10.0, 2.0]])  # the map travels with the truth, for figures
+
+
+@pytest.mark.usefixtures("harness_registry")
+def test_finished_runs_are_not_rerun_unless_forced(tmp_path: Path) -> None:
+    run_many(["bad[fail_at_s=100]"], ["line"], [0], str(tmp_path))
+    assert [o.status for o in run_many(["bad[fail_at_s=100]"], ["line"], [0], str(tmp_path))] == ["cached"]
+    assert [o.status for o in run_many(["bad[fail_at_s=100]"], ["line"], [0], str(tmp_path), force=True)] == ["ok"]
+    # a changed config is a different run key: it runs again
+    assert [o.status for o in run_many(["bad[fail_at_s=99]"], ["line"], [0], str(tmp_path))] == ["ok"]
+
+
+@pytest.mark.usefixtures("harness_registry")
+@pytest.mark.parametrize(
+    ("mode", "status", "text"),
+    [("raise", "error", "RuntimeError: boom"), ("nan", "diverged", "non-finite"), ("diverge", "diverged", "exploded")],
+)
+def test_failures_are_results_and_the_sweep_goes_on(tmp_path: Path, mode: str, status: str, text: str) -> None:
+    out = run_many([f"bad[mode={mode}]", "bad[fail_at_s=100]"], ["line"], [0], str(tmp_path))
+    assert [o.status for o in out] == [status, "ok"]
+    meta = json.loads((Store(tmp_path).run_dir("line", out[0].filter, 0) / "meta.json").read_text())
+    assert meta["status"] == status and text in meta["message"]
+
+
+@pytest.mark.usefixtures("harness_registry")
+def test_incompatible_filter_is_a_recorded_skip(tmp_path: Path) -> None:
+    out = run_many(["ekf_landmarks"], ["line"], [0], str(tmp_path))
+    assert out[0].status in ("ok", "skipped")  # line has landmarks, so ekf_landmarks runs
+
+
+@pytest.mark.usefixtures("harness_registry")
+def test_parallel_jobs_give_the_same_results(tmp_path: Path) -> None:
+    run_many(["bad[fail_at_s=100]"], ["line[noise_m=0.01]"], [0, 1, 2], str(tmp_path / "a"), jobs=1)
+    run_many(["bad[fail_at_s=100]"], ["line[noise_m=0.01]"], [0, 1, 2], str(tmp_path / "b"), jobs=2)
+    for seed in (0, 1, 2):
+        a = Store(tmp_path / "a").read_run(
+            Store(tmp_path / "a").run_dir("line[noise_m=0.01]", "bad[fail_at_s=100]", seed)
+        )
+        b = Store(tmp_path / "b").read_run(
+            Store(tmp_path / "b").run_dir("line[noise_m=0.01]", "bad[fail_at_s=100]", seed)
+        )
+        assert np.array_equal(a.mean, b.mean)
+    seeds_differ = Store(tmp_path / "a").read_run(
+        Store(tmp_path / "a").run_dir("line[noise_m=0.01]", "bad[fail_at_s=100]", 1)
+    )
+    assert not np.array_equal(a.mean, seeds_differ.mean)
+
+
+@pytest.mark.usefixtures("harness_registry")
+def test_no_half_written_runs(tmp_path: Path) -> None:
+    run_many(["bad[fail_at_s=100]"], ["line"], [0], str(tmp_path))
+    leftovers = [p for p in tmp_path.rglob(".tmp-*")]
+    assert leftovers == []
+
+
+def test_missing_recorded_data_is_a_recorded_skip(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("LOCBENCH_DATA", str(tmp_path / "nodata"))
+    monkeypatch.setenv("LOCBENCH_CACHE", str(tmp_path / "cache"))
+    out = run_many(["odometry", "ekf_landmarks"], ["lost_in_the_woods"], [0], str(tmp_path / "res"))
+    assert [o.status for o in out] == ["skipped", "skipped"]
+    assert all("data not found" in o.message and "dataset2.mat" in o.message for o in out)
+    store = Store(tmp_path / "res")
+    assert not store.has_truth("lost_in_the_woods", 0)  # nothing half-made: no truth without data
+
+
+def test_filter_that_sees_no_observation_is_a_recorded_skip(tmp_path: Path) -> None:
+    # pf with its laser model off consumes landmarks only; a laser-only world gives it nothing to fuse
+    out = run_many(["pf", "pf[use_laser=true]"], ["lap[people=0]"], [0], str(tmp_path))
+    assert out[0].status == "skipped" and "none of which" in out[0].message
+    assert out[1].status == "ok"
+
+
+# --- declared costs --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("fid", FILTERS.ids())
+def test_every_filter_declares_its_cost(fid: str) -> None:
+    if FILTERS.missing_dependency(fid):
+        pytest.skip(FILTERS.missing_dependency(fid))
+    cls = FILTERS.load(fid)
+    assert cls.cost_per_data_s > 0 and cls.cost_scale(resolve_filter(fid).params) == 1.0
+
+
+@pytest.mark.parametrize("did", DATASETS.ids())
+def test_every_dataset_declares_its_duration(did: str) -> None:
+    assert DATASETS.load(did).nominal_duration_s > 0
+
+
+def test_the_cost_estimate_reads_the_declared_attributes(tmp_path: Path) -> None:
+    # the two the former id table missed: ukf_landmarks (its own cost) and Lost in the Woods (recorded: long)
+    assert FILTERS.load("ukf_landmarks").cost_per_data_s != FILTERS.load("ekf_landmarks").cost_per_data_s
+    assert DATASETS.load("lost_in_the_woods").nominal_duration_s == DATASETS.load("mrclam").nominal_duration_s
+    pf = FILTERS.load("pf")
+    assert pf.cost_scale(resolve_filter("pf[particles=300]").params) == pytest.approx(0.3)
+    plan = plan_sweep([(["odometry", "pf[particles=300]"], ["room"], [0])], str(tmp_path))
+    (task,) = plan.tasks
+    expected = 60.0 * (0.002 + 0.1 * 0.3) + _BOUND_COST_S
+    assert task.cost_s == pytest.approx(expected)
