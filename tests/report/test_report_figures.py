@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from figure_support import texts_off_canvas
 from matplotlib.colors import to_hex
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
@@ -19,7 +20,7 @@ from locbench.report.build import build_sections
 from locbench.report.collect import collect
 from locbench.report.context import Report
 from locbench.report.doc import Plot
-from locbench.report.render import plots_of, texts_off_canvas
+from locbench.report.render import plots_of
 from locbench.report.sections.experiment import MAX_LINE_SERIES, MAX_TRACK_PANELS
 from locbench.report.style import MPL_STYLE
 from locbench.run.store import Store

@@ -466,11 +466,6 @@ def recorded_means(rep: Report, filter_name: str) -> dict[int, float]:
     return out
 
 
-def summary_table(rep: Report, dataset: str) -> Table:
-    """The decision table of one dataset name (:data:`COLUMNS`)."""
-    return _summary(rep, dataset)[0]
-
-
 def _summary(rep: Report, dataset: str) -> tuple[Table, Context, list[Row]]:
     df = rep.rows(dataset)
     kid = kidnap_variant(rep, dataset) if dataset in rep.col.datasets else None
