@@ -2,9 +2,9 @@
 
 Usage: python tools/derive/calibrate_odometry.py [room|lap]
 
-``room``: :func:`locbench.datasets.synthetic.odometry_calibration.calibrate_room_odometry` (the encoder scales and
-the wheelbase ratio of ``locbench.datasets.synthetic.toolkit``); ``lap``: :func:`~locbench.datasets.synthetic.
-odometry_calibration.calibrate_lap_odometry` (``LAP_SYSTEMATIC_SCALE`` of ``locbench.datasets.synthetic.lap``).
+Both fits are functions of :mod:`locbench.datasets.synthetic.odometry_calibration`: ``room`` runs
+``calibrate_room_odometry`` (the encoder scales and the wheelbase ratio of ``locbench.datasets.synthetic.toolkit``),
+``lap`` runs ``calibrate_lap_odometry`` (``LAP_SYSTEMATIC_SCALE`` of ``locbench.datasets.synthetic.lap``).
 """
 
 from __future__ import annotations
