@@ -83,17 +83,6 @@ GPS_FINAL_FRACTION = 0.2
 #: "Does not recover": recovery rate over seeds below this.
 KIDNAP_MAX_RATE = 0.5
 
-_PARAM_COLS = (
-    "path",
-    "landmarks",
-    "known_ids",
-    "gps",
-    "pose_fix_sigma_m",
-    "initial_offset_m",
-    "kidnap_m",
-    "kidnap_rad",
-)
-
 
 def _params_class() -> type:
     # Imported on use: the dataset module pulls in the simulator, which the claims registry does not need.

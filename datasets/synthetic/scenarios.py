@@ -7,8 +7,8 @@ landmarks, laser, fixes, kidnap), so that e.g. ``laser_beams`` or ``known_ids`` 
 odometry realisation of a seed.
 
 Every scenario's robot is the same H20-like differential drive with the same wheel-odometry error
-(calibrated on the room by ``tools/calibrate_odometry.py``) and the same execution noise between its
-commanded twist and its true motion (wheel slip, :data:`SLIP_K_TRUE`, see
+(calibrated on the room by :mod:`locbench.datasets.synthetic.odometry_calibration`) and the same execution
+noise between its commanded twist and its true motion (wheel slip, :data:`SLIP_K_TRUE`, see
 :mod:`locbench.datasets.synthetic.robot`), drawn from its own child stream (:func:`execution_stream`,
 spawned after every other stream so that those are unchanged by it); the tiny scenarios can switch all
 noise off.

@@ -14,7 +14,7 @@ from locbench.report.names import MATCHED_PARAM, NAN
 from locbench.report.sections.experiment import nees_plots
 
 if TYPE_CHECKING:
-    from locbench.report.build import Report
+    from locbench.report.context import Report
 
 
 def consistency_section(rep: Report) -> Section:

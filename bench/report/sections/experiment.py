@@ -18,7 +18,7 @@ from locbench.report.doc import Plot, Section, Table, Text
 from locbench.report.names import slug
 
 if TYPE_CHECKING:
-    from locbench.report.build import Report
+    from locbench.report.context import Report
 
 #: Most panels of one trajectory figure before it is split into defaults and one figure per sweep.
 MAX_TRACK_PANELS = 12

@@ -8,14 +8,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 from matplotlib.figure import Figure
 
+from locbench.present.docfmt import LINESTYLES, LineStyle
 from locbench.report import figures as fg
 from locbench.report import tables as tb
 from locbench.report.doc import Plot, Section, Table, Text
 from locbench.report.names import KIDNAP_PARAM, slug
-from locbench.report.style import LINESTYLES, LineStyle
 
 if TYPE_CHECKING:
-    from locbench.report.build import Report
+    from locbench.report.context import Report
 
 
 def kidnap_section(rep: Report) -> Section:

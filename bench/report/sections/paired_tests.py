@@ -22,12 +22,12 @@ from matplotlib.figure import Figure
 from locbench.evaluate import significance as sg
 from locbench.evaluate.metrics import WITHIN_THRESHOLDS_CM
 from locbench.present.metric_info import METRICS
-from locbench.present.ranking import WAYPOINT_MEAN, Column, hover_grid, mark_ties, per_seed, samples_for, tie_footnote
+from locbench.present.ranking import Column, hover_grid, mark_ties, per_seed, samples_for, tie_footnote
 from locbench.report import tables as tb
 from locbench.report.doc import Plot, Section, Table, Text
 
 if TYPE_CHECKING:
-    from locbench.report.build import Report
+    from locbench.report.context import ComparisonRecord, Report
     from locbench.run.store import Store
 
 NAN = float("nan")
@@ -52,76 +52,6 @@ CSV_COLUMNS = (
     "effect_low",
     "effect_high",
 )
-
-
-@dataclass(frozen=True)
-class ComparisonRecord:
-    """One row of ``comparisons.csv``: a configuration against its column's best on one dataset."""
-
-    dataset: str
-    metric: str
-    configuration: str
-    reference: str
-    n: int
-    statistic: float
-    p: float
-    p_holm: float
-    effect: float
-    effect_low: float
-    effect_high: float
-
-
-#: Metrics compared in ``comparisons.csv`` (each dataset's ranked columns; SI units as in ``metrics.csv``).
-COMPARED = (*(m for m in tb.COMPARISON if METRICS[m].better), WAYPOINT_MEAN, "kidnap_recovered")
-
-
-def dataset_comparisons(
-    df: pd.DataFrame, dataset: str, filters: Sequence[str], eligible: Sequence[bool]
-) -> list[ComparisonRecord]:
-    """Every ranked metric of one dataset: each configuration against the metric's best, with effects."""
-    out: list[ComparisonRecord] = []
-    present = set(df["metric"].unique())
-    for metric in COMPARED:
-        if metric == WAYPOINT_MEAN:
-            if not df["metric"].astype(str).str.match(r"^waypoint_\d+_error_m$").any():
-                continue
-        elif metric not in present:
-            continue
-        info = METRICS[metric]
-        samples = samples_for(df, filters, metric)
-        means = [float(np.mean(list(s.values()))) if s else NAN for s in samples]
-        target = info.target if info.better == "closer" else 1.0
-        v = sg.ties_with_best(means, samples, eligible, info.better, target)  # type: ignore[arg-type]
-        for c in v.comparisons:
-            t = c.test
-            out.append(
-                ComparisonRecord(
-                    dataset,
-                    metric,
-                    filters[c.index],
-                    filters[c.reference],
-                    t.n,
-                    t.statistic,
-                    t.p,
-                    c.p_holm,
-                    c.effect,
-                    c.effect_low,
-                    c.effect_high,
-                )
-            )
-    return out
-
-
-def all_comparisons(report: Report) -> list[ComparisonRecord]:
-    """``comparisons.csv``'s rows: every dataset's ranked metrics, every configuration against the best."""
-    out: list[ComparisonRecord] = []
-    for ds in sorted(report.col.datasets):
-        filters = report.filters_on(ds)
-        if len(filters) < 2:
-            continue
-        eligible = [not report.col.is_baseline(f) for f in filters]
-        out += dataset_comparisons(report.rows(ds), ds, filters, eligible)
-    return out
 
 
 def comparisons_csv(records: Sequence[ComparisonRecord]) -> bytes:

@@ -22,7 +22,7 @@ the ratio to that reference.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
@@ -32,6 +32,9 @@ from locbench.present.metric_info import METRICS
 from locbench.registry import DATASETS
 from locbench.report import tables as tb
 from locbench.report.doc import Table
+
+if TYPE_CHECKING:
+    from locbench.report.context import Report
 
 #: The reference kinds, in the order the report groups them.
 KINDS = ("motion capture", "GPS", "survey", "not stated", "SLAM", "simulation")
@@ -62,6 +65,18 @@ def reference_kind(dataset_id: str, metadata: dict[str, Any], truth_label: str) 
 def semi_synthetic(metadata: dict[str, Any]) -> bool:
     """Whether the dataset's motion data is simulated on top of the recording (``metadata["semi_synthetic"]``)."""
     return metadata.get("semi_synthetic") is True
+
+
+def dataset_reference_kind(rep: Report, dataset: str) -> str:
+    """:func:`reference_kind` of a stored dataset name, from its stored truth (else its id)."""
+    ident, meta, label = rep.truth_meta(dataset)
+    return reference_kind(ident or rep.col.datasets[dataset].spec.ident, meta, label)
+
+
+def recorded_header(rep: Report, dataset: str) -> str:
+    """A recorded dataset's column header: its name, marked when it is semi-synthetic."""
+    semi = " (semi-synthetic)" if semi_synthetic(rep.truth_meta(dataset)[1]) else ""
+    return f"`{rep.col.display(dataset)}`{semi}"
 
 
 def kind_caption(kind: str) -> str:

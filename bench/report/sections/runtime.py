@@ -17,7 +17,7 @@ from locbench.report.doc import Plot, Section, Text
 from locbench.report.names import slug
 
 if TYPE_CHECKING:
-    from locbench.report.build import Report
+    from locbench.report.context import Report
 
 
 def pareto_points(rep: Report, dataset: str, metric: str) -> list[fg.ParetoPoint]:

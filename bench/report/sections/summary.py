@@ -34,10 +34,10 @@ from locbench.report.doc import Block, Section, Table, Text
 from locbench.report.names import KIDNAP_PARAM, NAN, slug
 from locbench.report.sections import health as hl
 from locbench.report.sections import paired_tests as sig
-from locbench.report.sections.reference import INDEPENDENT_KINDS
+from locbench.report.sections.reference import INDEPENDENT_KINDS, dataset_reference_kind
 
 if TYPE_CHECKING:
-    from locbench.report.build import Report
+    from locbench.report.context import Report
 
 #: The kidnap distance whose recovery rate the summary table shows, m.
 SUMMARY_KIDNAP_M = 2.0
@@ -457,18 +457,13 @@ def recorded_means(rep: Report, filter_name: str) -> dict[int, float]:
     independent ground truth (the recorded-median column's cell is their median, its test pairs them)."""
     out: dict[int, float] = {}
     for i, ds in enumerate(rep.recorded()):
-        if not rep.ground_truth(ds) or rep.reference_kind(ds) not in INDEPENDENT_KINDS:
+        if not rep.ground_truth(ds) or dataset_reference_kind(rep, ds) not in INDEPENDENT_KINDS:
             continue
         sub = rep.rows(ds)
         v = tb.values(sub[sub["filter"] == filter_name], "ate_m")
         if v.size:
             out[i] = float(np.mean(v))
     return out
-
-
-def summary_table(rep: Report, dataset: str) -> Table:
-    """The decision table of one dataset name (:data:`COLUMNS`)."""
-    return _summary(rep, dataset)[0]
 
 
 def _summary(rep: Report, dataset: str) -> tuple[Table, Context, list[Row]]:

@@ -2,9 +2,9 @@
 
 Usage::
 
-    python tools/readme_results.py            # print the generated blocks and the per-filter diagnostics
-    python tools/readme_results.py --write    # rewrite README.md's generated blocks from the committed summary
-    python tools/readme_results.py --check    # exit 1 naming every block of README.md that disagrees
+    python tools/docs/readme_results.py            # print the generated blocks and the per-filter diagnostics
+    python tools/docs/readme_results.py --write    # rewrite README.md's generated blocks from the committed summary
+    python tools/docs/readme_results.py --check    # exit 1 naming every block of README.md that disagrees
 
 A generated block in README.md lies between ``<!-- gen:NAME -->`` and ``<!-- /gen:NAME -->`` (a table on lines of
 its own, or a value inside a sentence); :func:`blocks` makes every one from the tidy metrics, with the report's
@@ -44,7 +44,7 @@ from locbench.report.tables import (
 )
 from locbench.suites import KIDNAP_DISTANCES_M, KIDNAP_FILTERS, SUITES
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 README = ROOT / "README.md"
 METRICS_CSV = ROOT / "results" / "summary" / "metrics.csv"
 REPORT_MD = METRICS_CSV.with_name("REPORT.md")
@@ -690,7 +690,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.check:
         bad = disagreements(text, generated)
         for name in bad:
-            print(f"README.md: block {name!r} disagrees with {args.metrics}; run tools/readme_results.py --write")
+            print(f"README.md: block {name!r} disagrees with {args.metrics}; run tools/docs/readme_results.py --write")
         return 1 if bad else 0
     for name, body in generated.items():
         print(f"--- {name}:{body}")
