@@ -776,10 +776,11 @@ class MrclamParams:
 class MrclamDataset(RecordedDataset):
     """MRCLAM: one robot of one dataset, landmark sightings by subject, Vicon truth (module docstring)."""
 
+    id: ClassVar[str] = "mrclam"
     Params: ClassVar[type] = MrclamParams
     version: ClassVar[int] = 1
     description: ClassVar[str] = (
-        "UTIAS MRCLAM: one of 5 robots, twist odometry, camera range-bearing to 15 landmarks, Vicon truth"
+        "UTIAS MRCLAM (recorded): one robot of a dataset, (v, omega) odometry, camera landmark sightings, Vicon truth"
     )
     folder: ClassVar[str] = FOLDER
     reference_kind: ClassVar[str] = "motion capture"

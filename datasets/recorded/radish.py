@@ -821,11 +821,12 @@ def semi_synthetic(site: str) -> bool:
 class RadishDataset(RecordedDataset):
     """Radish corrected CARMEN logs: scans, SLAM reference, map from the reference; raw or semi-synthetic odometry."""
 
+    id: ClassVar[str] = "radish"
     Params: ClassVar[type] = RadishParams
     version: ClassVar[int] = 1
     description: ClassVar[str] = (
-        "Radish corrected laser logs (any NAME-corrected.log.gz): map from the SLAM reference; raw odometry for "
-        "intel, aces, freiburg-079, semi-synthetic elsewhere"
+        "Radish corrected CARMEN logs (recorded, any NAME-corrected.log.gz): laser, map and SLAM reference; "
+        "raw odometry for intel, aces, freiburg-079, semi-synthetic elsewhere"
     )
     folder: ClassVar[str] = FOLDER
     reference_kind: ClassVar[str] = "SLAM"

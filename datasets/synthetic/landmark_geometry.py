@@ -406,6 +406,7 @@ STREAMS = ("odometry", "landmarks", "laser", "fixes", "kidnap", "route", "initia
 class LandmarkGeometryScenario(SyntheticBuilder):
     """Report 001's micro-simulator: paths x landmark layouts, laser-detected disc landmarks, GPS variant."""
 
+    id: ClassVar[str] = "landmark_geometry"
     Params: ClassVar[type] = LandmarkGeometryParams
     version: ClassVar[int] = 2
     description: ClassVar[str] = (

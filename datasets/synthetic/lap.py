@@ -317,6 +317,7 @@ class LapParams:
 class LapScenario(SyntheticBuilder):
     """Report 000's lap: one rectangle on the office floor, Hokuyo-like laser, people not on the map."""
 
+    id: ClassVar[str] = "lap"
     Params: ClassVar[type] = LapParams
     version: ClassVar[int] = 2
     nominal_duration_s: ClassVar[float] = 60.0

@@ -114,6 +114,7 @@ class RoomScenario(SyntheticBuilder):
     """Report 003's experiment: a 7 m x 2 m room, 4 landmarks, a start and 5 marked waypoints, a
     Kinect-like range-bearing sensor (0.8-3.5 m, 57 deg) and calibrated wheel-encoder odometry."""
 
+    id: ClassVar[str] = "room"
     Params: ClassVar[type] = RoomParams
     version: ClassVar[int] = 2
     nominal_duration_s: ClassVar[float] = 60.0
@@ -290,6 +291,7 @@ class OfficeParams:
 class OfficeScenario(SyntheticBuilder):
     """One office floor with walls, doors, 22 landmarks and a 9-waypoint tour; every sensor."""
 
+    id: ClassVar[str] = "office"
     Params: ClassVar[type] = OfficeParams
     version: ClassVar[int] = 2
     nominal_duration_s: ClassVar[float] = 231.0
@@ -378,7 +380,6 @@ class _TinyScenario(DatasetBuilder):
 
     Params: ClassVar[type] = TinyParams
     version: ClassVar[int] = 2
-    dataset_id: ClassVar[str] = ""
 
     def world(self) -> World:
         raise NotImplementedError
@@ -424,7 +425,7 @@ class _TinyScenario(DatasetBuilder):
             pose_fix_sigma_xy_m=fixes.reported_sigma_xy_m,
         )
         return assemble(
-            dataset_id=self.dataset_id,
+            dataset_id=self.id,
             params=params,
             world=world,
             motion=motion,
@@ -438,7 +439,7 @@ class _TinyScenario(DatasetBuilder):
 class TinyLineScenario(_TinyScenario):
     """A short straight drive (two stops) past 3 landmarks in a 6 m x 4 m box; every sensor type."""
 
-    dataset_id: ClassVar[str] = "tiny_line"
+    id: ClassVar[str] = "tiny_line"
     description: ClassVar[str] = "a 10 s straight drive past 3 landmarks (conformance checks)"
 
     def world(self) -> World:
@@ -452,7 +453,7 @@ class TinyCircleScenario(_TinyScenario):
     """One counter-clockwise circle of radius 1.2 m in a 6 m x 6 m box with 4 landmarks; the heading
     crosses +-pi half way round."""
 
-    dataset_id: ClassVar[str] = "tiny_circle"
+    id: ClassVar[str] = "tiny_circle"
     description: ClassVar[str] = "a circle whose heading crosses +-pi, 4 landmarks (conformance checks)"
     radius_m: ClassVar[float] = 1.2
 
