@@ -109,7 +109,8 @@ def test_the_documents_hold_the_generated_lists(document: str) -> None:
     blocks = catalog.doc_blocks()
     for name in names:
         assert f"<!-- gen:{name} -->{blocks[name]}<!-- /gen:{name} -->" in text, (
-            f"{document}: block {name!r} is not what the registry makes; run python tools/docs/readme_results.py --write"
+            f"{document}: block {name!r} is not what the registry makes; "
+            "run python tools/docs/readme_results.py --write"
         )
 
 

@@ -703,7 +703,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         for doc, name in bad:
             source = f"{args.metrics} or the registry"
             print(
-                f"{doc.relative_to(ROOT)}: block {name!r} disagrees with {source}; run tools/docs/readme_results.py --write"
+                f"{doc.relative_to(ROOT)}: block {name!r} disagrees with {source}; "
+                "run tools/docs/readme_results.py --write"
             )
         return 1 if bad else 0
     for name, body in generated.items():
