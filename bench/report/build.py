@@ -25,7 +25,7 @@ import numpy as np
 import pandas as pd
 
 from locbench.core.spec import Spec
-from locbench.evaluate.metrics import CONFIDENCE
+from locbench.evaluate.metrics import ATE_M, CONFIDENCE, KIDNAP_DISTANCE_M, RELATION_ERROR_M
 from locbench.evaluate.pcrb import BOUND_ROWS
 from locbench.present.experiments import all_claims, experiments
 from locbench.present.palette import Palette, split_by_sweep
@@ -118,7 +118,7 @@ class Report:
         return sorted(n for n, info in self.col.datasets.items() if info.spec.ident == dataset_id)
 
     def kidnap_distance(self, dataset: str) -> float:
-        v = tb.values(self.rows(dataset), "kidnap_distance_m")
+        v = tb.values(self.rows(dataset), KIDNAP_DISTANCE_M)
         return float(np.median(v)) if v.size else NAN
 
     @cached_property
@@ -176,9 +176,9 @@ class Report:
         return f"`{self.col.display(dataset)}`{semi}"
 
     def recorded_metric(self, dataset: str) -> str:
-        if (self.rows(dataset)["metric"] == "relation_error_m").any():
-            return "relation_error_m"
-        return "ate_m"
+        if (self.rows(dataset)["metric"] == RELATION_ERROR_M).any():
+            return RELATION_ERROR_M
+        return ATE_M
 
     # --- sections -------------------------------------------------------------------------------------
 
