@@ -18,12 +18,21 @@ import pandas as pd
 
 from locbench.core.spec import Spec
 from locbench.evaluate import significance as sg
+from locbench.evaluate.metrics import (
+    ATE_M,
+    KIDNAP_DISTANCE_M,
+    KIDNAP_RECOVERED,
+    METRICS,
+    RELATION_ERROR_M,
+    WAYPOINT_ERROR_M,
+    WAYPOINT_RMSE_MEAN_M,
+    family_regex,
+)
 from locbench.evaluate.pcrb import BOUND_ROWS
 from locbench.present.docfmt import LineStyle
 from locbench.present.experiments import experiments
-from locbench.present.metric_info import METRICS
 from locbench.present.palette import Palette, split_by_sweep
-from locbench.present.ranking import WAYPOINT_MEAN, samples_for
+from locbench.present.ranking import samples_for
 from locbench.report import tables as tb
 from locbench.report import timing as tm
 from locbench.report.collect import Collected
@@ -48,7 +57,7 @@ class ComparisonRecord:
 
 
 #: Metrics compared in ``comparisons.csv`` (each dataset's ranked columns; SI units as in ``metrics.csv``).
-COMPARED = (*(m for m in tb.COMPARISON if METRICS[m].better), WAYPOINT_MEAN, "kidnap_recovered")
+COMPARED = (*(m for m in tb.COMPARISON if METRICS[m].better), WAYPOINT_RMSE_MEAN_M, KIDNAP_RECOVERED)
 
 
 def dataset_comparisons(
@@ -58,8 +67,8 @@ def dataset_comparisons(
     out: list[ComparisonRecord] = []
     present = set(df["metric"].unique())
     for metric in COMPARED:
-        if metric == WAYPOINT_MEAN:
-            if not df["metric"].astype(str).str.match(r"^waypoint_\d+_error_m$").any():
+        if metric == WAYPOINT_RMSE_MEAN_M:
+            if not df["metric"].astype(str).str.fullmatch(family_regex(WAYPOINT_ERROR_M)).any():
                 continue
         elif metric not in present:
             continue
@@ -169,7 +178,7 @@ class Report:
 
     def kidnap_distance(self, dataset: str) -> float:
         """The median stored kidnap distance of a dataset name, m (NaN without one)."""
-        v = tb.values(self.rows(dataset), "kidnap_distance_m")
+        v = tb.values(self.rows(dataset), KIDNAP_DISTANCE_M)
         return float(np.median(v)) if v.size else NAN
 
     @cached_property
@@ -223,6 +232,6 @@ class Report:
 
     def recorded_metric(self, dataset: str) -> str:
         """The accuracy metric a recorded dataset is scored by: the relation error where it has one, else ATE."""
-        if (self.rows(dataset)["metric"] == "relation_error_m").any():
-            return "relation_error_m"
-        return "ate_m"
+        if (self.rows(dataset)["metric"] == RELATION_ERROR_M).any():
+            return RELATION_ERROR_M
+        return ATE_M

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from locbench.present.metric_info import METRICS
+from locbench.evaluate.metrics import METRICS, REALTIME_FACTOR
 from locbench.report import tables as tb
 from locbench.report import timing as tm
 from locbench.report.doc import Section, Table, Text
@@ -50,7 +50,7 @@ def recorded_section(rep: Report) -> Section:
 
     def with_ref(c: tuple[str, float], f: str, ds: str) -> tuple[str, float]:
         sub = rep.rows(ds)
-        return tm.with_ref(c[0], sub[sub["filter"] == f], "realtime_factor") if np.isfinite(c[1]) else c[0], c[1]
+        return tm.with_ref(c[0], sub[sub["filter"] == f], REALTIME_FACTOR) if np.isfinite(c[1]) else c[0], c[1]
 
     groups = [(k, [d for d in names if dataset_reference_kind(rep, d) == k]) for k in KINDS]
     sec.add(
@@ -72,13 +72,13 @@ def recorded_section(rep: Report) -> Section:
         head = ("filter", *(recorded_header(rep, d) for d in group))
         fs = [f for f in filters if any((f, d) in status for d in group)]
         acc = [[cell(f, d, rep.recorded_metric(d)) for d in group] for f in fs]
-        rtf = [[with_ref(cell(f, d, "realtime_factor"), f, d) for d in group] for f in fs]
+        rtf = [[with_ref(cell(f, d, REALTIME_FACTOR), f, d) for d in group] for f in fs]
         metrics_text = "; ".join(f"`{rep.col.display(d)}` {tb.header(rep.recorded_metric(d))}" for d in group)
         sub = Section(f"Reference: {kind}", f"recorded-{slug(kind)}")
         sub.add(Text(f"Accuracy: {metrics_text}; {kind_caption(kind)}."))
         for grid, metric_of, what in (
             (acc, rep.recorded_metric, "Accuracy (cm)"),
-            (rtf, lambda d: "realtime_factor", "Real-time factor (x)"),
+            (rtf, lambda d: REALTIME_FACTOR, "Real-time factor (x)"),
         ):
             cells, note, hover = sig.mark_grid(rep, fs, group, grid, metric_of)
             sub.add(

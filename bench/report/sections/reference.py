@@ -28,7 +28,7 @@ import numpy as np
 import pandas as pd
 
 from locbench.core.errors import LocbenchError
-from locbench.present.metric_info import METRICS
+from locbench.evaluate.metrics import ATE_M, METRICS
 from locbench.registry import DATASETS
 from locbench.report import tables as tb
 from locbench.report.doc import Table
@@ -100,8 +100,8 @@ def robustness_table(df: pd.DataFrame, filters: list[str], noise_of: dict[str, t
     if not cols:
         return None
     ref_of = {w: d for d, (w, n) in noise_of.items() if n == GAUSSIAN}
-    scale = METRICS["ate_m"].scale
-    ate = df[df["metric"] == "ate_m"]
+    scale = METRICS[ATE_M].scale
+    ate = df[df["metric"] == ATE_M]
 
     def mean(f: str, ds: str) -> float:
         v = ate[(ate["dataset"] == ds) & (ate["filter"] == f)]["value"].to_numpy(dtype=np.float64)
