@@ -59,8 +59,8 @@ def tests(session: nox.Session) -> None:
 
 #: The tests that race the machine (executors, Ctrl-C, child processes, dask's ports): run again under load by CI.
 BUSY_TESTS = (
-    "tests/run/test_sweeps.py",
-    "tests/run/test_runner.py",
+    "tests/run/test_sweep.py",
+    "tests/run/test_execute.py",
     "tests/run/test_store.py",
     "tests/malformed/test_untrusted_inputs.py",
 )
@@ -74,7 +74,7 @@ def tests_busy(session: nox.Session) -> None:
     _install(session, "all,test")
     common = ("pytest", "--benchmark-disable", "-p", "no:cacheprovider")
     session.run(*common, "-m", "not slow", *(session.posargs or BUSY_TESTS), env=_data_env())
-    session.run(*common, "-m", "slow", "-k", BUSY_DASK, "tests/run/test_sweeps.py", env=_data_env())
+    session.run(*common, "-m", "slow", "-k", BUSY_DASK, "tests/run/test_sweep.py", env=_data_env())
 
 
 #: The numeric tests: every comparison with numpy, OpenBLAS, LAPACK, scipy, filterpy, gtsam or Stone Soup (filters,

@@ -1,7 +1,7 @@
 """Conformance checks for filters and datasets, after scikit-learn's ``check_estimator``.
 
 A filter check takes a filter class or instance (so a filter can be checked before it is registered), runs it
-through the runner's own loop (:func:`locbench.run.runner.run_filter`, which resets it, routes each event to
+through the runner's own loop (:func:`locbench.run.filter_pass.run_filter`, which resets it, routes each event to
 ``predict`` or ``update`` and reads ``estimate()`` after every call) and raises :class:`CheckFailed` when the
 filter breaks the contract. Each check declares when it applies, from the filter's declared capabilities
 (``consumes``, ``requires``, ``routed_events()``); :func:`yield_filter_checks` yields the ones that apply and
@@ -29,7 +29,7 @@ from locbench.core.spec import Spec
 from locbench.datasets.dataset import Dataset, MapKind, check_dataset_contract
 from locbench.filters.base import HEALTH_SIGNALS, Filter, FilterConfig
 from locbench.registry import DATASETS, FILTERS, make_dataset, make_filter, resolve_dataset, resolve_filter
-from locbench.run.runner import FilterTrace, incompatibility, run_filter
+from locbench.run.filter_pass import FilterTrace, incompatibility, run_filter
 
 #: What a filter check accepts: a filter instance, or a class (checked with its default config).
 FilterLike = Filter | type[Filter]

@@ -32,7 +32,7 @@ from locbench.core.spec import MAX_CONFIGS
 from locbench.suites import MAX_SEEDS
 
 #: ``locbench run --interleave`` without a value: seconds of data each filter of a task runs before the next
-#: (:attr:`locbench.run.runner.Task.slice_s`); and the longest slice accepted.
+#: (:attr:`locbench.run.plan.Task.slice_s`); and the longest slice accepted.
 INTERLEAVE_SLICE_S = 5.0
 MAX_INTERLEAVE_S = 3600.0
 
@@ -109,8 +109,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from locbench.run.executors import check_scheduler_address
-    from locbench.run.runner import plan_sweep, run_sweep
+    from locbench.run.plan import plan_sweep
     from locbench.run.store import Store
+    from locbench.run.sweep import run_sweep
     from locbench.suites import Block, check_seeds, get_suite
 
     # every input is checked here, before anything is expanded, run or written
@@ -145,12 +146,13 @@ def _cmd_run(args: argparse.Namespace) -> int:
             suite = get_suite(name, **limits)
             blocks += list((suite.with_seeds(args.seeds, args.max_seeds) if args.seeds else suite).blocks)
     tuned = TUNED_SUITE in (args.suite or [])
+    store = Store(args.results)  # the one store of this command: planned against, claimed, written
     rc = 0
     if blocks or not tuned:
-        # every spec is resolved and validated here, before anything runs or is written
+        # every spec is parsed and validated here, once, before anything runs or is written
         specs = [(b.filters, b.datasets, range(b.seeds)) for b in blocks]
-        plan = plan_sweep(specs, args.results, args.force, slice_s=args.interleave)
-        Store(args.results).claim()  # refuses another tool's folder before anything is written or cleaned in it
+        plan = plan_sweep(specs, store, args.force, slice_s=args.interleave)
+        store.claim()  # refuses another tool's folder before anything is written or cleaned in it
         bar = tqdm(total=plan.total, unit="run", desc="locbench run", disable=True if args.no_progress else None)
         with bar:
             sweep = run_sweep(
@@ -161,14 +163,14 @@ def _cmd_run(args: argparse.Namespace) -> int:
             return 130
         rc = _print_summary(sweep, args.results)
     if tuned:
-        Store(args.results).claim()
+        store.claim()
         rc = max(rc, _run_tuned(args))
     return rc
 
 
 def _run_tuned(args: argparse.Namespace) -> int:
     """Suite ``tuned``: every study (tuning on train data), then the tuned and default configurations on test data."""
-    from locbench.run.runner import SweepResult
+    from locbench.run.sweep import SweepResult
     from locbench.run.tuning import run_tuned_suite
 
     res = run_tuned_suite(args.results, executor=args.executor, jobs=args.jobs, scheduler=args.scheduler)
@@ -194,7 +196,7 @@ MAX_CONNECT_TIMEOUT_S = 3600.0
 
 def _print_summary(sweep: Any, results: str) -> int:
     """Counts by status, then one line per (status, filter, dataset, reason) with a count; 1 if any run failed."""
-    from locbench.run.runner import NOT_STORED
+    from locbench.run.plan import NOT_STORED
 
     outcomes = sweep.outcomes
     counts = Counter(o.status for o in outcomes)

@@ -231,7 +231,7 @@ def test_check_filter_honours_declared_failures() -> None:
 def test_unwrapped_heading_really_leaves_the_interval() -> None:
     # Guard of the broken filter itself: on the circle its heading must exceed pi for the test above to mean much.
     from locbench.registry import make_dataset
-    from locbench.run.runner import run_filter
+    from locbench.run.filter_pass import run_filter
 
     tr = run_filter(UnwrappedHeading(), make_dataset("tiny_circle", 0), np.random.default_rng(0))
     # the runner's estimate contract stops it at the first heading outside [-pi, pi], the last row it keeps

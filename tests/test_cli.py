@@ -82,6 +82,25 @@ def test_run_then_report(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
     assert not any("ekf_landmarks" in f for f in files)
 
 
+@pytest.mark.usefixtures("harness_registry")
+def test_run_plans_claims_and_writes_through_one_store(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from locbench.run import store as store_mod
+
+    made: list[Path] = []
+    real = store_mod.Store.__init__
+
+    def counted(self: store_mod.Store, root: str) -> None:
+        made.append(Path(root))
+        real(self, root)
+
+    monkeypatch.setattr(store_mod.Store, "__init__", counted)
+    argv = ["run", "--filter", "bad[fail_at_s=100]", "--dataset", "line", "--results", str(tmp_path), "--no-progress"]
+    assert main(argv) == 0
+    assert made == [tmp_path]
+    assert main(argv) == 0  # the second time every run is cached: still one store
+    assert made == [tmp_path, tmp_path]
+
+
 def test_fetch_synthetic_has_nothing_to_fetch(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["fetch", "room"]) == 0
     assert "nothing to fetch" in capsys.readouterr().out

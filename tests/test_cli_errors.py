@@ -154,7 +154,7 @@ def test_fetch_rosbag_without_a_path_names_the_parameter(capsys: pytest.CaptureF
 
 
 def test_missing_data_names_the_path_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from locbench.run.runner import run_many
+    from locbench.run.sweep import run_many
 
     monkeypatch.setenv("LOCBENCH_DATA", str(tmp_path / "nodata"))
     monkeypatch.setenv("LOCBENCH_CACHE", str(tmp_path / "cache"))

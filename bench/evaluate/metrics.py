@@ -2,10 +2,11 @@
 
 Conventions shared by every function here:
 
-- **Zero-order hold.** A run stores a belief after each predict/update call. The estimate in force at a
-  time ``t`` is the last stored row with ``t_row <= t`` (a real-time filter reports its latest belief);
-  a query before the first row gets the first row (the reset belief, which holds from the start).
-  At equal times the later row wins, so a predict and an update at the same ``t`` score the update.
+- **Zero-order hold** (:mod:`locbench.evaluate.hold`, the one definition the runner uses too). A run stores a
+  belief after each predict/update call. The estimate in force at a time ``t`` is the last stored row with
+  ``t_row <= t`` (a real-time filter reports its latest belief); a query before the first row gets the first
+  row (the reset belief, which holds from the start). At equal times the later row wins, so a predict and an
+  update at the same ``t`` score the update.
 - Errors are taken at the **ground-truth times** (and at the waypoint times for waypoint errors), never
   at the filter's own times, so that filters with different update rates are scored on the same grid.
 - **Align once, then compute** (as evo associates estimate and reference before any metric): :func:`align`
@@ -83,11 +84,12 @@ import numpy.typing as npt
 from scipy import stats
 
 from locbench.core.geometry import between, pose_error, wrap_angle
+from locbench.evaluate.hold import estimate_at, hold_indices
 from locbench.evaluate.scores import SCORE_IDS, score_metrics
 
 if TYPE_CHECKING:
     from locbench.datasets.dataset import Kidnap
-    from locbench.run.store import RunRecord, TruthRecord
+    from locbench.evaluate.records import RunRecord, TruthRecord
 
 log = logging.getLogger(__name__)
 
@@ -178,52 +180,6 @@ def member_id(family: str, *parts: object) -> str:
 
 
 _PLACEHOLDER = re.compile(r"<[a-z]+>")
-
-
-# --- zero-order hold ----------------------------------------------------------------------------
-
-
-def hold_indices(t_est: npt.ArrayLike, t_query: npt.ArrayLike) -> npt.NDArray[np.intp]:
-    """Row of the estimate in force at each query time (zero-order hold).
-
-    Parameters
-    ----------
-    t_est : array-like, shape (n,)
-        Times of the stored estimates, s, non-decreasing.
-    t_query : array-like, shape (m,)
-        Query times, s.
-
-    Returns
-    -------
-    ndarray of intp, shape (m,)
-        Index of the last row with ``t_est[row] <= t_query``; 0 for a query before the first row.
-    """
-    t = np.asarray(t_est, dtype=np.float64)
-    if t.ndim != 1 or t.shape[0] == 0:
-        raise ValueError("t_est must be a non-empty 1-d array of estimate times")
-    idx = np.searchsorted(t, np.asarray(t_query, dtype=np.float64), side="right") - 1
-    return np.clip(idx, 0, t.shape[0] - 1)
-
-
-def estimate_at(t_est: npt.ArrayLike, values: npt.ArrayLike, t_query: npt.ArrayLike) -> np.ndarray:
-    """The stored values in force at the query times (zero-order hold, see the module docstring).
-
-    Parameters
-    ----------
-    t_est : array-like, shape (n,)
-        Times of the stored estimates, s, non-decreasing.
-    values : array-like, shape (n, ...)
-        Anything stored per row: means (n, 3), covariances (n, 3, 3), diagnostics (n,).
-    t_query : array-like, shape (m,)
-        Query times, s.
-
-    Returns
-    -------
-    ndarray, shape (m, ...)
-        ``values[row]`` of the last row with ``t_est[row] <= t_query`` (the first row before it).
-    """
-    v = np.asarray(values)
-    return v[hold_indices(t_est, t_query)]
 
 
 # --- the aligned view: a run held at the ground-truth times, once ------------------------------------

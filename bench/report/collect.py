@@ -1,9 +1,10 @@
 """Reading the store once: the tidy metrics, each run's status, and what the figures need.
 
 This is the report's only I/O on stored runs. Every dataset and filter name is parsed here, once, into a
-:class:`~locbench.core.spec.Spec` and the facts the report needs about it (recorded or synthetic, the name to
-print, whether a filter configuration starts without a pose, which filter is the baseline), asked of the
-registry's classes, so the rest of the report never looks inside a name.
+:class:`~locbench.core.spec.Spec`, beside the facts the report needs about it: of a filter configuration, the
+traits its runs recorded when they were planned (:class:`locbench.run.plan.FilterTraits`: the baseline, a start
+without a pose, its kidnap configuration, the sensors and maps it uses); of a dataset, whether it is recorded and
+the name to print, asked of the registry's classes. The rest of the report never looks inside a name.
 """
 
 from __future__ import annotations
@@ -25,7 +26,9 @@ from locbench.core.spec import Spec, format_spec, params_to_dict
 from locbench.evaluate.lost import HealthSeries, health_series
 from locbench.evaluate.metrics import align_run, nees_at_truth, run_metrics
 from locbench.evaluate.pcrb import BOUND_ROWS, is_bound_row, pcrb_summary
-from locbench.run.store import RunRecord, Store, TruthRecord
+from locbench.evaluate.records import RunRecord, TruthRecord
+from locbench.run.plan import FilterTraits, parse_filter
+from locbench.run.store import Store
 
 log = logging.getLogger(__name__)
 
@@ -138,37 +141,32 @@ def natural_key(name: str) -> tuple[tuple[int, float, str], ...]:
 # --- what a name means, asked of the registry -----------------------------------------------------------
 
 
-def describe_filter(name: str) -> FilterInfo:
-    """Parse a stored filter name and ask its class whether it is the baseline and starts without a pose.
+def describe_filter(name: str, traits: FilterTraits | None = None) -> FilterInfo:
+    """What the report knows of a filter name: the traits its runs recorded (``traits``).
 
-    A filter whose class cannot be loaded here (an optional dependency missing, a plug-in gone) is described
-    by its name alone: not the baseline, starting from the belief.
+    A configuration whose runs recorded none (stored before runs recorded them) has them derived as a sweep derives
+    them when it plans (:func:`locbench.run.plan.parse_filter`); one whose class cannot be loaded here (an optional
+    dependency missing, a plug-in gone) is described by its name alone: not the baseline, starting from the belief.
     """
-    from locbench.registry import FILTERS, resolve_filter
-
     spec = Spec.parse(name)
     if is_bound_row(name):
         return FilterInfo(name, spec, False, False, bound=True)
-    try:
-        cls: Any = FILTERS.load(spec.ident)
-        cfg = resolve_filter(name).params
-        extra = dict(getattr(cls, "kidnap_params", {}) or {})
-        kidnap = resolve_filter(format_spec(spec.ident, spec.as_dict() | extra)).name if extra else None
-        # a filter does no work in __init__ (the interface's rule), so asking an instance what it routes is cheap
-        sensors = tuple(sorted(t.__name__ for t in cls(cfg).routed_events()))
-        maps = tuple(sorted(k.value for k in cls.requires))
-        return FilterInfo(
-            name,
-            spec,
-            bool(cls.baseline),
-            bool(cls.starts_without_pose(cfg)),
-            kidnap_name=kidnap,
-            sensors=sensors,
-            maps=maps,
-        )
-    except Exception as exc:  # the report must still come out without the class
-        log.info("filter %s described by its name only: %s", name, exc)
+    if traits is None:
+        try:
+            traits = parse_filter(name).traits
+        except Exception as exc:  # the report must still come out without the class
+            log.info("filter %s described by its name only: %s", name, exc)
+    if traits is None:
         return FilterInfo(name, spec, False, False)
+    return FilterInfo(
+        name,
+        spec,
+        traits.baseline,
+        traits.global_start,
+        kidnap_name=traits.kidnap_name,
+        sensors=traits.sensors,
+        maps=traits.maps,
+    )
 
 
 def describe_dataset(name: str) -> DatasetInfo:
@@ -337,8 +335,13 @@ def collect(store: Store, keep: Keep | None = None, jobs: int = 1) -> Collected:
     out.metrics = frame(rows)
     for name in sorted({r.dataset for r in out.runs}):
         out.datasets[name] = describe_dataset(name)
+    recorded: dict[str, FilterTraits] = {}
+    for meta in out.metas:
+        traits = FilterTraits.from_record(meta.get("filter_traits"))
+        if traits is not None:
+            recorded.setdefault(str(meta["filter"]), traits)
     for name in sorted({r.filter for r in out.runs} | set(BOUND_ROWS)):
-        out.filters[name] = describe_filter(name)
+        out.filters[name] = describe_filter(name, recorded.get(name))
     return out
 
 

@@ -2,7 +2,7 @@
 
 A filter's estimate has a mean of shape (3,) (x m, y m, theta rad with theta wrapped to (-pi, pi]) and a
 covariance of shape (3, 3) that is symmetric and positive semi-definite. The runner checks it on every
-estimate of every run (:class:`locbench.run.runner.FilterPass`): the shapes as each estimate is taken (a wrong
+estimate of every run (:class:`locbench.run.filter_pass.FilterPass`): the shapes as each estimate is taken (a wrong
 shape would otherwise be broadcast into the run's arrays, silently or as an internal error), the values once
 over the whole trace at the end of the run (:func:`first_violation`, vectorised: one batched eigenvalue call
 instead of one per event). A violation fails the run with a one-line message naming the contract, the value

@@ -2,7 +2,7 @@
 
 Every executor goes through one loop (:class:`_Schedule`) over ``concurrent.futures`` executors: this
 process's, a ``ProcessPoolExecutor``, or the dask client's (``Client.get_executor``). It splits the plan's
-tasks (longest first) into one part per filter (:func:`parts`), runs :func:`locbench.run.runner.execute_contained` on
+tasks (longest first) into one part per filter (:func:`parts`), runs :func:`locbench.run.execute.execute_contained` on
 each somewhere, and hands each result back to the caller, which writes the store in this process as each
 filter finishes; so a dask worker on another machine needs locbench installed but no shared folder. Wherever
 a part runs, its filter runs in a child process of that worker under the run time limit
@@ -36,7 +36,8 @@ from typing import Any
 
 from locbench.core.errors import ConfigError, DependencyNotInstalled, one_line
 from locbench.run.containment import die_with_parent
-from locbench.run.runner import Task, TaskResult, execute_contained, forget_realisations
+from locbench.run.execute import TaskResult, execute_contained, forget_realisations
+from locbench.run.plan import Task
 
 log = logging.getLogger(__name__)
 
@@ -321,7 +322,7 @@ def parts(task: Task) -> list[Task]:
 
     A part's result holds one run, so each run is stored as soon as its filter finishes, and a worker that
     dies takes only its own filter with it. The parts of a task run one after another on one worker, which
-    builds the dataset once for all of them (:func:`locbench.run.runner.execute_task` keeps it).
+    builds the dataset once for all of them (:func:`locbench.run.execute.execute_task` keeps it).
     """
     if not task.jobs or task.slice_s > 0:
         # interleaved timing (Task.slice_s) runs the task's filters in turns: one part, stored together

@@ -37,7 +37,8 @@ from locbench.datasets.recorded.tum import TUM_COLUMNS, read_tum, write_tum
 
 __all__ = ["TUM_COLUMNS", "export_results", "export_textlog", "export_truth_tum", "export_tum", "read_tum", "write_tum"]
 from locbench.core.errors import ConfigError
-from locbench.run.store import RunRecord, Store, TruthRecord
+from locbench.evaluate.records import RunRecord, TruthRecord
+from locbench.run.store import Store
 
 log = logging.getLogger(__name__)
 

@@ -112,7 +112,7 @@ def reference() -> dict[str, Any]:
     ``reference_s`` (the median pass's wall time, s), ``reference_cpu_s`` (its thread CPU time, s),
     ``reference_runs_s`` (every timed pass, s) and ``reference_load_avg`` (the load averages when it was
     measured). A ``locbench run`` or ``locbench tune`` is one process, so this is once per sweep;
-    :func:`locbench.run.runner.run_sweep` measures before its workers start, and forked workers inherit it (a dask
+    :func:`locbench.run.sweep.run_sweep` measures before its workers start, and forked workers inherit it (a dask
     worker on another machine measures its own on its first run).
     """
     if not _REFERENCE:

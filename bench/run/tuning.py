@@ -2,8 +2,8 @@
 
 :func:`tune` searches the tunable fields of a filter's config (:mod:`locbench.core.tunable`) with optuna's TPE sampler.
 Each trial is one filter spec holding the trial's values (``ekf_landmarks[sigma_range_m=0.031]``); its runs on the
-train datasets and seeds are planned and executed by :func:`locbench.run.runner.plan_sweep` and
-:func:`locbench.run.runner.run_sweep` (any executor) and stored as ordinary runs in ``<results>/tuning`` (a store of its
+train datasets and seeds are planned and executed by :func:`locbench.run.plan.plan_sweep` and
+:func:`locbench.run.sweep.run_sweep` (any executor) and stored as ordinary runs in ``<results>/tuning`` (a store of its
 own, so that no train run ever enters the report's tables), so a trial whose runs are stored is read back, never
 recomputed. The first trial of every study is the default, the plain spec with no tunable field overridden (a field
 whose default is the dataset's nominal value stays so), and counts in the budget: N trials are the default and N - 1
@@ -389,7 +389,7 @@ def tune(
     results : path
         The results folder: train runs go to ``<results>/tuning/runs``, the study to ``<results>/tuning/studies``.
     executor, jobs, scheduler
-        Where each trial's runs execute, as for :func:`locbench.run.runner.run_sweep`.
+        Where each trial's runs execute, as for :func:`locbench.run.sweep.run_sweep`.
     objective : {"ate", "nll"}
         The per-run metric whose mean is minimised.
     sampler_seed : int
@@ -413,27 +413,28 @@ def tune(
     dnames = tuple(resolve_dataset(d).name for d in datasets)
     optuna = _optuna()
 
-    from locbench.run.runner import plan_sweep, run_sweep
+    from locbench.run.plan import plan_sweep
+    from locbench.run.sweep import run_sweep
 
     name = study_name(filter_spec, datasets, seeds, objective)
     path = journal_path(results, name)
     # both folders are locbench's before anything is written in them (another tool's folder is refused)
     Store(results).claim()
-    Store(Path(results) / TUNING_DIR).claim()
+    train_root = Path(results) / TUNING_DIR
+    store = Store(train_root)  # the train runs' store, one for every trial of the study
+    store.claim()
     path.parent.mkdir(parents=True, exist_ok=True)
     storage, study = open_journal(optuna, path, name)
     states = optuna.trial.TrialState
     fail_dead_trials(optuna, study, storage, path, every=fail_stale)
     dists = {k: _distribution(optuna, r) for k, r in space.items()}
-    train_root = Path(results) / TUNING_DIR
-    store = Store(train_root)
     plain = resolve_filter(filter_spec).name
     result = TuneResult(name, plain, dnames, tuple(seed_list), objective)
 
     def run_trial(spec: str, checking: bool = False) -> tuple[float, str]:
         """Run what is not stored of ``spec``'s train runs, then score it from the store (``checking``: a finished
         trial's value re-derived, which runs nothing when its runs are stored and counts in no tally)."""
-        plan = plan_sweep([([spec], dnames, seed_list)], str(train_root))
+        plan = plan_sweep([([spec], dnames, seed_list)], store)
         if not plan.tasks and not checking:
             result.reused += 1
         if (plan.tasks or not checking) and run_sweep(plan, executor, jobs, scheduler).interrupted:
@@ -603,7 +604,8 @@ def run_tuned_suite(
     one sweep into ``results`` (the default rows are the comparison's stored runs where present). Writes
     ``<results>/tuning/tuned.json`` for the report.
     """
-    from locbench.run.runner import plan_sweep, run_sweep
+    from locbench.run.plan import plan_sweep
+    from locbench.run.sweep import run_sweep
 
     todo = list(studies) if studies is not None else suite_studies()
     ready: list[SuiteStudy] = []

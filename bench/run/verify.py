@@ -3,7 +3,7 @@
 A benchmark whose non-timing numbers cannot be regenerated exactly is not a benchmark (MLPerf fixes its runs in
 advance; Henderson et al. 2018 show results flip with the seed set). This re-runs a sample of the stored runs
 (by default 2 %, at least one per filter configuration) through the same code path as a sweep
-(:func:`locbench.run.runner.execute_task`) and compares, byte for byte (our code against itself on one machine):
+(:func:`locbench.run.execute.execute_task`) and compares, byte for byte (our code against itself on one machine):
 
 - each sampled run's arrays except the call times (``step_ns``): the times, means, covariances, event kinds,
   diagnostics and extra arrays, and its status;
@@ -33,11 +33,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from locbench.core.errors import ConfigError, LocbenchError
+from locbench.evaluate.records import BoundRecord, RunRecord, TruthRecord
 from locbench.run import provenance
-from locbench.run.store import BoundRecord, RunRecord, StaleRecord, Store, TruthRecord, bound_arrays, truth_arrays
+from locbench.run.store import StaleRecord, Store, bound_arrays, truth_arrays
 
 if TYPE_CHECKING:
-    from locbench.run.runner import Task
+    from locbench.run.plan import Task
 
 log = logging.getLogger(__name__)
 
@@ -255,15 +256,14 @@ class _Plan:
 def _plan(store: Store, groups: dict[tuple[str, int], list[RunId]], result: VerifyResult) -> _Plan:
     """One task per sampled realisation with the jobs still current; a run that cannot be re-run (stale, another
     run's folder, an unknown spec) is recorded in ``result`` as differing instead."""
-    from locbench.registry import DATASETS, FILTERS, resolve_dataset, resolve_filter
-    from locbench.run.runner import Job, Task, bound_key, run_key
+    from locbench.run.plan import Job, Task, bound_key, parse_dataset, parse_filter, run_key
 
     plan = _Plan()
     stored_recs, tasks, bound_keys, stored_name = plan.stored_recs, plan.tasks, plan.bound_keys, plan.stored_name
     for (dataset, s), members in sorted(groups.items()):
         jobs_of_task: list[Job] = []
         try:
-            dr = resolve_dataset(dataset)
+            dr = parse_dataset(dataset)
         except LocbenchError as exc:
             for r in members:
                 result.checked.append(r)
@@ -274,7 +274,7 @@ def _plan(store: Store, groups: dict[tuple[str, int], list[RunId]], result: Veri
             try:
                 # its checksums, its shape contract and the folder it lies in (Store.read_run)
                 stored_recs[r] = store.read_run(Path(r.folder) if r.folder else store.run_dir(r.dataset, r.filter, s))
-                fr = resolve_filter(r.filter)
+                fr = parse_filter(r.filter)
             except StaleRecord as exc:  # altered since it was written, or another run's folder
                 result.differ.append((r, f"stale: {exc}"))
                 continue
@@ -285,14 +285,14 @@ def _plan(store: Store, groups: dict[tuple[str, int], list[RunId]], result: Veri
             if key != r.run_key:
                 result.differ.append((r, "stale: the run key changed (a version or parameter of the code)"))
                 continue
-            jobs_of_task.append(Job(fr, FILTERS.load(fr.id), key))
+            jobs_of_task.append(Job(fr, key))
         if jobs_of_task:
             bkey = bound_key(dr, s)
             bound_keys[(dataset, s)] = bkey
             stored_bound = store.bound_files(dataset, s) if bkey is not None else None
             # the bound is recomputed when one is stored under the current key (else it differs without it)
             wanted = bkey if stored_bound is not None and stored_bound[0].get("bound_key") == bkey else None
-            tasks.append(Task(dr, DATASETS.load(dr.id), s, tuple(jobs_of_task), bound_key=wanted))
+            tasks.append(Task(dr, s, tuple(jobs_of_task), bound_key=wanted))
             stored_name[(dr.name, s)] = dataset
     return plan
 
@@ -312,7 +312,7 @@ def verify(store: Store, fraction: float = DEFAULT_FRACTION, seed: int = 0, jobs
         The store holds no run to verify.
     """
     from locbench.run import executors
-    from locbench.run.runner import TaskResult
+    from locbench.run.execute import TaskResult
 
     runs = stored_runs(store)
     if not runs:
@@ -333,8 +333,8 @@ def verify(store: Store, fraction: float = DEFAULT_FRACTION, seed: int = 0, jobs
 
     def handle(task: Task, out: TaskResult) -> None:
         where = (stored_name[(task.dataset.name, task.seed)], task.seed)
-        for rec in out.runs:
-            fresh[(*where, rec.meta["filter"])] = rec
+        for job, rec in zip(task.jobs, out.runs, strict=True):
+            fresh[(*where, job.filter.name)] = rec
         if out.truth is not None:
             truths[where] = out.truth
         if out.bound is not None:

@@ -26,7 +26,7 @@ from locbench.core.limits import MAX_TABLE_BYTES, RAYCAST_BYTES_PER_CELL, check_
 from locbench.datasets.dataset import OccupancyGrid, WorldMap
 from locbench.datasets.recorded.ros_map import load_map_server_map
 from locbench.registry import make_dataset, make_filter
-from locbench.run.runner import incompatibility, run_filter
+from locbench.run.filter_pass import incompatibility, run_filter
 
 #: The issue's map: 4096 x 4096 cells at 5 cm.
 SIDE = 4096
@@ -112,7 +112,7 @@ def test_refusing_the_huge_map_stays_far_below_1_gb(big_map: Path) -> None:
         import numpy as np
         from locbench.datasets.recorded.ros_map import load_map_server_map
         from locbench.registry import make_dataset, make_filter
-        from locbench.run.runner import run_filter
+        from locbench.run.filter_pass import run_filter
         grid = load_map_server_map({str(big_map)!r})
         ds = make_dataset("tiny_line", 0)
         ds = dataclasses.replace(ds, world=dataclasses.replace(ds.world, occupancy=grid))

@@ -12,8 +12,8 @@ import pytest
 from locbench.datasets.dataset import Landmarks, OccupancyGrid, WorldMap
 from locbench.evaluate.divergence import DIVERGENCE_FACTOR, Box, left_world, world_box, world_extent
 from locbench.registry import make_dataset
-from locbench.run.runner import run_many
 from locbench.run.store import Store
+from locbench.run.sweep import run_many
 
 
 def test_world_extent_covers_truth_landmarks_and_grid() -> None:

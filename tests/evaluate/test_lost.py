@@ -10,7 +10,7 @@ from locbench.evaluate import lost
 from locbench.evaluate.metrics import align
 from locbench.filters.pf import BELIEF_SAMPLE_SIZE, ParticleFilter
 from locbench.registry import make_dataset
-from locbench.run.runner import run_filter
+from locbench.run.filter_pass import run_filter
 
 
 def test_auroc_of_a_perfect_signal_is_one_and_of_a_random_one_about_a_half() -> None:

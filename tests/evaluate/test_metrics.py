@@ -12,7 +12,7 @@ from scipy import stats
 from locbench.core.geometry import compose
 from locbench.datasets.dataset import Trajectory2D, Waypoints
 from locbench.evaluate import metrics as lm
-from locbench.run.store import KIND_NAMES, RunRecord, TruthRecord
+from locbench.evaluate.records import KIND_NAMES, RunRecord, TruthRecord
 
 ODO = KIND_NAMES.index("Odometry")
 LMK = KIND_NAMES.index("LandmarkObservations")

@@ -17,7 +17,7 @@ from locbench.datasets.synthetic.robot import DriveLimits, GoTo, simulate_route
 from locbench.evaluate import pcrb
 from locbench.evaluate.metrics import align, ate
 from locbench.registry import make_dataset, make_filter
-from locbench.run.runner import run_filter
+from locbench.run.filter_pass import run_filter
 
 
 def _spd(rng: np.random.Generator, n: int, floor: float = 0.1) -> np.ndarray:

@@ -170,7 +170,7 @@ def test_bad_config_raises(kwargs: dict[str, float]) -> None:
 @pytest.mark.slow
 def test_localizes_on_line_room() -> None:
     from locbench.registry import make_dataset
-    from locbench.run.runner import run_filter
+    from locbench.run.filter_pass import run_filter
 
     ds = make_dataset("line_room[laser_beams=91]", 0)
     tr = run_filter(LineEKF(), ds, np.random.default_rng(0))

@@ -19,7 +19,7 @@ from locbench.core.geometry import is_symmetric_psd, pose_error
 from locbench.datasets.dataset import Gaussian2, Landmarks, SensorSpec, WorldMap
 from locbench.filters.gtsam_fls import GtsamFixedLagSmoother, GtsamFLSConfig
 from locbench.registry import make_dataset, make_filter
-from locbench.run.runner import run_filter
+from locbench.run.filter_pass import run_filter
 
 X = gtsam.symbol_shorthand.X
 L = gtsam.symbol_shorthand.L

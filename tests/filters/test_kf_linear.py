@@ -17,7 +17,7 @@ from locbench.datasets.dataset import Gaussian2, SensorSpec
 from locbench.filters.kf_linear import LinearKF, LinearKFConfig
 from locbench.raycast.cast import cast_rays
 from locbench.registry import make_dataset
-from locbench.run.runner import run_filter
+from locbench.run.filter_pass import run_filter
 
 
 def _run(spec: str, seed: int = 0, **cfg: object) -> tuple[np.ndarray, LinearKF]:

@@ -23,7 +23,7 @@ from locbench.filters.pf import (
 )
 from locbench.raycast.cast import cast_scan
 from locbench.registry import make_dataset, resolve_filter
-from locbench.run.runner import run_filter
+from locbench.run.filter_pass import run_filter
 
 
 def _box_grid(width: float = 4.0, height: float = 3.0, res: float = 0.05) -> OccupancyGrid:
@@ -450,7 +450,7 @@ def test_augmented_pf_survives_injecting_every_particle() -> None:
     """A seed on which the slow and fast averages made p_inject = 1 crashed the compiled resampler."""
     from locbench.core.seeding import filter_rng
     from locbench.registry import make_dataset, make_filter
-    from locbench.run.runner import run_filter
+    from locbench.run.filter_pass import run_filter
 
     ds = make_dataset("room[kidnap_m=0.5]", 7)
     name = "pf[augmented=true]"

@@ -21,7 +21,7 @@ from locbench.filters._noise import DEFAULT_PROCESS_SIGMA_THETA_RAD
 from locbench.filters.ekf_landmarks import LandmarkEKF, LandmarkEKFConfig, range_bearing
 from locbench.filters.ukf_landmarks import LandmarkUKF, LandmarkUKFConfig, circular_mean
 from locbench.registry import FILTERS, make_dataset, resolve_filter
-from locbench.run.runner import run_filter
+from locbench.run.filter_pass import run_filter
 
 W = 0.4
 SENSORS = SensorSpec(

@@ -472,7 +472,7 @@ def test_grid_filters_refuse_or_run_within_the_memory_limit(rows: int, cols: int
 
     from locbench.core.limits import LIKELIHOOD_FIELD_BYTES_PER_CELL, MAX_TABLE_BYTES, RAYCAST_BYTES_PER_CELL
     from locbench.registry import make_dataset, make_filter
-    from locbench.run.runner import run_filter
+    from locbench.run.filter_pass import run_filter
 
     occ = np.zeros((rows, cols))
     occ[::37, ::41] = 1.0

@@ -33,8 +33,9 @@ from hypothesis import strategies as st
 from locbench.cli import build_parser, main
 from locbench.core.errors import MAX_MESSAGE_CHARS, ConfigError
 from locbench.datasets.dataset import Trajectory2D
+from locbench.evaluate.records import BoundRecord, RunRecord, TruthRecord
 from locbench.run import store as store_mod
-from locbench.run.store import BoundRecord, RunRecord, StaleRecord, Store, TruthRecord
+from locbench.run.store import StaleRecord, Store
 
 _COUNTER = itertools.count()
 N = 4

@@ -491,13 +491,13 @@ def test_mrclam_vicon_rate_is_about_65_hz_not_100() -> None:
 @pytest.mark.usefixtures("harness_registry")
 def test_make_dataset_runs_the_contract_for_every_dataset(tmp_path: Path) -> None:
     from locbench.registry import make_dataset
-    from locbench.run.runner import run_group
+    from locbench.run.sweep import run_many
 
     make_dataset("line", 0)  # a good one passes
     with pytest.raises(ConfigError, match=r"dataset 'line\[steps=0\]': no events"):
         make_dataset("line[steps=0]", 0)
     # the runner stores it as a failed build, never as an ok run
-    out = run_group("line[steps=0]", ["odometry"], 0, str(tmp_path))
+    out = run_many(["odometry"], ["line[steps=0]"], [0], str(tmp_path))
     assert [o.status for o in out] == ["error"] and "no events" in out[0].message
 
 

@@ -17,8 +17,8 @@ import pytest
 from locbench.cli import main
 from locbench.report import output
 from locbench.report.output import MANIFEST, read_manifest
-from locbench.run.runner import run_many
 from locbench.run.store import MARKER, Store, _sealed, npz_digest
+from locbench.run.sweep import run_many
 
 DATASET = "room"  # small, synthetic, with a bound
 

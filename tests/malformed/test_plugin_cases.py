@@ -21,8 +21,10 @@ import pytest
 from locbench.cli import main
 from locbench.registry import FILTERS, make_dataset
 from locbench.run.containment import DEFAULT_RULE, call_in_child, run_time_limit
-from locbench.run.runner import execute_contained, execute_task, plan_sweep, run_many
+from locbench.run.execute import execute_contained, execute_task
+from locbench.run.plan import plan_sweep
 from locbench.run.store import Store
+from locbench.run.sweep import run_many
 
 DIST, VERSION = "lbtest-plugins", "1.0"
 

@@ -19,8 +19,8 @@ from locbench.cli import main
 from locbench.core.errors import ConfigError
 from locbench.datasets.recorded.ros_map import MAX_YAML_BYTES
 from locbench.datasets.recorded.rosbag import MAX_BAG_BYTES, resolve_bag_path
-from locbench.run.runner import run_many
 from locbench.run.store import MARKER, Store
+from locbench.run.sweep import run_many
 
 TESTS = Path(__file__).resolve().parents[1]
 SMOKE = ["run", "--filter", "odometry", "--dataset", "tiny_line", "--no-progress"]
@@ -116,8 +116,8 @@ def test_a_bound_of_the_wrong_shape_does_not_crash_the_report(tmp_path: Path) ->
     res = str(tmp_path)
     run_many(["odometry"], ["tiny_line"], [0], res)
     st = Store(tmp_path)
+    from locbench.evaluate.records import BoundRecord
     from locbench.report.collect import collect
-    from locbench.run.store import BoundRecord
 
     t = st.read_truth("tiny_line", 0).ground_truth.t
     st.write_bound(BoundRecord("tiny_line", 0, t, {"PCRB": np.tile(np.eye(3), (t.size, 1, 1))}, {"bound_key": "k"}))
@@ -338,10 +338,10 @@ def test_a_full_disk_is_found_before_anything_is_computed(
 
     monkeypatch.setattr(store_mod.shutil, "disk_usage", lambda p: Usage())
     computed = []
-    import locbench.run.runner as runner_mod
+    from locbench.run import executors
 
-    real = runner_mod.execute_task
-    monkeypatch.setattr(runner_mod, "execute_task", lambda task: computed.append(task) or real(task))
+    real = executors.execute_contained  # what the executors run, looked up as each part is submitted
+    monkeypatch.setattr(executors, "execute_contained", lambda task: computed.append(task) or real(task))
     argv = ["run", "--filter", "bad[fail_at_s=100]", "--dataset", "line", "--results", str(tmp_path), "--no-progress"]
     assert main(argv) == 2
     _one_line(capsys, "MB free", "disk is full")

@@ -11,11 +11,13 @@ import pandas as pd
 import pytest
 
 from locbench.evaluate.pcrb import BOUND_ALL, BOUND_NO_LASER, bound_covariances, pcrb_summary
+from locbench.evaluate.records import BoundRecord
 from locbench.registry import make_dataset
 from locbench.report import collect_metrics, write_report
 from locbench.report.tables import ate_over_bound
-from locbench.run.runner import plan_sweep, run_many, run_sweep
-from locbench.run.store import BoundRecord, Store
+from locbench.run.plan import plan_sweep
+from locbench.run.store import Store
+from locbench.run.sweep import run_many, run_sweep
 
 
 @pytest.fixture(scope="module")

@@ -7,7 +7,7 @@ import pytest
 
 from locbench.filters.base import Estimate, gaussian_health, gaussian_health_rows
 from locbench.registry import FILTERS, make_dataset, resolve_filter
-from locbench.run.runner import run_filter
+from locbench.run.filter_pass import run_filter
 
 
 def _rows(rng: np.random.Generator, n: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:

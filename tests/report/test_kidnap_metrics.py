@@ -10,6 +10,7 @@ import pytest
 
 from locbench.datasets.dataset import Kidnap, Trajectory2D
 from locbench.evaluate import metrics as lm
+from locbench.evaluate.records import KIND_NAMES, RunRecord, TruthRecord
 from locbench.report import wilson_interval, write_report
 from locbench.report.collect import collect
 from locbench.report.context import Report
@@ -17,7 +18,7 @@ from locbench.report.doc import Plot, Table
 from locbench.report.render import render_png
 from locbench.report.sections.experiment import nees_plots
 from locbench.report.sections.kidnap import kidnap_section
-from locbench.run.store import KIND_NAMES, RunRecord, Store, TruthRecord
+from locbench.run.store import Store
 
 ODO = KIND_NAMES.index("Odometry")
 RESET = KIND_NAMES.index("reset")

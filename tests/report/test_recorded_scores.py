@@ -14,8 +14,8 @@ import pytest
 from locbench.evaluate.scores import SCORE_IDS, ci_ids
 from locbench.registry import DATASETS, resolve_dataset
 from locbench.report import collect_metrics
-from locbench.run.runner import run_many
 from locbench.run.store import Store
+from locbench.run.sweep import run_many
 
 # every filter that runs on landmark recordings; the particle filter with fewer particles to keep the test short
 FILTERS = ("odometry", "ekf_landmarks", "ukf_landmarks", "gtsam_fls", "pf[particles=300]")

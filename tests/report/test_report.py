@@ -17,10 +17,11 @@ import locbench.report
 from locbench import claims
 from locbench.claims import ganganath_kinect as report_003
 from locbench.datasets.dataset import Trajectory2D, Waypoints
+from locbench.evaluate.records import KIND_NAMES, RunRecord, TruthRecord
 from locbench.evaluate.scores import SCORE_IDS, ci_ids
 from locbench.registry import DATASETS, FILTERS
 from locbench.report import collect_metrics, suite_filter, summary_text, write_metrics_csv, write_report
-from locbench.run.store import KIND_NAMES, RunRecord, Store, TruthRecord
+from locbench.run.store import Store
 
 ODO = KIND_NAMES.index("Odometry")
 LMK = KIND_NAMES.index("LandmarkObservations")

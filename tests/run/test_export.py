@@ -14,6 +14,7 @@ from locbench.core.geometry import quaternion_to_yaw, wrap_angle, yaw_to_quatern
 from locbench.datasets.dataset import Trajectory2D
 from locbench.datasets.recorded.files import RecordedDataError
 from locbench.evaluate.metrics import estimate_at
+from locbench.evaluate.records import KIND_NAMES, RunRecord
 from locbench.run.export import (
     export_results,
     export_truth_tum,
@@ -21,8 +22,8 @@ from locbench.run.export import (
     read_tum,
     write_tum,
 )
-from locbench.run.runner import run_group
-from locbench.run.store import KIND_NAMES, RunRecord, Store
+from locbench.run.store import Store
+from locbench.run.sweep import run_many
 
 
 def test_quaternion_of_a_yaw() -> None:
@@ -100,7 +101,7 @@ def test_read_names_the_bad_line(tmp_path: Path, line: str, match: str) -> None:
 def results(tmp_path: Path, harness_registry: None) -> Path:
     """A results folder with dead reckoning, a filter that breaks half way, on the test-only line dataset."""
     root = tmp_path / "results"
-    outcomes = run_group("line", ["odometry", "bad[mode=nan,fail_at_s=2.5]"], 0, str(root))
+    outcomes = run_many(["odometry", "bad[mode=nan,fail_at_s=2.5]"], ["line"], [0], str(root))
     assert [o.status for o in outcomes] == ["ok", "diverged"]
     return root
 
@@ -188,7 +189,7 @@ def test_export_long_non_ascii_names(tmp_path: Path, harness_registry: None) -> 
     label = "Küche-Straße-東京-" * 30
     spec = f"line[label={label}]"
     root = tmp_path / "results"
-    assert [o.status for o in run_group(spec, ["odometry"], 0, str(root))] == ["ok"]
+    assert [o.status for o in run_many(["odometry"], [spec], [0], str(root))] == ["ok"]
     written = export_results(root, tmp_path / "tum")
     assert len(written) == 2
     for path in written:

@@ -11,8 +11,8 @@ import pytest
 from locbench.cli import main
 from locbench.core.spec import describe_params
 from locbench.registry import FILTERS
-from locbench.run.runner import run_many
 from locbench.run.store import Store
+from locbench.run.sweep import run_many
 
 DIST = "locbench-iekf"
 

@@ -12,10 +12,12 @@ import pytest
 
 from locbench.datasets.dataset import Trajectory2D
 from locbench.evaluate.metrics import REFERENCE_TIMES, reference_units, run_metrics
-from locbench.registry import DATASETS, build_dataset, resolve_dataset, resolve_filter
+from locbench.evaluate.records import KIND_NAMES, RunRecord, TruthRecord
+from locbench.registry import DATASETS, build_dataset, resolve_dataset
 from locbench.run import provenance, reference_workload
-from locbench.run.runner import execute_task, plan_sweep, run_key, run_sweep, slice_stops
-from locbench.run.store import KIND_NAMES, RunRecord, TruthRecord
+from locbench.run.execute import execute_task, slice_stops
+from locbench.run.plan import parse_dataset, parse_filter, plan_sweep, run_key
+from locbench.run.sweep import run_sweep
 
 FILTERS = ("odometry", "ekf_landmarks", "ekf_landmarks[association=nearest]")
 
@@ -60,7 +62,7 @@ def test_every_stored_run_records_the_machine_and_keeps_its_run_key(tmp_path: Pa
         assert {"reference_s", "cpu_model", "cpu_count", "load_avg"} <= set(meta)
         assert meta["reference_s"] == provenance.machine()["reference_s"]
         # provenance is not part of the key: the key is that of the config, dataset and seed alone
-        assert meta["run_key"] == run_key(resolve_filter(f), resolve_dataset("room"), 0)
+        assert meta["run_key"] == run_key(parse_filter(f), parse_dataset("room"), 0)
     again = plan_sweep([(FILTERS[:2], ["room"], [0])], results)
     assert not again.tasks and len(again.cached) == 2  # stored runs stay up to date
 

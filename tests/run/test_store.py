@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 
 from locbench.core.errors import ConfigError
+from locbench.evaluate.records import RunRecord
 from locbench.run import store as store_mod
-from locbench.run.store import RunRecord, Store
+from locbench.run.store import Store
 
 
 def _record(dataset: str, filt: str = "odometry", seed: int = 0, value: float = 1.0) -> RunRecord:

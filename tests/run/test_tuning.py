@@ -12,7 +12,7 @@ import pytest
 from locbench.cli import main
 from locbench.core.tunable import TunableRange, tunable_fields
 from locbench.registry import FILTERS, resolve_filter
-from locbench.run import runner
+from locbench.run import sweep
 from locbench.run.store import Store
 from locbench.suites import SUITES
 
@@ -95,7 +95,7 @@ def test_a_misset_noise_parameter_is_found(tmp_path: Path) -> None:
     assert 0.01 <= found <= 0.04, f"tuned sigma_range_m {found} m, the simulator's is 0.02 m"
     misset = tuning.trial_spec("ekf_landmarks", {"sigma_bearing_rad": "0.01745"}, {"sigma_range_m": 0.5})
     store = Store(tmp_path / "misset")
-    runner.run_many([misset], ["tiny_line"], tuning.train_seeds(3), str(store.root))
+    sweep.run_many([misset], ["tiny_line"], tuning.train_seeds(3), str(store.root))
     worse, _ = tuning.score_trial(store, misset, ["tiny_line"], tuning.train_seeds(3), "nll")
     assert best.value < worse
 
@@ -183,25 +183,25 @@ def test_a_resumed_study_does_not_repeat_finished_trials(tmp_path: Path, monkeyp
 
     # The same study stopped by Ctrl-C during its fourth trial, then run again.
     calls = {"n": 0}
-    real = runner.run_sweep
+    real = sweep.run_sweep
 
     def interrupted_once(plan: Any, *a: Any, **k: Any) -> Any:
         calls["n"] += 1
         if calls["n"] == 4:
-            return runner.SweepResult([], plan.total, interrupted=True)
+            return sweep.SweepResult([], plan.total, interrupted=True)
         return real(plan, *a, **k)
 
-    monkeypatch.setattr(runner, "run_sweep", interrupted_once)
+    monkeypatch.setattr(sweep, "run_sweep", interrupted_once)
     first = tuning.tune("ekf_landmarks", ["tiny_line"], 5, 1, tmp_path / "resumed")
     assert first.interrupted and len(first.trials) == 3
-    monkeypatch.setattr(runner, "run_sweep", real)
+    monkeypatch.setattr(sweep, "run_sweep", real)
     planned: list[int] = []
 
     def counting(plan: Any, *a: Any, **k: Any) -> Any:
         planned.append(sum(len(t.jobs) for t in plan.tasks))
         return real(plan, *a, **k)
 
-    monkeypatch.setattr(runner, "run_sweep", counting)
+    monkeypatch.setattr(sweep, "run_sweep", counting)
     again = tuning.tune("ekf_landmarks", ["tiny_line"], 5, 1, tmp_path / "resumed")
     assert planned == [1, 1], "only the two unfinished trials run, one run each"
     assert [t.spec for t in again.trials] == [t.spec for t in straight.trials]

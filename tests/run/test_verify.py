@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from locbench.cli import main
-from locbench.run.runner import run_many
 from locbench.run.store import Store, _sealed, npz_digest
+from locbench.run.sweep import run_many
 from locbench.run.verify import RunId, compare, read_record, record_text, sample, verify
 
 FILTERS = ["bad[fail_at_s=100]", "odometry"]

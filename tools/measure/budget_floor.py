@@ -54,7 +54,7 @@ def belief_share(dataset: str, filters: list[str], rounds: int = 7) -> None:
     belief generator, in turn with one with it)."""
     from locbench.core.seeding import belief_rng, filter_rng
     from locbench.registry import FILTERS, make_dataset, resolve_filter
-    from locbench.run.runner import run_filter
+    from locbench.run.filter_pass import run_filter
 
     ds = make_dataset(dataset, 0)
     for spec in filters:

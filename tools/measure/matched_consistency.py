@@ -16,7 +16,7 @@ from locbench.core.seeding import filter_rng
 from locbench.evaluate.metrics import POSE_DOF, align, anees, ate, chi2_band, nees_at_truth, nll_at_truth
 from locbench.evaluate.pcrb import pcrb_metrics
 from locbench.registry import make_dataset, make_filter
-from locbench.run.runner import incompatibility, run_filter
+from locbench.run.filter_pass import incompatibility, run_filter
 
 
 def main() -> None:

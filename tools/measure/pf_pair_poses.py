@@ -15,7 +15,7 @@ import numpy as np
 from locbench.core.seeding import filter_rng
 from locbench.filters.pf import ParticleFilter
 from locbench.registry import make_dataset, resolve_filter
-from locbench.run.runner import run_filter
+from locbench.run.filter_pass import run_filter
 
 
 def main(spec: str, dataset: str, seed: int) -> None:

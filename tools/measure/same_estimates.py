@@ -21,7 +21,7 @@ import numpy as np
 
 from locbench.core.seeding import filter_rng
 from locbench.registry import make_dataset, make_filter, resolve_filter
-from locbench.run.runner import run_filter
+from locbench.run.filter_pass import run_filter
 
 
 def dump(out: str, filters: list[str], datasets: list[str], seeds: int) -> None:

@@ -19,7 +19,8 @@ import sys
 import time
 
 from locbench.run import tuning
-from locbench.run.runner import plan_sweep, run_sweep
+from locbench.run.plan import plan_sweep
+from locbench.run.sweep import run_sweep
 
 
 def _cpu_all() -> float:

@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 
 from locbench.registry import DATASETS
-from locbench.run.runner import run_many
 from locbench.run.store import Store
+from locbench.run.sweep import run_many
 
 
 @pytest.fixture

@@ -36,7 +36,7 @@ from locbench.datasets.recorded.radish import (
     site_map,
 )
 from locbench.registry import make_dataset, make_filter
-from locbench.run.runner import incompatibility
+from locbench.run.filter_pass import incompatibility
 
 ROOT = Path(__file__).resolve().parents[3]
 BEAMS = 181

@@ -25,7 +25,7 @@ from locbench.datasets.recorded.files import RecordedDataError
 from locbench.datasets.recorded.ros_map import save_map_server_map
 from locbench.evaluate.metrics import align, ate
 from locbench.registry import DATASETS, make_dataset, make_filter
-from locbench.run.runner import run_filter
+from locbench.run.filter_pass import run_filter
 
 rosbags = pytest.importorskip("rosbags", reason="rosbags is not installed: pip install 'locbench[ros]'")
 

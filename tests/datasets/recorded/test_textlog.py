@@ -22,7 +22,7 @@ from locbench.datasets.recorded.files import RecordedDataError
 from locbench.datasets.recorded.textlog import MANIFEST, VERSION, _cached_events, load_textlog, write_textlog
 from locbench.registry import make_dataset, make_filter
 from locbench.run.export import export_textlog
-from locbench.run.runner import run_filter
+from locbench.run.filter_pass import run_filter
 
 
 def _same_events(a: Dataset, b: Dataset) -> None:

@@ -19,8 +19,8 @@ from locbench.evaluate.metrics import chi2_band
 from locbench.evaluate.pcrb import pcrb_covariances
 from locbench.registry import make_dataset
 from locbench.report import write_report
-from locbench.run.runner import run_many
 from locbench.run.store import Store
+from locbench.run.sweep import run_many
 from locbench.suites import ALL_FILTERS, SUITES
 
 WORLDS = ("room", "office", "lap", "line_room", "scan_grid", "landmark_geometry")

@@ -16,8 +16,9 @@ import pytest
 
 from locbench.cli import main
 from locbench.run import store as store_mod
-from locbench.run.runner import NOT_STORED, plan_sweep, run_many, run_sweep
+from locbench.run.plan import NOT_STORED, plan_sweep
 from locbench.run.store import Store
+from locbench.run.sweep import run_many, run_sweep
 
 TESTS = Path(__file__).resolve().parents[1]
 

@@ -1,4 +1,4 @@
-"""The runner: stored runs, caching, pairing, and failures recorded as results."""
+"""Executing a task: its runs stored with their provenance, the same on every worker, failures recorded as results."""
 
 from __future__ import annotations
 
@@ -8,9 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from locbench.registry import DATASETS, FILTERS, resolve_filter
-from locbench.run.runner import _BOUND_COST_S, plan_sweep, run_many
 from locbench.run.store import Store
+from locbench.run.sweep import run_many
 
 
 @pytest.mark.usefixtures("harness_registry")
@@ -29,15 +28,6 @@ def test_runs_are_stored_with_provenance(tmp_path: Path) -> None:
     truth = store.read_truth(rec.meta["dataset"], rec.meta["seed"])
     assert len(truth.waypoints) == 2  # type: ignore[arg-type]
     assert np.array_equal(truth.map_landmarks, [[10.0, 2.0]])  # the map travels with the truth, for figures
-
-
-@pytest.mark.usefixtures("harness_registry")
-def test_finished_runs_are_not_rerun_unless_forced(tmp_path: Path) -> None:
-    run_many(["bad[fail_at_s=100]"], ["line"], [0], str(tmp_path))
-    assert [o.status for o in run_many(["bad[fail_at_s=100]"], ["line"], [0], str(tmp_path))] == ["cached"]
-    assert [o.status for o in run_many(["bad[fail_at_s=100]"], ["line"], [0], str(tmp_path), force=True)] == ["ok"]
-    # a changed config is a different run key: it runs again
-    assert [o.status for o in run_many(["bad[fail_at_s=99]"], ["line"], [0], str(tmp_path))] == ["ok"]
 
 
 @pytest.mark.usefixtures("harness_registry")
@@ -98,31 +88,3 @@ def test_filter_that_sees_no_observation_is_a_recorded_skip(tmp_path: Path) -> N
     out = run_many(["pf", "pf[use_laser=true]"], ["lap[people=0]"], [0], str(tmp_path))
     assert out[0].status == "skipped" and "none of which" in out[0].message
     assert out[1].status == "ok"
-
-
-# --- declared costs --------------------------------------------------------------------------------------
-
-
-@pytest.mark.parametrize("fid", FILTERS.ids())
-def test_every_filter_declares_its_cost(fid: str) -> None:
-    if FILTERS.missing_dependency(fid):
-        pytest.skip(FILTERS.missing_dependency(fid))
-    cls = FILTERS.load(fid)
-    assert cls.cost_per_data_s > 0 and cls.cost_scale(resolve_filter(fid).params) == 1.0
-
-
-@pytest.mark.parametrize("did", DATASETS.ids())
-def test_every_dataset_declares_its_duration(did: str) -> None:
-    assert DATASETS.load(did).nominal_duration_s > 0
-
-
-def test_the_cost_estimate_reads_the_declared_attributes(tmp_path: Path) -> None:
-    # the two the former id table missed: ukf_landmarks (its own cost) and Lost in the Woods (recorded: long)
-    assert FILTERS.load("ukf_landmarks").cost_per_data_s != FILTERS.load("ekf_landmarks").cost_per_data_s
-    assert DATASETS.load("lost_in_the_woods").nominal_duration_s == DATASETS.load("mrclam").nominal_duration_s
-    pf = FILTERS.load("pf")
-    assert pf.cost_scale(resolve_filter("pf[particles=300]").params) == pytest.approx(0.3)
-    plan = plan_sweep([(["odometry", "pf[particles=300]"], ["room"], [0])], str(tmp_path))
-    (task,) = plan.tasks
-    expected = 60.0 * (0.002 + 0.1 * 0.3) + _BOUND_COST_S
-    assert task.cost_s == pytest.approx(expected)
