@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import logging
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Generic, TypeVar
 
@@ -312,7 +312,7 @@ def _estimate_cost(
 P = TypeVar("P", bound=Parsed[Any])
 
 
-def _once(spec: str | P, cache: dict[str, P], parse: Any) -> P:
+def _once(spec: str | P, cache: dict[str, P], parse: Callable[[str], P]) -> P:
     """``spec`` parsed (each text once per plan), or itself when it is parsed already."""
     if not isinstance(spec, str):
         return spec

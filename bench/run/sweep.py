@@ -1,10 +1,11 @@
 """A sweep: a plan's tasks handed to an executor, and every returned record written into the store as it arrives.
 
 :func:`run_sweep` checks the store (ours, writable, with room), hands the plan's tasks to an executor
-(:mod:`locbench.run.executors`, which runs them one filter at a time in workers, :func:`locbench.run.execute.
-execute_contained`), and stores each filter's record as it finishes (:func:`store_result`), so an interrupted sweep
-keeps every finished run and the same plan resumes. SIGINT (Ctrl-C) and SIGTERM stop it; a worker that died is
-retried, then recorded as an error run; the sweep goes on. :func:`run_many` plans and sweeps in one call.
+(:mod:`locbench.run.executors`, which runs them one filter at a time in workers,
+:func:`locbench.run.execute.execute_contained`), and stores each filter's record as it finishes
+(:func:`store_result`), so an interrupted sweep keeps every finished run and the same plan resumes. SIGINT
+(Ctrl-C) and SIGTERM stop it; a worker that died is retried, then recorded as an error run; the sweep goes on.
+:func:`run_many` plans and sweeps in one call.
 """
 
 from __future__ import annotations
