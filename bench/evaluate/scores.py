@@ -19,9 +19,8 @@ prediction, and estimation", JASA 102(477), eq. 20-22):
   draws (seed :data:`ENERGY_SEED`), the same draws at every time, so the score is deterministic. A point mass
   scores its Euclidean error exactly.
 - Scores are taken at every ground-truth time with the belief in force there (the run's aligned view,
-  :func:`locbench.evaluate.metrics.align`, as every metric in :mod:`locbench.evaluate.metrics`), then averaged; the
-  interval of
-  that mean is a circular block bootstrap over time (:func:`block_bootstrap_ci`) with blocks of
+  :func:`locbench.evaluate.aligned.align`, as every metric in :mod:`locbench.evaluate.metrics`), then averaged;
+  the interval of that mean is a circular block bootstrap over time (:func:`block_bootstrap_ci`) with blocks of
   :data:`BLOCK_S` seconds of ground truth.
 - A particle filter exposes a fixed-size unbiased subsample of its particles (:meth:`Filter.belief_sample`);
   the runner scores it at each ground-truth time while the filter runs (:func:`sample_scores`) and stores the
@@ -44,7 +43,7 @@ from locbench.core.geometry import wrap_angle
 from locbench.core.pairwise import pairwise_sum
 
 if TYPE_CHECKING:
-    from locbench.evaluate.metrics import Aligned
+    from locbench.evaluate.aligned import Aligned
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -328,7 +327,7 @@ def score_metrics(a: Aligned, extra: Mapping[str, np.ndarray]) -> dict[str, floa
 
     A run whose ``extra`` holds the per-time scores of its own samples (:data:`SAMPLE_SCORE_KEYS`, one per
     ground-truth time) is scored by those; any other by its Gaussian (mean, covariance) held at the truth times,
-    read from the run's aligned view ``a`` (:func:`locbench.evaluate.metrics.align`, with covariances).
+    read from the run's aligned view ``a`` (:func:`locbench.evaluate.aligned.align`, with covariances).
     """
     gt_t = a.t
     if all(k in extra for k in SAMPLE_SCORE_KEYS):

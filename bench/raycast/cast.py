@@ -39,7 +39,7 @@ numpy reference used by tests (:func:`cast_rays_reference`):
 Why the kernels are shaped so, and what was measured and tried on the way (the pool, the scalar lane kernels
 before it, lock-step refills, the octant planes): docs/performance.md, "The ray caster's measurement diary".
 
-Grid conventions are those of :class:`locbench.datasets.dataset.OccupancyGrid` (ROS map_server): row ``i``
+Grid conventions are those of :class:`locbench.core.grid.OccupancyGrid` (ROS map_server): row ``i``
 spans y in [oy + i*res, oy + (i+1)*res), column ``j`` spans x likewise, and ``origin_xy`` = (ox, oy) is
 the world position of the corner of cell (0, 0). Poses are world-frame sensor poses (x m, y m, theta
 rad); beam angles are relative to the pose heading. A range is the distance from the sensor to the
@@ -72,7 +72,7 @@ from locbench.raycast import _simd as vec
 from locbench.raycast._sectors import SAFETY_CELLS, sector_bounds
 
 if TYPE_CHECKING:
-    from locbench.datasets.dataset import OccupancyGrid
+    from locbench.core.grid import OccupancyGrid
 
 logger = logging.getLogger(__name__)
 

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from locbench.datasets.dataset import OccupancyGrid
+from locbench.core.grid import OccupancyGrid
 from locbench.datasets.synthetic.scenarios import office_world
 from locbench.raycast import _sectors as _raycast_sectors
 from locbench.raycast import cast as raycast
