@@ -1,8 +1,8 @@
-"""The bound's earlier forms, the references its faster parts are tested and benchmarked against: the laser
-information by central differences of full casts (its version 1), for the one-cast derivative of
-:func:`locbench.evaluate.pcrb.laser_information`; the corner checks inside the traversal's loop, for
-:func:`locbench.raycast.cast.dda_face`; one numpy call per sighting event, for the batched sightings; and the whole
-bound as it was before issue 24, item 3 (:func:`seven_cast_bound`)."""
+"""Plain reference forms of the bound's parts, which the tests and benchmarks hold the library's against: the laser
+information by central differences of full casts, for the one-traversal derivative of
+:func:`locbench.evaluate.pcrb.laser_information`; the corner checks at every crossing, inside the traversal's loop,
+for :func:`locbench.raycast.cast.dda_face`; one numpy call per sighting event, for the batched sightings; the
+covariance recursion in numpy calls; and the whole bound from these (:func:`seven_cast_bound`)."""
 
 from __future__ import annotations
 
@@ -32,7 +32,7 @@ def differenced_laser_information(
     measured: np.ndarray,
     eps: float = 1e-5,
 ) -> np.ndarray:
-    """The laser information by central differences of seven full casts per scan (the bound's version 1)."""
+    """The laser information by central differences of seven full casts per scan (six perturbed poses)."""
     from locbench.raycast.cast import cast_rays
 
     def cast(p: np.ndarray) -> np.ndarray:
@@ -82,7 +82,7 @@ def scan_poses(world: str, every: int = 10) -> tuple[Any, ...]:
 def python_covariance_recursion(
     p0: np.ndarray, jacobians: np.ndarray, process_cov: np.ndarray, meas_info: np.ndarray
 ) -> np.ndarray:
-    """:func:`locbench.evaluate.pcrb.covariance_recursion` as numpy calls per step (before it was compiled)."""
+    """:func:`locbench.evaluate.pcrb.covariance_recursion` as numpy calls per step."""
     eye = np.eye(p0.shape[0])
     out = np.empty((jacobians.shape[0] + 1, *p0.shape))
     p = out[0] = np.asarray(p0, dtype=np.float64)
@@ -94,7 +94,7 @@ def python_covariance_recursion(
 
 
 def truth_index(dataset: Any, t: float) -> int:
-    """The ground-truth index of one event as the bound looked it up before (bound version 3)."""
+    """The ground-truth index of one event at time ``t`` (s), looked up by itself."""
     gt_t = dataset.ground_truth.t
     k = int(np.searchsorted(gt_t, t - 1e-6))
     if k >= gt_t.shape[0] or abs(gt_t[k] - t) > 1e-6:
@@ -105,9 +105,8 @@ def truth_index(dataset: Any, t: float) -> int:
 def associate_one(
     e: LandmarkObservations, pose: np.ndarray, xy: np.ndarray, by_id: dict[int, int], sr: float, sb: float
 ) -> list[int]:
-    """The landmark rows of one sighting event as the bound associated them before it batched the sightings
-    (bound version 3, ``pcrb._associate``): by id, else the nearest true range and bearing in Mahalanobis
-    distance."""
+    """The landmark rows of one sighting event, associated one row at a time: by id, else the nearest true range
+    and bearing in Mahalanobis distance."""
     rows: list[int] = []
     d = xy - pose[None, 0:2]
     r_true = np.hypot(d[:, 0], d[:, 1])
@@ -122,9 +121,8 @@ def associate_one(
 
 
 def grouped_laser_information(dataset: Any, sigma_m: float, gt_poses: np.ndarray) -> np.ndarray:
-    """``pcrb._laser_information`` as it was (bound version 3): :func:`locbench.evaluate.pcrb.laser_information` per
-    beam
-    layout, each scan's truth index looked up by itself."""
+    """``pcrb._laser_information`` with each scan's truth index looked up by itself:
+    :func:`locbench.evaluate.pcrb.laser_information` per beam layout."""
     from locbench.evaluate import pcrb
 
     info = np.zeros((gt_poses.shape[0], 3, 3))
@@ -150,9 +148,8 @@ def grouped_laser_information(dataset: Any, sigma_m: float, gt_poses: np.ndarray
 def per_event_information(
     dataset: Any, noise: Any, gt_poses: np.ndarray, laser: bool = True, events: Any = None
 ) -> np.ndarray:
-    """``pcrb._measurement_information`` as it was before the sightings were batched (bound version 3): one
-    ``range_bearing_information``, association and truth lookup per event, added in event order (``events``
-    is ignored: every row computes its own)."""
+    """``pcrb._measurement_information`` one event at a time: one ``range_bearing_information``, association and
+    truth lookup per event, added in event order (``events`` is ignored: every row computes its own)."""
     from locbench.evaluate import pcrb
 
     gt_t = dataset.ground_truth.t
@@ -187,9 +184,9 @@ def per_event_information(
 
 
 def seven_cast_bound(dataset: Any) -> dict[str, np.ndarray]:
-    """:func:`locbench.evaluate.pcrb.bound_covariances` as it was before issue 24, item 3: the laser term differenced
-    from seven casts per scan, the covariance recursion in numpy, and each row computing its own odometry
-    terms and its sightings one event at a time (:func:`per_event_information`): the whole-bound reference."""
+    """:func:`locbench.evaluate.pcrb.bound_covariances` from the plain forms: the laser term differenced from seven
+    casts per scan, the covariance recursion in numpy, and each row computing its own odometry terms and its
+    sightings one event at a time (:func:`per_event_information`): the whole-bound reference."""
     from locbench.evaluate import pcrb
 
     saved = pcrb.laser_information, pcrb.covariance_recursion, pcrb._measurement_information
@@ -234,9 +231,8 @@ def _vertex_near(occ: np.ndarray, px: float, py: float, lim: float) -> bool:
 def stepwise_dda_face(
     occ: np.ndarray, gx: float, gy: float, dx: float, dy: float, t_lim: float, near0: float, near1: float
 ) -> tuple[float, int, bool]:
-    """:func:`locbench.raycast.cast.dda_face` as it was before it split the corner checks off the traversal (bound
-    version 3), on the boolean grid: the checks at every crossing, inside the traversal's loop (its helpers
-    above are the corner checks as they were then)."""
+    """:func:`locbench.raycast.cast.dda_face` on the boolean grid with the corner checks at every crossing, inside
+    the traversal's loop (the helpers above: the corner checks on the boolean grid)."""
     rows, cols = occ.shape
     t0, t1 = _clip_to_grid(rows, cols, gx, gy, dx, dy)
     if t0 >= t1 or t0 > t_lim:

@@ -1,9 +1,10 @@
-"""numpy's pairwise summation order, compiled: a sum that equals ``np.sum`` of a contiguous float64 row bit for bit.
+"""Pairwise summation of a float64 row, compiled: the sum used where a compiled kernel averages many terms.
 
-numpy sums a contiguous row pairwise (halves split at a multiple of 8 down to leaves of at most 128 values, each
-leaf summed in 8 lanes combined as a tree); a compiled kernel that sums in that order gives the same bits as the
-numpy expression it replaces, so stored numbers do not move. Used by the scores and by ``ekf_icp``'s mean range;
-kept apart from :mod:`locbench.evaluate.scores` so that the filters need not import the metrics.
+A pairwise sum's rounding error grows as log2(n) eps sum |v_i| rather than the n eps of a running sum (Higham,
+"The accuracy of floating point summation", SIAM J. Sci. Comput. 14(4), 1993). The order is numpy's for a
+contiguous row: halves split at a multiple of 8 down to leaves of at most 128 values, each leaf summed in 8 lanes
+combined as a tree (under 8 values in order). Used by the Gaussian energy score and by ``ekf_icp``'s mean range;
+kept in the core so that the filters need not import the evaluation.
 """
 
 from __future__ import annotations
@@ -17,7 +18,8 @@ FloatArray = npt.NDArray[np.float64]
 
 @njit(cache=True)
 def _block_sum(v: FloatArray, lo: int, n: int) -> float:  # pragma: no cover - compiled
-    # numpy's leaf of a pairwise sum: under 8 values in order, up to 128 in 8 lanes combined as a tree
+    """A leaf of the pairwise sum, ``v[lo : lo + n]`` with n <= 128: under 8 values in order, else 8 lanes (every
+    8th value each) combined as a tree, then the remainder in order."""
     if n < 8:
         s = 0.0
         for i in range(lo, lo + n):
@@ -46,9 +48,10 @@ def _block_sum(v: FloatArray, lo: int, n: int) -> float:  # pragma: no cover - c
 
 @njit(cache=True)
 def pairwise_sum(v: FloatArray, lo: int, n: int) -> float:  # pragma: no cover - compiled
-    # numpy's order for summing a contiguous row (halves split at a multiple of 8 down to leaves of 128), so the
-    # compiled mean below equals np.mean(..., axis=1) bit for bit and the stored scores do not move; an explicit
-    # stack, as a self-recursive kernel is not safe in numba's on-disk cache
+    """The sum of ``v[lo : lo + n]`` in the pairwise order of the module docstring.
+
+    The halving is walked on an explicit stack: a self-recursive kernel is not safe in numba's on-disk cache.
+    """
     if n <= 128:
         return _block_sum(v, lo, n)
     los = np.empty(64, np.int64)

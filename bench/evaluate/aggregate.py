@@ -17,7 +17,8 @@ import numpy.typing as npt
 import pandas as pd
 from scipy import stats
 
-from locbench.evaluate.metrics import CONFIDENCE, estimate_at
+from locbench.evaluate.hold import estimate_at
+from locbench.evaluate.metrics import CONFIDENCE
 
 FloatArray = npt.NDArray[np.float64]
 

@@ -13,8 +13,9 @@ with F_k and H the Jacobians of f_k and h (here evaluated along the true traject
 the state is taken at its one realised value, the usual practice for a bound "along the trajectory").
 Any estimate's error covariance satisfies E[e e'] >= J^-1. With the matrix inversion lemma the recursion
 is J_{k+1} = (Q_k + F_k J_k^-1 F_k')^-1 + J_z,k+1, which needs no Q_k^-1: a robot standing still has
-Q_k = 0 (its wheel noise is proportional to the travel), so :func:`information_step` uses that form;
-:func:`tmn_step` is the literal eq. 21 for a non-singular Q_k (a test checks that they agree).
+Q_k = 0 (its wheel noise is proportional to the travel), so :func:`pcrb_recursion` takes that form (the tests
+hold it against the literal eq. 21 for a non-singular Q_k). A zero prior (a robot that starts at its exact true
+pose) has no information form: :func:`covariance_recursion` runs the same recursion on the covariance.
 
 What the bound of a locbench world covers (docs/pcrb.md):
 
@@ -61,46 +62,8 @@ FloatArray = npt.NDArray[np.float64]
 # --- the recursion: pure functions of arrays ---------------------------------------------------------------
 
 
-def tmn_step(j: FloatArray, f: FloatArray, q: FloatArray, j_meas: FloatArray) -> FloatArray:
-    """One step of Tichavsky et al. 1998 eq. 21 with additive Gaussian process noise.
-
-    Parameters
-    ----------
-    j : ndarray, shape (n, n)
-        Fisher information J_k of the state at step k (units: inverse of the state's squared units).
-    f : ndarray, shape (n, n)
-        Jacobian F_k of the transition at the true state.
-    q : ndarray, shape (n, n)
-        Process noise covariance Q_k; must be non-singular (see :func:`information_step` otherwise).
-    j_meas : ndarray, shape (n, n)
-        Measurement information at step k+1, the sum of H' R^-1 H over its sensors (eq. 36).
-
-    Returns
-    -------
-    ndarray, shape (n, n)
-        J_{k+1} = D22 - D21 (J_k + D11)^-1 D12.
-    """
-    qi = np.linalg.inv(q)
-    d11 = f.T @ qi @ f
-    d12 = -f.T @ qi
-    d22 = qi + j_meas
-    out: FloatArray = d22 - d12.T @ np.linalg.solve(j + d11, d12)
-    return 0.5 * (out + out.T)
-
-
-def information_step(j: FloatArray, f: FloatArray, q: FloatArray, j_meas: FloatArray) -> FloatArray:
-    """One step of the same recursion in the form J_{k+1} = (Q_k + F_k J_k^-1 F_k')^-1 + J_meas.
-
-    Equal to :func:`tmn_step` by the matrix inversion lemma when Q_k is non-singular, and defined for a
-    singular (even zero) Q_k as long as J_k is (a robot standing still). Arguments as in :func:`tmn_step`.
-    """
-    p = f @ np.linalg.solve(j, f.T) + q
-    out: FloatArray = np.linalg.inv(0.5 * (p + p.T)) + j_meas
-    return 0.5 * (out + out.T)
-
-
 def pcrb_recursion(j0: FloatArray, jacobians: FloatArray, process_cov: FloatArray, meas_info: FloatArray) -> FloatArray:
-    """Bound covariances J_k^-1 at steps 0..n.
+    """Bound covariances J_k^-1 at steps 0..n: the information recursion of TMN eq. 21 (module docstring).
 
     Parameters
     ----------
@@ -127,8 +90,9 @@ def _contiguous(*arrays: FloatArray) -> list[FloatArray]:
 
 @njit(cache=True)
 def _recursion(j0: FloatArray, jacobians: FloatArray, process_cov: FloatArray, meas_info: FloatArray) -> FloatArray:
-    """:func:`pcrb_recursion` compiled: :func:`information_step` at every step, the same operations (numba's
-    solve, inverse and products call LAPACK and BLAS as numpy's do; equal to rounding)."""
+    """The information recursion of :func:`pcrb_recursion`: J_{k+1} = (Q_k + F_k J_k^-1 F_k')^-1 + J_meas,k+1
+    (TMN eq. 21 by the matrix inversion lemma), each inverse's argument and J symmetrised, and J_k^-1 kept at every
+    step (numba's solve, inverse and products call LAPACK and BLAS)."""
     n = jacobians.shape[0]
     out = np.empty((n + 1, j0.shape[0], j0.shape[1]))
     j = j0.copy()
@@ -159,8 +123,8 @@ def covariance_recursion(
 def _covariance_recursion(
     p0: FloatArray, jacobians: FloatArray, process_cov: FloatArray, meas_info: FloatArray
 ) -> FloatArray:
-    """:func:`covariance_recursion` compiled: the same products and solve at every step (numba's call LAPACK
-    and BLAS as numpy's do; equal to rounding). Python's per-step calls of numpy were a quarter of a bound."""
+    """The covariance recursion of :func:`covariance_recursion`: P^- = F_k P_k F_k' + Q_k, then P_{k+1} the
+    solution of (I + P^- J_meas,k+1) P = P^-, symmetrised (numba's solve and products call LAPACK and BLAS)."""
     n = jacobians.shape[0]
     eye = np.eye(p0.shape[0])
     out = np.empty((n + 1, p0.shape[0], p0.shape[1]))

@@ -19,9 +19,8 @@ prediction, and estimation", JASA 102(477), eq. 20-22):
   draws (seed :data:`ENERGY_SEED`), the same draws at every time, so the score is deterministic. A point mass
   scores its Euclidean error exactly.
 - Scores are taken at every ground-truth time with the belief in force there (the run's aligned view,
-  :func:`locbench.evaluate.metrics.align`, as every metric in :mod:`locbench.evaluate.metrics`), then averaged; the
-  interval of
-  that mean is a circular block bootstrap over time (:func:`block_bootstrap_ci`) with blocks of
+  :func:`locbench.evaluate.aligned.align`, as every metric in :mod:`locbench.evaluate.metrics`), then averaged;
+  the interval of that mean is a circular block bootstrap over time (:func:`block_bootstrap_ci`) with blocks of
   :data:`BLOCK_S` seconds of ground truth.
 - A particle filter exposes a fixed-size unbiased subsample of its particles (:meth:`Filter.belief_sample`);
   the runner scores it at each ground-truth time while the filter runs (:func:`sample_scores`) and stores the
@@ -44,7 +43,7 @@ from locbench.core.geometry import wrap_angle
 from locbench.core.pairwise import pairwise_sum
 
 if TYPE_CHECKING:
-    from locbench.evaluate.metrics import Aligned
+    from locbench.evaluate.aligned import Aligned
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -63,8 +62,6 @@ BOOTSTRAP_RESAMPLES = 1000
 BOOTSTRAP_SEED = 0
 #: Coverage of the interval.
 CONFIDENCE = 0.95
-#: Rows scored at once by the pairwise energy term (bounds memory: rows x m x m x 2 doubles).
-_CHUNK = 256
 
 
 def crps_normal(y: npt.ArrayLike, mu: npt.ArrayLike, sigma: npt.ArrayLike) -> FloatArray:
@@ -80,70 +77,6 @@ def crps_normal(y: npt.ArrayLike, mu: npt.ArrayLike, sigma: npt.ArrayLike) -> Fl
     z = d[pos] / s[pos]
     out[pos] = s[pos] * (z * (2.0 * special.ndtr(z) - 1.0) + 2.0 * stats.norm.pdf(z) - 1.0 / np.sqrt(np.pi))
     return out.reshape(y.shape)
-
-
-def crps_sample(y: npt.ArrayLike, x: npt.ArrayLike, w: npt.ArrayLike | None = None) -> FloatArray:
-    """CRPS of a weighted sample at y: sum_i w_i |x_i - y| - 0.5 sum_ij w_i w_j |x_i - x_j|.
-
-    Parameters
-    ----------
-    y : array-like, shape (n,)
-        Truth.
-    x : array-like, shape (n, m)
-        Members (same unit as y).
-    w : array-like, shape (n, m), optional
-        Weights, normalised per row here (default equal).
-
-    Returns
-    -------
-    ndarray, shape (n,)
-        The score, unit of y (the "energy form" estimator, exact for the discrete distribution given).
-    """
-    xs = np.asarray(x, dtype=np.float64)
-    ws = np.full(xs.shape, 1.0 / xs.shape[1]) if w is None else np.asarray(w, dtype=np.float64)
-    ws = ws / ws.sum(axis=1, keepdims=True)
-    yy = np.asarray(y, dtype=np.float64)
-    first = np.sum(ws * np.abs(xs - yy[:, None]), axis=1)
-    # sum_ij w_i w_j |x_i - x_j| = 2 sum_i w_i x_i (W_below_i - W_above_i) over the sorted members
-    order = np.argsort(xs, axis=1, kind="stable")
-    xo = np.take_along_axis(xs, order, axis=1)
-    wo = np.take_along_axis(ws, order, axis=1)
-    below = np.cumsum(wo, axis=1) - wo
-    above = 1.0 - below - wo
-    spread = 2.0 * np.sum(wo * xo * (below - above), axis=1)
-    return first - 0.5 * spread
-
-
-def energy_score_sample(y: npt.ArrayLike, x: npt.ArrayLike, w: npt.ArrayLike | None = None) -> FloatArray:
-    """Energy score of a weighted sample at y: sum_i w_i ||x_i - y|| - 0.5 sum_ij w_i w_j ||x_i - x_j||.
-
-    Parameters
-    ----------
-    y : array-like, shape (n, d)
-        Truth.
-    x : array-like, shape (n, m, d)
-        Members.
-    w : array-like, shape (n, m), optional
-        Weights, normalised per row here (default equal).
-
-    Returns
-    -------
-    ndarray, shape (n,)
-        The score, unit of y.
-    """
-    xs = np.asarray(x, dtype=np.float64)
-    ws = np.full(xs.shape[:2], 1.0 / xs.shape[1]) if w is None else np.asarray(w, dtype=np.float64)
-    ws = ws / ws.sum(axis=1, keepdims=True)
-    yy = np.asarray(y, dtype=np.float64)
-    out = np.empty(xs.shape[0])
-    for a in range(0, xs.shape[0], _CHUNK):
-        b = min(a + _CHUNK, xs.shape[0])
-        xc, wc = xs[a:b], ws[a:b]
-        first = np.sum(wc * np.linalg.norm(xc - yy[a:b, None, :], axis=2), axis=1)
-        pair = np.linalg.norm(xc[:, :, None, :] - xc[:, None, :, :], axis=3)
-        spread = np.einsum("ni,nij,nj->n", wc, pair, wc)
-        out[a:b] = first - 0.5 * spread
-    return out
 
 
 @functools.cache
@@ -226,21 +159,40 @@ def gaussian_scores(
 def sample_scores(
     points: npt.ArrayLike, weights: npt.ArrayLike, truth: npt.ArrayLike
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """The four scores of one weighted pose sample (m, 3) with weights (m,) at each of k truth poses (k, 3).
+    """The four scores of one weighted pose sample at each of k truth poses, in one compiled pass.
 
-    The same sums as :func:`crps_sample` and :func:`energy_score_sample` (tested equal), in one compiled pass:
-    the runner calls it at every ground-truth time of a particle filter's run.
+    Parameters
+    ----------
+    points : array-like, shape (m, 3)
+        The sample's poses (x m, y m, theta rad), world frame.
+    weights : array-like, shape (m,)
+        Their weights, normalised here.
+    truth : array-like, shape (k, 3)
+        Truth poses, world frame.
+
+    Returns
+    -------
+    tuple of four ndarrays, shape (k,)
+        CRPS of x (m), of y (m), of the heading (rad) and the position energy score (m), each the weighted
+        sample's score sum_i w_i |x_i - y| - sum_{i<j} w_i w_j |x_i - x_j| (module docstring; the norm for the
+        energy score), each member's heading error wrapped to (-pi, pi] about the truth's heading and scored
+        against 0. The runner calls it at every ground-truth time of a particle filter's run.
     """
     p = np.ascontiguousarray(points, dtype=np.float64)
     w = np.asarray(weights, dtype=np.float64)
     w = np.ascontiguousarray(w / w.sum())
     g = np.ascontiguousarray(np.asarray(truth, dtype=np.float64).reshape(-1, 3))
-    out = _sample_scores_kernel(p, w, g)
+    heading_error = np.ascontiguousarray(wrap_angle(p[None, :, 2] - g[:, 2:3]))
+    out = _sample_scores_kernel(p, w, g, heading_error)
     return out[0], out[1], out[2], out[3]
 
 
 @njit(cache=True)
-def _sample_scores_kernel(p: FloatArray, w: FloatArray, g: FloatArray) -> FloatArray:  # pragma: no cover - compiled
+def _sample_scores_kernel(
+    p: FloatArray, w: FloatArray, g: FloatArray, h: FloatArray
+) -> FloatArray:  # pragma: no cover - compiled
+    """The four scores (4, k) of :func:`sample_scores`: the members ``p`` (m, 3) with normalised weights ``w``
+    (m,), the truths ``g`` (k, 3) and the members' wrapped heading errors ``h`` (k, m), rad."""
     m, k = p.shape[0], g.shape[0]
     # the spread terms do not depend on the truth (except the heading, unwrapped about it): once per sample
     sx = sy = se = 0.0
@@ -259,19 +211,13 @@ def _sample_scores_kernel(p: FloatArray, w: FloatArray, g: FloatArray) -> FloatA
             fx += w[i] * abs(dx)
             fy += w[i] * abs(dy)
             fe += w[i] * math.sqrt(dx * dx + dy * dy)
-            hi = _wrap(p[i, 2] - g[r, 2])
+            hi = h[r, i]
             fh += w[i] * abs(hi)
             for j in range(i + 1, m):
-                sh += w[i] * w[j] * abs(hi - _wrap(p[j, 2] - g[r, 2]))
+                sh += w[i] * w[j] * abs(hi - h[r, j])
         # each unordered pair once: 0.5 * sum_ij = sum_{i<j}
         out[0, r], out[1, r], out[2, r], out[3, r] = fx - sx, fy - sy, fh - sh, fe - se
     return out
-
-
-@njit(cache=True)
-def _wrap(a: float) -> float:  # pragma: no cover - compiled
-    """An angle wrapped to (-pi, pi] (as :func:`locbench.core.geometry.wrap_angle`)."""
-    return math.pi - ((math.pi - a) % (2.0 * math.pi))
 
 
 def block_length(t: npt.ArrayLike, block_s: float = BLOCK_S) -> int:
@@ -328,7 +274,7 @@ def score_metrics(a: Aligned, extra: Mapping[str, np.ndarray]) -> dict[str, floa
 
     A run whose ``extra`` holds the per-time scores of its own samples (:data:`SAMPLE_SCORE_KEYS`, one per
     ground-truth time) is scored by those; any other by its Gaussian (mean, covariance) held at the truth times,
-    read from the run's aligned view ``a`` (:func:`locbench.evaluate.metrics.align`, with covariances).
+    read from the run's aligned view ``a`` (:func:`locbench.evaluate.aligned.align`, with covariances).
     """
     gt_t = a.t
     if all(k in extra for k in SAMPLE_SCORE_KEYS):

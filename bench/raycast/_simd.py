@@ -3,10 +3,12 @@ kernel (:func:`locbench.raycast.cast._march_pool`).
 
 numba does not vectorise the march itself: the per-ray state lives in a dozen arrays that LLVM cannot prove
 apart, and the step's branches (jump or cell step, x or y boundary, hit, leave) are data-dependent. So the step
-is written here as a numba intrinsic that emits LLVM IR on 4-wide vectors: every branch of the scalar step
-becomes a select, and the four cells' values are loaded one by one (AVX2 has no byte gather). The arithmetic is
-the scalar step's, operation for operation (no fused multiply-adds: LLVM does not contract without fast-math
-flags), so the ranges are the same bit for bit.
+is written here, and only here, as a numba intrinsic that emits LLVM IR on 4-wide vectors: each branch of the
+step is a select, and the four cells' values are loaded one by one (AVX2 has no byte gather). Each lane's
+arithmetic is the IEEE operations written below, in order (no fused multiply-adds: LLVM does not contract without
+fast-math flags), so a beam's range does not depend on its lane, on the other beams of the pool or on the field
+it marches on (the tests compare these layouts bit for bit, and the ranges with the exact traversal's to
+rounding).
 
 State layout (one column per lane, ``W`` lanes, a multiple of 4):
 
@@ -22,7 +24,7 @@ State layout (one column per lane, ``W`` lanes, a multiple of 4):
 A lane whose :data:`T` is inf is idle: it never reports a hit and ends at every step.
 
 numba's on-disk cache of the kernels that call :data:`step4` is keyed on :mod:`locbench.raycast.cast`'s source alone:
-after editing this module, delete the ``*.nbi`` / ``*.nbc`` files under ``bench/__pycache__``.
+after editing this module, delete the ``*.nbi`` / ``*.nbc`` files under ``bench/raycast/__pycache__``.
 """
 
 from __future__ import annotations

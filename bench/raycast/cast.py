@@ -1,7 +1,6 @@
 """Ray casting on an occupancy grid, shared by the laser simulator and the grid-based filters.
 
-Two methods, in numba kernels, behind one API (:func:`cast_rays`, :func:`cast_scan`), plus a deliberately simple
-numpy reference used by tests (:func:`cast_rays_reference`):
+Two methods, in numba kernels, behind one API (:func:`cast_rays`, :func:`cast_scan`):
 
 ``method="dda"``
     Exact grid traversal (Amanatides & Woo, "A Fast Voxel Traversal Algorithm for Ray Tracing",
@@ -39,7 +38,7 @@ numpy reference used by tests (:func:`cast_rays_reference`):
 Why the kernels are shaped so, and what was measured and tried on the way (the pool, the scalar lane kernels
 before it, lock-step refills, the octant planes): docs/performance.md, "The ray caster's measurement diary".
 
-Grid conventions are those of :class:`locbench.datasets.dataset.OccupancyGrid` (ROS map_server): row ``i``
+Grid conventions are those of :class:`locbench.core.grid.OccupancyGrid` (ROS map_server): row ``i``
 spans y in [oy + i*res, oy + (i+1)*res), column ``j`` spans x likewise, and ``origin_xy`` = (ox, oy) is
 the world position of the corner of cell (0, 0). Poses are world-frame sensor poses (x m, y m, theta
 rad); beam angles are relative to the pose heading. A range is the distance from the sensor to the
@@ -49,18 +48,22 @@ point where the beam enters the first occupied cell; ``inf`` when no occupied ce
 Grids are treated as immutable (``OccupancyGrid`` is frozen): :func:`cast_scan` keys its cache on the
 grid object, so an ``occupancy`` array changed in place after the first cast is not seen.
 
-Threads: the parallel kernels use numba's threading layer; with the default ``workqueue`` layer they
-must not be called from several Python threads at once (processes are fine). Pass ``parallel=False``
-there.
+Threads: each kernel that casts many rays is written once, its rays (or pieces of them) the items of a ``prange``
+loop, and compiled twice (:func:`_threads_build`): serial, and with numba's ``parallel=True``, which spreads
+the items over numba's threads; the two builds give the same ranges, bit for bit. The threaded builds use numba's
+threading layer; with the default ``workqueue`` layer they must not be called from several Python threads at once
+(processes are fine). Pass ``parallel=False`` there.
 """
 
 from __future__ import annotations
 
 import logging
 import math
+import types
 import weakref
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal, cast
+from typing import TYPE_CHECKING, Any, Literal, cast
 
 import numba
 import numpy as np
@@ -72,13 +75,15 @@ from locbench.raycast import _simd as vec
 from locbench.raycast._sectors import SAFETY_CELLS, sector_bounds
 
 if TYPE_CHECKING:
-    from locbench.datasets.dataset import OccupancyGrid
+    from locbench.core.grid import OccupancyGrid
 
 logger = logging.getLogger(__name__)
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
 UInt8Array = npt.NDArray[np.uint8]
+#: A grid the traversal reads: occupied cells have :data:`CELL_OCCUPIED` set (a boolean grid, or :func:`face_cells`).
+GridArray = BoolArray | UInt8Array
 IntArray = npt.NDArray[np.int64]
 Method = Literal["auto", "march", "dda"]
 
@@ -172,38 +177,6 @@ def _dda_start(
     return i, j, step_i, step_j, t_next_x, t_next_y, t_delta_x, t_delta_y
 
 
-@njit(cache=True, inline="always")
-def _dda_one(occ: BoolArray, gx: float, gy: float, dx: float, dy: float, t_lim: float) -> float:
-    """Distance along one beam to the first occupied cell, in cells (inf if none within t_lim).
-
-    ``(gx, gy)`` is the start in grid units (one cell = 1), ``(dx, dy)`` the unit direction.
-    """
-    rows = occ.shape[0]
-    cols = occ.shape[1]
-    t0, t1 = _clip_to_grid(rows, cols, gx, gy, dx, dy)
-    if t0 >= t1 or t0 > t_lim:
-        return math.inf
-    i, j, step_i, step_j, t_next_x, t_next_y, t_delta_x, t_delta_y = _dda_start(rows, cols, gx, gy, dx, dy, t0)
-    t = t0
-    while True:
-        if occ[i, j]:
-            return t
-        if t_next_x < t_next_y:
-            t = t_next_x
-            t_next_x += t_delta_x
-            j += step_j
-            if j < 0 or j >= cols:
-                return math.inf
-        else:
-            t = t_next_y
-            t_next_y += t_delta_y
-            i += step_i
-            if i < 0 or i >= rows:
-                return math.inf
-        if t > t_lim:
-            return math.inf
-
-
 #: Bits of :func:`face_cells`: the cell is occupied; an occupied (or off-grid) cell lies within two cells.
 CELL_OCCUPIED = 1
 CELL_NEAR_OCCUPIED = 2
@@ -237,7 +210,7 @@ def face_cells(occupied: npt.ArrayLike) -> UInt8Array:
 
 
 @njit(cache=True, inline="always")
-def _corner_occupied(cells: UInt8Array, vi: int, vj: int) -> bool:
+def _corner_occupied(cells: GridArray, vi: int, vj: int) -> bool:
     """Whether a cell touching grid vertex (row vi, column vj) is occupied or lies off the grid (``cells``
     from :func:`face_cells`)."""
     rows = cells.shape[0]
@@ -249,19 +222,51 @@ def _corner_occupied(cells: UInt8Array, vi: int, vj: int) -> bool:
     return False
 
 
-@njit(cache=True)
-def dda_face(
-    cells: UInt8Array, gx: float, gy: float, dx: float, dy: float, t_lim: float, near0: float, near1: float
-) -> tuple[float, int, bool]:
-    """:func:`_dda_one`'s traversal (the same distance, bit for bit), also returning the face it enters the
-    hit cell through and whether the ray passes near a corner of the occupied cells.
+@njit(cache=True, inline="always")
+def _crossing_near(cells: GridArray, c: float, across: float, lim: float, line: int, vertical: bool) -> bool:
+    """At the ray's crossing of grid line ``line`` (vertical: x = line, at y = ``c``; else y = line, at x =
+    ``c``): whether one of the two vertices of that line beside the crossing touches an occupied cell and
+    lies within ``lim`` of the ray (``across``: |direction component| normal to the line)."""
+    v = math.floor(c)
+    if (c - v) * across < lim and (_corner_occupied(cells, v, line) if vertical else _corner_occupied(cells, line, v)):
+        return True
+    w = v + 1
+    return (w - c) * across < lim and (
+        _corner_occupied(cells, w, line) if vertical else _corner_occupied(cells, line, w)
+    )
 
-    ``cells`` is the grid coded by :func:`face_cells`. Returns (t, axis, near): ``axis`` 0 when the ray
-    enters the hit cell across a vertical grid line (x = const), 1 across a horizontal one, -1 when it
-    starts in it (or nothing is hit). ``near`` is True when a grid vertex that touches an occupied (or
-    off-grid) cell lies within ``near0 + near1 * t`` cells of the ray before the hit, or within three times
-    that of its start or of the hit point: there the range may not be a smooth function of the ray (a
-    perturbed ray may hit another cell or face).
+
+@njit(cache=True, inline="always")
+def _vertex_near(cells: GridArray, px: float, py: float, lim: float) -> bool:
+    """Whether the grid vertex nearest to (px, py) (grid units) is within ``lim`` and touches an occupied cell."""
+    vj = math.floor(px + 0.5)
+    vi = math.floor(py + 0.5)
+    return math.hypot(px - vj, py - vi) < lim and _corner_occupied(cells, vi, vj)
+
+
+@njit(cache=True, inline="always")
+def _traverse(
+    cells: GridArray,
+    gx: float,
+    gy: float,
+    dx: float,
+    dy: float,
+    t_lim: float,
+    near0: float,
+    near1: float,
+    faces: bool,
+) -> tuple[float, int, bool]:
+    """The exact traversal of one beam (Amanatides & Woo 1987): the distance to the first occupied cell it enters.
+
+    ``(gx, gy)`` is the start in grid units (one cell = 1), ``(dx, dy)`` the unit direction; a cell is occupied
+    where ``cells[i, j] & CELL_OCCUPIED`` (a boolean grid, or one coded by :func:`face_cells`). Returns (t, axis,
+    near): t in cells, inf when no occupied cell is entered within ``t_lim``. With ``faces`` (the grid coded by
+    :func:`face_cells`), ``axis`` is 0 when the ray enters the hit cell across a vertical grid line (x = const),
+    1 across a horizontal one, -1 when it starts in it (or nothing is hit); ``near`` is True when a grid vertex
+    that touches an occupied (or off-grid) cell lies within ``near0 + near1 * t`` cells of the ray before the
+    hit, or within three times that of its start or of the hit point: there the range may not be a smooth
+    function of the ray (a perturbed ray may hit another cell or face). Without ``faces`` (a constant at each
+    call, so the compiler drops that bookkeeping) ``axis`` and ``near`` carry nothing.
     """
     rows = cells.shape[0]
     cols = cells.shape[1]
@@ -269,7 +274,9 @@ def dda_face(
     if t0 >= t1 or t0 > t_lim:
         return math.inf, -1, True
     i, j, step_i, step_j, t_next_x, t_next_y, t_delta_x, t_delta_y = _dda_start(rows, cols, gx, gy, dx, dy, t0)
-    near = t0 > 0.0 or _vertex_near(cells, gx, gy, 3.0 * near0)
+    near = True
+    if faces:
+        near = t0 > 0.0 or _vertex_near(cells, gx, gy, 3.0 * near0)
     adx = abs(dx)
     ady = abs(dy)
     t = t0
@@ -278,7 +285,7 @@ def dda_face(
     while not cell & CELL_OCCUPIED:
         # A crossing's vertices touch only cells within two of the cell it leaves (one for the crossing's
         # rounding): away from the occupied cells the checks cannot find a corner, so they are not made.
-        check = not near and cell & CELL_NEAR_OCCUPIED
+        check = faces and not near and cell & CELL_NEAR_OCCUPIED
         if t_next_x < t_next_y:
             t = t_next_x
             t_next_x += t_delta_x
@@ -302,75 +309,89 @@ def dda_face(
         if t > t_lim:
             return math.inf, -1, True
         cell = cells[i, j]
-    near = near or axis < 0 or _vertex_near(cells, gx + t * dx, gy + t * dy, 3.0 * (near0 + near1 * t))
+    if faces:
+        near = near or axis < 0 or _vertex_near(cells, gx + t * dx, gy + t * dy, 3.0 * (near0 + near1 * t))
     return t, axis, near
 
 
 @njit(cache=True, inline="always")
-def _crossing_near(cells: UInt8Array, c: float, across: float, lim: float, line: int, vertical: bool) -> bool:
-    """At the ray's crossing of grid line ``line`` (vertical: x = line, at y = ``c``; else y = line, at x =
-    ``c``): whether one of the two vertices of that line beside the crossing touches an occupied cell and
-    lies within ``lim`` of the ray (``across``: |direction component| normal to the line)."""
-    v = math.floor(c)
-    if (c - v) * across < lim and (_corner_occupied(cells, v, line) if vertical else _corner_occupied(cells, line, v)):
-        return True
-    w = v + 1
-    return (w - c) * across < lim and (
-        _corner_occupied(cells, w, line) if vertical else _corner_occupied(cells, line, w)
-    )
-
-
-@njit(cache=True, inline="always")
-def _vertex_near(cells: UInt8Array, px: float, py: float, lim: float) -> bool:
-    """Whether the grid vertex nearest to (px, py) (grid units) is within ``lim`` and touches an occupied cell."""
-    vj = math.floor(px + 0.5)
-    vi = math.floor(py + 0.5)
-    return math.hypot(px - vj, py - vi) < lim and _corner_occupied(cells, vi, vj)
+def _dda_one(occ: BoolArray, gx: float, gy: float, dx: float, dy: float, t_lim: float) -> float:
+    """Distance along one beam to the first occupied cell of the boolean grid ``occ``, in cells (inf if none
+    within ``t_lim``): :func:`_traverse` without the faces."""
+    return _traverse(occ, gx, gy, dx, dy, t_lim, 0.0, 0.0, False)[0]
 
 
 @njit(cache=True)
-def _dda_serial(
-    occ: BoolArray, res: float, ox: float, oy: float, poses: FloatArray, angles: FloatArray, max_range: float
-) -> FloatArray:
-    n = poses.shape[0]
-    nb = angles.shape[0]
-    out = np.empty((n, nb))
-    inv_res = 1.0 / res
-    t_lim = max_range * inv_res
-    cb = np.cos(angles)
-    sb = np.sin(angles)
-    for p in range(n):
-        gx = (poses[p, 0] - ox) * inv_res
-        gy = (poses[p, 1] - oy) * inv_res
-        cp = math.cos(poses[p, 2])
-        sp = math.sin(poses[p, 2])
-        for b in range(nb):
-            # cos/sin of (heading + beam) by the sum formulas: no trigonometry per ray
-            out[p, b] = _dda_one(occ, gx, gy, cp * cb[b] - sp * sb[b], sp * cb[b] + cp * sb[b], t_lim) * res
-    return out
+def dda_face(
+    cells: UInt8Array, gx: float, gy: float, dx: float, dy: float, t_lim: float, near0: float, near1: float
+) -> tuple[float, int, bool]:
+    """The traversal of one beam on the grid coded by :func:`face_cells`, with the face it enters the hit cell
+    through and whether it passes near a corner of the occupied cells: (t, axis, near) of :func:`_traverse`."""
+    return _traverse(cells, gx, gy, dx, dy, t_lim, near0, near1, True)
 
 
-@njit(cache=True, parallel=True)
-def _dda_parallel(
+@njit(cache=True, inline="always")
+def _beam_direction(cp: float, sp: float, cb: float, sb: float) -> tuple[float, float]:
+    """Unit direction (cos, sin) of a beam at angle ``b`` from a heading ``h``, from cos and sin of each (``cp``,
+    ``sp``; ``cb``, ``sb``) by the angle-sum formulas: no trigonometry per ray."""
+    return cp * cb - sp * sb, sp * cb + cp * sb
+
+
+#: Rays per ``prange`` item of the kernels that cast many rays: a pool of the march (:func:`_march_pool`) idles
+#: while its last beams end.
+_CHUNK = 2048
+
+#: ``chunk`` of :func:`_march_rays` for all rays in one piece (more rays than any cast).
+_ONE_PIECE = 1 << 62
+
+
+def _threads_build(kernel: Callable[..., Any], **options: Any) -> tuple[Any, Any]:
+    """``kernel`` compiled by numba twice: as written, where its ``prange`` loop runs in order on the calling
+    thread, and with ``parallel=True``, where the loop's items spread over numba's threads.
+
+    One kernel, two builds. numba keys its on-disk cache on a function's qualified name and code, not on the
+    compile options, so the two builds of one function would take each other's cache entries: the threaded
+    build compiles a copy of the function named ``<name>_threads``.
+    """
+    twin = types.FunctionType(
+        kernel.__code__, kernel.__globals__, f"{kernel.__name__}_threads", kernel.__defaults__, kernel.__closure__
+    )
+    twin.__qualname__ = f"{kernel.__qualname__}_threads"
+    twin.__doc__ = kernel.__doc__
+    return njit(cache=True, **options)(kernel), njit(cache=True, parallel=True, **options)(twin)
+
+
+def _dda_rays(
     occ: BoolArray, res: float, ox: float, oy: float, poses: FloatArray, angles: FloatArray, max_range: float
-) -> FloatArray:
+) -> FloatArray:  # pragma: no cover - compiled
+    """Ranges (N, B), m, of the exact traversal (:func:`_dda_one`) of every beam ``angles`` (B,) from every sensor
+    pose ``poses`` (N, 3): the rays pose-major in items of :data:`_CHUNK`, the ``prange`` loop (so that one
+    pose with many beams also spreads over the threads)."""
     n = poses.shape[0]
     nb = angles.shape[0]
-    out = np.empty((n, nb))
+    total = n * nb
+    out = np.empty(total)
     inv_res = 1.0 / res
     t_lim = max_range * inv_res
     cb = np.cos(angles)
     sb = np.sin(angles)
     cp = np.cos(poses[:, 2])
     sp = np.sin(poses[:, 2])
-    # Flattened so that one pose with many beams also spreads over the threads.
-    for k in prange(n * nb):
-        p = k // nb
-        b = k - p * nb
-        gx = (poses[p, 0] - ox) * inv_res
-        gy = (poses[p, 1] - oy) * inv_res
-        out[p, b] = _dda_one(occ, gx, gy, cp[p] * cb[b] - sp[p] * sb[b], sp[p] * cb[b] + cp[p] * sb[b], t_lim) * res
-    return out
+    for c in prange((total + _CHUNK - 1) // _CHUNK):
+        first = c * _CHUNK
+        p = first // nb
+        b = first - p * nb
+        for k in range(first, min(first + _CHUNK, total)):
+            dx, dy = _beam_direction(cp[p], sp[p], cb[b], sb[b])
+            out[k] = _dda_one(occ, (poses[p, 0] - ox) * inv_res, (poses[p, 1] - oy) * inv_res, dx, dy, t_lim) * res
+            b += 1
+            if b == nb:
+                p += 1
+                b = 0
+    return out.reshape((n, nb))
+
+
+_dda_serial, _dda_threads = _threads_build(_dda_rays)
 
 
 #: Lanes of the pool kernel (:func:`_march_pool`), a multiple of 4: each sweep steps them all, four at a time.
@@ -523,9 +544,7 @@ def _march_pool(
                     if b == nb:
                         p += 1
                         b = 0
-                    # cos/sin of (heading + beam) by the sum formulas: no trigonometry per ray
-                    dx = cp[p] * cb[b] - sp[p] * sb[b]
-                    dy = sp[p] * cb[b] + cp[p] * sb[b]
+                    dx, dy = _beam_direction(cp[p], sp[p], cb[b], sb[b])
                     g = p - p0
                     _pool_take(
                         fstate, istate, k, gxy[g, 0], gxy[g, 1], dx, dy, first[g], plane_size, t_lim, t_end, rows, cols
@@ -555,8 +574,7 @@ def _pose_trig(poses: FloatArray, angles: FloatArray, trig: FloatArray) -> tuple
     return cp, sp
 
 
-@njit(cache=True, error_model="numpy")
-def _march_serial(
+def _march_rays(
     field: UInt8Array,
     planes: UInt8Array,
     plane_size: int,
@@ -568,20 +586,32 @@ def _march_serial(
     angles: FloatArray,
     max_range: float,
     trig: FloatArray,
-) -> FloatArray:
-    """Serial march (:func:`_march_pool`, arguments as there) from ``poses`` (3,) or (N, 3), returning (N, B);
-    ``trig`` (3, B) caches (angles, cos, sin) between calls and is refreshed here if stale."""
+    chunk: int,
+) -> FloatArray:  # pragma: no cover - compiled
+    """The march (:func:`_march_pool`, arguments as there) from ``poses`` (3,) or (N, 3), returning (N, B) m.
+
+    ``trig`` (3, B) caches (angles, cos, sin) between calls and is refreshed here if stale. The rays, pose-major,
+    are marched in pieces of ``chunk`` rays, the ``prange`` items (:data:`_ONE_PIECE`: one pool for all).
+    """
     poses = poses.reshape((-1, 3))
     n = poses.shape[0]
     nb = angles.shape[0]
-    out = np.empty(n * nb)
+    total = n * nb
+    out = np.empty(total)
     cp, sp = _pose_trig(poses, angles, trig)
     t_lim = max_range / res
-    _march_pool(field, planes, plane_size, starts, res, ox, oy, poses, cp, sp, trig[1], trig[2], t_lim, 0, n * nb, out)
+    for c in prange((total + chunk - 1) // chunk):
+        first = c * chunk
+        last = min(first + chunk, total)
+        _march_pool(field, planes, plane_size, starts, res, ox, oy, poses, cp, sp, trig[1], trig[2], t_lim, first, last,
+                    out)  # fmt: skip
     return out.reshape((n, nb))
 
 
-#: Per number of beams, the (angles, cos, sin) rows that :func:`_march_serial` reuses (NaN: not yet set).
+_march_serial, _march_threads = _threads_build(_march_rays, error_model="numpy")
+
+
+#: Per number of beams, the (angles, cos, sin) rows that serial marches reuse (NaN: not yet set).
 _TRIG_CACHE: dict[int, FloatArray] = {}
 
 
@@ -591,38 +621,6 @@ def _trig_rows(nb: int) -> FloatArray:
         trig = np.full((3, nb), np.nan)
         _TRIG_CACHE[nb] = trig
     return trig
-
-
-#: Rays per parallel work item of the march kernel: a pool (:func:`_march_pool`) idles while its last beams end.
-_CHUNK = 2048
-
-
-@njit(cache=True, parallel=True)
-def _march_parallel(
-    field: UInt8Array,
-    res: float,
-    ox: float,
-    oy: float,
-    poses: FloatArray,
-    angles: FloatArray,
-    max_range: float,
-) -> FloatArray:
-    """March from ``poses`` on the isotropic ``field``, the rays spread over numba's threads."""
-    n = poses.shape[0]
-    nb = angles.shape[0]
-    total = n * nb
-    out = np.empty(total)
-    flat = field.reshape(-1)
-    cb = np.cos(angles)
-    sb = np.sin(angles)
-    cp = np.cos(poses[:, 2])
-    sp = np.sin(poses[:, 2])
-    t_lim = max_range / res
-    for c in prange((total + _CHUNK - 1) // _CHUNK):
-        first = c * _CHUNK
-        last = min(first + _CHUNK, total)
-        _march_pool(field, flat, 0, _NO_STARTS, res, ox, oy, poses, cp, sp, cb, sb, t_lim, first, last, out)
-    return out.reshape((n, nb))
 
 
 def march_field(occupied: npt.ArrayLike) -> UInt8Array:
@@ -779,16 +777,16 @@ def _run(
     oy = float(origin_xy[1])
     if method == "march":
         field = cast("UInt8Array", grid_array)
-        if threads:
-            return _march_parallel(field, resolution, ox, oy, p, a, max_range)
         flat = field.reshape(-1)
-        return _march_serial(field, flat, 0, _NO_STARTS, resolution, ox, oy, p, a, max_range, _trig_rows(a.shape[0]))
-    occ = cast("BoolArray", grid_array)
-    return (
-        _dda_parallel(occ, resolution, ox, oy, p, a, max_range)
-        if threads
-        else _dda_serial(occ, resolution, ox, oy, p, a, max_range)
-    )
+        if threads:
+            # a trig cache of its own: the shared one is for serial casts
+            trig = np.full((3, a.shape[0]), np.nan)
+            return _march_threads(field, flat, 0, _NO_STARTS, resolution, ox, oy, p, a, max_range, trig, _CHUNK)
+        trig = _trig_rows(a.shape[0])
+        return _march_serial(field, flat, 0, _NO_STARTS, resolution, ox, oy, p, a, max_range, trig, _ONE_PIECE)
+    dda = _dda_threads if threads else _dda_serial
+    out: FloatArray = dda(cast("BoolArray", grid_array), resolution, ox, oy, p, a, max_range)
+    return out
 
 
 @dataclass(frozen=True)
@@ -866,7 +864,7 @@ def _march_one_pose(
         else:
             scan = (field, field.reshape(-1), 0, _NO_STARTS, arrays.resolution, arrays.ox, arrays.oy)
         _SCAN_CACHE[grid] = scan
-    return _march_serial(*scan, pose, angles, max_range, _trig_rows(angles.shape[0]))[0]
+    return _march_serial(*scan, pose, angles, max_range, _trig_rows(angles.shape[0]), _ONE_PIECE)[0]
 
 
 def _grid_arrays(grid: OccupancyGrid) -> _GridArrays:
@@ -945,7 +943,7 @@ def cast_scan(
         trig = _TRIG_CACHE.get(angles.shape[0])
         if trig is None:
             trig = _trig_rows(angles.shape[0])
-        return _march_serial(*scan, pose, angles, float(max_range), trig)[0]
+        return _march_serial(*scan, pose, angles, float(max_range), trig, _ONE_PIECE)[0]
     _check_method(method)
     if grid.origin[2] != 0.0:
         raise ValueError(f"grid.origin theta must be 0 (rotated grids are not supported), got {grid.origin[2]}")
@@ -970,43 +968,11 @@ def cast_scan(
             a,
             float(max_range),
             _trig_rows(a.shape[0]),
+            _ONE_PIECE,
         )
     else:
         out = _run(arrays.field, "march", float(grid.resolution), grid.origin[:2], p, a, float(max_range), parallel)
     return out[0] if single else out
-
-
-def cast_rays_reference(
-    occupied: npt.ArrayLike,
-    resolution: float,
-    origin_xy: tuple[float, float],
-    poses: npt.ArrayLike,
-    angles: npt.ArrayLike,
-    max_range: float,
-    step_fraction: float = 0.05,
-) -> FloatArray:
-    """Slow, obviously-correct ray marcher with the same signature as :func:`cast_rays` (tests only).
-
-    Samples each beam every ``step_fraction * resolution`` metres and returns the distance of the first
-    sample inside an occupied cell, so it overestimates the exact range by less than one step and may
-    miss a cell that a beam only clips at a corner.
-    """
-    occ, p, a = _check_inputs(occupied, resolution, poses, angles, max_range)
-    rows, cols = occ.shape
-    step = step_fraction * resolution
-    s = np.arange(0.0, max_range + step, step)
-    s = s[s <= max_range]
-    th = p[:, 2:3] + a[None, :]  # (N, B)
-    x = p[:, 0, None, None] + np.cos(th)[..., None] * s  # (N, B, S)
-    y = p[:, 1, None, None] + np.sin(th)[..., None] * s
-    j = np.floor((x - origin_xy[0]) / resolution).astype(np.int64)
-    i = np.floor((y - origin_xy[1]) / resolution).astype(np.int64)
-    inside = (i >= 0) & (i < rows) & (j >= 0) & (j < cols)
-    hit = np.zeros(x.shape, dtype=bool)
-    hit[inside] = occ[i[inside], j[inside]]
-    any_hit = hit.any(axis=-1)
-    first = np.argmax(hit, axis=-1)
-    return np.where(any_hit, s[first], np.inf)
 
 
 # --- range derivatives for the bound (locbench.evaluate.pcrb) -------------------------------------------------------
@@ -1043,7 +1009,7 @@ def scan_gradients(
     ranges = np.empty((n, nb))
     grads = np.zeros((n, nb, 3))
     smooth = np.zeros((n, nb), dtype=np.bool_)
-    kernel = _gradients_parallel if _use_threads(None, n * nb) else _gradients_serial
+    kernel = _gradients_threads if _use_threads(None, n * nb) else _gradients_serial
     cells = face_cells(occ)
     kernel(
         cells, res, ox, oy, sensors, headings, mount_xy[0], mount_xy[1], angles, max_range, eps, ranges, grads, smooth
@@ -1082,8 +1048,7 @@ def _ray_gradient(
     gy = (sensors[p, 1] - oy) * inv_res
     cp = trig[p, 0]
     sp = trig[p, 1]
-    dx = cp * cb[b] - sp * sb[b]
-    dy = sp * cb[b] + cp * sb[b]
+    dx, dy = _beam_direction(cp, sp, cb[b], sb[b])
     t, axis, near = dda_face(cells, gx, gy, dx, dy, t_lim, near0, near1)
     r = t * res
     ranges[p, b] = r
@@ -1124,28 +1089,12 @@ def _heading_trig(sensors: FloatArray, headings: FloatArray) -> FloatArray:
     return out
 
 
-@njit(cache=True)
-def _gradients_serial(
+def _gradient_rays(
     cells: UInt8Array, res: float, ox: float, oy: float, sensors: FloatArray, headings: FloatArray, mx: float,
     my: float, angles: FloatArray, max_range: float, eps: float, ranges: FloatArray, grads: FloatArray,
     smooth: npt.NDArray[np.bool_],
-) -> None:  # fmt: skip
-    cb = np.cos(angles)
-    sb = np.sin(angles)
-    nb = angles.shape[0]
-    trig = _heading_trig(sensors, headings)
-    for k in range(sensors.shape[0] * nb):
-        p = k // nb
-        _ray_gradient(cells, res, ox, oy, sensors, trig, mx, my, cb, sb, max_range, eps, p, k - p * nb, ranges, grads,
-                      smooth)  # fmt: skip
-
-
-@njit(cache=True, parallel=True)
-def _gradients_parallel(
-    cells: UInt8Array, res: float, ox: float, oy: float, sensors: FloatArray, headings: FloatArray, mx: float,
-    my: float, angles: FloatArray, max_range: float, eps: float, ranges: FloatArray, grads: FloatArray,
-    smooth: npt.NDArray[np.bool_],
-) -> None:  # fmt: skip
+) -> None:  # fmt: skip  # pragma: no cover - compiled
+    """:func:`scan_gradients` into its outputs, one ray per ``prange`` item (:func:`_ray_gradient`)."""
     cb = np.cos(angles)
     sb = np.sin(angles)
     nb = angles.shape[0]
@@ -1154,6 +1103,9 @@ def _gradients_parallel(
         p = k // nb
         _ray_gradient(cells, res, ox, oy, sensors, trig, mx, my, cb, sb, max_range, eps, p, k - p * nb, ranges, grads,
                       smooth)  # fmt: skip
+
+
+_gradients_serial, _gradients_threads = _threads_build(_gradient_rays)
 
 
 def cast_ray_subset(
@@ -1167,8 +1119,9 @@ def cast_ray_subset(
     rows: IntArray,
     beams: IntArray,
 ) -> FloatArray:
-    """The ranges of :func:`cast_rays` (``method="dda"``) of the rays (``rows[k]``, ``beams[k]``) only, bit
-    for bit (the same arithmetic per ray), spread over numba's threads.
+    """The ranges of :func:`cast_rays` (``method="dda"``) of the rays (``rows[k]``, ``beams[k]``) only, spread over
+    numba's threads: the same traversal and beam direction per ray (:func:`_dda_one`, :func:`_beam_direction`),
+    so the same ranges, bit for bit.
 
     ``poses`` are the sensor poses, (S, 3), giving ranges of shape (K,); or several sets of them, (P, S, 3)
     (the bound's six perturbed poses), cast in one call, giving (P, K).
@@ -1211,7 +1164,6 @@ def _ray_subset_parallel(
         b = beams[k]
         gx = (poses[s, p, 0] - ox) * inv_res
         gy = (poses[s, p, 1] - oy) * inv_res
-        cp = trig[s, p, 0]
-        sp = trig[s, p, 1]
-        out[s, k] = _dda_one(occ, gx, gy, cp * cb[b] - sp * sb[b], sp * cb[b] + cp * sb[b], t_lim) * res
+        dx, dy = _beam_direction(trig[s, p, 0], trig[s, p, 1], cb[b], sb[b])
+        out[s, k] = _dda_one(occ, gx, gy, dx, dy, t_lim) * res
     return out

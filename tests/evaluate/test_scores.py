@@ -1,15 +1,41 @@
-"""Proper scores (locbench.evaluate.scores) against their closed forms, large samples and scoringrules."""
+"""Proper scores (locbench.evaluate.scores) against their closed forms, large samples, plain sums and scoringrules."""
 
 from __future__ import annotations
-
-import math
 
 import numpy as np
 import pytest
 import scoringrules as sr
 
+from locbench.core.geometry import wrap_angle
 from locbench.evaluate import scores as sc
-from locbench.evaluate.metrics import align
+from locbench.evaluate.aligned import align
+
+
+def crps_sample(y: np.ndarray, x: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
+    """A plain CRPS of weighted samples (rows of ``x`` (n, m) with weights ``w`` (n, m), normalised per row) at
+    ``y`` (n,): sum_i w_i |x_i - y| - 0.5 sum_ij w_i w_j |x_i - x_j| (Gneiting & Raftery 2007, eq. 22), the
+    double sum over the sorted members as 2 sum_i w_i x_i (W_below_i - W_above_i)."""
+    xs = np.asarray(x, dtype=np.float64)
+    ws = np.full(xs.shape, 1.0 / xs.shape[1]) if w is None else np.asarray(w, dtype=np.float64)
+    ws = ws / ws.sum(axis=1, keepdims=True)
+    first = np.sum(ws * np.abs(xs - np.asarray(y, dtype=np.float64)[:, None]), axis=1)
+    order = np.argsort(xs, axis=1, kind="stable")
+    xo = np.take_along_axis(xs, order, axis=1)
+    wo = np.take_along_axis(ws, order, axis=1)
+    below = np.cumsum(wo, axis=1) - wo
+    above = 1.0 - below - wo
+    return first - np.sum(wo * xo * (below - above), axis=1)
+
+
+def energy_score_sample(y: np.ndarray, x: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
+    """A plain energy score of weighted samples (rows of ``x`` (n, m, d), weights ``w`` (n, m) normalised per row)
+    at ``y`` (n, d): sum_i w_i ||x_i - y|| - 0.5 sum_ij w_i w_j ||x_i - x_j||."""
+    xs = np.asarray(x, dtype=np.float64)
+    ws = np.full(xs.shape[:2], 1.0 / xs.shape[1]) if w is None else np.asarray(w, dtype=np.float64)
+    ws = ws / ws.sum(axis=1, keepdims=True)
+    first = np.sum(ws * np.linalg.norm(xs - np.asarray(y, dtype=np.float64)[:, None, :], axis=2), axis=1)
+    pair = np.linalg.norm(xs[:, :, None, :] - xs[:, None, :, :], axis=3)
+    return first - 0.5 * np.einsum("ni,nij,nj->n", ws, pair, ws)
 
 
 def test_crps_normal_matches_its_closed_form_and_scoringrules() -> None:
@@ -24,29 +50,42 @@ def test_crps_normal_against_a_large_sample() -> None:
     rng = np.random.default_rng(1)
     y, mu, s = np.array([0.3, -2.0, 1.0]), np.array([0.0, 0.5, 1.0]), np.array([1.0, 0.7, 2.0])
     draws = mu[:, None] + s[:, None] * rng.standard_normal((3, 200_000))
-    np.testing.assert_allclose(sc.crps_sample(y, draws), sc.crps_normal(y, mu, s), rtol=5e-3)
+    np.testing.assert_allclose(crps_sample(y, draws), sc.crps_normal(y, mu, s), rtol=5e-3)
 
 
 def test_crps_of_a_point_mass_is_the_absolute_error() -> None:
     np.testing.assert_allclose(sc.crps_normal([1.5, -2.0], [0.0, 0.0], [0.0, 0.0]), [1.5, 2.0])
-    np.testing.assert_allclose(sc.crps_sample([1.5], [[0.0, 0.0]]), [1.5])
+    # a sample of two members on one pose is a point mass
+    cx, cy, ch, _ = sc.sample_scores(np.zeros((2, 3)), np.ones(2), [[1.5, -2.0, 0.3]])
+    np.testing.assert_allclose([cx[0], cy[0], ch[0]], [1.5, 2.0, 0.3], rtol=1e-15)
 
 
-def test_weighted_sample_crps_and_energy_score_match_scoringrules() -> None:
+def test_weighted_sample_scores_match_scoringrules() -> None:
+    """The compiled scores of one weighted pose sample at several truths against scoringrules' ensemble scores
+    (the energy form), and the plain sums of this module against them too."""
     rng = np.random.default_rng(2)
-    y, x, w = rng.normal(size=30), rng.normal(size=(30, 64)), rng.uniform(size=(30, 64))
-    ref = sr.crps_ensemble(y, x, m_axis=-1, ens_w=w, estimator="nrg")
-    np.testing.assert_allclose(sc.crps_sample(y, x, w), ref, rtol=1e-10, atol=1e-12)
-    y2, x2 = rng.normal(size=(30, 2)), rng.normal(size=(30, 64, 2))
-    ref2 = sr.es_ensemble(y2, x2, m_axis=-2, v_axis=-1, ens_w=w)
-    np.testing.assert_allclose(sc.energy_score_sample(y2, x2, w), ref2, rtol=1e-10, atol=1e-12)
+    pts = np.column_stack([rng.normal(size=64), rng.normal(size=64), rng.uniform(-0.5, 0.5, 64)])
+    w = rng.uniform(size=64)
+    truth = np.column_stack([rng.normal(size=30), rng.normal(size=(30, 2))])
+    cx, cy, _, es = sc.sample_scores(pts, w, truth)
+    wk = np.broadcast_to(w, (30, 64))
+    for axis, got in ((0, cx), (1, cy)):
+        members = np.broadcast_to(pts[:, axis], (30, 64))
+        ref = sr.crps_ensemble(truth[:, axis], members, m_axis=-1, ens_w=wk, estimator="nrg")
+        np.testing.assert_allclose(got, ref, rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(crps_sample(truth[:, axis], members, wk), ref, rtol=1e-10, atol=1e-12)
+    members2 = np.broadcast_to(pts[None, :, :2], (30, 64, 2))
+    ref2 = sr.es_ensemble(truth[:, :2], members2, m_axis=-2, v_axis=-1, ens_w=wk)
+    np.testing.assert_allclose(es, ref2, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(energy_score_sample(truth[:, :2], members2, wk), ref2, rtol=1e-10, atol=1e-12)
 
 
 def test_energy_score_of_a_point_mass_is_the_euclidean_error() -> None:
     y = np.array([[3.0, 4.0], [0.0, 0.0]])
     mu = np.array([[0.0, 0.0], [1.0, -1.0]])
     np.testing.assert_allclose(sc.energy_score_gaussian(y, mu, np.zeros((2, 2, 2))), [5.0, np.sqrt(2.0)], rtol=1e-12)
-    np.testing.assert_allclose(sc.energy_score_sample(y, mu[:, None, :]), [5.0, np.sqrt(2.0)], rtol=1e-12)
+    _, _, _, es = sc.sample_scores(np.zeros((1, 3)), np.ones(1), np.column_stack([y - mu, np.zeros(2)]))
+    np.testing.assert_allclose(es, [5.0, np.sqrt(2.0)], rtol=1e-12)
 
 
 def test_gaussian_energy_score_against_a_large_sample() -> None:
@@ -103,7 +142,7 @@ def test_score_metrics_use_stored_sample_scores_when_present() -> None:
     assert (lo, hi) == ("crps_heading_ci_low_rad", "crps_heading_ci_high_rad")
 
 
-def test_compiled_sample_scores_equal_the_reference_sums() -> None:
+def test_compiled_sample_scores_equal_the_plain_sums() -> None:
     rng = np.random.default_rng(5)
     pts = np.column_stack([rng.normal(size=64), rng.normal(size=64), rng.uniform(-np.pi, np.pi, 64)])
     w = rng.uniform(size=64)
@@ -112,42 +151,18 @@ def test_compiled_sample_scores_equal_the_reference_sums() -> None:
     k = truth.shape[0]
     wk = np.broadcast_to(w, (k, 64))
     ref = (
-        sc.crps_sample(truth[:, 0], np.broadcast_to(pts[:, 0], (k, 64)), wk),
-        sc.crps_sample(truth[:, 1], np.broadcast_to(pts[:, 1], (k, 64)), wk),
-        sc.crps_sample(np.zeros(k), sc.wrap_angle(pts[None, :, 2] - truth[:, 2:3]), wk),
-        sc.energy_score_sample(truth[:, :2], np.broadcast_to(pts[None, :, :2], (k, 64, 2)), wk),
+        crps_sample(truth[:, 0], np.broadcast_to(pts[:, 0], (k, 64)), wk),
+        crps_sample(truth[:, 1], np.broadcast_to(pts[:, 1], (k, 64)), wk),
+        crps_sample(np.zeros(k), wrap_angle(pts[None, :, 2] - truth[:, 2:3]), wk),
+        energy_score_sample(truth[:, :2], np.broadcast_to(pts[None, :, :2], (k, 64, 2)), wk),
     )
     for a, b in zip(got, ref, strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-10, atol=1e-12)
 
 
-def _pairwise_model(v: list[float]) -> float:
-    """numpy's documented pairwise order (halves split at a multiple of 8, leaves of at most 128 summed in 8 lanes
-    combined as a tree, under 8 in order), in Python floats: the order the compiled sum must follow exactly."""
-    n = len(v)
-    if n < 8:
-        s = 0.0
-        for x in v:
-            s += x
-        return s
-    if n <= 128:
-        r = v[:8]
-        i = 8
-        while i < n - n % 8:
-            r = [r[j] + v[i + j] for j in range(8)]
-            i += 8
-        s = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
-        for x in v[i:]:
-            s += x
-        return s
-    half = n // 2
-    half -= half % 8
-    return _pairwise_model(v[:half]) + _pairwise_model(v[half:])
-
-
 def test_compiled_gaussian_energy_term_equals_the_numpy_mean() -> None:
-    # the numpy form of the compiled first term, and libm's hypot (the form before), within rounding: numpy's
-    # reductions and SIMD loops are chosen per CPU, so against numpy the test holds a tolerance, not the bits
+    # the compiled first term against its numpy form, with the norm as sqrt and as libm's hypot: numpy's
+    # reductions and SIMD loops are chosen per CPU, so the test holds a tolerance, not the bits
     rng = np.random.default_rng(7)
     n = 3001
     d = rng.normal(size=(n, 2)) * rng.lognormal(size=(n, 1))
@@ -164,11 +179,3 @@ def test_compiled_gaussian_energy_term_equals_the_numpy_mean() -> None:
     # a mean of m positive terms: numpy's pairwise sum is within (log2 m + 2) eps relative, so 1e-13 either side
     np.testing.assert_allclose(got, expected, rtol=1e-13, atol=0.0)
     np.testing.assert_allclose(got, np.mean(np.hypot(px, py), axis=1), rtol=1e-13, atol=0.0)
-    eps = np.finfo(np.float64).eps
-    for m in (1, 7, 8, 9, 127, 128, 129, 300, 1030):
-        v = rng.normal(size=m) * 10.0 ** rng.integers(-8, 8, size=m)
-        # the summation order, exactly (our kernel against our model of it); np.sum within a pairwise sum's error
-        # bound, (log2 m + 8) eps sum |v|, as numpy's reduction kernels may differ per CPU
-        assert sc.pairwise_sum(v, 0, m) == _pairwise_model(v.tolist())
-        bound = (math.log2(m) + 8) * eps * float(np.sum(np.abs(v)))
-        assert abs(sc.pairwise_sum(v, 0, m) - float(np.sum(v))) <= bound

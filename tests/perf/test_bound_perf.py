@@ -1,6 +1,6 @@
 """pytest-benchmark: the bound's laser information from one traversal per beam against differencing seven
-casts per scan (issue 24, item 3), on every 10th scan of ``office`` and ``lap`` at their true poses; and the whole
-bound (both rows) against the seven-cast reference with the numpy covariance recursion."""
+casts per scan, on every 10th scan of ``office`` and ``lap`` at their true poses; and the whole bound (both rows)
+against the seven-cast reference with the numpy covariance recursion."""
 
 from __future__ import annotations
 

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from locbench.datasets.dataset import OccupancyGrid
+from locbench.core.grid import OccupancyGrid
 from locbench.raycast.cast import cast_scan
 
 RES = 0.05

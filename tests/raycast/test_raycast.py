@@ -1,13 +1,17 @@
-"""The numba ray caster against analytic cases and the slow numpy reference."""
+"""The numba ray caster against analytic cases and a plain sampled reference."""
 
 from __future__ import annotations
 
 import math
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from locbench.datasets.dataset import OccupancyGrid
+from locbench.core.grid import OccupancyGrid
 from locbench.datasets.synthetic.scenarios import office_world
 from locbench.raycast import _sectors as _raycast_sectors
 from locbench.raycast import cast as raycast
@@ -15,7 +19,6 @@ from locbench.raycast.cast import (
     FIELD_OCCUPIED,
     JUMP_UNIT_CELLS,
     cast_rays,
-    cast_rays_reference,
     cast_scan,
     march_field,
     march_sector_field,
@@ -29,6 +32,40 @@ def box_grid(rows: int = 40, cols: int = 80) -> np.ndarray:
     occ = np.zeros((rows, cols), dtype=bool)
     occ[0, :] = occ[-1, :] = occ[:, 0] = occ[:, -1] = True
     return occ
+
+
+def sampled_ranges(
+    occupied: np.ndarray,
+    resolution: float,
+    origin_xy: tuple[float, float],
+    poses: np.ndarray,
+    angles: np.ndarray,
+    max_range: float,
+    step_fraction: float = 0.05,
+) -> np.ndarray:
+    """A plain reference of :func:`cast_rays`, its arguments (poses (N, 3), angles (B,)) and its ranges (N, B), m.
+
+    Samples each beam every ``step_fraction * resolution`` metres and returns the distance of the first sample
+    inside an occupied cell, so it overestimates the exact range by less than one step and may miss a cell that a
+    beam only clips at a corner.
+    """
+    occ = np.asarray(occupied, dtype=bool)
+    p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    a = np.asarray(angles, dtype=np.float64).reshape(-1)
+    rows, cols = occ.shape
+    step = step_fraction * resolution
+    s = np.arange(0.0, max_range + step, step)
+    s = s[s <= max_range]
+    th = p[:, 2:3] + a[None, :]  # (N, B)
+    x = p[:, 0, None, None] + np.cos(th)[..., None] * s  # (N, B, S)
+    y = p[:, 1, None, None] + np.sin(th)[..., None] * s
+    j = np.floor((x - origin_xy[0]) / resolution).astype(np.int64)
+    i = np.floor((y - origin_xy[1]) / resolution).astype(np.int64)
+    inside = (i >= 0) & (i < rows) & (j >= 0) & (j < cols)
+    hit = np.zeros(x.shape, dtype=bool)
+    hit[inside] = occ[i[inside], j[inside]]
+    first = np.argmax(hit, axis=-1)
+    return np.where(hit.any(axis=-1), s[first], np.inf)
 
 
 METHODS = ["march", "dda"]
@@ -97,7 +134,7 @@ def test_agrees_with_reference_on_random_poses_in_a_real_grid() -> None:
     xy = grid.cell_centers(cells) + rng.uniform(-0.02, 0.02, (60, 2))
     poses = np.column_stack([xy, rng.uniform(-math.pi, math.pi, 60)])
     angles = np.linspace(-2.0, 2.0, 41)
-    ref = cast_rays_reference(grid.occupied(), RES, grid.origin[:2], poses, angles, 6.0, step_fraction=0.05)
+    ref = sampled_ranges(grid.occupied(), RES, grid.origin[:2], poses, angles, 6.0, step_fraction=0.05)
     for method in METHODS:  # the reference is slow: one sampling for both kernels
         fast = cast_scan(grid, poses, angles, 6.0, method=method)
         both = np.isfinite(fast) & np.isfinite(ref)
@@ -117,6 +154,61 @@ def test_parallel_and_serial_kernels_are_identical(method: str) -> None:
     a = cast_rays(grid.occupied(), RES, grid.origin[:2], poses, angles, 8.0, parallel=False, method=method)
     b = cast_rays(grid.occupied(), RES, grid.origin[:2], poses, angles, 8.0, parallel=True, method=method)
     np.testing.assert_array_equal(a, b)
+
+
+def test_serial_and_threaded_gradient_builds_are_identical() -> None:
+    """The bound's one traversal per beam (ranges, derivatives and the smooth flags) from both builds of its
+    kernel, on random sensor poses in the office grid."""
+    grid = office_world().occupancy_grid(RES)
+    rng = np.random.default_rng(4)
+    n = 200
+    sensors = np.column_stack([rng.uniform(0.5, 19.5, n), rng.uniform(0.5, 14.5, n), rng.uniform(-3, 3, n)])
+    headings = sensors[:, 2] - 0.05
+    angles = np.linspace(-2.1, 2.1, 61)
+    cells = raycast.face_cells(grid.occupied())
+    outs = []
+    for kernel in (raycast._gradients_serial, raycast._gradients_threads):
+        ranges, grads, smooth = np.empty((n, 61)), np.zeros((n, 61, 3)), np.zeros((n, 61), dtype=bool)
+        kernel(cells, RES, 0.0, 0.0, sensors, headings, 0.1, -0.02, angles, 8.0, 1e-5, ranges, grads, smooth)
+        outs.append((ranges, grads, smooth))
+    for a, b in zip(*outs, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert outs[0][2].mean() > 0.5  # most beams take the closed form
+
+
+_BUILD_SCRIPT = """
+import sys
+import numba
+import numpy as np
+from locbench.raycast import cast
+occ = np.zeros((30, 30), dtype=bool)
+occ[0] = occ[-1] = occ[:, 0] = occ[:, -1] = True
+poses = np.array([[0.7, 0.8, 0.3], [1.0, 0.4, -2.0]])
+kernel = cast._dda_threads if sys.argv[1] == "threads" else cast._dda_serial
+ranges = kernel(occ, 0.05, 0.0, 0.0, poses, np.linspace(-3.0, 3.0, 50), 5.0)
+try:
+    numba.threading_layer()
+    threads = True
+except ValueError:  # not initialized: nothing ran on numba's threads
+    threads = False
+print(threads, repr(float(ranges.sum())))
+"""
+
+
+def test_the_two_builds_of_a_kernel_are_cached_apart(tmp_path: Path) -> None:
+    """numba keys its on-disk cache on a function's name and code, not on ``parallel``: with the threaded build
+    cached first, the serial build, compiled and then loaded from the cache in fresh processes, starts no thread
+    and gives the threaded build's ranges."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    out = [
+        subprocess.run(
+            [sys.executable, "-c", _BUILD_SCRIPT, build], env=env, capture_output=True, text=True, check=True
+        ).stdout.split()
+        for build in ("threads", "serial", "serial")
+    ]
+    assert [o[0] for o in out] == ["True", "False", "False"]
+    assert out[0][1] == out[1][1] == out[2][1]
+    assert any(tmp_path.rglob("*_dda_rays_threads*.nbi")) and any(tmp_path.rglob("*_dda_rays-*.nbi"))
 
 
 def test_cast_scan_single_pose_shape_and_bad_inputs() -> None:

@@ -9,7 +9,8 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from locbench.evaluate.aggregate import mean_over_runs, waypoint_stats
-from locbench.evaluate.metrics import CONFIDENCE, PARTICLES_MEAN, POSE_DOF, chi2_band, estimate_at
+from locbench.evaluate.hold import estimate_at
+from locbench.evaluate.metrics import CONFIDENCE, PARTICLES_MEAN, POSE_DOF, chi2_band
 from locbench.present.experiments import Experiment, sections_for
 from locbench.report import figures as fg
 from locbench.report import interactive as ia
