@@ -1,9 +1,18 @@
 """Lazy registries of filters and datasets.
 
-Entries are import paths (``"locbench.filters.ekf_landmarks:LandmarkEKF"``), imported only when a
-filter or dataset is made, so a missing optional dependency shows as "unavailable: install ..."
-instead of an ImportError at start-up. Third-party packages can add entries through the
-``locbench.filters`` and ``locbench.datasets`` entry-point groups.
+The package's own entries register themselves where they are defined: a class of a module of
+:mod:`locbench.filters` (or of :mod:`locbench.datasets` and its sub-packages) whose own body sets ``id`` is the
+filter (dataset) of that id, found by walking the package's modules (pkgutil; modules named ``_*`` are private and
+not searched). No module is named here, so adding a filter or a recorded format is adding its module. The package
+is searched on the first lookup that needs it; a lookup by id first tries the modules named after the id, so
+``make_filter("odometry")`` imports one filter module, not all. A module that does not import for a missing
+optional dependency is an entry under its module name, unavailable with the reason; two classes declaring one id
+are an error naming both.
+
+Entries are import paths (``"locbench.filters.ekf_landmarks:LandmarkEKF"``), and a class's optional dependencies
+(its ``requires_modules``) are checked when it is made, so a missing one shows as "unavailable: install ..."
+instead of an ImportError at start-up. Third-party packages add entries through the ``locbench.filters`` and
+``locbench.datasets`` entry-point groups; :meth:`Registry.register` adds one by hand (tests).
 
 A plugin (an entry of those groups) is code locbench does not control: before its module is imported here,
 it is imported and its class checked (:func:`check_class`) in a child Python process under a time limit
@@ -11,7 +20,8 @@ it is imported and its class checked (:func:`check_class`) in a child Python pro
 which reports each as it is done. A plugin whose import raises anything (not only ImportError), hangs,
 exits or crashes, or whose class is not what its group expects, is *unavailable* with its entry point and
 the reason on one line (:meth:`Registry.load_error`): ``locbench list`` shows it so, making it raises
-:class:`PluginUnavailable`, and every other entry works as before.
+:class:`PluginUnavailable`, and every other entry works as before. An id the package declares wins over a
+plugin's.
 """
 
 from __future__ import annotations
@@ -21,6 +31,7 @@ import importlib
 import importlib.metadata
 import json
 import os
+import pkgutil
 import select
 import subprocess
 import sys
@@ -56,6 +67,11 @@ class Entry:
     distribution_version: str = ""
     #: Registered through an entry-point group (a plugin: imported in a child process first).
     plugin: bool = False
+    #: Declared by a class of the registry's package (found by searching it).
+    declared: bool = False
+    #: Why the declaring module did not import when the package was searched (a missing optional dependency):
+    #: the entry, named after the module, is unavailable with this reason ("" when it imported).
+    import_error: str = ""
 
     def origin(self) -> str:
         """``entry point NAME = module:attr (distribution version)``: where a plugin came from, for messages."""
@@ -83,14 +99,26 @@ def plugin_import_timeout() -> float:
     return value if value > 0 and value == value else PLUGIN_IMPORT_TIMEOUT_S
 
 
-class Registry(Generic[T]):
-    """An id -> lazily imported class mapping."""
+class DuplicateIdError(ValueError):
+    """Two classes of the package declare one id."""
 
-    def __init__(self, kind: str, group: str) -> None:
+
+class Registry(Generic[T]):
+    """An id -> lazily imported class mapping: the classes its package declares, plugins and hand registrations."""
+
+    def __init__(self, kind: str, group: str, package: str) -> None:
         self.kind = kind
         self.group = group
+        #: The package whose modules declare the built-in entries (``id`` on a class).
+        self.package = package
         self._entries: dict[str, Entry] = {}
         self._plugins_loaded = False
+        #: id -> entry of every class the package's searched modules declare, in the order they were found
+        self._declared: dict[str, Entry] = {}
+        #: the package's modules (names), once listed; those searched so far; whether all were
+        self._modules: list[str] | None = None
+        self._searched: set[str] = set()
+        self._discovered = False
         #: id -> why the plugin does not load ("" when it does), from the probing child process
         self._probed: dict[str, str] = {}
 
@@ -102,17 +130,19 @@ class Registry(Generic[T]):
         requires_modules: tuple[str, ...] = (),
         install_hint: str = "",
     ) -> None:
-        """Add an entry; re-registering an id replaces it."""
+        """Add an entry by hand; re-registering an id replaces it (a declared one too, also when the package is
+        searched later)."""
         if ":" not in entry_point:
             raise ValueError(f"entry point {entry_point!r} must be 'module:attribute'")
         self._entries[id] = Entry(id, entry_point, summary, requires_modules, install_hint)
 
     def unregister(self, id: str) -> None:
+        self._discover()  # a later search must not bring it back
         self._entries.pop(id, None)
 
     def snapshot(self) -> dict[str, Entry]:
         """A copy of the entries (tests restore it so that test-only registrations don't leak)."""
-        self._load_plugins()
+        self._load_all()
         return dict(self._entries)
 
     def restore(self, snap: dict[str, Entry]) -> None:
@@ -124,6 +154,103 @@ class Registry(Generic[T]):
         self._entries = {k: e for k, e in self._entries.items() if not e.plugin}
         self._plugins_loaded = False
         self._probed.clear()
+
+    # --- the package's own entries: classes that declare an id -------------------------------------------------
+
+    def _package_modules(self) -> list[str]:
+        """The names of the package's public modules, its sub-packages' included (walking imports the sub-packages,
+        not the modules)."""
+        if self._modules is None:
+            pkg = importlib.import_module(self.package)
+            prefix = pkg.__name__ + "."
+            self._modules = [
+                m.name
+                for m in pkgutil.walk_packages(pkg.__path__, prefix)
+                if not any(part.startswith("_") for part in m.name[len(prefix) :].split("."))
+            ]
+        return self._modules
+
+    def _search(self, module_name: str) -> None:
+        """Register every class ``module_name`` defines whose own body sets a non-empty ``id``.
+
+        A module that does not import because a module outside the package's top-level package is missing (an
+        optional dependency), or that raises :class:`DependencyNotInstalled`, becomes an entry under its own name,
+        unavailable with the reason; any other failure is a bug of ours and raises.
+        """
+        if module_name in self._searched:
+            return
+        self._searched.add(module_name)
+        try:
+            module = importlib.import_module(module_name)
+        except ImportError as exc:
+            if (exc.name or "").split(".")[0] == self.package.split(".")[0]:
+                raise
+            reason = f"unavailable: {exc}; install with: pip install 'locbench[all]'"
+            self._declare(self._unreadable(module_name, reason))
+            return
+        except DependencyNotInstalled as exc:
+            self._declare(self._unreadable(module_name, f"unavailable: {exc}"))
+            return
+        for obj in list(vars(module).values()):
+            if not (isinstance(obj, type) and obj.__module__ == module_name):
+                continue  # imported from elsewhere: its own module declares it
+            ident = vars(obj).get("id")  # inherited ids do not count: a subclass declares its own or none
+            if isinstance(ident, str) and ident:
+                self._declare(Entry(ident, f"{module_name}:{obj.__qualname__}", declared=True))
+
+    @staticmethod
+    def _unreadable(module_name: str, reason: str) -> Entry:
+        return Entry(module_name.rsplit(".", 1)[1], f"{module_name}:", declared=True, import_error=one_line(reason))
+
+    def _declare(self, entry: Entry) -> None:
+        before = self._declared.get(entry.id)
+        if before is not None and before.entry_point != entry.entry_point:
+            raise DuplicateIdError(
+                f"{self.kind} id {entry.id!r} is declared twice: by {before.entry_point} and {entry.entry_point}"
+            )
+        self._declared[entry.id] = entry
+        self._entries.setdefault(entry.id, entry)  # a registration made by hand before the search wins
+
+    def _discover(self) -> None:
+        """Search every module of the package (once)."""
+        if self._discovered:
+            return
+        for name in self._package_modules():
+            self._search(name)
+        self._discovered = True
+
+    def _search_named(self, id: str) -> None:
+        """Search the package's modules named ``id`` (a filter's module is usually named after it): a lookup by id
+        then imports one module instead of every one."""
+        if not self._discovered:
+            for name in self._package_modules():
+                if name.rsplit(".", 1)[1] == id:
+                    self._search(name)
+
+    def _load_all(self) -> None:
+        """The package's entries, then the plugins (which cannot take an id the package declares)."""
+        self._discover()
+        self._load_plugins()
+
+    def package_ids(self) -> list[str]:
+        """The ids the package's own classes declare (not a plugin's, not one registered by hand; one replaced by
+        hand is still listed), by the classes' ``order`` (0 without one), then by id; an entry whose module does
+        not import here comes after the others."""
+        self._discover()
+
+        def key(ident: str) -> tuple[int, float, str]:
+            cls = self.class_of(ident)
+            return (0, float(getattr(cls, "order", 0)), ident) if cls is not None else (1, 0.0, ident)
+
+        return sorted((i for i in self._declared if i in self._entries), key=key)
+
+    def class_of(self, id: str) -> type[T] | None:
+        """The class of ``id`` when its module imports here, whether or not the optional dependencies the class
+        declares are installed (a class can be read without them: its declarations); else None."""
+        cls, _ = self._import(self.entry(id))
+        return cls
+
+    # --- plugins ---------------------------------------------------------------------------------------------
 
     def _load_plugins(self) -> None:
         if self._plugins_loaded:
@@ -142,11 +269,14 @@ class Registry(Generic[T]):
 
     def ids(self) -> list[str]:
         """Every registered id, sorted."""
-        self._load_plugins()
+        self._load_all()
         return sorted(self._entries)
 
     def entry(self, id: str) -> Entry:
-        self._load_plugins()
+        if id not in self._entries:
+            self._search_named(id)
+        if id not in self._entries:
+            self._load_all()
         try:
             return self._entries[id]
         except KeyError:
@@ -160,8 +290,10 @@ class Registry(Generic[T]):
             return e.summary
         cls, _ = self._import(e)
         described = str(getattr(cls, "description", "") or "") if cls is not None else ""
+        if described or not e.plugin:
+            return described or f"{e.entry_point.split(':')[0]} (its class cannot be read here)"
         origin = f" ({e.distribution} {e.distribution_version})" if e.distribution else ""
-        return described or f"plugin from {e.entry_point}{origin}"
+        return f"plugin from {e.entry_point}{origin}"
 
     def missing_dependency(self, id: str) -> str | None:
         """None when the entry's optional dependencies import, else 'unavailable: install ...'.
@@ -180,6 +312,8 @@ class Registry(Generic[T]):
 
     def _import(self, e: Entry) -> tuple[type[T] | None, str | None]:
         """The entry's class, or None and why it does not load (a missing optional dependency, a broken plugin)."""
+        if e.import_error:
+            return None, e.import_error
         if e.plugin:
             broken = self.load_error(e.id)
             if broken is not None:
@@ -187,6 +321,8 @@ class Registry(Generic[T]):
         module_name, attr = e.entry_point.split(":", 1)
         try:
             module = importlib.import_module(module_name)
+        except DependencyNotInstalled as exc:  # a module that names its missing dependency itself
+            return None, one_line(f"unavailable: {e.origin() + ': ' if e.plugin else ''}{exc}")
         except ImportError as exc:
             missing = getattr(exc, "name", None) or ""
             if missing.split(".")[0] == "locbench" and not e.plugin:
@@ -408,147 +544,8 @@ def _signal_name(sig: int) -> str:
         return str(sig)
 
 
-FILTERS: Registry[Any] = Registry("filter", "locbench.filters")
-DATASETS: Registry[Any] = Registry("dataset", "locbench.datasets")
-
-FILTERS.register(
-    "odometry",
-    "locbench.filters.odometry:OdometryFilter",
-    "dead reckoning from odometry increments; the baseline row of every table",
-)
-FILTERS.register(
-    "ekf_landmarks",
-    "locbench.filters.ekf_landmarks:LandmarkEKF",
-    "EKF, wheel-encoder motion model and range-bearing landmarks, optional GPS fixes (reports 003, 001)",
-)
-
-FILTERS.register(
-    "ukf_landmarks",
-    "locbench.filters.ukf_landmarks:LandmarkUKF",
-    "unscented KF (filterpy, Merwe sigma points) with ekf_landmarks' motion, landmark, range and fix models",
-    requires_modules=("filterpy",),
-    install_hint="pip install 'locbench[filterpy]'",
-)
-FILTERS.register(
-    "ekf_lines",
-    "locbench.filters.ekf_lines:LineEKF",
-    "EKF on a map of lines, chi-square gated association, Joseph form (report 002)",
-)
-FILTERS.register(
-    "ekf_icp",
-    "locbench.filters.ekf_icp:IcpEKF",
-    "EKF whose update is ICP between the scan and a scan ray-cast from the occupancy grid (report 000)",
-)
-FILTERS.register(
-    "kf_linear",
-    "locbench.filters.kf_linear:LinearKF",
-    "linear Kalman filter (filterpy) with a scan-database pose measurement (report 004)",
-    requires_modules=("filterpy",),
-    install_hint="pip install 'locbench[filterpy]'",
-)
-FILTERS.register(
-    "pf",
-    "locbench.filters.pf:ParticleFilter",
-    "Monte Carlo localization: encoder motion model, landmark and laser likelihood-field models, augmented MCL",
-)
-FILTERS.register(
-    "gtsam_fls",
-    "locbench.filters.gtsam_fls:GtsamFixedLagSmoother",
-    "gtsam fixed-lag smoother (incremental or batch): odometry between-factors, bearing-range factors, fixes",
-    requires_modules=("gtsam",),
-    install_hint="pip install 'locbench[gtsam]'",
-)
-
-#: The built-in filters in registration order (the baseline first): every suite's "every filter".
-BUILTIN_FILTERS: tuple[str, ...] = tuple(FILTERS._entries)
-
-DATASETS.register(
-    "room",
-    "locbench.datasets.synthetic.scenarios:RoomScenario",
-    "report 003's 7 m x 2 m room: 4 landmarks, start + 5 waypoints, Kinect-like sensor",
-)
-DATASETS.register(
-    "office",
-    "locbench.datasets.synthetic.scenarios:OfficeScenario",
-    "one office floor with walls, doors, landmarks and a waypoint tour; every sensor",
-)
-DATASETS.register(
-    "tiny_line",
-    "locbench.datasets.synthetic.scenarios:TinyLineScenario",
-    "a 10 s straight drive past 3 landmarks (conformance checks)",
-)
-DATASETS.register(
-    "tiny_circle",
-    "locbench.datasets.synthetic.scenarios:TinyCircleScenario",
-    "a circle whose heading crosses +-pi, 4 landmarks (conformance checks)",
-)
-
-DATASETS.register(
-    "lap",
-    "locbench.datasets.synthetic.lap:LapScenario",
-    "report 000's office lap: 0.05 m grid, rectangular lap, Hokuyo-like laser, people not on the map",
-)
-DATASETS.register(
-    "line_room",
-    "locbench.datasets.synthetic.line_room:LineRoomScenario",
-    "report 002's polygonal rooms for the line-map EKF",
-)
-DATASETS.register(
-    "scan_grid",
-    "locbench.datasets.synthetic.scan_grid:ScanGridScenario",
-    "report 004's scan database at grid poses, translate-or-rotate commands of 1 s",
-)
-DATASETS.register(
-    "landmark_geometry",
-    "locbench.datasets.synthetic.landmark_geometry:LandmarkGeometryScenario",
-    "report 001's paths x landmark layouts, landmarks detected by a 151-ray laser; GPS variant",
-)
-
-DATASETS.register(
-    "mrclam",
-    "locbench.datasets.recorded.mrclam:MrclamDataset",
-    "UTIAS MRCLAM (recorded): one robot of a dataset, (v, omega) odometry, camera landmark sightings, Vicon truth",
-)
-DATASETS.register(
-    "lost_in_the_woods",
-    "locbench.datasets.recorded.lost_in_the_woods:LostInTheWoods",
-    "Barfoot's Lost in the Woods (recorded): v/omega at 10 Hz, range-bearing to 17 tubes, Vicon truth",
-)
-DATASETS.register(
-    "intel",
-    "locbench.datasets.recorded.intel:IntelDataset",
-    "Intel Research Lab (recorded CARMEN log): odometry, 180-beam laser, grid and lines from the GMapping "
-    "reference, Kuemmerle relations",
-)
-
-DATASETS.register(
-    "radish",
-    "locbench.datasets.recorded.radish:RadishDataset",
-    "Radish corrected CARMEN logs (recorded, any NAME-corrected.log.gz): laser, map and SLAM reference; raw odometry "
-    "for intel, aces, freiburg-079, semi-synthetic elsewhere",
-)
-DATASETS.register(
-    "librsf",
-    "locbench.datasets.recorded.librsf:LibrsfDataset",
-    "libRSF ranging sets (Pfeifer, TU Chemnitz): Indoor UWB (real) and M3500 / W3500 with non-Gaussian range noise",
-)
-DATASETS.register(
-    "plaza",
-    "locbench.datasets.recorded.plaza:PlazaDataset",
-    "CMU Plaza range-only runs (recorded, Djugash et al. 2009): odometry, radio ranges to 4 beacons, GPS truth",
-)
-DATASETS.register(
-    "rosbag",
-    "locbench.datasets.recorded.rosbag:RosbagDataset",
-    "a user's ROS 1 / ROS 2 bag: nav_msgs/Odometry, sensor_msgs/LaserScan, a truth pose topic, a map_server map",
-    requires_modules=("rosbags",),
-    install_hint="pip install 'locbench[ros]'",
-)
-DATASETS.register(
-    "textlog",
-    "locbench.datasets.recorded.textlog:TextlogDataset",
-    "a user's plain-text log (locbench-textlog v1): JSON-lines events, TUM truth, map_server map, landmark files",
-)
+FILTERS: Registry[Any] = Registry("filter", "locbench.filters", "locbench.filters")
+DATASETS: Registry[Any] = Registry("dataset", "locbench.datasets", "locbench.datasets")
 
 # --- making things from specs -------------------------------------------------------------------
 

@@ -9,6 +9,11 @@ A suite is also readable from a TOML file (``locbench run --suite my_suite.toml`
     filters = ["odometry", "ekf_landmarks[association=nearest]"]
     datasets = ["room", "office[kidnap_m=1]"]
     seeds = 10
+
+"Every filter" is read from the registry: the package's filters that declare themselves compared
+(``Filter.compared``), in their declared ``order``, each with the configurations its class declares for the
+main comparison and the kidnap protocol (:func:`all_filters`, :func:`comparison_filters`, :func:`kidnap_filters`).
+The suites are made on first use (:data:`SUITES`), so importing this module imports no filter.
 """
 
 from __future__ import annotations
@@ -16,13 +21,15 @@ from __future__ import annotations
 import os
 import stat
 import tomllib
+from collections.abc import Iterator, MutableMapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from locbench.core.errors import ConfigError, UnknownIdError, one_line, shown
 from locbench.core.limits import check_input_file
-from locbench.core.spec import MAX_CONFIGS, Spec, expand_grid, grid_size
-from locbench.registry import BUILTIN_FILTERS
+from locbench.core.spec import MAX_CONFIGS, Spec, expand_grid, format_spec, grid_size
+from locbench.registry import FILTERS
 
 #: Most seeds a block may run (``--max-seeds`` raises it; a suite file's ``seeds`` too).
 MAX_SEEDS = 10_000
@@ -90,26 +97,65 @@ class Suite:
         return Suite(self.name, blocks, self.description)
 
 
-#: Every built-in filter with its default config (the registry's, in its order): the rows of the main comparison.
-ALL_FILTERS = BUILTIN_FILTERS
-#: Each filter with its own source's kidnap policy: 000's inflation rule is built into ekf_icp; pf's
-#: augmented MCL is switched on (003's PF, the default, only resamples), injecting uniform poses (PR
-#: table 8.3) or poses drawn from the sightings (sensor resetting, Lenser & Veloso 2000); the others
-#: have none.
-KIDNAP_FILTERS = (
-    "odometry",
-    "ekf_landmarks",
-    "ukf_landmarks",
-    "ekf_lines",
-    "ekf_icp",
-    "kf_linear",
-    "pf[augmented=true]",
-    # sensor resetting also from pairs of single sightings: recovers on room too (version 5: 5.1 cm office ATE)
-    "pf[augmented=true,inject=sensor,inject_pairs=true]",
-    # KLD-adaptive MCL (Fox 2003) with the same recovery
-    "pf[adaptive=kld,augmented=true,inject=sensor,inject_pairs=true]",
-    "gtsam_fls",
-)
+# --- every filter, from the registry ---------------------------------------------------------------------------
+
+
+def _compared() -> list[tuple[str, Any]]:
+    """The package's filters that the comparing suites run (``Filter.compared``), in declared order, each with its
+    class; None for one whose module does not import here (an optional dependency missing), which is run with its
+    default configuration only."""
+    out: list[tuple[str, Any]] = []
+    for fid in FILTERS.package_ids():
+        cls = FILTERS.class_of(fid)
+        if cls is None or cls.compared:
+            out.append((fid, cls))
+    return out
+
+
+def all_filters() -> tuple[str, ...]:
+    """Every compared filter with its default config, in declared order: the rows of every comparison."""
+    return tuple(fid for fid, _ in _compared())
+
+
+def comparison_filters() -> tuple[str, ...]:
+    """The main comparison's configurations: :func:`all_filters`, then the configurations each filter declares for
+    it (``Filter.comparison_configurations``), in the same order."""
+    compared = _compared()
+    extra = [
+        format_spec(fid, dict(p)) for fid, cls in compared if cls is not None for p in cls.comparison_configurations
+    ]
+    return (*(fid for fid, _ in compared), *extra)
+
+
+def kidnap_filters() -> tuple[str, ...]:
+    """Each compared filter with its own source's kidnap policy (``Filter.kidnap_configurations``, else its kidnap
+    configuration ``Filter.kidnap_params``): 000's inflation rule is built into ekf_icp, pf switches augmented MCL
+    on (003's PF, the default, only resamples), the others have none."""
+    out: list[str] = []
+    for fid, cls in _compared():
+        configs = ({},) if cls is None else cls.kidnap_configurations
+        if configs is None:
+            configs = (cls.kidnap_params,)
+        out += [format_spec(fid, dict(p)) for p in configs]
+    return tuple(out)
+
+
+if TYPE_CHECKING:
+    #: :func:`all_filters` and :func:`kidnap_filters`, read when first asked for (module ``__getattr__``).
+    ALL_FILTERS: tuple[str, ...]
+    KIDNAP_FILTERS: tuple[str, ...]
+
+
+def __getattr__(name: str) -> tuple[str, ...]:
+    """``ALL_FILTERS`` (:func:`all_filters`) and ``KIDNAP_FILTERS`` (:func:`kidnap_filters`), read from the
+    registry when asked for, not when this module is imported."""
+    if name == "ALL_FILTERS":
+        return all_filters()
+    if name == "KIDNAP_FILTERS":
+        return kidnap_filters()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 KIDNAP_DISTANCES_M = (0.5, 1, 2, 4)
 
 #: The recorded datasets of the recorded-data table (MRCLAM Dataset 6, all five robots; Dataset 6 is the default).
@@ -154,138 +200,6 @@ def _kidnap_datasets(base: str) -> tuple[str, ...]:
     return tuple(f"{base}[kidnap_m={d:g}]" for d in KIDNAP_DISTANCES_M)
 
 
-_SUITES: tuple[Suite, ...] = (
-    Suite(
-        "default",
-        # KLD-adaptive MCL (Fox 2003) beside the fixed 1000 particles: does adaptive sampling pay?
-        (Block((*ALL_FILTERS, "ekf_landmarks[association=nearest]", "pf[adaptive=kld]"), ("room", "office"), 20),),
-        "the main comparison: every registered filter on report 003's room and the common office",
-    ),
-    Suite(
-        "room",
-        (Block(("odometry", "ekf_landmarks", "ekf_landmarks[association=nearest]", "pf", "gtsam_fls"), ("room",), 20),),
-        "report 003's experiment: 20 runs through 5 waypoints",
-    ),
-    Suite(
-        "lap",
-        (
-            Block(("odometry", "ekf_icp"), ("lap", "lap[people=0]"), 20),
-            Block(("ekf_icp",), ("lap[kidnap_m=0.3]", "lap[kidnap_m=1]", "lap[kidnap_m=2]"), 10),
-        ),
-        "report 000's lap with people walking, and its small-kidnap claim",
-    ),
-    Suite(
-        "line_room",
-        (
-            Block(
-                (
-                    "odometry",
-                    "ekf_lines[chi2_threshold=1.39]",
-                    "ekf_lines[chi2_threshold=4.61]",
-                    "ekf_lines",
-                    "ekf_lines[chi2_threshold=13.82]",
-                    "ekf_lines[reject_longer=false]",
-                    # the gate sweep with the length check off too (report 002's claims hold for both settings)
-                    "ekf_lines[chi2_threshold=1.39|4.61|13.82,reject_longer=false]",
-                ),
-                ("line_room", "line_room[laser_sigma_m=0.05]"),
-                5,
-            ),
-        ),
-        "report 002's chi-square gate sweep, with the line-length check on and off",
-    ),
-    Suite(
-        "scan_grid",
-        (Block(("odometry", "kf_linear"), ("scan_grid", "scan_grid[mixed_commands=true]"), 10),),
-        "report 004's translate-or-rotate commands against mixed commands",
-    ),
-    Suite(
-        "landmark_geometry",
-        (
-            Block(
-                ("odometry", "ekf_landmarks", "pf", "gtsam_fls"),
-                tuple(f"landmark_geometry[landmarks={n},path={p}]" for p in _LG_PATHS for n in _LG_LAYOUTS),
-                5,
-            ),
-            Block(
-                ("odometry", "ekf_landmarks", "ekf_landmarks[use_pose_fixes=true]"),
-                (
-                    "landmark_geometry[gps=true,initial_offset_m=2]",
-                    "landmark_geometry[gps=true,initial_offset_m=2,landmarks=1]",
-                ),
-                5,
-            ),
-            Block(
-                ("odometry", "ekf_landmarks", "ekf_landmarks[association=nearest]"),
-                ("landmark_geometry[kidnap_m=1]", "landmark_geometry[kidnap_m=2]"),
-                5,
-            ),
-        ),
-        "report 001's paths x landmark layouts, the GPS variant from a wrong start, and kidnaps",
-    ),
-    Suite(
-        "kidnap",
-        (Block(KIDNAP_FILTERS, _kidnap_datasets("room") + _kidnap_datasets("office"), 20),),
-        "the kidnap protocol: every filter with its own recovery policy, D = 0.5, 1, 2, 4 m",
-    ),
-    Suite(
-        "global",
-        (
-            Block(
-                ("pf[augmented=true,init=uniform,use_laser=true]", "pf[augmented=true,init=uniform]"), ("office",), 10
-            ),
-        ),
-        "global localization: the particle filter from a uniform prior over free space",
-    ),
-    Suite(
-        "recorded",
-        (
-            Block((*ALL_FILTERS, "pf[adaptive=kld]"), RECORDED_LANDMARK_DATASETS, 1),
-            # pf's laser model is off by default (003's PF uses landmarks); Intel has only the laser.
-            Block((*ALL_FILTERS, "pf[use_laser=true]"), RECORDED_LASER_DATASETS, 1),
-        ),
-        "every filter on the recorded datasets (skips where data or a map kind is missing): MRCLAM 6 robots 1-5, "
-        "Lost in the Woods, Intel, CMU Plaza 1 and 2, the 11 Radish buildings, the 9 libRSF ranging sets",
-    ),
-    Suite(
-        "consistency",
-        (Block(ALL_FILTERS, MATCHED_DATASETS, 50),),
-        "consistency on the model-matched worlds (simulator noise = the filters' nominal noise): every filter, "
-        "50 seeds (run beside 'all' by nox -s bench)",
-    ),
-    Suite(
-        "pareto",
-        (
-            Block(
-                (
-                    "odometry",
-                    "pf[particles=100|300|1000|3000]",
-                    "ekf_icp[max_iterations=5|10|30|700]",
-                    "gtsam_fls[lag_s=0.5|1|2|4]",
-                    "ekf_landmarks[association=nearest,gate_probability=0.9|0.99|0.999|0.9999]",
-                ),
-                ("office",),
-                5,
-            ),
-        ),
-        "accuracy against runtime: the main cost knob of each filter on office (pf particles, ekf_icp ICP "
-        "iterations, gtsam_fls lag, ekf_landmarks' association gate)",
-    ),
-    # Run by locbench.run.tuning (locbench run --suite tuned), not as blocks: each tunable filter tuned on train seeds
-    # and recordings, then its tuned configuration and its default on the test data (docs/protocols.md, Tuning).
-    Suite(
-        "tuned",
-        (),
-        "every tunable filter tuned (optuna TPE, the same budget each) on room, office and MRCLAM 6 robots 1-3, "
-        "then run on the test seeds 0-19 and robots 4-5 beside its default",
-    ),
-    Suite(
-        "smoke",
-        (Block(("odometry", "ekf_landmarks", "ekf_landmarks[association=nearest]"), ("tiny_line", "tiny_circle"), 2),),
-        "seconds-long sanity run",
-    ),
-)
-
 _SUITES_IN_ALL = (
     "default",
     "lap",
@@ -298,12 +212,192 @@ _SUITES_IN_ALL = (
     "pareto",
 )
 
-SUITES: dict[str, Suite] = {s.name: s for s in _SUITES}
-SUITES["all"] = Suite(
-    "all",
-    tuple(b for name in _SUITES_IN_ALL for b in SUITES[name].blocks),
-    "every experiment: " + ", ".join(_SUITES_IN_ALL) + " (what nox -s bench runs and results/summary holds)",
-)
+
+def _make_suites() -> dict[str, Suite]:
+    """Every named suite, ``all`` (the union of :data:`_SUITES_IN_ALL`) last; what :data:`SUITES` holds."""
+    # long: the suites as one table, a literal per suite
+    every = all_filters()
+    suites = (
+        Suite(
+            "default",
+            (Block(comparison_filters(), ("room", "office"), 20),),
+            "the main comparison: every registered filter on report 003's room and the common office",
+        ),
+        Suite(
+            "room",
+            (
+                Block(
+                    ("odometry", "ekf_landmarks", "ekf_landmarks[association=nearest]", "pf", "gtsam_fls"),
+                    ("room",),
+                    20,
+                ),
+            ),
+            "report 003's experiment: 20 runs through 5 waypoints",
+        ),
+        Suite(
+            "lap",
+            (
+                Block(("odometry", "ekf_icp"), ("lap", "lap[people=0]"), 20),
+                Block(("ekf_icp",), ("lap[kidnap_m=0.3]", "lap[kidnap_m=1]", "lap[kidnap_m=2]"), 10),
+            ),
+            "report 000's lap with people walking, and its small-kidnap claim",
+        ),
+        Suite(
+            "line_room",
+            (
+                Block(
+                    (
+                        "odometry",
+                        "ekf_lines[chi2_threshold=1.39]",
+                        "ekf_lines[chi2_threshold=4.61]",
+                        "ekf_lines",
+                        "ekf_lines[chi2_threshold=13.82]",
+                        "ekf_lines[reject_longer=false]",
+                        # the gate sweep with the length check off too (report 002's claims hold for both settings)
+                        "ekf_lines[chi2_threshold=1.39|4.61|13.82,reject_longer=false]",
+                    ),
+                    ("line_room", "line_room[laser_sigma_m=0.05]"),
+                    5,
+                ),
+            ),
+            "report 002's chi-square gate sweep, with the line-length check on and off",
+        ),
+        Suite(
+            "scan_grid",
+            (Block(("odometry", "kf_linear"), ("scan_grid", "scan_grid[mixed_commands=true]"), 10),),
+            "report 004's translate-or-rotate commands against mixed commands",
+        ),
+        Suite(
+            "landmark_geometry",
+            (
+                Block(
+                    ("odometry", "ekf_landmarks", "pf", "gtsam_fls"),
+                    tuple(f"landmark_geometry[landmarks={n},path={p}]" for p in _LG_PATHS for n in _LG_LAYOUTS),
+                    5,
+                ),
+                Block(
+                    ("odometry", "ekf_landmarks", "ekf_landmarks[use_pose_fixes=true]"),
+                    (
+                        "landmark_geometry[gps=true,initial_offset_m=2]",
+                        "landmark_geometry[gps=true,initial_offset_m=2,landmarks=1]",
+                    ),
+                    5,
+                ),
+                Block(
+                    ("odometry", "ekf_landmarks", "ekf_landmarks[association=nearest]"),
+                    ("landmark_geometry[kidnap_m=1]", "landmark_geometry[kidnap_m=2]"),
+                    5,
+                ),
+            ),
+            "report 001's paths x landmark layouts, the GPS variant from a wrong start, and kidnaps",
+        ),
+        Suite(
+            "kidnap",
+            (Block(kidnap_filters(), _kidnap_datasets("room") + _kidnap_datasets("office"), 20),),
+            "the kidnap protocol: every filter with its own recovery policy, D = 0.5, 1, 2, 4 m",
+        ),
+        Suite(
+            "global",
+            (
+                Block(
+                    ("pf[augmented=true,init=uniform,use_laser=true]", "pf[augmented=true,init=uniform]"),
+                    ("office",),
+                    10,
+                ),
+            ),
+            "global localization: the particle filter from a uniform prior over free space",
+        ),
+        Suite(
+            "recorded",
+            (
+                Block((*every, "pf[adaptive=kld]"), RECORDED_LANDMARK_DATASETS, 1),
+                # pf's laser model is off by default (003's PF uses landmarks); Intel has only the laser.
+                Block((*every, "pf[use_laser=true]"), RECORDED_LASER_DATASETS, 1),
+            ),
+            "every filter on the recorded datasets (skips where data or a map kind is missing): MRCLAM 6 robots 1-5, "
+            "Lost in the Woods, Intel, CMU Plaza 1 and 2, the 11 Radish buildings, the 9 libRSF ranging sets",
+        ),
+        Suite(
+            "consistency",
+            (Block(every, MATCHED_DATASETS, 50),),
+            "consistency on the model-matched worlds (simulator noise = the filters' nominal noise): every filter, "
+            "50 seeds (run beside 'all' by nox -s bench)",
+        ),
+        Suite(
+            "pareto",
+            (
+                Block(
+                    (
+                        "odometry",
+                        "pf[particles=100|300|1000|3000]",
+                        "ekf_icp[max_iterations=5|10|30|700]",
+                        "gtsam_fls[lag_s=0.5|1|2|4]",
+                        "ekf_landmarks[association=nearest,gate_probability=0.9|0.99|0.999|0.9999]",
+                    ),
+                    ("office",),
+                    5,
+                ),
+            ),
+            "accuracy against runtime: the main cost knob of each filter on office (pf particles, ekf_icp ICP "
+            "iterations, gtsam_fls lag, ekf_landmarks' association gate)",
+        ),
+        # Run by locbench.run.tuning (locbench run --suite tuned), not as blocks: each tunable filter tuned on train
+        # seeds and recordings, then its tuned configuration and its default on the test data (docs/protocols.md,
+        # Tuning).
+        Suite(
+            "tuned",
+            (),
+            "every tunable filter tuned (optuna TPE, the same budget each) on room, office and MRCLAM 6 robots 1-3, "
+            "then run on the test seeds 0-19 and robots 4-5 beside its default",
+        ),
+        Suite(
+            "smoke",
+            (
+                Block(
+                    ("odometry", "ekf_landmarks", "ekf_landmarks[association=nearest]"), ("tiny_line", "tiny_circle"), 2
+                ),
+            ),
+            "seconds-long sanity run",
+        ),
+    )
+    out = {s.name: s for s in suites}
+    out["all"] = Suite(
+        "all",
+        tuple(b for name in _SUITES_IN_ALL for b in out[name].blocks),
+        "every experiment: " + ", ".join(_SUITES_IN_ALL) + " (what nox -s bench runs and results/summary holds)",
+    )
+    return out
+
+
+class _Suites(MutableMapping[str, Suite]):
+    """The named suites, made on first use (:func:`_make_suites`): making them reads every filter class."""
+
+    def __init__(self) -> None:
+        self._made: dict[str, Suite] | None = None
+
+    def _suites(self) -> dict[str, Suite]:
+        if self._made is None:
+            self._made = _make_suites()
+        return self._made
+
+    def __getitem__(self, name: str) -> Suite:
+        return self._suites()[name]
+
+    def __setitem__(self, name: str, suite: Suite) -> None:
+        self._suites()[name] = suite
+
+    def __delitem__(self, name: str) -> None:
+        del self._suites()[name]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._suites())
+
+    def __len__(self) -> int:
+        return len(self._suites())
+
+
+#: Every named suite by name (made on first use).
+SUITES: MutableMapping[str, Suite] = _Suites()
 
 
 def get_suite(name: str, max_configs: int = MAX_CONFIGS, max_seeds: int = MAX_SEEDS) -> Suite:

@@ -2,5 +2,7 @@
 
 The dataset contract lives in :mod:`locbench.datasets.dataset`; synthetic worlds and sensors in
 :mod:`locbench.datasets.synthetic`; loaders for recorded datasets in :mod:`locbench.datasets.recorded`.
-Datasets are registered lazily in :mod:`locbench.registry`.
+A builder class registers its dataset by declaring its ``id``
+(:class:`locbench.datasets.dataset.DatasetBuilder`); :mod:`locbench.registry` searches this package's modules on
+first need.
 """

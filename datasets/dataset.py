@@ -514,11 +514,15 @@ class DatasetBuilder(abc.ABC):
     for a seed (the pairing protocol). It does no work in ``__init__``.
     """
 
+    #: The id the dataset is registered under: the registry finds every class of a module of
+    #: :mod:`locbench.datasets` whose own body sets it, so a loader module registers its own dataset ids. Empty (the
+    #: default, inherited ids do not count): not registered by the package (a base class; a plugin's builder).
+    id: ClassVar[str] = ""
     #: Frozen keyword-only dataclass of the dataset's parameters (field names carry units).
     Params: ClassVar[type]
     #: Bump when the generated data changes for the same (params, seed); part of the run key.
     version: ClassVar[int] = 1
-    #: One line for ``locbench list`` (a registration's own summary wins).
+    #: One line for ``locbench list`` (a registration made with a summary of its own shows that instead).
     description: ClassVar[str] = ""
     #: Top-level modules the builder needs beyond locbench's dependencies, and the command that installs them
     #: (as :attr:`locbench.filters.base.Filter.requires_modules`).

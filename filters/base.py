@@ -169,6 +169,28 @@ def accepted_share(accepted: float, rejected: float) -> float:
     return accepted / total if total > 0 else float("nan")
 
 
+@dataclass(frozen=True)
+class FilterDoc:
+    """A filter's row in the filter tables of ``README.md`` and ``docs/design.md`` (generated from it).
+
+    Attributes
+    ----------
+    source : str
+        The source reports (by number, ``"003, 001"``) or the reference the filter follows.
+    prediction : str
+        The motion model, with the source's equation numbers.
+    observation : str
+        The measurement models and what the update does with them, with the equation numbers.
+    notes : str
+        What ``docs/design.md`` adds: choices and rules beyond the two models ("" for none).
+    """
+
+    source: str
+    prediction: str
+    observation: str
+    notes: str = ""
+
+
 @dataclass(frozen=True, kw_only=True)
 class CheckTolerances:
     """The bounds the conformance checks (:mod:`locbench.checks`) hold a filter to; a filter may widen one.
@@ -194,6 +216,11 @@ class Filter(abc.ABC):
 
     Class attributes
     ----------------
+    id : str
+        The id the filter is registered under: the registry finds every class of a module of
+        :mod:`locbench.filters` whose own body sets it (:mod:`locbench.registry`), so a new filter is its module
+        alone. Empty (the default, inherited ids do not count): not registered by the package (a base class; a
+        plugin, whose entry point names it).
     consumes : frozenset of event types
         Every event type the filter can use: :class:`Odometry` (through ``predict``) and the
         observation types it takes through ``update``; any other observation raises ``TypeError``.
@@ -206,7 +233,7 @@ class Filter(abc.ABC):
     source : str
         The report or reference the filter follows (for the README and report).
     description : str
-        One line for ``locbench list`` (a plugin's summary; a registration's own summary wins).
+        One line for ``locbench list`` (a registration made with a summary of its own shows that instead).
     requires_modules : tuple of str
         Top-level modules the filter needs beyond locbench's dependencies, and ``install_hint``, the command that
         installs them: a missing one makes the filter "unavailable: ... install it with: HINT" instead of an
@@ -217,9 +244,12 @@ class Filter(abc.ABC):
         Degrees of freedom of the ``nis`` diagnostic for the default :meth:`health`; None reads the
         ``nis_dof`` diagnostic instead.
 
-    Hooks read by the conformance checks: ``expected_check_failures`` and :meth:`check_tolerances`.
+    Hooks read by the conformance checks: ``expected_check_failures`` and :meth:`check_tolerances`. Read by the
+    suites (:mod:`locbench.suites`) and the generated docs tables: ``order``, ``compared``,
+    ``comparison_configurations``, ``kidnap_configurations`` and ``doc``.
     """
 
+    id: ClassVar[str] = ""
     expected_check_failures: ClassVar[Mapping[str, str]] = MappingProxyType({})
     consumes: ClassVar[frozenset[type]] = frozenset()
     requires: ClassVar[frozenset[MapKind]] = frozenset()
@@ -235,9 +265,23 @@ class Filter(abc.ABC):
     #: Parameters that switch on this filter's recovery policy: its kidnap configuration is a configuration
     #: with these set (the report's summary reads kidnap recovery there). Empty: it recovers as configured.
     kidnap_params: ClassVar[dict[str, str]] = {}
+    #: The configurations suite ``kidnap`` runs, as parameter overrides (``{}``: the default); None: the kidnap
+    #: configuration alone (:attr:`kidnap_params`). A tuple must hold that configuration too.
+    kidnap_configurations: ClassVar[tuple[dict[str, str], ...] | None] = None
     #: Configurations beyond the default that the conformance checks also run, as parameter overrides
     #: (``{"adaptive": "kld"}``); the kidnap configuration (:attr:`kidnap_params`) is added to them.
     check_configurations: ClassVar[tuple[dict[str, str], ...]] = ()
+    #: Whether the suites that compare every filter run it (``default``, ``kidnap``, ``recorded``,
+    #: ``consistency``), which puts it in the report's summary tables; False: it runs only when named.
+    compared: ClassVar[bool] = True
+    #: Configurations the main comparison (suite ``default``) runs beside the default, as parameter overrides;
+    #: they become rows of the summary tables.
+    comparison_configurations: ClassVar[tuple[dict[str, str], ...]] = ()
+    #: Place among the package's filters in every list of them (the suites, the docs tables): ascending, ties
+    #: by id.
+    order: ClassVar[int] = 100
+    #: The filter's row in the docs' filter tables; None: no row (a plugin's are in its own docs).
+    doc: ClassVar[FilterDoc | None] = None
     #: Rough compute seconds per second of data with the default config (measured order of magnitude on
     #: ``office``): the runner orders a sweep's tasks by it before any timing is stored.
     cost_per_data_s: ClassVar[float] = 0.1

@@ -86,7 +86,15 @@ from locbench.filters._ekf_icp_kernels import (
     state_buffer,
 )
 from locbench.filters._icp import MIN_PAIRS, IcpResult
-from locbench.filters.base import POSITIVE, POSITIVE_OR_DATASET, Estimate, Filter, FilterConfig, bound
+from locbench.filters.base import (
+    POSITIVE,
+    POSITIVE_OR_DATASET,
+    Estimate,
+    Filter,
+    FilterConfig,
+    FilterDoc,
+    bound,
+)
 from locbench.raycast.cast import cast_scan
 
 FloatArray = npt.NDArray[np.float64]
@@ -185,6 +193,19 @@ class IcpEKF(Filter):
     ``kidnap_resets`` (times the kidnap rule fired so far), ``nis`` (V^T (P + R)^-1 V of an accepted scan).
     """
 
+    id: ClassVar[str] = "ekf_icp"
+    order: ClassVar[int] = 40
+    description: ClassVar[str] = (
+        "EKF whose update is ICP between the scan and a scan ray-cast from the occupancy grid (report 000)"
+    )
+    doc: ClassVar[FilterDoc | None] = FilterDoc(
+        "000",
+        "odometry increments in the world frame, Q static + dynamic (eq. 11-13)",
+        "ICP between the scan and a scan ray-cast from the grid at the predicted pose, H = I (eq. 14-18); mismatch "
+        "rules; after 100 mismatches P x 10 and a tighter ICP threshold",
+        "a mismatch is an ICP that did not converge or matched too few points; the report's appendix parameters "
+        "are the default config",
+    )
     consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LaserScan})
     requires: ClassVar[frozenset[MapKind]] = frozenset({MapKind.OCCUPANCY})
     Config: ClassVar[type[FilterConfig]] = IcpEKFConfig

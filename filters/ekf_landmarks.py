@@ -88,6 +88,7 @@ from locbench.filters.base import (
     Estimate,
     Filter,
     FilterConfig,
+    FilterDoc,
     bound,
 )
 
@@ -208,6 +209,20 @@ class LandmarkEKF(Filter):
     chi-square check), ``accepted`` and ``rejected`` (counts of the last update; 0 after a predict).
     """
 
+    id: ClassVar[str] = "ekf_landmarks"
+    order: ClassVar[int] = 10
+    description: ClassVar[str] = (
+        "EKF, wheel-encoder motion model and range-bearing landmarks, optional GPS fixes (reports 003, 001)"
+    )
+    doc: ClassVar[FilterDoc | None] = FilterDoc(
+        "003, 001",
+        "wheel-encoder model (003 eq. 1-5), input covariance growing with wheel travel (eq. 10), additive Q (eq. 8)",
+        "range-bearing to landmarks (003 eq. 7, 001 fig. 2 with its Jacobian corrected), known identities or "
+        "Mahalanobis nearest neighbour under a chi-square gate; optional GPS pose fixes (001); Joseph form",
+        "nearest-neighbour candidates are the landmarks predicted inside the sensor's range and field of view",
+    )
+    #: the main comparison also runs it with nearest-neighbour association (the landmark identities unused)
+    comparison_configurations: ClassVar[tuple[dict[str, str], ...]] = ({"association": "nearest"},)
     consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LandmarkObservations, PoseFix, RangeObservations})
     requires: ClassVar[frozenset[MapKind]] = frozenset({MapKind.LANDMARKS})
     Config: ClassVar[type[FilterConfig]] = LandmarkEKFConfig

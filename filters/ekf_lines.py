@@ -59,7 +59,7 @@ from locbench.core.tunable import tunable
 from locbench.datasets.dataset import Gaussian2, MapKind, SensorSpec, WorldMap
 from locbench.filters._line_extraction import ExtractedLines, ExtractionParams, extract_lines
 from locbench.filters._motion import MotionModel, propagate_covariance, resolve_motion_noise
-from locbench.filters.base import NON_NEGATIVE, Estimate, Filter, FilterConfig, bound
+from locbench.filters.base import NON_NEGATIVE, Estimate, Filter, FilterConfig, FilterDoc, bound
 
 FloatArray = npt.NDArray[np.float64]
 logger = logging.getLogger(__name__)
@@ -172,6 +172,16 @@ class LineEKF(Filter):
     when nothing was accepted) and ``nis_dof`` (2 per accepted line).
     """
 
+    id: ClassVar[str] = "ekf_lines"
+    order: ClassVar[int] = 30
+    description: ClassVar[str] = "EKF on a map of lines, chi-square gated association, Joseph form (report 002)"
+    doc: ClassVar[FilterDoc | None] = FilterDoc(
+        "002",
+        "odometry compounding with noise Jacobians (eq. 1-2)",
+        "lines (rho, psi) extracted from the scan by split-and-merge, matched to map lines by Mahalanobis distance "
+        "under a chi-square threshold (eq. 3-5), Joseph form (eq. 8); optional rejection of lines longer than "
+        "their map line",
+    )
     consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LaserScan})
     requires: ClassVar[frozenset[MapKind]] = frozenset({MapKind.LINES})
     Config: ClassVar[type[FilterConfig]] = LineEKFConfig

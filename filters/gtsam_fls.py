@@ -70,7 +70,7 @@ from typing import Any, ClassVar, Literal
 import numpy as np
 import numpy.typing as npt
 
-from locbench.core.errors import ConfigError, DependencyNotInstalled, FilterDiverged
+from locbench.core.errors import ConfigError, FilterDiverged
 from locbench.core.events import UNKNOWN_ID, LandmarkObservations, Observation, Odometry, PoseFix, RangeObservations
 from locbench.core.geometry import wrap_angle, wrap_scalar
 from locbench.core.runkey import RUN_KEY_OMIT_IF_DEFAULT
@@ -94,19 +94,21 @@ from locbench.filters.base import (
     Estimate,
     Filter,
     FilterConfig,
+    FilterDoc,
     bound,
 )
 
 try:
     import gtsam
-except ImportError as exc:  # pragma: no cover - the registry reports the missing module before import
-    raise DependencyNotInstalled("gtsam_fls needs gtsam: pip install 'locbench[gtsam]'") from exc
+
+    _X = gtsam.symbol_shorthand.X
+    _L = gtsam.symbol_shorthand.L
+except ImportError:  # pragma: no cover - the class stays readable; its requires_modules make it unavailable
+    pass
 
 FloatArray = npt.NDArray[np.float64]
 logger = logging.getLogger(__name__)
 
-_X = gtsam.symbol_shorthand.X
-_L = gtsam.symbol_shorthand.L
 
 #: Floor of the process noise (m, rad per odometry step): a standstill increment with zero process noise (a
 #: model-matched world, whose robot stands at waypoints) has a singular covariance, which a between factor
@@ -245,6 +247,19 @@ class GtsamFixedLagSmoother(Filter):
     last smoother update) and ``iterations`` (of the last smoother update; NaN when the smoother did not run).
     """
 
+    id: ClassVar[str] = "gtsam_fls"
+    order: ClassVar[int] = 70
+    description: ClassVar[str] = (
+        "gtsam fixed-lag smoother (incremental or batch): odometry between-factors, bearing-range factors, fixes"
+    )
+    requires_modules: ClassVar[tuple[str, ...]] = ("gtsam",)
+    install_hint: ClassVar[str] = "pip install 'locbench[gtsam]'"
+    doc: ClassVar[FilterDoc | None] = FilterDoc(
+        "gtsam 4.3",
+        "odometry between-factors (same noise model as `ekf_landmarks`)",
+        "bearing-range factors to prior-held landmarks, pose priors for fixes; incremental (iSAM2) or batch "
+        "fixed-lag smoother; filtered estimate scored, smoothed trajectory reported beside",
+    )
     consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LandmarkObservations, PoseFix, RangeObservations})
     requires: ClassVar[frozenset[MapKind]] = frozenset({MapKind.LANDMARKS})
     Config: ClassVar[type[FilterConfig]] = GtsamFLSConfig

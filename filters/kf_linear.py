@@ -66,7 +66,7 @@ from locbench.core.tunable import tunable
 from locbench.datasets.dataset import Gaussian2, MapKind, SensorSpec, WorldMap
 from locbench.filters._motion import increment_variances, resolve_motion_noise
 from locbench.filters._scan_database import ScanDatabase, build_database, lattice_too_large, match_scan
-from locbench.filters.base import NON_NEGATIVE, Estimate, Filter, FilterConfig, bound
+from locbench.filters.base import NON_NEGATIVE, Estimate, Filter, FilterConfig, FilterDoc, bound
 
 FloatArray = npt.NDArray[np.float64]
 logger = logging.getLogger(__name__)
@@ -168,6 +168,18 @@ class LinearKF(Filter):
     commanded twist, 0 for the increment).
     """
 
+    id: ClassVar[str] = "kf_linear"
+    order: ClassVar[int] = 50
+    description: ClassVar[str] = "linear Kalman filter (filterpy) with a scan-database pose measurement (report 004)"
+    requires_modules: ClassVar[tuple[str, ...]] = ("filterpy",)
+    install_hint: ClassVar[str] = "pip install 'locbench[filterpy]'"
+    doc: ClassVar[FilterDoc | None] = FilterDoc(
+        "004",
+        "filterpy `KalmanFilter`, translate-or-rotate velocity model",
+        "pose from matching 8 ranges of the scan against a database of scans at known grid poses (average "
+        "absolute difference under a tolerance)",
+        "a true linear KF, with its linearity assumption visible in the results",
+    )
     consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LaserScan})
     requires: ClassVar[frozenset[MapKind]] = frozenset({MapKind.OCCUPANCY})
     Config: ClassVar[type[FilterConfig]] = LinearKFConfig

@@ -21,7 +21,7 @@ from locbench.core.events import Observation, Odometry
 from locbench.core.geometry import wrap_scalar
 from locbench.datasets.dataset import Gaussian2, SensorSpec, WorldMap
 from locbench.filters._motion import InputNoise, MotionKind, MotionModel, propagate_covariance, resolve_motion_noise
-from locbench.filters.base import Estimate, Filter, FilterConfig
+from locbench.filters.base import Estimate, Filter, FilterConfig, FilterDoc
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -52,6 +52,15 @@ class OdometryFilter(Filter):
     composition w.r.t. the pose and N_k the world-frame motion noise of the step.
     """
 
+    id: ClassVar[str] = "odometry"
+    order: ClassVar[int] = 0
+    description: ClassVar[str] = "dead reckoning from odometry increments; the baseline row of every table"
+    doc: ClassVar[FilterDoc | None] = FilterDoc(
+        "all reports",
+        "composes the robot's odometry increments exactly",
+        "none",
+        "the baseline every table starts with",
+    )
     consumes: ClassVar[frozenset[type]] = frozenset({Odometry})
     Config: ClassVar[type[FilterConfig]] = OdometryConfig
     version: ClassVar[int] = 1

@@ -160,6 +160,7 @@ from locbench.filters.base import (
     Estimate,
     Filter,
     FilterConfig,
+    FilterDoc,
     bound,
 )
 
@@ -1020,6 +1021,21 @@ class ParticleFilter(Filter):
     configured sensors have no usable map.
     """
 
+    id: ClassVar[str] = "pf"
+    order: ClassVar[int] = 60
+    description: ClassVar[str] = (
+        "Monte Carlo localization: encoder motion model, landmark and laser likelihood-field models, augmented MCL"
+    )
+    doc: ClassVar[FilterDoc | None] = FilterDoc(
+        "003",
+        "sampled wheel-encoder model",
+        "landmark likelihood (ids known or marginalised); laser likelihood field on the grid; low-variance "
+        "resampling on low ESS; augmented MCL; uniform prior for global localization",
+        "particles injected uniformly or drawn from the sightings (sensor resetting) for kidnap recovery; "
+        "KLD-adaptive sample size (`adaptive=kld`)",
+    )
+    #: KLD-adaptive MCL (Fox 2003) beside the fixed 1000 particles: does adaptive sampling pay?
+    comparison_configurations: ClassVar[tuple[dict[str, str], ...]] = ({"adaptive": "kld"},)
     consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LandmarkObservations, LaserScan, RangeObservations})
     requires: ClassVar[frozenset[MapKind]] = frozenset()
     Config: ClassVar[type[FilterConfig]] = ParticleFilterConfig
@@ -1049,6 +1065,14 @@ class ParticleFilter(Filter):
     #: The kidnap configuration: augmented MCL with sensor resetting, also from sighting pairs (the one that
     #: recovers on both office and room, docs/pf_consistency_kidnap.md); 003's PF only resamples.
     kidnap_params: ClassVar[dict[str, str]] = {"augmented": "true", "inject": "sensor", "inject_pairs": "true"}
+    #: Suite ``kidnap`` runs augmented MCL injecting uniform poses (PR table 8.3), the kidnap configuration
+    #: (sensor resetting, Lenser & Veloso 2000, also from pairs of single sightings: it recovers on room too) and
+    #: KLD-adaptive MCL (Fox 2003) with the same recovery.
+    kidnap_configurations: ClassVar[tuple[dict[str, str], ...] | None] = (
+        {"augmented": "true"},
+        kidnap_params,
+        {"adaptive": "kld"} | kidnap_params,
+    )
     source: ClassVar[str] = "003_e5c93f9be776ee5e.txt sec. 4.2; Thrun, Burgard & Fox, Probabilistic Robotics ch. 6, 8"
     config: ParticleFilterConfig
 

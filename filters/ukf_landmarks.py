@@ -56,7 +56,7 @@ from locbench.datasets.dataset import Gaussian2, SensorSpec, WorldMap
 from locbench.filters import _ukf_kernels as kern
 from locbench.filters._kalman import gain_update, subtract
 from locbench.filters._landmark_index import NEAR_M
-from locbench.filters.base import NON_NEGATIVE, Estimate, FilterConfig, bound
+from locbench.filters.base import NON_NEGATIVE, Estimate, FilterConfig, FilterDoc, bound
 from locbench.filters.ekf_landmarks import LandmarkEKF, LandmarkEKFConfig
 
 FloatArray = npt.NDArray[np.float64]
@@ -177,6 +177,23 @@ class LandmarkUKF(LandmarkEKF):
     prediction and every correction (module docstring). Diagnostics as the EKF's.
     """
 
+    id: ClassVar[str] = "ukf_landmarks"
+    order: ClassVar[int] = 20
+    description: ClassVar[str] = (
+        "unscented KF (filterpy, Merwe sigma points) with ekf_landmarks' motion, landmark, range and fix models"
+    )
+    requires_modules: ClassVar[tuple[str, ...]] = ("filterpy",)
+    install_hint: ClassVar[str] = "pip install 'locbench[filterpy]'"
+    doc: ClassVar[FilterDoc | None] = FilterDoc(
+        "Julier & Uhlmann, van der Merwe; models of 003, 001",
+        "`ekf_landmarks`' motion model through Merwe scaled sigma points (filterpy `UnscentedKalmanFilter`), "
+        "circular heading mean",
+        "`ekf_landmarks`' range-bearing, range-only and pose-fix models through the unscented transform, wrapped "
+        "residuals; the same association and gates",
+        "additive-noise UKF: each sigma point moves with the EKF's mean motion, the EKF's motion noise is added",
+    )
+    #: the default alone: the EKF's nearest-neighbour configuration is not repeated with sigma points
+    comparison_configurations: ClassVar[tuple[dict[str, str], ...]] = ()
     Config: ClassVar[type[FilterConfig]] = LandmarkUKFConfig
     # 2: the process noise Q is the dataset's when it declares one (0 on a model-matched world); 3: estimates equal
     # to version 2's to rounding (stored version-2 runs moved by at most 5.6e-10 m in waypoint errors)

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
-from typing import Literal
+from pathlib import Path
+from typing import Any, Literal
 
 import numpy as np
 import pytest
@@ -11,7 +13,7 @@ import pytest
 from locbench.core.errors import ConfigError, DependencyNotInstalled, UnknownIdError
 from locbench.core.seeding import dataset_rng, filter_rng
 from locbench.core.spec import build_params, format_spec, parse_spec, stable_hash
-from locbench.registry import DATASETS, FILTERS, resolve_dataset, resolve_filter
+from locbench.registry import DATASETS, FILTERS, DuplicateIdError, Registry, resolve_dataset, resolve_filter
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -103,3 +105,96 @@ def test_previous_registration_is_gone() -> None:
 def test_canonical_names_drop_defaults() -> None:
     assert resolve_dataset("room[kidnap_m=0]").name == "room"
     assert resolve_dataset("room[kidnap_m=2]").name == "room[kidnap_m=2]"
+
+
+# --- registration at the definition: a package's modules are searched for classes that declare an id ------------
+
+MODULES = {
+    "__init__.py": "",
+    "alpha.py": 'class Alpha:\n    id = "alpha"\n    order = 2\n    description = "the first"\n',
+    # an id-less subclass does not inherit its base's id; a class imported from elsewhere is its module's
+    "beta.py": (
+        "from regpkg.alpha import Alpha\n\nclass Beta:\n    id = 'beta'\n    order = 1\n\n"
+        "class Quiet(Alpha):\n    pass\n"
+    ),
+    "needs_lib.py": "import no_such_library_for_locbench\n",
+    "_private.py": 'class Hidden:\n    id = "hidden"\n',
+    "sub/__init__.py": "",
+    "sub/gamma.py": 'class G1:\n    id = "g1"\n\nclass G2:\n    id = "g2"\n',
+}
+
+
+def _package(root: Path, modules: dict[str, str], monkeypatch: pytest.MonkeyPatch) -> Registry[Any]:
+    """A package ``regpkg`` of ``modules`` on ``sys.path`` and a registry that searches it."""
+    for name, text in modules.items():
+        path = root / "regpkg" / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text, encoding="utf-8")
+    monkeypatch.syspath_prepend(str(root))
+    for name in [m for m in sys.modules if m == "regpkg" or m.startswith("regpkg.")]:
+        monkeypatch.delitem(sys.modules, name)
+    return Registry("thing", "locbench.test_no_such_group", "regpkg")
+
+
+def test_a_package_registers_the_classes_that_declare_an_id(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    reg = _package(tmp_path, MODULES, monkeypatch)
+    assert reg.ids() == ["alpha", "beta", "g1", "g2", "needs_lib"]
+    assert reg.entry("g2").entry_point == "regpkg.sub.gamma:G2" and reg.entry("g2").declared
+    assert reg.summary("alpha") == "the first"
+    # by declared order, then id; the module that does not import here last
+    assert reg.package_ids() == ["g1", "g2", "beta", "alpha", "needs_lib"]
+    reason = reg.unavailable_reason("needs_lib")
+    assert reason is not None and "no_such_library_for_locbench" in reason and "install" in reason
+    assert reg.class_of("needs_lib") is None
+    with pytest.raises(DependencyNotInstalled, match="no_such_library_for_locbench"):
+        reg.load("needs_lib")
+
+
+def test_a_lookup_by_id_searches_the_module_named_after_it_first(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    reg = _package(tmp_path, MODULES, monkeypatch)
+    assert reg.load("alpha").__name__ == "Alpha"
+    assert "regpkg.alpha" in sys.modules and "regpkg.beta" not in sys.modules
+    assert reg.load("g1").__name__ == "G1"  # no module of that name: every module is searched
+    assert "regpkg.beta" in sys.modules
+
+
+def test_one_id_declared_twice_is_an_error_naming_both(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    reg = _package(tmp_path, {**MODULES, "zeta.py": 'class Other:\n    id = "alpha"\n'}, monkeypatch)
+    with pytest.raises(
+        DuplicateIdError, match=r"'alpha' is declared twice: by regpkg.alpha:Alpha and regpkg.zeta:Other"
+    ):
+        reg.ids()
+
+
+def test_a_broken_module_of_the_package_is_a_bug_not_a_missing_dependency(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    reg = _package(tmp_path, {**MODULES, "broken.py": "from regpkg import no_such_module\n"}, monkeypatch)
+    with pytest.raises(ImportError, match="no_such_module"):
+        reg.ids()
+    reg = _package(tmp_path, {**MODULES, "broken.py": "raise RuntimeError('boom')\n"}, monkeypatch)
+    with pytest.raises(RuntimeError, match="boom"):
+        reg.ids()
+
+
+def test_a_registration_by_hand_wins_over_a_declared_class(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    reg = _package(tmp_path, MODULES, monkeypatch)
+    reg.register("beta", "regpkg.alpha:Alpha", "by hand")
+    assert reg.summary("beta") == "by hand" and reg.load("beta").__name__ == "Alpha"
+    assert "beta" in reg.package_ids()  # a declared id replaced by hand is still the package's
+    reg.unregister("alpha")
+    assert "alpha" not in reg.ids() and "alpha" not in reg.package_ids()
+
+
+def test_the_packages_own_filters_and_datasets_are_declared_by_their_classes() -> None:
+    for reg in (FILTERS, DATASETS):
+        for ident in reg.package_ids():
+            e = reg.entry(ident)
+            assert e.declared and not e.plugin
+            cls = reg.class_of(ident)
+            if cls is not None:
+                assert vars(cls)["id"] == ident and e.entry_point == f"{cls.__module__}:{cls.__qualname__}"
+    assert FILTERS.entry("pf").entry_point == "locbench.filters.pf:ParticleFilter"
+    assert DATASETS.entry("tiny_circle").entry_point == "locbench.datasets.synthetic.scenarios:TinyCircleScenario"

@@ -1,20 +1,18 @@
-"""Import a study of ``tools/`` by file name (tools/ is not a package), for the tests that rerun it."""
+"""Run a script of ``tools/`` as a person does (``python tools/KIND/NAME.py ARGS``), for the tests of a tool."""
 
 from __future__ import annotations
 
-import importlib.util
+import subprocess
 import sys
 from pathlib import Path
-from types import ModuleType
+
+#: The checkout's ``tools`` folder.
+TOOLS = Path(__file__).resolve().parents[1] / "tools"
 
 
-def load_tool(name: str) -> ModuleType:
-    """The module ``tools/<name>.py``."""
-    path = Path(__file__).resolve().parents[1] / "tools" / f"{name}.py"
-    spec = importlib.util.spec_from_file_location(f"_tool_{name}", path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    # registered first: a dataclass in the tool looks its module up while the class is made
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
+def run_tool(script: str, *args: str) -> subprocess.CompletedProcess[str]:
+    """Run ``tools/<script>`` (``"measure/budget_floor.py"``) with ``args`` in this interpreter; its exit code,
+    output and error text (nothing raised on a non-zero exit)."""
+    path = TOOLS / script
+    assert path.is_file(), path
+    return subprocess.run([sys.executable, str(path), *args], capture_output=True, text=True, check=False)

@@ -24,10 +24,10 @@ from locbench.claims import (
     register_section,
     test_text,
 )
+from locbench.evaluate.metrics import ANEES, ATE_M, METRICS
 from locbench.evaluate.significance import mann_whitney
 from locbench.present import ranking as rk
 from locbench.present.docfmt import Block
-from locbench.present.metric_info import METRICS
 from locbench.suites import SUITES
 
 SOURCE_004 = Source("004", "Kalman Filtering with STDR Simulator and ROS", "Luc Alexandre Bettaieb")
@@ -59,9 +59,9 @@ def _check_linear_kf(df: pd.DataFrame) -> ClaimResult:
     odo = pick_filter(lin_df, "odometry")
     if kf_l is None or kf_m is None or odo is None:
         return ClaimResult("not evaluated", "needs kf_linear on both variants and odometry on scan_grid")
-    ate_l, n_l = _mean_metric(df, LINEAR, kf_l, "ate_m")
-    ate_m, n_m = _mean_metric(df, MIXED, kf_m, "ate_m")
-    ate_o, _ = _mean_metric(df, LINEAR, odo, "ate_m")
+    ate_l, n_l = _mean_metric(df, LINEAR, kf_l, ATE_M)
+    ate_m, n_m = _mean_metric(df, MIXED, kf_m, ATE_M)
+    ate_o, _ = _mean_metric(df, LINEAR, odo, ATE_M)
     if not (np.isfinite(ate_l) and np.isfinite(ate_m) and np.isfinite(ate_o)):
         return ClaimResult("not evaluated", "missing ate_m values")
     frac = ate_l / ate_o
@@ -75,7 +75,7 @@ def _check_linear_kf(df: pd.DataFrame) -> ClaimResult:
 
     # the two variants are different realisations: an unpaired one-sided test that mixed commands do worse
     def ate_of(dataset: str, name: str) -> np.ndarray:
-        sel = df[(df["dataset"] == dataset) & (df["filter"] == name) & (df["metric"] == "ate_m")]
+        sel = df[(df["dataset"] == dataset) & (df["filter"] == name) & (df["metric"] == ATE_M)]
         return sel["value"].to_numpy(dtype=np.float64)
 
     test = mann_whitney(ate_of(MIXED, kf_m), ate_of(LINEAR, kf_l), "greater")
@@ -108,8 +108,8 @@ def _section(df: pd.DataFrame, slug: str) -> list[Block]:
 
     rows, keys, groups, names = [], [], [], []
     for (dname, fname), _ in df.groupby(["dataset", "filter"], sort=True):
-        ate, n = _mean_metric(df, str(dname), str(fname), "ate_m")
-        anees, _ = _mean_metric(df, str(dname), str(fname), "anees")
+        ate, n = _mean_metric(df, str(dname), str(fname), ATE_M)
+        anees, _ = _mean_metric(df, str(dname), str(fname), ANEES)
         rows.append(
             (f"`{dname}`", f"`{fname}`", str(n), f"{100 * ate:.2f}", "-" if np.isnan(anees) else f"{anees:.2f}")
         )
@@ -119,7 +119,7 @@ def _section(df: pd.DataFrame, slug: str) -> list[Block]:
     if not rows:
         return []
     columns = []
-    for index, metric in ((3, "ate_m"), (4, "anees")):
+    for index, metric in ((3, ATE_M), (4, ANEES)):
         per: list[dict[int, float] | None] = []
         for d, f in zip(groups, names, strict=True):
             sub = df[(df["dataset"] == d) & (df["filter"] == f)]
@@ -135,7 +135,7 @@ def _section(df: pd.DataFrame, slug: str) -> list[Block]:
             caption="scan_grid: translate-or-rotate against mixed commands (report 004)",
             groups=groups,
             labels=names,
-            footnotes=(f"Ranked within each dataset; ANEES: closest to {METRICS['anees'].target:g} is best.",),
+            footnotes=(f"Ranked within each dataset; ANEES: closest to {METRICS[ANEES].target:g} is best.",),
         )
     ]
 

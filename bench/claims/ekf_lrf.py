@@ -29,6 +29,7 @@ from locbench.claims import (
     test_text,
 )
 from locbench.core.errors import ConfigError
+from locbench.evaluate.metrics import ATE_M, FAILED, FINAL_ERROR_M, KIDNAP_RECOVERED
 from locbench.evaluate.significance import TestResult, fisher_rates, mann_whitney
 from locbench.suites import SUITES
 
@@ -44,7 +45,7 @@ REPORTED_EKF_FINAL_M = 0.025
 #: "About" = within this factor of the reported value (either way).
 ABOUT_FACTOR = 1.5
 #: The EKF's bar: median final error over seeds at most this, m (twice the reported 2.5 cm).
-EKF_FINAL_BAR_M = 0.05
+EKF_FINAL_BAR_M = 2 * REPORTED_EKF_FINAL_M
 #: Kidnap recovery rate separating "recovers" from "does not" at a kidnap distance.
 RECOVERY_RATE_BAR = 0.5
 #: ``people`` of ``lap`` when its name does not set it (LapParams.people).
@@ -87,7 +88,7 @@ def _check_odometry_final(df: pd.DataFrame) -> ClaimResult:
     name = pick_filter(df, "odometry")
     if name is None:
         return ClaimResult("not evaluated", "no odometry runs")
-    fin = _values(df, name, "final_error_m")
+    fin = _values(df, name, FINAL_ERROR_M)
     if fin.size == 0:
         return ClaimResult("not evaluated", f"{name}: no final_error_m")
     med = float(np.median(fin))
@@ -106,8 +107,8 @@ def _check_ekf_final(df: pd.DataFrame) -> ClaimResult:
     name = pick_filter(df, "ekf_icp")
     if name is None:
         return ClaimResult("not evaluated", "no ekf_icp runs")
-    fin = _values(df, name, "final_error_m")
-    failed = _values(df, name, "failed")
+    fin = _values(df, name, FINAL_ERROR_M)
+    failed = _values(df, name, FAILED)
     n_failed = int(np.sum(failed > 0.5))
     if fin.size == 0:
         return ClaimResult("not evaluated", f"{name}: no final_error_m ({n_failed} failed runs)")
@@ -117,8 +118,8 @@ def _check_ekf_final(df: pd.DataFrame) -> ClaimResult:
         f"(range {100 * fin.min():.1f}-{100 * fin.max():.1f} cm), {n_failed} failed"
     )
     odo = pick_filter(df, "odometry")
-    if odo is not None and _values(df, odo, "final_error_m").size:
-        text += f"; {odo} {100 * float(np.median(_values(df, odo, 'final_error_m'))):.1f} cm"
+    if odo is not None and _values(df, odo, FINAL_ERROR_M).size:
+        text += f"; {odo} {100 * float(np.median(_values(df, odo, FINAL_ERROR_M))):.1f} cm"
     ok = med <= EKF_FINAL_BAR_M and n_failed == 0
     return ClaimResult("reproduced" if ok else "not reproduced", text)
 
@@ -136,7 +137,7 @@ def _check_people(df: pd.DataFrame) -> ClaimResult:
         sub0 = df[df["dataset"] == without[0]]
         f0 = pick_filter(sub0, "ekf_icp")
         if f0 is not None:
-            base = _values(sub0, f0, "ate_m")
+            base = _values(sub0, f0, ATE_M)
     tests: list[TestResult] = []
     evaluated = False
     for n in with_people:
@@ -145,9 +146,9 @@ def _check_people(df: pd.DataFrame) -> ClaimResult:
         if f is None:
             continue
         evaluated = True
-        failed = int(np.sum(_values(sub, f, "failed") > 0.5))
-        runs = _values(sub, f, "failed").size
-        ate = _values(sub, f, "ate_m")
+        failed = int(np.sum(_values(sub, f, FAILED) > 0.5))
+        runs = _values(sub, f, FAILED).size
+        ate = _values(sub, f, ATE_M)
         med = float(np.median(ate)) if ate.size else float("nan")
         text = f"`{n}` {f}: {failed}/{runs} failed, median ATE {100 * med:.1f} cm"
         ok = ok and failed == 0 and ate.size > 0
@@ -172,7 +173,7 @@ def _check_people(df: pd.DataFrame) -> ClaimResult:
 
 
 def _check_kidnap(df: pd.DataFrame) -> ClaimResult:
-    rec = df[(df["metric"] == "kidnap_recovered") & df["filter"].map(lambda f: spec_id(str(f)) == "ekf_icp")]
+    rec = df[(df["metric"] == KIDNAP_RECOVERED) & df["filter"].map(lambda f: spec_id(str(f)) == "ekf_icp")]
     if rec.empty:
         return ClaimResult("not evaluated", "no kidnap_recovered rows for ekf_icp on lap[kidnap_m=D]")
     rates: list[tuple[float, float, int]] = []

@@ -55,11 +55,11 @@ from locbench.claims import (
 from locbench.core.errors import LocbenchError
 from locbench.core.spec import build_params
 from locbench.evaluate.aggregate import mean_ci
+from locbench.evaluate.metrics import ATE_M, FAILED, FINAL_ERROR_M, KIDNAP_RECOVERED, METRICS
 from locbench.evaluate.pcrb import is_bound_row
 from locbench.evaluate.significance import ALPHA, TestResult, mann_whitney, wilcoxon_paired
 from locbench.present import ranking as rk
 from locbench.present.docfmt import Block, Plot, Text
-from locbench.present.metric_info import METRICS
 from locbench.present.palette import Palette
 from locbench.suites import SUITES
 
@@ -82,17 +82,6 @@ PATH_FACTOR = 2.0
 GPS_FINAL_FRACTION = 0.2
 #: "Does not recover": recovery rate over seeds below this.
 KIDNAP_MAX_RATE = 0.5
-
-_PARAM_COLS = (
-    "path",
-    "landmarks",
-    "known_ids",
-    "gps",
-    "pose_fix_sigma_m",
-    "initial_offset_m",
-    "kidnap_m",
-    "kidnap_rad",
-)
 
 
 def _params_class() -> type:
@@ -153,7 +142,7 @@ def _mean_metric(rows: pd.DataFrame, metric: str) -> float:
 
 
 def _n_failed(rows: pd.DataFrame) -> int:
-    return int(rows.loc[rows["metric"] == "failed", "value"].sum())
+    return int(rows.loc[rows["metric"] == FAILED, "value"].sum())
 
 
 def _filter_flag(name: str, key: str) -> bool:
@@ -180,9 +169,9 @@ def _check_landmark_count(df: pd.DataFrame) -> ClaimResult:
         return ClaimResult("not evaluated", "no ekf_landmarks runs on the base variants")
     rows = base[base["filter"] == ekf]
     per = {
-        (p, lay): _mean_metric(g, "ate_m")
+        (p, lay): _mean_metric(g, ATE_M)
         for (p, lay), g in rows.groupby(["path", "landmarks"], sort=True)
-        if not np.isnan(_mean_metric(g, "ate_m"))
+        if not np.isnan(_mean_metric(g, ATE_M))
     }
     paths = [p for p in PATH_ORDER if all((p, lay) in per for lay in LAYOUT_ORDER)]
     if not paths:
@@ -192,7 +181,7 @@ def _check_landmark_count(df: pd.DataFrame) -> ClaimResult:
     ratio = ate["8"] / ate["4"]
     flat = 1.0 / FLAT_FACTOR <= ratio <= FLAT_FACTOR
     # each fall must be found (layouts are different realisations: unpaired, runs pooled over the paths)
-    runs = rows[rows["path"].isin(paths) & (rows["metric"] == "ate_m")]
+    runs = rows[rows["path"].isin(paths) & (rows["metric"] == ATE_M)]
 
     def ate_runs(lay: str) -> np.ndarray:
         return runs.loc[runs["landmarks"] == lay, "value"].to_numpy(dtype=np.float64)
@@ -229,7 +218,7 @@ def _check_path_independent(df: pd.DataFrame) -> ClaimResult:
     tests: list[TestResult] = []
     for lay in ("3", "4", "8"):
         sub = base[base["landmarks"] == lay]
-        e = {p: _mean_metric(sub[(sub["filter"] == ekf) & (sub["path"] == p)], "ate_m") for p in PATH_ORDER}
+        e = {p: _mean_metric(sub[(sub["filter"] == ekf) & (sub["path"] == p)], ATE_M) for p in PATH_ORDER}
         e = {p: x for p, x in e.items() if not np.isnan(x)}
         if len(e) < 2:
             continue
@@ -240,7 +229,7 @@ def _check_path_independent(df: pd.DataFrame) -> ClaimResult:
             # below odometry on each path, found by a one-sided paired test (same realisations)
             for p in e:
                 on_path = sub[sub["path"] == p]
-                a, b = paired(on_path, ekf, odo, "ate_m")
+                a, b = paired(on_path, ekf, odo, ATE_M)
                 tests.append(wilcoxon_paired(a, b, alternative="less"))
             below = all(t.tested and t.p < ALPHA for t in tests[-len(e) :])
         ok = ok and ratio <= PATH_FACTOR and below
@@ -283,12 +272,12 @@ def _check_gps_converges(df: pd.DataFrame) -> ClaimResult:
         sigma = float(g["pose_fix_sigma_m"].iloc[0])
         limit = min(GPS_FINAL_FRACTION * offset, sigma)
         for f in gps_filters:
-            fe = _mean_metric(g[g["filter"] == f], "final_error_m")
+            fe = _mean_metric(g[g["filter"] == f], FINAL_ERROR_M)
             if np.isnan(fe):
                 continue
             ok = ok and fe < limit
             others = [
-                f"{o} {_cm(_mean_metric(g[g['filter'] == o], 'final_error_m'))}"
+                f"{o} {_cm(_mean_metric(g[g['filter'] == o], FINAL_ERROR_M))}"
                 for o in sorted({str(x) for x in g["filter"].unique()} - {f})
             ]
             parts.append(
@@ -308,14 +297,14 @@ def _check_kidnap(df: pd.DataFrame) -> ClaimResult:
     ekf = pick_filter(sel, "ekf_landmarks") if len(sel) else None
     if ekf is None:
         return ClaimResult("not evaluated", "no ekf_landmarks runs on a kidnap_m > 0 variant")
-    if not (sel["metric"] == "kidnap_recovered").any():
+    if not (sel["metric"] == KIDNAP_RECOVERED).any():
         return ClaimResult("not evaluated", "the metrics carry no kidnap_recovered (kidnap recovery not computed)")
     parts: list[str] = []
     ok = True
     names = sorted({str(f) for f in sel["filter"].unique() if spec_id(str(f)) == "ekf_landmarks"})
     for ds_name, g in sel.groupby("dataset", sort=True):
         for f in [ekf, *(n for n in names if n != ekf)]:
-            r = g.loc[(g["filter"] == f) & (g["metric"] == "kidnap_recovered"), "value"].to_numpy(dtype=np.float64)
+            r = g.loc[(g["filter"] == f) & (g["metric"] == KIDNAP_RECOVERED), "value"].to_numpy(dtype=np.float64)
             if not r.size:
                 continue
             rate = float(np.mean(r))
@@ -395,7 +384,7 @@ def layout_section(df: pd.DataFrame, slug: str) -> list[Block]:
     The figure has one line per path and filter (odometry dashed), ATE on a log scale.
     """
     v = variants(df)
-    base = v[v["base"] & (v["metric"] == "ate_m")] if len(v) else v
+    base = v[v["base"] & (v["metric"] == ATE_M)] if len(v) else v
     caption = "ATE per landmark layout (base variants, cm, mean ± 95 % interval over seeds)"
     if not len(base):
         return [Text("No runs of the base variants.")]
@@ -450,7 +439,7 @@ def layout_section(df: pd.DataFrame, slug: str) -> list[Block]:
             header,
             rows,
             [(math.nan, math.nan, *m) for _, _, m in series],
-            [rk.Column(2 + j, METRICS["ate_m"], [r[j] for r in per_run]) for j in range(len(LAYOUT_ORDER))],
+            [rk.Column(2 + j, METRICS[ATE_M], [r[j] for r in per_run]) for j in range(len(LAYOUT_ORDER))],
             rk.eligible_names([f for f, _, _ in series]),
             caption=caption,
             groups=[p for _, p, _ in series],

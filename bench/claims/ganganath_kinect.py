@@ -23,10 +23,10 @@ from locbench.claims import (
     test_text,
 )
 from locbench.evaluate.aggregate import waypoint_stats
+from locbench.evaluate.metrics import METRICS, WAYPOINT_ERROR_M, family_regex, member_id
 from locbench.evaluate.significance import wilcoxon_paired
 from locbench.present import ranking as rk
 from locbench.present.docfmt import Block, Text
-from locbench.present.metric_info import MetricInfo
 from locbench.suites import SUITES
 
 SOURCE_003 = Source(
@@ -51,12 +51,8 @@ FAR_BELOW_MEAN_RATIO = 0.5
 GROWTH_MIN_SPEARMAN = 0.8
 GROWTH_MIN_LAST_OVER_FIRST = 2.0
 #: A run's waypoint errors (all waypoints; waypoints 3-5), the per-run values the paired tests compare.
-WAYPOINT_ERRORS = r"^waypoint_\d+_error_m$"
-WAYPOINTS_3_5 = r"^waypoint_[345]_error_m$"
-
-
-#: Display metadata of a run's error at one waypoint (``waypoint_<j>_error_m``), for table 1's columns.
-WAYPOINT_ERROR = MetricInfo("waypoint error", "cm", 100.0)
+WAYPOINT_ERRORS = f"^{family_regex(WAYPOINT_ERROR_M)}$"
+WAYPOINTS_3_5 = "^(" + "|".join(member_id(WAYPOINT_ERROR_M, j) for j in (3, 4, 5)) + ")$"
 
 
 def _ref_cm(values: tuple[float, ...]) -> str:
@@ -226,8 +222,8 @@ def _table1_section(rows: pd.DataFrame, slug: str) -> list[Block]:
     shown = [n for n in names if n is not None]
     columns = []
     for j in range(1, n_wp + 1):
-        per = dict(zip(shown, rk.samples_for(base, shown, f"waypoint_{j}_error_m"), strict=True))
-        columns.append(rk.Column(j, WAYPOINT_ERROR, [per[n] if n is not None else None for n in names]))
+        per = dict(zip(shown, rk.samples_for(base, shown, member_id(WAYPOINT_ERROR_M, j)), strict=True))
+        columns.append(rk.Column(j, METRICS[WAYPOINT_ERROR_M], [per[n] if n is not None else None for n in names]))
     flags = rk.eligible_names(shown)
     eligible = [n is not None and flags[shown.index(n)] for n in names]
     return [

@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from locbench.claims import Claim, ClaimResult, Source, pick_filter, register, spec_of
-from locbench.evaluate.metrics import POSE_DOF, chi2_band
+from locbench.evaluate.metrics import ANEES, POSE_DOF, chi2_band
 from locbench.suites import SUITES
 
 SOURCE_PROTOCOL = Source(
@@ -57,7 +57,7 @@ def check_matched_consistency(df: pd.DataFrame, filters: tuple[str, ...] = CONSI
         f = pick_filter(rows, fid)
         if f is None:
             return ClaimResult("not evaluated", f"no {fid} runs on the matched world")
-        v = rows.loc[(rows["filter"] == f) & (rows["metric"] == "anees"), "value"].to_numpy(dtype=np.float64)
+        v = rows.loc[(rows["filter"] == f) & (rows["metric"] == ANEES), "value"].to_numpy(dtype=np.float64)
         if not v.size:
             return ClaimResult("not evaluated", f"{f}: no anees rows on the matched world")
         lo, hi = chi2_band(POSE_DOF, int(v.size))
@@ -68,7 +68,7 @@ def check_matched_consistency(df: pd.DataFrame, filters: tuple[str, ...] = CONSI
     # The other filters' values, reported and not judged (their models are not the simulator's).
     others = []
     for f in sorted({str(n) for n in rows["filter"].unique()} - {pick_filter(rows, fid) for fid in filters}):
-        v = rows.loc[(rows["filter"] == f) & (rows["metric"] == "anees"), "value"].to_numpy(dtype=np.float64)
+        v = rows.loc[(rows["filter"] == f) & (rows["metric"] == ANEES), "value"].to_numpy(dtype=np.float64)
         if v.size:
             others.append(f"{f} {float(np.mean(v)):.2f}")
     if others:

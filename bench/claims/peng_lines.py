@@ -36,10 +36,10 @@ from locbench.claims import (
 )
 from locbench.core.errors import LocbenchError
 from locbench.evaluate.aggregate import mean_ci
+from locbench.evaluate.metrics import ACCEPTED_FRACTION, ATE_M, METRICS
 from locbench.evaluate.significance import TestResult, wilcoxon_paired
 from locbench.present import ranking as rk
 from locbench.present.docfmt import PALETTE, Block, Plot, Text
-from locbench.present.metric_info import METRICS
 from locbench.suites import SUITES
 
 log = logging.getLogger(__name__)
@@ -47,10 +47,8 @@ log = logging.getLogger(__name__)
 SOURCE_002 = Source("002", "Lab4 - EKF Map Based Localization", "Songyou Peng")
 DATASET = "line_room"
 FILTER = "ekf_lines"
-#: Metric id of the per-run accepted fraction of extracted lines (see the module docstring).
-ACCEPTED_METRIC = "accepted_fraction"
 
-_COLUMNS = ["dataset", "laser_sigma_m", "filter", "chi2", "reject_longer", "seed", "ate_m", "accepted"]
+_COLUMNS = ["dataset", "laser_sigma_m", "filter", "chi2", "reject_longer", "seed", ATE_M, "accepted"]
 
 
 def _filter_params(name: str) -> tuple[float, bool] | None:
@@ -83,7 +81,7 @@ def sweep_table(df: pd.DataFrame) -> pd.DataFrame:
     ``accepted`` is the ``accepted_fraction`` metric (NaN when absent). Failed runs have no ``ate_m``
     and are left out.
     """
-    sub = df[df["metric"].isin(["ate_m", ACCEPTED_METRIC])]
+    sub = df[df["metric"].isin([ATE_M, ACCEPTED_FRACTION])]
     if sub.empty:
         return pd.DataFrame(columns=_COLUMNS)
     wide = sub.pivot_table(index=["dataset", "filter", "seed"], columns="metric", values="value", aggfunc="first")
@@ -92,12 +90,12 @@ def sweep_table(df: pd.DataFrame) -> pd.DataFrame:
     for key, r in wide.iterrows():
         ds, flt, seed = (str(key[0]), str(key[1]), int(key[2]))  # type: ignore[index]
         prm = _filter_params(str(flt))
-        if prm is None or "ate_m" not in r or pd.isna(r["ate_m"]):
+        if prm is None or ATE_M not in r or pd.isna(r[ATE_M]):
             continue
         if ds not in sigma_of:
             sigma_of[ds] = _laser_sigma(str(ds))
-        acc = float(r[ACCEPTED_METRIC]) if ACCEPTED_METRIC in r and not pd.isna(r[ACCEPTED_METRIC]) else math.nan
-        rows.append((str(ds), sigma_of[ds], str(flt), prm[0], prm[1], int(seed), float(r["ate_m"]), acc))
+        acc = float(r[ACCEPTED_FRACTION]) if ACCEPTED_FRACTION in r and not pd.isna(r[ACCEPTED_FRACTION]) else math.nan
+        rows.append((str(ds), sigma_of[ds], str(flt), prm[0], prm[1], int(seed), float(r[ATE_M]), acc))
     return pd.DataFrame(rows, columns=_COLUMNS)
 
 
@@ -143,17 +141,17 @@ def _check_gate_lowers_error(df: pd.DataFrame) -> ClaimResult:
     if tab.empty:
         return ClaimResult("not evaluated", f"no {FILTER} runs on {DATASET}")
     ds = tab["dataset"].iloc[0]
-    m = _means(tab, "ate_m")
+    m = _means(tab, ATE_M)
     parts, tests = [], []
     for flag, g in m.groupby("reject_longer", sort=True):
         if g.shape[0] < 2:
             continue
         g = g.sort_values("chi2")
         lo, hi = g.iloc[0], g.iloc[-1]
-        tests.append(_paired_step(tab, bool(flag), float(lo["chi2"]), float(hi["chi2"]), "ate_m", "less"))
+        tests.append(_paired_step(tab, bool(flag), float(lo["chi2"]), float(hi["chi2"]), ATE_M, "less"))
         parts.append(
             f"{_setting(bool(flag))}: ATE "
-            + " / ".join(f"{100 * a:.2f}" for a in g["ate_m"])
+            + " / ".join(f"{100 * a:.2f}" for a in g[ATE_M])
             + " cm at chi2 "
             + " / ".join(f"{c:g}" for c in g["chi2"])
         )
@@ -168,7 +166,7 @@ def _check_gate_accepts_more(df: pd.DataFrame) -> ClaimResult:
     if tab.empty:
         return ClaimResult("not evaluated", f"no {FILTER} runs on {DATASET}")
     if tab["accepted"].isna().all():
-        return ClaimResult("not evaluated", f"metrics.csv has no {ACCEPTED_METRIC} metric yet")
+        return ClaimResult("not evaluated", f"metrics.csv has no {ACCEPTED_FRACTION} metric yet")
     ds = tab["dataset"].iloc[0]
     m = _means(tab.dropna(subset=["accepted"]), "accepted")
     parts, tests = [], []
@@ -198,7 +196,7 @@ def _check_length_check_helps(df: pd.DataFrame) -> ClaimResult:
     if tab.empty:
         return ClaimResult("not evaluated", f"no {FILTER} runs on {DATASET}")
     ds = tab["dataset"].iloc[0]
-    wide = tab.pivot_table(index=["chi2", "seed"], columns="reject_longer", values="ate_m", aggfunc="first")
+    wide = tab.pivot_table(index=["chi2", "seed"], columns="reject_longer", values=ATE_M, aggfunc="first")
     if True not in wide.columns or False not in wide.columns:
         return ClaimResult("not evaluated", f"{ds}: runs with the length check on and off are both needed")
     pairs = wide.dropna(subset=[True, False])
@@ -233,7 +231,7 @@ register(
         DATASET,
         SOURCE_002,
         f"A larger chi-square threshold accepts more lines: at every step up in the threshold a one-sided Wilcoxon "
-        f"signed-rank test over the seeds finds {ACCEPTED_METRIC} higher at 5 %, on the accurate variant, with the "
+        f"signed-rank test over the seeds finds {ACCEPTED_FRACTION} higher at 5 %, on the accurate variant, with the "
         "length check on and off.",
         "sec. 2.3: a large threshold accepts more observations (no numbers)",
         _check_gate_accepts_more,
@@ -272,7 +270,7 @@ def _gate_section(rows: pd.DataFrame, slug: str) -> list[Block]:
     labels: list[str] = []
     samples: list[dict[int, float] | None] = []
     for (ds, flag, chi2), g in tab.groupby(["dataset", "reject_longer", "chi2"], sort=True):
-        ci = mean_ci(100.0 * g["ate_m"].to_numpy())
+        ci = mean_ci(100.0 * g[ATE_M].to_numpy())
         cell = f"{ci.mean:.2f}" + (f" [{ci.low:.2f}, {ci.high:.2f}]" if ci.n > 1 else "")
         row = [f"`{ds}`", "on" if flag else "off", f"{chi2:g}", str(ci.n), cell]
         key = [math.nan, math.nan, float(g["chi2"].iloc[0]), float(ci.n), ci.mean / 100.0]
@@ -284,7 +282,7 @@ def _gate_section(rows: pd.DataFrame, slug: str) -> list[Block]:
         keys.append(tuple(key))
         groups.append(str(ds))
         labels.append(f"{_setting(bool(flag))}, chi2 {chi2:g}")
-        samples.append({int(k): float(v) for k, v in zip(g["seed"], g["ate_m"], strict=True)} or None)
+        samples.append({int(k): float(v) for k, v in zip(g["seed"], g[ATE_M], strict=True)} or None)
     datasets = sorted(tab["dataset"].unique())
 
     def draw(fig: Figure) -> None:
@@ -296,10 +294,10 @@ def _gate_section(rows: pd.DataFrame, slug: str) -> list[Block]:
                 g = sub[sub["reject_longer"] == flag]
                 if g.empty:
                     continue
-                m = g.groupby("chi2", sort=True)[["ate_m", "accepted"]].mean()
+                m = g.groupby("chi2", sort=True)[[ATE_M, "accepted"]].mean()
                 color, ls = PALETTE[d_i % len(PALETTE)], "-" if flag else "--"
                 label = f"{ds}, {_setting(flag)}"
-                axes[0].plot(m.index, 100.0 * m["ate_m"], label=label, color=color, linestyle=ls, marker="o")
+                axes[0].plot(m.index, 100.0 * m[ATE_M], label=label, color=color, linestyle=ls, marker="o")
                 if has_acc:
                     axes[1].plot(m.index, 100.0 * m["accepted"], label=label, color=color, linestyle=ls, marker="o")
         axes[0].set_xlabel("chi-square threshold")
@@ -315,7 +313,7 @@ def _gate_section(rows: pd.DataFrame, slug: str) -> list[Block]:
             header,
             out,
             keys,
-            [rk.Column(4, METRICS["ate_m"], samples)],
+            [rk.Column(4, METRICS[ATE_M], samples)],
             [True] * len(out),
             caption="ekf_lines: chi-square threshold sweep (report 002)",
             groups=groups,

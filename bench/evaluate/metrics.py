@@ -14,9 +14,13 @@ Conventions shared by every function here:
 - Position errors in m, headings in rad wrapped to (-pi, pi], times in s, runtimes in microseconds.
 - No alignment of the estimate to the truth: a localization filter works in the map frame.
 
-Metric ids returned by :func:`run_metrics` are the DESIGN names (``results/summary/metrics.csv``); an id
-never changes meaning. Undefined values (no update calls, a path shorter than the RPE distance) are
-left out of the returned dict rather than stored as NaN.
+**A metric is one declaration.** Every id of ``results/summary/metrics.csv`` is declared once, in :data:`METRICS`,
+as a :class:`Metric`: its id (a named constant here, ``ATE_M``), the function that gives one run's value and how the
+report shows it (header, display unit and scale, which way is better, whether the summary table has it, its line in
+docs/protocols.md). :func:`run_metrics` computes every declared metric of a run, the report's tables read the display
+records, and :func:`declare` adds a metric (a plugin's or a study's) the same way. An id never changes meaning.
+Undefined values (no update calls, a path shorter than the RPE distance) are left out of the returned dict rather
+than stored as NaN.
 
 **Recovery criterion** (DESIGN "Kidnap recovery"): at a ground-truth time the filter is *within* when
 its position error is <= :data:`RECOVERY_POSITION_M` (0.25 m) and its wrapped heading error is
@@ -66,9 +70,11 @@ Metric ids added on top of the DESIGN list (each documented here, none changes a
 
 from __future__ import annotations
 
+import functools
 import logging
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+import re
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
 from functools import cached_property
 from typing import TYPE_CHECKING
 
@@ -77,7 +83,7 @@ import numpy.typing as npt
 from scipy import stats
 
 from locbench.core.geometry import between, pose_error, wrap_angle
-from locbench.evaluate.scores import score_metrics
+from locbench.evaluate.scores import SCORE_IDS, score_metrics
 
 if TYPE_CHECKING:
     from locbench.datasets.dataset import Kidnap
@@ -105,6 +111,73 @@ KIDNAP_WINDOW_S = 30.0
 FALSE_CONFIDENCE_PROBABILITY = 0.999
 #: Tolerance on time comparisons, s (ground-truth times are sums of float steps).
 _T_EPS = 1e-6
+
+# --- metric ids (each declared in METRICS, at the end of the module) ----------------------------------------------
+# An id with a <name> part names a family of ids (member_id fills it in).
+
+FAILED = "failed"
+ATE_M = "ate_m"
+ATE_OVER_PCRB = "ate_over_pcrb"
+WAYPOINT_ERROR_M = "waypoint_<j>_error_m"
+WAYPOINT_EST_X_M = "waypoint_<j>_est_x_m"
+WAYPOINT_EST_Y_M = "waypoint_<j>_est_y_m"
+WAYPOINT_MARKED_X_M = "waypoint_<j>_marked_x_m"
+WAYPOINT_MARKED_Y_M = "waypoint_<j>_marked_y_m"
+WAYPOINT_RMSE_MEAN_M = "waypoint_rmse_mean_m"
+SMOOTHED_ATE_M = "smoothed_ate_m"
+SMOOTHED_HEADING_RMSE_RAD = "smoothed_heading_rmse_rad"
+HEADING_RMSE_RAD = "heading_rmse_rad"
+RPE_M_PER_M = "rpe_m_per_m"
+FINAL_ERROR_M = "final_error_m"
+WITHIN_FRACTION = "within_<k>cm_fraction"
+RELATION_ERROR_M = "relation_error_m"
+RELATION_ERROR_RAD = "relation_error_rad"
+RELATION_COUNT = "relation_count"
+ANEES = "anees"
+NEES_IN_BAND_FRACTION = "nees_in_band_fraction"
+NLL = "nll"
+CRPS_X_M, CRPS_Y_M, CRPS_HEADING_RAD, ENERGY_SCORE_M = SCORE_IDS
+SCORE_CI_LOW = "<score>_ci_low_<unit>"
+SCORE_CI_HIGH = "<score>_ci_high_<unit>"
+LOST_AUROC = "lost_auroc"
+PREDICT_US_MEAN = "predict_us_mean"
+PREDICT_US_MEDIAN = "predict_us_median"
+PREDICT_US_P95 = "predict_us_p95"
+UPDATE_US_MEAN = "update_us_mean"
+UPDATE_US_MEDIAN = "update_us_median"
+UPDATE_US_P95 = "update_us_p95"
+REALTIME_FACTOR = "realtime_factor"
+#: The suffix of a metric id in reference units.
+REF_SUFFIX = "_ref"
+PREDICT_US_MEDIAN_REF = PREDICT_US_MEDIAN + REF_SUFFIX
+UPDATE_US_MEDIAN_REF = UPDATE_US_MEDIAN + REF_SUFFIX
+REALTIME_FACTOR_REF = REALTIME_FACTOR + REF_SUFFIX
+KIDNAP_DISTANCE_M = "kidnap_distance_m"
+KIDNAP_RECOVERED = "kidnap_recovered"
+KIDNAP_TIME_TO_RECOVER_S = "kidnap_time_to_recover_s"
+KIDNAP_FALSE_CONFIDENCE_FRACTION = "kidnap_false_confidence_fraction"
+CONVERGED = "converged"
+TIME_TO_CONVERGE_S = "time_to_converge_s"
+ACCEPTED_FRACTION = "accepted_fraction"
+PARTICLES_MEAN = "particles_mean"
+RECORDED_ATE_MEDIAN_M = "recorded_ate_median_m"
+
+
+def member_id(family: str, *parts: object) -> str:
+    """The id of one member of a family of ids: ``member_id(WAYPOINT_ERROR_M, 3)`` is ``waypoint_3_error_m``.
+
+    Each ``<name>`` part of ``family`` is replaced, in order, by one of ``parts``.
+    """
+    names = _PLACEHOLDER.findall(family)
+    if len(names) != len(parts):
+        raise ValueError(f"{family!r} has {len(names)} part(s) to fill, got {len(parts)}")
+    out = family
+    for name, part in zip(names, parts, strict=True):
+        out = out.replace(name, str(part), 1)
+    return out
+
+
+_PLACEHOLDER = re.compile(r"<[a-z]+>")
 
 
 # --- zero-order hold ----------------------------------------------------------------------------
@@ -290,7 +363,7 @@ def within_fractions(a: Aligned) -> dict[str, float]:
     """Accuracy at thresholds: the fraction of ground-truth times whose position error is at most each of
     :data:`WITHIN_THRESHOLDS_CM`, as ``within_<k>cm_fraction`` (zero-order hold, no alignment)."""
     err = a.position_error
-    return {f"within_{k}cm_fraction": float(np.mean(err <= k / 100.0)) for k in WITHIN_THRESHOLDS_CM}
+    return {member_id(WITHIN_FRACTION, k): float(np.mean(err <= k / 100.0)) for k in WITHIN_THRESHOLDS_CM}
 
 
 def heading_rmse(a: Aligned) -> float:
@@ -589,12 +662,12 @@ def kidnap_metrics(a: Aligned, kidnaps: Sequence[Kidnap]) -> dict[str, float]:
     if np.isfinite(t_next):
         ok = ok & (tt < t_next - _T_EPS)  # a hold must not straddle the next jump
     t_s = first_hold(tt, ok, t_k, latest_start=min(t_k + KIDNAP_WINDOW_S, t_next))
-    out = {"kidnap_distance_m": float(np.hypot(first.delta[0], first.delta[1]))}
-    out["kidnap_recovered"] = 1.0 if t_s is not None else 0.0
+    out = {KIDNAP_DISTANCE_M: float(np.hypot(first.delta[0], first.delta[1]))}
+    out[KIDNAP_RECOVERED] = 1.0 if t_s is not None else 0.0
     if t_s is not None:
-        out["kidnap_time_to_recover_s"] = t_s - t_k
+        out[KIDNAP_TIME_TO_RECOVER_S] = t_s - t_k
     confident = a.nees > false_confidence_bound()
-    out["kidnap_false_confidence_fraction"] = time_fraction(tt, confident, t_k, window_end if t_s is None else t_s)
+    out[KIDNAP_FALSE_CONFIDENCE_FRACTION] = time_fraction(tt, confident, t_k, window_end if t_s is None else t_s)
     return out
 
 
@@ -607,8 +680,8 @@ def convergence_metrics(a: Aligned) -> dict[str, float]:
     tt = a.t
     t_s = first_hold(tt, within_recovery(a), float(tt[0]))
     if t_s is None:
-        return {"converged": 0.0}
-    return {"converged": 1.0, "time_to_converge_s": t_s - float(tt[0])}
+        return {CONVERGED: 0.0}
+    return {CONVERGED: 1.0, TIME_TO_CONVERGE_S: t_s - float(tt[0])}
 
 
 def smoothed_metrics(extra: Mapping[str, np.ndarray], a: Aligned) -> dict[str, float]:
@@ -649,7 +722,7 @@ def smoothed_metrics(extra: Mapping[str, np.ndarray], a: Aligned) -> dict[str, f
     if np.any(np.diff(st) < 0):
         raise ValueError("smoothed trajectory: 'smoothed_t' must be non-decreasing")
     smoothed = align(st, sm, a.t, a.truth)
-    return {"smoothed_ate_m": ate(smoothed), "smoothed_heading_rmse_rad": heading_rmse(smoothed)}
+    return {SMOOTHED_ATE_M: ate(smoothed), SMOOTHED_HEADING_RMSE_RAD: heading_rmse(smoothed)}
 
 
 # --- runtime ------------------------------------------------------------------------------------
@@ -686,9 +759,7 @@ def realtime_factor(duration_s: float, compute_ns: npt.ArrayLike) -> float:
 
 
 #: The runtime metrics of :func:`run_metrics` with a twin in reference units (``<id>_ref``, :func:`reference_units`).
-REFERENCE_TIMES = tuple(f"{call}_us_{stat}" for call in ("predict", "update") for stat in ("mean", "median", "p95"))
-#: The suffix of a metric id in reference units.
-REF_SUFFIX = "_ref"
+REFERENCE_TIMES = (PREDICT_US_MEAN, PREDICT_US_MEDIAN, PREDICT_US_P95, UPDATE_US_MEAN, UPDATE_US_MEDIAN, UPDATE_US_P95)
 
 
 def reference_units(
@@ -721,8 +792,8 @@ def reference_units(
         for k in REFERENCE_TIMES
         if k in metrics
     }
-    if "realtime_factor" in metrics:
-        out[f"realtime_factor{REF_SUFFIX}"] = metrics["realtime_factor"] * reference_s
+    if REALTIME_FACTOR in metrics:
+        out[REALTIME_FACTOR_REF] = metrics[REALTIME_FACTOR] * reference_s
     return out
 
 
@@ -772,7 +843,7 @@ def relation_errors(
 def run_metrics(
     run: RunRecord, truth: TruthRecord, rpe_delta_m: float = RPE_DELTA_M, aligned: Aligned | None = None
 ) -> dict[str, float]:
-    """Every metric of one stored run, keyed by its DESIGN metric id.
+    """Every declared metric (:data:`METRICS`) of one stored run, keyed by its metric id.
 
     Parameters
     ----------
@@ -790,7 +861,8 @@ def run_metrics(
     -------
     dict of str to float
         For a run with status "skipped": empty. For any other status except "ok": ``{"failed": 1}``.
-        For an ok run: ``failed`` = 0 and ``waypoint_<j>_error_m``, ``waypoint_<j>_est_x_m``,
+        For an ok run: ``failed`` = 0 and the value of every declared metric that is defined for it, in
+        declaration order. The built-in ones: ``waypoint_<j>_error_m``, ``waypoint_<j>_est_x_m``,
         ``waypoint_<j>_est_y_m``, ``waypoint_<j>_marked_x_m``, ``waypoint_<j>_marked_y_m`` (j from 1,
         when the dataset has waypoints), ``ate_m``, ``heading_rmse_rad``, ``rpe_m_per_m``,
         ``final_error_m``, ``within_<k>cm_fraction`` (:func:`within_fractions`), ``anees``,
@@ -805,53 +877,17 @@ def run_metrics(
         ``run.extra`` ``smoothed_ate_m`` and ``smoothed_heading_rmse_rad``; with reference relations in the
         truth ``relation_error_m``, ``relation_error_rad`` and ``relation_count``. Undefined values are left out.
     """
-    # long: the metrics table of one run: each metric family appended in the order of metrics.csv from one aligned view
     status = run.status
     if status == "skipped":
         return {}
     if status != "ok":
-        return {"failed": 1.0}
+        return {FAILED: 1.0}
     if run.t.shape[0] == 0:
         raise ValueError("an ok run has no estimates")
-    a = aligned if aligned is not None else align_run(run, truth)
-    out: dict[str, float] = {"failed": 0.0}
-    if truth.waypoints is not None and len(truth.waypoints):
-        err, est_xy = waypoint_errors(run.t, run.mean, truth.waypoints.t, truth.waypoints.xy)
-        for j in range(err.shape[0]):
-            out[f"waypoint_{j + 1}_error_m"] = float(err[j])
-            out[f"waypoint_{j + 1}_est_x_m"] = float(est_xy[j, 0])
-            out[f"waypoint_{j + 1}_est_y_m"] = float(est_xy[j, 1])
-            # The marked point itself, so that the distance of the mean estimate needs only the CSV.
-            out[f"waypoint_{j + 1}_marked_x_m"] = float(truth.waypoints.xy[j, 0])
-            out[f"waypoint_{j + 1}_marked_y_m"] = float(truth.waypoints.xy[j, 1])
-    out["ate_m"] = ate(a)
-    out.update(within_fractions(a))
-    out["heading_rmse_rad"] = heading_rmse(a)
-    out["rpe_m_per_m"] = rpe_per_metre(a, rpe_delta_m)
-    out["final_error_m"] = final_error(a)
-    out["anees"] = anees(a.nees)
-    out["nees_in_band_fraction"] = fraction_in_band(a.nees, chi2_band(POSE_DOF, 1))
-    # +inf when any time's covariance is singular, as the ANEES.
-    out["nll"] = float(np.mean(nll_at_truth(a)))
-    for call in ("predict", "update"):
-        for stat, value in runtime_stats(run.step_times_us(call)).items():
-            out[f"{call}_us_{stat}"] = value
-    out["realtime_factor"] = realtime_factor(truth.duration_s, run.step_ns)
-    ref, ref_cpu = (_positive(run.meta.get(k)) for k in ("reference_s", "reference_cpu_s"))
-    if ref is not None:  # runs stored before reference_s was recorded have none
-        out.update(reference_units(out, ref, ref_cpu))
-    out.update(convergence_metrics(a))
-    out.update(kidnap_metrics(a, truth.kidnaps))
-    out.update(smoothed_metrics(run.extra, a))
-    out.update(score_metrics(a, run.extra))
-    out.update(acceptance_metrics(run.diagnostics))
-    out.update(particle_count_metrics(run.diagnostics))
-    if truth.relations is not None and len(truth.relations):
-        trans, rot = relation_errors(run.t, run.mean, truth.relations.t1, truth.relations.t2, truth.relations.delta)
-        out["relation_count"] = float(trans.shape[0])
-        if trans.shape[0]:
-            out["relation_error_m"] = float(np.mean(trans))
-            out["relation_error_rad"] = float(np.mean(rot))
+    view = RunView(run, truth, aligned if aligned is not None else align_run(run, truth), rpe_delta_m)
+    out: dict[str, float] = {}
+    for metric in METRICS.values():
+        out.update(metric.values(view))
     return {k: v for k, v in out.items() if not np.isnan(v)}
 
 
@@ -866,7 +902,7 @@ def particle_count_metrics(diagnostics: dict[str, FloatArray]) -> dict[str, floa
         return {}
     c = np.asarray(count, dtype=np.float64)
     c = c[np.isfinite(c)]
-    return {"particles_mean": float(np.mean(c))} if c.size else {}
+    return {PARTICLES_MEAN: float(np.mean(c))} if c.size else {}
 
 
 def acceptance_metrics(diagnostics: dict[str, FloatArray]) -> dict[str, float]:
@@ -880,4 +916,775 @@ def acceptance_metrics(diagnostics: dict[str, FloatArray]) -> dict[str, float]:
     if acc is None or rej is None:
         return {}
     total = float(np.nansum(acc) + np.nansum(rej))
-    return {"accepted_fraction": float(np.nansum(acc)) / total} if total > 0 else {}
+    return {ACCEPTED_FRACTION: float(np.nansum(acc)) / total} if total > 0 else {}
+
+
+# --- declarations: a metric is one record --------------------------------------------------------------------------
+
+#: The tables of docs/protocols.md a metric is listed in (one generated table each), in the page's order.
+GROUPS = ("run", "accuracy", "consistency", "scores", "runtime", "recovery", "filter", "over runs")
+#: Which way a metric is better: lower, higher, closer to its target (in ratio), or neither (not ranked).
+BETTER = ("lower", "higher", "closer", "")
+#: What a summary cell without a value shows: the value is undefined ("n/a") or does not apply ("-").
+ABSENT = ("n/a", "-")
+
+#: A function that gives the values of several metric ids of one run at once (the kidnap metrics, the waypoints).
+Family = Callable[["RunView"], Mapping[str, float]]
+
+
+@dataclass(eq=False)
+class RunView:
+    """One ok run as a metric reads it: the stored run, its truth and the run held at the ground-truth times.
+
+    Attributes
+    ----------
+    run : RunRecord
+        The stored run (estimates, covariances, step kinds and times, diagnostics, ``extra``, meta).
+    truth : TruthRecord
+        The ground truth of its dataset and seed (trajectory, waypoints, kidnaps, relations, duration).
+    aligned : Aligned
+        The run's means and covariances held at the truth's ground-truth times (:func:`align_run`).
+    rpe_delta_m : float
+        Travelled distance of the RPE pairs, m.
+    """
+
+    run: RunRecord
+    truth: TruthRecord
+    aligned: Aligned
+    rpe_delta_m: float = RPE_DELTA_M
+    _families: dict[Family, Mapping[str, float]] = field(default_factory=dict, repr=False)
+
+    def shared(self, family: Family) -> Mapping[str, float]:
+        """``family(self)``, computed once per run however many metrics read it."""
+        if family not in self._families:
+            self._families[family] = family(self)
+        return self._families[family]
+
+
+@dataclass(frozen=True)
+class Metric:
+    """One metric, declared once: its id, how one run's value is computed and how the report shows it.
+
+    A metric with ``compute`` or ``family`` is a row of ``metrics.csv`` for every ok run that defines it; one with
+    neither is a statistic over runs that the report computes (its declaration holds how it is shown).
+
+    Attributes
+    ----------
+    id : str
+        The id in ``metrics.csv``; it never changes meaning. An id with ``<name>`` parts (``waypoint_<j>_error_m``)
+        declares a family of ids (:func:`member_id`; a one-letter part is a number), whose values a ``family``
+        function gives.
+    header : str
+        The report's name of it (``ATE``).
+    unit : str
+        The unit of its value in ``metrics.csv``: SI (``m``, ``rad``, ``s``), ``us`` for call times, ``1`` for a
+        fraction or a 1/0 flag, ``x`` for a ratio, ``""`` for a dimensionless score.
+    display_unit : str
+        The unit the report shows it in (``cm``); ``""`` none.
+    scale : float
+        The factor from its value to the shown one (100 from m to cm, degrees(1) from rad to deg).
+    better : str
+        One of :data:`BETTER`: "lower", "higher", "closer" (to ``target``, in ratio) or "" (not ranked).
+    target : float
+        The best value of a "closer" metric (the ANEES: :data:`POSE_DOF`).
+    definition : str
+        Its line in the table of docs/protocols.md (generated from the declarations).
+    group : str
+        The table it is listed in (:data:`GROUPS`; "" for none, a metric declared outside this module).
+    compute : callable or None
+        ``compute(view)``: the value of one ok run (:class:`RunView`), NaN when undefined (left out).
+    family : callable or None
+        ``family(view)``: the values of several ids of one run, computed once and shared by the metrics that name it
+        (:meth:`RunView.shared`); the metric takes its own id's value, or every id of its pattern.
+    summary : bool
+        The report's summary table shows it: a column per metric, in declaration order, the mean over seeds in the
+        display unit, ranked by a paired test (the report's own cell for the metrics it computes over runs).
+    note : str
+        The summary table's footnote for its column ("" none).
+    absent : str
+        A summary cell without a value (:data:`ABSENT`): "n/a" (undefined) or "-" (does not apply: a filter
+        without update calls has no update time).
+    bound : bool
+        The accuracy bound (:mod:`locbench.evaluate.pcrb`) gives it too: the summary shows the bound's value.
+    """
+
+    id: str
+    header: str
+    unit: str
+    display_unit: str = ""
+    scale: float = 1.0
+    better: str = "lower"
+    target: float = float("nan")
+    definition: str = ""
+    group: str = ""
+    compute: Callable[[RunView], float] | None = None
+    family: Family | None = None
+    summary: bool = False
+    note: str = ""
+    absent: str = "n/a"
+    bound: bool = False
+
+    def __post_init__(self) -> None:
+        problems = []
+        if not re.fullmatch(r"[a-z0-9_]+", _PLACEHOLDER.sub("x", self.id)):
+            problems.append("an id is lower-case letters, digits and '_' (and <name> parts)")
+        if self.better not in BETTER:
+            problems.append(f"better must be one of {BETTER}")
+        if self.better == "closer" and not np.isfinite(self.target):
+            problems.append("a metric closest to a target needs a finite target")
+        if self.group and self.group not in GROUPS:
+            problems.append(f"group must be one of {GROUPS} or ''")
+        if self.absent not in ABSENT:
+            problems.append(f"absent must be one of {ABSENT}")
+        if self.compute is not None and self.family is not None:
+            problems.append("it is computed by compute or by a family, not both")
+        if self.is_family and self.compute is not None:
+            problems.append("a family of ids takes its values from a family function, not compute")
+        if self.is_family and self.summary:
+            problems.append("the summary shows one id's mean, not a family's")
+        if problems:
+            raise ValueError(f"metric {self.id!r}: " + "; ".join(problems))
+
+    @property
+    def is_family(self) -> bool:
+        """The id names a family of ids (it has ``<name>`` parts)."""
+        return bool(_PLACEHOLDER.search(self.id))
+
+    @property
+    def per_run(self) -> bool:
+        """A row of ``metrics.csv`` (computed from each run), not a statistic over runs."""
+        return self.compute is not None or self.family is not None
+
+    def matches(self, metric_id: str) -> bool:
+        """Whether ``metric_id`` is this metric's id or, for a family, one of its members."""
+        return metric_id == self.id or (self.is_family and _pattern(self.id).fullmatch(metric_id) is not None)
+
+    def values(self, view: RunView) -> dict[str, float]:
+        """This metric's values of one ok run, by id (empty when it is not computed from runs or has none)."""
+        if self.compute is not None:
+            return {self.id: float(self.compute(view))}
+        if self.family is None:
+            return {}
+        got = view.shared(self.family)
+        return {k: float(v) for k, v in got.items() if self.matches(k)}
+
+
+@functools.cache
+def _pattern(family: str) -> re.Pattern[str]:
+    return re.compile(family_regex(family))
+
+
+def family_regex(family: str) -> str:
+    """The regular expression (for a full match) of a family's member ids: a one-letter part (``<j>``) stands for
+    a number, a longer one (``<score>``) for a part of an id (letters, digits, ``_``)."""
+    out = re.escape(family)
+    for name in _PLACEHOLDER.findall(family):
+        out = out.replace(re.escape(name), r"(\d+)" if len(name) == 3 else "([a-z0-9_]+)", 1)
+    return out
+
+
+#: Every declared metric by id, in declaration order (the order of the summary's metric columns and of the docs'
+#: tables). Add one with :func:`declare`.
+METRICS: dict[str, Metric] = {}
+
+
+def declare(metric: Metric) -> Metric:
+    """Declare a metric: from then on :func:`run_metrics` computes it for every ok run (``metrics.csv``), and with
+    ``summary=True`` the report's summary table shows it.
+
+    Raises
+    ------
+    ValueError
+        When its id, or a member of its family, is declared already: an id never changes meaning.
+    """
+    clash = [m.id for m in METRICS.values() if m.matches(metric.id) or metric.matches(m.id)]
+    if clash:
+        raise ValueError(f"metric {metric.id!r} is declared already ({clash[0]!r}); an id never changes meaning")
+    METRICS[metric.id] = metric
+    return metric
+
+
+def declared(metric_id: str) -> Metric:
+    """The declaration of a metric id: its own or its family's (``waypoint_3_error_m``: ``waypoint_<j>_error_m``).
+
+    Raises
+    ------
+    KeyError
+        For an id nothing declares.
+    """
+    m = METRICS.get(metric_id)
+    if m is not None:
+        return m
+    for m in METRICS.values():
+        if m.is_family and m.matches(metric_id):
+            return m
+    raise KeyError(f"no metric declares the id {metric_id!r}")
+
+
+# the families of the built-in metrics: each is computed once per run
+
+
+def _waypoints(v: RunView) -> dict[str, float]:
+    wp = v.truth.waypoints
+    if wp is None or not len(wp):
+        return {}
+    err, est_xy = waypoint_errors(v.run.t, v.run.mean, wp.t, wp.xy)
+    out: dict[str, float] = {}
+    for j in range(err.shape[0]):
+        out[member_id(WAYPOINT_ERROR_M, j + 1)] = float(err[j])
+        out[member_id(WAYPOINT_EST_X_M, j + 1)] = float(est_xy[j, 0])
+        out[member_id(WAYPOINT_EST_Y_M, j + 1)] = float(est_xy[j, 1])
+        # The marked point itself, so that the distance of the mean estimate needs only the CSV.
+        out[member_id(WAYPOINT_MARKED_X_M, j + 1)] = float(wp.xy[j, 0])
+        out[member_id(WAYPOINT_MARKED_Y_M, j + 1)] = float(wp.xy[j, 1])
+    return out
+
+
+def _within(v: RunView) -> dict[str, float]:
+    return within_fractions(v.aligned)
+
+
+def _smoothed(v: RunView) -> dict[str, float]:
+    return smoothed_metrics(v.run.extra, v.aligned)
+
+
+def _relations(v: RunView) -> dict[str, float]:
+    rel = v.truth.relations
+    if rel is None or not len(rel):
+        return {}
+    trans, rot = relation_errors(v.run.t, v.run.mean, rel.t1, rel.t2, rel.delta)
+    out = {RELATION_COUNT: float(trans.shape[0])}
+    if trans.shape[0]:
+        out[RELATION_ERROR_M] = float(np.mean(trans))
+        out[RELATION_ERROR_RAD] = float(np.mean(rot))
+    return out
+
+
+def _scores(v: RunView) -> dict[str, float]:
+    return score_metrics(v.aligned, v.run.extra)
+
+
+#: The runtime ids of each timed call, in the order of :func:`runtime_stats`' statistics.
+_CALL_TIMES = {
+    "predict": {"mean": PREDICT_US_MEAN, "median": PREDICT_US_MEDIAN, "p95": PREDICT_US_P95},
+    "update": {"mean": UPDATE_US_MEAN, "median": UPDATE_US_MEDIAN, "p95": UPDATE_US_P95},
+}
+
+
+def _runtime(v: RunView) -> dict[str, float]:
+    out = {
+        ids[stat]: value
+        for call, ids in _CALL_TIMES.items()
+        for stat, value in runtime_stats(v.run.step_times_us(call)).items()
+    }
+    out[REALTIME_FACTOR] = realtime_factor(v.truth.duration_s, v.run.step_ns)
+    return out
+
+
+def _reference(v: RunView) -> dict[str, float]:
+    ref, ref_cpu = (_positive(v.run.meta.get(k)) for k in ("reference_s", "reference_cpu_s"))
+    if ref is None:  # runs stored before reference_s was recorded have none
+        return {}
+    return reference_units(v.shared(_runtime), ref, ref_cpu)
+
+
+def _convergence(v: RunView) -> dict[str, float]:
+    return convergence_metrics(v.aligned)
+
+
+def _kidnap(v: RunView) -> dict[str, float]:
+    return kidnap_metrics(v.aligned, v.truth.kidnaps)
+
+
+def _acceptance(v: RunView) -> dict[str, float]:
+    return acceptance_metrics(v.run.diagnostics)
+
+
+def _particles(v: RunView) -> dict[str, float]:
+    return particle_count_metrics(v.run.diagnostics)
+
+
+_CM = 100.0
+_DEG = float(np.degrees(1.0))
+_PERCENT = 100.0
+
+# The built-in metrics. Their order is the order of the summary's metric columns (those with summary=True) and of the
+# rows of each docs table.
+for _m in (
+    Metric(
+        FAILED,
+        header="failed",
+        unit="1",
+        better="",
+        group="run",
+        compute=lambda v: 0.0,
+        definition="1 for a run that failed or diverged (its only row), 0 for an ok run",
+    ),
+    Metric(
+        ATE_M,
+        header="ATE",
+        unit="m",
+        display_unit="cm",
+        scale=_CM,
+        group="accuracy",
+        compute=lambda v: ate(v.aligned),
+        summary=True,
+        bound=True,
+        definition="position RMSE over every ground-truth time",
+    ),
+    Metric(
+        ATE_OVER_PCRB,
+        header="ATE / PCRB",
+        unit="x",
+        display_unit="x",
+        group="over runs",
+        summary=True,
+        definition="sqrt(mean over seeds of `ate_m`^2) over the bound's on the same seeds "
+        "(`locbench.evaluate.aggregate.ate_over_pcrb`; 1 = as accurate as any estimator can be)",
+    ),
+    Metric(
+        WAYPOINT_ERROR_M,
+        header="waypoint error",
+        unit="m",
+        display_unit="cm",
+        scale=_CM,
+        group="accuracy",
+        family=_waypoints,
+        bound=True,
+        definition="e_ij = |p_hat_i(t_j) - p_j| against the marked point of waypoint j (j from 1)",
+    ),
+    Metric(
+        WAYPOINT_EST_X_M,
+        header="estimated x at the waypoint",
+        unit="m",
+        display_unit="cm",
+        scale=_CM,
+        better="",
+        group="accuracy",
+        family=_waypoints,
+        definition="x of the estimated position at waypoint j's time (world frame)",
+    ),
+    Metric(
+        WAYPOINT_EST_Y_M,
+        header="estimated y at the waypoint",
+        unit="m",
+        display_unit="cm",
+        scale=_CM,
+        better="",
+        group="accuracy",
+        family=_waypoints,
+        definition="y of the same",
+    ),
+    Metric(
+        WAYPOINT_MARKED_X_M,
+        header="marked x of the waypoint",
+        unit="m",
+        display_unit="cm",
+        scale=_CM,
+        better="",
+        group="accuracy",
+        family=_waypoints,
+        definition="x of waypoint j's marked point (so the mean estimate's distance needs only `metrics.csv`)",
+    ),
+    Metric(
+        WAYPOINT_MARKED_Y_M,
+        header="marked y of the waypoint",
+        unit="m",
+        display_unit="cm",
+        scale=_CM,
+        better="",
+        group="accuracy",
+        family=_waypoints,
+        definition="y of the same",
+    ),
+    Metric(
+        WAYPOINT_RMSE_MEAN_M,
+        header="mean waypoint RMSE",
+        unit="m",
+        display_unit="cm",
+        scale=_CM,
+        group="over runs",
+        summary=True,
+        definition="the mean over the waypoints of RMSE_j = sqrt(mean over runs of e_ij^2); "
+        "its paired test takes each run's mean of `waypoint_<j>_error_m`",
+    ),
+    Metric(
+        SMOOTHED_ATE_M,
+        header="smoothed ATE",
+        unit="m",
+        display_unit="cm",
+        scale=_CM,
+        group="accuracy",
+        family=_smoothed,
+        definition="the ATE of a smoother's lag-smoothed trajectory (gtsam's fixed-lag smoother)",
+    ),
+    Metric(
+        SMOOTHED_HEADING_RMSE_RAD,
+        header="smoothed heading RMSE",
+        unit="rad",
+        display_unit="deg",
+        scale=_DEG,
+        group="accuracy",
+        family=_smoothed,
+        definition="the heading RMSE of the same smoothed trajectory",
+    ),
+    Metric(
+        HEADING_RMSE_RAD,
+        header="heading RMSE",
+        unit="rad",
+        display_unit="deg",
+        scale=_DEG,
+        group="accuracy",
+        summary=True,
+        bound=True,
+        compute=lambda v: heading_rmse(v.aligned),
+        definition="RMSE of the wrapped heading error",
+    ),
+    Metric(
+        RPE_M_PER_M,
+        header="RPE",
+        unit="m/m",
+        display_unit="%",
+        scale=_PERCENT,
+        group="accuracy",
+        compute=lambda v: rpe_per_metre(v.aligned, v.rpe_delta_m),
+        definition="mean translational error of the relative motion over 1 m of travelled path, divided by "
+        "that distance",
+    ),
+    Metric(
+        FINAL_ERROR_M,
+        header="final error",
+        unit="m",
+        display_unit="cm",
+        scale=_CM,
+        group="accuracy",
+        compute=lambda v: final_error(v.aligned),
+        definition="position error at the last ground-truth time",
+    ),
+    Metric(
+        WITHIN_FRACTION,
+        header="within k cm",
+        unit="1",
+        display_unit="%",
+        scale=_PERCENT,
+        better="higher",
+        group="accuracy",
+        family=_within,
+        definition="the fraction of ground-truth times whose position error is at most k cm, k = 5, 10, 25, 50 "
+        "(accuracy at thresholds)",
+    ),
+    Metric(
+        RELATION_ERROR_M,
+        header="relation error",
+        unit="m",
+        display_unit="cm",
+        scale=_CM,
+        group="accuracy",
+        family=_relations,
+        definition="mean translational relation error over reference relative poses (Kuemmerle et al. 2009, "
+        "eq. 1-2), for datasets whose trajectory is a SLAM reference",
+    ),
+    Metric(
+        RELATION_ERROR_RAD,
+        header="relation error",
+        unit="rad",
+        display_unit="deg",
+        scale=_DEG,
+        group="accuracy",
+        family=_relations,
+        definition="mean rotational relation error over the same relations",
+    ),
+    Metric(
+        RELATION_COUNT,
+        header="relations",
+        unit="1",
+        better="",
+        group="accuracy",
+        family=_relations,
+        definition="how many reference relations have both times within the run",
+    ),
+    Metric(
+        ANEES,
+        header="ANEES",
+        unit="",
+        better="closer",
+        target=float(POSE_DOF),
+        group="consistency",
+        summary=True,
+        compute=lambda v: anees(v.aligned.nees),
+        definition="mean NEES over a run's ground-truth times (3 for a consistent filter)",
+    ),
+    Metric(
+        NEES_IN_BAND_FRACTION,
+        header="NEES in 95 % band",
+        unit="1",
+        display_unit="%",
+        scale=_PERCENT,
+        better="higher",
+        group="consistency",
+        compute=lambda v: fraction_in_band(v.aligned.nees, chi2_band(POSE_DOF, 1)),
+        definition="fraction of ground-truth times whose NEES lies in the single-run two-sided 95 % chi-square(3) "
+        "band [0.216, 9.35]",
+    ),
+    # +inf when any time's covariance is singular, as the ANEES
+    Metric(
+        NLL,
+        header="NLL",
+        unit="",
+        group="consistency",
+        compute=lambda v: float(np.mean(nll_at_truth(v.aligned))),
+        definition="mean over the ground-truth times of 0.5 (e' P^-1 e + log det(2 pi P)), +inf when a "
+        "covariance is singular",
+    ),
+    Metric(
+        CRPS_X_M,
+        header="CRPS x",
+        unit="m",
+        display_unit="cm",
+        scale=_CM,
+        group="scores",
+        family=_scores,
+        definition="mean over the ground-truth times of the CRPS of the belief's x marginal at the true x",
+    ),
+    Metric(CRPS_Y_M, "CRPS y", "m", "cm", _CM, group="scores", family=_scores, definition="the same for y"),
+    Metric(
+        CRPS_HEADING_RAD,
+        header="CRPS heading",
+        unit="rad",
+        display_unit="deg",
+        scale=_DEG,
+        group="scores",
+        family=_scores,
+        definition="the same for the heading, each belief's heading unwrapped onto the branch nearest the true "
+        "heading (error wrapped to (-pi, pi], scored at 0)",
+    ),
+    Metric(
+        ENERGY_SCORE_M,
+        header="energy score",
+        unit="m",
+        display_unit="cm",
+        scale=_CM,
+        group="scores",
+        family=_scores,
+        summary=True,
+        note="Energy score: proper score of the filter's own position belief, mean over the ground-truth times "
+        "(lower is better).",
+        definition="mean over the ground-truth times of the energy score of the belief's position (x, y) at "
+        "the true position",
+    ),
+    Metric(
+        SCORE_CI_LOW,
+        header="interval low",
+        unit="as the score",
+        better="",
+        group="scores",
+        family=_scores,
+        definition="the lower end of the 95 % block-bootstrap interval of each score's mean (`crps_x_ci_low_m`, "
+        "`energy_score_ci_low_m`, ...)",
+    ),
+    Metric(
+        SCORE_CI_HIGH,
+        header="interval high",
+        unit="as the score",
+        better="",
+        group="scores",
+        family=_scores,
+        definition="its upper end (`crps_x_ci_high_m`, ...)",
+    ),
+    Metric(
+        LOST_AUROC,
+        header="lost AUROC",
+        unit="",
+        better="higher",
+        group="over runs",
+        summary=True,
+        definition="AUROC of a configuration's best health signal for the times its position error exceeds "
+        "0.25 m, over its runs (below)",
+    ),
+    Metric(
+        PREDICT_US_MEAN,
+        header="predict mean",
+        unit="us",
+        display_unit="us",
+        group="runtime",
+        family=_runtime,
+        definition="mean time of a predict call",
+    ),
+    Metric(
+        PREDICT_US_MEDIAN,
+        header="predict median",
+        unit="us",
+        display_unit="us",
+        group="runtime",
+        family=_runtime,
+        definition="median time of a predict call",
+    ),
+    Metric(
+        PREDICT_US_P95,
+        header="predict p95",
+        unit="us",
+        display_unit="us",
+        group="runtime",
+        family=_runtime,
+        definition="95th percentile of the time of a predict call",
+    ),
+    Metric(
+        UPDATE_US_MEAN,
+        header="update mean",
+        unit="us",
+        display_unit="us",
+        group="runtime",
+        family=_runtime,
+        definition="mean time of an update call",
+    ),
+    Metric(
+        UPDATE_US_MEDIAN,
+        header="update median",
+        unit="us",
+        display_unit="us",
+        group="runtime",
+        family=_runtime,
+        summary=True,
+        absent="-",
+        definition="median time of an update call (none without update calls)",
+    ),
+    Metric(
+        UPDATE_US_P95,
+        header="update p95",
+        unit="us",
+        display_unit="us",
+        group="runtime",
+        family=_runtime,
+        definition="95th percentile of the time of an update call",
+    ),
+    Metric(
+        REALTIME_FACTOR,
+        header="real-time factor",
+        unit="x",
+        display_unit="x",
+        better="higher",
+        group="runtime",
+        family=_runtime,
+        summary=True,
+        definition="dataset duration over the run's total compute time (higher is faster)",
+    ),
+    *(
+        Metric(
+            f"{raw}{REF_SUFFIX}",
+            header=f"{call} {stat}",
+            unit="ref us",
+            display_unit="ref us",
+            group="runtime",
+            family=_reference,
+            definition=f"`{raw}` over the run's " + ("`reference_cpu_s`" if stat == "median" else "`reference_s`"),
+        )
+        for call, ids in _CALL_TIMES.items()
+        for stat, raw in ids.items()
+    ),
+    Metric(
+        REALTIME_FACTOR_REF,
+        header="real-time factor",
+        unit="ref x",
+        display_unit="ref x",
+        better="higher",
+        group="runtime",
+        family=_reference,
+        definition="`realtime_factor` x the run's `reference_s`",
+    ),
+    Metric(
+        KIDNAP_DISTANCE_M,
+        header="kidnap distance",
+        unit="m",
+        display_unit="m",
+        better="",
+        group="recovery",
+        family=_kidnap,
+        definition="length of the first kidnap's jump",
+    ),
+    Metric(
+        KIDNAP_RECOVERED,
+        header="kidnap recovery",
+        unit="1",
+        display_unit="%",
+        scale=_PERCENT,
+        better="higher",
+        group="recovery",
+        family=_kidnap,
+        summary=True,
+        definition="1 when the filter recovered from the first kidnap within 30 s of it, else 0",
+    ),
+    Metric(
+        KIDNAP_TIME_TO_RECOVER_S,
+        header="time to recover",
+        unit="s",
+        display_unit="s",
+        group="recovery",
+        family=_kidnap,
+        definition="from the first kidnap to the start of the recovery (recovered runs only)",
+    ),
+    Metric(
+        KIDNAP_FALSE_CONFIDENCE_FRACTION,
+        header="false confidence",
+        unit="1",
+        display_unit="%",
+        scale=_PERCENT,
+        group="recovery",
+        family=_kidnap,
+        definition="share of the time from the kidnap to the recovery (or the window's end) with the NEES above "
+        "the 99.9 % chi-square(3) quantile",
+    ),
+    Metric(
+        CONVERGED,
+        header="convergence",
+        unit="1",
+        display_unit="%",
+        scale=_PERCENT,
+        better="higher",
+        group="recovery",
+        family=_convergence,
+        definition="1 when the recovery criterion holds from some ground-truth time on, else 0",
+    ),
+    Metric(
+        TIME_TO_CONVERGE_S,
+        header="time to converge",
+        unit="s",
+        display_unit="s",
+        group="recovery",
+        family=_convergence,
+        definition="from the first ground-truth time to that time (converged runs only)",
+    ),
+    Metric(
+        ACCEPTED_FRACTION,
+        header="accepted",
+        unit="1",
+        display_unit="%",
+        scale=_PERCENT,
+        better="higher",
+        group="filter",
+        family=_acceptance,
+        definition="measurements fused over measurements offered, over the run (gated landmark sightings, "
+        "extracted lines, ICP matches)",
+    ),
+    Metric(
+        PARTICLES_MEAN,
+        header="mean particles",
+        unit="1",
+        better="",
+        group="filter",
+        family=_particles,
+        definition="mean particle count over the run's steps (particle filters)",
+    ),
+    Metric(
+        RECORDED_ATE_MEDIAN_M,
+        header="recorded median ATE",
+        unit="m",
+        display_unit="cm",
+        scale=_CM,
+        group="over runs",
+        summary=True,
+        definition="median over the recorded datasets with independent ground truth of a configuration's mean "
+        "ATE there; its paired test pairs the datasets",
+    ),
+):
+    declare(_m)
+del _m

@@ -53,6 +53,7 @@ from locbench.core.errors import ConfigError
 from locbench.core.events import UNKNOWN_ID, LandmarkObservations, LaserScan, PoseFix, RangeObservations
 from locbench.core.geometry import wrap_angle
 from locbench.datasets.dataset import Dataset
+from locbench.evaluate.metrics import ATE_M, HEADING_RMSE_RAD, WAYPOINT_ERROR_M, member_id
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -669,10 +670,10 @@ def pcrb_summary(t: FloatArray, cov: FloatArray, waypoint_t: FloatArray) -> dict
     errors, with the squared error replaced by its lower bound.
     """
     pos = cov[:, 0, 0] + cov[:, 1, 1]
-    out = {"ate_m": math.sqrt(float(np.mean(pos))), "heading_rmse_rad": math.sqrt(float(np.mean(cov[:, 2, 2])))}
+    out = {ATE_M: math.sqrt(float(np.mean(pos))), HEADING_RMSE_RAD: math.sqrt(float(np.mean(cov[:, 2, 2])))}
     for j, tw in enumerate(np.asarray(waypoint_t, dtype=np.float64).tolist()):
         k = int(np.argmin(np.abs(t - tw)))
-        out[f"waypoint_{j + 1}_error_m"] = math.sqrt(float(pos[k]))
+        out[member_id(WAYPOINT_ERROR_M, j + 1)] = math.sqrt(float(pos[k]))
     return out
 
 

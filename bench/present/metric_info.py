@@ -1,63 +1,100 @@
-"""How the report shows each metric: header, display unit and scale, which way is better, digits.
+"""The metric tables of docs/protocols.md, generated from the metric declarations.
 
-Display metadata only (the definitions are :mod:`locbench.evaluate.metrics`' pure functions): one record per metric id,
-read by the report's tables and by the claims' sections, so it sits below both packages (neither imports the
-other to learn how ``ate_m`` is printed). Errors are shown in cm, headings in deg, times in us.
+Every metric is declared once, in :data:`locbench.evaluate.metrics.METRICS` (its function and how it is shown); the
+page lists each group of them (:data:`~locbench.evaluate.metrics.GROUPS`) in one table between the markers
+``<!-- gen:metrics-<group> -->`` and ``<!-- /gen:metrics-<group> -->``. :func:`with_tables` fills them in;
+``python -m locbench.present.metric_info docs/protocols.md`` rewrites the page, and a test checks that it holds what
+the declarations give.
 """
 
 from __future__ import annotations
 
-from typing import NamedTuple
+import re
+import sys
+from pathlib import Path
 
-import numpy as np
-
-from locbench.evaluate.metrics import POSE_DOF
+from locbench.evaluate.metrics import GROUPS, METRICS, Metric
 
 
-class MetricInfo(NamedTuple):
-    """How a metric is shown: header, display unit and the factor from its SI value, and which way is better.
+def _cell(text: str) -> str:
+    """Text for a Markdown table cell: a ``|`` escaped, so it does not end the cell."""
+    return text.replace("|", "\\|")
 
-    ``better`` is ``"lower"``, ``"higher"`` or ``"closer"`` (to ``target``, in ratio: the ANEES against
-    the pose dimension) or ``""`` (no best value).
+
+def _better(m: Metric) -> str:
+    if m.better == "closer":
+        return f"closest to {m.target:g}"
+    return m.better or "-"
+
+
+def metric_table(group: str) -> str:
+    """The Markdown table of the metrics declared in ``group``, in declaration order (an empty string for none).
+
+    Columns: the id, its definition, its unit in ``metrics.csv``, the unit the report shows it in, which way is
+    better, and whether the summary table has it.
     """
+    rows = [m for m in METRICS.values() if m.group == group]
+    if not rows:
+        return ""
+    lines = [
+        "| metric id | definition | unit in `metrics.csv` | shown as | better | summary |",
+        "|---|---|---|---|---|---|",
+    ]
+    for m in rows:
+        cells = (
+            f"`{m.id}`",
+            m.definition,
+            m.unit or "-",
+            m.display_unit or "-",
+            _better(m),
+            "yes" if m.summary else "",
+        )
+        lines.append("| " + " | ".join(_cell(c) for c in cells) + " |")
+    return "\n".join(lines)
 
-    header: str
-    unit: str
-    scale: float = 1.0
-    better: str = "lower"
-    target: float = float("nan")
-    digits: int = 3
+
+def _markers(group: str) -> tuple[str, str]:
+    key = group.replace(" ", "-")
+    return f"<!-- gen:metrics-{key} -->", f"<!-- /gen:metrics-{key} -->"
 
 
-#: Display metadata of the metric ids the report tables show; errors in cm, headings in deg, times in us.
-METRICS: dict[str, MetricInfo] = {
-    "ate_m": MetricInfo("ATE", "cm", 100.0),
-    "smoothed_ate_m": MetricInfo("smoothed ATE", "cm", 100.0),
-    "waypoint_rmse_mean_m": MetricInfo("mean waypoint RMSE", "cm", 100.0),
-    "heading_rmse_rad": MetricInfo("heading RMSE", "deg", float(np.degrees(1.0))),
-    "rpe_m_per_m": MetricInfo("RPE", "%", 100.0),
-    "final_error_m": MetricInfo("final error", "cm", 100.0),
-    "anees": MetricInfo("ANEES", "", 1.0, "closer", float(POSE_DOF)),
-    "nees_in_band_fraction": MetricInfo("NEES in 95 % band", "%", 100.0, "higher"),
-    "nll": MetricInfo("NLL", "", 1.0),
-    "crps_x_m": MetricInfo("CRPS x", "cm", 100.0),
-    "crps_y_m": MetricInfo("CRPS y", "cm", 100.0),
-    "crps_heading_rad": MetricInfo("CRPS heading", "deg", float(np.degrees(1.0))),
-    "energy_score_m": MetricInfo("energy score", "cm", 100.0),
-    "lost_auroc": MetricInfo("lost AUROC", "", 1.0, "higher"),
-    "ate_over_pcrb": MetricInfo("ATE / PCRB", "x", 1.0),
-    "predict_us_median": MetricInfo("predict median", "us", 1.0),
-    "update_us_median": MetricInfo("update median", "us", 1.0),
-    "realtime_factor": MetricInfo("real-time factor", "x", 1.0, "higher"),
-    # reference units (locbench.evaluate.metrics.reference_units): us and x on a machine whose reference workload takes
-    # 1 s
-    "predict_us_median_ref": MetricInfo("predict median", "ref us", 1.0),
-    "update_us_median_ref": MetricInfo("update median", "ref us", 1.0),
-    "realtime_factor_ref": MetricInfo("real-time factor", "ref x", 1.0, "higher"),
-    "kidnap_recovered": MetricInfo("kidnap recovery", "%", 100.0, "higher"),
-    "relation_error_m": MetricInfo("relation error", "cm", 100.0),
-    "relation_error_rad": MetricInfo("relation error", "deg", float(np.degrees(1.0))),
-    "accepted_fraction": MetricInfo("accepted", "%", 100.0, "higher"),
-    "particles_mean": MetricInfo("mean particles", "", 1.0, ""),
-    "recorded_ate_median_m": MetricInfo("recorded median ATE", "cm", 100.0),
-}
+def with_tables(text: str) -> str:
+    """``text`` (docs/protocols.md) with the table of every group written between its markers.
+
+    Raises
+    ------
+    ValueError
+        When a group that has metrics has no markers (or more than one pair) in ``text``.
+    """
+    for group in GROUPS:
+        table = metric_table(group)
+        start, end = _markers(group)
+        pattern = re.compile(re.escape(start) + r"\n.*?" + re.escape(end), re.DOTALL)
+        found = len(pattern.findall(text))
+        if not table and not found:
+            continue
+        if found != 1:
+            raise ValueError(f"the page needs one '{start}' ... '{end}' block for the metrics of group {group!r}")
+        m = pattern.search(text)
+        assert m is not None
+        text = f"{text[: m.start()]}{start}\n{table}\n{end}{text[m.end() :]}"
+    return text
+
+
+def main(argv: list[str]) -> int:
+    """Rewrite the metric tables of the page(s) named in ``argv`` in place."""
+    if not argv:
+        print("usage: python -m locbench.present.metric_info docs/protocols.md", file=sys.stderr)
+        return 2
+    for name in argv:
+        path = Path(name)
+        text = path.read_text(encoding="utf-8")
+        new = with_tables(text)
+        if new != text:
+            path.write_text(new, encoding="utf-8")
+            print(f"rewrote the metric tables of {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

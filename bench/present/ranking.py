@@ -16,13 +16,16 @@ import pandas as pd
 
 from locbench.core.spec import Spec
 from locbench.evaluate import significance as sg
+from locbench.evaluate.metrics import (
+    FAILED,
+    KIDNAP_RECOVERED,
+    WAYPOINT_ERROR_M,
+    WAYPOINT_RMSE_MEAN_M,
+    Metric,
+    family_regex,
+)
 from locbench.evaluate.pcrb import is_bound_row
 from locbench.present.docfmt import Table, num
-from locbench.present.metric_info import MetricInfo
-
-#: The per-run value the summary's mean-waypoint-RMSE column is tested on: each run's mean error over the
-#: waypoints (the column itself is a statistic over runs).
-WAYPOINT_MEAN = "waypoint_rmse_mean_m"
 
 TIES_FOOTNOTE = (
     "Bold: the best value of the column and every configuration not significantly different from it: a "
@@ -49,18 +52,19 @@ def per_seed(df: pd.DataFrame, metric: str) -> dict[int, float]:
 def samples_for(df: pd.DataFrame, filters: Sequence[str], metric: str) -> list[dict[int, float] | None]:
     """The per-run values of one column, a dict seed -> value per row (None: no values); one pass over ``df``.
 
-    ``WAYPOINT_MEAN``: each run's mean of ``waypoint_<j>_error_m`` over the waypoints; ``kidnap_recovered``:
+    ``waypoint_rmse_mean_m`` (a statistic over runs): each run's mean of ``waypoint_<j>_error_m`` over the waypoints,
+    the per-run value its column is tested on; ``kidnap_recovered``:
     a failed run (no value) counts as 0, as the tables' rates do; otherwise the metric's value (NaN left out).
     """
-    if metric == WAYPOINT_MEAN:
-        sel = df[df["metric"].astype(str).str.match(r"^waypoint_\d+_error_m$")]
+    if metric == WAYPOINT_RMSE_MEAN_M:
+        sel = df[df["metric"].astype(str).str.fullmatch(family_regex(WAYPOINT_ERROR_M))]
         grouped = sel.groupby(["filter", "seed"])["value"].mean()
     else:
         sel = df[(df["metric"].to_numpy() == metric) & df["value"].notna().to_numpy()]
         grouped = sel.groupby(["filter", "seed"])["value"].last()
     by: dict[str, dict[int, float]] = {}
-    if metric == "kidnap_recovered":
-        failed = df[df["metric"] == "failed"]
+    if metric == KIDNAP_RECOVERED:
+        failed = df[df["metric"] == FAILED]
         for f, seed in zip(failed["filter"], failed["seed"], strict=True):
             by.setdefault(str(f), {})[int(seed)] = 0.0
     for (f, seed), v in grouped.items():  # type: ignore[misc]
@@ -76,7 +80,7 @@ class Column:
     """A ranked column of a table: its index, metric metadata and per-row per-run values."""
 
     index: int
-    info: MetricInfo
+    info: Metric
     samples: Sequence[dict[int, float] | None]
 
 
@@ -93,12 +97,12 @@ class TieMarks:
         return bool(self.untested_columns) and not self.tested
 
 
-def effect_hover(info: MetricInfo, c: sg.PairedComparison, reference: str) -> str:
+def effect_hover(info: Metric, c: sg.PairedComparison, reference: str) -> str:
     """The hover text of a compared cell: the paired effect against the column's best, in display units."""
     t = c.test
     if not t.tested:
         return f"against {reference}: no paired test possible (n = {t.n})"
-    unit = f" {info.unit}" if info.unit else ""
+    unit = f" {info.display_unit}" if info.display_unit else ""
     s = info.scale
     eff = f"{num(c.effect * s)}{unit}"
     if not math.isnan(c.effect_low):

@@ -67,7 +67,8 @@ def write_report(store: Store, keep: Keep | None = None, out: Path | None = None
     OSError
         A write failed (a full disk): the error names the file; the folder is left as it was.
     """
-    from locbench.report.build import Report
+    from locbench.report.build import build_sections, how_to_read
+    from locbench.report.context import Report
     from locbench.report.output import OutputFolder
     from locbench.report.render import figure_pngs, to_html, to_markdown
     from locbench.report.sections.paired_tests import comparisons_csv
@@ -78,8 +79,8 @@ def write_report(store: Store, keep: Keep | None = None, out: Path | None = None
     folder = OutputFolder(summary, legacy=legacy)  # refuses someone else's folder before anything is computed
     col = collect(store, keep, jobs)
     report = Report(col)
-    sections = report.sections()
-    intro = report.how_to_read()
+    sections = build_sections(report)
+    intro = how_to_read()
     with folder:
         metrics = folder.write("metrics.csv", metrics_csv(col.metrics))
         folder.write("comparisons.csv", comparisons_csv(report.comparisons))

@@ -17,7 +17,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Ellipse
 from scipy import stats
 
-from locbench.report.style import LineStyle
+from locbench.present.docfmt import LineStyle
 
 _CHI2_2D_95 = float(stats.chi2.ppf(0.95, 2))
 

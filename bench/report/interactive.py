@@ -11,9 +11,9 @@ from typing import Any
 
 import numpy as np
 
+from locbench.present.docfmt import LineStyle
 from locbench.present.palette import plotly_line, plotly_marker
 from locbench.report import figures as fg
-from locbench.report.style import LineStyle
 
 #: Most points of one plotted path (the page stays small).
 MAX_PATH_POINTS = 2000

@@ -1,7 +1,7 @@
 """Tables from the tidy metrics: pure functions from a metrics frame to :class:`~locbench.report.doc.Table`.
 
-Headers, units and which way is better come from :data:`locbench.present.metric_info.METRICS`; no dataset or filter is
-named here.
+Headers, units and which way is better come from the metric declarations (:data:`locbench.evaluate.metrics.METRICS`);
+no dataset or filter is named here.
 """
 
 from __future__ import annotations
@@ -13,11 +13,31 @@ import pandas as pd
 from scipy import stats
 
 from locbench.evaluate.aggregate import ate_over_pcrb, mean_ci, waypoint_stats
-from locbench.evaluate.metrics import CONFIDENCE, POSE_DOF, chi2_band
+from locbench.evaluate.metrics import (
+    ANEES,
+    ATE_M,
+    ATE_OVER_PCRB,
+    CONFIDENCE,
+    FAILED,
+    FINAL_ERROR_M,
+    HEADING_RMSE_RAD,
+    METRICS,
+    NEES_IN_BAND_FRACTION,
+    PARTICLES_MEAN,
+    POSE_DOF,
+    REALTIME_FACTOR,
+    REALTIME_FACTOR_REF,
+    RELATION_ERROR_M,
+    RPE_M_PER_M,
+    SMOOTHED_ATE_M,
+    UPDATE_US_MEDIAN,
+    UPDATE_US_MEDIAN_REF,
+    chi2_band,
+    declared,
+)
 from locbench.evaluate.pcrb import BOUND_ALL
 from locbench.present import ranking as rk
 from locbench.present.docfmt import num
-from locbench.present.metric_info import METRICS, MetricInfo
 from locbench.report.doc import Table
 
 NAN = float("nan")
@@ -25,8 +45,8 @@ NAN = float("nan")
 
 def header(metric: str) -> str:
     """``ATE (cm)``: the metric's header with its display unit."""
-    info = METRICS[metric]
-    return f"{info.header} ({info.unit})" if info.unit else info.header
+    info = declared(metric)
+    return f"{info.header} ({info.display_unit})" if info.display_unit else info.header
 
 
 def values(df: pd.DataFrame, metric: str) -> np.ndarray:
@@ -43,13 +63,12 @@ def mean_of(df: pd.DataFrame, metric: str) -> float:
 
 
 def scaled(metric: str, x: float) -> float:
-    return x * METRICS[metric].scale
+    return x * declared(metric).scale
 
 
 def mean_pm(df: pd.DataFrame, metric: str) -> tuple[str, float]:
     """``mean ± half-width`` of the 95 % t-interval over seeds, in display units, and the mean for sorting."""
-    info = METRICS.get(metric, MetricInfo(metric, ""))
-    ci = mean_ci(values(df, metric) * info.scale)
+    ci = mean_ci(values(df, metric) * declared(metric).scale)
     if ci.n == 0:
         return "n/a", NAN
     if np.isnan(ci.low):
@@ -75,7 +94,7 @@ def consistency_cell(df: pd.DataFrame) -> tuple[str, float, int, int]:
     A run whose covariance is singular to rounding at some ground-truth time has NEES +inf and so ANEES
     +inf; such runs are counted ("collapsed in k/n runs") and the mean is taken over the others.
     """
-    v = values(df, "anees")
+    v = values(df, ANEES)
     n = int(v.size)
     if n == 0:
         return "n/a", NAN, 0, 0
@@ -129,19 +148,19 @@ def waypoint_table(df: pd.DataFrame, filters: Sequence[str], caption: str) -> Ta
 
 #: Columns of a dataset's comparison table.
 COMPARISON = (
-    "ate_m",
-    "smoothed_ate_m",
-    "relation_error_m",
-    "heading_rmse_rad",
-    "rpe_m_per_m",
-    "final_error_m",
-    "anees",
-    "nees_in_band_fraction",
-    "update_us_median",
-    "update_us_median_ref",
-    "realtime_factor",
-    "realtime_factor_ref",
-    "particles_mean",
+    ATE_M,
+    SMOOTHED_ATE_M,
+    RELATION_ERROR_M,
+    HEADING_RMSE_RAD,
+    RPE_M_PER_M,
+    FINAL_ERROR_M,
+    ANEES,
+    NEES_IN_BAND_FRACTION,
+    UPDATE_US_MEDIAN,
+    UPDATE_US_MEDIAN_REF,
+    REALTIME_FACTOR,
+    REALTIME_FACTOR_REF,
+    PARTICLES_MEAN,
 )
 
 
@@ -154,7 +173,7 @@ def ate_over_bound(df: pd.DataFrame, filter_name: str) -> float:
     """A filter's efficiency ``ate_over_pcrb`` on one dataset name: sqrt(mean over seeds of ate_m^2) divided
     by the bound's, over the seeds where both have an ATE (:func:`locbench.evaluate.aggregate.ate_over_pcrb`); NaN
     without a bound."""
-    ate = df[df["metric"] == "ate_m"]
+    ate = df[df["metric"] == ATE_M]
     bound = ate[ate["filter"] == BOUND_ALL].set_index("seed")["value"]
     mine = ate[ate["filter"] == filter_name].set_index("seed")["value"]
     seeds = mine.index.intersection(bound.index)
@@ -191,7 +210,7 @@ def comparison_table(
         sub = df[df["filter"] == f]
         if f in bounds and sub.empty:
             continue
-        failed = values(sub, "failed")
+        failed = values(sub, FAILED)
         n = run_count(sub)
         row = [f"`{f}`", str(n), str(int(np.sum(failed > 0.5)))]
         key = [NAN, float(n), float(np.sum(failed > 0.5))]
@@ -199,16 +218,14 @@ def comparison_table(
             text, k = mean_pm(sub, m)
             row.append("-" if f in bounds and np.isnan(k) else text)
             key.append(k)
-            if m == "ate_m" and with_bound:
+            if m == ATE_M and with_bound:
                 eff = NAN if f in bounds else ate_over_bound(df, f)
                 row.append(num(eff) if f not in bounds else "-")
                 key.append(eff)
         rows.append(tuple(row))
         keys.append(tuple(key))
     cols = [
-        h
-        for m in present
-        for h in ((header(m), header("ate_over_pcrb")) if m == "ate_m" and with_bound else (header(m),))
+        h for m in present for h in ((header(m), header(ATE_OVER_PCRB)) if m == ATE_M and with_bound else (header(m),))
     ]
     head = ("filter", "runs", "failed", *cols)
     notes = (BOUND_FOOTNOTE,) if with_bound else ()
@@ -219,7 +236,7 @@ def comparison_table(
         index = {
             m: 3
             + present.index(m)
-            + (1 if with_bound and "ate_m" in present and present.index("ate_m") < present.index(m) else 0)
+            + (1 if with_bound and ATE_M in present and present.index(ATE_M) < present.index(m) else 0)
             for m in ranked
         }
         flags = [*eligible, *[False] * (len(shown) - len(filters))]
@@ -257,7 +274,7 @@ def rate(df: pd.DataFrame, metric: str) -> tuple[int, int, float, float, float]:
     diverged run, which has no 1/0 value, counts as a failure)."""
     v = values(df, metric)
     k = int(np.sum(v > 0.5))
-    n = max(int(values(df, "failed").size), int(v.size))
+    n = max(int(values(df, FAILED).size), int(v.size))
     if n == 0:
         return 0, 0, NAN, NAN, NAN
     lo, hi = wilson_interval(k, n)

@@ -14,14 +14,13 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from locbench.evaluate.metrics import REF_SUFFIX
-from locbench.present.metric_info import METRICS
+from locbench.evaluate.metrics import METRICS, REALTIME_FACTOR, REALTIME_FACTOR_REF, REF_SUFFIX
 from locbench.report import tables as tb
 
 #: The x metric of the accuracy-runtime figures: the real-time factor in reference units, where every run has it.
-PARETO_X = f"realtime_factor{REF_SUFFIX}"
+PARETO_X = REALTIME_FACTOR_REF
 #: Their fallback on stores older than the reference workload.
-PARETO_X_RAW = "realtime_factor"
+PARETO_X_RAW = REALTIME_FACTOR
 
 REF_FOOTNOTE = (
     "Values as (ref ...): in reference units, the raw value with the time of a fixed reference workload, measured "

@@ -127,7 +127,7 @@ def describe_exception(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {text}{where}" if text else f"{type(exc).__name__}{where}"
 
 
-def _child(fn: Callable[[], Any], write_fd: int, parent: int, mask: set[signal.Signals]) -> None:
+def _child(fn: Callable[[], Any], write_fd: int, parent: int, mask: set[int | signal.Signals]) -> None:
     """The child's whole life: run ``fn``, write its pickled outcome, exit without returning to the caller.
 
     ``mask``: the signal mask to restore once the child's own handlers are in place (the fork blocked SIGINT).

@@ -46,6 +46,7 @@ import numpy as np
 from locbench.core.errors import ConfigError, DependencyNotInstalled, LocbenchError, one_line, shown
 from locbench.core.spec import format_spec, non_default_params, parse_spec
 from locbench.core.tunable import TunableRange, tunable_fields
+from locbench.evaluate.metrics import ATE_M, NLL
 from locbench.registry import FILTERS, resolve_dataset, resolve_filter
 from locbench.run.store import Store
 from locbench.suites import MAX_SEEDS, check_seeds
@@ -57,7 +58,7 @@ TRAIN_SEED_START = 1000
 #: The score of a trial with a failed or diverged run (or a non-finite objective): worse than any finite value.
 WORST = math.inf
 #: Objective name -> the per-run metric whose mean over the train runs is minimised.
-OBJECTIVES = {"ate": "ate_m", "nll": "nll"}
+OBJECTIVES = {"ate": ATE_M, "nll": NLL}
 #: Significant digits of a trial's values in its spec (a short name that runs as printed).
 SPEC_DIGITS = 4
 #: The folder of the train runs and the studies inside a results folder.

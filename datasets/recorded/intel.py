@@ -505,10 +505,12 @@ def _laser_offset(path: Path, text: str) -> float:
 class IntelDataset(RecordedDataset):
     """Intel Research Lab (Freiburg SLAM benchmark): raw CARMEN log, GMapping reference, Kuemmerle relations."""
 
+    id: ClassVar[str] = "intel"
     Params: ClassVar[type] = IntelParams
     version: ClassVar[int] = 1
     description: ClassVar[str] = (
-        "Intel Research Lab laser log (Freiburg SLAM benchmark): relation error; GMapping poses as SLAM reference"
+        "Intel Research Lab (recorded CARMEN log): odometry, 180-beam laser, grid and lines from the GMapping "
+        "reference, Kuemmerle relations"
     )
     folder: ClassVar[str] = FOLDER
     reference_kind: ClassVar[str] = "SLAM"

@@ -638,11 +638,11 @@ class LibrsfParams:
 class LibrsfDataset(RecordedDataset):
     """libRSF ranging sets: ``librsf[set=indoor_uwb]`` and ``librsf[set=m3500|w3500,noise=...]``."""
 
+    id: ClassVar[str] = "librsf"
     Params: ClassVar[type] = LibrsfParams
     version: ClassVar[int] = 1
     description: ClassVar[str] = (
-        "libRSF ranging (Pfeifer): Labyrinth UWB (real) and M3500 / W3500 with heavy-tailed, multimodal, skewed or "
-        "generated Gaussian range noise"
+        "libRSF ranging sets (Pfeifer, TU Chemnitz): Indoor UWB (real) and M3500 / W3500 with non-Gaussian range noise"
     )
     folder: ClassVar[str] = FOLDER
     identity_keys: ClassVar[tuple[str, ...]] = ("set",)

@@ -580,10 +580,11 @@ def load_lost_in_the_woods(
 class LostInTheWoods(RecordedDataset):
     """Builder of ``lost_in_the_woods``: ``$LOCBENCH_DATA/lost_in_the_woods/dataset2.mat``, checksum verified."""
 
+    id: ClassVar[str] = "lost_in_the_woods"
     Params: ClassVar[type] = LostInTheWoodsParams
     version: ClassVar[int] = 1
     description: ClassVar[str] = (
-        "Barfoot's Lost in the Woods (dataset2.mat): v/omega at 10 Hz, range-bearing to 17 tubes, Vicon truth"
+        "Barfoot's Lost in the Woods (recorded): v/omega at 10 Hz, range-bearing to 17 tubes, Vicon truth"
     )
     folder: ClassVar[str] = "lost_in_the_woods"
     reference_kind: ClassVar[str] = "motion capture"

@@ -97,11 +97,11 @@ How the dataset is derived
 Nominal noise: how the frozen constants were derived
 ----------------------------------------------------
 The dataset publishes no noise figures. The constants below (:data:`TWIST_SIGMA_V_MPS` ...) were computed ONCE
-by ``tools/derive_mrclam_noise.py`` on Dataset 6, robots 1-5 (pooled), against the Vicon truth and the surveyed
-map (robust standard deviations of the camera residuals and of the twist's error over 1 s windows; the procedure
-is in the tool's docstring), and frozen here; ``tests/datasets/recorded/test_recorded_mrclam.py`` reruns the tool on
-the shared
-files and checks they agree within 10 %. They were not chosen by looking at any filter's error.
+by :func:`~locbench.datasets.recorded.mrclam_noise.derive_nominal_noise` on Dataset 6, robots 1-5 (pooled), against
+the Vicon truth and the surveyed map (robust standard deviations of the camera residuals and of the twist's error
+over 1 s windows; the procedure is in :mod:`~locbench.datasets.recorded.mrclam_noise`), and frozen here;
+``tests/datasets/recorded/test_recorded_mrclam.py`` reruns it on the shared files and checks they agree within
+10 %. They were not chosen by looking at any filter's error.
 
 Known caveats: the camera has outliers (misread barcodes mapped to a wrong landmark, reflections) that a robust
 std ignores; a filter that fuses every detection without a gate sees them at full weight.
@@ -218,9 +218,9 @@ BOUNDS = plausibility.BOUNDS.tightened(
     position_jitter_m=TRUTH_JITTER_M,
 )
 
-# --- the nominal noise: frozen output of tools/derive_mrclam_noise.py (Dataset 6, robots 1-5) -----------------------
+# --- the nominal noise: frozen output of mrclam_noise.derive_nominal_noise (Dataset 6, robots 1-5) ------------------
 
-# tools/derive_mrclam_noise.py on Dataset 6 gave (pooled over robots 1-5): 15383 landmark sightings (median residual
+# derive_nominal_noise on Dataset 6 gave (pooled over robots 1-5): 15383 landmark sightings (median residual
 # +0.012 m, -0.0014 rad), 3511 one-second windows (1969 straight, 118 turning in place), dt_eff = 0.0185 s.
 TWIST_SIGMA_V_MPS = 0.0542
 TWIST_SIGMA_OMEGA_RADPS = 0.115
@@ -776,10 +776,11 @@ class MrclamParams:
 class MrclamDataset(RecordedDataset):
     """MRCLAM: one robot of one dataset, landmark sightings by subject, Vicon truth (module docstring)."""
 
+    id: ClassVar[str] = "mrclam"
     Params: ClassVar[type] = MrclamParams
     version: ClassVar[int] = 1
     description: ClassVar[str] = (
-        "UTIAS MRCLAM: one of 5 robots, twist odometry, camera range-bearing to 15 landmarks, Vicon truth"
+        "UTIAS MRCLAM (recorded): one robot of a dataset, (v, omega) odometry, camera landmark sightings, Vicon truth"
     )
     folder: ClassVar[str] = FOLDER
     reference_kind: ClassVar[str] = "motion capture"

@@ -549,9 +549,12 @@ class PlazaParams:
 class PlazaDataset(RecordedDataset):
     """CMU Plaza range-only runs (Djugash et al. 2009): ``plaza[run=1]`` and ``plaza[run=2]``."""
 
+    id: ClassVar[str] = "plaza"
     Params: ClassVar[type] = PlazaParams
     version: ClassVar[int] = 1
-    description: ClassVar[str] = "CMU Plaza: odometry and radio ranges to 4 beacons, GPS truth (Djugash 2009)"
+    description: ClassVar[str] = (
+        "CMU Plaza range-only runs (recorded, Djugash et al. 2009): odometry, radio ranges to 4 beacons, GPS truth"
+    )
     folder: ClassVar[str] = FOLDER
     reference_kind: ClassVar[str] = "GPS"
     identity_keys: ClassVar[tuple[str, ...]] = ("run",)

@@ -65,7 +65,7 @@ Odometry
   u = between(p_k, p_k+1), with simulated encoder error e ~ N(0, diag(s_xy^2 d, s_xy^2 d, s_tm^2 d + s_tr^2 a))
   (d = |u_xy| m, a = |u_theta| rad; the increment model of :func:`locbench.filters._motion.increment_variances`),
   drawn from the dataset's seeded generator like every synthetic error, one Odometry event just before each scan.
-  The parameters :data:`ENCODER_ERROR` are fitted on the three paired sites by ``tools/fit_radish_odometry.py``
+  The parameters :data:`ENCODER_ERROR` are fitted on the three paired sites by ``tools/derive/fit_radish_odometry.py``
   (:func:`fit_encoder_error`: the method of moments of ``derive_odometry_noise`` pooled over the pairs of
   consecutive paired scans of all three logs; a test reruns it). The nominal noise handed to the filters is the same
   model. Time: the scans at :data:`SCAN_PERIOD_S` apart (the logs' own stamps are unusable, above); the logged
@@ -248,8 +248,8 @@ class EncoderError:
     pairs: int
 
 
-#: Output of ``tools/fit_radish_odometry.py`` (:func:`fit_encoder_error` on intel, aces and freiburg-079 over their
-#: whole logs); tests/datasets/recorded/test_recorded_radish.py reruns the fit and compares.
+#: Output of ``tools/derive/fit_radish_odometry.py`` (:func:`fit_encoder_error` on intel, aces and freiburg-079 over
+#: their whole logs); tests/datasets/recorded/test_recorded_radish.py reruns the fit and compares.
 ENCODER_ERROR = EncoderError(
     sigma_xy_per_m=0.08102589100709597,
     sigma_theta_per_m=0.0574425450998974,
@@ -536,7 +536,8 @@ def paired_poses(corrected: CorrectedLog, pairing: Pairing) -> tuple[FloatArray,
 
 
 def fit_paired_sites(root: str | os.PathLike[str] | None = None) -> EncoderError:
-    """:func:`fit_encoder_error` over every site of :data:`RAW_LOGS` (what ``tools/fit_radish_odometry.py`` runs)."""
+    """:func:`fit_encoder_error` over every site of :data:`RAW_LOGS` (what ``tools/derive/fit_radish_odometry.py``
+    prints)."""
     pairs = []
     for site in sorted(RAW_LOGS):
         path = locate(RemoteFile(f"{FOLDER}/{site}{SUFFIX}", sha256=KNOWN_SHA256.get(site)), root)
@@ -817,11 +818,12 @@ def semi_synthetic(site: str) -> bool:
 class RadishDataset(RecordedDataset):
     """Radish corrected CARMEN logs: scans, SLAM reference, map from the reference; raw or semi-synthetic odometry."""
 
+    id: ClassVar[str] = "radish"
     Params: ClassVar[type] = RadishParams
     version: ClassVar[int] = 1
     description: ClassVar[str] = (
-        "Radish corrected laser logs (any NAME-corrected.log.gz): map from the SLAM reference; raw odometry for "
-        "intel, aces, freiburg-079, semi-synthetic elsewhere"
+        "Radish corrected CARMEN logs (recorded, any NAME-corrected.log.gz): laser, map and SLAM reference; "
+        "raw odometry for intel, aces, freiburg-079, semi-synthetic elsewhere"
     )
     folder: ClassVar[str] = FOLDER
     reference_kind: ClassVar[str] = "SLAM"

@@ -879,10 +879,15 @@ def build_rosbag_dataset(params: RosbagParams) -> Dataset:
 class RosbagDataset(DatasetBuilder):
     """A user's ROS 1 or ROS 2 bag: odometry, laser scans, a ground-truth pose topic and a map_server map."""
 
+    id: ClassVar[str] = "rosbag"
     Params: ClassVar[type] = RosbagParams
     version: ClassVar[int] = 1
     nominal_duration_s: ClassVar[float] = 1000.0
-    description: ClassVar[str] = "a ROS 1 / ROS 2 bag: nav_msgs/Odometry, sensor_msgs/LaserScan, a truth pose topic"
+    description: ClassVar[str] = (
+        "a user's ROS 1 / ROS 2 bag: nav_msgs/Odometry, sensor_msgs/LaserScan, a truth pose topic, a map_server map"
+    )
+    requires_modules: ClassVar[tuple[str, ...]] = ("rosbags",)
+    install_hint: ClassVar[str] = "pip install 'locbench[ros]'"
 
     def build(self, params: RosbagParams, rng: np.random.Generator) -> Dataset:
         del rng  # a recording: every seed is the same data

@@ -503,10 +503,13 @@ def load_textlog(path: str | os.PathLike[str]) -> Dataset:
 class TextlogDataset(DatasetBuilder):
     """A user's log in the plain-text ``locbench-textlog`` format (or any dataset exported to it)."""
 
+    id: ClassVar[str] = "textlog"
     Params: ClassVar[type] = TextlogParams
     version: ClassVar[int] = 1
     nominal_duration_s: ClassVar[float] = 1000.0
-    description: ClassVar[str] = "a plain-text log: JSON-lines events, TUM truth, map_server map, landmark files"
+    description: ClassVar[str] = (
+        "a user's plain-text log (locbench-textlog v1): JSON-lines events, TUM truth, map_server map, landmark files"
+    )
 
     def build(self, params: TextlogParams, rng: np.random.Generator) -> Dataset:
         del rng  # a recording: every seed is the same data

@@ -49,7 +49,7 @@ Sensors:
 
 The nominal landmark noise handed to filters (:data:`NOMINAL_SIGMA_RANGE_M` 5 cm,
 :data:`NOMINAL_SIGMA_BEARING_RAD` 0.007 rad) is the measured RMS error of this detector over every path
-and layout (``tools/landmark_detection_stats.py``, which records what it measured), rounded up.
+and layout (:mod:`locbench.datasets.synthetic.detection_error`, which records what it measured), rounded up.
 
 ``initial_offset_m = d`` moves the initial belief handed to filters d metres from the true start in a
 direction drawn from the seed, with a per-axis standard deviation of max(d, 2 cm) so that the belief
@@ -406,6 +406,7 @@ STREAMS = ("odometry", "landmarks", "laser", "fixes", "kidnap", "route", "initia
 class LandmarkGeometryScenario(SyntheticBuilder):
     """Report 001's micro-simulator: paths x landmark layouts, laser-detected disc landmarks, GPS variant."""
 
+    id: ClassVar[str] = "landmark_geometry"
     Params: ClassVar[type] = LandmarkGeometryParams
     version: ClassVar[int] = 2
     description: ClassVar[str] = (

@@ -23,7 +23,7 @@ Here:
   errors, a wheelbase mismatch and random encoder error k = 0.002 sqrt(m)), calibrated for this lap as a
   property of the world, never of a filter: the *systematic* part (both wheel-scale errors and the
   wheelbase mismatch) is multiplied by one factor ``LAP_SYSTEMATIC_SCALE``, fitted by
-  ``tools/calibrate_odometry.py`` so that the median over seeds 0-19 of odometry's end-of-lap error
+  ``odometry_calibration.calibrate_lap_odometry`` so that the median over seeds 0-19 of odometry's end-of-lap error
   (``final_error_m``, robot back on the start) is the report's 15 cm. The room calibration's full
   systematic error under-turns 7 % per turn on the spot, metres after four 90 deg corners; report 000's
   Pioneer was evidently far better calibrated (15 cm after a lap). The random part alone gives a median of
@@ -107,7 +107,7 @@ PEOPLE_REGION = (9.0, 0.5, 19.5, 8.2)
 
 #: Report 000 sec. IV: odometry is about 15 cm from the start after one lap, m.
 LAP_TARGET_FINAL_ERROR_M = 0.15
-# (The study is in tools/calibrate_odometry.py.)
+# (The study is in locbench.datasets.synthetic.odometry_calibration.)
 # Fitted by calibrate_lap_odometry() (scipy brentq on the median over seeds 0..19 of the dead-reckoned
 # position error at the last ground-truth time, the noise draws of make_dataset("lap", seed)); re-run unchanged
 # for generator version 2 (execution noise; version 1's exact execution gave 0.04979401478993158).
@@ -320,6 +320,7 @@ class LapParams:
 class LapScenario(SyntheticBuilder):
     """Report 000's lap: one rectangle on the office floor, Hokuyo-like laser, people not on the map."""
 
+    id: ClassVar[str] = "lap"
     Params: ClassVar[type] = LapParams
     version: ClassVar[int] = 2
     nominal_duration_s: ClassVar[float] = 60.0

@@ -126,9 +126,10 @@ class LineRoomParams:
 class LineRoomScenario(SyntheticBuilder):
     """Report 002's experiment: laser lines in two polygonal rooms; see the module docstring."""
 
+    id: ClassVar[str] = "line_room"
     Params: ClassVar[type] = LineRoomParams
     version: ClassVar[int] = 2
-    description: ClassVar[str] = "report 002's polygonal rooms: wall lines, a laser, 7 waypoints"
+    description: ClassVar[str] = "report 002's polygonal rooms for the line-map EKF"
 
     def build(self, params: LineRoomParams, rng: np.random.Generator) -> Dataset:
         laser = LaserSensor(

@@ -269,6 +269,7 @@ class ScanGridScenario(SyntheticBuilder):
     """Report 004's experiment: 1 s translate-or-rotate commands in a room, a 360 deg laser, odometry with
     the commanded twist (see the module docstring)."""
 
+    id: ClassVar[str] = "scan_grid"
     Params: ClassVar[type] = ScanGridParams
     version: ClassVar[int] = 1
     description: ClassVar[str] = "report 004's scan database at grid poses, translate-or-rotate commands of 1 s"

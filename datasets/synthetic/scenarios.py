@@ -7,8 +7,8 @@ landmarks, laser, fixes, kidnap), so that e.g. ``laser_beams`` or ``known_ids`` 
 odometry realisation of a seed.
 
 Every scenario's robot is the same H20-like differential drive with the same wheel-odometry error
-(calibrated on the room by ``tools/calibrate_odometry.py``) and the same execution noise between its
-commanded twist and its true motion (wheel slip, :data:`SLIP_K_TRUE`, see
+(calibrated on the room by :mod:`locbench.datasets.synthetic.odometry_calibration`) and the same execution
+noise between its commanded twist and its true motion (wheel slip, :data:`SLIP_K_TRUE`, see
 :mod:`locbench.datasets.synthetic.robot`), drawn from its own child stream (:func:`execution_stream`,
 spawned after every other stream so that those are unchanged by it); the tiny scenarios can switch all
 noise off.
@@ -122,6 +122,7 @@ class RoomScenario(SyntheticBuilder):
     """Report 003's experiment: a 7 m x 2 m room, 4 landmarks, a start and 5 marked waypoints, a
     Kinect-like range-bearing sensor (0.8-3.5 m, 57 deg) and calibrated wheel-encoder odometry."""
 
+    id: ClassVar[str] = "room"
     Params: ClassVar[type] = RoomParams
     version: ClassVar[int] = 2
     nominal_duration_s: ClassVar[float] = 60.0
@@ -273,6 +274,7 @@ class OfficeParams:
 class OfficeScenario(SyntheticBuilder):
     """One office floor with walls, doors, 22 landmarks and a 9-waypoint tour; every sensor."""
 
+    id: ClassVar[str] = "office"
     Params: ClassVar[type] = OfficeParams
     version: ClassVar[int] = 2
     nominal_duration_s: ClassVar[float] = 231.0
@@ -336,7 +338,6 @@ class _TinyScenario(DatasetBuilder):
 
     Params: ClassVar[type] = TinyParams
     version: ClassVar[int] = 2
-    dataset_id: ClassVar[str] = ""
 
     def world(self) -> World:
         raise NotImplementedError
@@ -377,7 +378,7 @@ class _TinyScenario(DatasetBuilder):
             laser_sigma_m=0.01,
         )
         ds, _ = drive_and_assemble(
-            dataset_id=self.dataset_id,
+            dataset_id=self.id,
             params=params,
             world=self.world(),
             tour=self.tour(),
@@ -393,7 +394,7 @@ class _TinyScenario(DatasetBuilder):
 class TinyLineScenario(_TinyScenario):
     """A short straight drive (two stops) past 3 landmarks in a 6 m x 4 m box; every sensor type."""
 
-    dataset_id: ClassVar[str] = "tiny_line"
+    id: ClassVar[str] = "tiny_line"
     description: ClassVar[str] = "a 10 s straight drive past 3 landmarks (conformance checks)"
 
     def world(self) -> World:
@@ -407,7 +408,7 @@ class TinyCircleScenario(_TinyScenario):
     """One counter-clockwise circle of radius 1.2 m in a 6 m x 6 m box with 4 landmarks; the heading
     crosses +-pi half way round."""
 
-    dataset_id: ClassVar[str] = "tiny_circle"
+    id: ClassVar[str] = "tiny_circle"
     description: ClassVar[str] = "a circle whose heading crosses +-pi, 4 landmarks (conformance checks)"
     radius_m: ClassVar[float] = 1.2
 

@@ -4,8 +4,8 @@ whose robot drives a tour is built by :func:`tour_dataset` (or, with its own str
 :func:`drive_and_assemble`).
 
 Every scenario's robot is the same H20-like differential drive with the same wheel-odometry error
-(calibrated on the room by ``tools/calibrate_odometry.py``) and the same execution noise between its
-commanded twist and its true motion (wheel slip, :data:`SLIP_K_TRUE`, see
+(calibrated on the room by :mod:`locbench.datasets.synthetic.odometry_calibration`) and the same execution
+noise between its commanded twist and its true motion (wheel slip, :data:`SLIP_K_TRUE`, see
 :mod:`locbench.datasets.synthetic.robot`), drawn from its own child stream (:func:`execution_stream`,
 spawned after every other stream so that those are unchanged by it). The generator is split into one child
 stream per noise source (odometry, landmarks, laser, fixes, kidnap), so that e.g. ``laser_beams`` or
@@ -65,7 +65,7 @@ GENERATOR_VERSION = 2
 WHEELBASE_NOMINAL_M = 0.40
 #: Random encoder error constants k_L = k_R of report 003 eq. 10 (chosen, not fitted), sqrt(m).
 ENCODER_K_TRUE = 0.002
-# Systematic errors fitted by calibrate_room_odometry() (tools/calibrate_odometry.py) on 2026-11-22: scipy
+# Systematic errors fitted by calibrate_room_odometry() (odometry_calibration) on 2026-11-22: scipy
 # least_squares on the log ratio
 # (measured / 003 table 1) at the 5 waypoints, measured as table 1 does (distance between each waypoint
 # and the mean over seeds 0..19 of the dead-reckoned position at the waypoint time), k fixed at

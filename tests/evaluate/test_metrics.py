@@ -3,6 +3,8 @@ test_aggregate.py)."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import numpy as np
 import pytest
 from scipy import stats
@@ -307,3 +309,111 @@ def test_nll_of_a_collapsed_covariance_is_inf_without_a_warning() -> None:
     assert lm.nll(np.array([[0.1, 0.0, 0.0]]), P)[0] == np.inf
     rank1 = np.outer([1.0, 0.0, 0.0], [1.0, 0.0, 0.0])[None]
     assert lm.nll(np.array([[0.0, 1.0, 0.0]]), rank1)[0] == np.inf
+
+
+# --- declarations ----------------------------------------------------------------------------------------------
+
+
+def _view(run: RunRecord, truth: TruthRecord) -> lm.RunView:
+    return lm.RunView(run, truth, lm.align_run(run, truth))
+
+
+@pytest.fixture
+def declared_here() -> Iterator[list[str]]:
+    """Ids a test declares; withdrawn afterwards, so the registry is the built-in one again."""
+    ids: list[str] = []
+    yield ids
+    for i in ids:
+        lm.METRICS.pop(i, None)
+
+
+def test_every_value_of_a_run_is_a_declared_metric_and_no_family_value_is_dropped() -> None:
+    run, truth = _run(), _truth()
+    got = lm.run_metrics(run, truth)
+    for k in got:
+        assert lm.declared(k).per_run, k
+    view = _view(run, truth)
+    families = {m.family for m in lm.METRICS.values() if m.family is not None}
+    for family in families:
+        for k, v in family(view).items():
+            assert np.isnan(v) or got[k] == v, k
+
+
+def test_a_declared_metric_is_computed_for_every_ok_run_and_left_out_when_nan(declared_here: list[str]) -> None:
+    toy = lm.declare(
+        lm.Metric("max_error_m", header="max error", unit="m", compute=lambda v: float(v.aligned.position_error.max()))
+    )
+    declared_here.append(toy.id)
+    assert lm.run_metrics(_run(), _truth())["max_error_m"] == pytest.approx(0.3)
+    assert lm.run_metrics(_run("error"), _truth()) == {"failed": 1.0}
+    undefined = lm.declare(lm.Metric("undefined_m", header="undefined", unit="m", compute=lambda v: float("nan")))
+    declared_here.append(undefined.id)
+    assert "undefined_m" not in lm.run_metrics(_run(), _truth())
+
+
+def test_a_family_is_computed_once_per_run_for_all_its_metrics(declared_here: list[str]) -> None:
+    calls: list[int] = []
+
+    def family(v: lm.RunView) -> dict[str, float]:
+        calls.append(1)
+        return {"toy_a": 1.0, "toy_part_1_m": 2.0, "toy_part_2_m": 3.0, "toy_unclaimed": 4.0}
+
+    for m in (
+        lm.Metric("toy_a", header="a", unit="1", family=family),
+        lm.Metric("toy_part_<j>_m", header="part", unit="m", family=family),
+    ):
+        declared_here.append(lm.declare(m).id)
+    got = lm.run_metrics(_run(), _truth())
+    assert calls == [1]
+    assert (got["toy_a"], got["toy_part_1_m"], got["toy_part_2_m"]) == (1.0, 2.0, 3.0)
+    assert "toy_unclaimed" not in got  # a family value no metric declares is not a metric
+
+
+def test_an_id_is_declared_once() -> None:
+    with pytest.raises(ValueError, match="declared already"):
+        lm.declare(lm.Metric(lm.ATE_M, header="ATE", unit="m", compute=lambda v: 0.0))
+    with pytest.raises(ValueError, match="declared already"):  # a member of a declared family
+        lm.declare(lm.Metric("waypoint_3_error_m", header="w3", unit="m", compute=lambda v: 0.0))
+    with pytest.raises(ValueError, match="declared already"):  # a family holding a declared id
+        lm.declare(lm.Metric("<what>_m_per_m", header="x", unit="1", family=lambda v: {}))
+
+
+@pytest.mark.parametrize(
+    ("fields", "message"),
+    [
+        ({"id": "Bad Id"}, "lower-case"),
+        ({"better": "smaller"}, "better must be one of"),
+        ({"better": "closer"}, "finite target"),
+        ({"group": "misc"}, "group must be one of"),
+        ({"absent": ""}, "absent must be one of"),
+        ({"compute": lambda v: 0.0, "family": lambda v: {}}, "not both"),
+        ({"id": "toy_<j>_m", "compute": lambda v: 0.0}, "family function"),
+        ({"id": "toy_<j>_m", "family": lambda v: {}, "summary": True}, "not a family's"),
+    ],
+)
+def test_a_declaration_is_checked(fields: dict[str, object], message: str) -> None:
+    args: dict[str, object] = {"id": "toy_m", "header": "toy", "unit": "m"} | fields
+    with pytest.raises(ValueError, match=message):
+        lm.Metric(**args)  # type: ignore[arg-type]
+
+
+def test_member_ids_and_their_declaration() -> None:
+    assert lm.member_id(lm.WAYPOINT_ERROR_M, 3) == "waypoint_3_error_m"
+    assert lm.member_id(lm.SCORE_CI_LOW, "crps_x", "m") == "crps_x_ci_low_m"
+    with pytest.raises(ValueError, match="1 part"):
+        lm.member_id(lm.WAYPOINT_ERROR_M)
+    assert lm.declared("waypoint_12_error_m") is lm.METRICS[lm.WAYPOINT_ERROR_M]
+    assert lm.declared("energy_score_ci_high_m") is lm.METRICS[lm.SCORE_CI_HIGH]
+    assert lm.declared(lm.ATE_M) is lm.METRICS[lm.ATE_M]
+    assert not lm.METRICS[lm.WAYPOINT_ERROR_M].matches("waypoint_x_error_m")  # a one-letter part is a number
+    with pytest.raises(KeyError, match="no metric declares"):
+        lm.declared("waypoint_rmse_m")
+
+
+def test_the_bound_gives_the_metrics_declared_with_bound() -> None:
+    from locbench.evaluate.pcrb import pcrb_summary
+
+    t = np.linspace(0.0, 4.0, 5)
+    cov = np.broadcast_to(np.diag([0.01, 0.04, 0.001]), (5, 3, 3)).copy()
+    ids = pcrb_summary(t, cov, np.array([1.0, 3.0]))
+    assert {lm.declared(k).id for k in ids} == {m.id for m in lm.METRICS.values() if m.bound}

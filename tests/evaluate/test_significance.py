@@ -11,7 +11,7 @@ import pytest
 from scipy import stats
 
 from locbench.evaluate import significance as sg
-from locbench.present.metric_info import METRICS
+from locbench.evaluate.metrics import METRICS
 from locbench.present.ranking import UNTESTED_FOOTNOTE, Column, mark_ties, tie_footnote
 from locbench.report.doc import Section, Table
 from locbench.report.sections.paired_tests import dataset_groups

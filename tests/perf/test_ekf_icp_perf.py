@@ -5,7 +5,7 @@ The numpy side is version 3's arithmetic (eq. 11-13 with ``F @ P @ F.T + Q``, an
 is :func:`~locbench.filters._ekf_icp_kernels.predict_pose` and :func:`~locbench.filters._ekf_icp_kernels.correct_pose`
 on the state buffer. Each round times a batch of each (alternating which goes first) and the case reports the
 median of the rounds' ratios compiled / numpy (unpaired cases drift with the load of the shared machine). The
-whole-run figure is ``tools/icp_outside_loop.py``'s.
+whole-run figure is ``tools/measure/icp_outside_loop.py``'s.
 """
 
 from __future__ import annotations

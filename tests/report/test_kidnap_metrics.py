@@ -11,8 +11,8 @@ import pytest
 from locbench.datasets.dataset import Kidnap, Trajectory2D
 from locbench.evaluate import metrics as lm
 from locbench.report import wilson_interval, write_report
-from locbench.report.build import Report
 from locbench.report.collect import collect
+from locbench.report.context import Report
 from locbench.report.doc import Plot, Table
 from locbench.report.render import render_png
 from locbench.report.sections.experiment import nees_plots

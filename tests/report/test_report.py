@@ -456,8 +456,8 @@ def test_suite_filter_keeps_the_suites_cells_only() -> None:
 
 
 def test_summary_takes_each_filters_own_kidnap_configuration() -> None:
-    from locbench.report.build import Report
     from locbench.report.collect import Collected, describe_filter, frame
+    from locbench.report.context import Report
     from locbench.report.sections.summary import kidnap_config
 
     names = ["pf", "pf[adaptive=kld]", "pf[particles=100]", "pf[augmented=true]", "pf[adaptive=kld,augmented=true]"]
@@ -471,8 +471,8 @@ def test_summary_takes_each_filters_own_kidnap_configuration() -> None:
 
 def test_summary_takes_the_kidnap_configuration_a_filter_declares(monkeypatch: pytest.MonkeyPatch) -> None:
     from locbench.filters.pf import ParticleFilter
-    from locbench.report.build import Report
     from locbench.report.collect import Collected, describe_filter, frame
+    from locbench.report.context import Report
     from locbench.report.sections.summary import kidnap_config
 
     monkeypatch.setattr(ParticleFilter, "kidnap_params", {"augmented": "true", "inject": "sensor"})
@@ -539,8 +539,8 @@ def test_table1_marks_the_tie_at_a_waypoint_and_not_the_shift() -> None:
 
 
 def _summary_of(rows: list[tuple[str, str, int, str, float]], dataset: str = "mine") -> tuple[object, object]:
-    from locbench.report.build import Report
     from locbench.report.collect import Collected, frame
+    from locbench.report.context import Report
     from locbench.report.sections.summary import summary_blocks
 
     rep = Report(Collected(metrics=frame(rows)))

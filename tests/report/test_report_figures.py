@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from figure_support import texts_off_canvas
 from matplotlib.colors import to_hex
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
@@ -15,10 +16,11 @@ from test_report import _fake_run, _fake_truth
 
 from locbench.present.palette import FILTER_COLORS, Palette, shade, split_by_sweep
 from locbench.report import figures as fg
-from locbench.report.build import Report
+from locbench.report.build import build_sections
 from locbench.report.collect import collect
+from locbench.report.context import Report
 from locbench.report.doc import Plot
-from locbench.report.render import plots_of, texts_off_canvas
+from locbench.report.render import plots_of
 from locbench.report.sections.experiment import MAX_LINE_SERIES, MAX_TRACK_PANELS
 from locbench.report.style import MPL_STYLE
 from locbench.run.store import Store
@@ -47,7 +49,7 @@ def report(tmp_path_factory: pytest.TempPathFactory) -> Report:
 
 @pytest.fixture(scope="module")
 def plots(report: Report) -> list[Plot]:
-    return plots_of(report.sections())
+    return plots_of(build_sections(report))
 
 
 def _drawn(plot: Plot) -> Figure:
@@ -213,7 +215,7 @@ def test_report_writes_the_split_figures(tmp_path: Path, report: Report) -> None
     """The Markdown names every figure it shows once, the split ones included."""
     from locbench.report.render import to_markdown
 
-    md = to_markdown("t", [], report.sections())
+    md = to_markdown("t", [], build_sections(report))
     for stem in ("room_trajectories", "room_trajectories_pf", "room_nees_pf", "room_waypoint_rmse_pf"):
         assert md.count(f"(figures/{stem}.png)") == 1, stem
 

@@ -155,7 +155,7 @@ def _collected(with_ref: bool) -> object:
 
 
 def test_pareto_x_axis_is_in_reference_units() -> None:
-    from locbench.report.build import Report
+    from locbench.report.context import Report
     from locbench.report.sections.runtime import pareto_points
     from locbench.report.timing import PARETO_X, PARETO_X_RAW, pareto_xlabel
 

@@ -1,13 +1,12 @@
-"""tools/budget_floor.py: a store's runs counted once each, by the first suite that has them, and the floor from
-their recorded seconds."""
+"""tools/measure/budget_floor.py, run as a script: a store's runs counted once each, by the first suite that has
+them, and the floor from their recorded seconds."""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
 
-import pytest
-from tool_support import load_tool
+from tool_support import run_tool
 
 
 def _write(path: Path, record: dict) -> None:
@@ -20,8 +19,7 @@ def _run(root: Path, dataset: str, flt: str, seed: int, wall: float, steps: floa
     _write(root / "runs" / dataset / flt / f"seed-{seed:04d}" / "meta.json", meta)
 
 
-def test_floor_counts_each_run_once_by_its_first_suite(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    tool = load_tool("budget_floor")
+def test_floor_counts_each_run_once_by_its_first_suite(tmp_path: Path) -> None:
     # pf on room is in 'default' (and in no earlier suite); pf on room[matched=true] only in 'consistency'
     _run(tmp_path, "room", "pf", 0, 10.0, 6.0)
     _run(tmp_path, "room", "pf", 1, 14.0, 8.0)
@@ -30,8 +28,9 @@ def test_floor_counts_each_run_once_by_its_first_suite(tmp_path: Path, capsys: p
     _run(tmp_path / "tuning", "room", "pf[sigma_range_m=0.2]", 1000, 40.0, 30.0)
     _write(tmp_path / "runs" / "room" / "_truth" / "seed-0000.json", {"build_s": 3.0})
     _write(tmp_path / "runs" / "room" / "_truth" / "seed-0000.bound.json", {"compute_s": 5.0})
-    assert tool.main([str(tmp_path)]) == 0
-    lines = capsys.readouterr().out.splitlines()
+    done = run_tool("measure/budget_floor.py", str(tmp_path))
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
     rows = {line[:22].strip(): line[22:].split() for line in lines[: lines.index("")]}
     assert rows["default"] == ["2", "24", "14", "10"]
     assert rows["consistency"] == ["1", "30", "20", "10"]

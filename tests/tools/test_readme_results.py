@@ -1,5 +1,5 @@
 """The README's result numbers agree with the committed summary: every ``<!-- gen:NAME -->`` block of README.md
-is what tools/readme_results.py makes from results/summary/metrics.csv."""
+is what tools/docs/readme_results.py makes from results/summary/metrics.csv."""
 
 from __future__ import annotations
 
@@ -7,9 +7,7 @@ import functools
 
 import pandas as pd
 import pytest
-from tool_support import load_tool
-
-tool = load_tool("readme_results")
+import readme_results as tool
 
 
 @functools.cache
@@ -28,7 +26,7 @@ def test_every_generated_block_of_the_readme_agrees_with_the_committed_summary()
     prose |= {"claims-000-verdict", "matched-band", "pareto-gate"}
     assert prose <= set(names)
     assert set(names) <= set(generated()), "a block of the README has no generator"
-    assert tool.disagreements(text, generated()) == [], "run: python tools/readme_results.py --write"
+    assert tool.disagreements(text, generated()) == [], "run: python tools/docs/readme_results.py --write"
 
 
 def test_a_number_that_disagrees_is_found() -> None:

@@ -13,7 +13,7 @@ from locbench.report.names import seed_ranges
 from locbench.report.sections import paired_tests as sig
 
 if TYPE_CHECKING:
-    from locbench.report.build import Report
+    from locbench.report.context import Report
 
 
 def appendix_section(rep: Report) -> Section:

@@ -7,14 +7,22 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from locbench.core.spec import Spec
-from locbench.present.metric_info import METRICS
+from locbench.evaluate.metrics import (
+    CRPS_HEADING_RAD,
+    CRPS_X_M,
+    CRPS_Y_M,
+    ENERGY_SCORE_M,
+    METRICS,
+    NEES_IN_BAND_FRACTION,
+    NLL,
+)
 from locbench.report import tables as tb
 from locbench.report.doc import Section, Table, Text
 from locbench.report.names import MATCHED_PARAM, NAN
 from locbench.report.sections.experiment import nees_plots
 
 if TYPE_CHECKING:
-    from locbench.report.build import Report
+    from locbench.report.context import Report
 
 
 def consistency_section(rep: Report) -> Section:
@@ -97,11 +105,11 @@ def consistency_cells(rep: Report, dataset: str, f: str) -> tuple[tuple[str, ...
     text, key, inf, n = tb.consistency_cell(sub)
     if n == 0:
         return None, (), False
-    inband = tb.mean_of(sub, "nees_in_band_fraction") * 100.0
-    nll = tb.mean_of(sub[np.isfinite(sub["value"]) | (sub["metric"] != "nll")], "nll")
-    es = tb.mean_of(sub, "energy_score_m") * METRICS["energy_score_m"].scale
-    cx, cy = (tb.mean_of(sub, m) * METRICS[m].scale for m in ("crps_x_m", "crps_y_m"))
-    ch = tb.mean_of(sub, "crps_heading_rad") * METRICS["crps_heading_rad"].scale
+    inband = tb.mean_of(sub, NEES_IN_BAND_FRACTION) * METRICS[NEES_IN_BAND_FRACTION].scale
+    nll = tb.mean_of(sub[np.isfinite(sub["value"]) | (sub["metric"] != NLL)], NLL)
+    es, cx, cy, ch = (
+        tb.mean_of(sub, m) * METRICS[m].scale for m in (ENERGY_SCORE_M, CRPS_X_M, CRPS_Y_M, CRPS_HEADING_RAD)
+    )
     crps = f"{tb.num(cx)} / {tb.num(cy)} / {tb.num(ch)}"
     cells = (str(n), tb.band_text(n), text, tb.num(inband), tb.num(nll), tb.num(es), crps)
     return cells, (float(n), NAN, key, inband, nll, es, NAN), inf > 0

@@ -9,7 +9,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from locbench.evaluate.aggregate import mean_over_runs, waypoint_stats
-from locbench.evaluate.metrics import CONFIDENCE, POSE_DOF, chi2_band, estimate_at
+from locbench.evaluate.metrics import CONFIDENCE, PARTICLES_MEAN, POSE_DOF, chi2_band, estimate_at
 from locbench.present.experiments import Experiment, sections_for
 from locbench.report import figures as fg
 from locbench.report import interactive as ia
@@ -18,7 +18,7 @@ from locbench.report.doc import Plot, Section, Table, Text
 from locbench.report.names import slug
 
 if TYPE_CHECKING:
-    from locbench.report.build import Report
+    from locbench.report.context import Report
 
 #: Most panels of one trajectory figure before it is split into defaults and one figure per sweep.
 MAX_TRACK_PANELS = 12
@@ -171,13 +171,13 @@ def _trajectory_plot(rep: Report, stem: str, caption: str, title: str, world: fg
 def count_plot(rep: Report, dataset: str) -> Plot | None:
     """The particle count over time of the filters whose count adapts (KLD sampling), first seed."""
     keys = sorted(k for k in rep.col.ok_dirs if k[0] == dataset and not rep.col.is_global(k[1]))
-    if not keys or not (rep.rows(dataset)["metric"] == "particles_mean").any():
+    if not keys or not (rep.rows(dataset)["metric"] == PARTICLES_MEAN).any():
         return None
     seed = keys[0][2]
     series: list[tuple[str, np.ndarray, np.ndarray]] = []
     for f in rep.filters_on(dataset):
         sub = rep.rows(dataset)
-        if (dataset, f, seed) not in rep.col.ok_dirs or not len(tb.values(sub[sub["filter"] == f], "particles_mean")):
+        if (dataset, f, seed) not in rep.col.ok_dirs or not len(tb.values(sub[sub["filter"] == f], PARTICLES_MEAN)):
             continue
         run = rep.col.read_run(dataset, f, seed)
         count = run.diagnostics.get("particles")

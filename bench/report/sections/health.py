@@ -30,8 +30,8 @@ from locbench.report import tables as tb
 from locbench.report.doc import Plot, Section, Table, Text
 
 if TYPE_CHECKING:
-    from locbench.report.build import Report
     from locbench.report.collect import Collected
+    from locbench.report.context import Report
 
 NAN = float("nan")
 #: A signal's name and its oriented values over some ground-truth times.

@@ -8,14 +8,20 @@ from typing import TYPE_CHECKING
 import numpy as np
 from matplotlib.figure import Figure
 
+from locbench.evaluate.metrics import (
+    CONVERGED,
+    KIDNAP_FALSE_CONFIDENCE_FRACTION,
+    KIDNAP_RECOVERED,
+    TIME_TO_CONVERGE_S,
+)
+from locbench.present.docfmt import LINESTYLES, LineStyle
 from locbench.report import figures as fg
 from locbench.report import tables as tb
 from locbench.report.doc import Plot, Section, Table, Text
 from locbench.report.names import KIDNAP_PARAM, slug
-from locbench.report.style import LINESTYLES, LineStyle
 
 if TYPE_CHECKING:
-    from locbench.report.build import Report
+    from locbench.report.context import Report
 
 
 def kidnap_section(rep: Report) -> Section:
@@ -43,14 +49,14 @@ def kidnap_section(rep: Report) -> Section:
             df = rep.rows(ds)
             for f in rep.filters_on(ds, global_start=True):
                 sub = df[df["filter"] == f]
-                k, n, r, lo, hi = tb.rate(sub, "converged")
+                k, n, r, lo, hi = tb.rate(sub, CONVERGED)
                 rows.append(
                     (
                         f"`{ds}`",
                         f"`{f}`",
                         str(n),
                         f"{k}/{n} = {r:.2f} [{lo:.2f}, {hi:.2f}]" if n else "n/a",
-                        tb.median_text(tb.values(sub, "time_to_converge_s")),
+                        tb.median_text(tb.values(sub, TIME_TO_CONVERGE_S)),
                     )
                 )
         sec.children.append(
@@ -90,11 +96,11 @@ def kidnap_family_section(rep: Report, ident: str, names: list[str]) -> Section:
                     continue
                 sub = rep.rows(n)
                 sub = sub[sub["filter"] == f]
-                k, cnt, r, lo, hi = tb.rate(sub, "kidnap_recovered")
+                k, cnt, r, lo, hi = tb.rate(sub, KIDNAP_RECOVERED)
                 cells.append(f"{k}/{cnt}" if cnt else "")
                 if cnt:
                     pts.append((d, r, lo, hi))
-                fc.extend(tb.values(sub, "kidnap_false_confidence_fraction"))
+                fc.extend(tb.values(sub, KIDNAP_FALSE_CONFIDENCE_FRACTION))
             label = f if len(families) == 1 else f"{f} on {fam}"
             rows.append((f"`{f}`", f"`{fam}`", *cells, tb.num(float(np.mean(fc))) if fc else "n/a"))
             if pts:

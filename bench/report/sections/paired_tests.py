@@ -20,14 +20,20 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from locbench.evaluate import significance as sg
-from locbench.evaluate.metrics import WITHIN_THRESHOLDS_CM
-from locbench.present.metric_info import METRICS
-from locbench.present.ranking import WAYPOINT_MEAN, Column, hover_grid, mark_ties, per_seed, samples_for, tie_footnote
+from locbench.evaluate.metrics import (
+    ATE_M,
+    METRICS,
+    UPDATE_US_MEDIAN,
+    WITHIN_FRACTION,
+    WITHIN_THRESHOLDS_CM,
+    member_id,
+)
+from locbench.present.ranking import Column, hover_grid, mark_ties, per_seed, samples_for, tie_footnote
 from locbench.report import tables as tb
 from locbench.report.doc import Plot, Section, Table, Text
 
 if TYPE_CHECKING:
-    from locbench.report.build import Report
+    from locbench.report.context import ComparisonRecord, Report
     from locbench.run.store import Store
 
 NAN = float("nan")
@@ -52,76 +58,6 @@ CSV_COLUMNS = (
     "effect_low",
     "effect_high",
 )
-
-
-@dataclass(frozen=True)
-class ComparisonRecord:
-    """One row of ``comparisons.csv``: a configuration against its column's best on one dataset."""
-
-    dataset: str
-    metric: str
-    configuration: str
-    reference: str
-    n: int
-    statistic: float
-    p: float
-    p_holm: float
-    effect: float
-    effect_low: float
-    effect_high: float
-
-
-#: Metrics compared in ``comparisons.csv`` (each dataset's ranked columns; SI units as in ``metrics.csv``).
-COMPARED = (*(m for m in tb.COMPARISON if METRICS[m].better), WAYPOINT_MEAN, "kidnap_recovered")
-
-
-def dataset_comparisons(
-    df: pd.DataFrame, dataset: str, filters: Sequence[str], eligible: Sequence[bool]
-) -> list[ComparisonRecord]:
-    """Every ranked metric of one dataset: each configuration against the metric's best, with effects."""
-    out: list[ComparisonRecord] = []
-    present = set(df["metric"].unique())
-    for metric in COMPARED:
-        if metric == WAYPOINT_MEAN:
-            if not df["metric"].astype(str).str.match(r"^waypoint_\d+_error_m$").any():
-                continue
-        elif metric not in present:
-            continue
-        info = METRICS[metric]
-        samples = samples_for(df, filters, metric)
-        means = [float(np.mean(list(s.values()))) if s else NAN for s in samples]
-        target = info.target if info.better == "closer" else 1.0
-        v = sg.ties_with_best(means, samples, eligible, info.better, target)  # type: ignore[arg-type]
-        for c in v.comparisons:
-            t = c.test
-            out.append(
-                ComparisonRecord(
-                    dataset,
-                    metric,
-                    filters[c.index],
-                    filters[c.reference],
-                    t.n,
-                    t.statistic,
-                    t.p,
-                    c.p_holm,
-                    c.effect,
-                    c.effect_low,
-                    c.effect_high,
-                )
-            )
-    return out
-
-
-def all_comparisons(report: Report) -> list[ComparisonRecord]:
-    """``comparisons.csv``'s rows: every dataset's ranked metrics, every configuration against the best."""
-    out: list[ComparisonRecord] = []
-    for ds in sorted(report.col.datasets):
-        filters = report.filters_on(ds)
-        if len(filters) < 2:
-            continue
-        eligible = [not report.col.is_baseline(f) for f in filters]
-        out += dataset_comparisons(report.rows(ds), ds, filters, eligible)
-    return out
 
 
 def comparisons_csv(records: Sequence[ComparisonRecord]) -> bytes:
@@ -268,8 +204,8 @@ def skill_scores(report: Report, datasets: Sequence[str], config: str, baseline:
     out = []
     for d in datasets:
         sub = report.rows(d)
-        mine = per_seed(sub[sub["filter"] == config], "ate_m")
-        ref = per_seed(sub[sub["filter"] == baseline], "ate_m")
+        mine = per_seed(sub[sub["filter"] == config], ATE_M)
+        ref = per_seed(sub[sub["filter"] == baseline], ATE_M)
         seeds = sorted(set(mine) & set(ref))
         if seeds:
             out.append(sg.skill([mine[s] for s in seeds], [ref[s] for s in seeds]))
@@ -282,7 +218,7 @@ def within_curve(report: Report, datasets: Sequence[str], config: str) -> np.nda
     for d in datasets:
         sub = report.rows(d)
         sub = sub[sub["filter"] == config]
-        row = [tb.mean_of(sub, f"within_{k}cm_fraction") for k in WITHIN_THRESHOLDS_CM]
+        row = [tb.mean_of(sub, member_id(WITHIN_FRACTION, k)) for k in WITHIN_THRESHOLDS_CM]
         if not any(math.isnan(x) for x in row):
             per.append(row)
     return np.mean(np.array(per), axis=0) if per else np.full(len(WITHIN_THRESHOLDS_CM), NAN)
@@ -302,7 +238,7 @@ def across_datasets(report: Report) -> Section:
         if not math.isnan(report.kidnap_distance(d)):
             continue
         sub = report.rows(d)
-        ran[d] = {f for f in report.filters_on(d) if tb.values(sub[sub["filter"] == f], "ate_m").size}
+        ran[d] = {f for f in report.filters_on(d) if tb.values(sub[sub["filter"] == f], ATE_M).size}
     groups = dataset_groups(ran)
     if not groups:
         return sec
@@ -330,13 +266,13 @@ def _group_section(report: Report, gi: int, configs: Sequence[str], datasets: Se
     col = report.col
     configs = col.filter_order(configs)
     baseline = next((f for f in configs if col.is_baseline(f)), None)
-    ate = rank_result(_means_table(report, datasets, configs, "ate_m"))
+    ate = rank_result(_means_table(report, datasets, configs, ATE_M))
     upd_cfg = [
         f
         for f in configs
-        if all(tb.values(report.rows(d)[report.rows(d)["filter"] == f], "update_us_median").size for d in datasets)
+        if all(tb.values(report.rows(d)[report.rows(d)["filter"] == f], UPDATE_US_MEDIAN).size for d in datasets)
     ]
-    upd = rank_result(_means_table(report, datasets, upd_cfg, "update_us_median"))
+    upd = rank_result(_means_table(report, datasets, upd_cfg, UPDATE_US_MEDIAN))
     names = ", ".join(f"`{col.display(d)}`" for d in datasets)
     blocks: list[Any] = [Text(f"{len(datasets)} datasets: {names}.")]
     rows: list[tuple[str, ...]] = []
@@ -449,7 +385,7 @@ def seed_audit(report: Report, datasets: Sequence[str]) -> Section:
         for f in report.filters_on(d):
             sub = report.rows(d)
             sub = sub[sub["filter"] == f]
-            v = per_seed(sub, "ate_m")
+            v = per_seed(sub, ATE_M)
             if not v:
                 continue
             seeds = np.array(sorted(v))
@@ -478,8 +414,8 @@ def seed_audit(report: Report, datasets: Sequence[str]) -> Section:
 
 def ratio_per_seed(df: pd.DataFrame, config: str, bound: str) -> dict[int, float]:
     """seed -> ATE / the bound's ATE on that seed (the per-run value behind the ATE / PCRB column)."""
-    mine = per_seed(df[df["filter"] == config], "ate_m")
-    ref = per_seed(df[df["filter"] == bound], "ate_m")
+    mine = per_seed(df[df["filter"] == config], ATE_M)
+    ref = per_seed(df[df["filter"] == bound], ATE_M)
     return {s: mine[s] / ref[s] for s in mine if s in ref and ref[s] > 0}
 
 

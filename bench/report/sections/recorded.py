@@ -7,16 +7,22 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from locbench.present.metric_info import METRICS
+from locbench.evaluate.metrics import METRICS, REALTIME_FACTOR
 from locbench.report import tables as tb
 from locbench.report import timing as tm
 from locbench.report.doc import Section, Table, Text
 from locbench.report.names import NAN, slug
 from locbench.report.sections import paired_tests as sig
-from locbench.report.sections.reference import KINDS, kind_caption, robustness_table
+from locbench.report.sections.reference import (
+    KINDS,
+    dataset_reference_kind,
+    kind_caption,
+    recorded_header,
+    robustness_table,
+)
 
 if TYPE_CHECKING:
-    from locbench.report.build import Report
+    from locbench.report.context import Report
 
 
 def recorded_section(rep: Report) -> Section:
@@ -44,9 +50,9 @@ def recorded_section(rep: Report) -> Section:
 
     def with_ref(c: tuple[str, float], f: str, ds: str) -> tuple[str, float]:
         sub = rep.rows(ds)
-        return tm.with_ref(c[0], sub[sub["filter"] == f], "realtime_factor") if np.isfinite(c[1]) else c[0], c[1]
+        return tm.with_ref(c[0], sub[sub["filter"] == f], REALTIME_FACTOR) if np.isfinite(c[1]) else c[0], c[1]
 
-    groups = [(k, [d for d in names if rep.reference_kind(d) == k]) for k in KINDS]
+    groups = [(k, [d for d in names if dataset_reference_kind(rep, d) == k]) for k in KINDS]
     sec.add(
         Text(
             "Every filter on the recorded datasets (one recording each; the mean over seeds where a randomised "
@@ -63,16 +69,16 @@ def recorded_section(rep: Report) -> Section:
     for kind, group in groups:
         if not group:
             continue
-        head = ("filter", *(rep.recorded_header(d) for d in group))
+        head = ("filter", *(recorded_header(rep, d) for d in group))
         fs = [f for f in filters if any((f, d) in status for d in group)]
         acc = [[cell(f, d, rep.recorded_metric(d)) for d in group] for f in fs]
-        rtf = [[with_ref(cell(f, d, "realtime_factor"), f, d) for d in group] for f in fs]
+        rtf = [[with_ref(cell(f, d, REALTIME_FACTOR), f, d) for d in group] for f in fs]
         metrics_text = "; ".join(f"`{rep.col.display(d)}` {tb.header(rep.recorded_metric(d))}" for d in group)
         sub = Section(f"Reference: {kind}", f"recorded-{slug(kind)}")
         sub.add(Text(f"Accuracy: {metrics_text}; {kind_caption(kind)}."))
         for grid, metric_of, what in (
             (acc, rep.recorded_metric, "Accuracy (cm)"),
-            (rtf, lambda d: "realtime_factor", "Real-time factor (x)"),
+            (rtf, lambda d: REALTIME_FACTOR, "Real-time factor (x)"),
         ):
             cells, note, hover = sig.mark_grid(rep, fs, group, grid, metric_of)
             sub.add(

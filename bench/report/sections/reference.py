@@ -22,16 +22,19 @@ the ratio to that reference.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
 
 from locbench.core.errors import LocbenchError
-from locbench.present.metric_info import METRICS
+from locbench.evaluate.metrics import ATE_M, METRICS
 from locbench.registry import DATASETS
 from locbench.report import tables as tb
 from locbench.report.doc import Table
+
+if TYPE_CHECKING:
+    from locbench.report.context import Report
 
 #: The reference kinds, in the order the report groups them.
 KINDS = ("motion capture", "GPS", "survey", "not stated", "SLAM", "simulation")
@@ -64,6 +67,18 @@ def semi_synthetic(metadata: dict[str, Any]) -> bool:
     return metadata.get("semi_synthetic") is True
 
 
+def dataset_reference_kind(rep: Report, dataset: str) -> str:
+    """:func:`reference_kind` of a stored dataset name, from its stored truth (else its id)."""
+    ident, meta, label = rep.truth_meta(dataset)
+    return reference_kind(ident or rep.col.datasets[dataset].spec.ident, meta, label)
+
+
+def recorded_header(rep: Report, dataset: str) -> str:
+    """A recorded dataset's column header: its name, marked when it is semi-synthetic."""
+    semi = " (semi-synthetic)" if semi_synthetic(rep.truth_meta(dataset)[1]) else ""
+    return f"`{rep.col.display(dataset)}`{semi}"
+
+
 def kind_caption(kind: str) -> str:
     """The words every table of a group carries."""
     return f"reference: {kind}" + (
@@ -85,8 +100,8 @@ def robustness_table(df: pd.DataFrame, filters: list[str], noise_of: dict[str, t
     if not cols:
         return None
     ref_of = {w: d for d, (w, n) in noise_of.items() if n == GAUSSIAN}
-    scale = METRICS["ate_m"].scale
-    ate = df[df["metric"] == "ate_m"]
+    scale = METRICS[ATE_M].scale
+    ate = df[df["metric"] == ATE_M]
 
     def mean(f: str, ds: str) -> float:
         v = ate[(ate["dataset"] == ds) & (ate["filter"] == f)]["value"].to_numpy(dtype=np.float64)

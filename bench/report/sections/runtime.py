@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from matplotlib.figure import Figure
 
-from locbench.present.metric_info import METRICS
+from locbench.evaluate.metrics import ATE_M, METRICS
 from locbench.report import figures as fg
 from locbench.report import interactive as ia
 from locbench.report import tables as tb
@@ -17,7 +17,7 @@ from locbench.report.doc import Plot, Section, Text
 from locbench.report.names import slug
 
 if TYPE_CHECKING:
-    from locbench.report.build import Report
+    from locbench.report.context import Report
 
 
 def pareto_points(rep: Report, dataset: str, metric: str) -> list[fg.ParetoPoint]:
@@ -52,7 +52,7 @@ def pareto_section(rep: Report) -> Section:
     for e in rep.exps:
         if not e.summary or e.dataset not in rep.col.datasets:
             continue
-        pts = pareto_points(rep, e.dataset, "ate_m")
+        pts = pareto_points(rep, e.dataset, ATE_M)
         if pts:
             sec.add(pareto_plot(rep, f"{slug(e.dataset)}_pareto", e.dataset, [(e.dataset, "ATE (cm)", pts)]))
     for d in rep.own():

@@ -1,11 +1,14 @@
 """The report's summary: a decision table per main comparison and per dataset of a user's own, a row per filter
 configuration.
 
-The table is declared once, as :data:`COLUMNS`: each :class:`SummaryColumn` gives its header, its cell (text and
-sort key) for a row, the metric it is ranked by (which way is better comes from
-:data:`locbench.evaluate.metrics.METRICS`),
-the per-run values its paired test takes and its footnote; the headers, cells, sort keys, best marks and notes of
-every summary table are generated from it. Rows: the baseline, then the default configuration of each filter by
+The table is declared once, as :func:`columns`: each :class:`SummaryColumn` gives its header, its cell (text and
+sort key) for a row, the metric it is ranked by (which way is better comes from the metric's declaration,
+:data:`locbench.evaluate.metrics.METRICS`), the per-run values its paired test takes and its footnote; the headers,
+cells, sort keys, best marks and notes of every summary table are generated from it. Its metric columns are the
+metrics declared with ``summary=True``, in declaration order: a metric the report computes over runs (the ratio to
+the bound, the lost AUROC ...) or shows in its own way has its column in :data:`OWN_COLUMNS`; any other gets
+:func:`metric_column`, the mean over seeds in its display unit, so a metric declared for the summary appears there
+without an edit here. Rows: the baseline, then the default configuration of each filter by
 ATE, then each filter's other configurations grouped under it in the same order, then the configurations that were
 skipped (with the reason stored), then the bound. Above the table, a paragraph generated from the same numbers says
 which configuration to use with which sensors and map (:func:`advice`).
@@ -24,20 +27,33 @@ import pandas as pd
 from locbench.core.events import Odometry
 from locbench.evaluate import significance as sg
 from locbench.evaluate.lost import LOST_THRESHOLDS_M
-from locbench.evaluate.metrics import POSE_DOF
+from locbench.evaluate.metrics import (
+    ANEES,
+    ATE_M,
+    ATE_OVER_PCRB,
+    FAILED,
+    KIDNAP_RECOVERED,
+    LOST_AUROC,
+    METRICS,
+    POSE_DOF,
+    REALTIME_FACTOR,
+    RECORDED_ATE_MEDIAN_M,
+    REF_SUFFIX,
+    WAYPOINT_RMSE_MEAN_M,
+    Metric,
+)
 from locbench.evaluate.pcrb import BOUND_ALL
 from locbench.present import ranking as rk
-from locbench.present.metric_info import METRICS
 from locbench.report import tables as tb
 from locbench.report import timing as tm
 from locbench.report.doc import Block, Section, Table, Text
 from locbench.report.names import KIDNAP_PARAM, NAN, slug
 from locbench.report.sections import health as hl
 from locbench.report.sections import paired_tests as sig
-from locbench.report.sections.reference import INDEPENDENT_KINDS
+from locbench.report.sections.reference import INDEPENDENT_KINDS, dataset_reference_kind
 
 if TYPE_CHECKING:
-    from locbench.report.build import Report
+    from locbench.report.context import Report
 
 #: The kidnap distance whose recovery rate the summary table shows, m.
 SUMMARY_KIDNAP_M = 2.0
@@ -149,7 +165,7 @@ def _rows(rep: Report, ctx: Context) -> list[Row]:
     kfilters = rep.filters_on(ctx.kid) if ctx.kid else []
 
     def ate(f: str) -> float:
-        return tb.mean_of(df[df["filter"] == f], "ate_m")
+        return tb.mean_of(df[df["filter"] == f], ATE_M)
 
     out = []
     for f in row_order(rep, filters, ate):
@@ -181,8 +197,8 @@ class SummaryColumn:
     cell : callable
         (context, row) -> (cell text, sort key in the cell's units; NaN: none) of a configuration's row.
     metric : str or None
-        The :data:`~locbench.evaluate.metrics.METRICS` id the column is ranked by (best and ties in bold); None: not
-        ranked.
+        The id of the declared metric (:data:`~locbench.evaluate.metrics.METRICS`) the column is ranked by (best
+        and ties in bold); None: not ranked.
     samples : callable or None
         (context, rows) -> per row, seed -> the per-run value the paired test takes (None: no test, ranking only).
     bound : bool
@@ -213,19 +229,20 @@ def _fixed(text: str) -> Callable[[Context], str]:
     return lambda ctx: text
 
 
-def _mean(metric: str, scale: float | None = None, dash: bool = False) -> Callable[[Context, Row], tuple[str, float]]:
-    """The mean over runs of a metric in display units (``dash``: "-" instead of "n/a" without a value)."""
+def _mean(metric: str, absent: str = "n/a") -> Callable[[Context, Row], tuple[str, float]]:
+    """The mean over runs of a metric in display units (``absent``: the text without a value)."""
+    scale = METRICS[metric].scale
 
     def cell(ctx: Context, row: Row) -> tuple[str, float]:
-        x = tb.mean_of(row.sub, metric) * (METRICS[metric].scale if scale is None else scale)
-        return ("-" if dash and np.isnan(x) else tb.num(x)), x
+        x = tb.mean_of(row.sub, metric) * scale
+        return (absent if np.isnan(x) else tb.num(x)), x
 
     return cell
 
 
-def _mean_and_ref(metric: str, dash: bool = False) -> Callable[[Context, Row], tuple[str, float]]:
+def _mean_and_ref(metric: str, absent: str = "n/a") -> Callable[[Context, Row], tuple[str, float]]:
     """:func:`_mean` followed by ``(ref X)``, the same in reference units (:func:`locbench.report.timing.with_ref`)."""
-    raw = _mean(metric, 1.0, dash=dash)
+    raw = _mean(metric, absent)
 
     def cell(ctx: Context, row: Row) -> tuple[str, float]:
         text, x = raw(ctx, row)
@@ -239,7 +256,7 @@ def _per_run(metric: str) -> Callable[[Context, Sequence[Row]], list[PerRun]]:
 
 
 def _runs(ctx: Context, row: Row) -> tuple[str, float]:
-    n = tb.run_count(row.sub) if row.bound else int(tb.values(row.sub, "failed").size)
+    n = tb.run_count(row.sub) if row.bound else int(tb.values(row.sub, FAILED).size)
     return str(n), float(n)
 
 
@@ -253,7 +270,7 @@ def _ratio_samples(ctx: Context, rows: Sequence[Row]) -> list[PerRun]:
 
 
 def _waypoints(ctx: Context, row: Row) -> tuple[str, float]:
-    x = ctx.waypoints.get(row.name, NAN) * 100.0
+    x = ctx.waypoints.get(row.name, NAN) * METRICS[WAYPOINT_RMSE_MEAN_M].scale
     return tb.num(x), x
 
 
@@ -263,7 +280,7 @@ def _anees(ctx: Context, row: Row) -> tuple[str, float]:
 
 
 def _anees_note(ctx: Context, cells: Sequence[str]) -> str:
-    runs = [int(tb.values(ctx.df[ctx.df["filter"] == f], "failed").size) for f in ctx.rep.filters_on(ctx.dataset)]
+    runs = [int(tb.values(ctx.df[ctx.df["filter"] == f], FAILED).size) for f in ctx.rep.filters_on(ctx.dataset)]
     n = max(set(runs), key=runs.count) if runs else 0
     note = (
         f"ANEES: mean over runs of each run's average NEES (heading wrapped), against the two-sided 95 % "
@@ -299,14 +316,14 @@ def _lost_note(ctx: Context, cells: Sequence[str]) -> str:
 def _kidnap(ctx: Context, row: Row) -> tuple[str, float]:
     if row.kname is None:
         return "-", NAN
-    _, n, r, _, _ = tb.rate(ctx.kdf[ctx.kdf["filter"] == row.kname], "kidnap_recovered")
+    _, n, r, _, _ = tb.rate(ctx.kdf[ctx.kdf["filter"] == row.kname], KIDNAP_RECOVERED)
     if not n:
         return "n/a", NAN
     return f"{100 * r:.0f} ({n})" + ("²" if row.kname != row.name else ""), 100 * r
 
 
 def _kidnap_samples(ctx: Context, rows: Sequence[Row]) -> list[PerRun]:
-    return [rk.samples_for(ctx.kdf, [r.kname], "kidnap_recovered")[0] if r.kname else None for r in rows]
+    return [rk.samples_for(ctx.kdf, [r.kname], KIDNAP_RECOVERED)[0] if r.kname else None for r in rows]
 
 
 def _kidnap_note(ctx: Context, cells: Sequence[str]) -> str:
@@ -332,7 +349,7 @@ def _recorded(ctx: Context, row: Row) -> tuple[str, float]:
     per = ctx.recorded.get(row.name, {})
     if not per:
         return "-", NAN
-    x = 100.0 * float(np.median(list(per.values())))
+    x = METRICS[RECORDED_ATE_MEDIAN_M].scale * float(np.median(list(per.values())))
     return f"{tb.num(x)} ({len(per)})", x
 
 
@@ -340,8 +357,8 @@ def _text_key(text: Callable[[Context, Row], str]) -> Callable[[Context, Row], t
     return lambda ctx, row: (text(ctx, row), NAN)
 
 
-#: The summary table, one record per column in reading order.
-COLUMNS: tuple[SummaryColumn, ...] = (
+#: The columns before the metrics': which configuration, what it needs, how many runs.
+HEAD_COLUMNS: tuple[SummaryColumn, ...] = (
     SummaryColumn(_fixed("filter"), _text_key(lambda ctx, row: f"`{row.name}`"), bound=True, skipped=True, always=True),
     SummaryColumn(
         _fixed("needs (sensors; map)"),
@@ -355,63 +372,43 @@ COLUMNS: tuple[SummaryColumn, ...] = (
         ),
     ),
     SummaryColumn(_fixed("runs"), _runs, bound=True, skipped=True, always=True),
-    SummaryColumn(_fixed("ATE (cm)"), _mean("ate_m", 100.0), "ate_m", _per_run("ate_m"), bound=True, always=True),
-    SummaryColumn(
-        _fixed(tb.header("ate_over_pcrb")),
+)
+
+#: The columns of the summary's metrics that the report computes over runs or shows in its own way, by metric id
+#: (each shown where its metric's declaration puts it; any other summary metric gets :func:`metric_column`).
+OWN_COLUMNS: dict[str, SummaryColumn] = {
+    # the reason a configuration was skipped goes in this column (always shown)
+    ATE_M: SummaryColumn(_fixed(tb.header(ATE_M)), _mean(ATE_M), ATE_M, _per_run(ATE_M), bound=True, always=True),
+    ATE_OVER_PCRB: SummaryColumn(
+        _fixed(tb.header(ATE_OVER_PCRB)),
         _ratio,
-        "ate_over_pcrb",
+        ATE_OVER_PCRB,
         _ratio_samples,
         note=lambda ctx, cells: tb.BOUND_FOOTNOTE if ctx.rep.bounds_on(ctx.dataset) else "",
     ),
-    SummaryColumn(
-        _fixed("mean waypoint RMSE (cm)"), _waypoints, "waypoint_rmse_mean_m", _per_run(rk.WAYPOINT_MEAN), bound=True
-    ),
-    SummaryColumn(
-        _fixed("heading RMSE (deg)"),
-        _mean("heading_rmse_rad"),
-        "heading_rmse_rad",
-        _per_run("heading_rmse_rad"),
+    WAYPOINT_RMSE_MEAN_M: SummaryColumn(
+        _fixed(tb.header(WAYPOINT_RMSE_MEAN_M)),
+        _waypoints,
+        WAYPOINT_RMSE_MEAN_M,
+        _per_run(WAYPOINT_RMSE_MEAN_M),
         bound=True,
     ),
-    SummaryColumn(
-        _fixed("ANEES (verdict)"), _anees, "anees", _per_run("anees"), note=_anees_note, consistent_only=True
-    ),
-    SummaryColumn(
-        _fixed("energy score (cm)"),
-        _mean("energy_score_m"),
-        "energy_score_m",
-        _per_run("energy_score_m"),
-        note=lambda ctx, cells: (
-            "Energy score: proper score of the filter's own position belief, mean over the "
-            "ground-truth times (lower is better)."
-        ),
+    ANEES: SummaryColumn(
+        _fixed("ANEES (verdict)"), _anees, ANEES, _per_run(ANEES), note=_anees_note, consistent_only=True
     ),
     # one AUROC per configuration over all its runs: a ranking, not a paired test
-    SummaryColumn(_lost_header, _lost, "lost_auroc", lambda ctx, rows: [None] * len(rows), note=_lost_note),
-    SummaryColumn(
-        _fixed("update median (us)"),
-        _mean_and_ref("update_us_median", dash=True),
-        "update_us_median",
-        _per_run("update_us_median"),
-    ),
-    SummaryColumn(
-        _fixed("real-time factor (x)"),
-        _mean_and_ref("realtime_factor"),
-        "realtime_factor",
-        _per_run("realtime_factor"),
-        note=lambda ctx, cells: " ".join(tm.ref_footnote([list(cells)])),
-    ),
-    SummaryColumn(
+    LOST_AUROC: SummaryColumn(_lost_header, _lost, LOST_AUROC, lambda ctx, rows: [None] * len(rows), note=_lost_note),
+    KIDNAP_RECOVERED: SummaryColumn(
         _fixed(f"kidnap recovery at {SUMMARY_KIDNAP_M:g} m (%)"),
         _kidnap,
-        "kidnap_recovered",
+        KIDNAP_RECOVERED,
         _kidnap_samples,
         note=_kidnap_note,
     ),
-    SummaryColumn(
-        _fixed("recorded median ATE (cm)"),
+    RECORDED_ATE_MEDIAN_M: SummaryColumn(
+        _fixed(tb.header(RECORDED_ATE_MEDIAN_M)),
         _recorded,
-        "recorded_ate_median_m",
+        RECORDED_ATE_MEDIAN_M,
         lambda ctx, rows: [ctx.recorded.get(r.name) or None for r in rows],
         note=lambda ctx, cells: (
             "Recorded median ATE: median over the recorded datasets with independent ground "
@@ -419,7 +416,28 @@ COLUMNS: tuple[SummaryColumn, ...] = (
             "this configuration ran on (their number in brackets) of its mean ATE there."
         ),
     ),
-)
+}
+
+
+def metric_column(m: Metric) -> SummaryColumn:
+    """The summary column of a declared metric shown as it is: the mean over seeds in its display unit, with the
+    mean in reference units beside it when the metric has a twin in them (``<id>_ref``), ranked by the paired test
+    of the per-run values; the bound's rows show their value when the bound gives the metric (``m.bound``); its
+    footnote is the declaration's ``note``."""
+    ref = f"{m.id}{REF_SUFFIX}" in METRICS
+    cell = _mean_and_ref(m.id, m.absent) if ref else _mean(m.id, m.absent)
+
+    def note(ctx: Context, cells: Sequence[str]) -> str:
+        return " ".join([*([m.note] if m.note else []), *(tm.ref_footnote([list(cells)]) if ref else [])])
+
+    return SummaryColumn(_fixed(tb.header(m.id)), cell, m.id, _per_run(m.id), bound=m.bound, note=note)
+
+
+def columns() -> tuple[SummaryColumn, ...]:
+    """The summary table, one record per column in reading order: :data:`HEAD_COLUMNS`, then a column per metric
+    declared with ``summary=True``, in declaration order (read when a table is made, so a metric declared later is
+    in it)."""
+    return (*HEAD_COLUMNS, *(OWN_COLUMNS.get(m.id) or metric_column(m) for m in METRICS.values() if m.summary))
 
 
 def kidnap_variant(rep: Report, dataset: str) -> str | None:
@@ -457,18 +475,13 @@ def recorded_means(rep: Report, filter_name: str) -> dict[int, float]:
     independent ground truth (the recorded-median column's cell is their median, its test pairs them)."""
     out: dict[int, float] = {}
     for i, ds in enumerate(rep.recorded()):
-        if not rep.ground_truth(ds) or rep.reference_kind(ds) not in INDEPENDENT_KINDS:
+        if not rep.ground_truth(ds) or dataset_reference_kind(rep, ds) not in INDEPENDENT_KINDS:
             continue
         sub = rep.rows(ds)
-        v = tb.values(sub[sub["filter"] == filter_name], "ate_m")
+        v = tb.values(sub[sub["filter"] == filter_name], ATE_M)
         if v.size:
             out[i] = float(np.mean(v))
     return out
-
-
-def summary_table(rep: Report, dataset: str) -> Table:
-    """The decision table of one dataset name (:data:`COLUMNS`)."""
-    return _summary(rep, dataset)[0]
 
 
 def _summary(rep: Report, dataset: str) -> tuple[Table, Context, list[Row]]:
@@ -478,20 +491,21 @@ def _summary(rep: Report, dataset: str) -> tuple[Table, Context, list[Row]]:
     names = rep.filters_on(dataset)
     ctx = Context(rep, dataset, df, kid, kdf, tb.waypoint_rmse_mean(df), {f: recorded_means(rep, f) for f in names})
     rows = _rows(rep, ctx)
+    table_columns = columns()
     grid: list[list[tuple[str, float]]] = []
-    for c in COLUMNS:
+    for c in table_columns:
         cells = []
         for r in rows:
             if r.skipped and not c.skipped:
                 # every run skipped: the row says what the configuration lacked, where its ATE would be
-                cells.append((f"skipped: {r.skipped}", NAN) if c.metric == "ate_m" else ("-", NAN))
+                cells.append((f"skipped: {r.skipped}", NAN) if c.metric == ATE_M else ("-", NAN))
             elif r.bound and not c.bound:
                 cells.append(("-", NAN))
             else:
                 cells.append(c.cell(ctx, r))
         grid.append(cells)
-    shown = [j for j, c in enumerate(COLUMNS) if c.always or any(not math.isnan(k) for _, k in grid[j])]
-    cols = [COLUMNS[j] for j in shown]
+    shown = [j for j, c in enumerate(table_columns) if c.always or any(not math.isnan(k) for _, k in grid[j])]
+    cols = [table_columns[j] for j in shown]
     text = [[grid[j][i][0] for j in shown] for i in range(len(rows))]
     keys = [[grid[j][i][1] for j in shown] for i in range(len(rows))]
     hovers = rk.hover_grid(text)
@@ -500,7 +514,7 @@ def _summary(rep: Report, dataset: str) -> tuple[Table, Context, list[Row]]:
     for k, c in enumerate(cols):
         if c.note is not None:
             n = c.note(ctx, [r[k] for r in text])
-            if n:
+            if n and n not in notes:  # the runtime columns share the note on reference units
                 notes.append(n)
     table = Table(
         tuple(c.header(ctx) for c in cols),
@@ -566,12 +580,12 @@ def advice(ctx: Context, rows: Sequence[Row]) -> str:
     """
     col = ctx.rep.col
     cands = [r for r in rows if not (r.bound or r.skipped or col.is_baseline(r.name))]
-    means = [tb.mean_of(r.sub, "ate_m") for r in cands]
+    means = [tb.mean_of(r.sub, ATE_M) for r in cands]
     cands = [r for r, m in zip(cands, means, strict=True) if np.isfinite(m)]
     if not cands:
         return ""
-    means = [tb.mean_of(r.sub, "ate_m") for r in cands]
-    samples = rk.samples_for(ctx.df, [r.name for r in cands], "ate_m")
+    means = [tb.mean_of(r.sub, ATE_M) for r in cands]
+    samples = rk.samples_for(ctx.df, [r.name for r in cands], ATE_M)
     needs = {}
     for r in cands:
         info = col.filter_info(r.name)
@@ -584,7 +598,7 @@ def advice(ctx: Context, rows: Sequence[Row]) -> str:
         if v.best is None:
             continue
         best = cands[v.best]
-        rtf = tb.mean_of(best.sub, "realtime_factor")
+        rtf = tb.mean_of(best.sub, REALTIME_FACTOR)
         tied = [cands[i].name for i in sorted(v.marked) if i != v.best]
         parts.append(
             f"with {_have_text(sensors, maps)}, `{best.name}` (ATE {tb.num(100 * means[v.best])} cm, real-time "

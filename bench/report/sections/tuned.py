@@ -18,6 +18,7 @@ import pandas as pd
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
+from locbench.evaluate.metrics import ATE_M, FAILED
 from locbench.present.palette import Palette
 from locbench.report import tables as tb
 from locbench.report.collect import Collected
@@ -34,8 +35,8 @@ def _test_rows(df: pd.DataFrame, study: dict[str, Any], filt: str, test_names: l
 
 def _ate_cm(rows: pd.DataFrame) -> tuple[float, int, int]:
     """Mean test ATE (cm) over the ok runs, the ok runs and all runs."""
-    v = tb.values(rows, "ate_m")
-    runs = int(tb.values(rows, "failed").size)
+    v = tb.values(rows, ATE_M)
+    runs = int(tb.values(rows, FAILED).size)
     return (100.0 * float(np.mean(v)) if v.size else NAN), int(v.size), runs
 
 

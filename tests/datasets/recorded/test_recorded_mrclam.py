@@ -10,7 +10,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from tool_support import load_tool
 
 from locbench.core.errors import ConfigError
 from locbench.core.events import LandmarkObservations, Odometry
@@ -25,6 +24,7 @@ from locbench.datasets.recorded.mrclam import (
     read_robot_sightings,
     waypoints_by_distance,
 )
+from locbench.datasets.recorded.mrclam_noise import derive_nominal_noise
 from locbench.registry import DATASETS, make_dataset
 
 HEADER = (
@@ -347,7 +347,7 @@ def test_dataset6_robot1(registered: None) -> None:
 @needs_data
 def test_frozen_noise_matches_a_fresh_derivation() -> None:
     root = os.environ.get("LOCBENCH_DATA", "")
-    got = load_tool("derive_mrclam_noise").derive_nominal_noise(Path(root) / "utias_mrclam" / "MRCLAM_Dataset6")
+    got = derive_nominal_noise(Path(root) / "utias_mrclam" / "MRCLAM_Dataset6")
     frozen = {
         "twist_sigma_v_mps": mrclam.TWIST_SIGMA_V_MPS,
         "twist_sigma_omega_radps": mrclam.TWIST_SIGMA_OMEGA_RADPS,

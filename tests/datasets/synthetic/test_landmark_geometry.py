@@ -7,13 +7,17 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
-from tool_support import load_tool
 
 from locbench import claims
 from locbench.claims import gadau_gps as report_001
 from locbench.core.errors import ConfigError
 from locbench.core.events import UNKNOWN_ID, LandmarkObservations, LaserScan, PoseFix
 from locbench.datasets.synthetic import landmark_geometry as lg
+from locbench.datasets.synthetic.detection_error import (
+    DETECTION_ERROR_MEASURED,
+    detection_cases,
+    detection_error_stats,
+)
 from locbench.registry import make_dataset
 from locbench.report.doc import Plot, Table
 from locbench.report.render import render_png
@@ -234,9 +238,8 @@ def test_layout_section_gives_a_table_and_a_figure() -> None:
 
 @pytest.mark.slow
 def test_the_detection_study_reproduces_its_recorded_result() -> None:
-    # tools/landmark_detection_stats.py measured the detector's error behind the nominal landmark noise
-    tool = load_tool("landmark_detection_stats")
-    measured = tool.detection_error_stats()
-    assert measured == pytest.approx(tool.RECORDED, rel=1e-9, abs=1e-12)
+    # the detector's measured error is what the nominal landmark noise rounds up
+    measured = detection_error_stats(make_dataset(name, seed) for name, seed in detection_cases())
+    assert measured == pytest.approx(DETECTION_ERROR_MEASURED, rel=1e-9, abs=1e-12)
     assert measured["range_rms_m"] <= lg.NOMINAL_SIGMA_RANGE_M
     assert measured["bearing_rms_rad"] <= lg.NOMINAL_SIGMA_BEARING_RAD

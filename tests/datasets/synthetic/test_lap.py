@@ -7,12 +7,12 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
-from tool_support import load_tool
 
 from locbench.claims import claims_for
 from locbench.core.errors import ConfigError
 from locbench.core.events import LaserScan, Odometry
 from locbench.datasets.synthetic import lap
+from locbench.datasets.synthetic.odometry_calibration import lap_dead_reckoning_final_errors
 from locbench.datasets.synthetic.sensors import dead_reckon
 from locbench.raycast.cast import cast_rays
 from locbench.registry import make_dataset
@@ -21,10 +21,6 @@ from locbench.registry import make_dataset
 @pytest.fixture(scope="module")
 def ds():  # type: ignore[no-untyped-def]
     return make_dataset("lap", 0)
-
-
-#: The calibration study (tools/calibrate_odometry.py) that fitted LAP_SYSTEMATIC_SCALE.
-_TOOL = load_tool("calibrate_odometry")
 
 
 def test_contract_route_and_laser(ds) -> None:  # type: ignore[no-untyped-def]
@@ -45,12 +41,12 @@ def test_contract_route_and_laser(ds) -> None:  # type: ignore[no-untyped-def]
 def test_dataset_odometry_uses_the_calibrated_draws(ds) -> None:  # type: ignore[no-untyped-def]
     inc = np.array([[e.dx, e.dy, e.dtheta] for e in ds.events if isinstance(e, Odometry)])
     end = dead_reckon(ds.ground_truth.poses[0], inc)[-1]
-    expected = _TOOL.lap_dead_reckoning_final_errors(lap.LAP_SYSTEMATIC_SCALE, seeds=[0])[0]
+    expected = lap_dead_reckoning_final_errors(lap.LAP_SYSTEMATIC_SCALE, seeds=[0])[0]
     assert math.isclose(float(np.hypot(*(end[:2] - ds.ground_truth.xy[-1]))), expected, rel_tol=1e-9)
 
 
 def test_frozen_calibration_gives_about_15_cm() -> None:
-    errs = _TOOL.lap_dead_reckoning_final_errors(lap.LAP_SYSTEMATIC_SCALE)
+    errs = lap_dead_reckoning_final_errors(lap.LAP_SYSTEMATIC_SCALE)
     med = float(np.median(errs))
     assert math.isclose(med, lap.LAP_CALIBRATION_ACHIEVED_M, rel_tol=1e-6)
     assert lap.LAP_TARGET_FINAL_ERROR_M / 1.5 <= med <= lap.LAP_TARGET_FINAL_ERROR_M * 1.5

@@ -6,13 +6,13 @@ import math
 
 import numpy as np
 import pytest
-from tool_support import load_tool
 
 from locbench.core.errors import ConfigError
 from locbench.core.events import UNKNOWN_ID, LandmarkObservations, LaserScan, Odometry, PoseFix
 from locbench.core.geometry import wrap_angle
 from locbench.datasets.synthetic import scenarios as sc
 from locbench.datasets.synthetic import toolkit as tk
+from locbench.datasets.synthetic.odometry_calibration import room_dead_reckoning_errors
 from locbench.datasets.synthetic.robot import DriveLimits, GoTo, simulate_route
 from locbench.datasets.synthetic.sensors import (
     EncoderModel,
@@ -386,10 +386,7 @@ def test_synthetic_worlds_declare_their_sensor_streams() -> None:
 
 
 def test_the_room_calibration_study_reproduces_its_recorded_result() -> None:
-    # tools/calibrate_odometry.py fitted the frozen constants; what they achieve is kept beside them
-    tool = load_tool("calibrate_odometry")
-    room = 100.0 * tool.room_dead_reckoning_errors(
-        tk.ENCODER_SCALE_LEFT, tk.ENCODER_SCALE_RIGHT, tk.WHEELBASE_TRUE_RATIO
-    )
+    # calibrate_room_odometry fitted the frozen constants; what they achieve is kept beside them
+    room = 100.0 * room_dead_reckoning_errors(tk.ENCODER_SCALE_LEFT, tk.ENCODER_SCALE_RIGHT, tk.WHEELBASE_TRUE_RATIO)
     np.testing.assert_allclose(room, tk.ROOM_CALIBRATION_ACHIEVED_CM, atol=5e-4)
     # the lap calibration: tests/datasets/synthetic/test_lap.py::test_frozen_calibration_gives_about_15_cm

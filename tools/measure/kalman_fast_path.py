@@ -1,6 +1,6 @@
 """Time ekf_landmarks' hand-unrolled landmark update against the same update through the Kalman core.
 
-Usage: ``python tools/kalman_fast_path.py {fast,core} N``: N range-bearing updates of one landmark from the same
+Usage: ``python tools/measure/kalman_fast_path.py {fast,core} N``: N range-bearing updates of one landmark from the same
 prior (restored before each update so that both modes do identical work). Run the two modes as paired whole
 processes; the difference of their times over N is the cost per update. docs/kalman_core.md has the figures.
 """

@@ -6,8 +6,8 @@ the script prints the median wall time of each and its ratio to the first. With 
 it instead starts the sweep, sends SIGINT after S seconds and prints how long the command took to exit
 and its status (130 expected).
 
-    python tools/sweep_timing.py --suite default --seeds 2 --repeat 3
-    python tools/sweep_timing.py --suite default --interrupt-after 20 --repeat 3 --config local:2 dask:2
+    python tools/measure/sweep_timing.py --suite default --seeds 2 --repeat 3
+    python tools/measure/sweep_timing.py --suite default --interrupt-after 20 --repeat 3 --config local:2 dask:2
 
 A configuration is ``EXECUTOR:JOBS`` (``local:1``, ``local:2``, ``dask:2``). The machine must be otherwise
 idle for the ratios to mean anything; the script prints the load average before and after.

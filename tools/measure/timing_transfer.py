@@ -1,9 +1,9 @@
-"""How far two regenerations of the same runs agree on the accuracy-runtime figure (docs/performance.md, issue 25).
+"""How far two regenerations of the same runs agree on the accuracy-runtime figure (docs/performance.md).
 
 Run the same ``locbench run`` twice into two results folders (for example once on an idle machine, once with the
 cores busy), ``locbench report --results DIR`` each, then compare their ``summary/metrics.csv``::
 
-    python tools/timing_transfer.py idle/summary/metrics.csv busy/summary/metrics.csv
+    python tools/measure/timing_transfer.py idle/summary/metrics.csv busy/summary/metrics.csv
 
 For every (dataset, configuration) present in both, the figure's place is (mean real-time factor in reference
 units over the seeds, mean ATE); the script prints the ratio B / A of the x coordinate, raw and in reference

@@ -1,19 +1,15 @@
-"""The calibration studies of the synthetic robot's systematic odometry error (not run at build time).
+"""The calibrations of the synthetic robot's systematic odometry error (not run at build time).
 
-Usage: python tools/calibrate_odometry.py [room|lap]
-
-``calibrate_room_odometry`` fitted ``ENCODER_SCALE_LEFT``, ``ENCODER_SCALE_RIGHT`` and ``WHEELBASE_TRUE_RATIO``
-(``locbench.datasets.synthetic.toolkit``) to report 003's table 1; ``calibrate_lap_odometry`` fitted
-``LAP_SYSTEMATIC_SCALE`` (``locbench.datasets.synthetic.lap``) to a 15 cm median end-of-lap error. Both frozen
+:func:`calibrate_room_odometry` fitted ``ENCODER_SCALE_LEFT``, ``ENCODER_SCALE_RIGHT`` and ``WHEELBASE_TRUE_RATIO``
+(:mod:`locbench.datasets.synthetic.toolkit`) to report 003's table 1; :func:`calibrate_lap_odometry` fitted
+``LAP_SYSTEMATIC_SCALE`` (:mod:`locbench.datasets.synthetic.lap`) to a 15 cm median end-of-lap error. Both frozen
 results and what they achieve are constants of those modules (``ROOM_CALIBRATION_ACHIEVED_CM``,
-``LAP_CALIBRATION_ACHIEVED_M``); ``tests/datasets/synthetic/test_synthetic.py`` checks that the error functions below
-still give
-them.
+``LAP_CALIBRATION_ACHIEVED_M``); the tests of those datasets check that the error functions here still give them,
+and ``tools/derive/calibrate_odometry.py`` reruns a fit.
 """
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Sequence
 from typing import Any
 
@@ -21,6 +17,7 @@ import numpy as np
 import numpy.typing as npt
 
 from locbench.core.errors import ConfigError
+from locbench.core.seeding import dataset_rng
 from locbench.datasets.synthetic.lap import LAP_TARGET_FINAL_ERROR_M, lap_encoder_model, lap_motion
 from locbench.datasets.synthetic.scenarios import (
     room_motion,
@@ -45,15 +42,31 @@ def room_dead_reckoning_errors(
     seeds: Sequence[int] = tuple(range(20)),
     z: Sequence[FloatArray] | None = None,
 ) -> FloatArray:
-    """Table-1 odometry error at each room waypoint for given error constants, m, shape (5,).
+    """Report 003 table 1's odometry error at each room waypoint for given error constants.
 
     The distance between each waypoint and the mean over ``seeds`` of the dead-reckoned position at the
-    waypoint time, with the same noise draws as ``make_dataset("room", seed)`` (the execution noise of the
-    true motion and the encoder noise). ``z`` (one (n_seed, 2) array of encoder draws per seed) may hold
-    the encoder draws precomputed.
-    """
-    from locbench.core.seeding import dataset_rng
+    waypoint time (world frame), with the same noise draws as ``make_dataset("room", seed)`` (the execution
+    noise of the true motion and the encoder noise of report 003 eq. 10).
 
+    Parameters
+    ----------
+    scale_left, scale_right : float
+        Systematic wheel-scale errors of the left and right encoder (fractions: 0.01 reads 1 % long).
+    wheelbase_ratio : float
+        True over nominal wheelbase.
+    k : float
+        Random encoder error constant k_L = k_R, sqrt(m).
+    seeds : sequence of int
+        The room's seeds to average over.
+    z : sequence of array, optional
+        Precomputed standard-normal encoder draws, one (n_steps, 2) array per seed (a prefix of each seed's
+        odometry stream); by default drawn from the stream.
+
+    Returns
+    -------
+    ndarray, shape (5,)
+        The error at each waypoint, m.
+    """
     model = EncoderModel(
         wheelbase_nominal_m=WHEELBASE_NOMINAL_M, scale_left=scale_left, scale_right=scale_right, k_left=k, k_right=k
     )
@@ -78,14 +91,23 @@ def calibrate_room_odometry(seeds: Sequence[int] = tuple(range(20))) -> dict[str
     """Fit the world's systematic odometry error to report 003 table 1 (reproducible; not run at build time).
 
     Least squares (scipy ``least_squares``) over (scale_left, scale_right, wheelbase_ratio) of
-    log(measured / target) at the 5 waypoints, with the random constant k fixed at ENCODER_K_TRUE, the
-    execution noise at SLIP_K_TRUE and the noise draws of ``make_dataset("room", seed)`` for ``seeds``
-    (the true motion is re-simulated for each wheelbase ratio). Returns the fitted constants, the achieved
-    errors (cm) and the ratios; freeze them as the module constants.
+    log(measured / target) at the 5 waypoints (:func:`room_dead_reckoning_errors`), with the random constant k
+    fixed at ``ENCODER_K_TRUE``, the execution noise at ``SLIP_K_TRUE`` and the noise draws of
+    ``make_dataset("room", seed)`` for ``seeds`` (the true motion is re-simulated for each wheelbase ratio).
+
+    Parameters
+    ----------
+    seeds : sequence of int
+        The room's seeds the fit averages over.
+
+    Returns
+    -------
+    dict
+        ``scale_left``, ``scale_right``, ``wheelbase_ratio`` (the fitted constants, frozen in
+        :mod:`locbench.datasets.synthetic.toolkit`), ``achieved_cm`` (the error at each waypoint, cm) and
+        ``ratio`` (achieved over table 1).
     """
     from scipy.optimize import least_squares
-
-    from locbench.core.seeding import dataset_rng
 
     target = np.asarray(ROOM_TABLE1_ODOMETRY_CM) / 100.0
     # Encoder draws for more steps than any tour takes (a prefix of the stream is what a dataset uses).
@@ -116,13 +138,25 @@ def calibrate_room_odometry(seeds: Sequence[int] = tuple(range(20))) -> dict[str
 def lap_dead_reckoning_final_errors(
     scale: float, seeds: Sequence[int] = tuple(range(20)), dataset_name: str = "lap"
 ) -> FloatArray:
-    """Odometry's position error at the last ground-truth time for each seed, m, shape (len(seeds),).
+    """Odometry's position error at the last ground-truth time of the lap, one per seed.
 
     Uses the same noise draws as ``make_dataset(dataset_name, seed)`` (the execution noise of the true
     motion and the odometry stream).
-    """
-    from locbench.core.seeding import dataset_rng
 
+    Parameters
+    ----------
+    scale : float
+        The factor on the systematic error (``LAP_SYSTEMATIC_SCALE``).
+    seeds : sequence of int
+        The seeds.
+    dataset_name : str
+        The dataset name whose seed streams are drawn (``lap`` or a variant of it).
+
+    Returns
+    -------
+    ndarray, shape (len(seeds),)
+        Distance between the dead-reckoned and the true final position (world frame), m.
+    """
     model = lap_encoder_model(scale)
     out = []
     for seed in seeds:
@@ -139,8 +173,25 @@ def calibrate_lap_odometry(
     """Fit ``LAP_SYSTEMATIC_SCALE`` (reproducible; not run at build time).
 
     Brent's method (scipy ``brentq``) on scale in [0, 1] for median over ``seeds`` of
-    :func:`lap_dead_reckoning_final_errors` = ``target_m``. Returns the factor, the achieved median (m)
-    and the per-seed errors; freeze them as the module constants.
+    :func:`lap_dead_reckoning_final_errors` = ``target_m``.
+
+    Parameters
+    ----------
+    seeds : sequence of int
+        The seeds whose median is fitted.
+    target_m : float
+        The median end-of-lap error to reach, m (report 000 sec. IV: about 15 cm).
+
+    Returns
+    -------
+    dict
+        ``scale`` (the factor, frozen in :mod:`locbench.datasets.synthetic.lap`), ``achieved_median_m`` and
+        ``errors_m`` (per seed), m.
+
+    Raises
+    ------
+    ConfigError
+        The random error alone exceeds ``target_m`` (no factor in [0, 1] reaches it).
     """
     from scipy.optimize import brentq
 
@@ -153,8 +204,3 @@ def calibrate_lap_odometry(
     a = float(brentq(f, lo, hi, xtol=1e-6))
     errs = lap_dead_reckoning_final_errors(a, seeds)
     return {"scale": a, "achieved_median_m": float(np.median(errs)), "errors_m": [float(e) for e in errs]}
-
-
-if __name__ == "__main__":
-    which = sys.argv[1] if len(sys.argv) > 1 else "room"
-    print(calibrate_room_odometry() if which == "room" else calibrate_lap_odometry())

@@ -1,16 +1,10 @@
-"""The derivation study of MRCLAM's nominal noise (not run at load time).
+"""MRCLAM's nominal noise, derived from Dataset 6's Vicon truth and surveyed map (not run at load time).
 
-Usage: python tools/derive_mrclam_noise.py FOLDER   (an MRCLAM dataset folder, e.g. .../MRCLAM_Dataset6)
-
-The constants of ``locbench.datasets.recorded.mrclam`` (``TWIST_SIGMA_V_MPS`` ...) were computed once by
-:func:`derive_nominal_noise` on Dataset 6, robots 1-5 (pooled); ``tests/datasets/recorded/test_recorded_mrclam.py``
-reruns it on
-the shared files and checks the frozen values within 10 %.
-The dataset publishes no noise figures. The constants below (:data:`TWIST_SIGMA_V_MPS` ...) were computed ONCE
-by :func:`derive_nominal_noise` on Dataset 6, robots 1-5 (pooled), against the Vicon truth and the surveyed
-map, and frozen here; ``tests/datasets/recorded/test_recorded_mrclam.py`` recomputes them from the shared files and
-checks they
-agree within 10 %. They were not chosen by looking at any filter's error. The procedure (robust std
+The dataset publishes no noise figures. The constants of :mod:`locbench.datasets.recorded.mrclam`
+(:data:`~locbench.datasets.recorded.mrclam.TWIST_SIGMA_V_MPS` ...) are what :func:`derive_nominal_noise` gave on
+Dataset 6, robots 1-5 (pooled), frozen there; ``tests/datasets/recorded/test_recorded_mrclam.py`` reruns it on the
+shared files and checks the frozen values within 10 %, and ``tools/derive/derive_mrclam_noise.py`` prints it for a
+folder. The values were not chosen by looking at any filter's error. The procedure (robust std
 s(e) = 1.4826 median |e|, taken about zero so that a bias counts as noise, since the filters model none):
 
 1. **Camera.** For every landmark sighting inside the truth span: the truth pose interpolated at its time
@@ -35,12 +29,11 @@ s(e) = 1.4826 median |e|, taken about zero so that a bias counts as noise, since
 
 from __future__ import annotations
 
-import json
 import math
 import os
-import sys
 from collections.abc import Iterable
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
@@ -50,7 +43,7 @@ from locbench.datasets.dataset import Trajectory2D
 from locbench.datasets.recorded.files import Table
 from locbench.datasets.recorded.mrclam import (
     ROBOTS,
-    _resolve_paths,
+    file_names,
     interpolate_pose,
     read_barcodes,
     read_groundtruth,
@@ -165,7 +158,7 @@ def derive_nominal_noise(
     wins: list[_Windows] = []
     sum_dt2 = sum_dt = 0.0
     for robot in robots:
-        paths = _resolve_paths(folder, robot)
+        paths = {key: Path(folder) / name for key, name in file_names(robot).items()}
         barcodes = read_barcodes(paths["barcodes"])
         world = read_landmarks(paths["landmarks"])
         truth = read_groundtruth(paths["groundtruth"])
@@ -213,9 +206,3 @@ def derive_nominal_noise(
         "n_in_place": float(np.count_nonzero(in_place)),
         "dt_eff_s": dt_eff,
     }
-
-
-if __name__ == "__main__":
-    if len(sys.argv) != 2:
-        sys.exit(__doc__.split("\n\n")[1])
-    print(json.dumps(derive_nominal_noise(sys.argv[1]), indent=2))

@@ -1,6 +1,6 @@
 """Measure the CPU seconds of suite ``tuned``, by phase: the studies, the tuned runs on test data, the defaults there.
 
-    python tools/tuned_cost.py RESULTS_DIR [--jobs 2] [--trials 6]
+    python tools/measure/tuned_cost.py RESULTS_DIR [--jobs 2] [--trials 6]
 
 Phase 1 runs every study of the suite as ``locbench run --suite tuned`` does (a pool of ``--jobs`` processes, one
 study each at a time) and prints each study's CPU seconds (``time.process_time`` in its worker) as it finishes;

@@ -1,6 +1,6 @@
 """Measure ANEES, NLL, ATE and the PCRB of filters on the model-matched worlds (a few seeds, no store).
 
-Usage: python tools/matched_consistency.py FILTER[,FILTER...] DATASET[,DATASET...] SEEDS
+Usage: python tools/measure/matched_consistency.py FILTER[,FILTER...] DATASET[,DATASET...] SEEDS
 Prints, per (dataset, filter), the mean ANEES over the seeds with the chi-square band for that run count,
 the RMS over seeds of the ATE, the bound's RMS ATE without the laser, and their ratio.
 """

@@ -2,8 +2,8 @@
 the filters' own steps and the runner's work around them, the dataset builds and the bounds, and the wall time
 two cores could reach if nothing else cost anything.
 
-    python tools/budget_floor.py results [--cores 2]
-    python tools/budget_floor.py --belief office pf 'pf[augmented=true]' kf_linear   # the belief scores' share
+    python tools/measure/budget_floor.py results [--cores 2]
+    python tools/measure/budget_floor.py --belief office pf 'pf[augmented=true]' kf_linear   # the belief scores' share
 
 Reads only what the sweep recorded: each run's ``wall_s`` (its whole pass: the filter's steps, the runner's row
 bookkeeping, the belief scores) and ``compute_s`` (the sum of its per-step ``step_ns``: predict and update only),

@@ -1,6 +1,6 @@
 """How far from the truth are the poses `pf` injects from sighting pairs? (docs/pf_consistency_kidnap.md, 2 (f))
 
-Usage: ``python tools/pf_pair_poses.py 'pf[augmented=true,inject=sensor,inject_pairs=true]' office 8``.
+Usage: ``python tools/measure/pf_pair_poses.py 'pf[augmented=true,inject=sensor,inject_pairs=true]' office 8``.
 Runs the filter as the runner does (its seed stream) and prints, for every injection from a pair, the
 median distance of the injected poses to the true position and the odometry since the previous event.
 """

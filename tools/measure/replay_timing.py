@@ -4,8 +4,8 @@ The before/after figures of docs/performance.md: run it once with each checkout'
 paired whole-process comparison, alternate the two commands under a process timer such as
 ``/usr/bin/time -v``)::
 
-    python tools/replay_timing.py kf_linear office
-    python tools/replay_timing.py 'pf[particles=10000]' office --repeat 3
+    python tools/measure/replay_timing.py kf_linear office
+    python tools/measure/replay_timing.py 'pf[particles=10000]' office --repeat 3
 
 Every event is fed as the runner feeds it (predict for odometry, update for the routed observations, an
 estimate after each), with the runner's seed; each call is timed with ``perf_counter_ns``. The first line

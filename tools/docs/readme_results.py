@@ -1,13 +1,17 @@
-"""The README's result numbers, generated from results/summary/metrics.csv and REPORT.md (and the suites' run counts).
+"""The README's result numbers, generated from results/summary/metrics.csv and REPORT.md (and the suites' run counts),
+and the lists of filters and datasets in README.md and docs/design.md, generated from the registry.
 
 Usage::
 
-    python tools/readme_results.py            # print the generated blocks and the per-filter diagnostics
-    python tools/readme_results.py --write    # rewrite README.md's generated blocks from the committed summary
-    python tools/readme_results.py --check    # exit 1 naming every block of README.md that disagrees
+    python tools/docs/readme_results.py            # print the generated blocks and the per-filter diagnostics
+    python tools/docs/readme_results.py --write    # rewrite the generated blocks of README.md and docs/design.md
+    python tools/docs/readme_results.py --check    # exit 1 naming every block of either that disagrees
 
-A generated block in README.md lies between ``<!-- gen:NAME -->`` and ``<!-- /gen:NAME -->`` (a table on lines of
-its own, or a value inside a sentence); :func:`blocks` makes every one from the tidy metrics, with the report's
+A generated block lies between ``<!-- gen:NAME -->`` and ``<!-- /gen:NAME -->`` (a table on lines of its own, or a
+value inside a sentence). The filter and dataset lists (the filter tables, the README's list of the filters, the
+design page's dataset table) are what the classes declare (:func:`locbench.present.catalog.doc_blocks`), so a
+filter or a dataset added as one module is listed after ``--write``. :func:`blocks` makes every other one from the
+tidy metrics, with the report's
 own formatting and aggregation (:mod:`locbench.report.tables`), so the README and the summary cannot disagree:
 ``tests/tools/test_readme_results.py`` regenerates them from the committed ``metrics.csv`` and compares. A number
 that only REPORT.md holds (what the report computes from the stored runs rather than from ``metrics.csv``:
@@ -31,6 +35,7 @@ import numpy as np
 import pandas as pd
 
 from locbench.evaluate.pcrb import BOUND_ALL, BOUND_NO_LASER
+from locbench.present.catalog import doc_blocks
 from locbench.report.collect import describe_filter
 from locbench.report.tables import (
     ate_over_bound,
@@ -44,8 +49,10 @@ from locbench.report.tables import (
 )
 from locbench.suites import KIDNAP_DISTANCES_M, KIDNAP_FILTERS, SUITES
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 README = ROOT / "README.md"
+#: Every document with generated blocks (the registry's lists are in both).
+DOCUMENTS = (README, ROOT / "docs" / "design.md")
 METRICS_CSV = ROOT / "results" / "summary" / "metrics.csv"
 REPORT_MD = METRICS_CSV.with_name("REPORT.md")
 
@@ -654,7 +661,7 @@ def blocks(df: pd.DataFrame, report: str | None = None) -> dict[str, str]:
     out |= office_prose(df) | radish(df, report) | robustness(report) | office_report(report)
     out |= claim_values(report) | run_counts(report) | tuned_changes(report) | pareto(df)
     out["across-landmark-geometry"] = across_landmark_geometry(report)
-    return out
+    return out | doc_blocks()
 
 
 def render(text: str, generated: dict[str, str]) -> str:
@@ -679,18 +686,26 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("metrics", nargs="?", default=str(METRICS_CSV))
     mode = ap.add_mutually_exclusive_group()
-    mode.add_argument("--write", action="store_true", help="rewrite README.md's generated blocks")
-    mode.add_argument("--check", action="store_true", help="exit 1 when a block of README.md disagrees")
+    mode.add_argument(
+        "--write", action="store_true", help="rewrite the generated blocks of README.md and docs/design.md"
+    )
+    mode.add_argument(
+        "--check", action="store_true", help="exit 1 when a generated block of README.md or docs/design.md disagrees"
+    )
     args = ap.parse_args(argv)
     generated = blocks(pd.read_csv(args.metrics))
-    text = README.read_text(encoding="utf-8")
     if args.write:
-        README.write_text(render(text, generated), encoding="utf-8")
+        for doc in DOCUMENTS:
+            doc.write_text(render(doc.read_text(encoding="utf-8"), generated), encoding="utf-8")
         return 0
     if args.check:
-        bad = disagreements(text, generated)
-        for name in bad:
-            print(f"README.md: block {name!r} disagrees with {args.metrics}; run tools/readme_results.py --write")
+        bad = [(doc, name) for doc in DOCUMENTS for name in disagreements(doc.read_text(encoding="utf-8"), generated)]
+        for doc, name in bad:
+            source = f"{args.metrics} or the registry"
+            print(
+                f"{doc.relative_to(ROOT)}: block {name!r} disagrees with {source}; "
+                "run tools/docs/readme_results.py --write"
+            )
         return 1 if bad else 0
     for name, body in generated.items():
         print(f"--- {name}:{body}")

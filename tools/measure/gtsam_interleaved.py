@@ -7,9 +7,9 @@ the filter of another checkout and its wrapper), 21 times by default, and prints
 observation of each and the median of the per-round ratios. The cases are those of
 ``tests/perf/test_gtsam_perf.py`` (imported from it)::
 
-    python tools/gtsam_interleaved.py
+    python tools/measure/gtsam_interleaved.py
     git show main:filters/gtsam_fls.py > /tmp/gtsam_fls_main.py
-    python tools/gtsam_interleaved.py --before /tmp/gtsam_fls_main.py
+    python tools/measure/gtsam_interleaved.py --before /tmp/gtsam_fls_main.py
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rounds", type=int, default=21)
     parser.add_argument("--before", type=Path, help="another gtsam_fls.py to run as the 'before' filter")
     args = parser.parse_args(argv)
-    bench = _load("_gtsam_perf", Path(__file__).resolve().parents[1] / "tests" / "perf" / "test_gtsam_perf.py")
+    bench = _load("_gtsam_perf", Path(__file__).resolve().parents[2] / "tests" / "perf" / "test_gtsam_perf.py")
     ds = make_dataset("office", 0)
     events, _, make, answers = bench._record(ds)
 

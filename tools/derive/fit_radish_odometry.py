@@ -1,6 +1,6 @@
 """Fit the simulated encoder error of the semi-synthetic Radish sites on the three sites with raw odometry.
 
-Run: ``LOCBENCH_DATA=../shared/datasets python tools/fit_radish_odometry.py``. It pairs each corrected scan of
+Run: ``LOCBENCH_DATA=../shared/datasets python tools/derive/fit_radish_odometry.py``. It pairs each corrected scan of
 intel, aces and freiburg-079 with the raw scan of identical ranges
 (:func:`locbench.datasets.recorded.radish.pair_scans`), and fits the increment model by the pooled method of
 moments (:func:`~locbench.datasets.recorded.radish.fit_encoder_error`); the printed constant is

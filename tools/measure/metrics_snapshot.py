@@ -1,6 +1,6 @@
 """Snapshot what the report reads from a store (metric rows, NEES series, health series) and compare two snapshots.
 
-Usage: python tools/metrics_snapshot.py RESULTS OUT.pkl [--compare BEFORE.pkl]
+Usage: python tools/measure/metrics_snapshot.py RESULTS OUT.pkl [--compare BEFORE.pkl]
 
 Reads every run of the store the way ``locbench report`` does (:mod:`locbench.report.collect`) and pickles, per
 run folder, its tidy metric rows, its NEES at the ground-truth times and its lost-detection health series. With

@@ -1,10 +1,10 @@
 """CPU seconds of ``ekf_icp``'s office replay (predict + update) inside its compiled ICP loop and outside it.
 
-The before/after figures of docs/performance.md (issue 24, item 2): run it with each checkout's package in
+The before/after figures of docs/performance.md: run it with each checkout's package in
 turn (main's, e.g. a copy of its tree on ``PYTHONPATH``, then the branch's) and compare the ``outside``
 figures pair by pair::
 
-    python tools/icp_outside_loop.py
+    python tools/measure/icp_outside_loop.py
 
 Four replays of the office dataset (seed 0); the first compiles and fills the caches and is not counted; the
 medians of the other three are printed. The loop's time comes from a timer around ``_icp._icp_loop``.

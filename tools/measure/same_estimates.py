@@ -1,11 +1,11 @@
 """Store every array of ``run_filter`` for filters x datasets x seeds, or compare two such files exactly.
 
-The "bit-identical" checks of docs/performance.md (issue 24): run ``dump`` with each checkout's package (for
+The "bit-identical" checks of docs/performance.md: run ``dump`` with each checkout's package (for
 main, e.g. a copy of its tree on ``PYTHONPATH``), then ``compare``::
 
-    python tools/same_estimates.py dump before.npz "ekf_landmarks;ekf_icp" "office;lap" 2
-    python tools/same_estimates.py dump after.npz "ekf_landmarks;ekf_icp" "office;lap" 2
-    python tools/same_estimates.py compare before.npz after.npz
+    python tools/measure/same_estimates.py dump before.npz "ekf_landmarks;ekf_icp" "office;lap" 2
+    python tools/measure/same_estimates.py dump after.npz "ekf_landmarks;ekf_icp" "office;lap" 2
+    python tools/measure/same_estimates.py compare before.npz after.npz
 
 Each run keeps its times, means, covariances, kinds, every diagnostic, health signal and extra array, the order of
 the diagnostics' and health signals' names, and its status (not the step times);
