@@ -28,6 +28,8 @@ from locbench.core.events import (
 )
 from locbench.core.geometry import is_symmetric_psd, wrap_angle
 from locbench.core.grid import OccupancyGrid  # one of the map types here; loaders and plugins import it from here
+from locbench.core.runkey import RUN_KEY_OMIT_IF_DEFAULT
+from locbench.core.spec import bound
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -178,15 +180,17 @@ class Kidnap:
 
 
 @dataclass(frozen=True, kw_only=True)
-class SensorSpec:
-    """The nominal sensor noise and geometry handed to filters (the simulator's true noise may differ).
-
-    Every field is optional: a dataset sets what its sensors provide.
+class MotionNoiseFields:
+    """The odometry noise of the motion model, one field each: a dataset's nominal values (the first fields of
+    :class:`SensorSpec`) and a filter config's overrides of them (``MotionNoiseConfig`` of
+    :mod:`locbench.filters.motion`, None there taking the dataset's value), which ``resolve_motion_noise`` of that
+    module turns into the noise a filter uses.
 
     Attributes
     ----------
     wheelbase_m : float or None
-        Distance between the drive wheels, m (report 003 eq. 1).
+        Distance between the drive wheels, m (report 003 eq. 1); > 0 where given (a filter config refuses another
+        value).
     encoder_k_left, encoder_k_right : float or None
         Encoder noise constants k_L, k_R in sqrt(m): the wheel travel variance grows as
         k^2 * sum |delta wheel| (report 003 eq. 10).
@@ -195,6 +199,32 @@ class SensorSpec:
         per sqrt(m) travelled (m / sqrt(m), rad / sqrt(m)).
     odometry_sigma_theta_per_rad : float or None
         Extra heading noise per sqrt(rad) turned.
+    twist_sigma_v_mps, twist_sigma_omega_radps : float or None
+        White noise of a MEASURED twist (speed m/s, turn rate rad/s) per odometry sample, for datasets whose
+        odometry is (v, omega) held for ``dt`` (MRCLAM, Lost in the Woods): the increment's variance is
+        (sigma * dt)^2 per component. A filter config's run key holds them only when set
+        (:data:`~locbench.core.runkey.RUN_KEY_OMIT_IF_DEFAULT`).
+    """
+
+    wheelbase_m: float | None = field(default=None, metadata=bound(0.0, low_open=True, optional=True))
+    encoder_k_left: float | None = None
+    encoder_k_right: float | None = None
+    odometry_sigma_xy_per_m: float | None = None
+    odometry_sigma_theta_per_m: float | None = None
+    odometry_sigma_theta_per_rad: float | None = None
+    twist_sigma_v_mps: float | None = field(default=None, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    twist_sigma_omega_radps: float | None = field(default=None, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+
+
+@dataclass(frozen=True, kw_only=True)
+class SensorSpec(MotionNoiseFields):
+    """The nominal sensor noise and geometry handed to filters (the simulator's true noise may differ).
+
+    Every field is optional: a dataset sets what its sensors provide. The odometry noise comes first, the fields of
+    :class:`MotionNoiseFields`; then:
+
+    Attributes
+    ----------
     landmark_sigma_range_m, landmark_sigma_bearing_rad : float or None
         Range-bearing noise (report 003 eq. 9).
     landmark_min_range_m, landmark_max_range_m, landmark_fov_rad : float or None
@@ -205,10 +235,6 @@ class SensorSpec:
         Standard deviation of a GPS-like fix per axis, m.
     range_sigma_m : float or None
         Standard deviation of a range-only (radio beacon) measurement, m.
-    twist_sigma_v_mps, twist_sigma_omega_radps : float or None
-        White noise of a MEASURED twist (speed m/s, turn rate rad/s) per odometry sample, for datasets whose
-        odometry is (v, omega) held for ``dt`` (MRCLAM, Lost in the Woods): the increment's variance is
-        (sigma * dt)^2 per component.
     process_sigma_xy_m, process_sigma_theta_rad : float or None
         Standard deviation of the additive process noise Q per odometry step (report 003 eq. 8), per world
         axis (m) and on the heading (rad): unmodelled motion on top of the odometry noise. None leaves the
@@ -216,12 +242,6 @@ class SensorSpec:
         odometry model, declares 0.
     """
 
-    wheelbase_m: float | None = None
-    encoder_k_left: float | None = None
-    encoder_k_right: float | None = None
-    odometry_sigma_xy_per_m: float | None = None
-    odometry_sigma_theta_per_m: float | None = None
-    odometry_sigma_theta_per_rad: float | None = None
     landmark_sigma_range_m: float | None = None
     landmark_sigma_bearing_rad: float | None = None
     landmark_min_range_m: float | None = None
@@ -230,8 +250,6 @@ class SensorSpec:
     laser_sigma_m: float | None = None
     pose_fix_sigma_xy_m: float | None = None
     range_sigma_m: float | None = None
-    twist_sigma_v_mps: float | None = None
-    twist_sigma_omega_radps: float | None = None
     process_sigma_xy_m: float | None = None
     process_sigma_theta_rad: float | None = None
 

@@ -59,8 +59,8 @@ from locbench.core.events import Odometry
 from locbench.core.geometry import wrap_angle, wrap_scalar
 from locbench.core.runkey import RUN_KEY_OMIT_IF_DEFAULT
 from locbench.core.tunable import tunable
-from locbench.datasets.dataset import SensorSpec
-from locbench.filters.base import POSITIVE_OR_DATASET, bound
+from locbench.datasets.dataset import MotionNoiseFields, SensorSpec
+from locbench.filters.base import bound
 
 FloatArray = npt.NDArray[np.float64]
 InputNoise = Literal["per_step", "cumulative"]
@@ -483,8 +483,18 @@ def _first(*values: float | None) -> float | None:
 
 
 @dataclass(frozen=True, kw_only=True)
-class MotionNoiseConfig:
-    """Config fields shared by the filters that use the odometry noise model (a mixin of their configs).
+class _InputNoiseChoice:
+    """The first field of :class:`MotionNoiseConfig`: a base of its own, so that it comes before the noise fields
+    in every config's field order (``locbench list``, the config's documentation)."""
+
+    input_noise: InputNoise = "per_step"
+
+
+@dataclass(frozen=True, kw_only=True)
+class MotionNoiseConfig(MotionNoiseFields, _InputNoiseChoice):
+    """Config fields shared by the filters that use the odometry noise model (a mixin of their configs): the reading
+    of eq. 10, overrides of the dataset's odometry noise (the fields of
+    :class:`~locbench.datasets.dataset.MotionNoiseFields`) and one scale on all of it.
 
     Attributes
     ----------
@@ -501,15 +511,6 @@ class MotionNoiseConfig:
         they are resolved. Default 1 (the nominal model); the one motion knob a tuner searches.
     """
 
-    input_noise: InputNoise = "per_step"
-    wheelbase_m: float | None = field(default=None, metadata=POSITIVE_OR_DATASET)
-    encoder_k_left: float | None = None
-    encoder_k_right: float | None = None
-    odometry_sigma_xy_per_m: float | None = None
-    odometry_sigma_theta_per_m: float | None = None
-    odometry_sigma_theta_per_rad: float | None = None
-    twist_sigma_v_mps: float | None = field(default=None, metadata=RUN_KEY_OMIT_IF_DEFAULT)
-    twist_sigma_omega_radps: float | None = field(default=None, metadata=RUN_KEY_OMIT_IF_DEFAULT)
     # one knob over every motion noise source (encoders, increments, twist): what a tuner searches
     motion_noise_scale: float = field(
         default=1.0,
@@ -524,46 +525,42 @@ class MotionNoiseConfig:
     def motion_noise(self, sensors: SensorSpec) -> MotionNoise:
         """The noise model: each override, else the dataset's nominal value, else the module default; every
         standard deviation multiplied by ``motion_noise_scale``."""
-        noise = resolve_motion_noise(
-            sensors,
-            input_noise=self.input_noise,
-            wheelbase_m=self.wheelbase_m,
-            encoder_k_left=self.encoder_k_left,
-            encoder_k_right=self.encoder_k_right,
-            odometry_sigma_xy_per_m=self.odometry_sigma_xy_per_m,
-            odometry_sigma_theta_per_m=self.odometry_sigma_theta_per_m,
-            odometry_sigma_theta_per_rad=self.odometry_sigma_theta_per_rad,
-            twist_sigma_v_mps=self.twist_sigma_v_mps,
-            twist_sigma_omega_radps=self.twist_sigma_omega_radps,
-        )
+        noise = _resolve(sensors, self, self.input_noise)
         return noise if self.motion_noise_scale == 1.0 else noise.scaled(self.motion_noise_scale)
 
 
 def resolve_motion_noise(
-    sensors: SensorSpec,
-    *,
-    input_noise: InputNoise = "per_step",
-    wheelbase_m: float | None = None,
-    encoder_k_left: float | None = None,
-    encoder_k_right: float | None = None,
-    odometry_sigma_xy_per_m: float | None = None,
-    odometry_sigma_theta_per_m: float | None = None,
-    odometry_sigma_theta_per_rad: float | None = None,
-    twist_sigma_v_mps: float | None = None,
-    twist_sigma_omega_radps: float | None = None,
+    sensors: SensorSpec, *, input_noise: InputNoise = "per_step", **overrides: float | None
 ) -> MotionNoise:
-    """Take each value from the keyword override, else from ``sensors``, else the module default (logged)."""
-    kl = _first(encoder_k_left, sensors.encoder_k_left)
-    kr = _first(encoder_k_right, sensors.encoder_k_right)
-    sxy = _first(odometry_sigma_xy_per_m, sensors.odometry_sigma_xy_per_m)
-    stm = _first(odometry_sigma_theta_per_m, sensors.odometry_sigma_theta_per_m)
-    str_ = _first(odometry_sigma_theta_per_rad, sensors.odometry_sigma_theta_per_rad)
+    """Take each value from the keyword override, else from ``sensors``, else the module default (logged).
+
+    Parameters
+    ----------
+    sensors : SensorSpec
+        The dataset's nominal noise.
+    input_noise : {"per_step", "cumulative"}
+        Reading of report 003 eq. 10 (see :func:`wheel_variances`).
+    **overrides : float or None
+        Any field of :class:`~locbench.datasets.dataset.MotionNoiseFields` (``wheelbase_m``, ``encoder_k_left``
+        ... ``twist_sigma_omega_radps``); None takes the dataset's value. Another name is a TypeError.
+    """
+    return _resolve(sensors, MotionNoiseFields(**overrides), input_noise)
+
+
+def _resolve(sensors: SensorSpec, overrides: MotionNoiseFields, input_noise: InputNoise) -> MotionNoise:
+    """:func:`resolve_motion_noise` with the overrides as one record (a :class:`MotionNoiseConfig` is one)."""
+    o = overrides
+    kl = _first(o.encoder_k_left, sensors.encoder_k_left)
+    kr = _first(o.encoder_k_right, sensors.encoder_k_right)
+    sxy = _first(o.odometry_sigma_xy_per_m, sensors.odometry_sigma_xy_per_m)
+    stm = _first(o.odometry_sigma_theta_per_m, sensors.odometry_sigma_theta_per_m)
+    str_ = _first(o.odometry_sigma_theta_per_rad, sensors.odometry_sigma_theta_per_rad)
     # A dataset that gives per-metre noise but no per-radian term means "none"; default it only when all are absent.
     default_per_rad = DEFAULT_SIGMA_THETA_PER_RAD if sxy is None and stm is None else 0.0
     if sxy is None or stm is None:
         logger.info("no nominal odometry increment noise given; using the defaults of %s", __name__)
     return MotionNoise(
-        wheelbase_m=_first(wheelbase_m, sensors.wheelbase_m),
+        wheelbase_m=_first(o.wheelbase_m, sensors.wheelbase_m),
         k_left=DEFAULT_ENCODER_K if kl is None else kl,
         k_right=DEFAULT_ENCODER_K if kr is None else kr,
         encoder_given=kl is not None and kr is not None,
@@ -571,8 +568,8 @@ def resolve_motion_noise(
         sigma_theta_per_m=DEFAULT_SIGMA_THETA_PER_M if stm is None else stm,
         sigma_theta_per_rad=str_ if str_ is not None else default_per_rad,
         input_noise=input_noise,
-        twist_sigma_v_mps=_first(twist_sigma_v_mps, sensors.twist_sigma_v_mps),
-        twist_sigma_omega_radps=_first(twist_sigma_omega_radps, sensors.twist_sigma_omega_radps),
+        twist_sigma_v_mps=_first(o.twist_sigma_v_mps, sensors.twist_sigma_v_mps),
+        twist_sigma_omega_radps=_first(o.twist_sigma_omega_radps, sensors.twist_sigma_omega_radps),
     )
 
 

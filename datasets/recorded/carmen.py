@@ -44,8 +44,9 @@ refused (a limit, not a sample).
 Time stamps that go backwards in real logs: in ``intel.clf`` 631 FLASER and 602 ODOM messages carry an
 ``ipc_timestamp`` smaller than the message before them in the file, by up to 0.90 s (the
 ``logger_timestamp`` is the same clock shifted by a constant and has the same steps). A caller that must
-read such a log passes ``max_backstep_s`` (the Intel loader uses 1 s) and orders the messages itself;
-the arrays here are always in file order.
+read such a log passes ``max_backstep_s`` (the loaders of the Freiburg SLAM benchmark's raw logs, intel and
+radish, pass :data:`FREIBURG_MAX_BACKSTEP_S`, 1 s) and orders the messages itself; the arrays here are always in
+file order.
 
 Speed: ``intel.clf`` (16 MB, 13631 FLASER x 180 beams, 26915 ODOM) parses in about 3 s on one (shared) core;
 :func:`read_carmen` caches the result per (resolved path, size, mtime, options).
@@ -76,6 +77,10 @@ FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 BoolArray = npt.NDArray[np.bool_]
 
+#: The ``max_backstep_s`` of the Freiburg SLAM benchmark's raw logs, s: the largest tolerated step back of a stream's
+#: stamps (``intel.clf``'s worst is 0.90 s; ``aces.clf`` and ``fr079.clf`` never step back), and each stamp's
+#: uncertainty when their pose tracks are judged.
+FREIBURG_MAX_BACKSTEP_S = 1.0
 #: Field names of an ODOM message after the message name (the host, a word, is not stored).
 ODOM_FIELDS = ("x", "y", "theta", "tv", "rv", "accel", "ipc_timestamp", "ipc_host", "logger_timestamp")
 #: Field names of a FLASER message after the ranges.

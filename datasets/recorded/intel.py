@@ -45,23 +45,21 @@ The 910 corrected FLASER poses of ``intel.gfs.log``, each matched to the ``intel
 ``logger_timestamp`` is nearest (every match within 5 ms, one to one), stamped with that scan's
 ``ipc_timestamp`` and ordered by it; ``truth_label = "SLAM reference"``. Events are trimmed to its time span
 (32.9 s to 2683.8 s of the log). The initial belief is the first reference pose with standard deviations
-0.1 m and 0.05 rad: the reference is itself an estimate, and this is of the order of its own error; the
-value is not tuned on any filter result.
+0.1 m and 0.05 rad (:data:`~locbench.datasets.recorded.reference.SLAM_INITIAL_SIGMA`: the reference is itself an
+estimate, and this is of the order of its own error; the value is not tuned on any filter result).
 
 Primary metric: the relations of Kuemmerle et al. (``Dataset.relations``): every relation time is checked to
 be the ``ipc_timestamp`` of a FLASER of ``intel.clf`` (all 2984 are; all lie inside the reference span).
 
 Map
 ---
-An occupancy grid built from the reference: for each of the 910 corrected scans, every beam with a return
-adds the log-odds of a hit, log(0.7/0.3), to its end cell and of a miss, log(0.4/0.6), to every cell a
-Bresenham line crosses from the laser cell to it (the inverse sensor model of occupancy-grid mapping,
-S. Thrun, W. Burgard, D. Fox, "Probabilistic Robotics", MIT Press 2005, ch. 9); no-return beams add
-nothing. Cells never crossed are unknown (-1); the others hold p = 1 / (1 + exp(-l)) with ROS thresholds
-(occupied above 0.65, free below 0.196). Default cell 0.05 m. Built once per (file, size, mtime, resolution).
-The grid's size is computed from the scans' extent before anything is allocated and refused above
-``max_grid_cells`` (:data:`~locbench.datasets.recorded.files.MAX_GRID_CELLS`, 4096 x 4096 cells, by default);
-``map_resolution_m`` lies in [:data:`MIN_RESOLUTION_M`, :data:`MAX_RESOLUTION_M`].
+An occupancy grid built from the reference's 910 corrected scans by log-odds ray casting
+(:func:`~locbench.datasets.recorded.scan_map.build_occupancy_grid`; readings at or above :data:`NO_RETURN_M` add
+nothing). Default cell 0.05 m. Built once per (file, size, mtime, resolution). The grid's size is computed from the
+scans' extent before anything is allocated and refused above ``max_grid_cells``
+(:data:`~locbench.datasets.recorded.files.MAX_GRID_CELLS`, 4096 x 4096 cells, by default); ``map_resolution_m``
+lies in [:data:`~locbench.datasets.recorded.scan_map.MIN_RESOLUTION_M`,
+:data:`~locbench.datasets.recorded.scan_map.MAX_RESOLUTION_M`].
 
 Validation beyond the CARMEN parser's: each of ``intel.clf`` and ``intel.gfs.log`` must hold FLASER messages of
 180 beams (the message names the file that does not); ``intel.clf`` needs ODOM messages at more than one time and
@@ -73,31 +71,27 @@ tightened to the SICK's no-return reading :data:`NO_RETURN_M` and the heading bo
 wrapped): a flagged message is left out and listed in ``Dataset.flagged``: a flagged ODOM gives no pose (the
 increment spans from the pose before it to the one after), a flagged raw FLASER no scan, a flagged reference scan
 no reference pose and no part in the map; the odometry noise is derived from the reference scans whose reference
-and raw scan are both kept. The pose track is judged over the time between stamps plus :data:`MAX_BACKSTEP_S`: the
+and raw scan are both kept. The pose track is judged over the time between stamps plus
+:data:`~locbench.datasets.recorded.carmen.FREIBURG_MAX_BACKSTEP_S` (1 s): the
 stamps are the IPC delivery times, which come in bursts (half the consecutive ODOM stamps lie less than 1 ms apart
 while the pose moved 3 cm, then none for up to 3.5 s): on the stamps alone the bound flags 323 ODOM and 2348 FLASER
 poses of the shared log, with 0.1 s of slack still 10 and 4; with 1 s the speed bound catches a jump of more than
 5 m, and the turn-rate bound no turn (1 s at 10 rad/s exceeds pi). The shared files flag nothing. Relation times
 are checked against every FLASER of the log, flagged or not (a relation is the benchmark's, not the scan's).
 
-Map lines (for ``ekf_lines``): a Hough transform of the occupied cells (1 deg x one cell), taken greedily:
-at the strongest bin, the cells within one cell of its line are fitted by total least squares, the cells
-within one cell of the fitted line are split into runs wherever two neighbours lie more than 0.3 m apart,
-each run at least 0.5 m long becomes a segment, and all those cells leave the accumulator; this stops when
-the strongest bin holds fewer cells than a 0.5 m diagonal wall. :func:`extract_map_lines` returns the counts
-(stored in ``metadata["map"]``).
+Map lines (for ``ekf_lines``): the greedy Hough extraction of
+:func:`~locbench.datasets.recorded.scan_map.extract_map_lines` on the grid; its counts are stored in
+``metadata["map"]``.
 
 Nominal noise (``SensorSpec``)
 ------------------------------
 No official values exist. ``laser_sigma_m`` = 0.05 m: GMapping's default ``sigma`` (the endpoint-matching
-standard deviation, ROS ``gmapping`` parameter ``~sigma``), the model with which the reference itself was
-computed. The odometry noise is derived from the reference, never from filter results: for each pair of
-consecutive reference scans, u = between(odometry at scan i, odometry at scan i+1) from the raw log's FLASER
-odometry fields, z = the same between the reference poses, e = between(u, z); with d = |u_xy| and
-a = |u_theta|, the method-of-moments fit of the model of :func:`locbench.filters._motion.increment_variances`
-gives sigma_xy^2 = sum((e_x^2 + e_y^2) / 2) / sum(d) and (sigma_theta_m^2, sigma_theta_rad^2) as the
-non-negative least-squares fit of e_theta^2 ~ sigma_theta_m^2 d + sigma_theta_rad^2 a. The reference's own
-error enters these values (an upper bound on the odometry noise); :func:`derive_odometry_noise` returns them.
+standard deviation, ROS ``gmapping`` parameter ``~sigma``;
+:data:`~locbench.datasets.recorded.reference.GMAPPING_SIGMA_M`), the model with which the reference itself was
+computed. The odometry noise is derived from the reference, never from filter results:
+:func:`~locbench.datasets.recorded.reference.derive_odometry_noise` of the raw log's FLASER odometry fields against
+the reference poses at the consecutive reference scans (the method-of-moments fit of the increment model; an upper
+bound on the odometry noise, since the reference's own error enters it).
 """
 
 from __future__ import annotations
@@ -112,8 +106,6 @@ from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
-from numba import njit
-from scipy.optimize import nnls
 
 from locbench.core.errors import ConfigError
 from locbench.core.events import Event, LaserScan, Odometry
@@ -131,17 +123,23 @@ from locbench.datasets.dataset import (
     sort_events,
 )
 from locbench.datasets.recorded import plausibility
-from locbench.datasets.recorded.carmen import CarmenFlags, CarmenLog, read_carmen_flagged
+from locbench.datasets.recorded.carmen import FREIBURG_MAX_BACKSTEP_S, CarmenFlags, CarmenLog, read_carmen_flagged
 from locbench.datasets.recorded.common import RecordedDataset
 from locbench.datasets.recorded.files import (
     MAX_GRID_CELLS,
     MAX_GRID_CELLS_BOUND,
     RecordedDataError,
     RemoteFile,
-    check_cells,
     locate,
     quote,
     read_table,
+)
+from locbench.datasets.recorded.reference import GMAPPING_SIGMA_M, SLAM_INITIAL_SIGMA, derive_odometry_noise
+from locbench.datasets.recorded.scan_map import (
+    MAX_RESOLUTION_M,
+    MIN_RESOLUTION_M,
+    build_occupancy_grid,
+    extract_map_lines,
 )
 
 FloatArray = npt.NDArray[np.float64]
@@ -171,30 +169,14 @@ RELATIONS = RemoteFile(
 
 #: CARMEN's no-return reading of this log's SICK laser, m.
 NO_RETURN_M = 81.83
-#: Largest Hough vote count of :func:`extract_map_lines` (occupied cells x angles; 24 bytes each: 432 MB). The Intel
-#: map has 14455 occupied cells (2.6 M votes at 1 deg).
-MAX_HOUGH_VOTES = 18_000_000
-#: Bounds of ``map_resolution_m``, m: below 1 mm a cell is finer than the laser by two orders, above 10 m there is
-#: no map.
-MIN_RESOLUTION_M = 0.001
-MAX_RESOLUTION_M = 10.0
 #: Beam geometry of the Intel FLASER messages: 180 beams, first at -90 deg, 1 deg apart.
 ANGLE_MIN_RAD = -math.pi / 2
 ANGLE_INCREMENT_RAD = math.pi / 180
-#: Largest tolerated step back of a stream's stamps, s (the log's worst is 0.90 s); also each stamp's uncertainty
-#: when the pose track is judged.
-MAX_BACKSTEP_S = 1.0
 #: The plausibility bounds tightened with the scanner's limit (no reading beyond its no-return value) and CARMEN's
 #: wrapped headings.
 BOUNDS = plausibility.BOUNDS.tightened(range_m=NO_RETURN_M, heading_abs_rad=2 * math.pi)
 #: Largest |logger time difference| between a reference scan and its raw scan, s (SOURCES.md).
 MATCH_TOLERANCE_S = 0.005
-#: GMapping's default endpoint-matching sigma, m (ROS gmapping ``~sigma``).
-LASER_SIGMA_M = 0.05
-#: Standard deviation of the initial belief around the first reference pose (x, y m; theta rad).
-INITIAL_SIGMA = (0.1, 0.1, 0.05)
-#: Inverse sensor model of the grid build (Probabilistic Robotics ch. 9).
-P_HIT, P_MISS = 0.7, 0.4
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -224,221 +206,6 @@ class IntelParams:
             )
         if self.max_grid_cells < 1:
             raise ConfigError(f"parameter 'max_grid_cells' must be >= 1, got {self.max_grid_cells!r}")
-
-
-# --- occupancy grid --------------------------------------------------------------------------------------
-
-
-@njit(cache=True)
-def _accumulate(
-    logodds: npt.NDArray[np.float64],
-    touched: npt.NDArray[np.bool_],
-    c0: npt.NDArray[np.int64],
-    r0: npt.NDArray[np.int64],
-    c1: npt.NDArray[np.int64],
-    r1: npt.NDArray[np.int64],
-    l_hit: float,
-    l_miss: float,
-) -> None:  # pragma: no cover - compiled
-    for b in range(c0.shape[0]):
-        x, y, x1, y1 = c0[b], r0[b], c1[b], r1[b]
-        dx = abs(x1 - x)
-        dy = -abs(y1 - y)
-        sx = 1 if x < x1 else -1
-        sy = 1 if y < y1 else -1
-        err = dx + dy
-        while x != x1 or y != y1:
-            logodds[y, x] += l_miss
-            touched[y, x] = True
-            e2 = 2 * err
-            if e2 >= dy:
-                err += dy
-                x += sx
-            if e2 <= dx:
-                err += dx
-                y += sy
-        logodds[y1, x1] += l_hit
-        touched[y1, x1] = True
-
-
-def build_occupancy_grid(
-    poses: npt.ArrayLike,
-    ranges: npt.ArrayLike,
-    angles: npt.ArrayLike,
-    resolution_m: float,
-    max_range_m: float = NO_RETURN_M,
-    margin_m: float = 1.0,
-    *,
-    max_cells: int = MAX_GRID_CELLS,
-    source: str | os.PathLike[str] = "occupancy grid",
-) -> OccupancyGrid:
-    """Occupancy grid of scans taken at known poses, by log-odds ray casting (see the module docstring).
-
-    Parameters
-    ----------
-    poses : array-like, shape (n, 3)
-        Laser poses (x m, y m, theta rad), world frame.
-    ranges : array-like, shape (n, B)
-        Ranges, m; values >= ``max_range_m`` or non-finite are no-returns and add nothing.
-    angles : array-like, shape (B,)
-        Beam bearings in the laser frame, rad.
-    resolution_m : float
-        Cell side, m.
-    max_range_m : float
-        No-return reading, m.
-    margin_m : float
-        Unknown border around the scans' extent, m.
-    max_cells : int
-        Largest grid built, cells; a larger one is refused before it is allocated.
-    source : path-like
-        What the scans came from, for the message.
-
-    Returns
-    -------
-    OccupancyGrid
-        Probabilities in [0, 1], -1 for never-observed cells; origin at the lower-left corner.
-    """
-    if not resolution_m > 0:
-        raise ConfigError(f"map_resolution_m must be > 0 m, got {resolution_m}")
-    P = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
-    R = np.asarray(ranges, dtype=np.float64)
-    a = np.asarray(angles, dtype=np.float64)
-    hit = np.isfinite(R) & (max_range_m > R)
-    bearing = P[:, 2:3] + a[None, :]
-    ex = (P[:, 0:1] + R * np.cos(bearing))[hit]
-    ey = (P[:, 1:2] + R * np.sin(bearing))[hit]
-    sx = np.broadcast_to(P[:, 0:1], R.shape)[hit]
-    sy = np.broadcast_to(P[:, 1:2], R.shape)[hit]
-    span_x = max(ex.max(initial=-np.inf), P[:, 0].max()) - min(ex.min(initial=np.inf), P[:, 0].min())
-    span_y = max(ey.max(initial=-np.inf), P[:, 1].max()) - min(ey.min(initial=np.inf), P[:, 1].min())
-    check_cells(
-        source,
-        (span_y + 2 * margin_m) / resolution_m + 1,
-        (span_x + 2 * margin_m) / resolution_m + 1,
-        max_cells,
-        f"at {resolution_m!r} m per cell; raise max_grid_cells or map_resolution_m",
-    )
-    x_lo = math.floor((min(ex.min(initial=np.inf), P[:, 0].min()) - margin_m) / resolution_m) * resolution_m
-    y_lo = math.floor((min(ey.min(initial=np.inf), P[:, 1].min()) - margin_m) / resolution_m) * resolution_m
-    x_hi = max(ex.max(initial=-np.inf), P[:, 0].max()) + margin_m
-    y_hi = max(ey.max(initial=-np.inf), P[:, 1].max()) + margin_m
-    cols = math.ceil((x_hi - x_lo) / resolution_m)
-    rows = math.ceil((y_hi - y_lo) / resolution_m)
-    logodds = np.zeros((rows, cols))
-    touched = np.zeros((rows, cols), dtype=np.bool_)
-
-    def cell(v: FloatArray, lo: float) -> npt.NDArray[np.int64]:
-        return np.floor((v - lo) / resolution_m).astype(np.int64)
-
-    l_hit = math.log(P_HIT / (1 - P_HIT))
-    l_miss = math.log(P_MISS / (1 - P_MISS))
-    _accumulate(logodds, touched, cell(sx, x_lo), cell(sy, y_lo), cell(ex, x_lo), cell(ey, y_lo), l_hit, l_miss)
-    occ = np.where(touched, 1.0 / (1.0 + np.exp(-logodds)), -1.0)
-    return OccupancyGrid(occ, float(resolution_m), (float(x_lo), float(y_lo), 0.0))
-
-
-# --- map lines -------------------------------------------------------------------------------------------
-
-
-def extract_map_lines(
-    grid: OccupancyGrid,
-    *,
-    min_length_m: float = 0.5,
-    max_gap_m: float = 0.3,
-    angle_step_deg: float = 1.0,
-) -> tuple[LineMap, dict[str, float]]:
-    """Line segments along the occupied cells of a grid by greedy Hough voting (see the module docstring).
-
-    Parameters
-    ----------
-    grid : OccupancyGrid
-        The map.
-    min_length_m : float
-        Shortest segment kept, m.
-    max_gap_m : float
-        Largest gap between neighbouring cells of one segment, m.
-    angle_step_deg : float
-        Angular bin of the Hough accumulator, deg; the distance bin is one cell.
-
-    Raises
-    ------
-    ConfigError
-        More than :data:`MAX_HOUGH_VOTES` votes (occupied cells x angles), before they are allocated.
-
-    Returns
-    -------
-    LineMap
-        Segments (x1, y1, x2, y2), world frame, m.
-    dict
-        ``occupied_cells``, ``cells_on_lines`` (cells within one cell of a kept segment's line, in its runs),
-        ``segments``, ``total_length_m``.
-    """
-    # long: the Hough steps (vote, peak, walk along the line, split at gaps) share the grid's arrays; numpydoc
-    res = grid.resolution
-    n_occupied = int(np.count_nonzero(grid.occupied()))
-    n_angles = math.ceil(180.0 / angle_step_deg)
-    if n_occupied * n_angles > MAX_HOUGH_VOTES:
-        # the votes take 24 bytes each (rho, bin, flat index): refuse before allocating them
-        raise ConfigError(
-            f"map lines: {n_occupied} occupied cells x {n_angles} angles = {n_occupied * n_angles} Hough votes, "
-            f"expected at most {MAX_HOUGH_VOTES} (a coarser map, or no line extraction)"
-        )
-    cells = np.argwhere(grid.occupied())
-    pts = grid.cell_centers(cells)
-    n = pts.shape[0]
-    ang = np.deg2rad(np.arange(0.0, 180.0, angle_step_deg))
-    na = ang.shape[0]
-    normals = np.stack([np.cos(ang), np.sin(ang)], axis=1)
-    rho = pts @ normals.T  # (n, na)
-    rho_lo = float(rho.min(initial=0.0)) - res
-    bins = np.floor((rho - rho_lo) / res).astype(np.int64)
-    nb = int(bins.max(initial=0)) + 2
-    flat = bins + (np.arange(na, dtype=np.int64) * nb)[None, :]
-    acc = np.bincount(flat.ravel(), minlength=na * nb).astype(np.int64)
-    alive = np.ones(n, dtype=bool)
-    min_votes = max(2, math.floor(min_length_m / (res * math.sqrt(2.0))))
-    tol = res
-    segments: list[tuple[float, float, float, float]] = []
-    on_lines = 0
-    while True:
-        k = int(np.argmax(acc))
-        if acc[k] < min_votes:
-            break
-        ia, ib = divmod(k, nb)
-        idx = np.flatnonzero(alive)
-        voters = idx[bins[idx, ia] == ib]
-        line_rho = rho_lo + (ib + 0.5) * res
-        near = idx[np.abs(rho[idx, ia] - line_rho) <= tol]
-        nrm, c = normals[ia], pts[near].mean(axis=0)
-        if near.shape[0] >= 2:  # total least squares: the normal is the direction of least spread
-            d = pts[near] - c
-            _, vecs = np.linalg.eigh(d.T @ d)
-            nrm = vecs[:, 0]
-        sel = idx[np.abs((pts[idx] - c) @ nrm) <= tol]
-        tangent = np.array([-nrm[1], nrm[0]])
-        s = np.sort((pts[sel] - c) @ tangent)
-        if s.size:
-            cut = np.flatnonzero(np.diff(s) > max_gap_m)
-            starts = np.r_[0, cut + 1]
-            ends = np.r_[cut, s.size - 1]
-            for i0, i1 in zip(starts, ends, strict=True):
-                lo, hi = s[i0] - 0.5 * res, s[i1] + 0.5 * res
-                if hi - lo >= min_length_m and i1 - i0 + 1 >= min_votes:
-                    p1, p2 = c + lo * tangent, c + hi * tangent
-                    segments.append((float(p1[0]), float(p1[1]), float(p2[0]), float(p2[1])))
-                    on_lines += int(i1 - i0 + 1)
-        gone = np.union1d(voters, sel)
-        alive[gone] = False
-        acc -= np.bincount(flat[gone].ravel(), minlength=na * nb)
-    seg = np.array(segments, dtype=np.float64).reshape(-1, 4)
-    lm = LineMap(seg)
-    stats = {
-        "occupied_cells": float(n),
-        "cells_on_lines": float(on_lines),
-        "segments": float(len(lm)),
-        "total_length_m": float(lm.lengths().sum()),
-    }
-    return lm, stats
 
 
 # --- reference, relations, noise ---------------------------------------------------------------------------
@@ -534,31 +301,6 @@ def read_relations(path: str | os.PathLike[str], scan_times: npt.ArrayLike) -> R
     return Relations(tab.column(0).copy(), tab.column(1).copy(), delta)
 
 
-def derive_odometry_noise(odom_poses: npt.ArrayLike, ref_poses: npt.ArrayLike) -> tuple[float, float, float]:
-    """Per-distance odometry noise from consecutive reference poses (method of moments; module docstring).
-
-    Parameters
-    ----------
-    odom_poses, ref_poses : array-like, shape (n, 3)
-        Raw odometry and reference poses at the same n instants, in time order.
-
-    Returns
-    -------
-    sigma_xy_per_m, sigma_theta_per_m, sigma_theta_per_rad : float
-        m / sqrt(m), rad / sqrt(m), rad / sqrt(rad).
-    """
-    o = np.asarray(odom_poses, dtype=np.float64)
-    r = np.asarray(ref_poses, dtype=np.float64)
-    u = between(o[:-1], o[1:])
-    z = between(r[:-1], r[1:])
-    e = between(u, z)
-    d = np.hypot(u[:, 0], u[:, 1])
-    a = np.abs(u[:, 2])
-    sxy2 = float(np.sum(0.5 * (e[:, 0] ** 2 + e[:, 1] ** 2)) / max(float(np.sum(d)), 1e-12))
-    coef, _ = nnls(np.column_stack([d, a]), e[:, 2] ** 2)
-    return math.sqrt(sxy2), math.sqrt(float(coef[0])), math.sqrt(float(coef[1]))
-
-
 @functools.lru_cache(maxsize=4)
 def _reference_map(
     gfs_path: str, size: int, mtime_ns: int, resolution_m: float, max_cells: int
@@ -568,7 +310,13 @@ def _reference_map(
     angles = ANGLE_MIN_RAD + ANGLE_INCREMENT_RAD * np.arange(beams)
     kept = flags.flaser_kept  # a flagged reference scan has no part in the map
     grid = build_occupancy_grid(
-        gfs.flaser.pose[kept], gfs.flaser.ranges[kept], angles, resolution_m, max_cells=max_cells, source=gfs_path
+        gfs.flaser.pose[kept],
+        gfs.flaser.ranges[kept],
+        angles,
+        resolution_m,
+        max_range_m=NO_RETURN_M,
+        max_cells=max_cells,
+        source=gfs_path,
     )
     grid.occupancy.setflags(write=False)
     lines, stats = extract_map_lines(grid)
@@ -579,12 +327,12 @@ def _reference_map(
 
 def _read_raw(path: Path) -> tuple[CarmenLog, CarmenFlags]:
     """The raw log and its flagged messages (module docstring)."""
-    return read_carmen_flagged(path, max_backstep_s=MAX_BACKSTEP_S, bounds=BOUNDS)
+    return read_carmen_flagged(path, max_backstep_s=FREIBURG_MAX_BACKSTEP_S, bounds=BOUNDS)
 
 
 def _read_reference(path: Path) -> tuple[CarmenLog, CarmenFlags]:
     """The GMapping log and its flagged FLASER messages (its ODOM lines are stamped 0: not read)."""
-    return read_carmen_flagged(path, max_backstep_s=MAX_BACKSTEP_S, time_checked=("FLASER",), bounds=BOUNDS)
+    return read_carmen_flagged(path, max_backstep_s=FREIBURG_MAX_BACKSTEP_S, time_checked=("FLASER",), bounds=BOUNDS)
 
 
 def reference_map(
@@ -696,12 +444,12 @@ def _assemble(
     odo_at_ref = np.asarray(las.odom_pose)[match][ref_kept][order][raw_kept]
     sxy, stm, str_ = derive_odometry_noise(odo_at_ref, ref_pose[raw_kept])
     sensors = SensorSpec(
-        laser_sigma_m=LASER_SIGMA_M,
+        laser_sigma_m=GMAPPING_SIGMA_M,
         odometry_sigma_xy_per_m=sxy,
         odometry_sigma_theta_per_m=stm,
         odometry_sigma_theta_per_rad=str_,
     )
-    initial = Gaussian2(ref_pose[0].copy(), np.diag(np.square(INITIAL_SIGMA)))
+    initial = Gaussian2(ref_pose[0].copy(), np.diag(np.square(SLAM_INITIAL_SIGMA)))
     truth = Trajectory2D(ref_t, ref_pose[:, :2].copy(), ref_pose[:, 2].copy())
     backsteps = {
         "ODOM": int(np.sum(np.diff(od.ipc_t) < 0)),

@@ -50,8 +50,8 @@ What the dataset is made of
   anchors (``world.landmarks``) from the lines' anchor positions (an id with two positions is an error).
 * **Truth**: ``point2`` positions; heading from ``angle`` where the file has it (M3500, W3500), else (Indoor UWB)
   the direction of travel over a :data:`HEADING_CHORD_M` chord
-  (:func:`~locbench.datasets.recorded.plaza.heading_from_track`; the robot drives forwards), a derived heading used
-  only by the heading metrics.
+  (:func:`~locbench.datasets.recorded.reference.heading_from_track`; the robot drives forwards), a derived heading
+  used only by the heading metrics.
 * **Initial belief**: the first truth pose, standard deviations :data:`INITIAL_SIGMA` (the UWB heading is derived,
   hence its larger value).
 * **Nominal noise** (``SensorSpec``), the files' declared values: ``range_sigma_m`` = sqrt(median declared range
@@ -136,7 +136,7 @@ from locbench.datasets.recorded.files import (
     quote,
 )
 from locbench.datasets.recorded.plausibility import BOUNDS, Bounds, Flags, merge
-from locbench.datasets.recorded.plaza import heading_from_track
+from locbench.datasets.recorded.reference import heading_from_track
 
 FloatArray = npt.NDArray[np.float64]
 

@@ -38,9 +38,9 @@ What the dataset is made of, and why
   not used: in Plaza1 it equals ``DRp``'s odometry heading exactly (so it is not independent of the odometry),
   and in Plaza2 it points backwards (the direction of travel minus pi, median deviation 0.018 rad; GTSAM's
   example adds pi to it). The true heading is taken as the GPS direction of travel
-  (:func:`heading_from_track`): the direction of the chord from the first GT sample at least
-  ``HEADING_CHORD_M`` / 2 of path behind to the first at least as far ahead (one-sided at the ends). The robot
-  only drives forwards (every d_dist >= 0), so the direction of travel is its heading.
+  (:func:`~locbench.datasets.recorded.reference.heading_from_track`): the direction of the chord from the first GT
+  sample at least ``HEADING_CHORD_M`` / 2 of path behind to the first at least as far ahead (one-sided at the ends).
+  The robot only drives forwards (every d_dist >= 0), so the direction of travel is its heading.
 * **Initial belief**: the first ground-truth pose (position and derived heading) with covariance
   diag(``INITIAL_SIGMA_XY_M``^2 x 2, ``INITIAL_SIGMA_THETA_RAD``^2): a few times the spread of the derived
   heading (its robust spread against Plaza1's odometry heading, which is locally accurate, is 0.036 rad, and
@@ -121,6 +121,7 @@ from locbench.datasets.recorded.files import (
     mat_numbers,
     verify_sha256,
 )
+from locbench.datasets.recorded.reference import heading_from_track
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -357,21 +358,6 @@ def dead_reckoning_check(arrays: PlazaArrays) -> dict[str, float]:
     return {"drp_max_position_diff_m": float(pos.max()), "drp_max_heading_diff_rad": float(head.max())}
 
 
-def heading_from_track(xy: FloatArray, chord_m: float = HEADING_CHORD_M) -> FloatArray:
-    """Direction of travel (rad) at each sample of a track (n, 2): the chord over ``chord_m`` of path, centred.
-
-    For sample i the chord runs from the last sample at least ``chord_m / 2`` of path before i (or the first
-    sample) to the first at least as far after it (or the last sample).
-    """
-    step = np.hypot(*np.diff(xy, axis=0).T)
-    s = np.concatenate([[0.0], np.cumsum(step)])
-    half = 0.5 * chord_m
-    lo = np.clip(np.searchsorted(s, s - half, side="right") - 1, 0, len(s) - 1)
-    hi = np.clip(np.searchsorted(s, s + half, side="left"), 0, len(s) - 1)
-    d = xy[hi] - xy[lo]
-    return np.arctan2(d[:, 1], d[:, 0])
-
-
 def estimate_nominal_noise(arrays: PlazaArrays) -> tuple[NominalNoise, float]:
     """The nominal noise of the module docstring, and the median range residual (m), from the data and the truth."""
     gt = arrays.GT
@@ -388,7 +374,7 @@ def estimate_nominal_noise(arrays: PlazaArrays) -> tuple[NominalNoise, float]:
 
     # odometry segments of NOISE_SEGMENT_M against the truth at the DR times
     dr = arrays.DR
-    theta_gt = heading_from_track(gt[:, 1:3])
+    theta_gt = heading_from_track(gt[:, 1:3], HEADING_CHORD_M)
     tx = np.interp(dr[:, 0], gt[:, 0], gt[:, 1])
     ty = np.interp(dr[:, 0], gt[:, 0], gt[:, 2])
     tth = np.interp(dr[:, 0], gt[:, 0], np.unwrap(theta_gt))
@@ -456,7 +442,7 @@ def load_plaza(
     arrays = read_plaza_mat(path, sha256)
     gt = arrays.GT
     t0, t1 = float(gt[0, 0]), float(gt[-1, 0])
-    theta = heading_from_track(gt[:, 1:3])
+    theta = heading_from_track(gt[:, 1:3], HEADING_CHORD_M)
     truth = Trajectory2D(t=gt[:, 0].copy(), xy=gt[:, 1:3].copy(), theta=theta)
 
     events: list[Event] = []

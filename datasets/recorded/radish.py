@@ -37,7 +37,7 @@ metrics (ATE against the reference) are shown.
 
 Map
 ---
-The occupancy grid of :func:`locbench.datasets.recorded.intel.build_occupancy_grid` (log-odds ray casting of the
+The occupancy grid of :func:`locbench.datasets.recorded.scan_map.build_occupancy_grid` (log-odds ray casting of the
 reference scans, Probabilistic Robotics ch. 9; hits log(0.7/0.3), misses log(0.4/0.6); unknown = -1; ROS
 thresholds) from EVERY reference scan of the log (the event window below does not change the map), at
 ``map_resolution_m`` (0.1 m by default for every site: the largest sites, freiburg-campus and
@@ -45,8 +45,8 @@ infinite-corridor, are about 300 m x 300 m with their beams, 9-10 M cells at 0.1
 :data:`~locbench.datasets.recorded.files.MAX_GRID_CELLS`; at 0.05 m they are not), with a 1 m unknown border.
 The build is deterministic (the same bytes every time; tested) and cached by the sha256 of the input file (the
 content, not its name or time) and the resolution. The line map for ``ekf_lines`` is
-:func:`~locbench.datasets.recorded.intel.extract_map_lines` of the grid; where the grid has more occupied cells
-than :data:`~locbench.datasets.recorded.intel.MAX_HOUGH_VOTES` allows, no line map is given (``ekf_lines`` is
+:func:`~locbench.datasets.recorded.scan_map.extract_map_lines` of the grid; where the grid has more occupied cells
+than :data:`~locbench.datasets.recorded.scan_map.MAX_HOUGH_VOTES` allows, no line map is given (``ekf_lines`` is
 then a stored skip naming the missing map kind, and ``metadata["map"]["lines"]`` says why).
 
 Odometry
@@ -58,9 +58,9 @@ Odometry
   from the raw logs'). Every corrected scan of the three logs pairs (910/910, 440/440, 4791/4791;
   ``metadata["pairing"]``). The run is in the raw log's time base (``ipc_timestamp``): the scans at their raw
   scan's time, the reference pose of each paired scan at that time, the raw ODOM messages ordered by stamp and
-  differenced as in :mod:`~locbench.datasets.recorded.intel`. Nominal odometry noise: the intel loader's
-  :func:`~locbench.datasets.recorded.intel.derive_odometry_noise` from the raw odometry at the paired scans against
-  the reference.
+  differenced as in :mod:`~locbench.datasets.recorded.intel`. Nominal odometry noise: as intel's,
+  :func:`~locbench.datasets.recorded.reference.derive_odometry_noise` from the raw odometry at the paired scans
+  against the reference.
 * **Other sites: semi-synthetic odometry.** The reference increments between consecutive scans,
   u = between(p_k, p_k+1), with simulated encoder error e ~ N(0, diag(s_xy^2 d, s_xy^2 d, s_tm^2 d + s_tr^2 a))
   (d = |u_xy| m, a = |u_theta| rad; the increment model of :func:`locbench.filters._motion.increment_variances`),
@@ -155,7 +155,7 @@ from locbench.datasets.dataset import (
     WorldMap,
     sort_events,
 )
-from locbench.datasets.recorded.carmen import CarmenLog, parse_carmen_bytes, read_carmen
+from locbench.datasets.recorded.carmen import FREIBURG_MAX_BACKSTEP_S, CarmenLog, parse_carmen_bytes, read_carmen
 from locbench.datasets.recorded.common import RecordedDataset
 from locbench.datasets.recorded.files import (
     MAX_GRID_CELLS,
@@ -168,17 +168,14 @@ from locbench.datasets.recorded.files import (
     quote,
     verify_sha256,
 )
-from locbench.datasets.recorded.intel import (
-    INITIAL_SIGMA,
-    LASER_SIGMA_M,
-    MAX_BACKSTEP_S,
+from locbench.datasets.recorded.plausibility import BOUNDS, Flags, merge
+from locbench.datasets.recorded.reference import GMAPPING_SIGMA_M, SLAM_INITIAL_SIGMA, derive_odometry_noise
+from locbench.datasets.recorded.scan_map import (
     MAX_RESOLUTION_M,
     MIN_RESOLUTION_M,
     build_occupancy_grid,
-    derive_odometry_noise,
     extract_map_lines,
 )
-from locbench.datasets.recorded.plausibility import BOUNDS, Flags, merge
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -515,7 +512,7 @@ def paired_raw(
     if spec is None:
         return None
     raw_path = locate(spec, root, verify=verify)
-    raw = read_carmen(raw_path, max_backstep_s=MAX_BACKSTEP_S, max_beams=MAX_LASER_BEAMS)
+    raw = read_carmen(raw_path, max_backstep_s=FREIBURG_MAX_BACKSTEP_S, max_beams=MAX_LASER_BEAMS)
     idx = pair_scans(corrected.log.flaser.ranges, raw.flaser.ranges)
     pairing = Pairing(raw, idx)
     need = math.ceil(MIN_PAIRED_FRACTION * len(corrected.log.flaser))
@@ -778,13 +775,13 @@ def load_radish(
         metadata["encoder_error"] = {"sigma_xy_per_m": sxy, "sigma_theta_per_m": stm, "sigma_theta_per_rad": str_}
     metadata["window"] = {"max_scans": max_scans, "scans_used": int(keep.shape[0])}
     sensors = SensorSpec(
-        laser_sigma_m=LASER_SIGMA_M,
+        laser_sigma_m=GMAPPING_SIGMA_M,
         odometry_sigma_xy_per_m=sxy,
         odometry_sigma_theta_per_m=stm,
         odometry_sigma_theta_per_rad=str_,
     )
     truth = Trajectory2D(np.asarray(ref_t, dtype=np.float64).copy(), ref[:, :2].copy(), ref[:, 2].copy())
-    initial = Gaussian2(ref[0].copy(), np.diag(np.square(INITIAL_SIGMA)))
+    initial = Gaussian2(ref[0].copy(), np.diag(np.square(SLAM_INITIAL_SIGMA)))
     return Dataset(
         id="radish",
         params={"site": site},

@@ -39,10 +39,15 @@ gigabytes); ``resolution`` lies in [:data:`MIN_RESOLUTION_M`, :data:`MAX_RESOLUT
 :data:`~locbench.datasets.recorded.files.MAX_GRID_CELLS`, read from the PGM header or the image header before
 its pixels are decoded; Pillow's own decompression-bomb guard stays on); and the map spans at most
 :data:`MAX_EXTENT_M` per side.
+
+The loaders of a user's recording (:mod:`~locbench.datasets.recorded.rosbag`,
+:mod:`~locbench.datasets.recorded.textlog`) read their map through :func:`load_map_and_lines`: once per file
+version, with the line segments of :func:`~locbench.datasets.recorded.scan_map.extract_map_lines` when asked.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import tempfile
@@ -55,7 +60,8 @@ import numpy as np
 import numpy.typing as npt
 import yaml
 
-from locbench.datasets.dataset import OccupancyGrid
+from locbench.core.errors import ConfigError
+from locbench.datasets.dataset import LineMap, OccupancyGrid
 from locbench.datasets.recorded.files import (
     MAX_GRID_CELLS,
     MAX_POSITION_M,
@@ -453,6 +459,53 @@ def _pixels_to_occupancy(
     out[p < free_th] = 0.0
     out[p > occ_th] = 1.0  # free_th <= occ_th: no cell is both
     return out
+
+
+def load_map_and_lines(yaml_path: Path, with_lines: bool) -> tuple[OccupancyGrid, LineMap | None]:
+    """A map_server map and, with ``with_lines``, the line segments along its occupied cells, read once per file
+    version (the loaders of a user's recording read the map of every seed's dataset through this).
+
+    Parameters
+    ----------
+    yaml_path : Path
+        The map's YAML file (:func:`load_map_server_map`).
+    with_lines : bool
+        Also extract the map lines (:func:`~locbench.datasets.recorded.scan_map.extract_map_lines`).
+
+    Returns
+    -------
+    OccupancyGrid
+        The map, read-only.
+    LineMap or None
+        Its lines (read-only), or None without ``with_lines``.
+
+    Raises
+    ------
+    RecordedDataError
+        As :func:`load_map_server_map`; and a map with too many occupied cells for the line extraction, naming the
+        ``map_lines`` option that skips it.
+    """
+    st = yaml_path.stat()
+    return _map_cached(str(yaml_path.resolve()), st.st_size, st.st_mtime_ns, with_lines)
+
+
+@functools.lru_cache(maxsize=4)
+def _map_cached(path: str, size: int, mtime_ns: int, with_lines: bool) -> tuple[OccupancyGrid, LineMap | None]:
+    """The map (and its lines) of a map_server YAML, cached per file version (a re-saved map is read again)."""
+    del size, mtime_ns  # cache key only
+    grid = load_map_server_map(path)
+    grid.occupancy.setflags(write=False)
+    if not with_lines:
+        return grid, None
+    # imported here: the line extraction's module compiles a kernel (numba), which reading a map needs not
+    from locbench.datasets.recorded.scan_map import extract_map_lines
+
+    try:
+        lines, _ = extract_map_lines(grid)
+    except ConfigError as exc:
+        raise RecordedDataError(path, f"{exc}; give map_lines=false to skip the line map") from None
+    lines.segments.setflags(write=False)
+    return grid, lines
 
 
 # --- saving --------------------------------------------------------------------------------------

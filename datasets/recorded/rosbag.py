@@ -24,8 +24,9 @@ optional):
   ``truth_label`` says whether it is a measured ground truth or another estimator's output (AMCL, SLAM).
 - **Map**: the ROS map_server map named by ``map`` (:func:`~locbench.datasets.recorded.ros_map.load_map_server_map`);
   required when there are scans. With ``map_lines`` (default) line segments are also extracted from its occupied
-  cells (the greedy Hough extraction of :func:`~locbench.datasets.recorded.intel.extract_map_lines`), so that the
-  line-map filter runs too; the map is parsed once per file version.
+  cells (the greedy Hough extraction of :func:`~locbench.datasets.recorded.scan_map.extract_map_lines`), so that
+  the line-map filter runs too; the map is parsed once per file version
+  (:func:`~locbench.datasets.recorded.ros_map.load_map_and_lines`).
 - **Time**: the messages' header stamps (s, as recorded: usually Unix time; ``stamps=bag`` uses the time the bag
   recorded each message instead, for drivers that leave headers unset). Each topic's stamps must not go backwards
   (an error names the topic and the message number). Events are trimmed to the ground truth's time span; the
@@ -39,7 +40,8 @@ optional):
 - **Sidecar files** for what a bag has no standard message for: ``landmarks`` (a landmark map, ``id x y [std_x
   std_y]`` per line), ``waypoints`` (``t x y``, stamped like the bag) and ``events`` (range-bearing sightings,
   ranges to beacons and fixes, one JSON object per line in the textlog format of
-  :mod:`~locbench.datasets.recorded.textlog`). Relative paths are looked up like the bag's.
+  :mod:`~locbench.datasets.recorded.jsonl_events`; the two tables read as a textlog's,
+  :mod:`~locbench.datasets.recorded.text_tables`). Relative paths are looked up like the bag's.
 - **Twist check**: when the odometry's twist contradicts its own poses (zero while the pose moves, or a total
   distance or turn off by more than a factor 2: :func:`~locbench.datasets.recorded.files.twist_contradiction`), the
   dataset loads with a warning in ``metadata["warnings"]`` (logged, stored with the run's truth and shown in the
@@ -98,8 +100,6 @@ from locbench.datasets.dataset import (
     DatasetBuilder,
     FlaggedSample,
     Gaussian2,
-    LineMap,
-    OccupancyGrid,
     SensorSpec,
     Trajectory2D,
     WorldMap,
@@ -116,8 +116,9 @@ from locbench.datasets.recorded.files import (
     twist_contradiction,
     user_path_candidates,
 )
-from locbench.datasets.recorded.intel import extract_map_lines
-from locbench.datasets.recorded.ros_map import MAX_YAML_BYTES, load_map_server_map
+from locbench.datasets.recorded.jsonl_events import MAX_EVENTS_BYTES, read_events_flagged
+from locbench.datasets.recorded.ros_map import MAX_YAML_BYTES, load_map_and_lines
+from locbench.datasets.recorded.text_tables import read_landmarks, read_waypoints
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -128,7 +129,7 @@ ODOMETRY_TYPES = ("nav_msgs/msg/Odometry",)
 #: is no memory bound: it refuses a device or a runaway file before the reader starts on it.
 MAX_BAG_BYTES = 16 << 30
 #: Largest sidecar file (landmarks, waypoints, events), bytes: the textlog events file's bound.
-MAX_SIDECAR_BYTES = 512 << 20
+MAX_SIDECAR_BYTES = MAX_EVENTS_BYTES
 #: Bounds of the validation: the largest odometry twist component (m/s, rad/s) and scan range_max (m).
 MAX_TWIST = 100.0
 #: Largest interval between two messages of the odometry or the truth, s: the truth is interpolated between its
@@ -738,8 +739,6 @@ def _sidecar_events(
 ) -> tuple[list[Event], tuple[FlaggedSample, ...]]:
     """The events of the ``events`` sidecar (textlog JSON lines) inside [t0, t1]: sightings, ranges, fixes only; and
     the events flagged by the plausibility policy."""
-    from locbench.datasets.recorded.textlog import read_events_flagged
-
     path = resolve_bag_path(params.events, "events")
     events, flagged = read_events_flagged(path, known)
     other = sorted({type(e).__name__ for e in events if isinstance(e, (Odometry, LaserScan))})
@@ -756,27 +755,6 @@ def _twist_warning(inc: FloatArray, twist: FloatArray, t: FloatArray, topic: str
     """The warning when the odometry's twist contradicts its poses (``twist`` and ``t`` aligned with ``inc``)."""
     why = twist_contradiction(inc, twist[:, 0], twist[:, 1], np.diff(t))
     return f"topic {topic!r}: {why}" if why else ""
-
-
-def _map(path: Path, with_lines: bool) -> tuple[OccupancyGrid, LineMap | None]:
-    st = path.stat()
-    return _map_cached(str(path.resolve()), st.st_size, st.st_mtime_ns, with_lines)
-
-
-@functools.lru_cache(maxsize=4)
-def _map_cached(path: str, size: int, mtime_ns: int, with_lines: bool) -> tuple[OccupancyGrid, LineMap | None]:
-    """The map (and its lines) of a map_server YAML, cached per file version (a re-saved map is read again)."""
-    del size, mtime_ns  # cache key only
-    grid = load_map_server_map(path)
-    grid.occupancy.setflags(write=False)
-    if not with_lines:
-        return grid, None
-    try:
-        lines, _ = extract_map_lines(grid)
-    except ConfigError as exc:
-        raise RecordedDataError(path, f"{exc}; give map_lines=false to skip the line map") from None
-    lines.segments.setflags(write=False)
-    return grid, lines
 
 
 def _odometry_events(
@@ -830,11 +808,9 @@ def build_rosbag_dataset(params: RosbagParams) -> Dataset:
     events, warnings = _odometry_events(params, streams, bag, t0, t1)
     grid, lines = None, None
     if params.map:
-        grid, lines = _map(resolve_bag_path(params.map, "map"), params.map_lines)
+        grid, lines = load_map_and_lines(resolve_bag_path(params.map, "map"), params.map_lines)
     landmarks = None
     if params.landmarks:
-        from locbench.datasets.recorded.textlog import read_landmarks
-
         landmarks = read_landmarks(resolve_bag_path(params.landmarks, "landmarks"))
     known = frozenset(int(i) for i in landmarks.ids) if landmarks is not None else None
     extra, side_flags = _sidecar_events(params, known, t0, t1) if params.events else ([], ())
@@ -867,8 +843,6 @@ def build_rosbag_dataset(params: RosbagParams) -> Dataset:
     )
     waypoints = None
     if params.waypoints:
-        from locbench.datasets.recorded.textlog import read_waypoints
-
         waypoints = read_waypoints(resolve_bag_path(params.waypoints, "waypoints"), truth)
     sidecars = tuple(p for p in (params.landmarks, params.waypoints, params.events) if p)
     ds = Dataset(

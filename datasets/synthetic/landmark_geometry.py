@@ -431,12 +431,12 @@ class LandmarkGeometryScenario(SyntheticBuilder):
         spec = nominal_sensor_spec(
             params.matched,
             laser=LASER,
+            fixes=fixes,
             landmark_sigma_range_m=NOMINAL_SIGMA_RANGE_M,
             landmark_sigma_bearing_rad=NOMINAL_SIGMA_BEARING_RAD,
             landmark_min_range_m=LASER.min_range_m + LANDMARK_RADIUS_M,
             landmark_max_range_m=LASER.max_range_m + LANDMARK_RADIUS_M,
             landmark_fov_rad=LASER.fov_rad,
-            pose_fix_sigma_xy_m=fixes.reported_sigma_xy_m if fixes else None,
         )
         # Unless matched, the landmark stream is not used by assemble (landmarks come from the scans below).
         matched_sightings = (

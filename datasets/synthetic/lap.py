@@ -53,9 +53,7 @@ from locbench.core.limits import check_bytes
 from locbench.core.runkey import RUN_KEY_OMIT_IF_DEFAULT
 from locbench.datasets.dataset import Dataset, SyntheticBuilder, sort_events
 from locbench.datasets.synthetic.robot import DriveLimits, GoTo, Leg, Motion, simulate_route
-from locbench.datasets.synthetic.scenarios import (
-    office_world,
-)
+from locbench.datasets.synthetic.scenarios import office_world
 from locbench.datasets.synthetic.sensors import (
     EncoderModel,
     LaserSensor,
@@ -69,11 +67,12 @@ from locbench.datasets.synthetic.toolkit import (
     SLIP_K_TRUE,
     WHEELBASE_NOMINAL_M,
     WHEELBASE_TRUE_RATIO,
+    ScenarioStreams,
     SensorSuite,
-    assemble,
+    Tour,
     check_kidnap_params,
     check_laser_beams,
-    drive,
+    drive_and_assemble,
     execution_stream,
     kidnap_distance,
     matched_encoder_model,
@@ -123,6 +122,10 @@ def lap_route() -> list[Leg]:
     return [*(GoTo(c) for c in LAP_CORNERS), GoTo(LAP_START[:2])]
 
 
+#: The lap as driven, a kidnap at 50 % of it.
+LAP_TOUR = Tour(LAP_START, tuple(lap_route()), LAP_LIMITS, (0.02, 0.02, math.radians(1.0)))
+
+
 def lap_encoder_model(scale: float = LAP_SYSTEMATIC_SCALE) -> EncoderModel:
     """The shared robot's odometry error with its systematic part multiplied by ``scale``."""
     return EncoderModel(
@@ -151,13 +154,13 @@ def lap_streams(
 def lap_motion(scale: float = LAP_SYSTEMATIC_SCALE, seed: int | None = None, dataset_name: str = "lap") -> Motion:
     """The kidnap-free lap driven with the true wheelbase for ``scale``; with a ``seed``, with the execution
     noise of ``make_dataset(dataset_name, seed)``, else executed exactly."""
-    limits = dataclasses.replace(LAP_LIMITS, wheelbase_m=lap_wheelbase(scale))
+    limits = dataclasses.replace(LAP_TOUR.limits, wheelbase_m=lap_wheelbase(scale))
     if seed is None:
-        return simulate_route(LAP_START, lap_route(), limits)
+        return simulate_route(LAP_TOUR.start, LAP_TOUR.legs, limits)
     from locbench.core.seeding import dataset_rng
 
     slip_rng = lap_streams(dataset_rng(dataset_name, seed))[2]
-    return simulate_route(LAP_START, lap_route(), limits, slip_k=SLIP_K_TRUE, slip_rng=slip_rng)
+    return simulate_route(LAP_TOUR.start, LAP_TOUR.legs, limits, slip_k=SLIP_K_TRUE, slip_rng=slip_rng)
 
 
 # --- people ---------------------------------------------------------------------------------------------
@@ -332,18 +335,6 @@ class LapScenario(SyntheticBuilder):
         initial_rng = matched_stream(rng) if params.matched else None
         world = dataclasses.replace(office_world(), name="lap")
         systematic = 0.0 if params.matched else LAP_SYSTEMATIC_SCALE
-        limits = dataclasses.replace(LAP_LIMITS, wheelbase_m=lap_wheelbase(systematic))
-        motion = drive(
-            world,
-            LAP_START,
-            lap_route(),
-            limits,
-            params.kidnap_m,
-            params.kidnap_rad,
-            0.5,
-            streams["kidnap"],
-            slip_rng=slip_rng,
-        )
         laser = LaserSensor(
             rate_hz=10.0,
             beams=params.laser_beams,
@@ -365,17 +356,17 @@ class LapScenario(SyntheticBuilder):
             "people": [dataclasses.asdict(p) for p in people],
             "sensors_true": {"laser": dataclasses.asdict(laser)},
         }
-        ds = assemble(
+        ds, motion = drive_and_assemble(
             dataset_id="lap",
             params=params,
             world=world,
-            motion=motion,
+            tour=LAP_TOUR,
+            streams=ScenarioStreams(streams, slip_rng, initial_rng),
             suite=SensorSuite(encoder=matched_encoder_model() if params.matched else lap_encoder_model()),
-            streams=streams,
             spec=spec,
-            initial_sigma=(0.02, 0.02, math.radians(1.0)),
+            wheelbase_m=lap_wheelbase(systematic),
+            kidnap=(params.kidnap_m, params.kidnap_rad),
             metadata=meta,
-            initial_rng=initial_rng,
         )
         assert ds.world.occupancy is not None
         scans: list[Event] = list(laser_scans_with_people(motion, ds.world.occupancy, laser, people, streams["laser"]))

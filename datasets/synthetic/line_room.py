@@ -23,7 +23,6 @@ The nominal noise handed to filters is the true laser noise and the shared nomin
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 from dataclasses import dataclass, field
@@ -37,17 +36,7 @@ from locbench.core.runkey import RUN_KEY_OMIT_IF_DEFAULT
 from locbench.datasets.dataset import Dataset, SyntheticBuilder
 from locbench.datasets.synthetic.robot import DriveLimits, GoTo, Leg
 from locbench.datasets.synthetic.sensors import LaserSensor
-from locbench.datasets.synthetic.toolkit import (
-    SensorSuite,
-    assemble,
-    check_kidnap_params,
-    drive,
-    encoder_model,
-    kidnap_distance,
-    nominal_sensor_spec,
-    scenario_streams,
-    true_wheelbase,
-)
+from locbench.datasets.synthetic.toolkit import Tour, check_kidnap_params, kidnap_distance, tour_dataset
 from locbench.datasets.synthetic.world import World, wall_with_doors
 
 logger = logging.getLogger(__name__)
@@ -92,6 +81,10 @@ def line_room_route() -> list[Leg]:
         west,
         GoTo((2.0, 1.5)),
     ]
+
+
+#: The line_room tour, a kidnap at 50 % of the run.
+LINE_ROOM_TOUR = Tour(LINE_ROOM_START, tuple(line_room_route()), LINE_ROOM_LIMITS, (0.02, 0.02, math.radians(1.0)))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -139,20 +132,6 @@ class LineRoomScenario(SyntheticBuilder):
     description: ClassVar[str] = "report 002's polygonal rooms for the line-map EKF"
 
     def build(self, params: LineRoomParams, rng: np.random.Generator) -> Dataset:
-        streams = scenario_streams(rng, params.matched)
-        world = line_room_world()
-        limits = dataclasses.replace(LINE_ROOM_LIMITS, wheelbase_m=true_wheelbase(params.matched))
-        motion = drive(
-            world,
-            LINE_ROOM_START,
-            line_room_route(),
-            limits,
-            params.kidnap_m,
-            params.kidnap_rad,
-            0.5,
-            streams.noise["kidnap"],
-            slip_rng=streams.execution,
-        )
         laser = LaserSensor(
             rate_hz=5.0,
             beams=params.laser_beams,
@@ -160,16 +139,12 @@ class LineRoomScenario(SyntheticBuilder):
             max_range_m=5.6,
             sigma_m=params.laser_sigma_m,
         )
-        suite = SensorSuite(encoder=encoder_model(params.matched), laser=laser)
-        return assemble(
-            dataset_id="line_room",
-            params=params,
-            world=world,
-            motion=motion,
-            suite=suite,
-            streams=streams.noise,
-            spec=nominal_sensor_spec(params.matched, laser=laser),
-            initial_sigma=(0.02, 0.02, math.radians(1.0)),
+        return tour_dataset(
+            "line_room",
+            params,
+            rng,
+            line_room_world(),
+            LINE_ROOM_TOUR,
+            laser=laser,
             resolution_m=LINE_ROOM_RESOLUTION_M,
-            initial_rng=streams.initial,
         )

@@ -35,17 +35,17 @@ from locbench.datasets.synthetic.toolkit import (
     WHEELBASE_NOMINAL_M,
     WHEELBASE_TRUE_RATIO,
     SensorSuite,
-    assemble,
+    Tour,
     check_kidnap_params,
     check_laser_beams,
-    drive,
-    encoder_model,
+    drive_and_assemble,
     execution_stream,
     kidnap_distance,
     nominal_sensor_spec,
     robot_encoder_model,
     scenario_streams,
     split_streams,
+    tour_dataset,
     true_wheelbase,
 )
 from locbench.datasets.synthetic.world import World, wall_with_doors
@@ -61,6 +61,14 @@ ROOM_START = (0.6, 1.0, 0.0)
 ROOM_WAYPOINTS = ((2.0, 0.5), (3.5, 1.5), (5.0, 0.5), (6.4, 1.4), (3.0, 1.0))
 ROOM_LIMITS = DriveLimits(
     dt_s=0.05, v_max_mps=0.25, accel_mps2=0.25, omega_max_radps=0.5, alpha_radps2=1.0, dwell_s=2.0, start_dwell_s=1.0
+)
+#: The room tour: the start, the 5 waypoints, a kidnap at 60 % of the run.
+ROOM_TOUR = Tour(
+    ROOM_START,
+    tuple(GoTo(w) for w in ROOM_WAYPOINTS),
+    ROOM_LIMITS,
+    (0.01, 0.01, math.radians(1.0)),
+    kidnap_fraction=0.6,
 )
 
 
@@ -132,49 +140,22 @@ class RoomScenario(SyntheticBuilder):
     )
 
     def build(self, params: RoomParams, rng: np.random.Generator) -> Dataset:
-        streams = scenario_streams(rng, params.matched)
-        world = room_world()
-        limits = dataclasses.replace(ROOM_LIMITS, wheelbase_m=true_wheelbase(params.matched))
-        legs = [GoTo(w) for w in ROOM_WAYPOINTS]
-        motion = drive(
-            world,
-            ROOM_START,
-            legs,
-            limits,
-            params.kidnap_m,
-            params.kidnap_rad,
-            0.6,
-            streams.noise["kidnap"],
-            slip_rng=streams.execution,
-        )
         lm = dataclasses.replace(self.landmark_sensor, known_ids=params.known_ids)
         laser = LaserSensor(beams=params.laser_beams) if params.laser_beams else None
-        suite = SensorSuite(encoder=encoder_model(params.matched), landmarks=lm, laser=laser)
-        return assemble(
-            dataset_id="room",
-            params=params,
-            world=world,
-            motion=motion,
-            suite=suite,
-            streams=streams.noise,
-            spec=nominal_sensor_spec(params.matched, landmarks=lm, laser=laser),
-            initial_sigma=(0.01, 0.01, math.radians(1.0)),
-            initial_rng=streams.initial,
-        )
+        return tour_dataset("room", params, rng, room_world(), ROOM_TOUR, landmarks=lm, laser=laser)
 
 
 def room_motion_for(wheelbase_ratio: float, seed: int | None = None) -> Motion:
     """The kidnap-free room tour with a given true / nominal wheelbase ratio; with a ``seed``, with the
     execution noise of ``make_dataset("room", seed)`` (its execution stream), else executed exactly."""
-    limits = dataclasses.replace(ROOM_LIMITS, wheelbase_m=WHEELBASE_NOMINAL_M * wheelbase_ratio)
-    legs = [GoTo(w) for w in ROOM_WAYPOINTS]
+    limits = dataclasses.replace(ROOM_TOUR.limits, wheelbase_m=WHEELBASE_NOMINAL_M * wheelbase_ratio)
     if seed is None:
-        return simulate_route(ROOM_START, legs, limits)
+        return simulate_route(ROOM_TOUR.start, ROOM_TOUR.legs, limits)
     from locbench.core.seeding import dataset_rng
 
     rng = dataset_rng("room", seed)
     split_streams(rng)
-    return simulate_route(ROOM_START, legs, limits, slip_k=SLIP_K_TRUE, slip_rng=execution_stream(rng))
+    return simulate_route(ROOM_TOUR.start, ROOM_TOUR.legs, limits, slip_k=SLIP_K_TRUE, slip_rng=execution_stream(rng))
 
 
 # --- office ---------------------------------------------------------------------------------------------
@@ -251,6 +232,8 @@ def office_route() -> list[Leg]:
 OFFICE_LIMITS = DriveLimits(
     dt_s=0.05, v_max_mps=0.7, accel_mps2=0.5, omega_max_radps=1.2, alpha_radps2=2.0, dwell_s=2.0, start_dwell_s=1.0
 )
+#: The office tour, a kidnap at 50 % of the run.
+OFFICE_TOUR = Tour(OFFICE_START, tuple(office_route()), OFFICE_LIMITS, (0.02, 0.02, math.radians(1.0)))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -298,20 +281,6 @@ class OfficeScenario(SyntheticBuilder):
     description: ClassVar[str] = "one office floor with walls, doors, landmarks and a waypoint tour; every sensor"
 
     def build(self, params: OfficeParams, rng: np.random.Generator) -> Dataset:
-        streams = scenario_streams(rng, params.matched)
-        world = office_world()
-        limits = dataclasses.replace(OFFICE_LIMITS, wheelbase_m=true_wheelbase(params.matched))
-        motion = drive(
-            world,
-            OFFICE_START,
-            office_route(),
-            limits,
-            params.kidnap_m,
-            params.kidnap_rad,
-            0.5,
-            streams.noise["kidnap"],
-            slip_rng=streams.execution,
-        )
         lm = LandmarkSensor(
             rate_hz=5.0,
             min_range_m=0.3,
@@ -328,21 +297,8 @@ class OfficeScenario(SyntheticBuilder):
         fixes = PoseFixSensor(
             rate_hz=1.0, sigma_xy_m=params.pose_fix_sigma_m, reported_sigma_xy_m=params.pose_fix_sigma_m
         )
-        suite = SensorSuite(encoder=encoder_model(params.matched), landmarks=lm, laser=laser, fixes=fixes)
-        spec = nominal_sensor_spec(
-            params.matched, landmarks=lm, laser=laser, pose_fix_sigma_xy_m=fixes.reported_sigma_xy_m
-        )
-        return assemble(
-            dataset_id="office",
-            params=params,
-            world=world,
-            motion=motion,
-            suite=suite,
-            streams=streams.noise,
-            spec=spec,
-            initial_sigma=(0.02, 0.02, math.radians(1.0)),
-            initial_rng=streams.initial,
-        )
+        world = office_world()
+        return tour_dataset("office", params, rng, world, OFFICE_TOUR, landmarks=lm, laser=laser, fixes=fixes)
 
 
 # --- tiny conformance scenarios -------------------------------------------------------------------------
@@ -350,6 +306,8 @@ class OfficeScenario(SyntheticBuilder):
 TINY_LIMITS = DriveLimits(
     dt_s=0.05, v_max_mps=0.6, accel_mps2=0.4, omega_max_radps=0.8, alpha_radps2=1.5, dwell_s=2.0, start_dwell_s=1.0
 )
+#: Standard deviations of the tiny scenarios' initial belief (m, m, rad).
+TINY_INITIAL_SIGMA = (0.01, 0.01, math.radians(1.0))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -384,16 +342,12 @@ class _TinyScenario(DatasetBuilder):
     def world(self) -> World:
         raise NotImplementedError
 
-    def route(self) -> tuple[tuple[float, float, float], list[Leg]]:
+    def tour(self) -> Tour:
         raise NotImplementedError
 
     def build(self, params: TinyParams, rng: np.random.Generator) -> Dataset:
         streams = scenario_streams(rng, matched=False)
-        world = self.world()
-        start, legs = self.route()
         nf = params.noise_free
-        limits = dataclasses.replace(TINY_LIMITS, wheelbase_m=true_wheelbase(nf))
-        motion = simulate_route(start, legs, limits, slip_k=0.0 if nf else SLIP_K_TRUE, slip_rng=streams.execution)
         lm = LandmarkSensor(
             rate_hz=5.0,
             min_range_m=0.3,
@@ -413,27 +367,28 @@ class _TinyScenario(DatasetBuilder):
             dropout_prob=0.0 if nf else 0.01,
         )
         fixes = PoseFixSensor(rate_hz=1.0, sigma_xy_m=0.0 if nf else 0.5, reported_sigma_xy_m=0.5)
-        suite = SensorSuite(encoder=robot_encoder_model(nf), landmarks=lm, laser=laser, fixes=fixes)
         # Nominal noise stays positive even when the data are exact, so filters remain well-posed.
         spec = nominal_sensor_spec(
             False,
             landmarks=lm,
             laser=laser,
+            fixes=fixes,
             landmark_sigma_range_m=0.02,
             landmark_sigma_bearing_rad=math.radians(1.0),
             laser_sigma_m=0.01,
-            pose_fix_sigma_xy_m=fixes.reported_sigma_xy_m,
         )
-        return assemble(
+        ds, _ = drive_and_assemble(
             dataset_id=self.id,
             params=params,
-            world=world,
-            motion=motion,
-            suite=suite,
-            streams=streams.noise,
+            world=self.world(),
+            tour=self.tour(),
+            streams=streams,
+            suite=SensorSuite(encoder=robot_encoder_model(nf), landmarks=lm, laser=laser, fixes=fixes),
             spec=spec,
-            initial_sigma=(0.01, 0.01, math.radians(1.0)),
+            wheelbase_m=true_wheelbase(nf),
+            slip=not nf,
         )
+        return ds
 
 
 class TinyLineScenario(_TinyScenario):
@@ -445,8 +400,8 @@ class TinyLineScenario(_TinyScenario):
     def world(self) -> World:
         return _box_world("tiny_line", 6.0, 4.0, [(2.0, 3.95), (4.0, 0.05), (5.95, 2.5)])
 
-    def route(self) -> tuple[tuple[float, float, float], list[Leg]]:
-        return (0.8, 2.0, 0.0), [GoTo((2.9, 2.0)), GoTo((5.0, 2.0))]
+    def tour(self) -> Tour:
+        return Tour((0.8, 2.0, 0.0), (GoTo((2.9, 2.0)), GoTo((5.0, 2.0))), TINY_LIMITS, TINY_INITIAL_SIGMA)
 
 
 class TinyCircleScenario(_TinyScenario):
@@ -460,6 +415,7 @@ class TinyCircleScenario(_TinyScenario):
     def world(self) -> World:
         return _box_world("tiny_circle", 6.0, 6.0, [(0.05, 3.0), (5.95, 3.0), (3.0, 0.05), (3.0, 5.95)])
 
-    def route(self) -> tuple[tuple[float, float, float], list[Leg]]:
+    def tour(self) -> Tour:
         r = self.radius_m
-        return (3.0, 3.0 - r, 0.0), [Arc(length_m=2.0 * math.pi * r, curvature_1pm=1.0 / r)]
+        legs = (Arc(length_m=2.0 * math.pi * r, curvature_1pm=1.0 / r),)
+        return Tour((3.0, 3.0 - r, 0.0), legs, TINY_LIMITS, TINY_INITIAL_SIGMA)

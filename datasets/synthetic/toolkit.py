@@ -1,5 +1,7 @@
 """The synthetic toolkit every scenario builds on: the shared robot's odometry error, the seeded noise streams,
-the drive with an optional kidnap, and the assembly of a motion and a sensor suite into a checked dataset.
+the drive with an optional kidnap, and the assembly of a motion and a sensor suite into a checked dataset; a world
+whose robot drives a tour is built by :func:`tour_dataset` (or, with its own streams or robot, by
+:func:`drive_and_assemble`).
 
 Every scenario's robot is the same H20-like differential drive with the same wheel-odometry error
 (calibrated on the room by :mod:`locbench.datasets.synthetic.odometry_calibration`) and the same execution
@@ -19,7 +21,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -405,11 +407,12 @@ def nominal_sensor_spec(
     matched: bool,
     landmarks: LandmarkSensor | None = None,
     laser: LaserSensor | None = None,
+    fixes: PoseFixSensor | None = None,
     **overrides: Any,
 ) -> SensorSpec:
     """The nominal noise handed to the filters: the shared odometry, the process noise of a matched or default
-    world, and the landmark sensor's and laser's own noise and limits (``overrides`` replace any of them, e.g. a
-    nominal landmark noise other than the true one)."""
+    world, the landmark sensor's and laser's own noise and limits and the fixes' reported sigma (``overrides``
+    replace any of them, e.g. a nominal landmark noise other than the true one)."""
     fields: dict[str, Any] = {**nominal_odometry_spec(), **matched_process_noise(matched)}
     if landmarks is not None:
         fields.update(
@@ -420,5 +423,158 @@ def nominal_sensor_spec(
             landmark_fov_rad=landmarks.fov_rad,
         )
     fields["laser_sigma_m"] = laser.sigma_m if laser is not None else None
+    fields["pose_fix_sigma_xy_m"] = fixes.reported_sigma_xy_m if fixes is not None else None
     fields.update(overrides)
     return SensorSpec(**fields)
+
+
+# --- a tour driven in a world ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Tour:
+    """Where a scenario's robot starts and drives, and when a kidnap happens.
+
+    Attributes
+    ----------
+    start : tuple of float
+        True start pose (x m, y m, theta rad), world frame.
+    legs : tuple of GoTo or Arc
+        The route (:func:`~locbench.datasets.synthetic.robot.simulate_route`).
+    limits : DriveLimits
+        Speeds, accelerations, step and dwells; its wheelbase is replaced by the robot's true one when driven.
+    initial_sigma : tuple of float
+        Standard deviations of the initial belief around the start handed to the filters (m, m, rad).
+    kidnap_fraction : float
+        Time of a kidnap as a fraction of the kidnap-free run (:func:`drive`), when a kidnap distance is given.
+    """
+
+    start: tuple[float, float, float]
+    legs: tuple[Leg, ...]
+    limits: DriveLimits
+    initial_sigma: tuple[float, float, float]
+    kidnap_fraction: float = 0.5
+
+
+class TourParams(Protocol):
+    """The parameters every world that drives a tour with the shared robot has (room, office, line_room)."""
+
+    @property
+    def kidnap_m(self) -> float:
+        """Kidnap distance, m (0 = no kidnap)."""
+
+    @property
+    def kidnap_rad(self) -> float:
+        """Kidnap rotation magnitude, rad (sign drawn at random)."""
+
+    @property
+    def matched(self) -> bool:
+        """Model-matched world (:func:`matched_encoder_model`, :func:`matched_initial_mean`)."""
+
+
+def drive_and_assemble(
+    *,
+    dataset_id: str,
+    params: Any,
+    world: World,
+    tour: Tour,
+    streams: ScenarioStreams,
+    suite: SensorSuite,
+    spec: SensorSpec,
+    wheelbase_m: float,
+    kidnap: tuple[float, float] = (0.0, 0.0),
+    slip: bool = True,
+    resolution_m: float = 0.05,
+    metadata: dict[str, Any] | None = None,
+) -> tuple[Dataset, Motion]:
+    """Drive ``tour`` in ``world`` and turn the motion and ``suite`` into a checked dataset (:func:`assemble`).
+
+    Parameters
+    ----------
+    dataset_id : str
+        The dataset's id.
+    params : dataclass
+        The scenario's parameters, recorded in the dataset.
+    world : World
+    tour : Tour
+    streams : ScenarioStreams
+        The scenario's child streams: ``noise["kidnap"]`` chooses a kidnap, ``execution`` draws the wheel slip,
+        ``initial`` (model-matched worlds) the initial belief's mean.
+    suite : SensorSuite
+        The true odometry error and sensors.
+    spec : SensorSpec
+        The nominal noise handed to the filters.
+    wheelbase_m : float
+        The robot's true wheelbase, m.
+    kidnap : tuple of float
+        Kidnap distance (m, 0 = none) and rotation magnitude (rad), at ``tour.kidnap_fraction`` of the run.
+    slip : bool
+        Execute the commanded twist with the wheel slip of :data:`SLIP_K_TRUE`; False: exactly.
+    resolution_m : float
+        Cell side of the world's occupancy grid, m.
+    metadata : dict or None
+        Entries added to the dataset's metadata.
+
+    Returns
+    -------
+    Dataset
+    Motion
+        The true motion (for events a scenario adds).
+    """
+    limits = dataclasses.replace(tour.limits, wheelbase_m=wheelbase_m)
+    motion = drive(
+        world,
+        tour.start,
+        tour.legs,
+        limits,
+        kidnap[0],
+        kidnap[1],
+        tour.kidnap_fraction,
+        streams.noise["kidnap"],
+        slip_rng=streams.execution if slip else None,
+    )
+    ds = assemble(
+        dataset_id=dataset_id,
+        params=params,
+        world=world,
+        motion=motion,
+        suite=suite,
+        streams=streams.noise,
+        spec=spec,
+        initial_sigma=tour.initial_sigma,
+        resolution_m=resolution_m,
+        metadata=metadata,
+        initial_rng=streams.initial,
+    )
+    return ds, motion
+
+
+def tour_dataset(
+    dataset_id: str,
+    params: TourParams,
+    rng: np.random.Generator,
+    world: World,
+    tour: Tour,
+    *,
+    landmarks: LandmarkSensor | None = None,
+    laser: LaserSensor | None = None,
+    fixes: PoseFixSensor | None = None,
+    resolution_m: float = 0.05,
+) -> Dataset:
+    """The dataset of a world whose shared robot drives ``tour`` with the given sensors: the scenario's streams
+    (:func:`scenario_streams`), the robot of a default or model-matched world (its odometry error, true wheelbase and
+    the filters' nominal noise), the kidnap of ``params``; see :func:`drive_and_assemble` for the rest."""
+    streams = scenario_streams(rng, params.matched)
+    ds, _ = drive_and_assemble(
+        dataset_id=dataset_id,
+        params=params,
+        world=world,
+        tour=tour,
+        streams=streams,
+        suite=SensorSuite(encoder=encoder_model(params.matched), landmarks=landmarks, laser=laser, fixes=fixes),
+        spec=nominal_sensor_spec(params.matched, landmarks=landmarks, laser=laser, fixes=fixes),
+        wheelbase_m=true_wheelbase(params.matched),
+        kidnap=(params.kidnap_m, params.kidnap_rad),
+        resolution_m=resolution_m,
+    )
+    return ds

@@ -502,15 +502,15 @@ def test_make_dataset_runs_the_contract_for_every_dataset(tmp_path: Path) -> Non
 
 
 def test_map_line_extraction_is_bounded_before_allocation(monkeypatch: pytest.MonkeyPatch) -> None:
-    from locbench.datasets.recorded import intel
+    from locbench.datasets.recorded import scan_map
 
     occ = np.zeros((20, 20))
     occ[5, :] = 1.0  # 20 occupied cells x 180 angles = 3600 votes
     grid = OccupancyGrid(occ, 0.05)
-    assert len(intel.extract_map_lines(grid)[0]) == 1
-    monkeypatch.setattr(intel, "MAX_HOUGH_VOTES", 3000)
+    assert len(scan_map.extract_map_lines(grid)[0]) == 1
+    monkeypatch.setattr(scan_map, "MAX_HOUGH_VOTES", 3000)
     with pytest.raises(ConfigError, match=r"map lines: 20 occupied cells x 180 angles = 3600 Hough votes"):
-        intel.extract_map_lines(grid)
+        scan_map.extract_map_lines(grid)
 
 
 # --- issue 26: inputs that were stored as ok (silent wrong results) -----------------------------------------

@@ -1,5 +1,4 @@
-"""The Intel Research Lab dataset: assembly on small written logs, the grid and its lines, the noise derivation,
-every file error, and the shared files."""
+"""The Intel Research Lab dataset: assembly on small written logs, every file error, and the shared files."""
 
 from __future__ import annotations
 
@@ -14,7 +13,6 @@ from numpy.testing import assert_allclose
 
 from locbench.core.events import LaserScan, Odometry
 from locbench.core.geometry import between, compose
-from locbench.datasets.dataset import OccupancyGrid
 from locbench.datasets.recorded.files import MissingDataFile, RecordedDataError
 from locbench.datasets.recorded.intel import (
     ANGLE_INCREMENT_RAD,
@@ -22,9 +20,6 @@ from locbench.datasets.recorded.intel import (
     NO_RETURN_M,
     IntelDataset,
     IntelParams,
-    build_occupancy_grid,
-    derive_odometry_noise,
-    extract_map_lines,
     load_intel,
 )
 
@@ -41,93 +36,6 @@ def box_ranges(pose: np.ndarray, angles: np.ndarray = ANGLES) -> np.ndarray:
         tx = np.where(c > 0, (HALF_X - pose[0]) / c, np.where(c < 0, (-HALF_X - pose[0]) / c, np.inf))
         ty = np.where(s > 0, (HALF_Y - pose[1]) / s, np.where(s < 0, (-HALF_Y - pose[1]) / s, np.inf))
     return np.minimum(tx, ty)
-
-
-# --- the occupancy grid and its lines ------------------------------------------------------------------------
-
-
-def box_grid(resolution: float = 0.05) -> OccupancyGrid:
-    poses = np.array([[0.0, 0.0, h] for h in (0.0, math.pi / 2, math.pi, -math.pi / 2)])
-    ranges = np.stack([box_ranges(p) for p in poses])
-    return build_occupancy_grid(poses, ranges, ANGLES, resolution)
-
-
-def test_grid_of_a_box_room() -> None:
-    g = box_grid()
-    occ = g.cell_centers(np.argwhere(g.occupied()))
-    # every occupied cell lies on a wall (within one cell)
-    d_wall = np.minimum(np.abs(np.abs(occ[:, 0]) - HALF_X), np.abs(np.abs(occ[:, 1]) - HALF_Y))
-    assert occ.shape[0] > 300
-    assert d_wall.max() <= g.resolution
-    # the inside is free, beyond the walls is unknown
-    near = g.world_to_cell(np.array([[0.3, 0.2], [-0.2, -0.3], [0.0, 0.0]]))  # crossed by many beams
-    assert np.all(g.free()[near[:, 0], near[:, 1]])
-    rows, cols = np.indices(g.shape)
-    xy = g.cell_centers(np.stack([rows, cols], axis=-1))
-    interior = (np.abs(xy[..., 0]) < HALF_X - 0.2) & (np.abs(xy[..., 1]) < HALF_Y - 0.2)
-    o = g.occupancy[interior]
-    assert np.mean((o >= 0.0) & (o < 0.5)) > 0.8  # far cells fall between 1 deg beams: unseen, not occupied
-    outside = g.world_to_cell(np.array([[3.5, 0.0], [0.0, -2.6]]))
-    assert np.all(g.occupancy[outside[:, 0], outside[:, 1]] == -1.0)
-
-
-def test_no_return_beams_add_nothing() -> None:
-    pose = np.array([[0.0, 0.0, 0.0]])
-    r = box_ranges(pose[0])[None, :].copy()
-    g1 = build_occupancy_grid(pose, r, ANGLES, 0.05)
-    r[0, 80:100] = NO_RETURN_M
-    g2 = build_occupancy_grid(pose, r, ANGLES, 0.05)
-    w1 = g1.world_to_cell(np.array([HALF_X + 0.01, 0.0]))
-    w2 = g2.world_to_cell(np.array([HALF_X + 0.01, 0.0]))
-    assert g1.occupied()[w1[0], w1[1]]
-    assert g2.occupancy[w2[0], w2[1]] == -1.0  # never observed: the no-return beams neither hit nor cleared
-
-
-def test_lines_of_a_box_room() -> None:
-    lines, stats = extract_map_lines(box_grid())
-    seg = lines.segments
-    assert len(lines) == 4, seg
-    for s in seg:
-        vertical = abs(s[0] - s[2]) < abs(s[1] - s[3])
-        if vertical:  # x = +-3, spanning y in [-2, 2]
-            assert abs(abs(s[0]) - HALF_X) < 0.05 and abs(s[0] - s[2]) < 0.02
-            assert abs(abs(s[1] - s[3]) - 2 * HALF_Y) < 0.15
-        else:
-            assert abs(abs(s[1]) - HALF_Y) < 0.05 and abs(s[1] - s[3]) < 0.02
-            assert abs(abs(s[0] - s[2]) - 2 * HALF_X) < 0.15
-    assert stats["segments"] == 4
-    assert stats["total_length_m"] == pytest.approx(2 * (2 * HALF_X + 2 * HALF_Y), abs=0.6)
-    assert stats["cells_on_lines"] <= stats["occupied_cells"]
-
-
-def test_bad_resolution() -> None:
-    with pytest.raises(ValueError, match="map_resolution_m must be > 0"):
-        build_occupancy_grid(np.zeros((1, 3)), np.ones((1, 180)), ANGLES, 0.0)
-
-
-# --- the odometry noise derivation ------------------------------------------------------------------------------
-
-
-def test_odometry_noise_recovered_from_a_reference() -> None:
-    rng = np.random.default_rng(5)
-    n = 4000
-    d = rng.uniform(0.2, 1.0, n)
-    turn = rng.uniform(-0.8, 0.8, n)
-    true_inc = np.column_stack([d, np.zeros(n), turn])
-    sxy, stm, str_ = 0.05, 0.06, 0.1
-    var_th = stm**2 * d + str_**2 * np.abs(turn)
-    noisy = true_inc + np.column_stack(
-        [rng.normal(0, sxy * np.sqrt(d)), rng.normal(0, sxy * np.sqrt(d)), rng.normal(0, np.sqrt(var_th))]
-    )
-    ref = [np.zeros(3)]
-    odo = [np.zeros(3)]
-    for k in range(n):
-        ref.append(compose(ref[-1], true_inc[k]))
-        odo.append(compose(odo[-1], noisy[k]))
-    got = derive_odometry_noise(np.array(odo), np.array(ref))
-    assert got[0] == pytest.approx(sxy, rel=0.08)
-    assert got[1] == pytest.approx(stm, rel=0.15)
-    assert got[2] == pytest.approx(str_, rel=0.1)
 
 
 # --- assembly on small written logs ----------------------------------------------------------------------------

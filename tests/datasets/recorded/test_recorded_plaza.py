@@ -18,6 +18,7 @@ from locbench.core.geometry import wrap_angle
 from locbench.datasets.recorded import plaza
 from locbench.datasets.recorded.files import MissingDataFile, RecordedDataError
 from locbench.datasets.recorded.plaza import PlazaDataset, PlazaParams, load_plaza, read_plaza_mat
+from locbench.datasets.recorded.reference import heading_from_track
 from locbench.registry import DATASETS, make_dataset
 
 _SKIP = PlazaDataset.data_unavailable()
@@ -101,8 +102,8 @@ def test_odometry_model_reproduces_plaza2_dead_reckoning() -> None:
 def test_truth_heading_is_the_direction_of_travel() -> None:
     a1, a2 = read_plaza_mat(_shared(1)), read_plaza_mat(_shared(2))
     # Plaza1's GT heading column is its odometry heading (good locally); Plaza2's points backwards.
-    d1 = wrap_angle(plaza.heading_from_track(a1.GT[:, 1:3]) - a1.GT[:, 3])
-    d2 = wrap_angle(plaza.heading_from_track(a2.GT[:, 1:3]) - a2.GT[:, 3] - math.pi)
+    d1 = wrap_angle(heading_from_track(a1.GT[:, 1:3], plaza.HEADING_CHORD_M) - a1.GT[:, 3])
+    d2 = wrap_angle(heading_from_track(a2.GT[:, 1:3], plaza.HEADING_CHORD_M) - a2.GT[:, 3] - math.pi)
     assert abs(float(np.median(d1))) < 0.05 and abs(float(np.median(d2))) < 0.05
     assert a1.DRp is not None and np.array_equal(a1.GT[:, 3], a1.DRp[:, 3])
 

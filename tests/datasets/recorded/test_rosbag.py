@@ -473,7 +473,7 @@ def test_navsatfix_becomes_map_frame_position_fixes(folder: Path, synthetic: Dat
 def test_landmark_waypoint_and_event_sidecars(
     bags: Callable[[str], Path], folder: Path, synthetic: Dataset, tmp_path: Path
 ) -> None:
-    from locbench.datasets.recorded.textlog import _event_object
+    from locbench.datasets.recorded.jsonl_events import event_object
 
     lm = synthetic.world.landmarks
     assert lm is not None and synthetic.waypoints is not None
@@ -485,7 +485,7 @@ def test_landmark_waypoint_and_event_sidecars(
         "".join(f"{t + OFFSET_S!r} {x!r} {y!r}\n" for t, (x, y) in zip(wp.t.tolist(), wp.xy.tolist(), strict=True))
     )
     sightings = [e for e in synthetic.events if isinstance(e, LandmarkObservations)]
-    lines = [json.dumps(_event_object(dataclasses.replace(e, t=e.t + OFFSET_S))) for e in sightings]
+    lines = [json.dumps(event_object(dataclasses.replace(e, t=e.t + OFFSET_S))) for e in sightings]
     (tmp_path / "ev.jsonl").write_text("\n".join(lines) + "\n")
     bags_path = bags("ros1")
     side = {"landmarks": str(tmp_path / "lm.txt"), "waypoints": str(tmp_path / "wp.txt")}
