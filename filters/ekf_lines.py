@@ -154,7 +154,7 @@ class LineEKF(Filter):
     consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LaserScan})
     requires: ClassVar[frozenset[MapKind]] = frozenset({MapKind.LINES})
     Config: ClassVar[type[FilterConfig]] = LineEKFConfig
-    version: ClassVar[int] = 2
+    version: ClassVar[int] = 3
     cost_per_data_s: ClassVar[float] = 0.15
     source: ClassVar[str] = "002_f01b2dfd20d46b8b (EKF map-based localization with lines, eq. 1-8)"
 
