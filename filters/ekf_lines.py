@@ -18,7 +18,7 @@ frame (:meth:`locbench.datasets.dataset.LineMap.rho_psi`) seen from the pose (x,
     psi_r = psi_w - theta,
 
 so H = [[-cos psi_w, -sin psi_w, 0], [0, 0, -1]] (checked against finite differences in the tests).
-:func:`_innovation` computes eq. 3-4 for one pair of lines; the association and the update both call it.
+:func:`_expected` (eq. 3) and :func:`_innovation` (eq. 4) serve both the association and the update.
 rho_r may come out negative (the robot on the far side of the line from the world origin); the same line
 is then (-rho_r, psi_r + pi) and the rho row of H changes sign. Which of the two forms is compared with an
 observation is decided by the observation's own psi (the form whose psi is within pi/2 of it), so a line
@@ -348,27 +348,22 @@ def _accept(
 
 
 @njit(cache=True, inline="always")
-def _innovation(
-    z_rho: float,
-    z_psi: float,
-    rho_w: float,
-    psi_w: float,
-    cos_w: float,
-    sin_w: float,
-    x: float,
-    y: float,
-    th: float,
-    sign: float,
+def _expected(
+    rho_w: float, psi_w: float, cos_w: float, sin_w: float, x: float, y: float, th: float
 ) -> tuple[float, float]:
-    """v = z - h(x) of an observed line z = (rho m, psi rad) against a map line, report 002 eq. 3-4.
+    """h(x) of report 002 eq. 3: the map line (rho_w m, psi_w rad) seen from the pose (x m, y m, th rad), as
+    (rho_r, psi_r) = (rho_w - (x cos psi_w + y sin psi_w), psi_w - th wrapped to (-pi, pi]); ``cos_w``, ``sin_w``
+    are cos psi_w and sin psi_w. rho_r < 0 when the robot and the world origin lie on opposite sides of the line,
+    which is then also (-rho_r, psi_r + pi)."""
+    return rho_w - (x * cos_w + y * sin_w), _wrap(psi_w - th)
 
-    h is eq. 3 at the pose (x m, y m, th rad): rho_r = rho_w - (x cos psi_w + y sin psi_w), psi_r = psi_w - th
-    wrapped, in the form ``sign`` (+1: (rho_r, psi_r); -1: the same line as (-rho_r, psi_r + pi)). ``cos_w``,
-    ``sin_w`` are cos psi_w and sin psi_w. Returns (v_rho m, v_psi rad wrapped to (-pi, pi]).
-    """
-    rho_p = rho_w - (x * cos_w + y * sin_w)
-    h_psi = _wrap(psi_w - th) + (math.pi if sign < 0 else 0.0)
-    return z_rho - sign * rho_p, _wrap(z_psi - h_psi)
+
+@njit(cache=True, inline="always")
+def _innovation(z_rho: float, z_psi: float, rho_r: float, psi_r: float, sign: float) -> tuple[float, float]:
+    """v = z - h(x) of report 002 eq. 4 for an observed line z = (rho m, psi rad) and the expected line
+    (rho_r, psi_r) of :func:`_expected` in the form ``sign`` (+1: (rho_r, psi_r); -1: (-rho_r, psi_r + pi));
+    (v_rho m, v_psi rad wrapped to (-pi, pi])."""
+    return z_rho - sign * rho_r, _wrap(z_psi - (psi_r + (math.pi if sign < 0 else 0.0)))
 
 
 @njit(cache=True)
@@ -409,7 +404,7 @@ def _stack(
     H : ndarray, shape (2k, 3)
         Per line [[-sign cos psi_w, -sign sin psi_w, 0], [0, 0, -1]].
     v : ndarray, shape (2k,)
-        Per line :func:`_innovation`.
+        Per line :func:`_innovation` of :func:`_expected`.
     R : ndarray, shape (2k, 2k)
         Block diagonal, per line its fit covariance plus R0.
     """
@@ -425,7 +420,8 @@ def _stack(
         H[2 * r, 0] = -sg * math.cos(pw)
         H[2 * r, 1] = -sg * math.sin(pw)
         H[2 * r + 1, 2] = -1.0
-        v[2 * r], v[2 * r + 1] = _innovation(z[j, 0], z[j, 1], rho_w[i], pw, cos_w[i], sin_w[i], px, py, pth, sg)
+        rho_r, psi_r = _expected(rho_w[i], pw, cos_w[i], sin_w[i], px, py, pth)
+        v[2 * r], v[2 * r + 1] = _innovation(z[j, 0], z[j, 1], rho_r, psi_r, sg)
         for a in range(2):
             for b in range(2):
                 R[2 * r + a, 2 * r + b] = cov[j, a, b] + R0[a, b]
@@ -449,10 +445,10 @@ def _nearest_lines(
     """The association of report 002 eq. 3-5: each observed line's nearest map line in Mahalanobis distance.
 
     For every observed line z_j (``z`` (k, 2), fit covariance ``cov`` (k, 2, 2)) and map line i, the form is
-    chosen by z_j's own psi (flipped, sign -1, when psi_r is more than pi/2 from it), v = :func:`_innovation`,
-    S = H P H^T + cov_j + R0 with H of :func:`_stack`, and d2 = v^T S^-1 v (inf where S is not positive
-    definite). Returns per observed line the map line of least d2 (the first of equal ones; the first NaN, as
-    from a non-finite state, when there is one), the sign of its form and that d2.
+    chosen by z_j's own psi (flipped, sign -1, when psi_r of :func:`_expected` is more than pi/2 from it),
+    v = :func:`_innovation`, S = H P H^T + cov_j + R0 with H of :func:`_stack`, and d2 = v^T S^-1 v (inf where S
+    is not positive definite). Returns per observed line the map line of least d2 (the first of equal ones; the
+    first NaN, as from a non-finite state, when there is one), the sign of its form and that d2.
     """
     k = z.shape[0]
     n = rho_w.shape[0]
@@ -470,8 +466,9 @@ def _nearest_lines(
         for i in range(n):
             c = cos_w[i]
             s = sin_w[i]
-            sg = -1.0 if abs(_wrap(z[j, 1] - _wrap(psi_w[i] - th))) > half_pi else 1.0
-            v_rho, v_psi = _innovation(z[j, 0], z[j, 1], rho_w[i], psi_w[i], c, s, x, y, th, sg)
+            rho_r, psi_r = _expected(rho_w[i], psi_w[i], c, s, x, y, th)
+            sg = -1.0 if abs(_wrap(z[j, 1] - psi_r)) > half_pi else 1.0
+            v_rho, v_psi = _innovation(z[j, 0], z[j, 1], rho_r, psi_r, sg)
             s00 = c * c * p00 + 2.0 * c * s * p01 + s * s * p11 + r00
             s01 = sg * (c * p02 + s * p12) + r01
             det = s00 * s11 - s01 * s01
