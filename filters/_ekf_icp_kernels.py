@@ -1,20 +1,19 @@
-"""Compiled per-event arithmetic of :class:`~locbench.filters.ekf_icp.IcpEKF` outside its ICP loop (issue 24).
+"""The compiled per-event arithmetic of :class:`~locbench.filters.ekf_icp.IcpEKF` around its ICP loop: the
+filter's one implementation of its prediction, its clouds and rejection distances, and its correction.
 
 Around the compiled ICP loop (:func:`locbench.filters._icp._icp_loop`) the filter's work per event is a few
-3 x 3 products, an inverse and the two clouds' points; as numpy calls each costs its dispatch (1-5 us), more
-than the arithmetic. These kernels write them out as scalar expressions:
+3 x 3 products, an inverse and the two clouds' points, written out here as scalar expressions (as numpy calls
+each would cost its dispatch, 1-5 us, more than the arithmetic):
 
 - :func:`predict_pose`: the odometry prediction (report 000 eq. 11-13), F P F^T + Q with F's structure;
 - :func:`scan_clouds`: the usable beams' points of the real and the ray-cast scan, the mean range and the
   rejection distances D_0, D_min of :mod:`locbench.filters.ekf_icp` (the largest eigenvalue of P's position
-  block in closed form);
-- :func:`correct_pose`: the H = I Joseph correction (eq. 15-18, :func:`locbench.filters._kalman.joseph_correct_pose`)
-  with the 3 x 3 inverse by cofactors.
+  block in closed form, :func:`max_eig_2x2`; the mean range summed pairwise,
+  :func:`locbench.core.pairwise.pairwise_sum`);
+- :func:`correct_pose`: the H = I correction in the Joseph form (eq. 14-18) with the 3 x 3 inverse by cofactors.
 
-The mean of the prediction, the points and the mean range are numpy's operations in numpy's order (the same
-bits; the mean range sums in numpy's pairwise order). The covariance products, the inverse and the eigenvalue
-round differently from OpenBLAS's kernels (which fuse multiply-adds) and LAPACK, so the covariances differ
-from the numpy formulas at rounding level (``IcpEKF.version`` 4).
+numba compiles IEEE double operations in source order, without fused multiply-adds unless ``fastmath`` is asked
+for; the tests compare these kernels with numpy forms of the same equations within stated tolerances.
 
 The state lives in one float buffer ``s`` (numba unboxes every array argument on each call): the mean
 (x m, y m, theta rad) in ``s[0:3]``, the covariance row-major in ``s[3:12]`` and the constants from
@@ -99,12 +98,6 @@ def max_eig_2x2(a: float, b: float, c: float) -> float:
 
 
 @njit(cache=True)
-def largest_position_eigenvalue(s: FloatArray) -> float:
-    """:func:`max_eig_2x2` of the covariance's position block (``np.linalg.eigvalsh(P[0:2, 0:2])[-1]``)."""
-    return max_eig_2x2(s[3], s[4], s[7])
-
-
-@njit(cache=True)
 def scan_clouds(
     s: FloatArray,
     real: FloatArray,
@@ -119,10 +112,11 @@ def scan_clouds(
 
     The usable real beams (finite, within [range_min, range_max]) become ``src[:n_real]`` and the usable
     ray-cast beams (finite, at least range_min) ``dst[:n_pred]``, robot-frame points in beam order
-    (sx + r cos a, sy + r sin a with the beams' directions ``cos_a``, ``sin_a``); ``sensor`` is (sx, sy,
-    range_min, range_max). Returns (n_real, n_pred, D_0, D_min) with the module docstring's D_0 (from the
-    mean real range, numpy's pairwise sum, and the largest eigenvalue of P's position block) and D_min
-    (both NaN when either cloud has fewer than ``MIN_PAIRS`` points).
+    (sx + r cos a, sy + r sin a with the beams' directions ``cos_a``, ``sin_a`` in the robot frame); ``sensor``
+    is (sx m, sy m, range_min m, range_max m). Returns (n_real, n_pred, D_0 m, D_min m) with D_min =
+    k sqrt(pair variance) and D_0 = min(k sqrt(pair variance + lambda_max(P_xy) + r_mean^2 P_thth), cap), at
+    least D_min (:mod:`locbench.filters.ekf_icp`; r_mean the mean of the usable real ranges, summed pairwise),
+    both NaN when either cloud has fewer than ``MIN_PAIRS`` points.
     """
     sx, sy, rmin, rmax = sensor
     n = real.shape[0]

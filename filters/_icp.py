@@ -1,12 +1,14 @@
-"""Point-to-point ICP for 2-D scans (the scan matcher of the EKF-ICP filter, report 000 sec. III-A.2).
+"""Point-to-point ICP for 2-D scans (the scan matcher of the EKF-ICP filter, report 000 sec. III-A.2, whose
+transform gives the observation of eq. 2-3).
 
 Classic ICP (Besl & McKay 1992): exact nearest neighbours within the rejection distance from a uniform
 grid of buckets built once on the fixed target cloud (cells of a quarter of the initial rejection distance,
 searched in rings around the query until no nearer point can remain; a kd-tree gives the same neighbours,
 ties going to the lower index), and the closed-form 2-D rigid alignment of the matched pairs (the 2-D case
 of Arun, Huang & Blostein 1987: rotation from the cross-covariance of the centred pairs, then the
-translation). The whole loop is one compiled (numba) function: for a few hundred points per scan the
-per-call overhead of a kd-tree query and of numpy's small reductions dominated the interpreted loop.
+translation). The whole loop is one compiled (numba) function, :func:`_icp_loop`: for a few hundred points
+per scan the per-call overhead of a kd-tree query and of numpy's small reductions would dominate an interpreted
+loop.
 
 Correspondence rejection follows Zhang ("Iterative point matching for registration of free-form curves
 and surfaces", IJCV 1994): a pair is kept when its distance is below D, where D starts at the caller's
@@ -75,7 +77,25 @@ class IcpResult:
 def _rigid_transform(
     src: FloatArray, dst: FloatArray, si: IntArray, di: IntArray, n: int
 ) -> tuple[float, float, float]:
-    """Least-squares rigid transform (tx, ty, theta) with dst[di[k]] ~= R src[si[k]] + t over the first n pairs."""
+    """The least-squares rigid transform of n paired points (the 2-D case of Arun, Huang & Blostein 1987).
+
+    Over the pairs (src[si[k]], dst[di[k]]), k < n, with a and b the points less their centroids, theta =
+    atan2(sum a x b, sum a . b) maximises sum b . R(theta) a, and t = mean(dst) - R(theta) mean(src).
+
+    Parameters
+    ----------
+    src, dst : ndarray, shape (., 2)
+        The two clouds, one common frame, m.
+    si, di : ndarray of int64
+        The pairs' indices into them; the first ``n`` are used (n >= 1).
+    n : int
+        Number of pairs.
+
+    Returns
+    -------
+    tuple of float
+        (tx m, ty m, theta rad) with dst[di[k]] ~= R(theta) src[si[k]] + t.
+    """
     msx = 0.0
     msy = 0.0
     mdx = 0.0
@@ -105,7 +125,8 @@ def _rigid_transform(
 
 
 def rigid_transform_2d(src: FloatArray, dst: FloatArray) -> tuple[float, float, float]:
-    """Least-squares rigid transform (tx, ty, theta) with dst ~= R src + t, for paired (n, 2) points (n >= 2)."""
+    """Least-squares rigid transform (tx m, ty m, theta rad) with dst ~= R(theta) src + t, for paired (n, 2)
+    points (n >= 2) in one frame (:func:`_rigid_transform` over all of them)."""
     a = np.ascontiguousarray(src, dtype=np.float64)
     b = np.ascontiguousarray(dst, dtype=np.float64)
     idx = np.arange(a.shape[0], dtype=np.int64)
@@ -224,8 +245,27 @@ def _associate(
 def _icp_loop(
     src: FloatArray, dst: FloatArray, gates: tuple[float, float], max_iterations: int, eps: float, T0: Transform
 ) -> tuple[float, float, float, bool, int, int, float, float]:
-    """The iterations of :func:`icp_2d` from the transform T0 with the rejection distances gates = (D_0, D_min);
-    returns (tx, ty, theta, converged, iterations, matched, rmse, gate)."""
+    """The iterations of :func:`icp_2d` (module docstring).
+
+    Parameters
+    ----------
+    src, dst : ndarray, shape (n, 2) and (m, 2), C-contiguous
+        Source and target points, one frame, m; n, m >= ``MIN_PAIRS``.
+    gates : tuple of float
+        (D_0, D_min): the initial rejection distance and the floor of Zhang's adaptive one, m.
+    max_iterations : int
+        Iteration cap (>= 1).
+    eps : float
+        PCL's transformation epsilon (m^2 for the translation, 1 - cos for the rotation).
+    T0 : tuple of float
+        Starting transform (tx m, ty m, theta rad).
+
+    Returns
+    -------
+    tuple
+        (tx, ty, theta, converged, iterations, matched, rmse m, final rejection distance m), the fields of
+        :class:`IcpResult`.
+    """
     gate0, d_min = gates
     tx, ty, th = T0
     n = src.shape[0]
@@ -264,6 +304,22 @@ def _icp_loop(
         sq += dk[k] * dk[k]
     rmse = math.sqrt(sq / m) if m else math.nan
     return tx, ty, th, converged, it, m, rmse, gate
+
+
+def align(
+    src: FloatArray,
+    dst: FloatArray,
+    gates: tuple[float, float],
+    max_iterations: int,
+    transformation_epsilon: float,
+    initial: Transform = (0.0, 0.0, 0.0),
+) -> IcpResult:
+    """:func:`icp_2d` on clouds the caller has checked: C-contiguous float64 (n, 2) and (m, 2) arrays of at least
+    ``MIN_PAIRS`` points, 0 < D_min <= D_0 = ``gates`` (m), ``max_iterations`` >= 1."""
+    tx, ty, th, converged, it, matched, rmse, gate = _icp_loop(
+        src, dst, gates, max_iterations, transformation_epsilon, initial
+    )
+    return IcpResult((tx, ty, th), bool(converged), int(it), int(matched), float(rmse), float(gate))
 
 
 def icp_2d(
@@ -310,7 +366,4 @@ def icp_2d(
     gate = float(max_correspondence_m)
     if src.shape[0] < MIN_PAIRS or dst.shape[0] < MIN_PAIRS:
         return IcpResult(T, False, 0, 0, math.nan, gate)
-    tx, ty, th, converged, it, matched, rmse, gate = _icp_loop(
-        src, dst, (gate, float(min_correspondence_m)), int(max_iterations), float(transformation_epsilon), T
-    )
-    return IcpResult((tx, ty, th), bool(converged), int(it), int(matched), float(rmse), float(gate))
+    return align(src, dst, (gate, float(min_correspondence_m)), int(max_iterations), float(transformation_epsilon), T)

@@ -18,8 +18,8 @@ Steps
 5. **Fit.** Each segment with at least ``min_points`` points and ``min_length_m`` length is fitted by total
    least squares (orthogonal regression) and gets the first-order covariance of that fit.
 
-Steps 2-5 run as one compiled (numba) function over a scan's points; the end points and lengths are then
-formed for all segments at once with numpy.
+Every step runs compiled (numba): the points (:func:`_scan_points`), steps 2-5 as one function over a scan's
+points (:func:`_segments`), and the end points and lengths of the segments kept (:func:`_assemble`).
 
 Line parameters: a line is {p : p . (cos psi, sin psi) = rho} in the robot frame with ``rho`` >= 0 (m) and
 ``psi`` in (-pi, pi] (rad), the convention of :meth:`locbench.datasets.dataset.LineMap.rho_psi`. For a line
@@ -158,8 +158,27 @@ def _scan_points(
     sy: float,
     sth: float,
 ) -> tuple[FloatArray, FloatArray, npt.NDArray[np.int64]]:
-    """:func:`scan_points` in one pass: the numpy form's operations per beam in its order, so the same bits
-    (angle_min + increment * beam + heading left to right; libm's cos and sin, which numpy's equal here, tested).
+    """Step 1: the valid returns of a scan as robot-frame points, in beam order.
+
+    Parameters
+    ----------
+    r : ndarray, shape (n,)
+        Ranges, m (``inf`` or NaN: no return).
+    range_min, range_max : float
+        A return is valid when finite and in [range_min, range_max), m.
+    angle_min, angle_increment : float
+        Bearing of beam i in the sensor frame: angle_min + angle_increment i, rad.
+    sx, sy, sth : float
+        The sensor's mounting pose in the robot frame (m, m, rad).
+
+    Returns
+    -------
+    points : ndarray, shape (m, 2)
+        (sx + r cos a, sy + r sin a) with a = angle_min + angle_increment i + sth, m.
+    ranges : ndarray, shape (m,)
+        The valid ranges, m.
+    beam : ndarray of int64, shape (m,)
+        Their beam indices.
     """
     n = r.shape[0]
     count = 0
@@ -184,7 +203,18 @@ def _scan_points(
 
 @njit(cache=True)
 def _fit_core(xs: FloatArray, ys: FloatArray, var: float) -> tuple[float, float, float, float, float, float]:
-    """Total least squares on points (xs, ys); (rho, psi, var rho, cov rho psi, var psi, max residual)."""
+    """Total least squares (orthogonal regression) on the points (xs, ys), m, n >= 2.
+
+    The normal n(psi) is the direction of least spread about the centroid c (psi = atan2(-2 S_xy, S_yy - S_xx) / 2
+    from the centred second moments), rho = c . n made >= 0 by flipping the normal; the covariance is the module
+    docstring's first-order one for an error of variance ``var`` (m^2) across the line at each point.
+
+    Returns
+    -------
+    tuple of float
+        (rho m, psi rad in (-pi, pi], var(rho) m^2, cov(rho, psi) m rad, var(psi) rad^2, the largest distance of
+        a point from the line m).
+    """
     n = xs.shape[0]
     cx = 0.0
     cy = 0.0
@@ -247,7 +277,12 @@ def fit_line(points: FloatArray, sigma_m: float) -> tuple[float, float, FloatArr
 
 @njit(cache=True)
 def _split_core(xs: FloatArray, ys: FloatArray, lo: int, hi: int, thr: float) -> npt.NDArray[np.int64]:
-    """Iterative end-point fit on points[lo:hi]; (k, 2) index ranges of the pieces, sorted."""
+    """Step 3, iterative end-point fit (Ramer-Douglas-Peucker) on the points [lo, hi) of one run.
+
+    A piece is split at the point farthest from the chord through its ends while that distance exceeds ``thr``
+    (m); the farthest point ends the first piece and starts the second. Returns the pieces' index ranges
+    [a, b), shape (k, 2), sorted.
+    """
     stack = [(lo, hi)]
     pieces = []
     while len(stack) > 0:
@@ -400,53 +435,51 @@ def extract_lines(scan: LaserScan, params: ExtractionParams | None = None) -> Ex
     )
     if ranges.shape[0] == 0:
         return empty
-    t, ends_xy = _segment_ends(xs, ys, ranges, fits)
-    # their coordinates along the line (one small product per segment, as over the whole segment, to the bit):
-    # numpy's stacked matmul rounds unlike a written-out dot (tested), so it stays
-    s = np.matmul(ends_xy, t[:, :, None])[:, :, 0]
-    n_keep, rho_psi, cov, endpoints, lengths, n_points = _assemble(fits, ranges, s, t, prm.min_length_m)
+    n_keep, rho_psi, cov, endpoints, lengths, n_points = _assemble(xs, ys, ranges, fits, prm.min_length_m)
     if n_keep == 0:
         return empty
     return ExtractedLines(rho_psi=rho_psi, cov=cov, endpoints=endpoints, lengths=lengths, n_points=n_points)
 
 
 @njit(cache=True)
-def _segment_ends(
-    xs: FloatArray, ys: FloatArray, ranges: npt.NDArray[np.int64], fits: FloatArray
-) -> tuple[FloatArray, FloatArray]:
-    """Each segment's direction t = (-sin psi, cos psi) (k, 2) and its first and last point (k, 2, 2).
-
-    What the numpy form computed with a list of math.sin/cos and fancy indexing; libm's sin and cos, element by
-    element, so the same bits.
-    """
-    k = ranges.shape[0]
-    t = np.empty((k, 2))
-    ends = np.empty((k, 2, 2))
-    for j in range(k):
-        p = fits[j, 1]
-        t[j, 0] = -math.sin(p)
-        t[j, 1] = math.cos(p)
-        a = ranges[j, 0]
-        b = ranges[j, 1] - 1
-        ends[j, 0, 0], ends[j, 0, 1] = xs[a], ys[a]
-        ends[j, 1, 0], ends[j, 1, 1] = xs[b], ys[b]
-    return t, ends
-
-
-@njit(cache=True)
 def _assemble(
-    fits: FloatArray, ranges: npt.NDArray[np.int64], s: FloatArray, t: FloatArray, min_length: float
+    xs: FloatArray, ys: FloatArray, ranges: npt.NDArray[np.int64], fits: FloatArray, min_length: float
 ) -> tuple[int, FloatArray, FloatArray, FloatArray, FloatArray, npt.NDArray[np.int64]]:
-    """The segments kept by the length check (NaN lengths kept, as ``~(lengths < min)``), as the arrays of
-    :class:`ExtractedLines`: (count, rho_psi, cov, endpoints, lengths, n_points).
+    """The fitted segments at least ``min_length`` long (m; a NaN length is kept), as the arrays of
+    :class:`ExtractedLines`.
 
-    Element for element the numpy form's operations (|s1 - s0|; rho n + s t with n = (cos psi, sin psi)).
+    A segment's end points are its first and last point projected on its line: with n = (cos psi, sin psi) and
+    t = (-sin psi, cos psi), the point p becomes rho n + s t with s = p . t; its length is |s_last - s_first|.
+
+    Parameters
+    ----------
+    xs, ys : ndarray, shape (m,)
+        The scan's points, robot frame, m.
+    ranges : ndarray of int64, shape (k, 2)
+        Each segment's points [lo, hi).
+    fits : ndarray, shape (k, 5)
+        Each segment's (rho, psi, var rho, cov rho psi, var psi) from :func:`_fit_core`.
+    min_length : float
+        Shortest segment kept, m.
+
+    Returns
+    -------
+    tuple
+        (count kept, rho_psi (c, 2), cov (c, 2, 2), endpoints (c, 2, 2), lengths (c,), n_points (c,)).
     """
     k = ranges.shape[0]
+    s = np.empty((k, 2))
+    keep = np.empty(k, dtype=np.bool_)
     n_keep = 0
     for j in range(k):
-        if not abs(s[j, 1] - s[j, 0]) < min_length:
-            n_keep += 1
+        t0 = -math.sin(fits[j, 1])
+        t1 = math.cos(fits[j, 1])
+        a = ranges[j, 0]
+        b = ranges[j, 1] - 1
+        s[j, 0] = xs[a] * t0 + ys[a] * t1
+        s[j, 1] = xs[b] * t0 + ys[b] * t1
+        keep[j] = not abs(s[j, 1] - s[j, 0]) < min_length
+        n_keep += keep[j]
     rho_psi = np.empty((n_keep, 2))
     cov = np.empty((n_keep, 2, 2))
     endpoints = np.empty((n_keep, 2, 2))
@@ -454,19 +487,20 @@ def _assemble(
     n_points = np.empty(n_keep, dtype=np.int64)
     q = 0
     for j in range(k):
-        length = abs(s[j, 1] - s[j, 0])
-        if length < min_length:
+        if not keep[j]:
             continue
         rho = fits[j, 0]
         psi = fits[j, 1]
         n0 = math.cos(psi)
         n1 = math.sin(psi)
+        t0 = -n1
+        t1 = n0
         rho_psi[q, 0], rho_psi[q, 1] = rho, psi
         cov[q, 0, 0], cov[q, 0, 1], cov[q, 1, 0], cov[q, 1, 1] = fits[j, 2], fits[j, 3], fits[j, 3], fits[j, 4]
         for e in range(2):
-            endpoints[q, e, 0] = rho * n0 + s[j, e] * t[j, 0]
-            endpoints[q, e, 1] = rho * n1 + s[j, e] * t[j, 1]
-        lengths[q] = length
+            endpoints[q, e, 0] = rho * n0 + s[j, e] * t0
+            endpoints[q, e, 1] = rho * n1 + s[j, e] * t1
+        lengths[q] = abs(s[j, 1] - s[j, 0])
         n_points[q] = ranges[j, 1] - ranges[j, 0]
         q += 1
     return n_keep, rho_psi, cov, endpoints, lengths, n_points

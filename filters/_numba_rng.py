@@ -1,10 +1,11 @@
 """A run's ``numpy.random.Generator`` handed to numba kernels by its addresses, without per-call typing.
 
 numba accepts a ``numpy.random.Generator`` argument and draws from the generator's own state, so a
-kernel's draws continue the run's stream exactly as numpy's methods would. Unboxing that argument,
-however, looks up the bit generator's ``ctypes`` interface and casts its three function pointers through
-``ctypes.cast`` on every call: about 7.6 us against 0.2 us for a kernel without it (issue 24), a tenth of a
-particle filter's predict at 1000 particles.
+kernel's draws continue the run's stream: the raw words a kernel consumes are the ones numpy's methods would
+consume next, and the state after them is the one numpy's draws would leave (numba's distribution code is a
+port of numpy's, the values equal to within an ulp). Unboxing that argument, however, looks up the bit
+generator's ``ctypes`` interface and casts its three function pointers through ``ctypes.cast`` on every call:
+about 7.6 us against 0.2 us for a kernel without it, a tenth of a particle filter's predict at 1000 particles.
 
 :func:`generator_addresses` reads those addresses once per generator (the state lives as long as the
 Python object, which the caller keeps), and :func:`generator_from` rebuilds numba's generator value from

@@ -24,8 +24,8 @@ Matching
     (the filter's default) only entries inside a chi-square validation region around the predicted pose
     are kept: a room with symmetries (a rectangle seen at 8 bearings looks the same turned by 180 deg)
     otherwise matches poses far from the robot equally well. The region is applied first and only the
-    entries inside it are scored (a compiled loop that returns the matches directly), so a gated match
-    costs in proportion to the region, not to the database.
+    entries inside it are scored (one compiled loop, :func:`_matches`, that returns the matches), so a gated
+    match costs in proportion to the region, not to the database.
 
 Pose measurement and its covariance
     With d_i the scores of the n matches and weights w_i = 1 - d_i / tolerance (a triangular kernel: the
@@ -59,7 +59,7 @@ from scipy import ndimage
 
 from locbench.core.errors import ConfigError
 from locbench.core.events import LaserScan
-from locbench.core.geometry import TWO_PI, wrap_angle, wrap_scalar
+from locbench.core.geometry import wrap_angle, wrap_scalar
 from locbench.core.limits import DATABASE_BYTES_PER_RAY, SCAN_DATABASE_BYTES_PER_CELL, check_bytes, grid_cells
 from locbench.datasets.dataset import OccupancyGrid
 from locbench.raycast.cast import cast_rays
@@ -75,9 +75,14 @@ N_BEARINGS = 8
 BEARING_STEP_RAD = 2.0 * math.pi / N_BEARINGS
 
 
-#: Relative slack of the compiled gate pre-test: an entry the exact numpy gate of :func:`match_scan` keeps must
-#: never be dropped by the compiled test's different rounding.
+#: Relative slack of the position pre-test of :func:`_matches`: a bound on the entries' distances, computed in
+#: another order than each entry's own, must never drop an entry the entry's test keeps.
 _GATE_SLACK = 1e-9
+
+#: :func:`locbench.core.geometry.wrap_scalar` compiled (an angle to (-pi, pi]), for the kernels below. numba's
+#: on-disk cache of a kernel is keyed on this module's source alone: after editing ``wrap_scalar``, delete the
+#: ``*.nbi`` / ``*.nbc`` files under ``filters/__pycache__``.
+_wrap = njit(cache=True, inline="always")(wrap_scalar)
 
 
 @njit(cache=True)
@@ -94,19 +99,50 @@ def _matches(
     gate: float,
     heading_step: float,
 ) -> tuple[IntArray, IntArray, FloatArray]:
-    """The entries (i, h) whose score, the mean |min(db[i, (h + o_b) mod M], cap) - r_b| over b, is at most
-    ``tol``, in row-major order, and their scores.
+    """The database entries that match a scan: within the tolerance and, with ``gated``, inside the validation
+    region (module docstring, report 004's tolerance matching).
 
-    With ``gated``, an entry is scored only when it may lie inside the validation region
-    e^T info e <= gate, e = (x_i - cx, y_i - cy, wrap(h * heading_step - ctheta)): a position is skipped when
-    its (x, y) alone is outside (the smallest value over the heading is the Mahalanobis distance under the
-    (x, y) block of the covariance, whose inverse is the Schur complement of ``info``), then each heading is
-    tested. Both tests carry a relative slack of ``_GATE_SLACK``; the caller applies the exact gate.
+    The score of entry (i, h) is the mean over the k bearings b of |min(db[i, (h + o_b) mod M], cap) - r_b|, m.
+    With ``gated`` an entry is scored only when inside the region e^T info e <= gate, e = (x_i - cx, y_i - cy,
+    wrap(h heading_step - ctheta)); a position is skipped first when its (x, y) alone is outside (the least
+    distance over the heading is the Mahalanobis distance under the (x, y) block of the covariance, whose
+    inverse is the Schur complement of ``info``; with a relative slack of ``_GATE_SLACK``, as a bound).
+
+    Parameters
+    ----------
+    db : ndarray, shape (N, M)
+        Ranges of the N positions in the M world directions, m.
+    offsets : ndarray of int64, shape (k,)
+        Column offsets o_b of the scan's bearings.
+    r : ndarray, shape (k,)
+        The scan's ranges at its bearings, capped, m.
+    tol : float
+        Largest score of a match, m.
+    cap : float
+        Range cap, m.
+    positions : ndarray, shape (N, 2)
+        The positions, world frame, m.
+    gated : bool
+        Whether the validation region applies.
+    centre : ndarray, shape (3,)
+        Its centre (x m, y m, theta rad).
+    info : ndarray, shape (3, 3)
+        The inverse of its covariance.
+    gate : float
+        Its squared Mahalanobis radius.
+    heading_step : float
+        The database's heading spacing, rad.
+
+    Returns
+    -------
+    tuple of ndarray
+        The matched entries' positions i and headings h (int64), in row-major order, and their scores (m).
     """
+    # long: one compiled pass over positions and headings (pre-test, gate, score, growing output); numpydoc
     n, m = db.shape
     k = offsets.shape[0]
     limit = tol * k
-    g = gate * (1.0 + _GATE_SLACK)
+    g = gate * (1.0 + _GATE_SLACK)  # the position pre-test's bound
     # inverse of the (x, y) covariance block: info_xy - info_xt info_tt^-1 info_tx (Schur complement)
     a = info[0, 0] - info[0, 2] * info[2, 0] / info[2, 2]
     b = info[0, 1] - info[0, 2] * info[2, 1] / info[2, 2]
@@ -116,7 +152,6 @@ def _matches(
     out_h = np.empty(size, dtype=np.int64)
     out_s = np.empty(size)
     count = 0
-    two_pi = 2.0 * math.pi
     for i in range(n):
         dx = positions[i, 0] - centre[0]
         dy = positions[i, 1] - centre[1]
@@ -124,15 +159,14 @@ def _matches(
             continue
         for h in range(m):
             if gated:
-                dt = h * heading_step - centre[2]
-                dt = math.pi - ((math.pi - dt) % two_pi)
+                dt = _wrap(h * heading_step - centre[2])
                 d2 = (
                     info[0, 0] * dx * dx
                     + info[1, 1] * dy * dy
                     + info[2, 2] * dt * dt
                     + 2.0 * (info[0, 1] * dx * dy + info[0, 2] * dx * dt + info[1, 2] * dy * dt)
                 )
-                if d2 > g:
+                if not d2 <= gate:
                     continue
             s = 0.0
             for q in range(k):
@@ -430,8 +464,8 @@ def match_scan(
     hs = db.heading_step_rad
     quant = db.quantisation
     gated = prior is not None and math.isfinite(gate)
-    # Gate first, then score only the entries inside the validation region (the database is tens of
-    # thousands of entries, the region a few dozen).
+    # gate first, then score only the entries inside the validation region (the database is tens of thousands
+    # of entries, the region a few dozen)
     info = _NO_INFO
     if prior is not None and gated:
         info = np.asarray(np.linalg.inv(prior[1] + quant), dtype=np.float64)
@@ -449,21 +483,16 @@ def match_scan(
         float(gate) if gated else 0.0,
         hs,
     )
-    if gated and ii.size:
-        # the exact gate (the compiled pre-test only has to keep everything this keeps); the product and einsum
-        # stay numpy calls (BLAS rounds a 3-term row unlike a written-out sum), the rest is compiled elementwise
-        e = _gate_offsets(db.positions, ii, hh, hs, centre)
-        inside = np.einsum("ij,ij->i", e @ info, e) <= gate
-        ii, hh, d = _keep(ii, hh, d, inside)
     if ii.size == 0:
         return None, k
+    # the pose measurement: triangular weights, their weighted mean pose and scatter (module docstring); the
+    # sums over the matches are numpy's (np.sum and BLAS products), the elementwise steps compiled
     best, w, xy, th = _weights(ii, hh, d, db.positions, hs, float(tolerance_m))
-    sw = np.sum(w)  # numpy's pairwise order; one sum serves the test and the division (the same value)
+    sw = np.sum(w)
     if not sw > 0:
         w = np.ones_like(d)
         sw = np.sum(w)
     w, dth = _normalised(w, sw, th, best)
-    # the three weighted means are BLAS dots (a strided one for the columns of xy), as before
     z = np.array([w @ xy[:, 0], w @ xy[:, 1], wrap_scalar(float(th[best] + w @ dth))])
     dev, wdev = _deviations(xy, th, w, z[0], z[1], z[2])
     cov = wdev.T @ dev + quant
@@ -471,54 +500,36 @@ def match_scan(
     return ScanMatch(z=z, cov=cov, n_matches=int(ii.size), best_score_m=float(d[best]), n_bearings=k), k
 
 
-# The ungated call's unused region (read only by the compiled pre-test when gated).
+# The ungated call's unused region (read by :func:`_matches` only when gated).
 _NO_INFO = np.eye(3)
 _NO_CENTRE = np.zeros(3)
-
-
-@njit(cache=True)
-def _wrap(a: float) -> float:
-    # geometry.wrap_angle's pi - mod(pi - a, 2 pi); numba's float % has Python's (and numpy's) sign rule
-    return math.pi - ((math.pi - a) % TWO_PI)
-
-
-@njit(cache=True)
-def _gate_offsets(positions: FloatArray, ii: IntArray, hh: IntArray, hs: float, centre: FloatArray) -> FloatArray:
-    """e = (x_i - cx, y_i - cy, wrap(h hs - ctheta)) per match, (n, 3): the numpy column_stack's elements."""
-    n = ii.shape[0]
-    e = np.empty((n, 3))
-    for j in range(n):
-        e[j, 0] = positions[ii[j], 0] - centre[0]
-        e[j, 1] = positions[ii[j], 1] - centre[1]
-        e[j, 2] = _wrap(float(hh[j]) * hs - centre[2])
-    return e
-
-
-@njit(cache=True)
-def _keep(
-    ii: IntArray, hh: IntArray, d: FloatArray, inside: npt.NDArray[np.bool_]
-) -> tuple[IntArray, IntArray, FloatArray]:
-    """ii[inside], hh[inside], d[inside]."""
-    n = 0
-    for j in range(inside.shape[0]):
-        if inside[j]:
-            n += 1
-    oi = np.empty(n, dtype=np.int64)
-    oh = np.empty(n, dtype=np.int64)
-    od = np.empty(n)
-    q = 0
-    for j in range(inside.shape[0]):
-        if inside[j]:
-            oi[q], oh[q], od[q] = ii[j], hh[j], d[j]
-            q += 1
-    return oi, oh, od
 
 
 @njit(cache=True)
 def _weights(
     ii: IntArray, hh: IntArray, d: FloatArray, positions: FloatArray, hs: float, tol: float
 ) -> tuple[int, FloatArray, FloatArray, FloatArray]:
-    """(argmin d (the first), w = 1 - d / tol or ones when tol <= 0, positions[ii] (n, 2), hh * hs)."""
+    """The matches' triangular weights and poses (module docstring).
+
+    Parameters
+    ----------
+    ii, hh : ndarray of int64, shape (n,)
+        The matched entries' positions and heading indices.
+    d : ndarray, shape (n,)
+        Their scores, m.
+    positions : ndarray, shape (N, 2)
+        The database's positions, m.
+    hs : float
+        The heading spacing, rad.
+    tol : float
+        The tolerance, m.
+
+    Returns
+    -------
+    tuple
+        (the index of the least score (the first of equal ones), the weights w = 1 - d / tol (ones when
+        tol <= 0), the matched positions (n, 2) m, their headings h hs (n,) rad).
+    """
     n = d.shape[0]
     best = 0
     for j in range(1, n):
@@ -537,7 +548,8 @@ def _weights(
 
 @njit(cache=True)
 def _normalised(w: FloatArray, sw: float, th: FloatArray, best: int) -> tuple[FloatArray, FloatArray]:
-    """(w / sw, wrap(th - th[best]))."""
+    """The weights normalised by their sum ``sw`` and the headings ``th`` (rad) as wrapped differences from the
+    best match's: (w / sw, wrap(th - th[best]))."""
     n = w.shape[0]
     wn = np.empty(n)
     dth = np.empty(n)
@@ -551,7 +563,8 @@ def _normalised(w: FloatArray, sw: float, th: FloatArray, best: int) -> tuple[Fl
 def _deviations(
     xy: FloatArray, th: FloatArray, w: FloatArray, z0: float, z1: float, z2: float
 ) -> tuple[FloatArray, FloatArray]:
-    """dev = (x - z0, y - z1, wrap(th - z2)) (n, 3) and dev * w[:, None], elementwise as numpy's."""
+    """The matches' deviations from the measured pose (z0 m, z1 m, z2 rad), dev = (x - z0, y - z1,
+    wrap(th - z2)) (n, 3), and the weighted deviations w_j dev_j (n, 3), for the scatter sum_j w_j dev_j dev_j^T."""
     n = w.shape[0]
     dev = np.empty((n, 3))
     wdev = np.empty((n, 3))

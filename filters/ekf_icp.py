@@ -17,21 +17,19 @@ per 100 ms SIP cycle, 10 Hz); here they are scaled by dt / ``static_noise_period
 the same variance per second at any odometry rate (the synthetic robots report at 20 Hz).
 
 Observation (sec. III-A.2, eq. 2-3, 14). At each LaserScan a scan is ray-cast from the occupancy grid
-(:func:`locbench.raycast.cast.cast_scan`, which marches on fields cached with the grid; version 1 used the plain
-traversal, whose ranges differ only by rounding) at the predicted sensor pose with the real scan's geometry
-(angle_min, angle_increment, beam count, range_max, sensor_pose). Both scans become points in the robot
-frame, and point-to-point ICP (:mod:`locbench.filters._icp`) aligns the real points (source) onto the
-ray-cast points (target); version 3 runs it compiled (the same neighbours and iterations as version 2's
-kd-tree loop, the transform equal to rounding). If the world point w is seen at p_real = T^-1 w from the
-true pose T and at p_pred = X^-1 w from the predicted pose X, the ICP transform is M = X^-1 T: the true pose in the
-predicted robot frame. The observation is Z = X (+) M (eq. 2), the predicted observation is Z^ = X
+(:func:`locbench.raycast.cast.cast_scan`, which marches on fields cached with the grid) at the predicted sensor
+pose with the real scan's geometry (angle_min, angle_increment, beam count, range_max, sensor_pose). Both scans
+become points in the robot frame, and point-to-point ICP (:mod:`locbench.filters._icp`, compiled) aligns the
+real points (source) onto the ray-cast points (target). If the world point w is seen at p_real = T^-1 w from
+the true pose T and at p_pred = X^-1 w from the predicted pose X, the ICP transform is M = X^-1 T: the true pose
+in the predicted robot frame. The observation is Z = X (+) M (eq. 2), the predicted observation is Z^ = X
 (h(X) = X, H = I, eq. 14), and V = Z - Z^ = (R(theta) t_M, theta_M) (eq. 3, heading wrapped).
 
 Update (eq. 15-18). K = P (P + R)^-1, X = X + K V, with R = diag(r_x, r_y, r_theta) (eq. 16); the
 covariance uses the Joseph form (I - K) P (I - K)^T + K R K^T, equal to eq. 18 for the optimal gain but
 symmetric PSD under rounding. The prediction, both clouds with the rejection distances below and this
-update are scalar compiled kernels (:mod:`locbench.filters._ekf_icp_kernels`); since version 4 (before, numpy's
-3 x 3 calls) the covariances, and through the gain the corrected means, differ from version 3's at rounding.
+update are scalar compiled kernels (:mod:`locbench.filters._ekf_icp_kernels`), the filter's one implementation
+of them.
 
 Matching (sec. III-B): a scan is a mismatch, and the belief stays the prediction, when ICP did not
 converge or when fewer points matched than the threshold (``min_matched_fraction`` of the smaller of the
@@ -174,16 +172,6 @@ class IcpEKFConfig(FilterConfig):
     laser_sigma_m: float | None = field(default=None, metadata=POSITIVE_OR_DATASET)
 
 
-def scan_points(ranges: FloatArray, angles: FloatArray, sensor_pose: tuple[float, float, float]) -> FloatArray:
-    """Beam end points in the robot frame, m, shape (n, 2), for the given (finite) ranges and sensor-frame angles."""
-    sx, sy, sth = sensor_pose
-    a = angles + sth
-    out = np.empty((a.shape[0], 2))
-    out[:, 0] = sx + ranges * np.cos(a)
-    out[:, 1] = sy + ranges * np.sin(a)
-    return out
-
-
 class IcpEKF(Filter):
     """EKF on (x, y, theta): odometry prediction, ICP-against-the-map pose update (report 000).
 
@@ -323,22 +311,16 @@ class IcpEKF(Filter):
         real = np.asarray(z.ranges, dtype=np.float64)
         src, dst = self._cloud_buffers(real.shape[0])
         self._s[BUF_SIGMAS] = cfg.correspondence_sigmas * (cfg.kidnap_threshold_factor if self._tightened else 1.0)
-        # both clouds' points (scan_points from the beams' cached directions) and the rejection distances
+        # both clouds' points (from the beams' cached directions) and the rejection distances
         n_real, n_pred, d_0, d_min = scan_clouds(
             self._s, real, pred, cos_a, sin_a, (sx, sy, z.range_min, z.range_max), src, dst
         )
         if n_real < MIN_PAIRS or n_pred < MIN_PAIRS:
             return None, n_real, n_pred
-        # icp_2d's loop called directly: the clouds are already contiguous (n, 2) and the gates valid
-        tx, ty, tth, converged, it, matched, rmse, gate = _icp._icp_loop(
-            src[:n_real],
-            dst[:n_pred],
-            (d_0, d_min),
-            int(cfg.max_iterations),
-            float(cfg.transformation_epsilon),
-            (0.0, 0.0, 0.0),
+        # icp_2d without its checks: the clouds are already contiguous (n, 2) and the gates valid
+        res = _icp.align(
+            src[:n_real], dst[:n_pred], (d_0, d_min), int(cfg.max_iterations), float(cfg.transformation_epsilon)
         )
-        res = IcpResult((tx, ty, tth), bool(converged), int(it), int(matched), float(rmse), float(gate))
         return res, n_real, n_pred
 
     def _cloud_buffers(self, n: int) -> tuple[FloatArray, FloatArray]:

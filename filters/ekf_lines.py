@@ -18,6 +18,7 @@ frame (:meth:`locbench.datasets.dataset.LineMap.rho_psi`) seen from the pose (x,
     psi_r = psi_w - theta,
 
 so H = [[-cos psi_w, -sin psi_w, 0], [0, 0, -1]] (checked against finite differences in the tests).
+:func:`_expected` (eq. 3) and :func:`_innovation` (eq. 4) serve both the association and the update.
 rho_r may come out negative (the robot on the far side of the line from the world origin); the same line
 is then (-rho_r, psi_r + pi) and the rho row of H changes sign. Which of the two forms is compared with an
 observation is decided by the observation's own psi (the form whose psi is within pi/2 of it), so a line
@@ -34,7 +35,8 @@ longest of them.
 
 Update (eq. 6-8): every accepted observation of one scan is stacked into one update at the predicted state,
 as the report associates first and updates after, with K = P H^T S^-1, x = x^- + K v and the Joseph form
-P = (I - K H) P^- (I - K H)^T + K R K^T.
+P = (I - K H) P^- (I - K H)^T + K R K^T: the Kalman core's :func:`locbench.filters._kalman.joseph_correct`, whose
+dimension varies with the number of lines accepted.
 
 R of one observation is the covariance of its line fit plus a constant diag(sigma_rho_m^2, sigma_psi_rad^2)
 for what the per-point range noise does not model: walls rasterised on an occupancy grid are seen up to a
@@ -54,9 +56,10 @@ from numba import njit
 
 from locbench.core.errors import ConfigError, FilterDiverged
 from locbench.core.events import LaserScan, Observation, Odometry
-from locbench.core.geometry import TWO_PI, wrap_angle, wrap_scalar
+from locbench.core.geometry import wrap_scalar
 from locbench.core.tunable import tunable
 from locbench.datasets.dataset import Gaussian2, MapKind, SensorSpec, WorldMap
+from locbench.filters._kalman import joseph_correct
 from locbench.filters._line_extraction import ExtractedLines, ExtractionParams, extract_lines
 from locbench.filters._motion import MotionModel, propagate_covariance, resolve_motion_noise
 from locbench.filters.base import NON_NEGATIVE, Estimate, Filter, FilterConfig, FilterDoc, bound
@@ -70,34 +73,10 @@ DEFAULT_LASER_SIGMA_M = 0.01
 #: Chi-square quantile with 2 degrees of freedom at probability 0.99, the default gate: -2 ln(0.01).
 CHI2_2DOF_099 = 9.21
 
-
-def expected_line(pose: npt.ArrayLike, rho_w: npt.ArrayLike, psi_w: npt.ArrayLike) -> tuple[FloatArray, FloatArray]:
-    """Signed robot-frame (rho, psi) of world lines seen from ``pose`` (report 002 eq. 3).
-
-    Parameters
-    ----------
-    pose : array-like, shape (3,)
-        (x m, y m, theta rad), world frame.
-    rho_w, psi_w : array-like
-        World-frame Hessian normal form of the map lines (m, rad).
-
-    Returns
-    -------
-    rho_r : ndarray
-        rho_w - (x cos psi_w + y sin psi_w), m; negative when the robot and the world origin are on opposite
-        sides of the line (the line is then (-rho_r, psi_r + pi) with rho >= 0).
-    psi_r : ndarray
-        psi_w - theta wrapped to (-pi, pi], rad.
-    """
-    x, y, th = (float(v) for v in np.asarray(pose, dtype=np.float64)[:3])
-    rw = np.asarray(rho_w, dtype=np.float64)
-    pw = np.asarray(psi_w, dtype=np.float64)
-    return rw - (x * np.cos(pw) + y * np.sin(pw)), wrap_angle(pw - th)
-
-
-def expected_line_jacobian(psi_w: float, sign: float = 1.0) -> FloatArray:
-    """H = d(rho_r, psi_r)/d(x, y, theta) of eq. 3, shape (2, 3); ``sign`` = -1 for the flipped form."""
-    return np.array([[-sign * math.cos(psi_w), -sign * math.sin(psi_w), 0.0], [0.0, 0.0, -1.0]])
+#: :func:`locbench.core.geometry.wrap_scalar` compiled (an angle to (-pi, pi]), for the kernels below. numba's
+#: on-disk cache of a kernel is keyed on this module's source alone: after editing ``wrap_scalar``, delete the
+#: ``*.nbi`` / ``*.nbc`` files under ``filters/__pycache__``.
+_wrap = njit(cache=True, inline="always")(wrap_scalar)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -185,7 +164,7 @@ class LineEKF(Filter):
     consumes: ClassVar[frozenset[type]] = frozenset({Odometry, LaserScan})
     requires: ClassVar[frozenset[MapKind]] = frozenset({MapKind.LINES})
     Config: ClassVar[type[FilterConfig]] = LineEKFConfig
-    version: ClassVar[int] = 2
+    version: ClassVar[int] = 3
     cost_per_data_s: ClassVar[float] = 0.15
     source: ClassVar[str] = "002_f01b2dfd20d46b8b (EKF map-based localization with lines, eq. 1-8)"
 
@@ -309,17 +288,18 @@ class LineEKF(Filter):
         if k == 0:
             return
         px, py, pth = self._x.tolist()
-        # eq. 3-4 and the Jacobian per accepted line, stacked (compiled; the same operations as the Python loop)
+        # eq. 3-4 and the Jacobian per accepted line, stacked
         H, v, R = _stack(
             acc, best, sign, self._rho_w, self._psi_w, self._cos_w, self._sin_w, lines.rho_psi, lines.cov, self._R0,
             px, py, pth,
         )  # fmt: skip
         # S = H P H^T + R (eq. 5), K = P H^T S^-1 (eq. 6), x + K v (eq. 7), Joseph form (eq. 8): the Kalman core.
-        x_new, P_new, nis = _joseph_correct(self._x, self._P, v, H, R)
+        c = joseph_correct(self._x, self._P, v, H, R)
+        x_new = c.x
         x_new[2] = wrap_scalar(float(x_new[2]))
         self._x = x_new
-        self._P = P_new
-        self._nis = nis
+        self._P = c.P
+        self._nis = c.nis
         self._nis_dof = 2 * k
         self._accepted = k
 
@@ -347,9 +327,6 @@ class LineEKF(Filter):
                 "rejected_length": float(self._rej_len),
             },
         )
-
-
-_I3 = np.eye(3)
 
 
 @njit(cache=True)
@@ -380,6 +357,25 @@ def _accept(
     return out[:n], rej_gate, rej_len
 
 
+@njit(cache=True, inline="always")
+def _expected(
+    rho_w: float, psi_w: float, cos_w: float, sin_w: float, x: float, y: float, th: float
+) -> tuple[float, float]:
+    """h(x) of report 002 eq. 3: the map line (rho_w m, psi_w rad) seen from the pose (x m, y m, th rad), as
+    (rho_r, psi_r) = (rho_w - (x cos psi_w + y sin psi_w), psi_w - th wrapped to (-pi, pi]); ``cos_w``, ``sin_w``
+    are cos psi_w and sin psi_w. rho_r < 0 when the robot and the world origin lie on opposite sides of the line,
+    which is then also (-rho_r, psi_r + pi)."""
+    return rho_w - (x * cos_w + y * sin_w), _wrap(psi_w - th)
+
+
+@njit(cache=True, inline="always")
+def _innovation(z_rho: float, z_psi: float, rho_r: float, psi_r: float, sign: float) -> tuple[float, float]:
+    """v = z - h(x) of report 002 eq. 4 for an observed line z = (rho m, psi rad) and the expected line
+    (rho_r, psi_r) of :func:`_expected` in the form ``sign`` (+1: (rho_r, psi_r); -1: (-rho_r, psi_r + pi));
+    (v_rho m, v_psi rad wrapped to (-pi, pi])."""
+    return z_rho - sign * rho_r, _wrap(z_psi - (psi_r + (math.pi if sign < 0 else 0.0)))
+
+
 @njit(cache=True)
 def _stack(
     acc: npt.NDArray[np.int64],
@@ -396,10 +392,31 @@ def _stack(
     py: float,
     pth: float,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """The stacked Jacobian H (2k, 3), innovation v (2k,) and block-diagonal R (2k, 2k) of the accepted lines.
+    """The stacked Jacobian, innovation and noise of the accepted lines (report 002 eq. 3-5).
 
-    Per line the plain-float expressions of eq. 3-4 in their order (libm's cos and sin, the wrap of
-    geometry.wrap_scalar with Python's float %, the fit covariance plus R0), so the same bits.
+    Parameters
+    ----------
+    acc : ndarray of int64, shape (k,)
+        The accepted observations.
+    best, sign : ndarray, shape (m,)
+        Each observation's map line and the form compared (:func:`_nearest_lines`).
+    rho_w, psi_w, cos_w, sin_w : ndarray, shape (n,)
+        The map lines (m, rad) and cos, sin of psi_w.
+    z, cov : ndarray, shapes (m, 2) and (m, 2, 2)
+        The observed lines (rho m, psi rad) and their fit covariances.
+    R0 : ndarray, shape (2, 2)
+        The constant part of R.
+    px, py, pth : float
+        The predicted pose (m, m, rad).
+
+    Returns
+    -------
+    H : ndarray, shape (2k, 3)
+        Per line [[-sign cos psi_w, -sign sin psi_w, 0], [0, 0, -1]].
+    v : ndarray, shape (2k,)
+        Per line :func:`_innovation` of :func:`_expected`.
+    R : ndarray, shape (2k, 2k)
+        Block diagonal, per line its fit covariance plus R0.
     """
     k = acc.shape[0]
     H = np.zeros((2 * k, 3))
@@ -413,32 +430,12 @@ def _stack(
         H[2 * r, 0] = -sg * math.cos(pw)
         H[2 * r, 1] = -sg * math.sin(pw)
         H[2 * r + 1, 2] = -1.0
-        rho_p = rho_w[i] - (px * cos_w[i] + py * sin_w[i])
-        h_psi = (math.pi - ((math.pi - (pw - pth)) % TWO_PI)) + (math.pi if sg < 0 else 0.0)
-        v[2 * r] = z[j, 0] - sg * rho_p
-        v[2 * r + 1] = math.pi - ((math.pi - (z[j, 1] - h_psi)) % TWO_PI)
+        rho_r, psi_r = _expected(rho_w[i], pw, cos_w[i], sin_w[i], px, py, pth)
+        v[2 * r], v[2 * r + 1] = _innovation(z[j, 0], z[j, 1], rho_r, psi_r, sg)
         for a in range(2):
             for b in range(2):
                 R[2 * r + a, 2 * r + b] = cov[j, a, b] + R0[a, b]
     return H, v, R
-
-
-def _joseph_correct(
-    x: FloatArray, P: FloatArray, y: FloatArray, H: FloatArray, R: FloatArray
-) -> tuple[FloatArray, FloatArray, float]:
-    """:func:`locbench.filters._kalman.joseph_correct` for a 3-state without its log-likelihood: (x+, P+, NIS).
-
-    The same numpy calls in the same order, so the same bits; the filter never reads the log-likelihood, whose
-    determinant (``slogdet``) was a sixth of an update's cost.
-    """
-    PHt = P @ H.T
-    S = H @ PHt + R
-    Sinv = np.linalg.inv(S)
-    K = PHt @ Sinv
-    A = _I3 - K @ H
-    P_new = A @ P @ A.T + K @ R @ K.T
-    nis = float(y @ Sinv @ y)
-    return x + K @ y, 0.5 * (P_new + P_new.T), nis
 
 
 @njit(cache=True)
@@ -455,13 +452,13 @@ def _nearest_lines(
     R0: FloatArray,
     P: FloatArray,
 ) -> tuple[npt.NDArray[np.int64], FloatArray, FloatArray]:
-    """For each observed line (rho, psi) of ``z`` (k, 2) with fit covariance ``cov`` (k, 2, 2): the map line of
-    least squared Mahalanobis distance at the pose (x, y, th) with covariance ``P`` (eq. 3-5), the sign of the
-    form compared (-1: flipped) and that distance.
+    """The association of report 002 eq. 3-5: each observed line's nearest map line in Mahalanobis distance.
 
-    Element for element the arithmetic of the numpy expressions it replaces (same operations in the same order,
-    the first of equal distances, a NaN distance taken as numpy's argmin takes it), in one pass without the
-    (k, n) temporaries.
+    For every observed line z_j (``z`` (k, 2), fit covariance ``cov`` (k, 2, 2)) and map line i, the form is
+    chosen by z_j's own psi (flipped, sign -1, when psi_r of :func:`_expected` is more than pi/2 from it),
+    v = :func:`_innovation`, S = H P H^T + cov_j + R0 with H of :func:`_stack`, and d2 = v^T S^-1 v (inf where S
+    is not positive definite). Returns per observed line the map line of least d2 (the first of equal ones; the
+    first NaN, as from a non-finite state, when there is one), the sign of its form and that d2.
     """
     k = z.shape[0]
     n = rho_w.shape[0]
@@ -479,15 +476,9 @@ def _nearest_lines(
         for i in range(n):
             c = cos_w[i]
             s = sin_w[i]
-            rho_p = rho_w[i] - (x * c + y * s)
-            psi_p = math.pi - ((math.pi - (psi_w[i] - th)) % TWO_PI)
-            dpsi = math.pi - ((math.pi - (z[j, 1] - psi_p)) % TWO_PI)
-            sg = 1.0
-            v_psi = dpsi
-            if abs(dpsi) > half_pi:
-                sg = -1.0
-                v_psi = math.pi - ((math.pi - (dpsi - math.pi)) % TWO_PI)
-            v_rho = z[j, 0] - sg * rho_p
+            rho_r, psi_r = _expected(rho_w[i], psi_w[i], c, s, x, y, th)
+            sg = -1.0 if abs(_wrap(z[j, 1] - psi_r)) > half_pi else 1.0
+            v_rho, v_psi = _innovation(z[j, 0], z[j, 1], rho_r, psi_r, sg)
             s00 = c * c * p00 + 2.0 * c * s * p01 + s * s * p11 + r00
             s01 = sg * (c * p02 + s * p12) + r01
             det = s00 * s11 - s01 * s01
@@ -498,7 +489,7 @@ def _nearest_lines(
                 best[j], best_sign[j], best_d2[j] = i, sg, d2
                 first = False
             if math.isnan(d2):
-                break  # numpy's argmin returns the first NaN
+                break  # a non-finite state: the first NaN stands
     return best, best_sign, best_d2
 
 

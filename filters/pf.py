@@ -124,7 +124,7 @@ from numba.typed import Dict
 
 from locbench.core.errors import ConfigError, FilterDiverged, ResourceLimit
 from locbench.core.events import UNKNOWN_ID, LandmarkObservations, LaserScan, Observation, Odometry, RangeObservations
-from locbench.core.geometry import wrap_angle
+from locbench.core.geometry import wrap_angle, wrap_scalar
 from locbench.core.limits import (
     FREE_SPACE_BYTES_PER_CELL,
     LIKELIHOOD_FIELD_BYTES_PER_CELL,
@@ -388,6 +388,12 @@ def _wrap(a: float) -> float:
     return math.pi - ((math.pi - a) % (2.0 * math.pi))
 
 
+#: :func:`locbench.core.geometry.wrap_scalar` compiled: the wrap of the twist model's headings. numba's on-disk cache
+#: of a kernel is keyed on this module's source alone: after editing ``wrap_scalar``, delete the ``*.nbi`` /
+#: ``*.nbc`` files under ``filters/__pycache__``.
+_wrap_mod = njit(cache=True, inline="always")(wrap_scalar)
+
+
 #: Below this |angle| (rad) :func:`_sincos_near` uses its series: the first omitted terms, d^17 / 17! and
 #: d^18 / 18!, are below 1e-19 there, under a quarter of an ulp of the result.
 _SERIES_MAX_RAD = 0.5
@@ -505,7 +511,7 @@ def _move(
     q0, q1, q2 = q_std[0], q_std[1], q_std[2]
     ref = x[0, 2]
     sr, cr = math.sin(ref), math.cos(ref)
-    # the estimate's first pass (weighted sums about the moved first particle's heading), as _weighted_stats
+    # the estimate's first pass (weighted sums about the moved first particle's heading) in the same loop
     mx = 0.0
     my = 0.0
     sc = 0.0
@@ -534,24 +540,26 @@ def _move(
         if i == 0:
             ref1 = x[0, 2]
             sr1, cr1 = math.sin(ref1), math.cos(ref1)
-        mx += w[i] * x[i, 0]
-        my += w[i] * x[i, 1]
-        si, ci = _sincos_near(x[i, 2], ref1, sr1, cr1)
-        sc += w[i] * ci
-        ss += w[i] * si
+        mx, my, sc, ss = _add_weighted(mx, my, sc, ss, w[i], x[i, 0], x[i, 1], x[i, 2], ref1, sr1, cr1)
         finite = finite and math.isfinite(x[i, 0]) and math.isfinite(x[i, 1]) and math.isfinite(x[i, 2])
     mean, cov = _finish_stats(x, w, mx, my, sc, ss)
     return mean, cov, finite and _all_finite(logw)
 
 
-#: np.sinc's stand-in for a zero argument (float64's machine epsilon)
+#: The stand-in for a zero argument of sin(y) / y (float64's machine epsilon), whose quotient is then 1.
 _EPS = float(np.finfo(np.float64).eps)
 
 
 @njit(cache=True, inline="always")
 def _twist_arc(s: float, a: float) -> tuple[float, float, float]:
-    """:func:`locbench.filters._motion.twist_increment` of one (s m, a rad) with numpy's operations in their
-    order (``np.sinc`` scales by pi and back; the series below ``_SERIES_A``), so the same bits."""
+    """The increment (dx m, dy m, dtheta rad), previous robot frame, of a constant-twist arc of length ``s`` (m)
+    turning ``a`` (rad): dx = s sin(a) / a, dy = s (1 - cos a) / a, dtheta = a (the exact arc of
+    :func:`locbench.filters._motion.twist_increment`).
+
+    sin(a) / a is evaluated as sin(y) / y at y = pi (a / pi) (y = eps at a = 0, where the quotient is 1), the
+    evaluation of numpy's ``sinc`` that ``twist_increment`` uses; (1 - cos a) / a by its series a (1/2 - a^2/24)
+    below ``_SERIES_A``, where the difference loses digits.
+    """
     y = math.pi * (a / math.pi)
     if y == 0.0:
         y = _EPS
@@ -575,10 +583,31 @@ def _move_twist(
     w: FloatArray,
     logw: FloatArray,
 ) -> tuple[FloatArray, FloatArray, bool]:
-    """:func:`locbench.filters._motion.sample_twist_motion` in place (its draws: every arc length's normal,
-    then every turn's), then N(0, diag(q_std^2)) as :func:`_jitter` when any q_std is non-zero, then
-    :func:`_checked_stats`. ``(s0, a0)`` = (v dt, omega dt), ``(sd_s, sd_a)`` = (sigma_v dt, sigma_omega dt),
-    ``(dx, dy, dtheta)`` the event's increment; the same operations in numpy's order, so the same bits."""
+    """The twist model's prediction (:mod:`locbench.filters._motion`) of every particle in place, then the
+    additive noise of report 003 eq. 8, then :func:`_checked_stats`.
+
+    Each particle draws an arc length s ~ N(s0, sd_s^2) and a turn a ~ N(a0, sd_a^2) (every particle's arc length
+    first, then every turn) and moves, in its own frame, by the event's increment plus f(s, a) - f(s0, a0), f the
+    arc of :func:`_twist_arc`: the noise of the arc, centred on the robot's own (dx, dy, dtheta); the heading is
+    wrapped. Then N(0, diag(q_std^2)) by :func:`_jitter` when any q_std is non-zero.
+
+    Parameters
+    ----------
+    x : ndarray, shape (N, 3)
+        Particles (x m, y m, theta rad), world frame; moved in place.
+    s0, a0 : float
+        v dt (m) and omega dt (rad) of the event.
+    sd_s, sd_a : float
+        sigma_v dt (m) and sigma_omega dt (rad).
+    dx, dy, dtheta : float
+        The event's increment, previous robot frame (m, m, rad).
+    q_std : ndarray, shape (3,)
+        Standard deviations of the additive noise (m, m, rad).
+    gen : ndarray of uint64
+        The run's generator (:mod:`._numba_rng`).
+    w, logw : ndarray, shape (N,)
+        The weights and log-weights, for the statistics.
+    """
     rng = generator_from(gen)
     n = x.shape[0]
     noise = np.empty((2, n))
@@ -595,13 +624,9 @@ def _move_twist(
         c, s = math.cos(th), math.sin(th)
         x[i, 0] = x[i, 0] + c * ix - s * iy
         x[i, 1] = x[i, 1] + s * ix + c * iy
-        x[i, 2] = math.pi - ((math.pi - (th + ith)) % (2.0 * math.pi))  # wrap_angle's form
+        x[i, 2] = _wrap_mod(th + ith)
     if q_std[0] != 0.0 or q_std[1] != 0.0 or q_std[2] != 0.0:
-        q0, q1, q2 = q_std[0], q_std[1], q_std[2]
-        for i in range(n):
-            x[i, 0] += q0 * rng.standard_normal()
-            x[i, 1] += q1 * rng.standard_normal()
-            x[i, 2] = _wrap(x[i, 2] + q2 * rng.standard_normal())
+        _jitter(x, q_std, gen)
     return _checked_stats(x, w, logw)
 
 
@@ -778,19 +803,28 @@ def _spread(x: FloatArray, n: int, ref_heading: float) -> FloatArray:
 
 
 @njit(cache=True)
+def _roughening_spread(x: FloatArray, w: FloatArray, n_pred: int, roughening_k: float) -> FloatArray:
+    """K E of roughening (Gordon, Salmond & Smith 1993, sec. 4.1; the config's ``roughening_k``): K times the
+    :func:`_spread` (m, m, rad) of the first ``n_pred`` (predicted) particles, the heading's about the heading of
+    the heaviest particle (the first of equal weights ``w``). The jitter's standard deviations are this times
+    N^(-1/3) for the N particles after the resampling."""
+    best = 0
+    for i in range(1, x.shape[0]):
+        if w[i] > w[best]:
+            best = i
+    return _spread(x, n_pred, x[best, 2]) * roughening_k
+
+
+@njit(cache=True)
 def _resample_roughened(
     x: FloatArray, w: FloatArray, logw: FloatArray, n_pred: int, roughening_k: float, gen: UIntArray
 ) -> tuple[FloatArray, FloatArray, FloatArray, bool]:
-    """Systematic resampling of all N particles with roughening, as the filter's general path does it: the
-    jitter's standard deviations are K N^(-1/3) times the :func:`_spread` of the first ``n_pred`` (predicted)
-    particles, the heading's about the heaviest particle's heading; then the weights ``w`` and log-weights
-    ``logw`` are set uniform in place. Returns the new particles and their :func:`_checked_stats`."""
+    """Systematic resampling of all N particles (:func:`_systematic_indices`) roughened by N(0, diag(sd^2)),
+    sd = :func:`_roughening_spread` N^(-1/3); then the weights ``w`` and log-weights ``logw`` are set uniform in
+    place. The usual resampling (on a low ESS, nothing injected after it) in one call; ``ParticleFilter._resample``
+    composes the same steps otherwise. Returns the new particles and their :func:`_checked_stats`."""
     n = x.shape[0]
-    best = 0
-    for i in range(1, n):
-        if w[i] > w[best]:  # np.argmax: the first of equal weights
-            best = i
-    sd = _spread(x, n_pred, x[best, 2]) * roughening_k
+    sd = _roughening_spread(x, w, n_pred, roughening_k)
     sd = sd * n ** (-1.0 / 3.0)
     out = _gather(x, _systematic_indices(w, n, generator_from(gen).random()))
     _jitter(out, sd, gen)
@@ -816,6 +850,17 @@ def _jitter_correlated(x: FloatArray, root: FloatArray, gen: UIntArray) -> None:
         x[i, 2] = _wrap(x[i, 2] + root[2, 0] * e0 + root[2, 1] * e1 + root[2, 2] * e2)
 
 
+@njit(cache=True, inline="always")
+def _add_weighted(
+    mx: float, my: float, sc: float, ss: float, w: float, x: float, y: float, th: float, ref: float, sr: float,
+    cr: float,
+) -> tuple[float, float, float, float]:  # fmt: skip
+    """One particle's terms of the estimate's first pass added to its sums: (mx + w x, my + w y, sc + w cos th,
+    ss + w sin th), the sine and cosine through :func:`_sincos_near` about ``ref``."""
+    si, ci = _sincos_near(th, ref, sr, cr)
+    return mx + w * x, my + w * y, sc + w * ci, ss + w * si
+
+
 @njit(cache=True)
 def _weighted_stats(poses: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Weighted mean (circular for the heading) and weighted covariance (heading residuals wrapped)."""
@@ -827,11 +872,7 @@ def _weighted_stats(poses: FloatArray, w: FloatArray) -> tuple[FloatArray, Float
     ref = poses[0, 2]
     sr, cr = math.sin(ref), math.cos(ref)
     for i in range(n):
-        mx += w[i] * poses[i, 0]
-        my += w[i] * poses[i, 1]
-        si, ci = _sincos_near(poses[i, 2], ref, sr, cr)
-        sc += w[i] * ci
-        ss += w[i] * si
+        mx, my, sc, ss = _add_weighted(mx, my, sc, ss, w[i], poses[i, 0], poses[i, 1], poses[i, 2], ref, sr, cr)
     return _finish_stats(poses, w, mx, my, sc, ss)
 
 
@@ -1597,7 +1638,7 @@ class ParticleFilter(Filter):
         elif (resampled or kld or by_ess) and cfg.roughening_k > 0.0 and n_pred > 1:
             # roughening measures the spread of the predicted particles (not of the injected ones), the
             # heading's about the best particle's heading (the cloud's own)
-            jitter = _spread(self._x, n_pred, float(self._x[int(np.argmax(w)), 2])) * cfg.roughening_k
+            jitter = _roughening_spread(self._x, w, n_pred, cfg.roughening_k)
         if kld:
             # KLD sampling draws the new set, and its size, at every correction (Fox 2003, table 1)
             self._x = _kld_resample(
@@ -1649,7 +1690,7 @@ class ParticleFilter(Filter):
         sighting, and the odometry since: the two together pin the pose down. A previous sighting of the same
         landmark is left out: moved by the odometry since (one step when that landmark stays in view and
         another leaves it), its poses form the circle this sighting already allows, every one of which
-        explains it (version 4 drew from it too; docs/pf_consistency_kidnap.md)."""
+        explains it (docs/pf_consistency_kidnap.md)."""
         last = self._last_sightings
         if kind is not LandmarkObservations or last is None or data[0].shape[0] != 1:
             return None

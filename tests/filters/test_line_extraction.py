@@ -128,7 +128,7 @@ def test_bad_params_raise(kwargs: dict[str, float]) -> None:
 
 
 def _scan_points_numpy(scan: LaserScan) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    # the numpy form that the compiled scan_points replaced
+    """Step 1 of the extraction in numpy: the valid returns' points (robot frame, m), ranges and beam indices."""
     r = np.asarray(scan.ranges, dtype=np.float64)
     ok = np.isfinite(r) & (r >= scan.range_min) & (r < scan.range_max)
     beam = np.flatnonzero(ok).astype(np.int64)
@@ -138,21 +138,17 @@ def _scan_points_numpy(scan: LaserScan) -> tuple[np.ndarray, np.ndarray, np.ndar
     return np.column_stack([sx + rr * np.cos(a), sy + rr * np.sin(a)]), rr, beam
 
 
-def _extract_tail_numpy(
-    pts: np.ndarray, ranges: np.ndarray, fits: np.ndarray, min_length: float
-) -> tuple[np.ndarray, ...]:
-    # the numpy form of extract_lines after the compiled segments, which _segment_ends and _assemble replaced
-    rho, psi = fits[:, 0], fits[:, 1]
-    t = np.array([(-math.sin(p), math.cos(p)) for p in psi.tolist()])
-    nrm = np.array([(math.cos(p), math.sin(p)) for p in psi.tolist()])
-    ends_xy = pts[np.column_stack([ranges[:, 0], ranges[:, 1] - 1])]
-    s = np.matmul(ends_xy, t[:, :, None])[:, :, 0]
-    lengths = np.abs(s[:, 1] - s[:, 0])
-    keep = ~(lengths < min_length)
-    cov = np.empty((fits.shape[0], 2, 2))
-    cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 0], cov[:, 1, 1] = fits[:, 2], fits[:, 3], fits[:, 3], fits[:, 4]
-    endpoints = rho[:, None, None] * nrm[:, None, :] + s[:, :, None] * t[:, None, :]
-    return fits[keep, :2], cov[keep], endpoints[keep], lengths[keep], (ranges[keep, 1] - ranges[keep, 0])
+def _segments_numpy(pts: np.ndarray, ranges: np.ndarray, fits: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The end points (k, 2, 2) and lengths (k,) of fitted segments in numpy: each segment's first and last
+    point projected on its line (rho n + s t, n = (cos psi, sin psi), t = (-sin psi, cos psi), s the point's
+    coordinate along t), the length |s_last - s_first|."""
+    psi = fits[:, 1]
+    t = np.column_stack([-np.sin(psi), np.cos(psi)])
+    nrm = np.column_stack([np.cos(psi), np.sin(psi)])
+    ends_xy = pts[np.column_stack([ranges[:, 0], ranges[:, 1] - 1])]  # (k, 2, 2)
+    s = np.einsum("kej,kj->ke", ends_xy, t)
+    endpoints = fits[:, 0, None, None] * nrm[:, None, :] + s[:, :, None] * t[:, None, :]
+    return endpoints, np.abs(s[:, 1] - s[:, 0])
 
 
 def _random_scan(rng: np.random.Generator) -> LaserScan:
@@ -171,7 +167,10 @@ def _random_scan(rng: np.random.Generator) -> LaserScan:
     )
 
 
-def test_compiled_scan_points_equal_numpy_form() -> None:
+def test_scan_points_are_the_valid_returns_in_the_robot_frame() -> None:
+    """Step 1 against numpy on random scans: the same beams (indices and ranges as given), the points to 1e-12 m
+    (coordinates under 13 m: a few ulp of numpy's vectorised sin and cos; a wrong angle or offset is off by
+    centimetres)."""
     from locbench.filters._line_extraction import scan_points
 
     rng = np.random.default_rng(3)
@@ -180,13 +179,15 @@ def test_compiled_scan_points_equal_numpy_form() -> None:
         (pts, rr, beam), (pts_np, rr_np, beam_np) = scan_points(scan), _scan_points_numpy(scan)
         for g, w in ((pts, pts_np), (rr, rr_np), (beam, beam_np)):
             assert g.dtype == w.dtype and g.shape == w.shape
-        assert np.array_equal(rr, rr_np) and np.array_equal(beam, beam_np)  # selections: exact
-        # the points take numpy's np.cos/np.sin, whose SIMD kernels are chosen per CPU (libm's in the kernel):
-        # within 1e-12 m of coordinates under 13 m (a few ulp); a wrong angle or offset is off by centimetres
+        assert beam.tolist() == beam_np.tolist()
+        assert rr.tolist() == rr_np.tolist() == np.asarray(scan.ranges)[beam].tolist()  # the measured ranges
         np.testing.assert_allclose(pts, pts_np, rtol=0.0, atol=1e-12)
 
 
-def test_compiled_extraction_tail_equals_numpy_form_bit_for_bit() -> None:
+def test_segment_end_points_and_lengths() -> None:
+    """The compiled assembly of the fitted segments against numpy on random cuts of random scans: end points and
+    lengths to 1e-12 m (coordinates under 20 m), the (rho, psi) and covariances passed through, the segments
+    shorter than ``min_length`` dropped (cases with a length within 1e-12 m of it skipped: either side is right)."""
     from locbench.filters import _line_extraction as le
 
     rng = np.random.default_rng(5)
@@ -202,14 +203,19 @@ def test_compiled_extraction_tail_equals_numpy_form_bit_for_bit() -> None:
         ranges = np.column_stack([lo, np.concatenate([cuts, [m]])]).astype(np.int64)
         k = ranges.shape[0]
         fits = np.column_stack([rng.uniform(0, 5, k), rng.uniform(-math.pi, math.pi, k), rng.random((k, 3))])
-        xs, ys = np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1])
-        t, ends = le._segment_ends(xs, ys, ranges, fits)
-        s = np.matmul(ends, t[:, :, None])[:, :, 0]
+        endpoints_np, lengths_np = _segments_numpy(pts, ranges, fits)
         min_length = float(rng.uniform(0.0, 1.0))
-        n_keep, *got = le._assemble(fits, ranges, s, t, min_length)
-        want = _extract_tail_numpy(pts, ranges, fits, min_length)
-        assert n_keep == want[0].shape[0]
-        for g, w in zip(got, want, strict=True):
-            assert g.dtype == w.dtype and g.shape == w.shape and np.array_equal(g, w)
+        if np.any(np.abs(lengths_np - min_length) < 1e-12):
+            continue
+        keep = ~(lengths_np < min_length)
+        xs, ys = np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1])
+        n_keep, rho_psi, cov, endpoints, lengths, n_points = le._assemble(xs, ys, ranges, fits, min_length)
+        assert n_keep == np.count_nonzero(keep)
+        assert rho_psi.tolist() == fits[keep, :2].tolist()
+        assert cov[:, 0, 0].tolist() == fits[keep, 2].tolist() and cov[:, 1, 1].tolist() == fits[keep, 4].tolist()
+        assert cov[:, 0, 1].tolist() == cov[:, 1, 0].tolist() == fits[keep, 3].tolist()
+        assert n_points.tolist() == (ranges[keep, 1] - ranges[keep, 0]).tolist()
+        np.testing.assert_allclose(endpoints, endpoints_np[keep], rtol=0.0, atol=1e-12)
+        np.testing.assert_allclose(lengths, lengths_np[keep], rtol=0.0, atol=1e-12)
         checked += n_keep
     assert checked > 100

@@ -1,8 +1,8 @@
-"""pytest-benchmark: ``ekf_icp``'s compiled steps outside its ICP loop against the numpy formulas (issue 24, item 2).
+"""pytest-benchmark: ``ekf_icp``'s compiled steps outside its ICP loop against the same equations written with numpy.
 
-The numpy side is version 3's arithmetic (eq. 11-13 with ``F @ P @ F.T + Q``, and
-:func:`~locbench.filters._kalman.joseph_correct_pose` with the innovation formed in Python); the compiled side
-is :func:`~locbench.filters._ekf_icp_kernels.predict_pose` and :func:`~locbench.filters._ekf_icp_kernels.correct_pose`
+The numpy side is the reference form of report 000 eq. 11-13 and 15-18 (``tests/laser_reference.py``: ``F @ P @
+F.T + Q`` and the H = I Joseph correction with the innovation formed in Python); the compiled side is
+:func:`~locbench.filters._ekf_icp_kernels.predict_pose` and :func:`~locbench.filters._ekf_icp_kernels.correct_pose`
 on the state buffer. Each round times a batch of each (alternating which goes first) and the case reports the
 median of the rounds' ratios compiled / numpy (unpaired cases drift with the load of the shared machine). The
 whole-run figure is ``tools/measure/icp_outside_loop.py``'s.
@@ -16,12 +16,12 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+import laser_reference as ref
 import numpy as np
 import pytest
 
 from locbench.core.geometry import wrap_scalar
 from locbench.filters._ekf_icp_kernels import correct_pose, predict_pose, state_buffer
-from locbench.filters._kalman import joseph_correct_pose
 
 _Q = (0.0005, 0.0005, 0.0005, 0.001, 0.001, 0.0011)
 _R = (0.008, 0.008, 0.01)
@@ -32,7 +32,7 @@ _STEPS = 500
 
 
 def _numpy_steps() -> None:
-    """Version 3's prediction and correction, numpy calls on 3 x 3 arrays."""
+    """The prediction and correction as numpy calls on 3 x 3 arrays."""
     x, P, R = _X0.copy(), _P0.copy(), np.diag(_R)
     for _ in range(_STEPS):
         th = float(x[2])
@@ -46,7 +46,7 @@ def _numpy_steps() -> None:
         th = float(x[2])
         c, s = math.cos(th), math.sin(th)
         V = np.array([c * 0.002 - s * 0.001, s * 0.002 + c * 0.001, wrap_scalar(0.0005)])
-        x, P, _ = joseph_correct_pose(x, P, V, R)
+        x, P, _ = ref.joseph_pose_correct(x, P, V, R)
         x[2] = wrap_scalar(float(x[2]))
 
 

@@ -1,5 +1,5 @@
 """pytest-benchmark: particle throughput of one predict + update step of ``pf`` on the office world, and the
-same step as one compiled call (the fused reference of issue 24).
+same step as one compiled call (the fused reference).
 
 ``nox -s perf`` (``pytest tests/perf --benchmark-only``) measures 1e3, 1e4 and 1e5 particles with the
 landmark model and with the 60-beam likelihood field, stores particles/s (from the median step time) in
@@ -65,7 +65,7 @@ def _fused_step(
     ll = pf_mod._sightings_loglik(x, ranges, bearings, rows, lm_xy, True, lm[0], lm[1], lm[2], -math.inf)
     _, n_eff = pf_mod._reweigh(logw, ll, w)
     if n_eff < ess_fraction * n:
-        spread = pf_mod._spread(x, n, x[np.argmax(w), 2]) * roughening_k
+        spread = pf_mod._roughening_spread(x, w, n, roughening_k)
         idx = pf_mod._systematic_indices(w, n, generator_from(gen).random())
         x[:] = pf_mod._gather(x, idx)
         pf_mod._jitter(x, spread * n ** (-1.0 / 3.0), gen)
