@@ -4,7 +4,7 @@ list of the filters and ``docs/design.md``'s table of datasets, made from what e
 A filter's row is its class's ``doc`` (:class:`locbench.filters.base.FilterDoc`), in the declared order of the
 package's filters (:meth:`locbench.registry.Registry.package_ids`); a dataset's row is its builder's
 ``description`` and kind. ``tools/docs/readme_results.py`` writes these texts into the documents' generated blocks
-(``<!-- gen:NAME -->...<!-- /gen:NAME -->``, :func:`doc_blocks` by name), and ``tests/test_registry_docs.py``
+(``<!-- gen:NAME -->...<!-- /gen:NAME -->``, :func:`doc_blocks` by name), and ``tests/test_registry_declarations.py``
 checks that the committed documents hold them, so a filter or a dataset added as one module is listed once the
 tool has run.
 """
