@@ -218,9 +218,10 @@ def test_compiled_prediction_is_the_numpy_formula() -> None:
 
 def test_compiled_correction_is_joseph_correct_pose() -> None:
     """correct_pose against the numpy H = I Joseph form (V formed as IcpEKF formed it) on random beliefs."""
+    from kalman_reference import joseph_correct_pose
+
     from locbench.core.geometry import wrap_scalar
     from locbench.filters._ekf_icp_kernels import correct_pose, state_buffer
-    from locbench.filters._kalman import joseph_correct_pose
 
     rng = np.random.default_rng(12)
     for _ in range(300):

@@ -1,7 +1,7 @@
 """pytest-benchmark: ``ekf_icp``'s compiled steps outside its ICP loop against the numpy formulas (issue 24, item 2).
 
 The numpy side is version 3's arithmetic (eq. 11-13 with ``F @ P @ F.T + Q``, and
-:func:`~locbench.filters._kalman.joseph_correct_pose` with the innovation formed in Python); the compiled side
+``joseph_correct_pose`` of tests/kalman_reference.py with the innovation formed in Python); the compiled side
 is :func:`~locbench.filters._ekf_icp_kernels.predict_pose` and :func:`~locbench.filters._ekf_icp_kernels.correct_pose`
 on the state buffer. Each round times a batch of each (alternating which goes first) and the case reports the
 median of the rounds' ratios compiled / numpy (unpaired cases drift with the load of the shared machine). The
@@ -18,10 +18,10 @@ from typing import Any
 
 import numpy as np
 import pytest
+from kalman_reference import joseph_correct_pose
 
 from locbench.core.geometry import wrap_scalar
 from locbench.filters._ekf_icp_kernels import correct_pose, predict_pose, state_buffer
-from locbench.filters._kalman import joseph_correct_pose
 
 _Q = (0.0005, 0.0005, 0.0005, 0.001, 0.001, 0.0011)
 _R = (0.008, 0.008, 0.01)
