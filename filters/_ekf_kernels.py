@@ -1,20 +1,38 @@
-"""Compiled per-event arithmetic of :class:`~locbench.filters.ekf_landmarks.LandmarkEKF` (issue 24).
+"""The compiled per-event arithmetic of :class:`~locbench.filters.ekf_landmarks.LandmarkEKF`: its one
+implementation of the encoder prediction and of the range-bearing correction.
 
-The EKF's arithmetic per event is a few dozen floating-point operations; in Python each costs an interpreted
-step, so the filter's predict and landmark update spent most of their time on the interpreter, not on the
-maths. These kernels are the same expressions, in the same order, compiled: the filter's stored estimates
-are the same bits (numba evaluates each ``+``, ``*``, ``/`` as IEEE double operations without reassociation
-or fused multiply-adds unless ``fastmath`` is asked for, and ``math.sin``, ``cos``, ``atan2`` and ``sqrt``
-call the same libm as CPython).
+Prediction (report 003 eq. 1-5, 8, 10): the mean moves along the chord at the midpoint heading and the
+covariance becomes F P F^T + G U G^T + Q. The step's arithmetic is :func:`locbench.filters._motion.encoder_step`,
+:func:`~locbench.filters._motion.input_variances` and :func:`~locbench.filters._motion.propagate_upper`, compiled
+here (registered with numba below) from the same source that :class:`~locbench.filters._motion.MotionModel` runs in
+Python; a step the encoder model does not cover (an increment or a measured twist) comes from ``MotionModel.step``
+and is propagated by :func:`predict_step`.
+
+Correction (report 003 eq. 7 and 9, the sensor model of report 001 fig. 2 with its Jacobian corrected): a landmark
+at (l_x, l_y) is seen at range d = |l - p| and bearing atan2(dy, dx) - theta, dx = l_x - x, dy = l_y - y,
+q = d^2, R = diag(sigma_range^2, sigma_bearing^2), and
+
+    H = [[-dx/d, -dy/d,  0],
+         [ dy/q, -dx/q, -1]].
+
+Each sighting is one Joseph-form update, K = P H^T S^-1, P+ = (I - K H) P (I - K H)^T + K R K^T (report 002
+eq. 8), written out for the 3-state and the 2x2 S (inverted in closed form), the products with H's zero and
+-1 entries left out. The sightings of one event are fused one at a time (:func:`update_landmarks`): those with a
+known identity in their order, then those to associate, each with the nearest landmark in Mahalanobis distance
+inside the chi-square gate among those not used yet (:func:`nearest_row`).
 
 The state lives in one array ``s`` of 12 floats: the mean (x m, y m, theta rad) in ``s[0:3]`` and the
 covariance, row-major, in ``s[3:12]`` (kept exactly symmetric). Numba unboxes every array argument on each
-call (about 0.4 us each here), more than the arithmetic of a prediction, so the filter calls the two
-packed entry points :func:`predict_packed` and :func:`update_packed`: one float buffer holds the state, the
-update's outputs, the constants and the map (layout :data:`BUF_STATE` ... :data:`BUF_XY`), one integer
-buffer the map's ids and rows and the scratch (:func:`int_buffer`). The equations are those of
-:mod:`locbench.filters.ekf_landmarks` and :mod:`locbench.filters._motion` (report 003 eq. 1-10, report 001
-fig. 2 corrected); every kernel mirrors a Python function named in its docstring.
+call (about 0.4 us each), more than the arithmetic of a prediction, so the filter calls the two packed entry
+points :func:`predict_packed` and :func:`update_packed`: one float buffer holds the state, the update's
+outputs, the constants and the map (layout :data:`BUF_STATE` ... :data:`BUF_XY`), one integer buffer the map's
+ids and rows and the scratch (:func:`int_buffer`).
+
+numba compiles IEEE double operations in source order, without fused multiply-adds unless ``fastmath`` is asked
+for, and calls libm's ``sin``, ``cos``, ``atan2`` and ``sqrt``, so the kernels and the Python code that shares
+their source (``MotionModel.step``, ``wrap_scalar``) compute the same numbers. numba's on-disk cache of a kernel
+is keyed on this module's source alone: after editing a function it calls from :mod:`locbench.filters._motion`
+or :mod:`locbench.core.geometry`, delete the ``*.nbi`` / ``*.nbc`` files under ``filters/__pycache__``.
 """
 
 from __future__ import annotations
@@ -24,11 +42,13 @@ import math
 import numpy as np
 import numpy.typing as npt
 from numba import njit
+from numba.extending import register_jitable
+
+from locbench.core.geometry import wrap_scalar
+from locbench.filters._motion import encoder_jacobian, encoder_step, input_variances, propagate_upper, wheel_increment
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
-
-_TWO_PI = 2.0 * math.pi
 
 # s[3 + 3 i + j] = P[i][j]
 _P00, _P01, _P02, _P10, _P11, _P12, _P20, _P21, _P22 = range(3, 12)
@@ -38,27 +58,27 @@ _P00, _P01, _P02, _P10, _P11, _P12, _P20, _P21, _P22 = range(3, 12)
 #: (count 0 or 3, then 3 values) and the map's (x, y) row-major from ``BUF_XY`` on.
 BUF_STATE, BUF_OUT, BUF_ENC, BUF_LM, BUF_LIM, BUF_XY = 0, 12, 17, 26, 32, 36
 
+#: :func:`sighting_rows`' codes for a sighting that has no row of its own: to associate by nearest neighbour,
+#: rejected (not finite, or a range <= 0), or rejected because its identity is not in the map.
+ASSOCIATE, INVALID, NOT_IN_MAP = -1, -2, -3
 
-@njit(cache=True, inline="always")
-def _wrap(a: float) -> float:
-    """:func:`locbench.core.geometry.wrap_scalar`: the same expression (Python's float modulo, as numba's)."""
-    return math.pi - ((math.pi - a) % _TWO_PI)
+#: :func:`locbench.core.geometry.wrap_scalar` compiled (an angle to (-pi, pi]), for the kernels of the filters.
+_wrap = njit(cache=True, inline="always")(wrap_scalar)
+
+# The motion model's plain-float functions, compiled where a kernel calls them (numba's ``register_jitable``: the
+# functions stay as they are for Python callers). Registered once, here: the other kernel modules import this one.
+for _fn in (wheel_increment, input_variances, encoder_jacobian, encoder_step, propagate_upper):
+    register_jitable(inline="always")(_fn)
 
 
 @njit(cache=True, inline="always")
 def _propagate(s: FloatArray, f02: float, f12: float, n00: float, n01: float, n02: float, n11: float, n12: float,
                n22: float) -> None:  # fmt: skip
-    """:func:`locbench.filters._motion.propagate_covariance` on ``s`` in place: F P F^T + N."""
-    p00, p01, p02 = s[_P00], s[_P01], s[_P02]
-    p11, p12 = s[_P11], s[_P12]
-    p22 = s[_P22]
-    a, b = f02, f12
-    q00 = p00 + 2.0 * a * p02 + a * a * p22 + n00
-    q01 = p01 + a * p12 + b * p02 + a * b * p22 + n01
-    q02 = p02 + a * p22 + n02
-    q11 = p11 + 2.0 * b * p12 + b * b * p22 + n11
-    q12 = p12 + b * p22 + n12
-    q22 = p22 + n22
+    """F P F^T + N on the covariance of ``s`` in place (:func:`~locbench.filters._motion.propagate_upper`; F the
+    identity but for F[0, 2] = ``f02`` and F[1, 2] = ``f12``, N's upper triangle ``n..``)."""
+    q00, q01, q02, q11, q12, q22 = propagate_upper(
+        s[_P00], s[_P01], s[_P02], s[_P11], s[_P12], s[_P22], f02, f12, n00, n01, n02, n11, n12, n22
+    )
     s[_P00], s[_P01], s[_P02] = q00, q01, q02
     s[_P10], s[_P11], s[_P12] = q01, q11, q12
     s[_P20], s[_P21], s[_P22] = q02, q12, q22
@@ -66,7 +86,8 @@ def _propagate(s: FloatArray, f02: float, f12: float, n00: float, n01: float, n0
 
 @njit(cache=True, inline="always")
 def _finite(s: FloatArray) -> bool:
-    """``LandmarkEKF._check_finite``'s test: the mean's sum and the covariance's row sums (in its order)."""
+    """Whether the state is finite: the mean's sum and the sum of the covariance's row sums (a non-finite entry
+    makes them non-finite; an overflow of the sums alone does too, and then the state is beyond use anyway)."""
     ok = math.isfinite(s[0] + s[1] + s[2])
     r0 = 0.0 + s[_P00] + s[_P01] + s[_P02]
     r1 = 0.0 + s[_P10] + s[_P11] + s[_P12]
@@ -82,42 +103,27 @@ def state_finite(s: FloatArray) -> bool:
 
 @njit(cache=True)
 def predict_encoder(s: FloatArray, dl: float, dr: float, prm: FloatArray) -> bool:
-    """One encoder prediction (report 003 eq. 1-5, 10) with the additive Q; whether the state is finite.
+    """One encoder prediction (report 003 eq. 1-5, 10) with the additive Q (eq. 8) on ``s``; whether it is finite.
 
-    ``MotionModel.step``'s encoder branch with ``mean="model"`` and ``LandmarkEKF.predict``'s propagation.
-    ``prm`` = (W m, k_L, k_R sqrt(m), cumulative 0/1, travelled left, travelled right m, q_x, q_y, q_theta);
-    the travelled distances (``prm[4:6]``) are advanced in place as ``MotionModel`` does.
+    ``dl``, ``dr`` are the wheel travel (m). ``prm`` = (W m, k_L, k_R sqrt(m), cumulative 0/1, travelled left,
+    travelled right m, q_x, q_y, q_theta): eq. 10's reading and the distances travelled so far, which are advanced
+    in place (as :class:`~locbench.filters._motion.MotionModel` keeps them).
     """
-    W = prm[0]
-    x, y, th = s[0], s[1], s[2]
-    dd, dth = 0.5 * (dl + dr), (dr - dl) / W  # eq. 1-2
-    al, ar = abs(dl), abs(dr)
-    if prm[3] != 0.0:  # the literal eq. 10 (wheel_variances' "cumulative")
-        al += prm[4]
-        ar += prm[5]
-    vl, vr = prm[1] * prm[1] * al, prm[2] * prm[2] * ar
+    vl, vr = input_variances(dl, dr, prm[1], prm[2], prm[3] != 0.0, prm[4], prm[5])
     prm[4] += abs(dl)
     prm[5] += abs(dr)
-    c, sn = math.cos(th + 0.5 * dth), math.sin(th + 0.5 * dth)
-    hw = 0.5 / W
-    g00, g01 = 0.5 * c + dd * sn * hw, 0.5 * c - dd * sn * hw
-    g10, g11 = 0.5 * sn - dd * c * hw, 0.5 * sn + dd * c * hw
-    g20, g21 = -1.0 / W, 1.0 / W
-    n00 = g00 * g00 * vl + g01 * g01 * vr
-    n01 = g00 * g10 * vl + g01 * g11 * vr
-    n02 = g00 * g20 * vl + g01 * g21 * vr
-    n11 = g10 * g10 * vl + g11 * g11 * vr
-    n12 = g10 * g20 * vl + g11 * g21 * vr
-    n22 = g20 * g20 * vl + g21 * g21 * vr
-    s[0], s[1], s[2] = x + dd * c, y + dd * sn, _wrap(th + dth)
-    _propagate(s, -dd * sn, dd * c, n00 + prm[6], n01, n02, n11 + prm[7], n12, n22 + prm[8])
+    x, y, th = s[0], s[1], s[2]
+    ex, ey, dth, n00, n01, n02, n11, n12, n22 = encoder_step(th, dl, dr, prm[0], vl, vr)
+    s[0], s[1], s[2] = x + ex, y + ey, _wrap(th + dth)
+    _propagate(s, -ey, ex, n00 + prm[6], n01, n02, n11 + prm[7], n12, n22 + prm[8])
     return _finite(s)
 
 
 @njit(cache=True)
 def predict_step(s: FloatArray, pose: FloatArray, f02: float, f12: float, noise: FloatArray, q: FloatArray) -> bool:
-    """``LandmarkEKF.predict`` for a step ``MotionModel`` computed (increment or twist noise): the new mean
-    ``pose`` (3,), F's entries and the noise's upper triangle (6,) plus Q's diagonal ``q`` (3,)."""
+    """A prediction whose step :class:`~locbench.filters._motion.MotionModel` computed (an increment or a measured
+    twist): the new mean ``pose`` (3,), F's entries, the noise's upper triangle (6,) plus Q's diagonal ``q`` (3,)
+    (report 003 eq. 8); whether the state is finite."""
     s[0], s[1], s[2] = pose[0], pose[1], pose[2]
     _propagate(s, f02, f12, noise[0] + q[0], noise[1], noise[2], noise[3] + q[1], noise[4], noise[5] + q[2])
     return _finite(s)
@@ -126,11 +132,17 @@ def predict_step(s: FloatArray, pose: FloatArray, f02: float, f12: float, noise:
 @njit(cache=True, inline="always")
 def _innovation(s: FloatArray, r: float, b: float, lx: float, ly: float, rr: float, rb: float
                 ) -> tuple[bool, float, float, float, float, float, float, float, float, float, float]:  # fmt: skip
-    """``LandmarkEKF._innovation``: (valid, vr, vb, h00, h01, h10, h11, det S, d2, range, bearing)."""
+    """The range-bearing innovation of the landmark at (lx, ly) (report 003 eq. 7, report 001 fig. 2 corrected):
+    (valid, v_range, v_bearing, h00, h01, h10, h11, det S, d2, predicted range, predicted bearing).
+
+    H's entries are those of the module docstring (h02 = 0, h12 = -1 are implied), S = H P H^T + R with
+    R = diag(``rr``, ``rb``), d2 = v^T S^-1 v (inf unless det S > 0); invalid on top of the landmark, where the
+    bearing is undefined.
+    """
     x, y, th = s[0], s[1], s[2]
     dx, dy = lx - x, ly - y
     q = dx * dx + dy * dy
-    if q < 1e-12:  # on top of the landmark: the bearing is undefined
+    if q < 1e-12:
         return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, math.inf, 0.0, 0.0
     d = math.sqrt(q)
     h00, h01 = -dx / d, -dy / d
@@ -154,8 +166,9 @@ def _innovation(s: FloatArray, r: float, b: float, lx: float, ly: float, rr: flo
 @njit(cache=True)
 def correct_landmark(s: FloatArray, r: float, b: float, lx: float, ly: float, rr: float, rb: float,
                      gate: float) -> float:  # fmt: skip
-    """``LandmarkEKF._correct_landmark`` (eq. 7, Joseph form) on ``s`` in place; its NIS, or NaN if gated out
-    (an accepted NIS is never NaN: it passed ``d2 <= gate``)."""
+    """Fuse the sighting (range ``r`` m, bearing ``b`` rad) of the landmark at (lx, ly) into ``s``: one Joseph-form
+    update (module docstring; R = diag(``rr``, ``rb``)). Returns its NIS, or NaN with ``s`` unchanged when the
+    NIS is not inside ``gate`` or the innovation is invalid (an accepted NIS is never NaN)."""
     ok, vr, vb, h00, h01, h10, h11, det, d2, _, _ = _innovation(s, r, b, lx, ly, rr, rb)
     if not ok or not d2 <= gate:
         return math.nan
@@ -201,9 +214,12 @@ def correct_landmark(s: FloatArray, r: float, b: float, lx: float, ly: float, rr
 @njit(cache=True)
 def nearest_row(s: FloatArray, r: float, b: float, lm_xy: FloatArray, rows: IntArray, used: IntArray,
                 limits: FloatArray, rr: float, rb: float, gate: float) -> int:  # fmt: skip
-    """``LandmarkEKF._nearest``'s exact test over ``rows`` (ascending): the row of smallest d2 inside the gate
-    among those not ``used`` (nonzero per row) and, when ``limits`` (min range, max range, half field of view)
-    has size 3, predicted inside the sensor's limits; -1 for none. The first of equal d2 wins."""
+    """The row, among ``rows`` (ascending), of the landmark (``lm_xy`` (M, 2) m) of smallest squared Mahalanobis
+    distance d2 to the sighting (r m, b rad), if inside ``gate``; else -1. The first of equal d2 wins.
+
+    Rows marked in ``used`` (nonzero) are no candidates, nor, when ``limits`` (min range m, max range m, half
+    field of view rad) has size 3, the landmarks predicted outside the sensor's limits.
+    """
     best_row, best_d2 = -1, math.inf
     prune = limits.shape[0] == 3
     for i in range(rows.shape[0]):
@@ -221,49 +237,66 @@ def nearest_row(s: FloatArray, r: float, b: float, lm_xy: FloatArray, rows: IntA
 
 
 @njit(cache=True)
-def update_landmarks(s: FloatArray, ids: IntArray, ranges: FloatArray, bearings: FloatArray, lm_xy: FloatArray,
-                     map_ids: IntArray, map_rows: IntArray, all_rows: IntArray, used: IntArray,
-                     limits: FloatArray, prm: FloatArray, deferred: IntArray, out: FloatArray) -> int:  # fmt: skip
-    """``LandmarkEKF._update_landmarks``: the sightings with a known id in their order, then (with
-    ``prm[5]`` != 0) those to associate by nearest neighbour over every landmark (``all_rows``).
+def sighting_rows(ids: IntArray, ranges: FloatArray, bearings: FloatArray, map_ids: IntArray, map_rows: IntArray,
+                  use_ids: bool, rows: IntArray) -> None:  # fmt: skip
+    """Sort the sightings of one event for the sequential update: ``rows[k]`` is the map row of sighting k's
+    identity, or :data:`ASSOCIATE` (``use_ids`` False, or ``UNKNOWN_ID``), :data:`INVALID` (range or bearing not
+    finite, or a range <= 0) or :data:`NOT_IN_MAP`. ``map_ids`` are the map's ids sorted, ``map_rows`` their rows.
 
-    ``map_ids`` are the map's ids sorted, ``map_rows`` their rows; ``used`` (M,) is cleared and then marks
-    the rows fused (1). ``prm`` = (var_range, var_bearing, gate, gate known ids 0/1, use ids 0/1, associate here
-    0/1). ``out`` receives (NIS sum, accepted, rejected, ids not in the map, finite 0/1). Returns the number
-    of sightings left to associate, their indices in ``deferred``, when ``prm[5]`` is 0 (the caller takes
-    their candidates from a k-d tree); else 0.
+    The filters fuse the sightings with a row in their order, then associate the others in theirs, each with the
+    landmarks not fused yet (the association sees the state corrected by the identified landmarks).
     """
-    rr, rb, gate = prm[0], prm[1], prm[2]
-    gate_k = gate if prm[3] != 0.0 else math.inf
-    use_ids = prm[4] != 0.0
-    used[:] = 0
-    nis, acc, rej, missing, n_def = 0.0, 0, 0, 0, 0
     for k in range(ids.shape[0]):
         r, b = ranges[k], bearings[k]
         if not (math.isfinite(r) and math.isfinite(b)) or r <= 0.0:
-            rej += 1
+            rows[k] = INVALID
             continue
         ident = ids[k]
         if not use_ids or ident == -1:  # UNKNOWN_ID
-            deferred[n_def] = k
-            n_def += 1
+            rows[k] = ASSOCIATE
             continue
         j = np.searchsorted(map_ids, ident)
-        if j == map_ids.shape[0] or map_ids[j] != ident:
-            missing += 1
-            rej += 1
+        rows[k] = map_rows[j] if j < map_ids.shape[0] and map_ids[j] == ident else NOT_IN_MAP
+
+
+@njit(cache=True)
+def update_landmarks(s: FloatArray, ids: IntArray, ranges: FloatArray, bearings: FloatArray, lm_xy: FloatArray,
+                     map_ids: IntArray, map_rows: IntArray, all_rows: IntArray, used: IntArray,
+                     limits: FloatArray, prm: FloatArray, rows: IntArray, out: FloatArray) -> int:  # fmt: skip
+    """Fuse one event's sightings (module docstring): :func:`sighting_rows` into ``rows``, the identified ones
+    with :func:`correct_landmark`, then (with ``prm[5]`` != 0) those to associate by :func:`nearest_row` over
+    every landmark (``all_rows``).
+
+    ``used`` (M,) is cleared and then marks the rows fused (1). ``prm`` = (var_range, var_bearing, gate, gate known
+    ids 0/1, use ids 0/1, associate here 0/1). ``out`` receives (NIS sum, accepted, rejected, ids not in the map,
+    finite 0/1). Returns the number of sightings left to associate (``rows[k]`` = :data:`ASSOCIATE`) when
+    ``prm[5]`` is 0 (the caller takes their candidates from a k-d tree); else 0.
+    """
+    rr, rb, gate = prm[0], prm[1], prm[2]
+    gate_k = gate if prm[3] != 0.0 else math.inf
+    used[:] = 0
+    sighting_rows(ids, ranges, bearings, map_ids, map_rows, prm[4] != 0.0, rows)
+    nis, acc, rej, missing, n_def = 0.0, 0, 0, 0, 0
+    for k in range(ids.shape[0]):
+        row = rows[k]
+        if row == ASSOCIATE:
+            n_def += 1
             continue
-        row = map_rows[j]
-        d2 = correct_landmark(s, r, b, lm_xy[row, 0], lm_xy[row, 1], rr, rb, gate_k)
+        if row < 0:
+            rej += 1
+            missing += row == NOT_IN_MAP
+            continue
+        d2 = correct_landmark(s, ranges[k], bearings[k], lm_xy[row, 0], lm_xy[row, 1], rr, rb, gate_k)
         if math.isnan(d2):
             rej += 1
         else:
             nis += d2
             acc += 1
             used[row] = 1
-    if prm[5] != 0.0:
-        for i in range(n_def):
-            k = deferred[i]
+    if prm[5] != 0.0 and n_def:
+        for k in range(ids.shape[0]):
+            if rows[k] != ASSOCIATE:
+                continue
             r, b = ranges[k], bearings[k]
             row = nearest_row(s, r, b, lm_xy, all_rows, used, limits, rr, rb, gate)
             d2 = math.nan if row < 0 else correct_landmark(s, r, b, lm_xy[row, 0], lm_xy[row, 1], rr, rb, gate)
@@ -293,7 +326,7 @@ def float_buffer(lm_xy: FloatArray, encoder: FloatArray, landmark: FloatArray, l
 
 def int_buffer(map_ids: IntArray, map_rows: IntArray, capacity: int) -> IntArray:
     """The integer buffer of :func:`update_packed`: the map's ids sorted, their rows, every row, the used
-    marks (M each), then room for ``capacity`` deferred sightings."""
+    marks (M each), then the rows of up to ``capacity`` sightings (:func:`sighting_rows`)."""
     m = map_ids.shape[0]
     return np.concatenate([map_ids, map_rows, np.arange(m, dtype=np.int64), np.zeros(m + capacity, dtype=np.int64)])
 
@@ -306,7 +339,7 @@ def predict_packed(buf: FloatArray, dl: float, dr: float) -> bool:
 
 @njit(cache=True)
 def update_packed(buf: FloatArray, ids: IntArray, ranges: FloatArray, bearings: FloatArray, ibuf: IntArray) -> int:
-    """:func:`update_landmarks` on the two buffers (``ibuf`` must hold ``len(ids)`` deferred sightings)."""
+    """:func:`update_landmarks` on the two buffers (``ibuf`` must hold the rows of ``len(ids)`` sightings)."""
     m = (buf.shape[0] - BUF_XY) // 2
     n_lim = int(buf[BUF_LIM])
     return update_landmarks(

@@ -1,4 +1,4 @@
-"""The Kalman correction shared by the Gaussian filters, and the chi-square gates around it.
+"""The Kalman correction in numpy for any measurement model, and the chi-square gates around it.
 
 One measurement update in the Joseph form, after filterpy's ``ExtendedKalmanFilter.update``:
 
@@ -8,9 +8,14 @@ One measurement update in the Joseph form, after filterpy's ``ExtendedKalmanFilt
     x+ = x + K y
     P+ = (I - K H) P (I - K H)^T + K R K^T     Joseph form: symmetric and PSD for any K (report 002 eq. 8)
 
-with the innovation, S, the normalised innovation squared NIS = y^T S^-1 y and the Gaussian log-likelihood
-log N(y; 0, S) returned beside the new state. A sigma-point filter has no H; it forms y, S and the cross
+with the innovation, S and the normalised innovation squared NIS = y^T S^-1 y returned beside the new state (and
+the Gaussian log-likelihood log N(y; 0, S) on request). A sigma-point filter has no H; it forms y, S and the cross
 covariance P_xz itself and calls :func:`gain_update` (K = P_xz S^-1, P+ = P - K S K^T).
+
+These are the corrections of the measurements a filter meets rarely (a pose fix, a beacon range, a sigma-point
+update) or whose dimension varies. A correction a filter runs at every event is written out for
+its model in that filter's compiled kernels (the range-bearing landmark update of ``ekf_landmarks``,
+:mod:`locbench.filters._ekf_kernels`); the tests hold those to these forms within rounding.
 
 Gates: a measurement of dimension m is accepted when its NIS is inside the chi-square quantile with m
 degrees of freedom of the gate probability (:func:`chi2_quantile`; closed forms for 1 and 2 dof).
@@ -54,8 +59,6 @@ class Correction:
         Gain.
     nis : float
         Normalised innovation squared y^T S^-1 y (chi-square with m dof for a consistent filter).
-    log_likelihood : float
-        log N(y; 0, S) = -(m log 2 pi + log det S + NIS) / 2.
     """
 
     x: FloatArray
@@ -64,7 +67,11 @@ class Correction:
     S: FloatArray
     K: FloatArray
     nis: float
-    log_likelihood: float
+
+    @property
+    def log_likelihood(self) -> float:
+        """log N(y; 0, S) = -(m log 2 pi + log det S + NIS) / 2 (computed when asked: a determinant)."""
+        return log_likelihood(self.nis, self.S)
 
 
 def subtract(z: FloatArray, h: FloatArray) -> FloatArray:
@@ -124,7 +131,7 @@ def joseph_update(
     Returns
     -------
     Correction
-        The new mean (angles not wrapped) and covariance, with y, S, K, NIS and log-likelihood.
+        The new mean (angles not wrapped) and covariance, with y, S, K and NIS.
     """
     return joseph_correct(x, P, residual(z, hx), H, R)
 
@@ -132,8 +139,7 @@ def joseph_update(
 def joseph_correct(x: FloatArray, P: FloatArray, y: FloatArray, H: FloatArray, R: FloatArray) -> Correction:
     """The Joseph-form correction for an innovation ``y`` the caller formed itself (angles already wrapped).
 
-    Shapes as in :func:`joseph_update`. For H = I (a direct pose measurement) every product with H is exact, so
-    the result equals the same algebra written without H bit for bit.
+    Shapes as in :func:`joseph_update`.
     """
     PHt = P @ H.T
     S = H @ PHt + R
@@ -142,36 +148,20 @@ def joseph_correct(x: FloatArray, P: FloatArray, y: FloatArray, H: FloatArray, R
     A = np.eye(P.shape[0]) - K @ H
     P_new = A @ P @ A.T + K @ R @ K.T
     nis = float(y @ Sinv @ y)
-    return Correction(x + K @ y, 0.5 * (P_new + P_new.T), y, S, K, nis, log_likelihood(nis, S))
-
-
-def joseph_correct_pose(
-    x: FloatArray, P: FloatArray, y: FloatArray, R: FloatArray
-) -> tuple[FloatArray, FloatArray, float]:
-    """:func:`joseph_correct` for a direct measurement of the whole state (H = I): (x+, P+ symmetrised, NIS).
-
-    Every product with H = I is exact (P H^T = P, H P H^T = P, K H = K), so these are the same bits as
-    :func:`joseph_correct` with ``np.eye(n)``; without those products and the log-likelihood (a determinant)
-    it costs a third fewer small numpy calls per update.
-    """
-    S = P + R
-    Sinv = np.linalg.inv(S)
-    K = P @ Sinv
-    A = np.eye(P.shape[0]) - K
-    P_new = A @ P @ A.T + K @ R @ K.T
-    return x + K @ y, 0.5 * (P_new + P_new.T), float(y @ Sinv @ y)
+    return Correction(x + K @ y, 0.5 * (P_new + P_new.T), y, S, K, nis)
 
 
 def gain_update(x: FloatArray, P: FloatArray, y: FloatArray, S: FloatArray, Pxz: FloatArray) -> Correction:
     """A correction from the cross covariance (sigma-point filters): K = P_xz S^-1, P+ = P - K S K^T.
 
-    ``y`` and ``S`` are the innovation and its covariance as the caller formed them (R included).
+    ``y`` and ``S`` are the innovation and its covariance as the caller formed them (R included); shapes (m,),
+    (m, m), with P_xz (n, m).
     """
     Sinv = np.linalg.inv(S)
     K = Pxz @ Sinv
     P_new = P - K @ S @ K.T
     nis = float(y @ Sinv @ y)
-    return Correction(x + K @ y, 0.5 * (P_new + P_new.T), y, S, K, nis, log_likelihood(nis, S))
+    return Correction(x + K @ y, 0.5 * (P_new + P_new.T), y, S, K, nis)
 
 
 # --- chi-square gates ------------------------------------------------------------------------------------

@@ -79,6 +79,102 @@ DEFAULT_SIGMA_THETA_PER_RAD = 0.02
 # --- the encoder model (report 003 eq. 1-5, 10) -----------------------------------------------------------
 
 
+# The functions of this section in plain floats (and propagate_upper below) are the one implementation of the
+# encoder model's step: Python code (MotionModel.step, the public matrix forms) calls them as written, and the
+# compiled filters call them from their kernels (filters/_ekf_kernels.py registers them with numba, which compiles
+# IEEE operations in source order, no fused multiply-add without fastmath, libm's cos and sin; this module imports
+# no numba, as the plugin API does not). numba's on-disk cache of a kernel is keyed on its own module's source
+# alone: after editing one of them, delete the ``*.nbi`` / ``*.nbc`` files under ``filters/__pycache__``.
+
+
+def wheel_increment(d_left: float, d_right: float, wheelbase_m: float) -> tuple[float, float]:
+    """(delta_d m, delta_theta rad) of one step's wheel travel (report 003 eq. 2 and 1); also elementwise on arrays.
+
+    delta_d = (delta_l + delta_r) / 2 is the travel of the mid-axis point, delta_theta = (delta_r - delta_l) / W the
+    heading change, counter-clockwise; W = ``wheelbase_m``, m.
+    """
+    return 0.5 * (d_left + d_right), (d_right - d_left) / wheelbase_m
+
+
+def input_variances(
+    d_left: float, d_right: float, k_left: float, k_right: float, cumulative: bool, travelled_left: float,
+    travelled_right: float,
+) -> tuple[float, float]:  # fmt: skip
+    """(sigma_L^2, sigma_R^2) of one step, m^2 (report 003 eq. 10): :func:`wheel_variances` with its reading as a
+    flag (``cumulative``: the travelled distances, m, are added to this step's)."""
+    al, ar = abs(d_left), abs(d_right)
+    if cumulative:
+        al += travelled_left
+        ar += travelled_right
+    return k_left * k_left * al, k_right * k_right * ar
+
+
+def encoder_jacobian(
+    c: float, s: float, delta_d: float, wheelbase_m: float
+) -> tuple[float, float, float, float, float, float]:
+    """G = d(eq. 5)/d(delta_l, delta_r) row-major (g00, g01, g10, g11, g20, g21), through eq. 1-2.
+
+    ``c``, ``s`` are cos h and sin h at the midpoint heading h = theta + delta_theta / 2. With
+    d(delta_d)/d(delta_l) = d(delta_d)/d(delta_r) = 1/2 and d(delta_theta)/d(delta_l) = -1/W,
+    d(delta_theta)/d(delta_r) = +1/W, e.g. dx/d(delta_l) = cos(h)/2 + delta_d sin(h) / (2W).
+    """
+    hw = 0.5 / wheelbase_m
+    return (
+        0.5 * c + delta_d * s * hw,
+        0.5 * c - delta_d * s * hw,
+        0.5 * s - delta_d * c * hw,
+        0.5 * s + delta_d * c * hw,
+        -1.0 / wheelbase_m,
+        1.0 / wheelbase_m,
+    )
+
+
+def encoder_step(
+    theta: float, d_left: float, d_right: float, wheelbase_m: float, var_left: float, var_right: float
+) -> tuple[float, float, float, float, float, float, float, float, float]:
+    """One step of the encoder model from heading ``theta`` (rad): (ex, ey, dtheta, n00, n01, n02, n11, n12, n22).
+
+    (ex, ey) = delta_d (cos h, sin h), m, is the world-frame translation of eq. 5 (h = theta + delta_theta / 2),
+    dtheta the heading change (eq. 1; the new heading theta + dtheta is left to the caller to wrap), and n the
+    upper triangle of the world-frame motion noise G U G^T, U = diag(``var_left``, ``var_right``) (eq. 10, m^2),
+    G from :func:`encoder_jacobian`. F = d(eq. 5)/d(x, y, theta) is the identity but for F[0, 2] = -ey and
+    F[1, 2] = ex.
+    """
+    dd, dth = wheel_increment(d_left, d_right, wheelbase_m)
+    h = theta + 0.5 * dth
+    c, s = math.cos(h), math.sin(h)
+    g00, g01, g10, g11, g20, g21 = encoder_jacobian(c, s, dd, wheelbase_m)
+    vl, vr = var_left, var_right
+    return (
+        dd * c,
+        dd * s,
+        dth,
+        g00 * g00 * vl + g01 * g01 * vr,
+        g00 * g10 * vl + g01 * g11 * vr,
+        g00 * g20 * vl + g01 * g21 * vr,
+        g10 * g10 * vl + g11 * g11 * vr,
+        g10 * g20 * vl + g11 * g21 * vr,
+        g20 * g20 * vl + g21 * g21 * vr,
+    )
+
+
+def propagate_upper(
+    p00: float, p01: float, p02: float, p11: float, p12: float, p22: float, f02: float, f12: float, n00: float,
+    n01: float, n02: float, n11: float, n12: float, n22: float,
+) -> tuple[float, float, float, float, float, float]:  # fmt: skip
+    """F P F^T + N for F = [[1, 0, f02], [0, 1, f12], [0, 0, 1]] on upper triangles (p.., n.. row-major), the
+    covariance propagation of every motion model here (report 003 eq. 8 with the input noise of eq. 10)."""
+    a, b = f02, f12
+    return (
+        p00 + 2.0 * a * p02 + a * a * p22 + n00,
+        p01 + a * p12 + b * p02 + a * b * p22 + n01,
+        p02 + a * p22 + n02,
+        p11 + 2.0 * b * p12 + b * b * p22 + n11,
+        p12 + b * p22 + n12,
+        p22 + n22,
+    )
+
+
 def wheel_to_motion(d_left: npt.ArrayLike, d_right: npt.ArrayLike, wheelbase_m: float) -> tuple[FloatArray, FloatArray]:
     """Mid-axis travel and heading change from wheel travel (report 003 eq. 1-2).
 
@@ -96,9 +192,7 @@ def wheel_to_motion(d_left: npt.ArrayLike, d_right: npt.ArrayLike, wheelbase_m: 
     delta_theta : ndarray
         Heading change, rad, counter-clockwise: (delta_r - delta_l) / W (eq. 1).
     """
-    dl = np.asarray(d_left, dtype=np.float64)
-    dr = np.asarray(d_right, dtype=np.float64)
-    return 0.5 * (dl + dr), (dr - dl) / wheelbase_m
+    return wheel_increment(np.asarray(d_left, dtype=np.float64), np.asarray(d_right, dtype=np.float64), wheelbase_m)
 
 
 def predict_midpoint(pose: npt.ArrayLike, delta_d: npt.ArrayLike, delta_theta: npt.ArrayLike) -> FloatArray:
@@ -148,31 +242,15 @@ def predict_arc(pose: npt.ArrayLike, delta_d: npt.ArrayLike, delta_theta: npt.Ar
 def jacobian_state(theta: float, delta_d: float, delta_theta: float) -> FloatArray:
     """F = d(eq. 5)/d(x, y, theta) at the previous heading ``theta`` (rad), shape (3, 3)."""
     h = theta + 0.5 * delta_theta
-    return np.array(
-        [
-            [1.0, 0.0, -delta_d * math.sin(h)],
-            [0.0, 1.0, delta_d * math.cos(h)],
-            [0.0, 0.0, 1.0],
-        ]
-    )
+    ex, ey = delta_d * math.cos(h), delta_d * math.sin(h)  # the translation of eq. 5 (encoder_step)
+    return np.array([[1.0, 0.0, -ey], [0.0, 1.0, ex], [0.0, 0.0, 1.0]])
 
 
 def jacobian_wheels(theta: float, delta_d: float, delta_theta: float, wheelbase_m: float) -> FloatArray:
-    """G = d(eq. 5)/d(delta_l, delta_r), shape (3, 2), through eq. 1-2.
-
-    With h = theta + delta_theta / 2, d(delta_d)/d(delta_l) = d(delta_d)/d(delta_r) = 1/2 and
-    d(delta_theta)/d(delta_l) = -1/W, d(delta_theta)/d(delta_r) = +1/W, so e.g.
-    dx/d(delta_l) = cos(h)/2 + delta_d sin(h) / (2W).
-    """
-    c, s = math.cos(theta + 0.5 * delta_theta), math.sin(theta + 0.5 * delta_theta)
-    half_w = 0.5 / wheelbase_m
-    return np.array(
-        [
-            [0.5 * c + delta_d * s * half_w, 0.5 * c - delta_d * s * half_w],
-            [0.5 * s - delta_d * c * half_w, 0.5 * s + delta_d * c * half_w],
-            [-1.0 / wheelbase_m, 1.0 / wheelbase_m],
-        ]
-    )
+    """G = d(eq. 5)/d(delta_l, delta_r), shape (3, 2), through eq. 1-2 (:func:`encoder_jacobian` at
+    h = theta + delta_theta / 2)."""
+    h = theta + 0.5 * delta_theta
+    return np.array(encoder_jacobian(math.cos(h), math.sin(h), delta_d, wheelbase_m)).reshape(3, 2)
 
 
 def wheel_variances(
@@ -198,11 +276,8 @@ def wheel_variances(
     travelled_left, travelled_right : float
         sum_{i<k} |delta l_i| and |delta r_i| before this step, m (used by ``"cumulative"`` only).
     """
-    al, ar = abs(d_left), abs(d_right)
-    if input_noise == "cumulative":
-        al += travelled_left
-        ar += travelled_right
-    return k_left * k_left * al, k_right * k_right * ar
+    cumulative = input_noise == "cumulative"
+    return input_variances(d_left, d_right, k_left, k_right, cumulative, travelled_left, travelled_right)
 
 
 def input_covariance(
@@ -631,28 +706,15 @@ class MotionModel:
             W = nz.wheelbase_m
             dl, dr = u.d_left, u.d_right
             assert W is not None and dl is not None and dr is not None  # guaranteed by ``encoder``
-            dd, dth = 0.5 * (dl + dr), (dr - dl) / W  # eq. 1-2
             vl, vr = wheel_variances(
                 dl, dr, nz.k_left, nz.k_right, nz.input_noise, self.travelled_left, self.travelled_right
             )
             self.travelled_left += abs(dl)
             self.travelled_right += abs(dr)
-            c, s = math.cos(th + 0.5 * dth), math.sin(th + 0.5 * dth)
-            # G = d(eq. 5)/d(delta_l, delta_r); see jacobian_wheels.
-            hw = 0.5 / W
-            g00, g01 = 0.5 * c + dd * s * hw, 0.5 * c - dd * s * hw
-            g10, g11 = 0.5 * s - dd * c * hw, 0.5 * s + dd * c * hw
-            g20, g21 = -1.0 / W, 1.0 / W
-            noise = (
-                g00 * g00 * vl + g01 * g01 * vr,
-                g00 * g10 * vl + g01 * g11 * vr,
-                g00 * g20 * vl + g01 * g21 * vr,
-                g10 * g10 * vl + g11 * g11 * vr,
-                g10 * g20 * vl + g11 * g21 * vr,
-                g20 * g20 * vl + g21 * g21 * vr,
-            )
+            ex, ey, dth, n00, n01, n02, n11, n12, n22 = encoder_step(th, dl, dr, W, vl, vr)  # eq. 1-2, 5, G U G^T
+            noise = (n00, n01, n02, n11, n12, n22)
             if not self._compose:
-                return Step((x + dd * c, y + dd * s, wrap_scalar(th + dth)), -dd * s, dd * c, noise, True)
+                return Step((x + ex, y + ey, wrap_scalar(th + dth)), -ey, ex, noise, True)
         elif (tw := nz.twist_sigmas(u)) is not None:
             assert u.v is not None and u.omega is not None and u.dt is not None  # guaranteed by twist_sigmas
             sg = twist_increment_covariance(u.v, u.omega, u.dt, tw[0], tw[1])
@@ -694,14 +756,7 @@ def propagate_covariance(
     ``P`` is a 3x3 nested list; ``noise`` the upper triangle of N (as in :class:`Step`).
     """
     p00, p01, p02 = P[0]
-    p11, p12 = P[1][1], P[1][2]
-    p22 = P[2][2]
-    a, b = f02, f12
     n00, n01, n02, n11, n12, n22 = noise
-    q00 = p00 + 2.0 * a * p02 + a * a * p22 + n00
-    q01 = p01 + a * p12 + b * p02 + a * b * p22 + n01
-    q02 = p02 + a * p22 + n02
-    q11 = p11 + 2.0 * b * p12 + b * b * p22 + n11
-    q12 = p12 + b * p22 + n12
-    q22 = p22 + n22
+    q00, q01, q02, q11, q12, q22 = propagate_upper(p00, p01, p02, P[1][1], P[1][2], P[2][2], f02, f12, n00, n01,
+                                                   n02, n11, n12, n22)  # fmt: skip
     return [[q00, q01, q02], [q01, q11, q12], [q02, q12, q22]]

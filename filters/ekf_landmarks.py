@@ -46,6 +46,11 @@ Choices the reports leave open, made here:
   nearest-neighbour search excluding the landmarks already used in the same event.
 * Covariance updates use the Joseph form (I - K H) P (I - K H)^T + K R K^T, symmetric and PSD by
   construction (report 002 eq. 8 uses the same).
+
+Where each equation is implemented: the encoder prediction and the range-bearing correction (the filter's most
+frequent events) are compiled, :mod:`locbench.filters._ekf_kernels`; the other motion models' steps come from
+:class:`~locbench.filters._motion.MotionModel`; range-only and pose-fix corrections go through the Kalman core's
+numpy Joseph update, :func:`locbench.filters._kalman.joseph_update`.
 """
 
 from __future__ import annotations
@@ -60,7 +65,7 @@ import numpy.typing as npt
 
 from locbench.core.errors import ConfigError, FilterDiverged
 from locbench.core.events import UNKNOWN_ID, LandmarkObservations, Observation, Odometry, PoseFix, RangeObservations
-from locbench.core.geometry import wrap_angle, wrap_scalar
+from locbench.core.geometry import wrap_scalar
 from locbench.core.runkey import RUN_KEY_OMIT_IF_DEFAULT
 from locbench.core.tunable import tunable
 from locbench.datasets.dataset import Gaussian2, MapKind, SensorSpec, WorldMap
@@ -73,7 +78,7 @@ from locbench.filters._kalman import (
     subtract,
     wrapped_residual,
 )
-from locbench.filters._landmark_index import INDEX_MIN_LANDMARKS, LandmarkIndex, gate_radius
+from locbench.filters._landmark_index import LandmarkIndex, gate_radius
 from locbench.filters._motion import (
     MotionKind,
     MotionModel,
@@ -105,27 +110,8 @@ _NO_LIMITS = np.empty(0)
 # the packed compiled calls, bound once (a module attribute costs a lookup per event)
 _predict_packed = kern.predict_packed
 _update_packed = kern.update_packed
-
-
-def range_bearing(pose: npt.ArrayLike, landmarks_xy: npt.ArrayLike) -> FloatArray:
-    """Expected (range m, bearing rad) of landmarks seen from ``pose`` (report 003 eq. 7), shape (..., 2).
-
-    ``pose`` (3,) world frame; ``landmarks_xy`` (..., 2) world frame; bearing wrapped to (-pi, pi].
-    """
-    p = np.asarray(pose, dtype=np.float64)
-    lm = np.asarray(landmarks_xy, dtype=np.float64)
-    dx, dy = lm[..., 0] - p[0], lm[..., 1] - p[1]
-    return np.stack([np.hypot(dx, dy), wrap_angle(np.arctan2(dy, dx) - p[2])], axis=-1)
-
-
-def range_bearing_jacobian(pose: npt.ArrayLike, landmark_xy: npt.ArrayLike) -> FloatArray:
-    """H = d(range, bearing)/d(x, y, theta), shape (2, 3); the corrected form of report 001 fig. 2."""
-    p = np.asarray(pose, dtype=np.float64)
-    lm = np.asarray(landmark_xy, dtype=np.float64)
-    dx, dy = float(lm[0] - p[0]), float(lm[1] - p[1])
-    q = dx * dx + dy * dy
-    d = math.sqrt(q)
-    return np.array([[-dx / d, -dy / d, 0.0], [dy / q, -dx / q, -1.0]])
+#: Room for the rows of this many sightings in the integer buffer at reset; it grows with a larger event.
+_ROWS_CAPACITY = 16
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -233,9 +219,8 @@ class LandmarkEKF(Filter):
     source: ClassVar[str] = "003_e5c93f9be776ee5e (EKF, eq. 1-10); 001_71e01b0c4f2511a1 (sensor Jacobian, GPS)"
 
     config: LandmarkEKFConfig
-    #: Whether landmark events take the compiled path; a subclass with its own corrections (the UKF) sets
-    #: False and gets :meth:`_fuse_sightings` over its :meth:`_nearest` and :meth:`_correct_landmark`.
-    _compiled_update: ClassVar[bool] = True
+    #: Maps with at least this many landmarks take nearest-neighbour candidates from a k-d tree.
+    _index_min_landmarks: ClassVar[int] = _VECTOR_NN_MIN
 
     def routed_events(self) -> frozenset[type]:
         """``consumes`` without PoseFix unless ``use_pose_fixes``."""
@@ -273,13 +258,13 @@ class LandmarkEKF(Filter):
         limits = self._sensor_limits(sensors) if cfg.prune_to_sensor_limits else None
         self._limits = _NO_LIMITS if limits is None else np.array(limits)
         # a large map: nearest-neighbour candidates from a k-d tree instead of testing every landmark
-        big = len(self._lm_list) >= (_VECTOR_NN_MIN if self._compiled_update else INDEX_MIN_LANDMARKS)
+        big = len(self._lm_list) >= self._index_min_landmarks
         self._index = LandmarkIndex(self._lm_xy) if big else None
         # the compiled calls' buffers (_ekf_kernels): state, constants and map; the map's ids sorted with rows
         ids = np.asarray(lm.ids, dtype=np.int64).reshape(-1)
         order = np.argsort(ids, kind="stable")
         n_lm = len(self._lm_list)
-        self._ibuf = kern.int_buffer(ids[order], order.astype(np.int64), 16)
+        self._ibuf = kern.int_buffer(ids[order], order.astype(np.int64), _ROWS_CAPACITY)
         self._used = self._ibuf[3 * n_lm : 4 * n_lm]  # a view: the used marks of the current event
         self._all_rows = np.arange(n_lm, dtype=np.int64)
         use_ids = cfg.association == "known"
@@ -359,11 +344,9 @@ class LandmarkEKF(Filter):
         """Correct with landmark observations (eq. 7), beacon ranges or a pose fix (report 001); TypeError otherwise."""
         self._t = z.t
         if type(z) is LandmarkObservations:
-            if self._compiled_update:
-                self._update_landmarks(z)  # checks the state's finiteness in its compiled call
-                return
-            self._fuse_sightings(z)
-        elif type(z) is RangeObservations:
+            self._update_landmarks(z)  # checks the state's finiteness itself
+            return
+        if type(z) is RangeObservations:
             self._update_ranges(z)
         elif type(z) is PoseFix:
             self._update_pose_fix(z)
@@ -374,86 +357,76 @@ class LandmarkEKF(Filter):
 
     def _update_landmarks(self, z: LandmarkObservations) -> None:
         """Fuse the sightings: known ids first (reliable), then nearest neighbour among the landmarks not used
-        yet, one compiled call (:func:`._ekf_kernels.update_landmarks`); with a k-d tree the nearest-neighbour
-        sightings return here for their candidates."""
-        if self._lm_warn:
-            landmark_noise(None, None, SensorSpec(), warn=True)
-            self._lm_warn = False
-        ranges, bearings, out, ibuf = z.ranges, z.bearings, self._out, self._ibuf
-        n_lm = len(self._lm_list)
-        if len(ranges) > len(ibuf) - 4 * n_lm:  # room for the event's deferred sightings
-            self._ibuf = ibuf = np.concatenate([ibuf[: 4 * n_lm], np.zeros(2 * len(ranges), dtype=np.int64)])
-            self._used = ibuf[3 * n_lm : 4 * n_lm]
-        n_def = _update_packed(self._buf, z.ids, ranges, bearings, ibuf)
+        yet, one compiled call (:func:`._ekf_kernels.update_landmarks`); with a k-d tree the sightings to
+        associate return here for their candidates (:meth:`_fuse`)."""
+        self._warn_landmark_noise()
+        ranges, bearings, out = z.ranges, z.bearings, self._out
+        rows = self._rows(len(ranges))
+        n_def = _update_packed(self._buf, z.ids, ranges, bearings, self._ibuf)
         nis, acc, rej, missing, finite = out.tolist()
-        if missing and logger.isEnabledFor(logging.DEBUG):
-            for ident in z.ids.tolist():
-                if ident != UNKNOWN_ID and ident not in self._lm_row:
-                    logger.debug("landmark id %d is not in the map; observation rejected", ident)
-        if n_def:  # the nearest-neighbour sightings of a map with a k-d tree
-            for k in ibuf[4 * n_lm : 4 * n_lm + n_def].tolist():
-                r, b = float(ranges[k]), float(bearings[k])
-                row = self._nearest_row(r, b, self._used)
-                d2 = None if row < 0 else self._correct_landmark(r, b, row, self._gate)
-                if d2 is None:
-                    rej += 1
-                else:
-                    nis += d2
-                    acc += 1
-                    self._used[row] = 1
+        if missing:
+            self._log_unmapped(z)
+        if n_def:  # the sightings to associate of a map with a k-d tree
+            d_nis, d_acc, d_rej = self._fuse(ranges, bearings, rows, self._used, associate=True)
+            nis, acc, rej = nis + d_nis, acc + d_acc, rej + d_rej
             finite = kern.state_finite(self._s)
         self._nis = nis if acc else math.nan
         self._nis_dof, self._accepted, self._rejected = 2 * int(acc), int(acc), int(rej)
         if not finite:
             self._diverged(z.t)
 
-    def _fuse_sightings(self, z: LandmarkObservations) -> None:
-        """The order of :meth:`_update_landmarks` over the overridable :meth:`_correct_landmark` and
-        :meth:`_nearest`, in Python: known ids first, then nearest neighbour among the landmarks not used yet."""
+    def _warn_landmark_noise(self) -> None:
+        """Log the defaulted landmark noise once, at the first sightings (a range-only dataset has none)."""
         if self._lm_warn:
             landmark_noise(None, None, SensorSpec(), warn=True)
             self._lm_warn = False
-        nis, dof, acc, rej = 0.0, 0, 0, 0
-        ids = z.ids.tolist()
-        ranges = z.ranges.tolist()
-        bearings = z.bearings.tolist()
-        use_ids = self.config.association == "known"
-        gate_known = self.config.gate_known
-        used: set[int] = set()
-        deferred: list[int] = []
-        for k, ident in enumerate(ids):
-            r, b = ranges[k], bearings[k]
-            if not (math.isfinite(r) and math.isfinite(b)) or r <= 0.0:
-                rej += 1
+
+    def _rows(self, n: int) -> npt.NDArray[np.int64]:
+        """The integer buffer's room for the rows of ``n`` sightings (:func:`._ekf_kernels.sighting_rows`), grown
+        when an event has more sightings than any before; a view of its first ``n``."""
+        n_lm = len(self._lm_list)
+        if n > len(self._ibuf) - 4 * n_lm:
+            self._ibuf = np.concatenate([self._ibuf[: 4 * n_lm], np.zeros(2 * n, dtype=np.int64)])
+            self._used = self._ibuf[3 * n_lm : 4 * n_lm]
+        return self._ibuf[4 * n_lm : 4 * n_lm + n]
+
+    def _log_unmapped(self, z: LandmarkObservations) -> None:
+        """Log each identity of ``z`` that is not in the map (its sighting was rejected)."""
+        if logger.isEnabledFor(logging.DEBUG):
+            for ident in z.ids.tolist():
+                if ident != UNKNOWN_ID and ident not in self._lm_row:
+                    logger.debug("landmark id %d is not in the map; observation rejected", ident)
+
+    def _fuse(
+        self,
+        ranges: FloatArray,
+        bearings: FloatArray,
+        rows: npt.NDArray[np.int64],
+        used: npt.NDArray[np.int64],
+        associate: bool,
+    ) -> tuple[float, int, int]:
+        """Fuse sightings of one event in their order through :meth:`_correct_landmark`; (NIS sum, accepted, rejected).
+
+        ``rows`` are :func:`._ekf_kernels.sighting_rows`' codes. With ``associate`` False: the sightings with a row
+        (gated only with ``gate_known``) and the rejected ones (a code < 0 other than ``ASSOCIATE``); with
+        ``associate`` True: those to associate, each with the landmark of :meth:`_nearest_row` among those not
+        ``used``. The rows fused are marked in ``used``.
+        """
+        gate = self._gate if associate or self.config.gate_known else math.inf
+        nis, acc, rej = 0.0, 0, 0
+        for k, code in enumerate(rows.tolist()):
+            if (code == kern.ASSOCIATE) != associate:
                 continue
-            if not use_ids or ident == UNKNOWN_ID:
-                deferred.append(k)
-                continue
-            row = self._lm_row.get(ident)
-            if row is None:
-                logger.debug("landmark id %d is not in the map; observation rejected", ident)
-                rej += 1
-                continue
-            d2 = self._correct_landmark(r, b, row, self._gate if gate_known else math.inf)
+            r, b = float(ranges[k]), float(bearings[k])
+            row = self._nearest_row(r, b, used) if associate else code
+            d2 = None if row < 0 else self._correct_landmark(r, b, row, gate)
             if d2 is None:
                 rej += 1
             else:
                 nis += d2
-                dof += 2
                 acc += 1
-                used.add(row)
-        for k in deferred:
-            row = self._nearest(ranges[k], bearings[k], used)
-            d2 = None if row is None else self._correct_landmark(ranges[k], bearings[k], row, self._gate)
-            if row is None or d2 is None:
-                rej += 1
-            else:
-                nis += d2
-                dof += 2
-                acc += 1
-                used.add(row)
-        self._nis = nis if acc else math.nan
-        self._nis_dof, self._accepted, self._rejected = dof, acc, rej
+                used[row] = 1
+        return nis, acc, rej
 
     def _correct_landmark(self, r: float, b: float, row: int, gate: float) -> float | None:
         """Fuse one (range, bearing) of landmark ``row`` (eq. 7, Joseph form); its NIS, or None if gated out."""

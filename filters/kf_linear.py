@@ -41,11 +41,10 @@ A scan with no database entry within the tolerance (and, by default, inside a ch
 region of the predicted belief, see ``gate_probability``) gives no update and is counted (``no_match``).
 PoseFix events are **not** consumed: report 004's filter fuses only its velocity and sensor models.
 
-The algebra is filterpy 2.0.0's ``KalmanFilter.predict``/``update`` (measurements as (3, 1) columns) written
-out for F = H = I: the products with I that filterpy forms are exact and are left out, every other product,
-the inverse and the solve are the same numpy (BLAS/LAPACK) calls on the same shapes, so the numbers are
-filterpy's bit for bit (``tests/filters/test_kf_linear.py`` checks both steps against ``KalmanFilter``). The commanded
-prediction x + B u is done in floats: with B's zero entries, each component of B u is one product.
+The prediction is written out for F = I (x + B u, P + Q; with B's zero entries each component of a commanded
+B u is one product); the update is the Kalman core's Joseph form with H = I
+(:func:`locbench.filters._kalman.joseph_correct`), and the NIS y^T S^-1 y is taken by a solve with S.
+``tests/filters/test_kf_linear.py`` holds both steps to filterpy's ``KalmanFilter`` within rounding.
 """
 
 from __future__ import annotations
@@ -64,6 +63,7 @@ from locbench.core.events import LaserScan, Observation, Odometry
 from locbench.core.geometry import wrap_scalar
 from locbench.core.tunable import tunable
 from locbench.datasets.dataset import Gaussian2, MapKind, SensorSpec, WorldMap
+from locbench.filters._kalman import joseph_correct
 from locbench.filters._motion import increment_variances, resolve_motion_noise
 from locbench.filters._scan_database import ScanDatabase, build_database, lattice_too_large, match_scan
 from locbench.filters.base import NON_NEGATIVE, Estimate, Filter, FilterConfig, FilterDoc, bound
@@ -82,7 +82,7 @@ _EMPTY_DIAG: dict[str, float] = {
     "no_match": 0.0,
     "linear_input": _NAN,
 }
-#: filterpy's ``_I`` of ``I - K H`` (H = I, so K H = K exactly).
+#: H of the pose measurement.
 _I3 = np.eye(3)
 
 #: Laser range noise assumed for the default tolerance when the dataset gives none, m.
@@ -251,7 +251,7 @@ class LinearKF(Filter):
         cfg = self.config
         q_xy = var_xy + cfg.sigma_floor_xy_m**2
         q_th = var_th + cfg.sigma_floor_theta_rad**2
-        # filterpy: x = F x + B u, P = alpha^2 (F P F^T) + Q with F = I and alpha = 1 (both exact), so x + B u, P + Q
+        # x = F x + B u, P = F P F^T + Q with F = I: x + B u, P + Q
         if use_cmd:
             # B = [[c dt, 0], [s dt, 0], [0, dt]]: each row of B u has one nonzero product
             x_new = [x0 + (c * dt) * v, x1 + (s * dt) * v, wrap_scalar(th + dt * om)]
@@ -290,22 +290,16 @@ class LinearKF(Filter):
             return
         x0, x1, th = x[:, 0].tolist()
         z0, z1, zt = match.z.tolist()
-        # filterpy forms y = z - H x without wrapping: put z's heading within pi of the estimate's.
+        # the heading innovation wrapped: z's heading put within pi of the estimate's
         zt = th + wrap_scalar(zt - th)
-        R = match.cov
-        # filterpy's update with H = I (P H^T = P, H P H^T = P, K H = K exactly); the same numpy calls otherwise
-        y = np.array([[z0 - x0], [z1 - x1], [zt - th]])
-        S = P + R
-        K = np.dot(P, np.linalg.inv(S))
-        x_new = x + np.dot(K, y)
-        I_KH = _I3 - K
-        P_new = np.dot(np.dot(I_KH, P), I_KH.T) + np.dot(np.dot(K, R), K.T)
+        y = np.array([z0 - x0, z1 - x1, zt - th])
+        c = joseph_correct(x.reshape(3), P, y, _I3, match.cov)
+        x_new = c.x.reshape(3, 1)
         x_new[2, 0] = wrap_scalar(float(x_new[2, 0]))
         self._x = x_new
-        self._P = 0.5 * (P_new + P_new.T)
+        self._P = c.P
         self._check_finite(z.t)
-        yv = y.reshape(3)
-        nis = float(yv @ np.linalg.solve(S, yv))
+        nis = float(y @ np.linalg.solve(c.S, y))
         self._diag.update(
             nis=nis,
             accepted=1.0,

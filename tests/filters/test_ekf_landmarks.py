@@ -1,4 +1,6 @@
-"""The landmark EKF (report 003 with report 001's sensor model and GPS update)."""
+"""The landmark EKF (report 003 with report 001's sensor model and GPS update); its compiled kernels against the
+reference forms (tests/kalman_reference.py, the Kalman core's numpy Joseph update) and against the motion model's
+Python path, which runs the same source."""
 
 from __future__ import annotations
 
@@ -7,15 +9,17 @@ import math
 import numpy as np
 import pytest
 import range_only_support as ro
+from kalman_reference import range_bearing, range_bearing_jacobian
 from numpy.testing import assert_allclose
 
 from locbench.core.errors import ConfigError, FilterDiverged
 from locbench.core.events import UNKNOWN_ID, LandmarkObservations, LaserScan, Odometry, PoseFix, RangeObservations
 from locbench.core.geometry import between, is_symmetric_psd, pose_error, wrap_angle
 from locbench.datasets.dataset import Gaussian2, Landmarks, MapKind, SensorSpec, WorldMap
+from locbench.filters import _ekf_kernels as kern
 from locbench.filters._kalman import chi2_1dof_quantile, chi2_2dof_quantile, joseph_update, wrapped_residual
-from locbench.filters._motion import predict_midpoint
-from locbench.filters.ekf_landmarks import LandmarkEKF, LandmarkEKFConfig, range_bearing, range_bearing_jacobian
+from locbench.filters._motion import MotionModel, predict_midpoint, propagate_covariance, resolve_motion_noise
+from locbench.filters.ekf_landmarks import LandmarkEKF, LandmarkEKFConfig
 from locbench.registry import make_filter
 
 W = 0.4
@@ -83,10 +87,16 @@ def run(
     return np.array(means), np.array(covs), diags
 
 
-def test_range_bearing_jacobian_against_finite_differences() -> None:
+def test_the_kernels_measurement_and_jacobian_against_the_reference_and_finite_differences() -> None:
     lm = np.array([2.0, -1.5])
     for pose in (np.array([0.3, 0.2, 0.4]), np.array([-1.0, 2.0, -3.0]), np.array([4.0, -1.0, 3.1])):
-        H = range_bearing_jacobian(pose, lm)
+        s = np.concatenate([pose, 0.01 * np.eye(3).reshape(9)])
+        ok, vr, vb, h00, h01, h10, h11, _, _, d, pb = kern._innovation(s, 3.0, 0.5, lm[0], lm[1], 1e-4, 1e-4)
+        assert ok
+        H = np.array([[h00, h01, 0.0], [h10, h11, -1.0]])  # the kernel's entries; H[0, 2] = 0, H[1, 2] = -1 implied
+        assert_allclose(H, range_bearing_jacobian(pose, lm), rtol=1e-14, atol=1e-15)
+        assert_allclose([d, pb], range_bearing(pose, lm), rtol=1e-14, atol=1e-15)
+        assert_allclose([vr, vb], [3.0 - d, wrap_angle(0.5 - pb)], rtol=1e-14, atol=1e-15)
         num = np.zeros((2, 3))
         eps = 1e-7
         for i in range(3):
@@ -123,6 +133,53 @@ def test_scalar_update_matches_numpy_joseph_reference() -> None:
     assert_allclose(est.cov, ref.P, atol=1e-14)
     assert est.diagnostics["nis"] == pytest.approx(ref.nis)
     assert est.diagnostics["accepted"] == 1.0
+
+
+def _random_state(rng: np.random.Generator) -> np.ndarray:
+    a = rng.normal(size=(3, 3)) * 10.0 ** rng.uniform(-3.0, 0.0)
+    P = a @ a.T + 1e-9 * np.eye(3)
+    x = np.array([rng.normal() * 10.0, rng.normal() * 10.0, rng.uniform(-math.pi, math.pi)])
+    return np.concatenate([x, (0.5 * (P + P.T)).reshape(9)])
+
+
+@pytest.mark.parametrize("input_noise", ["per_step", "cumulative"])
+def test_the_encoder_prediction_kernel_is_the_motion_models_step(input_noise: str) -> None:
+    """The compiled prediction and MotionModel.step + propagate_covariance run the same source: the same bits on
+    any machine (ours against ours)."""
+    rng = np.random.default_rng(21)
+    noise = resolve_motion_noise(SENSORS, input_noise=input_noise)  # type: ignore[arg-type]
+    model = MotionModel(noise, "encoder")
+    q = (1e-6, 2e-6, 3e-7)
+    prm = np.array([W, noise.k_left, noise.k_right, float(input_noise == "cumulative"), 0.0, 0.0, *q])
+    for _ in range(300):
+        s = _random_state(rng)
+        dl, dr = rng.normal(0.05, 0.05), rng.normal(0.05, 0.05)
+        step = model.step(s[:3].tolist(), Odometry(0.0, 0.0, 0.0, 0.0, d_left=dl, d_right=dr))
+        n00, n01, n02, n11, n12, n22 = step.noise
+        P = propagate_covariance(s[3:].reshape(3, 3).tolist(), step.f02, step.f12,
+                                 (n00 + q[0], n01, n02, n11 + q[1], n12, n22 + q[2]))  # fmt: skip
+        assert kern.predict_encoder(s, dl, dr, prm)
+        assert np.array_equal(s, np.concatenate([step.pose, np.reshape(P, 9)]))
+        assert (prm[4], prm[5]) == (model.travelled_left, model.travelled_right)
+
+
+def test_the_kernels_landmark_update_equals_the_numpy_joseph_form_on_random_beliefs() -> None:
+    rng = np.random.default_rng(22)
+    R = np.diag([0.05**2, 0.02**2])
+    for _ in range(300):
+        s = _random_state(rng)
+        x0, P0 = s[:3].copy(), s[3:].reshape(3, 3).copy()
+        lm = x0[:2] + rng.uniform(-5.0, 5.0, size=2)
+        z = range_bearing(x0, lm) + rng.normal(size=2) * (0.05, 0.02)
+        nis = kern.correct_landmark(s, z[0], z[1], lm[0], lm[1], R[0, 0], R[1, 1], math.inf)
+        want = joseph_update(x0, P0, z, range_bearing(x0, lm), range_bearing_jacobian(x0, lm), R, wrapped_residual([1]))
+        # to rounding: the kernel's closed-form 2 x 2 inverse and written-out products against LAPACK and BLAS (the
+        # Joseph form's cancellation in a nearly singular posterior reaches ~2e-12 of the correlation scale)
+        assert_allclose(s[:2], want.x[:2], rtol=1e-12, atol=1e-12 * float(np.max(np.abs(want.x[:2]))))
+        assert abs(wrap_angle(s[2] - want.x[2])) <= 1e-12
+        scale = np.sqrt(np.outer(np.diag(want.P), np.diag(want.P)))
+        assert_allclose(s[3:].reshape(3, 3) / scale, want.P / scale, rtol=0, atol=1e-10)
+        assert nis == pytest.approx(want.nis, rel=1e-10)
 
 
 def test_joseph_keeps_covariance_symmetric_psd() -> None:

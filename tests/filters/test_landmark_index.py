@@ -26,7 +26,7 @@ def _world(rng: np.random.Generator) -> tuple[WorldMap, np.ndarray]:
 
 
 def _set_ukf(flt: Any, x: np.ndarray, P: np.ndarray) -> None:
-    flt._ukf.x, flt._ukf.P = x, P
+    flt._x, flt._P = x.tolist(), P.tolist()
 
 
 def _set_fls(flt: Any, x: np.ndarray, P: np.ndarray) -> None:
@@ -76,18 +76,26 @@ def test_fls_index_finds_the_scanned_nearest_landmark(spread: float) -> None:
     assert _random_sightings(flt, _set_fls, rng, xy, spread) > 30
 
 
-def test_ukf_subset_distances_are_the_full_maps() -> None:
-    """Each landmark's d2 is the same number computed over the map or over any subset of it (what makes the
-    index's first smallest the scan's)."""
+def test_ukf_subset_winner_is_the_full_maps() -> None:
+    """Each landmark's d2 is computed on its own, so the nearest landmark over the map is the nearest over any subset
+    that holds it (what makes the index's first smallest the scan's)."""
     rng = np.random.default_rng(5)
-    world, _ = _world(rng)
+    world, xy = _world(rng)
+    pose = np.array([1.0, -2.0, 0.3])
     flt = make_filter("ukf_landmarks[association=nearest,prune_to_sensor_limits=false]")
-    flt.reset(Gaussian2(np.array([1.0, -2.0, 0.3]), np.diag([0.2, 0.1, 0.05])), world, SensorSpec(), rng)
-    sig = flt._ukf.points_fn.sigma_points(flt._ukf.x, flt._ukf.P)
-    full = flt._mahalanobis_all(4.0, 0.5, set(), sig)
-    for _ in range(20):
-        rows = sorted(rng.choice(N_MAP, size=int(rng.integers(1, 30)), replace=False).tolist())
-        np.testing.assert_array_equal(flt._mahalanobis_all(4.0, 0.5, set(), sig, rows), full[rows])
+    flt.reset(Gaussian2(pose, np.diag([0.2, 0.1, 0.05])), world, SensorSpec(), rng)
+    flt._index = None  # every landmark
+    used = np.zeros(N_MAP, dtype=np.int64)
+    for target in rng.choice(N_MAP, size=10, replace=False).tolist():
+        dx, dy = xy[target] - pose[:2]
+        r, b = math.hypot(dx, dy) + 0.1, math.atan2(dy, dx) - pose[2] + 0.05
+        flt._all_rows = np.arange(N_MAP, dtype=np.int64)
+        full = flt._nearest_row(r, b, used)
+        assert full >= 0
+        for _ in range(10):
+            rows = sorted({full, *rng.choice(N_MAP, size=int(rng.integers(1, 30)), replace=False).tolist()})
+            flt._all_rows = np.array(rows, dtype=np.int64)
+            assert flt._nearest_row(r, b, used) == full
 
 
 def test_ukf_without_a_bound_scans() -> None:
@@ -96,5 +104,4 @@ def test_ukf_without_a_bound_scans() -> None:
     world, _ = _world(rng)
     flt = make_filter("ukf_landmarks[association=nearest]")
     flt.reset(Gaussian2(np.zeros(3), np.diag([0.01, 0.01, 4.0])), world, SensorSpec(), rng)
-    sig = flt._ukf.points_fn.sigma_points(flt._ukf.x, flt._ukf.P)
-    assert flt._gate_radius(5.0, sig) is None
+    assert flt._gate_radius(5.0, flt._sigma_points(0.0)) is None

@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+from kalman_reference import range_bearing
 from numpy.testing import assert_allclose
 
 pytest.importorskip("filterpy")
@@ -18,7 +19,7 @@ from locbench.core.seeding import filter_rng
 from locbench.datasets.dataset import Gaussian2, Landmarks, SensorSpec, WorldMap
 from locbench.evaluate.metrics import align, ate
 from locbench.filters._noise import DEFAULT_PROCESS_SIGMA_THETA_RAD
-from locbench.filters.ekf_landmarks import LandmarkEKF, LandmarkEKFConfig, range_bearing
+from locbench.filters.ekf_landmarks import LandmarkEKF, LandmarkEKFConfig
 from locbench.filters.ukf_landmarks import LandmarkUKF, LandmarkUKFConfig, circular_mean
 from locbench.registry import FILTERS, make_dataset, resolve_filter
 from locbench.run.filter_pass import run_filter

@@ -11,16 +11,30 @@ import sys
 
 import numpy as np
 
-from locbench.core.geometry import wrap_scalar
+from locbench.core.geometry import wrap_angle, wrap_scalar
 from locbench.datasets.dataset import Gaussian2, Landmarks, SensorSpec, WorldMap
 from locbench.filters._kalman import joseph_update, wrapped_residual
-from locbench.filters.ekf_landmarks import LandmarkEKF, range_bearing, range_bearing_jacobian
+from locbench.filters.ekf_landmarks import LandmarkEKF
 
 SENSORS = SensorSpec(landmark_sigma_range_m=0.05, landmark_sigma_bearing_rad=0.02)
 WORLD = WorldMap(landmarks=Landmarks(ids=np.array([1], dtype=np.int64), xy=np.array([[3.0, 1.0]])))
 P0 = [[0.04, 0.01, -0.005], [0.01, 0.09, 0.002], [-0.005, 0.002, 0.01]]
 X0 = [0.2, -0.1, 0.3]
 Z = (3.0, 0.02)
+
+
+def range_bearing(pose: np.ndarray, lm: np.ndarray) -> np.ndarray:
+    """h(x): (range, bearing) of the landmark ``lm`` from ``pose`` (report 003 eq. 7)."""
+    dx, dy = lm[0] - pose[0], lm[1] - pose[1]
+    return np.array([np.hypot(dx, dy), wrap_angle(np.arctan2(dy, dx) - pose[2])])
+
+
+def range_bearing_jacobian(pose: np.ndarray, lm: np.ndarray) -> np.ndarray:
+    """H = dh/dx (report 001 fig. 2, corrected)."""
+    dx, dy = float(lm[0] - pose[0]), float(lm[1] - pose[1])
+    q = dx * dx + dy * dy
+    d = q**0.5
+    return np.array([[-dx / d, -dy / d, 0.0], [dy / q, -dx / q, -1.0]])
 
 
 def main() -> None:
