@@ -50,7 +50,7 @@ import dataclasses
 import logging
 import math
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Literal, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -87,7 +87,11 @@ DEFAULT_SIGMA_THETA_PER_RAD = 0.02
 # alone: after editing one of them, delete the ``*.nbi`` / ``*.nbc`` files under ``filters/__pycache__``.
 
 
-def wheel_increment(d_left: float, d_right: float, wheelbase_m: float) -> tuple[float, float]:
+#: One step's wheel travel: a float (the compiled and per-event paths) or an array of them (the particle paths).
+_Travel = TypeVar("_Travel", float, FloatArray)
+
+
+def wheel_increment(d_left: _Travel, d_right: _Travel, wheelbase_m: float) -> tuple[_Travel, _Travel]:
     """(delta_d m, delta_theta rad) of one step's wheel travel (report 003 eq. 2 and 1); also elementwise on arrays.
 
     delta_d = (delta_l + delta_r) / 2 is the travel of the mid-axis point, delta_theta = (delta_r - delta_l) / W the
