@@ -343,7 +343,7 @@ def test_the_tool_reproduces_the_encoder_error_constant() -> None:
     assert fit == ENCODER_ERROR
     out = io.StringIO()
     with redirect_stdout(out), pytest.raises(SystemExit) as done:
-        runpy.run_path(str(ROOT / "tools" / "fit_radish_odometry.py"), run_name="__main__")
+        runpy.run_path(str(ROOT / "tools" / "derive" / "fit_radish_odometry.py"), run_name="__main__")
     assert done.value.code == 0
     assert f"sigma_xy_per_m={ENCODER_ERROR.sigma_xy_per_m!r}" in out.getvalue()
 
