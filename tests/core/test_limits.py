@@ -1,4 +1,4 @@
-"""Filters and builders estimate their memory before allocating and refuse above :mod:`locbench.core.limits` (issue 26).
+"""Filters and builders estimate their memory before allocating and refuse above :mod:`locbench.core.limits`.
 
 The case of the issue: a PNG map of a few kB with 4096 x 4096 cells at 5 cm (what the loaders accept, at their
 2^24-cell limit) made ``ekf_icp`` take 3.7 GB. Each filter that builds tables from the grid must refuse it in one

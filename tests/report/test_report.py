@@ -536,7 +536,7 @@ def test_table1_marks_the_tie_at_a_waypoint_and_not_the_shift() -> None:
     assert not any(c.startswith("**") for c in by["`pf` (003 table 1)"][0][1:])
 
 
-# --- the summary as a decision table (issue 25) ---------------------------------------------------------------
+# --- the summary as a decision table ------------------------------------------------------------------------
 
 
 def _summary_of(rows: list[tuple[str, str, int, str, float]], dataset: str = "mine") -> tuple[object, object]:
