@@ -50,7 +50,7 @@ import dataclasses
 import logging
 import math
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Literal, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -63,6 +63,8 @@ from locbench.datasets.dataset import SensorSpec
 from locbench.filters.base import POSITIVE_OR_DATASET, bound
 
 FloatArray = npt.NDArray[np.float64]
+#: A float, or an array of them (a function of plain floats that numpy also applies elementwise).
+_Floats = TypeVar("_Floats", float, FloatArray)
 InputNoise = Literal["per_step", "cumulative"]
 MotionKind = Literal["auto", "encoder", "increment"]
 
@@ -87,7 +89,7 @@ DEFAULT_SIGMA_THETA_PER_RAD = 0.02
 # alone: after editing one of them, delete the ``*.nbi`` / ``*.nbc`` files under ``filters/__pycache__``.
 
 
-def wheel_increment(d_left: float, d_right: float, wheelbase_m: float) -> tuple[float, float]:
+def wheel_increment(d_left: _Floats, d_right: _Floats, wheelbase_m: float) -> tuple[_Floats, _Floats]:
     """(delta_d m, delta_theta rad) of one step's wheel travel (report 003 eq. 2 and 1); also elementwise on arrays.
 
     delta_d = (delta_l + delta_r) / 2 is the travel of the mid-axis point, delta_theta = (delta_r - delta_l) / W the
@@ -686,7 +688,7 @@ class MotionModel:
         uses the model.
     """
 
-    __slots__ = ("_compose", "_use_encoder", "kind", "noise", "travelled_left", "travelled_right")
+    __slots__ = ("_compose", "_cumulative", "_use_encoder", "kind", "noise", "travelled_left", "travelled_right")
 
     def __init__(
         self, noise: MotionNoise, kind: MotionKind = "auto", mean: Literal["model", "compose"] = "model"
@@ -694,6 +696,7 @@ class MotionModel:
         self.noise = noise
         self.kind = kind
         self._compose = mean == "compose"
+        self._cumulative = noise.input_noise == "cumulative"
         self._use_encoder = noise.wheelbase_m is not None and (
             kind == "encoder" or (kind == "auto" and noise.encoder_given)
         )
@@ -709,8 +712,8 @@ class MotionModel:
             W = nz.wheelbase_m
             dl, dr = u.d_left, u.d_right
             assert W is not None and dl is not None and dr is not None  # guaranteed by ``encoder``
-            vl, vr = wheel_variances(
-                dl, dr, nz.k_left, nz.k_right, nz.input_noise, self.travelled_left, self.travelled_right
+            vl, vr = input_variances(
+                dl, dr, nz.k_left, nz.k_right, self._cumulative, self.travelled_left, self.travelled_right
             )
             self.travelled_left += abs(dl)
             self.travelled_right += abs(dr)
