@@ -25,8 +25,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from statistics import NormalDist
+from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -41,9 +41,8 @@ Residual = Callable[[FloatArray, FloatArray], FloatArray]
 _LOG_2PI = math.log(2.0 * math.pi)
 
 
-@dataclass(frozen=True, slots=True, eq=False)
-class Correction:
-    """One Kalman correction: the new state and what the update saw.
+class Correction(NamedTuple):
+    """One Kalman correction: the new state and what the update saw (a named tuple: cheap to make per update).
 
     Attributes
     ----------

@@ -687,7 +687,7 @@ class MotionModel:
         uses the model.
     """
 
-    __slots__ = ("_compose", "_use_encoder", "kind", "noise", "travelled_left", "travelled_right")
+    __slots__ = ("_compose", "_cumulative", "_use_encoder", "kind", "noise", "travelled_left", "travelled_right")
 
     def __init__(
         self, noise: MotionNoise, kind: MotionKind = "auto", mean: Literal["model", "compose"] = "model"
@@ -695,6 +695,7 @@ class MotionModel:
         self.noise = noise
         self.kind = kind
         self._compose = mean == "compose"
+        self._cumulative = noise.input_noise == "cumulative"
         self._use_encoder = noise.wheelbase_m is not None and (
             kind == "encoder" or (kind == "auto" and noise.encoder_given)
         )
@@ -710,8 +711,8 @@ class MotionModel:
             W = nz.wheelbase_m
             dl, dr = u.d_left, u.d_right
             assert W is not None and dl is not None and dr is not None  # guaranteed by ``encoder``
-            vl, vr = wheel_variances(
-                dl, dr, nz.k_left, nz.k_right, nz.input_noise, self.travelled_left, self.travelled_right
+            vl, vr = input_variances(
+                dl, dr, nz.k_left, nz.k_right, self._cumulative, self.travelled_left, self.travelled_right
             )
             self.travelled_left += abs(dl)
             self.travelled_right += abs(dr)

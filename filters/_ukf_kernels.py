@@ -220,28 +220,30 @@ def _moments3(sf: FloatArray, wc: FloatArray, m0: float, m1: float, m2: float, o
 
 
 @njit(cache=True, inline="always")
-def _rb_points(buf: FloatArray, lx: float, ly: float) -> tuple[float, float, float]:
+def _rb_points(buf: FloatArray, lx: float, ly: float) -> tuple[float, float]:
     """The predicted (range m, bearing rad) of the landmark at (lx, ly) from every sigma point (report 003 eq. 7;
-    bearing wrapped) into ``buf[B_SIGH:B_SIGH + 14]`` (row-major (7, 2)): (mean range, circular mean bearing,
-    smallest range)."""
+    bearing wrapped) into ``buf[B_SIGH:B_SIGH + 14]`` (row-major (7, 2)): (mean range, circular mean bearing)."""
     sg, sh = buf[B_SIG : B_SIG + 21], buf[B_SIGH : B_SIGH + 14]
-    nearest = math.inf
     for i in range(N_SIG):
         dx = lx - sg[3 * i]
         dy = ly - sg[3 * i + 1]
         sh[2 * i] = math.hypot(dx, dy)
         sh[2 * i + 1] = _wrap(math.atan2(dy, dx) - sg[3 * i + 2])
-        nearest = min(nearest, sh[2 * i])
     wm = buf[B_WM : B_WM + N_SIG]
-    return _dot_strided(wm, sh, 0, 2), _circular_mean(wm, sh, 1, 2), nearest
+    return _dot_strided(wm, sh, 0, 2), _circular_mean(wm, sh, 1, 2)
 
 
 @njit(cache=True, inline="always")
-def _rb_cov(buf: FloatArray, z0: float, z1: float) -> tuple[float, float, float, float]:
-    """sum_k Wc_k e_k e_k^T of the predicted measurements of :func:`_rb_points`, e_k = z_k - (z0, z1) with the
-    bearing residual wrapped, in the order of k: (s00, s01, s10, s11), R not added."""
-    sh, wc = buf[B_SIGH : B_SIGH + 14], buf[B_WC : B_WC + N_SIG]
+def _rb_sums(buf: FloatArray, z0: float, z1: float, cross: bool) -> tuple[float, float, float, float, float, float,
+                                                                          float, float, float, float]:  # fmt: skip
+    """The weighted sums over the sigma points of the predicted measurements of :func:`_rb_points`, in the order of
+    the points: (s00, s01, s10, s11) = sum Wc_k e_k e_k^T, e_k = z_k - (z0, z1) with the bearing residual wrapped
+    (R not added), then, with ``cross``, (p00, p01, p10, p11, p20, p21) = sum Wc_k d_k e_k^T row-major, d_k = point
+    k - the state's mean with the heading residual wrapped (zeros without)."""
+    sg, sh, wc = buf[B_SIG : B_SIG + 21], buf[B_SIGH : B_SIGH + 14], buf[B_WC : B_WC + N_SIG]
+    x0, x1, x2 = buf[0], buf[1], buf[2]
     s00 = s01 = s10 = s11 = 0.0
+    p00 = p01 = p10 = p11 = p20 = p21 = 0.0
     for i in range(N_SIG):
         e0 = sh[2 * i] - z0
         e1 = _wrap(sh[2 * i + 1] - z1)
@@ -254,47 +256,41 @@ def _rb_cov(buf: FloatArray, z0: float, z1: float) -> tuple[float, float, float,
             s01 += t01
             s10 += t10
             s11 += t11
-    return s00, s01, s10, s11
+        if cross:
+            d0 = sg[3 * i] - x0
+            d1 = sg[3 * i + 1] - x1
+            d2 = _wrap(sg[3 * i + 2] - x2)
+            q00, q01, q10, q11, q20, q21 = (
+                w * (d0 * e0),
+                w * (d0 * e1),
+                w * (d1 * e0),
+                w * (d1 * e1),
+                w * (d2 * e0),
+                w * (d2 * e1),
+            )
+            if i == 0:
+                p00, p01, p10, p11, p20, p21 = q00, q01, q10, q11, q20, q21
+            else:
+                p00 += q00
+                p01 += q01
+                p10 += q10
+                p11 += q11
+                p20 += q20
+                p21 += q21
+    return s00, s01, s10, s11, p00, p01, p10, p11, p20, p21
 
 
 @njit(cache=True)
 def landmark_sums(buf: FloatArray, r: float, b: float, lx: float, ly: float, rr: float, rb: float) -> int:
     """The sums of one range-bearing correction (module docstring) for the sighting (``r`` m, ``b`` rad) of the
     landmark at (lx, ly), R = diag(``rr``, ``rb``): the sigma points of the state, their predicted measurements
-    (:func:`_rb_points`), S (:func:`_rb_cov` + R), P_xz (state residuals' heading wrapped) and the innovation
-    (r - range, bearing difference wrapped), into ``buf[B_S:]`` (2 x 2), ``buf[B_PXZ:]`` (row-major 3 x 2) and
-    ``buf[B_Y:]``. Returns 0, or nonzero (the factorisation failed) with nothing written."""
+    (:func:`_rb_points`), S (+ R) and P_xz (:func:`_rb_sums`) and the innovation (r - range, bearing difference
+    wrapped), into ``buf[B_S:]`` (2 x 2), ``buf[B_PXZ:]`` (row-major 3 x 2) and ``buf[B_Y:]``. Returns 0, or nonzero
+    (the factorisation failed) with nothing written."""
     if sigma_points(buf) != 0:
         return 1
-    z0, z1, _ = _rb_points(buf, lx, ly)
-    s00, s01, s10, s11 = _rb_cov(buf, z0, z1)
-    sg, sh, wc = buf[B_SIG : B_SIG + 21], buf[B_SIGH : B_SIGH + 14], buf[B_WC : B_WC + N_SIG]
-    x0, x1, x2 = buf[0], buf[1], buf[2]
-    p00 = p01 = p10 = p11 = p20 = p21 = 0.0
-    for i in range(N_SIG):
-        e0 = sh[2 * i] - z0
-        e1 = _wrap(sh[2 * i + 1] - z1)
-        d0 = sg[3 * i] - x0
-        d1 = sg[3 * i + 1] - x1
-        d2 = _wrap(sg[3 * i + 2] - x2)
-        w = wc[i]
-        q00, q01, q10, q11, q20, q21 = (
-            w * (d0 * e0),
-            w * (d0 * e1),
-            w * (d1 * e0),
-            w * (d1 * e1),
-            w * (d2 * e0),
-            w * (d2 * e1),
-        )
-        if i == 0:
-            p00, p01, p10, p11, p20, p21 = q00, q01, q10, q11, q20, q21
-        else:
-            p00 += q00
-            p01 += q01
-            p10 += q10
-            p11 += q11
-            p20 += q20
-            p21 += q21
+    z0, z1 = _rb_points(buf, lx, ly)
+    s00, s01, s10, s11, p00, p01, p10, p11, p20, p21 = _rb_sums(buf, z0, z1, True)
     o = buf[B_S:B_SIGH]
     o[0], o[1], o[2], o[3] = s00 + rr, s01 + 0.0, s10 + 0.0, s11 + rb  # + R = diag(rr, rb)
     o[4], o[5], o[6], o[7], o[8], o[9] = p00, p01, p10, p11, p20, p21
@@ -316,17 +312,21 @@ def nearest_row(buf: FloatArray, r: float, b: float, lm_xy: FloatArray, rows: In
     landmarks whose predicted range or bearing lies outside the sensor's limits.
     """
     prune = limits.shape[0] == 3
+    sh = buf[B_SIGH : B_SIGH + 14]
     best_row, best_d2 = -1, math.inf
     for i in range(rows.shape[0]):
         row = rows[i]
         if used[row]:
             continue
-        z0, z1, nearest = _rb_points(buf, lm_xy[row, 0], lm_xy[row, 1])
+        z0, z1 = _rb_points(buf, lm_xy[row, 0], lm_xy[row, 1])
+        nearest = math.inf
+        for k in range(N_SIG):
+            nearest = min(nearest, sh[2 * k])
         if not nearest > 1e-6:
             continue
         if prune and not (limits[0] <= z0 <= limits[1] and abs(z1) <= limits[2]):
             continue
-        s00, s01, _, s11 = _rb_cov(buf, z0, z1)
+        s00, s01, _, s11, _, _, _, _, _, _ = _rb_sums(buf, z0, z1, False)
         s00, s11 = s00 + rr, s11 + rb
         det = s00 * s11 - s01 * s01
         if not det > 0.0:

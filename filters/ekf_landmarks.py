@@ -265,7 +265,9 @@ class LandmarkEKF(Filter):
         order = np.argsort(ids, kind="stable")
         n_lm = len(self._lm_list)
         self._ibuf = kern.int_buffer(ids[order], order.astype(np.int64), _ROWS_CAPACITY)
+        self._map_ids, self._map_rows = self._ibuf[:n_lm], self._ibuf[n_lm : 2 * n_lm]  # views
         self._used = self._ibuf[3 * n_lm : 4 * n_lm]  # a view: the used marks of the current event
+        self._rows_room = _ROWS_CAPACITY  # the sightings whose rows the integer buffer holds
         self._all_rows = np.arange(n_lm, dtype=np.int64)
         use_ids = cfg.association == "known"
         here = self._index is None
@@ -359,15 +361,18 @@ class LandmarkEKF(Filter):
         """Fuse the sightings: known ids first (reliable), then nearest neighbour among the landmarks not used
         yet, one compiled call (:func:`._ekf_kernels.update_landmarks`); with a k-d tree the sightings to
         associate return here for their candidates (:meth:`_fuse`)."""
-        self._warn_landmark_noise()
+        if self._lm_warn:
+            self._warn_landmark_noise()
         ranges, bearings, out = z.ranges, z.bearings, self._out
-        rows = self._rows(len(ranges))
+        if len(ranges) > self._rows_room:
+            self._rows(len(ranges))
         n_def = _update_packed(self._buf, z.ids, ranges, bearings, self._ibuf)
         nis, acc, rej, missing, finite = out.tolist()
         if missing:
             self._log_unmapped(z)
         if n_def:  # the sightings to associate of a map with a k-d tree
-            d_nis, d_acc, d_rej = self._fuse(ranges, bearings, rows, self._used, associate=True)
+            codes = self._rows(len(ranges)).tolist()
+            d_nis, d_acc, d_rej = self._fuse(ranges, bearings, codes, self._used, associate=True)
             nis, acc, rej = nis + d_nis, acc + d_acc, rej + d_rej
             finite = kern.state_finite(self._s)
         self._nis = nis if acc else math.nan
@@ -377,17 +382,18 @@ class LandmarkEKF(Filter):
 
     def _warn_landmark_noise(self) -> None:
         """Log the defaulted landmark noise once, at the first sightings (a range-only dataset has none)."""
-        if self._lm_warn:
-            landmark_noise(None, None, SensorSpec(), warn=True)
-            self._lm_warn = False
+        landmark_noise(None, None, SensorSpec(), warn=True)
+        self._lm_warn = False
 
     def _rows(self, n: int) -> npt.NDArray[np.int64]:
         """The integer buffer's room for the rows of ``n`` sightings (:func:`._ekf_kernels.sighting_rows`), grown
         when an event has more sightings than any before; a view of its first ``n``."""
         n_lm = len(self._lm_list)
-        if n > len(self._ibuf) - 4 * n_lm:
+        if n > self._rows_room:
             self._ibuf = np.concatenate([self._ibuf[: 4 * n_lm], np.zeros(2 * n, dtype=np.int64)])
+            self._map_ids, self._map_rows = self._ibuf[:n_lm], self._ibuf[n_lm : 2 * n_lm]
             self._used = self._ibuf[3 * n_lm : 4 * n_lm]
+            self._rows_room = 2 * n
         return self._ibuf[4 * n_lm : 4 * n_lm + n]
 
     def _log_unmapped(self, z: LandmarkObservations) -> None:
@@ -401,20 +407,20 @@ class LandmarkEKF(Filter):
         self,
         ranges: FloatArray,
         bearings: FloatArray,
-        rows: npt.NDArray[np.int64],
+        codes: list[int],
         used: npt.NDArray[np.int64],
         associate: bool,
     ) -> tuple[float, int, int]:
         """Fuse sightings of one event in their order through :meth:`_correct_landmark`; (NIS sum, accepted, rejected).
 
-        ``rows`` are :func:`._ekf_kernels.sighting_rows`' codes. With ``associate`` False: the sightings with a row
+        ``codes`` are :func:`._ekf_kernels.sighting_rows`' rows. With ``associate`` False: the sightings with a row
         (gated only with ``gate_known``) and the rejected ones (a code < 0 other than ``ASSOCIATE``); with
         ``associate`` True: those to associate, each with the landmark of :meth:`_nearest_row` among those not
         ``used``. The rows fused are marked in ``used``.
         """
         gate = self._gate if associate or self.config.gate_known else math.inf
         nis, acc, rej = 0.0, 0, 0
-        for k, code in enumerate(rows.tolist()):
+        for k, code in enumerate(codes):
             if (code == kern.ASSOCIATE) != associate:
                 continue
             r, b = float(ranges[k]), float(bearings[k])

@@ -40,7 +40,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import ClassVar
+from typing import ClassVar, NoReturn
 
 import numpy as np
 import numpy.typing as npt
@@ -160,8 +160,8 @@ class LandmarkUKF(LandmarkEKF):
         self._kb = kern.weights_buffer(wm, wc, scale)
         self._kb[0:12] = self._s
         self._s = self._kb[0:12]  # the state: a view of the kernels' buffer
+        self._kx, self._kP = self._kb[0:3], self._kb[3:12].reshape(3, 3)  # its mean and covariance, views
         self._wm, self._wc = wm, wc
-        self._R_lm = np.diag([self._rr, self._rb])
         # the k-d tree's bound (_gate_radius) needs non-negative weights (alpha = 1, beta = 2, kappa = 0 has them)
         self._weights_nonnegative = bool(np.all(wm >= 0.0) and np.all(wc >= 0.0))
         self._wc_sum = float(np.sum(wc))
@@ -175,7 +175,7 @@ class LandmarkUKF(LandmarkEKF):
         One compiled call (:func:`._ukf_kernels.predict`); it raises when the kernel cannot complete.
         """
         kb = self._kb
-        step = self._motion.step(self._s[0:3].tolist(), u)  # noise and model at the mean (and the travel count)
+        step = self._motion.step(self._kx.tolist(), u)  # noise and model at the mean (and the travel count)
         n00, n01, n02, n11, n12, n22 = step.noise
         q0, q1, q2 = self._q
         kb[kern.B_Q : kern.B_Q + 9] = [n00 + q0, n01, n02, n01, n11 + q1, n12, n02, n12, n22 + q2]
@@ -196,7 +196,8 @@ class LandmarkUKF(LandmarkEKF):
 
     # --- corrections ------------------------------------------------------------------------------------------
 
-    def _not_positive_definite(self, t: float) -> None:
+    def _not_positive_definite(self, t: float) -> NoReturn:
+        """Raise: P (or the predicted P) has no Cholesky factor, so no sigma points can be drawn."""
         raise np.linalg.LinAlgError(f"LandmarkUKF: the covariance is not positive definite at t={t:.3f} s")
 
     def _sigma_points(self, t: float) -> FloatArray:
@@ -209,23 +210,25 @@ class LandmarkUKF(LandmarkEKF):
     def _finish(self, x: FloatArray, P: FloatArray) -> None:
         """Take (x, P) as the state: heading wrapped, P symmetrised."""
         x[2] = wrap_scalar(float(x[2]))
-        self._s[0:3] = x
-        self._s[3:12] = (0.5 * (P + P.T)).reshape(9)
+        self._kx[:] = x
+        self._kP[:] = 0.5 * (P + P.T)
 
     def _update_landmarks(self, z: LandmarkObservations) -> None:
         """Fuse the sightings in the EKF's order: known identities first, then nearest neighbour among the
         landmarks not used yet (:func:`._ekf_kernels.sighting_rows`, :meth:`_fuse`)."""
-        self._warn_landmark_noise()
-        n_lm = len(self._lm_list)
-        rows, used = self._rows(len(z.ranges)), self._used
-        map_ids, map_rows = self._ibuf[:n_lm], self._ibuf[n_lm : 2 * n_lm]
-        ekf_kern.sighting_rows(z.ids, z.ranges, z.bearings, map_ids, map_rows, self.config.association == "known", rows)
-        used[:] = 0
-        nis, acc, rej = self._fuse(z.ranges, z.bearings, rows, used, associate=False)
-        if np.any(rows == ekf_kern.NOT_IN_MAP):
+        if self._lm_warn:
+            self._warn_landmark_noise()
+        rows = self._rows(len(z.ranges))
+        used, known = self._used, self.config.association == "known"
+        ekf_kern.sighting_rows(z.ids, z.ranges, z.bearings, self._map_ids, self._map_rows, known, rows)
+        used.fill(0)
+        codes = rows.tolist()
+        nis, acc, rej = self._fuse(z.ranges, z.bearings, codes, used, associate=False)
+        if ekf_kern.NOT_IN_MAP in codes:
             self._log_unmapped(z)
-        d_nis, d_acc, d_rej = self._fuse(z.ranges, z.bearings, rows, used, associate=True)
-        nis, acc, rej = nis + d_nis, acc + d_acc, rej + d_rej
+        if ekf_kern.ASSOCIATE in codes:
+            d_nis, d_acc, d_rej = self._fuse(z.ranges, z.bearings, codes, used, associate=True)
+            nis, acc, rej = nis + d_nis, acc + d_acc, rej + d_rej
         self._nis = nis if acc else math.nan
         self._nis_dof, self._accepted, self._rejected = 2 * acc, acc, rej
         self._check_finite(z.t)
@@ -250,7 +253,7 @@ class LandmarkUKF(LandmarkEKF):
         NIS for the gate. ``residual`` forms the innovation.
         """
         sigmas = self._sigma_points(self._t).copy()
-        x, P = self._s[0:3], self._s[3:12].reshape(3, 3)
+        x, P = self._kx, self._kP
         Wm, Wc = self._wm, self._wc
         sigmas_h = h_all(sigmas)
         zp = np.dot(Wm, sigmas_h) if z_mean is None else z_mean(sigmas_h, Wm)
@@ -270,14 +273,14 @@ class LandmarkUKF(LandmarkEKF):
         """Fuse one (range, bearing) of landmark ``row``: the compiled sums (:func:`._ukf_kernels.landmark_sums`)
         and the gain step; its NIS, or None if gated out."""
         lx, ly = self._lm_list[row]
-        s = self._s
-        if math.hypot(lx - float(s[0]), ly - float(s[1])) < 1e-6:
+        x = self._kx
+        if math.hypot(lx - float(x[0]), ly - float(x[1])) < 1e-6:
             return None  # on top of the landmark: the bearing is undefined
         kb = self._kb
         if kern.landmark_sums(kb, r, b, lx, ly, self._rr, self._rb) != 0:
             self._not_positive_definite(self._t)
         o = kb[kern.B_S : kern.B_SIGH]
-        c = gain_update(s[0:3], s[3:12].reshape(3, 3), o[10:12], o[0:4].reshape(2, 2), o[4:10].reshape(3, 2))
+        c = gain_update(x, self._kP, o[10:12], o[0:4].reshape(2, 2), o[4:10].reshape(3, 2))
         if not c.nis <= gate:
             return None
         self._finish(c.x, c.P)
