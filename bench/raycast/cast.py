@@ -337,9 +337,12 @@ def _beam_direction(cp: float, sp: float, cb: float, sb: float) -> tuple[float, 
     return cp * cb - sp * sb, sp * cb + cp * sb
 
 
-#: Rays per ``prange`` item of the kernels that cast many rays: a pool of the march (:func:`_march_pool`) idles
-#: while its last beams end.
+#: Rays per ``prange`` item of the march: a pool (:func:`_march_pool`) idles while its last beams end.
 _CHUNK = 2048
+
+#: Rays per ``prange`` item of the exact traversal: few, so that the items split evenly over the threads (numba
+#: gives each thread an equal run of items); within an item, pose and beam counters spare a division per ray.
+_DDA_CHUNK = 64
 
 #: ``chunk`` of :func:`_march_rays` for all rays in one piece (more rays than any cast).
 _ONE_PIECE = 1 << 62
@@ -365,7 +368,7 @@ def _dda_rays(
     occ: BoolArray, res: float, ox: float, oy: float, poses: FloatArray, angles: FloatArray, max_range: float
 ) -> FloatArray:  # pragma: no cover - compiled
     """Ranges (N, B), m, of the exact traversal (:func:`_dda_one`) of every beam ``angles`` (B,) from every sensor
-    pose ``poses`` (N, 3): the rays pose-major in items of :data:`_CHUNK`, the ``prange`` loop (so that one
+    pose ``poses`` (N, 3): the rays pose-major in items of :data:`_DDA_CHUNK`, the ``prange`` loop (so that one
     pose with many beams also spreads over the threads)."""
     n = poses.shape[0]
     nb = angles.shape[0]
@@ -377,11 +380,11 @@ def _dda_rays(
     sb = np.sin(angles)
     cp = np.cos(poses[:, 2])
     sp = np.sin(poses[:, 2])
-    for c in prange((total + _CHUNK - 1) // _CHUNK):
-        first = c * _CHUNK
+    for c in prange((total + _DDA_CHUNK - 1) // _DDA_CHUNK):
+        first = c * _DDA_CHUNK
         p = first // nb
         b = first - p * nb
-        for k in range(first, min(first + _CHUNK, total)):
+        for k in range(first, min(first + _DDA_CHUNK, total)):
             dx, dy = _beam_direction(cp[p], sp[p], cb[b], sb[b])
             out[k] = _dda_one(occ, (poses[p, 0] - ox) * inv_res, (poses[p, 1] - oy) * inv_res, dx, dy, t_lim) * res
             b += 1
