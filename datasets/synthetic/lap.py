@@ -348,7 +348,7 @@ class LapScenario(SyntheticBuilder):
         meta = {
             "generator_version": LAP_GENERATOR_VERSION,
             "calibration": {
-                "procedure": "tools/calibrate_odometry.py (calibrate_lap_odometry)",
+                "procedure": "locbench.datasets.synthetic.odometry_calibration.calibrate_lap_odometry",
                 "systematic_scale": LAP_SYSTEMATIC_SCALE,
                 "target_final_error_m": LAP_TARGET_FINAL_ERROR_M,
                 "achieved_median_final_error_m": LAP_CALIBRATION_ACHIEVED_M,

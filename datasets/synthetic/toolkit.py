@@ -313,7 +313,7 @@ def assemble(
         "execution_noise": execution_metadata(motion),
         "matched": initial_rng is not None,
         "calibration": {
-            "procedure": "tools/calibrate_odometry.py (calibrate_room_odometry)",
+            "procedure": "locbench.datasets.synthetic.odometry_calibration.calibrate_room_odometry",
             "target_cm": list(ROOM_TABLE1_ODOMETRY_CM),
             "achieved_cm": list(ROOM_CALIBRATION_ACHIEVED_CM),
         },
