@@ -674,7 +674,9 @@ def dataset_from_run(
         "unknown_barcode_rows": int(sum(run.unknown_barcodes.values())),
         "waypoint_spacing_m": waypoint_spacing_m,
         "initial_sigma": {"xy_m": INITIAL_SIGMA_XY_M, "theta_rad": INITIAL_SIGMA_THETA_RAD},
-        "nominal_noise": "frozen from tools/derive/derive_mrclam_noise.py (Dataset 6, robots 1-5); see the module docstring",
+        "nominal_noise": (
+            "frozen from tools/derive/derive_mrclam_noise.py (Dataset 6, robots 1-5); see the module docstring"
+        ),
     }
     return Dataset(
         id="mrclam",
