@@ -192,3 +192,23 @@ def test_particle_clouds_give_the_particle_filters_scores(tmp_path: Path) -> Non
     for k in SCORE_IDS:
         np.testing.assert_allclose(v2[k], values[k], rtol=RTOL, atol=0, err_msg=k)
     assert json.loads((store.run_dir("room", "external[name=clouds]", 0) / "meta.json").read_text())["covariance"]
+
+
+def test_the_report_collects_imported_runs_with_and_without_covariance(ekf: Any, tmp_path: Path) -> None:
+    from locbench.report.collect import collect
+
+    res, rec, _ = ekf
+    t, mean = last_per_time(rec.t, rec.mean)
+    import_system(res, "rep_pose", "office", [0], [str(write_tum_rows(tmp_path / "p.tum", t, mean))])
+    import_system(res, "rep_cov", "office", [0], [str(write_tumcov(tmp_path / "c.txt", rec.t, rec.mean, rec.cov))])
+    col = collect(Store(res))
+    assert not col.broken
+    m = col.metrics
+    for name in ("external[name=rep_pose]", "external[name=rep_cov]"):
+        ids = set(m.loc[m["filter"] == name, "metric"])
+        assert {"ate_m", "heading_rmse_rad", "failed"} <= ids
+        assert not any(_timing(k) for k in ids)
+        assert name in col.filters and not col.filters[name].baseline
+    assert ("office", "external[name=rep_cov]") in col.nees
+    assert ("office", "external[name=rep_pose]") not in col.nees
+    assert ("office", "external[name=rep_cov]") in col.health  # the spread it reported: the lost detection's input
