@@ -251,7 +251,7 @@ def read_bag(path: str | os.PathLike[str], topics: tuple[str, ...]) -> SystemOut
             counter[conn.topic] += 1
             here = f"message {counter[conn.topic]} of {conn.topic!r}"
             try:
-                msg = reader.deserialize(raw, conn.msgtype)
+                msg: Any = reader.deserialize(raw, conn.msgtype)
             except Exception as exc:
                 raise RecordedDataError(p, f"{here}: undecodable ({type(exc).__name__}: {quote(str(exc))})") from None
             st = msg.header.stamp

@@ -146,10 +146,10 @@ def _messages(ds: Dataset, off: float) -> list[tuple[float, str, Any]]:
             )
         static = _transform(ts, t0 + off, "base_link", "laser", sensor)  # type: ignore[arg-type]
         msgs.append((t0 + off, "/tf_static", mt["tf2_msgs/msg/TFMessage"](transforms=[static])))
-    for e in ds.events:
-        st = e.t + off
-        if isinstance(e, LaserScan):
-            r = np.asarray(e.ranges, dtype=np.float32)
+    for ev in ds.events:
+        st = ev.t + off
+        if isinstance(ev, LaserScan):
+            r = np.asarray(ev.ranges, dtype=np.float32)
             n = int(r.shape[0])
             msgs.append(
                 (
@@ -157,20 +157,20 @@ def _messages(ds: Dataset, off: float) -> list[tuple[float, str, Any]]:
                     "/scan",
                     mt["sensor_msgs/msg/LaserScan"](
                         header=header(ts, st, "laser"),
-                        angle_min=float(e.angle_min),
-                        angle_max=float(e.angle_min + (n - 1) * e.angle_increment),
-                        angle_increment=float(e.angle_increment),
+                        angle_min=float(ev.angle_min),
+                        angle_max=float(ev.angle_min + (n - 1) * ev.angle_increment),
+                        angle_increment=float(ev.angle_increment),
                         time_increment=0.0,
                         scan_time=0.0,
-                        range_min=float(e.range_min),
-                        range_max=float(e.range_max),
+                        range_min=float(ev.range_min),
+                        range_max=float(ev.range_max),
                         ranges=r,
                         intensities=np.zeros(0, np.float32),
                     ),
                 )
             )
-        elif isinstance(e, LandmarkObservations):
-            ids = np.array([-1 if i is None or i < 0 else int(i) for i in e.ids], dtype=np.int64)
+        elif isinstance(ev, LandmarkObservations):
+            ids = np.array([-1 if i is None or i < 0 else int(i) for i in ev.ids], dtype=np.int64)
             msgs.append(
                 (
                     st,
@@ -178,28 +178,28 @@ def _messages(ds: Dataset, off: float) -> list[tuple[float, str, Any]]:
                     mt["locbench_msgs/msg/LandmarkSightings"](
                         header=header(ts, st, "base_link"),
                         ids=ids,
-                        ranges=np.asarray(e.ranges, np.float64),
-                        bearings=np.asarray(e.bearings, np.float64),
+                        ranges=np.asarray(ev.ranges, np.float64),
+                        bearings=np.asarray(ev.bearings, np.float64),
                     ),
                 )
             )
-        elif isinstance(e, RangeObservations):
+        elif isinstance(ev, RangeObservations):
             msgs.append(
                 (
                     st,
                     "/beacon_ranges",
                     mt["locbench_msgs/msg/BeaconRanges"](
                         header=header(ts, st, "base_link"),
-                        ids=np.asarray(e.ids, np.int64),
-                        ranges=np.asarray(e.ranges, np.float64),
+                        ids=np.asarray(ev.ids, np.int64),
+                        ranges=np.asarray(ev.ranges, np.float64),
                     ),
                 )
             )
-        elif isinstance(e, PoseFix):
-            z = np.asarray(e.z, np.float64)
+        elif isinstance(ev, PoseFix):
+            z = np.asarray(ev.z, np.float64)
             cov = np.zeros((3, 3))
             k = z.shape[0]
-            cov[:k, :k] = np.asarray(e.cov, np.float64)
+            cov[:k, :k] = np.asarray(ev.cov, np.float64)
             if k < 3:  # a position-only fix: the heading is unknown (a very large variance, as ROS drivers write)
                 cov[2, 2] = 1e9
             msgs.append(
