@@ -25,7 +25,9 @@ What a stored import holds and means:
 - **Runtime** is not measured (``runtime_measured: false``): no call times are stored and no runtime metric given.
 - **Key and provenance.** The run key is a hash of the files' sha256 digests, the reading options and the dataset
   realisation; ``meta["imported"]`` holds each file's path, size and digest, the format, the topics, the
-  description and the sensors the system used. ``locbench verify`` checks those digests instead of re-running.
+  description and the sensors the system used (not stated: every event type of the dataset, so the report never
+  credits a system with needing less than it may have used). ``locbench verify`` checks those digests instead of
+  re-running.
 """
 
 from __future__ import annotations
@@ -252,6 +254,9 @@ def prepare(
     if unknown:
         valid = ", ".join(sorted(e.__name__ for e in EVENT_TYPES))
         raise ConfigError(f"--sensors: unknown {', '.join(unknown)}; expected some of {valid}")
+    stated = bool(sensors)
+    if not stated:  # not said: the system may have used anything the dataset offers (the report's "needs" column)
+        sensors = tuple(sorted({type(e).__name__ for e in ds.events}))
     options = {"format": out.fmt, "topics": list(out.topics), "frame": frame}
     key = stable_hash(
         {
@@ -295,6 +300,7 @@ def prepare(
             "clock_offset_s": shift,
             "description": description,
             "sensors": sorted(sensors),
+            "sensors_stated": stated,
             "particle_clouds": len(clouds),
         },
         "filter_traits": {

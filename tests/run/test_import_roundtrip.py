@@ -93,6 +93,9 @@ def test_tum_pose_only_gives_the_pose_metrics_and_no_consistency(ekf: Any, tmp_p
     import_system(res, "tum", "office", [0], [str(write_tum_rows(tmp_path / "ekf.tum", t, mean))])
     run = _imported(res, "tum")
     assert run.meta["covariance"] is False
+    # no --sensors: every event type the dataset has (never credited with needing less than it may have used)
+    assert run.meta["imported"]["sensors_stated"] is False
+    assert "LaserScan" in run.meta["filter_traits"]["sensors"] and "Odometry" in run.meta["filter_traits"]["sensors"]
     values = run_metrics(run, truth)
     _assert_same(run_metrics(rec, truth), values, pose_only=True)
     assert not any(_consistency(k) for k in values)
