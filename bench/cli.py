@@ -12,6 +12,8 @@ locbench check [ID ...]
 locbench fetch SPEC [SPEC ...]
 locbench export [--results DIR] [--out DIR] [--dataset SPEC ...] [--filter SPEC ...] [--smoothed]
 locbench export --format textlog --dataset SPEC [--seed N] --out FOLDER
+locbench export --format rosbag2|rosbag1 --dataset SPEC [--seed N] --out FOLDER
+locbench import --name NAME --dataset SPEC --seed N [--seed N ...] [--format F] [--topic T ...] FILE [FILE ...]
 """
 
 from __future__ import annotations
@@ -376,6 +378,8 @@ def _cmd_export(args: argparse.Namespace) -> int:
     from locbench.registry import resolve_dataset, resolve_filter
     from locbench.run.export import export_results, export_textlog
 
+    if args.format in ("rosbag1", "rosbag2"):
+        return _export_ros(args)
     if args.format == "textlog":
         if len(args.dataset) != 1 or args.filter or args.smoothed or not args.out:
             raise ConfigError("--format textlog writes one dataset: give --dataset SPEC --seed N --out FOLDER")
@@ -405,6 +409,59 @@ def _cmd_export(args: argparse.Namespace) -> int:
         )
         return 1
     print(f"{len(written)} TUM trajectory files written under {out}")
+    return 0
+
+
+def _export_ros(args: argparse.Namespace) -> int:
+    from locbench.run.rosbag_export import export_ros
+
+    if len(args.dataset) != 1 or args.filter or args.smoothed or not args.out:
+        raise ConfigError(f"--format {args.format} writes one dataset: give --dataset SPEC --seed N --out FOLDER")
+    seed = 0 if args.seed is None else args.seed
+    if seed < 0:
+        raise ConfigError(f"--seed must be >= 0, got {seed}")
+    res = export_ros(args.dataset[0], seed, args.out, args.format)
+    counts = ", ".join(f"{topic} {n}" for topic, n in res.counts.items())
+    print(f"{args.dataset[0]} seed {seed} written to {res.out}: {res.bag.name} ({counts} messages)")
+    if res.offset_s:
+        print(f"note: stamps are the dataset's times + {res.offset_s:g} s (ROS reads a stamp of 0 as unset)")
+    return 0
+
+
+def _seeds_arg(text: str) -> list[int]:
+    """``N`` or ``A-B`` (inclusive) as seeds."""
+    try:
+        if "-" in text[1:]:
+            a, b = text.split("-", 1)
+            lo, hi = int(a), int(b)
+            if lo > hi:
+                raise ValueError
+            return list(range(lo, hi + 1))
+        return [int(text)]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a seed N or a range A-B, got {text!r}") from None
+
+
+def _cmd_import(args: argparse.Namespace) -> int:
+    from locbench.run.import_runs import external_name, import_system
+
+    seeds = sorted({s for group in args.seed for s in group})
+    if any(s < 0 for s in seeds):
+        raise ConfigError("--seed: seeds are >= 0")
+    sensors = tuple(x for x in args.sensors.split(",") if x) if args.sensors else ()
+    written = import_system(
+        args.results,
+        args.name,
+        args.dataset,
+        seeds,
+        args.files,
+        fmt=args.format,
+        topics=tuple(args.topic),
+        description=args.description,
+        sensors=sensors,
+        frame=args.frame,
+    )
+    print(f"{len(written)} run(s) of {external_name(args.name)} on {args.dataset} stored in {args.results}/runs")
     return 0
 
 
@@ -553,17 +610,37 @@ def build_parser() -> argparse.ArgumentParser:
     )
     ex.add_argument(
         "--format",
-        choices=("tum", "textlog"),
+        choices=("tum", "textlog", "rosbag2", "rosbag1"),
         default="tum",
-        help="tum: stored runs (default); textlog: the dataset --dataset at --seed as a plain-text log in --out",
+        help="tum: stored runs (default); textlog: the dataset --dataset at --seed as a plain-text log in --out; "
+        "rosbag2/rosbag1: that dataset as a ROS bag with map and truth for a ROS localizer (docs/external.md)",
     )
-    ex.add_argument("--seed", type=int, default=None, help="with --format textlog: the realisation (default 0)")
+    ex.add_argument("--seed", type=int, default=None, help="with --format textlog/rosbag*: the realisation (default 0)")
     ex.add_argument("--results", default=_results_default(), help="results folder (default: results/)")
     ex.add_argument("--out", default=None, help="output folder (default: RESULTS/tum)")
     ex.add_argument("--dataset", nargs="+", action="extend", default=[], metavar="SPEC", help="only these datasets")
     ex.add_argument("--filter", nargs="+", action="extend", default=[], metavar="SPEC", help="only these filters")
     ex.add_argument("--smoothed", action="store_true", help="export smoothed trajectories (gtsam_fls) instead")
     ex.set_defaults(func=_cmd_export)
+
+    im = sub.add_parser(
+        "import", help="store another system's output (TUM, planar TUM with covariance, OpenVINS, ROS bags) as runs"
+    )
+    im.add_argument("--name", required=True, help="the system's name: its runs are external[name=NAME]")
+    im.add_argument("--dataset", required=True, metavar="SPEC", help="the dataset the output was computed on")
+    im.add_argument(
+        "--seed", type=_seeds_arg, action="append", required=True, metavar="N", help="a seed or A-B; repeatable"
+    )
+    im.add_argument("files", nargs="+", metavar="FILE", help="one file per seed in order, or one name with {seed}")
+    im.add_argument(
+        "--format", choices=("tum", "tumcov", "openvins", "bag"), default=None, help="default: from the file"
+    )
+    im.add_argument("--topic", action="append", default=[], help="bag topic of the poses and/or particle clouds")
+    im.add_argument("--frame", default="map", help="the frame the poses must be in (default map)")
+    im.add_argument("--description", default="", help="what the system is (stored in the runs' provenance)")
+    im.add_argument("--sensors", default="", help="event types the system used, comma-separated (Odometry,LaserScan)")
+    im.add_argument("--results", default=_results_default(), help="results folder (default: results/)")
+    im.set_defaults(func=_cmd_import)
     return p
 
 

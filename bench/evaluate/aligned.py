@@ -70,8 +70,12 @@ class Aligned:
     def nees(self) -> FloatArray:
         """NEES of the pose at every time (:func:`nees`), shape (k,); needs ``cov``."""
         if self.cov is None:
-            raise ValueError("this aligned trajectory has no covariance: no NEES")
+            raise NoCovariance("this aligned trajectory has no covariance: no NEES")
         return nees(self.error, self.cov)
+
+
+class NoCovariance(ValueError):
+    """A metric needs a covariance the run does not have (an imported pose-only run): the metric does not apply."""
 
 
 def align(

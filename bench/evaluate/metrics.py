@@ -83,7 +83,7 @@ import numpy.typing as npt
 from scipy import stats
 
 from locbench.core.geometry import between, wrap_angle
-from locbench.evaluate.aligned import Aligned, align, nees
+from locbench.evaluate.aligned import Aligned, NoCovariance, align, nees
 from locbench.evaluate.hold import estimate_at
 from locbench.evaluate.scores import SCORE_IDS, score_metrics
 
@@ -188,7 +188,8 @@ _PLACEHOLDER = re.compile(r"<[a-z]+>")
 def align_run(run: RunRecord, truth: TruthRecord) -> Aligned:
     """The :class:`Aligned` view of a stored run (means and covariances) at its truth's ground-truth times."""
     gt = truth.ground_truth
-    return align(run.t, run.mean, gt.t, gt.poses, run.cov)
+    # an imported pose-only run stores no covariance (``covariance`` false): its view has none
+    return align(run.t, run.mean, gt.t, gt.poses, run.cov if run.meta.get("covariance", True) else None)
 
 
 # --- errors of one run --------------------------------------------------------------------------
@@ -361,7 +362,7 @@ def nll(errors: npt.ArrayLike, cov: npt.ArrayLike) -> FloatArray:
 def nll_at_truth(a: Aligned) -> FloatArray:
     """NLL of the pose (x, y, theta) at every ground-truth time, heading error wrapped, shape (k,)."""
     if a.cov is None:
-        raise ValueError("this aligned trajectory has no covariance: no NLL")
+        raise NoCovariance("this aligned trajectory has no covariance: no NLL")
     return nll(a.error, a.cov)
 
 
@@ -507,6 +508,8 @@ def kidnap_metrics(a: Aligned, kidnaps: Sequence[Kidnap]) -> dict[str, float]:
     out[KIDNAP_RECOVERED] = 1.0 if t_s is not None else 0.0
     if t_s is not None:
         out[KIDNAP_TIME_TO_RECOVER_S] = t_s - t_k
+    if a.cov is None:
+        return out  # no covariance, no false confidence
     confident = a.nees > false_confidence_bound()
     out[KIDNAP_FALSE_CONFIDENCE_FRACTION] = time_fraction(tt, confident, t_k, window_end if t_s is None else t_s)
     return out
@@ -727,7 +730,10 @@ def run_metrics(
     view = RunView(run, truth, aligned if aligned is not None else align_run(run, truth), rpe_delta_m)
     out: dict[str, float] = {}
     for metric in METRICS.values():
-        out.update(metric.values(view))
+        try:
+            out.update(metric.values(view))
+        except NoCovariance:
+            continue  # a consistency metric of a run without covariance does not apply: left out
     return {k: v for k, v in out.items() if not np.isnan(v)}
 
 
@@ -1012,6 +1018,8 @@ _CALL_TIMES = {
 
 
 def _runtime(v: RunView) -> dict[str, float]:
+    if v.run.meta.get("runtime_measured", True) is False:
+        return {}  # an imported run: the system's call times are not known
     out = {
         ids[stat]: value
         for call, ids in _CALL_TIMES.items()

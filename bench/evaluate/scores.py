@@ -41,6 +41,7 @@ from scipy import special, stats
 
 from locbench.core.geometry import wrap_angle
 from locbench.core.pairwise import pairwise_sum
+from locbench.evaluate.aligned import NoCovariance
 
 if TYPE_CHECKING:
     from locbench.evaluate.aligned import Aligned
@@ -285,7 +286,7 @@ def score_metrics(a: Aligned, extra: Mapping[str, np.ndarray]) -> dict[str, floa
             )
     else:
         if a.cov is None:
-            raise ValueError("a Gaussian belief's scores need the aligned covariances")
+            raise NoCovariance("a Gaussian belief's scores need the aligned covariances")
         per = list(gaussian_scores(a.mean, a.cov, a.truth))
     size = block_length(gt_t)
     out: dict[str, float] = {}

@@ -235,7 +235,8 @@ def _read_runs(
                 # aligned once: the metrics, the NEES series and the health series read the same view
                 aligned = align_run(run, truth)
                 values = run_metrics(run, truth, aligned=aligned)
-                ne = nees_at_truth(aligned)
+                # an imported run without covariance has no NEES series (its consistency columns stay empty)
+                ne = nees_at_truth(aligned) if aligned.cov is not None else None
                 if run.health and truth.truth_label == "ground truth":
                     kt = truth.kidnaps[0].t if truth.kidnaps else float("nan")
                     hs = health_series(aligned, run.health, kt)
@@ -326,7 +327,8 @@ def collect(store: Store, keep: Keep | None = None, jobs: int = 1) -> Collected:
             rows.extend(run_rows)
             if key is not None:
                 truth = out.truths.setdefault(key, read_truths[key])
-                nees[(info.dataset, info.filter)].append((truth.ground_truth.t, ne))
+                if ne is not None:
+                    nees[(info.dataset, info.filter)].append((truth.ground_truth.t, ne))
                 out.ok_dirs[(info.dataset, info.filter, info.seed)] = run_dir
                 if hs is not None:
                     out.health.setdefault((info.dataset, info.filter), []).append(hs)

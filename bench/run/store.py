@@ -589,7 +589,9 @@ def run_problem(meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> str | No
     if "n_rows" in meta and meta["n_rows"] != n:
         return f"{n} rows, the record says {meta['n_rows']}"
     if meta["status"] == "ok":
-        if not (np.all(np.isfinite(arrays["mean"])) and np.all(np.isfinite(arrays["cov"]))):
+        # an imported pose-only run declares it has no covariance (``covariance`` false) and stores NaN
+        cov_ok = meta.get("covariance", True) is False or np.all(np.isfinite(arrays["cov"]))
+        if not (np.all(np.isfinite(arrays["mean"])) and cov_ok):
             return "non-finite estimates under status ok"
         return _sorted_finite(arrays["t"], "t")
     return None

@@ -11,7 +11,9 @@ advance; Henderson et al. 2018 show results flip with the seed set). This re-run
   specs, seed, run key, versions, row count and divergence time must be what the re-run records;
 - the truth of its realisation (``_truth/seed-NNNN.npz``): ground truth, waypoints, kidnaps, map, duration and
   the record's dataset spec and seed, rebuilt from the spec;
-- the realisation's posterior Cramer-Rao bound, recomputed, where the dataset has one.
+- the realisation's posterior Cramer-Rao bound, recomputed, where the dataset has one;
+- of a run imported from another system's output (``external[name=...]``, :mod:`locbench.run.import_runs`), which
+  cannot be re-run: the sha256 of each file it was imported from, read again from its path.
 
 The stored files are read through :class:`locbench.run.store.Store`, with their checksums; nothing in the store is
 changed except the record of the result, ``<results>/verify.json``, which the report's provenance shows.
@@ -256,6 +258,7 @@ class _Plan:
 def _plan(store: Store, groups: dict[tuple[str, int], list[RunId]], result: VerifyResult) -> _Plan:
     """One task per sampled realisation with the jobs still current; a run that cannot be re-run (stale, another
     run's folder, an unknown spec) is recorded in ``result`` as differing instead."""
+    from locbench.run.import_runs import EXTERNAL_ID, digest_problems
     from locbench.run.plan import Job, Task, bound_key, parse_dataset, parse_filter, run_key
 
     plan = _Plan()
@@ -274,6 +277,12 @@ def _plan(store: Store, groups: dict[tuple[str, int], list[RunId]], result: Veri
             try:
                 # its checksums, its shape contract and the folder it lies in (Store.read_run)
                 stored_recs[r] = store.read_run(Path(r.folder) if r.folder else store.run_dir(r.dataset, r.filter, s))
+                if stored_recs[r].meta.get("filter_id") == EXTERNAL_ID:
+                    # an imported run is not computed: its files must be the ones it was imported from
+                    problems = digest_problems(stored_recs[r].meta)
+                    if problems:
+                        result.differ.append((r, "; ".join(problems)))
+                    continue
                 fr = parse_filter(r.filter)
             except StaleRecord as exc:  # altered since it was written, or another run's folder
                 result.differ.append((r, f"stale: {exc}"))
@@ -313,6 +322,7 @@ def verify(store: Store, fraction: float = DEFAULT_FRACTION, seed: int = 0, jobs
     """
     from locbench.run import executors
     from locbench.run.execute import TaskResult
+    from locbench.run.import_runs import EXTERNAL_ID
 
     runs = stored_runs(store)
     if not runs:
@@ -349,6 +359,8 @@ def verify(store: Store, fraction: float = DEFAULT_FRACTION, seed: int = 0, jobs
         for r in members:
             if any(d is r for d, _ in result.differ):
                 continue
+            if r in stored_recs and stored_recs[r].meta.get("filter_id") == EXTERNAL_ID:
+                continue  # imported: checked by its files' digests (_plan)
             rec = fresh.get((dataset, s, r.filter))
             if rec is None:
                 result.differ.append((r, f"not re-run: {lost.get((dataset, s), 'no result came back')}"))
