@@ -6,6 +6,7 @@ from __future__ import annotations
 import contextlib
 import os
 import re
+import shlex
 import shutil
 import signal
 import subprocess
@@ -62,7 +63,7 @@ def test_tutorial_commands_run_as_written(page: Path, tmp_path: Path) -> None:
     shutil.copytree(
         ROOT / "examples", tmp_path / "examples", ignore=shutil.ignore_patterns("build", "*.egg-info", "__pycache__")
     )
-    script = "set -euo pipefail\n" + "\n".join(f"echo '+ {c[:60]}'\n{c}" for c in commands(page))
+    script = "set -euo pipefail\n" + "\n".join(f"printf '+ %s\\n' {shlex.quote(c)}\n{c}" for c in commands(page))
     env = {k: v for k, v in os.environ.items() if k not in ("LOCBENCH_DATA", "PYTHONPATH")}
     env["PATH"] = os.pathsep.join([str(Path(sys.executable).parent), env.get("PATH", "")])
     env["MPLBACKEND"] = "Agg"
