@@ -4,6 +4,7 @@ nox                 the tests (the default session)
 nox -s tests_busy   the sweep, executor and signal tests (with the slow ones); .ci/run runs it with both cores busy
 nox -s tests_dispatch  the numeric tests on other numpy, OpenBLAS and numba kernels than the machine's default
 nox -s lint         ruff, mypy and the import contracts (lint-imports)
+nox -s docs         the documentation site, warnings as errors, into docs/_build/html
 nox -s bench        run every experiment, verify a sample, write results/summary (posargs go to 'locbench run')
 nox -s report       regenerate results/summary from the stored runs, no re-run
 nox -s html         open results/summary/index.html in headless Chromium (renders, sorts; screenshot)
@@ -235,3 +236,10 @@ def fuzz(session: nox.Session) -> None:
     args = session.posargs or ["--hypothesis-profile=fuzz", "--hypothesis-show-statistics"]
     fuzzed = ("tests/fuzz/",)
     session.run("pytest", "--benchmark-disable", "-p", "no:cacheprovider", *fuzzed, *args)
+
+
+@nox.session(python=PYTHON, default=False)
+def docs(session: nox.Session) -> None:
+    """Build the documentation site from docs/ with every warning an error (docs/_build/html/index.html)."""
+    _install(session, "all,docs")
+    session.run("sphinx-build", "-W", "--keep-going", "-b", "html", "docs", "docs/_build/html", *session.posargs)

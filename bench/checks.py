@@ -445,7 +445,11 @@ def run_checks(ids: list[str] | None = None) -> Iterator[CheckResult]:
             # a plugin that does not import or is not a valid class fails, with its entry point and the cause
             yield CheckResult(spec, "check_loads", "failed", broken)
             continue
-        reason = registry.unavailable_reason(ident)
+        if registry is DATASETS and spec != ident:
+            # a spec with parameters names its own data (a textlog folder, a bag): only a missing package skips it
+            reason = registry.missing_dependency(ident)
+        else:
+            reason = registry.unavailable_reason(ident)
         if reason is not None:
             for name in checks:
                 yield CheckResult(spec, name, "skipped", reason)

@@ -110,7 +110,7 @@ def _list_params(ids: Sequence[str]) -> int:
 def _cmd_run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from locbench.run.executors import check_scheduler_address
+    from locbench.run.executors import scheduler_address
     from locbench.run.plan import plan_sweep
     from locbench.run.store import Store
     from locbench.run.sweep import run_sweep
@@ -134,7 +134,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         raise ConfigError("--scheduler needs --executor dask")
     if not (0 <= args.interleave <= MAX_INTERLEAVE_S):
         raise ConfigError(f"--interleave must be in [0, {MAX_INTERLEAVE_S:g}] s of data, got {args.interleave}")
-    scheduler = check_scheduler_address(args.scheduler) if args.scheduler is not None else None
+    scheduler = scheduler_address(args.scheduler, args.connect_timeout) if args.scheduler is not None else None
     limits = {"max_configs": args.max_configs, "max_seeds": args.max_seeds}
     if args.filter or args.dataset:
         if not (args.filter and args.dataset):
@@ -283,7 +283,7 @@ def _cmd_verify(args: argparse.Namespace) -> int:
 
 
 def _cmd_tune(args: argparse.Namespace) -> int:
-    from locbench.run.executors import check_scheduler_address
+    from locbench.run.executors import scheduler_address
     from locbench.run.tuning import check_trials, train_seeds, tune
 
     # every argument is bounded as for 'run', before the study's journal is opened or anything runs
@@ -295,7 +295,7 @@ def _cmd_tune(args: argparse.Namespace) -> int:
         raise ConfigError(f"--jobs: expected 1-{MAX_JOBS} processes, got {args.jobs}")
     if args.scheduler is not None and args.executor != "dask":
         raise ConfigError("--scheduler needs --executor dask")
-    scheduler = check_scheduler_address(args.scheduler) if args.scheduler is not None else None
+    scheduler = scheduler_address(args.scheduler) if args.scheduler is not None else None
 
     def show(t: Any) -> None:
         value = f"{t.value:.6g}" if t.value != float("inf") else "worst (" + t.message + ")"
@@ -509,7 +509,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--scheduler",
         default=None,
         metavar="ADDRESS",
-        help="with --executor dask: a running scheduler (tcp://host:8786); default: a LocalCluster of --jobs workers",
+        help=(
+            "with --executor dask: a running scheduler (tcp://host:8786) or its scheduler file (FILE.json, waited "
+            "for up to --connect-timeout); default: a LocalCluster of --jobs workers"
+        ),
     )
     r.add_argument(
         "--connect-timeout",
@@ -590,7 +593,12 @@ def build_parser() -> argparse.ArgumentParser:
     tu.add_argument("--results", default=_results_default(), help="results folder; runs and study go to RESULTS/tuning")
     tu.add_argument("--jobs", type=int, default=1, help="worker processes for each trial's runs (default 1)")
     tu.add_argument("--executor", choices=("local", "dask"), default="local", help="as for 'locbench run'")
-    tu.add_argument("--scheduler", default=None, metavar="ADDRESS", help="with --executor dask: a running scheduler")
+    tu.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="with --executor dask: a running scheduler or its FILE.json",
+    )
     _add_run_timeout(tu)
     tu.set_defaults(func=_cmd_tune)
 

@@ -214,8 +214,8 @@ class CheckTolerances:
 class Filter(abc.ABC):
     """Base class of every estimator.
 
-    Class attributes
-    ----------------
+    Attributes
+    ----------
     id : str
         The id the filter is registered under: the registry finds every class of a module of
         :mod:`locbench.filters` whose own body sets it (:mod:`locbench.registry`), so a new filter is its module

@@ -655,7 +655,7 @@ class GtsamFixedLagSmoother(Filter):
         params.relinearizeSkip = cfg.relinearize_skip
         # Reuse the slots of the factors marginalisation removed: otherwise the graph keeps an empty slot per
         # removed factor and grows with the run (3,726 slots for 23 factors after office, 30,042 after eight
-        # laps of it, the median update about 1.5x slower by then; docs/performance.md).
+        # laps of it, the median update about 1.5x slower by then; docs/history/performance.md).
         params.findUnusedFactorSlots = True
         return gtsam.IncrementalFixedLagSmoother(cfg.lag_s, params)
 

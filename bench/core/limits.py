@@ -8,11 +8,11 @@ naming the parameter: at spec parsing when the config alone decides it (``pf[par
 ``laser_beams``), else when the filter is reset on the map or the builder has planned its scans. The runner records
 such a run as failed (status ``error``) with that one-line message, like any other config error.
 
-The per-item costs are peak resident bytes measured once (``resource.getrusage`` of a fresh process, after a warm-up
-on a small input; logs in ``docs/performance.md``) and rounded up; they are an upper bound of what a run allocates per
-item, not an exact account. With the loaders' own bounds (:mod:`locbench.datasets.recorded.files`) this keeps any
-run, whatever its input, within about 1 GB: a process of about 200 MB (numpy, scipy, numba), a grid of at most
-2^24 cells (134 MB) and tables of at most :data:`MAX_TABLE_BYTES`.
+The per-item costs are peak resident bytes measured once (``resource.getrusage`` of a fresh process, after a warm-up on
+a small input; logs in ``docs/history/performance.md``) and rounded up; they are an upper bound of what a run allocates
+per item, not an exact account. With the loaders' own bounds (:mod:`locbench.datasets.recorded.files`) this keeps any
+run, whatever its input, within about 1 GB: a process of about 200 MB (numpy, scipy, numba), a grid of at most 2^24
+cells (134 MB) and tables of at most :data:`MAX_TABLE_BYTES`.
 
 :func:`check_input_file` bounds the files a user names (a suite file, a bag and its map YAML): looked at with
 ``os.stat`` before anything opens them, so a FIFO (which would block the open), a device (which never ends) or an

@@ -617,7 +617,7 @@ def reference_units(
     ``realtime_factor_ref`` = ``realtime_factor`` * ``reference_s`` (its real-time factor there). Totals (the
     real-time factor, the mean and p95 per call) take the wall time ``reference_s``, which holds the turns other
     processes took, as the totals do; the per-call medians take the CPU time ``reference_cpu_s`` when given: a
-    call of microseconds is rarely interrupted, so its median hardly moves with the load (docs/performance.md).
+    call of microseconds is rarely interrupted, so its median hardly moves with the load (docs/history/performance.md).
 
     Parameters
     ----------

@@ -36,7 +36,7 @@ Two methods, in numba kernels, behind one API (:func:`cast_rays`, :func:`cast_sc
     an eighth of that (larger ones scan on the isotropic field).
 
 Why the kernels are shaped so, and what was measured and tried on the way (the pool, the scalar lane kernels
-before it, lock-step refills, the octant planes): docs/performance.md, "The ray caster's measurement diary".
+before it, lock-step refills, the octant planes): docs/history/performance.md, "The ray caster's measurement diary".
 
 Grid conventions are those of :class:`locbench.core.grid.OccupancyGrid` (ROS map_server): row ``i``
 spans y in [oy + i*res, oy + (i+1)*res), column ``j`` spans x likewise, and ``origin_xy`` = (ox, oy) is

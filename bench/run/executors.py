@@ -185,6 +185,48 @@ class StopRequest:
             self._shielded -= 1
 
 
+def scheduler_from_file(path: str, timeout_s: float) -> str:
+    """The address in a dask scheduler file (``dask scheduler --scheduler-file PATH``), waiting for it to appear.
+
+    A scheduler started with ``--port 0`` picks a free port and writes it, as ``{"address": ...}``, to its file once
+    it listens; this waits up to ``timeout_s`` seconds for a complete file (the scheduler writes it while this may
+    read), then checks the address as :func:`check_scheduler_address` does. A :class:`ConfigError` naming the file
+    when it does not appear in time, is not JSON or has no address.
+    """
+    import json
+
+    deadline = time.monotonic() + timeout_s
+    why = "it does not exist"
+    while True:
+        try:
+            with open(path, encoding="utf-8") as fh:
+                info = json.load(fh)
+            break
+        except FileNotFoundError:
+            why = "it does not exist"
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            why = f"it is not JSON ({one_line(exc)})"
+        except OSError as exc:
+            raise ConfigError(f"--scheduler {path}: cannot read the scheduler file: {one_line(exc)}") from None
+        if time.monotonic() >= deadline:
+            raise ConfigError(
+                f"--scheduler {path}: no scheduler file after {timeout_s:g} s ({why}); expected the file that "
+                "'dask scheduler --scheduler-file PATH' writes"
+            )
+        time.sleep(0.05)  # the scheduler is another process: poll its file until the deadline
+    address = info.get("address") if isinstance(info, dict) else None
+    if not isinstance(address, str):
+        raise ConfigError(f"--scheduler {path}: field 'address' missing or not a string in the scheduler file")
+    return check_scheduler_address(address)
+
+
+def scheduler_address(value: str, timeout_s: float = CONNECT_TIMEOUT_S) -> str:
+    """``--scheduler``'s value as a checked address: a scheduler file when it ends in ``.json``, else an address."""
+    if value.endswith(".json"):
+        return scheduler_from_file(value, timeout_s)
+    return check_scheduler_address(value)
+
+
 def probe_scheduler(address: str, timeout_s: float) -> None:
     """Ask the dask scheduler at ``address`` for its identity; a :class:`TimeoutError` or :class:`OSError` when it
     does not answer within ``timeout_s`` seconds.

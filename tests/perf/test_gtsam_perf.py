@@ -19,7 +19,7 @@ grows its graph with every call.
 - ``wrapper``: the ``filter`` case with its smoother replaced by a stub that hands back the answers recorded
   from a real run (update results, poses, marginals) without computing anything: the wrapper's own Python
   cost. ``filter`` minus ``wrapper`` is what the gtsam calls cost inside the filter, which can exceed
-  ``minimal`` (docs/performance.md).
+  ``minimal`` (docs/history/performance.md).
 
 Each case stores the median time per observation in ``extra_info`` (``us_per_obs``); the session prints both
 and their ratio.

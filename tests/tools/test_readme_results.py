@@ -1,5 +1,5 @@
-"""The README's result numbers agree with the committed summary: every ``<!-- gen:NAME -->`` block of README.md
-is what tools/docs/readme_results.py makes from results/summary/metrics.csv."""
+"""The documents' result numbers agree with the committed summary: every ``<!-- gen:NAME -->`` block of README.md and
+the docs pages is what tools/docs/readme_results.py makes from results/summary/metrics.csv."""
 
 from __future__ import annotations
 
@@ -15,9 +15,15 @@ def generated() -> dict[str, str]:
     return dict(tool.blocks(pd.read_csv(tool.METRICS_CSV)))
 
 
-def test_every_generated_block_of_the_readme_agrees_with_the_committed_summary() -> None:
-    text = tool.README.read_text(encoding="utf-8")
+def documents() -> str:
+    """README.md and every docs page with generated blocks, joined."""
+    return "\n".join(doc.read_text(encoding="utf-8") for doc in tool.DOCUMENTS)
+
+
+def test_every_generated_block_of_the_documents_agrees_with_the_committed_summary() -> None:
+    text = documents()
     names = [m.group("name") for m in tool.BLOCK.finditer(text)]
+    assert "decision" in [m.group("name") for m in tool.BLOCK.finditer(tool.README.read_text(encoding="utf-8"))]
     # the tables and the values that drifted before (global localization, suite default's run count) are blocks
     assert {"office-summary", "kidnap", "consistency", "recorded", "global-laser", "suite-default-runs"} <= set(names)
     # the prose's numbers: run counts, the headline ratios, ranks, tuned changes, lost AUROC, Radish, claims
@@ -29,8 +35,13 @@ def test_every_generated_block_of_the_readme_agrees_with_the_committed_summary()
     assert tool.disagreements(text, generated()) == [], "run: python tools/docs/readme_results.py --write"
 
 
+def test_the_history_holds_no_generated_block() -> None:
+    """The history keeps the figures of its time: a generated block there would be rewritten to today's."""
+    assert not [d for d in tool.DOCUMENTS if "history" in d.parts]
+
+
 def test_a_number_that_disagrees_is_found() -> None:
-    text = tool.render(tool.README.read_text(encoding="utf-8"), generated())
+    text = tool.render(documents(), generated())
     body = generated()["global-laser"]
     assert body in text and "median" in body
     edited = text.replace(body, body.replace("median ", "median 1"), 1)
@@ -46,7 +57,7 @@ def test_a_block_without_a_generator_is_an_error() -> None:
 
 
 def test_a_prose_number_that_disagrees_is_found() -> None:
-    text = tool.render(tool.README.read_text(encoding="utf-8"), generated())
+    text = tool.render(documents(), generated())
     for name in ("lost-auroc", "claim-room-ekf-below", "tuned-ekf_icp-office"):
         body = generated()[name]
         edited = text.replace(f"<!-- gen:{name} -->{body}", f"<!-- gen:{name} -->{body.replace('.', ',', 1)}", 1)

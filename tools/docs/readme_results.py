@@ -1,10 +1,10 @@
 """The README's result numbers, generated from results/summary/metrics.csv and REPORT.md (and the suites' run counts),
-and the lists of filters and datasets in README.md and docs/design.md, generated from the registry.
+and the lists of filters and datasets in README.md and the docs pages, generated from the registry.
 
 Usage::
 
     python tools/docs/readme_results.py            # print the generated blocks and the per-filter diagnostics
-    python tools/docs/readme_results.py --write    # rewrite the generated blocks of README.md and docs/design.md
+    python tools/docs/readme_results.py --write    # rewrite the generated blocks of README.md and the docs pages
     python tools/docs/readme_results.py --check    # exit 1 naming every block of either that disagrees
 
 A generated block lies between ``<!-- gen:NAME -->`` and ``<!-- /gen:NAME -->`` (a table on lines of its own, or a
@@ -34,9 +34,15 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from locbench.core.events import Odometry
+from locbench.evaluate.metrics import GROUPS
 from locbench.evaluate.pcrb import BOUND_ALL, BOUND_NO_LASER
+from locbench.evaluate.significance import ties_with_best
 from locbench.present.catalog import doc_blocks
+from locbench.present.metric_info import metric_table
+from locbench.present.ranking import samples_for
 from locbench.report.collect import describe_filter
+from locbench.report.sections.summary import have_text
 from locbench.report.tables import (
     ate_over_bound,
     band_text,
@@ -47,21 +53,20 @@ from locbench.report.tables import (
     rate,
     waypoint_rmse_mean,
 )
-from locbench.suites import KIDNAP_DISTANCES_M, KIDNAP_FILTERS, SUITES
+from locbench.suites import KIDNAP_DISTANCES_M, KIDNAP_FILTERS, SUITES, suite_pairs
 
 ROOT = Path(__file__).resolve().parents[2]
 README = ROOT / "README.md"
-#: Every document with generated blocks (the registry's lists are in both).
-DOCUMENTS = (README, ROOT / "docs" / "design.md")
+#: Every document that may hold generated blocks: the README and the docs pages (the history keeps its own figures).
+DOCUMENTS = (README, *sorted((ROOT / "docs").glob("*.md")))
 METRICS_CSV = ROOT / "results" / "summary" / "metrics.csv"
 REPORT_MD = METRICS_CSV.with_name("REPORT.md")
 
 #: ``<!-- gen:NAME -->text<!-- /gen:NAME -->``; the text may span lines.
 BLOCK = re.compile(r"<!-- gen:(?P<name>[\w-]+) -->(?P<body>.*?)<!-- /gen:(?P=name) -->", re.DOTALL)
 
-#: The README's headline rows, in its order (the main comparison's default configurations).
-HEADLINE = ("odometry", "ekf_landmarks", "ukf_landmarks", "gtsam_fls", "pf", "pf[adaptive=kld]", "ekf_lines")
-HEADLINE += ("ekf_icp", "kf_linear")
+#: The headline rows, in the registry's order: the configurations suite ``default`` runs on ``office``.
+HEADLINE = tuple(str(f) for f, d in suite_pairs("default") if str(d) == "office")
 #: The recorded table's columns: (header, datasets joined by " / ", metric).
 RECORDED = (
     ("MRCLAM 6, robots 1 / 2 / 3 / 4 / 5", ("mrclam", *(f"mrclam[robot={r}]" for r in range(2, 6))), "ate_m"),
@@ -69,7 +74,7 @@ RECORDED = (
     ("Intel (relation error)", ("intel",), "relation_error_m"),
     ("Plaza 1 / 2", ("plaza", "plaza[run=2]"), "ate_m"),
 )
-RECORDED_FILTERS = (*HEADLINE[:6], "ekf_icp", "ekf_lines", "kf_linear")
+RECORDED_FILTERS = HEADLINE
 #: A filter whose default does not run on a recording, and the configuration the table shows there instead.
 RECORDED_VARIANTS = {("pf", "intel"): "pf[use_laser=true]"}
 MATCHED = ("room[matched=true]", "office[matched=true]")
@@ -120,6 +125,50 @@ def office_summary(df: pd.DataFrame) -> str:
     head = ("filter", "ATE (cm)", "ATE / PCRB", "mean waypoint RMSE (cm)", "ANEES", "energy score (cm)")
     head += ("update median (us)", "real-time factor", "kidnap recovery at 2 m (%)")
     return table(head, rows)
+
+
+def decision(df: pd.DataFrame) -> str:
+    """Which default configuration to use with which sensors and map, on ``office`` (every filter runs there).
+
+    For each combination of sensors and map some default configuration needs (as its class declares them), the
+    lowest mean ATE among the configurations that need no more, with every one the paired Wilcoxon test
+    (Holm-corrected, as the report's bold marks) does not find different from it; the dead-reckoning baseline is
+    no candidate. The report's summary makes the same choice over every configuration, tuned and swept ones too.
+    """
+    sub = df[df["dataset"] == "office"]
+    cands = [
+        f
+        for f in HEADLINE
+        if not describe_filter(f).baseline and np.isfinite(mean_of(sub[sub["filter"] == f], "ate_m"))
+    ]
+    means = [mean_of(sub[sub["filter"] == f], "ate_m") for f in cands]
+    samples = samples_for(sub, cands, "ate_m")
+    needs = {}
+    for f in cands:
+        info = describe_filter(f)
+        needs[f] = (frozenset(s for s in info.sensors if s != Odometry.__name__), frozenset(info.maps))
+    combos = sorted(set(needs.values()), key=lambda n: (len(n[0]) + len(n[1]), have_text(*n)))
+    rows = []
+    for sensors, maps in combos:
+        ok = [needs[f][0] <= sensors and needs[f][1] <= maps for f in cands]
+        v = ties_with_best(means, samples, ok, "lower", effects=False)
+        if v.best is None:
+            continue
+        best = cands[v.best]
+        s = sub[sub["filter"] == best]
+        tied = ", ".join(f"`{cands[i]}`" for i in sorted(v.marked) if i != v.best) or "-"
+        rows.append(
+            (
+                have_text(sensors, maps),
+                f"`{best}`",
+                cm(means[v.best]),
+                num(mean_of(s, "update_us_median")).replace("n/a", "-"),
+                num(mean_of(s, "realtime_factor")),
+                tied,
+            )
+        )
+    head = ("you have odometry and", "use", "ATE (cm)", "update median (us)", "real-time factor")
+    return table((*head, "not found different (paired test)"), rows)
 
 
 def kidnaps(df: pd.DataFrame) -> str:
@@ -650,6 +699,7 @@ def blocks(df: pd.DataFrame, report: str | None = None) -> dict[str, str]:
     df = df[df["dataset"].isin(used) | ident.isin(["radish", "librsf"])]  # what every block reads, once (15 MB)
     makers: dict[str, Callable[[], str]] = {
         "office-summary": lambda: office_summary(df),
+        "decision": lambda: decision(df),
         "kidnap": lambda: kidnaps(df),
         "consistency": lambda: consistency(df),
         "recorded": lambda: recorded(df),
@@ -661,6 +711,8 @@ def blocks(df: pd.DataFrame, report: str | None = None) -> dict[str, str]:
     out |= office_prose(df) | radish(df, report) | robustness(report) | office_report(report)
     out |= claim_values(report) | run_counts(report) | tuned_changes(report) | pareto(df)
     out["across-landmark-geometry"] = across_landmark_geometry(report)
+    # the protocols page's metric tables, as locbench.present.metric_info writes them
+    out |= {f"metrics-{g.replace(' ', '-')}": f"\n{metric_table(g)}\n" for g in GROUPS if metric_table(g)}
     return out | doc_blocks()
 
 
@@ -687,10 +739,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("metrics", nargs="?", default=str(METRICS_CSV))
     mode = ap.add_mutually_exclusive_group()
     mode.add_argument(
-        "--write", action="store_true", help="rewrite the generated blocks of README.md and docs/design.md"
+        "--write", action="store_true", help="rewrite the generated blocks of README.md and the docs pages"
     )
     mode.add_argument(
-        "--check", action="store_true", help="exit 1 when a generated block of README.md or docs/design.md disagrees"
+        "--check", action="store_true", help="exit 1 when a generated block of README.md or a docs page disagrees"
     )
     args = ap.parse_args(argv)
     generated = blocks(pd.read_csv(args.metrics))

@@ -1,6 +1,6 @@
 """CPU seconds of ``ekf_icp``'s office replay (predict + update) inside its compiled ICP loop and outside it.
 
-The before/after figures of docs/performance.md: run it with each checkout's package in
+The before/after figures of docs/history/performance.md: run it with each checkout's package in
 turn (main's, e.g. a copy of its tree on ``PYTHONPATH``, then the branch's) and compare the ``outside``
 figures pair by pair::
 

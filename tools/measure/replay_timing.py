@@ -1,6 +1,6 @@
 """Replay one dataset realisation through one filter and print the median update time.
 
-The before/after figures of docs/performance.md: run it once with each checkout's interpreter (for a
+The before/after figures of docs/history/performance.md: run it once with each checkout's interpreter (for a
 paired whole-process comparison, alternate the two commands under a process timer such as
 ``/usr/bin/time -v``)::
 

@@ -1,6 +1,6 @@
 """Store every array of ``run_filter`` for filters x datasets x seeds, or compare two such files exactly.
 
-The "bit-identical" checks of docs/performance.md: run ``dump`` with each checkout's package (for
+The "bit-identical" checks of docs/history/performance.md: run ``dump`` with each checkout's package (for
 main, e.g. a copy of its tree on ``PYTHONPATH``), then ``compare``::
 
     python tools/measure/same_estimates.py dump before.npz "ekf_landmarks;ekf_icp" "office;lap" 2

@@ -1,4 +1,4 @@
-"""How far two regenerations of the same runs agree on the accuracy-runtime figure (docs/performance.md).
+"""How far two regenerations of the same runs agree on the accuracy-runtime figure (docs/history/performance.md).
 
 Run the same ``locbench run`` twice into two results folders (for example once on an idle machine, once with the
 cores busy), ``locbench report --results DIR`` each, then compare their ``summary/metrics.csv``::

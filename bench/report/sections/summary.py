@@ -563,7 +563,8 @@ def _mark(
 # --- the advice -------------------------------------------------------------------------------------------------
 
 
-def _have_text(sensors: frozenset[str], maps: frozenset[str]) -> str:
+def have_text(sensors: frozenset[str], maps: frozenset[str]) -> str:
+    """The sensors and map kinds a configuration needs, in words ("landmark sightings and landmark map")."""
     words = sorted(SENSOR_WORDS.get(s, s) for s in sensors) + sorted(MAP_WORDS.get(m, m) for m in maps)
     if not words:
         return f"{ODOMETRY} only"
@@ -590,7 +591,7 @@ def advice(ctx: Context, rows: Sequence[Row]) -> str:
     for r in cands:
         info = col.filter_info(r.name)
         needs[r.name] = (frozenset(s for s in info.sensors if s != Odometry.__name__), frozenset(info.maps))
-    combos = sorted(set(needs.values()), key=lambda n: (len(n[0]) + len(n[1]), _have_text(*n)))
+    combos = sorted(set(needs.values()), key=lambda n: (len(n[0]) + len(n[1]), have_text(*n)))
     parts: list[str] = []
     for sensors, maps in combos:
         ok = [needs[r.name][0] <= sensors and needs[r.name][1] <= maps for r in cands]
@@ -601,7 +602,7 @@ def advice(ctx: Context, rows: Sequence[Row]) -> str:
         rtf = tb.mean_of(best.sub, REALTIME_FACTOR)
         tied = [cands[i].name for i in sorted(v.marked) if i != v.best]
         parts.append(
-            f"with {_have_text(sensors, maps)}, `{best.name}` (ATE {tb.num(100 * means[v.best])} cm, real-time "
+            f"with {have_text(sensors, maps)}, `{best.name}` (ATE {tb.num(100 * means[v.best])} cm, real-time "
             f"factor {tb.num(rtf)})"
             + (" or, not found different by the paired test, " + ", ".join(f"`{t}`" for t in tied) if tied else "")
         )
