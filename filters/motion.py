@@ -3,8 +3,9 @@
 The wheel-encoder model of report 003 (eq. 1-5, 10), the odometry-increment model and the twist noise of
 recorded odometry, their Jacobians, covariances and samplers, and :class:`MotionModel`, which picks one of
 them per :class:`~locbench.core.events.Odometry` event. The models, their equations, frames and units are
-documented in the implementation module (``locbench.filters._motion``, where the built-in filters import them
-from); this module is the stable name a plugin imports: ``from locbench.filters.motion import MotionModel``.
+documented in the implementation modules (``locbench.filters._motion``; the compiled per-particle steps that
+the samplers and the particle filter move a cloud with, ``locbench.filters._motion_kernels``); this module is
+the stable name a plugin imports: ``from locbench.filters.motion import MotionModel``.
 
 A config that mixes in :class:`MotionNoiseConfig` gets the motion-noise fields every built-in filter has
 (``input_noise``, ``wheelbase_m``, ``encoder_k_left`` ... ``motion_noise_scale``) and their resolution against
@@ -34,14 +35,16 @@ from locbench.filters._motion import (
     predict_midpoint,
     propagate_covariance,
     resolve_motion_noise,
-    sample_increment_motion,
-    sample_twist_motion,
-    sample_wheel_motion,
-    twist_increment,
     twist_increment_covariance,
     twist_jacobian,
     wheel_to_motion,
     wheel_variances,
+)
+from locbench.filters._motion_kernels import (
+    sample_increment_motion,
+    sample_twist_motion,
+    sample_wheel_motion,
+    twist_increment,
 )
 
 __all__ = [
