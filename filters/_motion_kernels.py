@@ -11,9 +11,9 @@ Frames and units: poses (x m, y m, theta rad) in the world frame, headings wrapp
 in m; increments (dx m, dy m, dtheta rad) in the previous robot frame.
 
 numba's on-disk cache of a kernel is keyed on its own module's source alone: after editing a function compiled
-here from another module (:func:`~locbench.core.geometry.wrap_scalar`,
-:func:`~locbench.filters._motion.wheel_increment`), delete the ``*.nbi`` / ``*.nbc`` files under
-``filters/__pycache__``.
+into these kernels from another module (:func:`~locbench.core.geometry.wrap_scalar`,
+:func:`~locbench.filters._motion.wheel_increment`, both compiled by :mod:`locbench.filters._ekf_kernels`), delete
+the ``*.nbi`` / ``*.nbc`` files under ``filters/__pycache__``.
 """
 
 from __future__ import annotations
@@ -25,7 +25,10 @@ import numpy.typing as npt
 from numba import njit
 
 from locbench.core.events import Odometry
-from locbench.core.geometry import wrap_scalar
+
+# _ekf_kernels compiles the motion model's plain-float functions (wheel_increment among them) for every kernel
+# module, and core.geometry.wrap_scalar as _wrap
+from locbench.filters._ekf_kernels import _wrap as wrap_mod
 from locbench.filters._motion import _SERIES_A, wheel_increment
 
 FloatArray = npt.NDArray[np.float64]
@@ -44,12 +47,6 @@ def wrap(a: float) -> float:
         return a + 2.0 * math.pi
     return math.pi - ((math.pi - a) % (2.0 * math.pi))
 
-
-#: :func:`locbench.core.geometry.wrap_scalar` compiled: the wrap of the twist model's headings.
-wrap_mod = njit(cache=True, inline="always")(wrap_scalar)
-
-#: :func:`locbench.filters._motion.wheel_increment` compiled: (delta_d m, delta_theta rad) of the wheel travel.
-wheel_chord = njit(cache=True, inline="always")(wheel_increment)
 
 #: Below this |angle| (rad) :func:`sincos_near` uses its series: the first omitted terms, d^17 / 17! and
 #: d^18 / 18!, are below 1e-19 there, under a quarter of an ulp of the result.
@@ -84,7 +81,7 @@ def wheel_step(
     """One particle's encoder step from heading ``theta`` (rad) with its own wheel travel (m): the world-frame
     translation along the chord at the midpoint heading and the turn, (ex m, ey m, turn rad) (report 003 eq. 1-2,
     5). ``ref``, ``sin_ref``, ``cos_ref``: the cloud's reference heading of :func:`sincos_near`."""
-    dd, turn = wheel_chord(d_left, d_right, wheelbase)
+    dd, turn = wheel_increment(d_left, d_right, wheelbase)
     s, c = sincos_near(theta + 0.5 * turn, ref, sin_ref, cos_ref)
     return dd * c, dd * s, turn
 

@@ -14,6 +14,8 @@ the dataset's nominal noise (:meth:`MotionNoiseConfig.motion_noise`).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Any
+
 from locbench.filters._motion import (
     DEFAULT_ENCODER_K,
     DEFAULT_SIGMA_THETA_PER_M,
@@ -40,12 +42,14 @@ from locbench.filters._motion import (
     wheel_to_motion,
     wheel_variances,
 )
-from locbench.filters._motion_kernels import (
-    sample_increment_motion,
-    sample_twist_motion,
-    sample_wheel_motion,
-    twist_increment,
-)
+
+if TYPE_CHECKING:
+    from locbench.filters._motion_kernels import (
+        sample_increment_motion,
+        sample_twist_motion,
+        sample_wheel_motion,
+        twist_increment,
+    )
 
 __all__ = [
     "DEFAULT_ENCODER_K",
@@ -77,3 +81,16 @@ __all__ = [
     "wheel_to_motion",
     "wheel_variances",
 ]
+
+#: The names this module takes from the compiled kernels' module, loaded on first use: importing the plugin API
+#: loads no numba (the samplers and the arc run compiled, so they need it).
+_COMPILED = frozenset({"sample_increment_motion", "sample_twist_motion", "sample_wheel_motion", "twist_increment"})
+
+
+def __getattr__(name: str) -> Any:
+    """The compiled samplers and arc (:mod:`locbench.filters._motion_kernels`), imported when first asked for."""
+    if name in _COMPILED:
+        from locbench.filters import _motion_kernels
+
+        return getattr(_motion_kernels, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
