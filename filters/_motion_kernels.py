@@ -38,7 +38,11 @@ FloatArray = npt.NDArray[np.float64]
 
 @njit(cache=True, inline="always")
 def wrap(a: float) -> float:
-    """``a`` wrapped to (-pi, pi]; one step covers a heading plus a turn, the modulo only larger values."""
+    """``a`` wrapped to (-pi, pi]; one step covers a heading plus a turn, the modulo only larger values.
+
+    Unlike :func:`~locbench.core.geometry.wrap_scalar` it returns an angle already in range unchanged and wraps
+    one turn by one exact subtraction (no fmod in the particle loops); the particle filter's headings and
+    bearings are wrapped with it, its twist model with ``wrap_scalar`` (``wrap_mod``)."""
     if -math.pi < a <= math.pi:
         return a
     if math.pi < a <= 3.0 * math.pi:
@@ -105,7 +109,8 @@ def twist_arc(s: float, a: float) -> tuple[float, float, float]:
     """The increment (dx m, dy m, dtheta rad), previous robot frame, of a constant-twist arc of length ``s`` (m)
     turning ``a`` (rad): dx = s sin(a) / a, dy = s (1 - cos a) / a, dtheta = a.
 
-    sin(a) / a is evaluated as sin(y) / y at y = pi (a / pi) (y = eps at a = 0, where the quotient is 1);
+    sin(a) / a is evaluated as sin(y) / y at y = pi (a / pi) (y = eps at a = 0, where the quotient is 1), the
+    rounding the particle filter's stored runs carry (y = a rounds differently and would move them);
     (1 - cos a) / a by its series a (1/2 - a^2/24) below ``_SERIES_A``, where the difference loses digits.
     """
     y = math.pi * (a / math.pi)
