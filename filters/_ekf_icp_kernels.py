@@ -31,6 +31,7 @@ from numba import njit
 from locbench.core.pairwise import pairwise_sum
 from locbench.filters._ekf_kernels import _propagate, _wrap
 from locbench.filters._icp import MIN_PAIRS
+from locbench.raycast.beams import beam_point
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -112,11 +113,12 @@ def scan_clouds(
 
     The usable real beams (finite, within [range_min, range_max]) become ``src[:n_real]`` and the usable
     ray-cast beams (finite, at least range_min) ``dst[:n_pred]``, robot-frame points in beam order
-    (sx + r cos a, sy + r sin a with the beams' directions ``cos_a``, ``sin_a`` in the robot frame); ``sensor``
-    is (sx m, sy m, range_min m, range_max m). Returns (n_real, n_pred, D_0 m, D_min m) with D_min =
-    k sqrt(pair variance) and D_0 = min(k sqrt(pair variance + lambda_max(P_xy) + r_mean^2 P_thth), cap), at
-    least D_min (:mod:`locbench.filters.ekf_icp`; r_mean the mean of the usable real ranges, summed pairwise),
-    both NaN when either cloud has fewer than ``MIN_PAIRS`` points.
+    (:func:`~locbench.raycast.beams.beam_point`: sx + r cos a, sy + r sin a with the beams' directions ``cos_a``,
+    ``sin_a`` in the robot frame); ``sensor`` is (sx m, sy m, range_min m, range_max m). Returns (n_real, n_pred,
+    D_0 m, D_min m) with D_min = k sqrt(pair variance) and
+    D_0 = min(k sqrt(pair variance + lambda_max(P_xy) + r_mean^2 P_thth), cap), at least D_min
+    (:mod:`locbench.filters.ekf_icp`; r_mean the mean of the usable real ranges, summed pairwise), both NaN when
+    either cloud has fewer than ``MIN_PAIRS`` points.
     """
     sx, sy, rmin, rmax = sensor
     n = real.shape[0]
@@ -126,14 +128,12 @@ def scan_clouds(
     for i in range(n):
         r = real[i]
         if math.isfinite(r) and r >= rmin and r <= rmax:
-            src[n_real, 0] = sx + r * cos_a[i]
-            src[n_real, 1] = sy + r * sin_a[i]
+            src[n_real, 0], src[n_real, 1] = beam_point(sx, sy, r, cos_a[i], sin_a[i])
             used[n_real] = r
             n_real += 1
         p = pred[i]
         if math.isfinite(p) and p >= rmin:
-            dst[n_pred, 0] = sx + p * cos_a[i]
-            dst[n_pred, 1] = sy + p * sin_a[i]
+            dst[n_pred, 0], dst[n_pred, 1] = beam_point(sx, sy, p, cos_a[i], sin_a[i])
             n_pred += 1
     if n_real < MIN_PAIRS or n_pred < MIN_PAIRS:
         return n_real, n_pred, math.nan, math.nan

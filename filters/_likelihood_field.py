@@ -36,6 +36,7 @@ from numba import njit
 from scipy import ndimage
 
 from locbench.datasets.dataset import OccupancyGrid
+from locbench.raycast.beams import beam_endpoints
 
 logger = logging.getLogger(__name__)
 
@@ -205,10 +206,9 @@ def _score(
 def scan_endpoints_robot_frame(
     ranges: npt.ArrayLike, angles: npt.ArrayLike, sensor_pose: tuple[float, float, float]
 ) -> tuple[FloatArray, FloatArray]:
-    """Beam endpoints (x, y) in the robot frame, m, for finite ``ranges`` at sensor-frame ``angles`` (rad)."""
-    r = np.asarray(ranges, dtype=np.float64)
-    a = np.asarray(angles, dtype=np.float64) + sensor_pose[2]
-    return sensor_pose[0] + r * np.cos(a), sensor_pose[1] + r * np.sin(a)
+    """Beam endpoints (x, y) in the robot frame, m, for finite ``ranges`` at sensor-frame ``angles`` (rad), the
+    sensor mounted at ``sensor_pose`` (:func:`locbench.raycast.beams.beam_endpoints`)."""
+    return beam_endpoints(ranges, angles, sensor_pose)
 
 
 def log_likelihood(

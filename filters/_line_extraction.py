@@ -47,6 +47,7 @@ from numba import njit
 
 from locbench.core.errors import ConfigError
 from locbench.core.events import LaserScan
+from locbench.raycast.beams import beam_point
 
 FloatArray = npt.NDArray[np.float64]
 logger = logging.getLogger(__name__)
@@ -193,8 +194,7 @@ def _scan_points(
         ri = r[i]
         if np.isfinite(ri) and ri >= range_min and ri < range_max:
             a = angle_min + angle_increment * float(i) + sth
-            pts[j, 0] = sx + ri * math.cos(a)
-            pts[j, 1] = sy + ri * math.sin(a)
+            pts[j, 0], pts[j, 1] = beam_point(sx, sy, ri, math.cos(a), math.sin(a))
             rr[j] = ri
             beam[j] = i
             j += 1

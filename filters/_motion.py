@@ -27,7 +27,8 @@ rank 2 (no lateral slip is modelled; the filters' additive process noise covers 
 per-distance increment noise for such events (both describe the same error); an event without v, omega and dt,
 or a dataset that gives neither sigma, keeps the increment noise, so results on data without twist noise are
 unchanged. The particle filter draws (s, a) per particle and moves through the exact arc
-(:func:`sample_twist_motion`), offset so that the noise-free draw is the event's own increment.
+(:func:`~locbench.filters._motion_kernels.sample_twist_motion`), offset so that the noise-free draw is the
+event's own increment.
 
 Reading of report 003 eq. 10
 ----------------------------
@@ -345,23 +346,9 @@ def increment_covariance(
 _SERIES_A = 1e-3
 
 
-def twist_increment(s: npt.ArrayLike, a: npt.ArrayLike) -> FloatArray:
-    """Increment (dx, dy, dtheta) in the previous robot frame of a constant-twist arc, shape (..., 3).
-
-    ``s`` is the arc length (m, v dt) and ``a`` the turned angle (rad, omega dt), broadcast together:
-    dx = s sin(a)/a, dy = s (1 - cos a)/a, dtheta = a.
-    """
-    s_ = np.asarray(s, dtype=np.float64)
-    a_ = np.asarray(a, dtype=np.float64)
-    sinc = np.sinc(a_ / np.pi)  # sin(a) / a, exact at 0
-    small = np.abs(a_) < _SERIES_A
-    safe = np.where(small, 1.0, a_)
-    cosc = np.where(small, a_ * (0.5 - a_ * a_ / 24.0), (1.0 - np.cos(a_)) / safe)  # (1 - cos a) / a
-    return np.stack(np.broadcast_arrays(s_ * sinc, s_ * cosc, a_ + 0.0 * s_), axis=-1)
-
-
 def twist_jacobian(s: float, a: float) -> FloatArray:
-    """J = d(dx, dy, dtheta)/d(s, a) of :func:`twist_increment` at (s m, a rad), shape (3, 2)."""
+    """J = d(dx, dy, dtheta)/d(s, a) of the arc :func:`~locbench.filters._motion_kernels.twist_increment` at
+    (s m, a rad), shape (3, 2)."""
     if abs(a) < _SERIES_A:
         a2 = a * a
         f, g = 1.0 - a2 / 6.0, a * (0.5 - a2 / 24.0)  # sin(a)/a, (1 - cos a)/a
@@ -382,111 +369,6 @@ def twist_increment_covariance(v: float, omega: float, dt: float, sigma_v: float
     J = twist_jacobian(v * dt, omega * dt)
     var = np.array([(sigma_v * dt) ** 2, (sigma_omega * dt) ** 2])
     return (J * var) @ J.T
-
-
-# --- sampling (particle filters) -------------------------------------------------------------------------
-
-
-def sample_wheel_motion(
-    poses: npt.ArrayLike,
-    d_left: float,
-    d_right: float,
-    wheelbase_m: float,
-    var_left: float,
-    var_right: float,
-    rng: np.random.Generator,
-) -> FloatArray:
-    """Draw one noisy successor per pose from the encoder model (report 003 eq. 1-2, 5, 10).
-
-    Each row gets its own wheel travel delta_l ~ N(d_left, var_left), delta_r ~ N(d_right, var_right)
-    (variances from :func:`wheel_variances`), moved with eq. 5.
-
-    Parameters
-    ----------
-    poses : array-like, shape (N, 3)
-        Particles (x m, y m, theta rad), world frame.
-    d_left, d_right : float
-        Measured wheel travel, m.
-    wheelbase_m : float
-        W, m.
-    var_left, var_right : float
-        Input variances, m^2.
-    rng : numpy.random.Generator
-
-    Returns
-    -------
-    ndarray, shape (N, 3)
-    """
-    p = np.asarray(poses, dtype=np.float64)
-    n = p.shape[0]
-    noise = rng.standard_normal((2, n))
-    dl = d_left + math.sqrt(var_left) * noise[0]
-    dr = d_right + math.sqrt(var_right) * noise[1]
-    dd, dth = wheel_to_motion(dl, dr, wheelbase_m)
-    return predict_midpoint(p, dd, dth)
-
-
-def sample_increment_motion(
-    poses: npt.ArrayLike,
-    dx: float,
-    dy: float,
-    dtheta: float,
-    var_xy: float,
-    var_theta: float,
-    rng: np.random.Generator,
-) -> FloatArray:
-    """Draw one noisy successor per pose: pose (+) (increment + noise), noise from :func:`increment_variances`.
-
-    ``poses`` (N, 3) world frame; the increment in the previous robot frame; returns (N, 3).
-    """
-    p = np.asarray(poses, dtype=np.float64)
-    n = p.shape[0]
-    noise = rng.standard_normal((3, n))
-    sxy, sth = math.sqrt(var_xy), math.sqrt(var_theta)
-    ix, iy, ith = dx + sxy * noise[0], dy + sxy * noise[1], dtheta + sth * noise[2]
-    c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
-    return np.stack([p[:, 0] + c * ix - s * iy, p[:, 1] + s * ix + c * iy, wrap_angle(p[:, 2] + ith)], axis=-1)
-
-
-def sample_twist_motion(
-    poses: npt.ArrayLike,
-    u: Odometry,
-    sigma_v: float,
-    sigma_omega: float,
-    rng: np.random.Generator,
-) -> FloatArray:
-    """Draw one noisy successor per pose from the twist-noise model of the module docstring.
-
-    Each row draws s ~ N(v dt, (sigma_v dt)^2) and a ~ N(omega dt, (sigma_omega dt)^2) and moves by the
-    event's increment plus f(s, a) - f(v dt, omega dt), f the exact arc of :func:`twist_increment`: the noise
-    of the arc, centred on the robot's own (dx, dy, dtheta). ``u`` must carry v, omega and dt.
-
-    Parameters
-    ----------
-    poses : array-like, shape (N, 3)
-        Particles (x m, y m, theta rad), world frame.
-    u : Odometry
-        The event (increment in the previous robot frame; v m/s, omega rad/s, dt s).
-    sigma_v, sigma_omega : float
-        White noise of the measured speed (m/s) and turn rate (rad/s).
-    rng : numpy.random.Generator
-
-    Returns
-    -------
-    ndarray, shape (N, 3)
-    """
-    assert u.v is not None and u.omega is not None and u.dt is not None
-    p = np.asarray(poses, dtype=np.float64)
-    n = p.shape[0]
-    s0, a0 = u.v * u.dt, u.omega * u.dt
-    noise = rng.standard_normal((2, n))
-    inc = twist_increment(s0 + sigma_v * u.dt * noise[0], a0 + sigma_omega * u.dt * noise[1])
-    base = twist_increment(s0, a0)
-    ix = u.dx + inc[:, 0] - base[0]
-    iy = u.dy + inc[:, 1] - base[1]
-    ith = u.dtheta + inc[:, 2] - base[2]
-    c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
-    return np.stack([p[:, 0] + c * ix - s * iy, p[:, 1] + s * ix + c * iy, wrap_angle(p[:, 2] + ith)], axis=-1)
 
 
 # --- the resolved noise and the per-step propagation used by the filters ---------------------------------

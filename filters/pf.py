@@ -75,7 +75,7 @@ Compiled kernels
     particles that draws its noise from the run's ``numpy.random.Generator`` (numba shares the generator's
     state), so a run stays reproducible from its seed. The headings' sines and cosines are taken through
     the angle sum about one particle's heading with a series for the small difference
-    (:func:`_sincos_near`), libm's only for particles far from it.
+    (:func:`~locbench.filters._motion_kernels.sincos_near`), libm's only for particles far from it.
 
 Augmented MCL (PR table 8.3)
     Short- and long-term averages of the measurement likelihood, w_fast and w_slow, updated with
@@ -124,7 +124,7 @@ from numba.typed import Dict
 
 from locbench.core.errors import ConfigError, FilterDiverged, ResourceLimit
 from locbench.core.events import UNKNOWN_ID, LandmarkObservations, LaserScan, Observation, Odometry, RangeObservations
-from locbench.core.geometry import wrap_angle, wrap_scalar
+from locbench.core.geometry import wrap_angle
 from locbench.core.limits import (
     FREE_SPACE_BYTES_PER_CELL,
     LIKELIHOOD_FIELD_BYTES_PER_CELL,
@@ -142,13 +142,8 @@ from locbench.filters._likelihood_field import (
     make_likelihood_field,
     scan_endpoints_robot_frame,
 )
-from locbench.filters._motion import (
-    _SERIES_A,
-    MotionKind,
-    MotionNoiseConfig,
-    increment_variances,
-    wheel_variances,
-)
+from locbench.filters._motion import MotionKind, MotionNoiseConfig, increment_variances, wheel_variances
+from locbench.filters._motion_kernels import increment_step, move_twist, sincos_near, wheel_step, wrap
 from locbench.filters._noise import landmark_noise, process_noise, range_only_noise
 from locbench.filters._numba_rng import UIntArray, generator_addresses, generator_from
 from locbench.filters.base import (
@@ -376,50 +371,6 @@ class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
 # --- compiled kernels --------------------------------------------------------------------------------------
 
 
-@njit(cache=True, inline="always")
-def _wrap(a: float) -> float:
-    """``a`` wrapped to (-pi, pi]; one step covers a heading plus a turn, the modulo only larger values."""
-    if -math.pi < a <= math.pi:
-        return a
-    if math.pi < a <= 3.0 * math.pi:
-        return a - 2.0 * math.pi
-    if -3.0 * math.pi < a <= -math.pi:
-        return a + 2.0 * math.pi
-    return math.pi - ((math.pi - a) % (2.0 * math.pi))
-
-
-#: :func:`locbench.core.geometry.wrap_scalar` compiled: the wrap of the twist model's headings. numba's on-disk cache
-#: of a kernel is keyed on this module's source alone: after editing ``wrap_scalar``, delete the ``*.nbi`` /
-#: ``*.nbc`` files under ``filters/__pycache__``.
-_wrap_mod = njit(cache=True, inline="always")(wrap_scalar)
-
-
-#: Below this |angle| (rad) :func:`_sincos_near` uses its series: the first omitted terms, d^17 / 17! and
-#: d^18 / 18!, are below 1e-19 there, under a quarter of an ulp of the result.
-_SERIES_MAX_RAD = 0.5
-_SIN_C = (1.0, -1.0 / 6.0, 1.0 / 120.0, -1.0 / 5040.0, 1.0 / 362880.0, -1.0 / 39916800.0, 1.0 / 6227020800.0)
-_COS_C = (1.0, -0.5, 1.0 / 24.0, -1.0 / 720.0, 1.0 / 40320.0, -1.0 / 3628800.0, 1.0 / 479001600.0)
-
-
-@njit(cache=True, inline="always")
-def _sincos_near(a: float, ref: float, sin_ref: float, cos_ref: float) -> tuple[float, float]:
-    """(sin a, cos a) through the angle sum about ``ref`` (whose sine and cosine are given): a Taylor series
-    of the small difference d = a - ref and one rotation, a third of the cost of libm's sin and cos for a
-    particle cloud (a spread of less than ``_SERIES_MAX_RAD`` about ``ref``); libm for the other angles."""
-    d = a - ref
-    if abs(d) > _SERIES_MAX_RAD:
-        return math.sin(a), math.cos(a)
-    d2 = d * d
-    # Horner in d^2 up to d^15 (sine) and d^16 (cosine) with the factorials' reciprocals
-    sd = -1.0 / 1307674368000.0  # -1 / 15!
-    cd = 1.0 / 20922789888000.0  # 1 / 16!
-    for k in range(6, -1, -1):
-        sd = sd * d2 + _SIN_C[k]
-        cd = cd * d2 + _COS_C[k]
-    sd *= d
-    return sin_ref * cd + cos_ref * sd, cos_ref * cd - sin_ref * sd
-
-
 @njit(cache=True)
 def _sightings_loglik(
     poses: FloatArray,
@@ -462,7 +413,7 @@ def _sightings_loglik(
                 dy = lm_xy[j, 1] - y
                 vr = ranges[k] - math.sqrt(dx * dx + dy * dy)
                 if with_bearing:
-                    vb = _wrap(bearings[k] - math.atan2(dy, dx) + th)
+                    vb = wrap(bearings[k] - math.atan2(dy, dx) + th)
                     ll = log_a - 0.5 * (vr * vr * inv_var_r + vb * vb * inv_var_b)
                 else:
                     a = log_a - 0.5 * vr * vr * inv_var_r
@@ -524,19 +475,15 @@ def _move(
         if wheels:
             dl = u0 + s0 * rng.standard_normal()
             dr = u1 + s1 * rng.standard_normal()
-            dd = 0.5 * (dl + dr)
-            turn = (dr - dl) / wheelbase
-            s, c = _sincos_near(x[i, 2] + 0.5 * turn, ref, sr, cr)
-            mx_i, my_i = dd * c, dd * s
+            mx_i, my_i, turn = wheel_step(x[i, 2], dl, dr, wheelbase, ref, sr, cr)
         else:
             ix = u0 + s0 * rng.standard_normal()
             iy = u1 + s0 * rng.standard_normal()
             turn = u2 + s1 * rng.standard_normal()
-            s, c = _sincos_near(x[i, 2], ref, sr, cr)
-            mx_i, my_i = c * ix - s * iy, s * ix + c * iy
+            mx_i, my_i = increment_step(x[i, 2], ix, iy, ref, sr, cr)
         x[i, 0] += mx_i + q0 * rng.standard_normal()
         x[i, 1] += my_i + q1 * rng.standard_normal()
-        x[i, 2] = _wrap(x[i, 2] + turn + q2 * rng.standard_normal())
+        x[i, 2] = wrap(x[i, 2] + turn + q2 * rng.standard_normal())
         if i == 0:
             ref1 = x[0, 2]
             sr1, cr1 = math.sin(ref1), math.cos(ref1)
@@ -544,28 +491,6 @@ def _move(
         finite = finite and math.isfinite(x[i, 0]) and math.isfinite(x[i, 1]) and math.isfinite(x[i, 2])
     mean, cov = _finish_stats(x, w, mx, my, sc, ss)
     return mean, cov, finite and _all_finite(logw)
-
-
-#: The stand-in for a zero argument of sin(y) / y (float64's machine epsilon), whose quotient is then 1.
-_EPS = float(np.finfo(np.float64).eps)
-
-
-@njit(cache=True, inline="always")
-def _twist_arc(s: float, a: float) -> tuple[float, float, float]:
-    """The increment (dx m, dy m, dtheta rad), previous robot frame, of a constant-twist arc of length ``s`` (m)
-    turning ``a`` (rad): dx = s sin(a) / a, dy = s (1 - cos a) / a, dtheta = a (the exact arc of
-    :func:`locbench.filters._motion.twist_increment`).
-
-    sin(a) / a is evaluated as sin(y) / y at y = pi (a / pi) (y = eps at a = 0, where the quotient is 1), the
-    evaluation of numpy's ``sinc`` that ``twist_increment`` uses; (1 - cos a) / a by its series a (1/2 - a^2/24)
-    below ``_SERIES_A``, where the difference loses digits.
-    """
-    y = math.pi * (a / math.pi)
-    if y == 0.0:
-        y = _EPS
-    sinc = math.sin(y) / y
-    cosc = a * (0.5 - a * a / 24.0) if abs(a) < _SERIES_A else (1.0 - math.cos(a)) / a
-    return s * sinc, s * cosc, a + 0.0 * s
 
 
 @njit(cache=True)
@@ -587,9 +512,8 @@ def _move_twist(
     additive noise of report 003 eq. 8, then :func:`_checked_stats`.
 
     Each particle draws an arc length s ~ N(s0, sd_s^2) and a turn a ~ N(a0, sd_a^2) (every particle's arc length
-    first, then every turn) and moves, in its own frame, by the event's increment plus f(s, a) - f(s0, a0), f the
-    arc of :func:`_twist_arc`: the noise of the arc, centred on the robot's own (dx, dy, dtheta); the heading is
-    wrapped. Then N(0, diag(q_std^2)) by :func:`_jitter` when any q_std is non-zero.
+    first, then every turn) and moves by :func:`~locbench.filters._motion_kernels.move_twist` (the event's
+    increment plus the noise of the arc). Then N(0, diag(q_std^2)) by :func:`_jitter` when any q_std is non-zero.
 
     Parameters
     ----------
@@ -614,17 +538,7 @@ def _move_twist(
     for r in range(2):
         for i in range(n):
             noise[r, i] = rng.standard_normal()
-    b0, b1, b2 = _twist_arc(s0, a0)
-    for i in range(n):
-        i0, i1, i2 = _twist_arc(s0 + sd_s * noise[0, i], a0 + sd_a * noise[1, i])
-        ix = dx + i0 - b0
-        iy = dy + i1 - b1
-        ith = dtheta + i2 - b2
-        th = x[i, 2]
-        c, s = math.cos(th), math.sin(th)
-        x[i, 0] = x[i, 0] + c * ix - s * iy
-        x[i, 1] = x[i, 1] + s * ix + c * iy
-        x[i, 2] = _wrap_mod(th + ith)
+    move_twist(x, noise, s0, a0, sd_s, sd_a, dx, dy, dtheta)
     if q_std[0] != 0.0 or q_std[1] != 0.0 or q_std[2] != 0.0:
         _jitter(x, q_std, gen)
     return _checked_stats(x, w, logw)
@@ -638,7 +552,7 @@ def _jitter(x: FloatArray, sd: FloatArray, gen: UIntArray) -> None:
     for i in range(x.shape[0]):
         x[i, 0] += s0 * rng.standard_normal()
         x[i, 1] += s1 * rng.standard_normal()
-        x[i, 2] = _wrap(x[i, 2] + s2 * rng.standard_normal())
+        x[i, 2] = wrap(x[i, 2] + s2 * rng.standard_normal())
 
 
 @njit(cache=True)
@@ -792,7 +706,7 @@ def _spread(x: FloatArray, n: int, ref_heading: float) -> FloatArray:
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     for i in range(n):
-        r2 = _wrap(x[i, 2] - ref_heading)
+        r2 = wrap(x[i, 2] - ref_heading)
         lo[0] = min(lo[0], x[i, 0])
         hi[0] = max(hi[0], x[i, 0])
         lo[1] = min(lo[1], x[i, 1])
@@ -847,7 +761,7 @@ def _jitter_correlated(x: FloatArray, root: FloatArray, gen: UIntArray) -> None:
         e2 = rng.standard_normal()
         x[i, 0] += root[0, 0] * e0 + root[0, 1] * e1 + root[0, 2] * e2
         x[i, 1] += root[1, 0] * e0 + root[1, 1] * e1 + root[1, 2] * e2
-        x[i, 2] = _wrap(x[i, 2] + root[2, 0] * e0 + root[2, 1] * e1 + root[2, 2] * e2)
+        x[i, 2] = wrap(x[i, 2] + root[2, 0] * e0 + root[2, 1] * e1 + root[2, 2] * e2)
 
 
 @njit(cache=True, inline="always")
@@ -856,8 +770,8 @@ def _add_weighted(
     cr: float,
 ) -> tuple[float, float, float, float]:  # fmt: skip
     """One particle's terms of the estimate's first pass added to its sums: (mx + w x, my + w y, sc + w cos th,
-    ss + w sin th), the sine and cosine through :func:`_sincos_near` about ``ref``."""
-    si, ci = _sincos_near(th, ref, sr, cr)
+    ss + w sin th), the sine and cosine through :func:`~locbench.filters._motion_kernels.sincos_near` about ``ref``."""
+    si, ci = sincos_near(th, ref, sr, cr)
     return mx + w * x, my + w * y, sc + w * ci, ss + w * si
 
 

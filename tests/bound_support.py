@@ -121,28 +121,16 @@ def associate_one(
 
 
 def grouped_laser_information(dataset: Any, sigma_m: float, gt_poses: np.ndarray) -> np.ndarray:
-    """``pcrb._laser_information`` with each scan's truth index looked up by itself:
-    :func:`locbench.evaluate.pcrb.laser_information` per beam layout."""
+    """``pcrb._laser_information`` with each scan's truth index looked up by itself (:func:`truth_index`) in place
+    of the one search of ``pcrb._truth_indices``."""
     from locbench.evaluate import pcrb
 
-    info = np.zeros((gt_poses.shape[0], 3, 3))
-    grid = dataset.world.occupancy
-    scans = [e for e in dataset.events if isinstance(e, LaserScan)]
-    if grid is None or not scans:
-        return info
-    groups: dict[tuple[float, ...], list[LaserScan]] = {}
-    for e in scans:
-        key = (*e.sensor_pose, e.angle_min, e.angle_increment, float(e.ranges.shape[0]), e.range_min, e.range_max)
-        groups.setdefault(key, []).append(e)
-    for group in groups.values():
-        e0 = group[0]
-        idx = np.array([truth_index(dataset, e.t) for e in group])
-        per_scan = pcrb.laser_information(
-            grid.occupied(), grid.resolution, (float(grid.origin[0]), float(grid.origin[1])), gt_poses[idx],
-            e0.sensor_pose, e0.angles, e0.range_max, e0.range_min, sigma_m, np.stack([e.ranges for e in group]),
-        )  # fmt: skip
-        np.add.at(info, idx, per_scan)
-    return info
+    saved = pcrb._truth_indices
+    pcrb._truth_indices = lambda ds, events: np.array([truth_index(ds, e.t) for e in events], dtype=np.intp)
+    try:
+        return pcrb._laser_information(dataset, sigma_m, gt_poses)
+    finally:
+        pcrb._truth_indices = saved
 
 
 def per_event_information(

@@ -115,20 +115,6 @@ def range_bearing_mean(sigmas: FloatArray, weights: FloatArray) -> FloatArray:
     return np.array([np.sum(weights * sigmas[:, 0]), circular_mean(sigmas[:, 1], weights)])
 
 
-def move_midpoint(pose: FloatArray, delta_d: float, delta_theta: float) -> FloatArray:
-    """A pose moved along the chord at the midpoint heading (report 003 eq. 5; heading not wrapped)."""
-    x, y, th = (float(v) for v in pose)
-    h = th + 0.5 * delta_theta
-    return np.array([x + delta_d * math.cos(h), y + delta_d * math.sin(h), th + delta_theta])
-
-
-def move_increment(pose: FloatArray, dx: float, dy: float, dtheta: float) -> FloatArray:
-    """A pose with the increment (robot frame) composed onto it (heading not wrapped)."""
-    x, y, th = (float(v) for v in pose)
-    c, s = math.cos(th), math.sin(th)
-    return np.array([x + c * dx - s * dy, y + s * dx + c * dy, th + dtheta])
-
-
 def pose_transform(sigmas: FloatArray, pts: Any, Q: FloatArray) -> tuple[FloatArray, FloatArray]:
     """filterpy's ``unscented_transform`` of moved poses (7, 3): (mean, covariance + Q), heading residuals wrapped."""
     from filterpy.kalman import unscented_transform

@@ -69,33 +69,6 @@ def icp_ekf_predict(
     return np.array([x[0] + dxw, x[1] + dyw, wrap_scalar(x[2] + u[2])]), 0.5 * (Pn + Pn.T)
 
 
-def joseph_pose_correct(
-    x: FloatArray, P: FloatArray, V: FloatArray, R: FloatArray
-) -> tuple[FloatArray, FloatArray, float]:
-    """A direct measurement of the whole pose (H = I): report 000 eq. 14-18 in the Joseph form.
-
-    Parameters
-    ----------
-    x, P : ndarray, shapes (3,) and (3, 3)
-        Predicted pose and covariance.
-    V : ndarray, shape (3,)
-        Innovation Z - Z^ (eq. 3), heading wrapped.
-    R : ndarray, shape (3, 3)
-        Observation noise (eq. 16).
-
-    Returns
-    -------
-    x, P, nis
-        x + K V with K = P (P + R)^-1 (eq. 15, 17; the heading not wrapped), (I - K) P (I - K)^T + K R K^T
-        symmetrised (eq. 18 in the Joseph form), and V^T (P + R)^-1 V.
-    """
-    Sinv = np.linalg.inv(P + R)
-    K = P @ Sinv
-    A = np.eye(3) - K
-    Pn = A @ P @ A.T + K @ R @ K.T
-    return x + K @ V, 0.5 * (Pn + Pn.T), float(V @ Sinv @ V)
-
-
 def icp_gates(
     used_ranges: FloatArray, P: FloatArray, pair_var: float, cap: float, sigmas: float
 ) -> tuple[float, float]:

@@ -970,6 +970,22 @@ def declared(metric_id: str) -> Metric:
 # the families of the built-in metrics: each is computed once per run
 
 
+def _waypoint_point(metric_id: str, header: str, definition: str) -> Metric:
+    """The record of one coordinate (m, world frame) of a waypoint's estimated or marked point: shown in cm, no
+    better direction, in the waypoint family."""
+    return Metric(
+        metric_id,
+        header=header,
+        unit="m",
+        display_unit="cm",
+        scale=_CM,
+        better="",
+        group="accuracy",
+        family=_waypoints,
+        definition=definition,
+    )
+
+
 def _waypoints(v: RunView) -> dict[str, float]:
     wp = v.truth.waypoints
     if wp is None or not len(wp):
@@ -1101,50 +1117,18 @@ for _m in (
         bound=True,
         definition="e_ij = |p_hat_i(t_j) - p_j| against the marked point of waypoint j (j from 1)",
     ),
-    Metric(
+    _waypoint_point(
         WAYPOINT_EST_X_M,
-        header="estimated x at the waypoint",
-        unit="m",
-        display_unit="cm",
-        scale=_CM,
-        better="",
-        group="accuracy",
-        family=_waypoints,
-        definition="x of the estimated position at waypoint j's time (world frame)",
+        "estimated x at the waypoint",
+        "x of the estimated position at waypoint j's time (world frame)",
     ),
-    Metric(
-        WAYPOINT_EST_Y_M,
-        header="estimated y at the waypoint",
-        unit="m",
-        display_unit="cm",
-        scale=_CM,
-        better="",
-        group="accuracy",
-        family=_waypoints,
-        definition="y of the same",
-    ),
-    Metric(
+    _waypoint_point(WAYPOINT_EST_Y_M, "estimated y at the waypoint", "y of the same"),
+    _waypoint_point(
         WAYPOINT_MARKED_X_M,
-        header="marked x of the waypoint",
-        unit="m",
-        display_unit="cm",
-        scale=_CM,
-        better="",
-        group="accuracy",
-        family=_waypoints,
-        definition="x of waypoint j's marked point (so the mean estimate's distance needs only `metrics.csv`)",
+        "marked x of the waypoint",
+        "x of waypoint j's marked point (so the mean estimate's distance needs only `metrics.csv`)",
     ),
-    Metric(
-        WAYPOINT_MARKED_Y_M,
-        header="marked y of the waypoint",
-        unit="m",
-        display_unit="cm",
-        scale=_CM,
-        better="",
-        group="accuracy",
-        family=_waypoints,
-        definition="y of the same",
-    ),
+    _waypoint_point(WAYPOINT_MARKED_Y_M, "marked y of the waypoint", "y of the same"),
     Metric(
         WAYPOINT_RMSE_MEAN_M,
         header="mean waypoint RMSE",

@@ -150,31 +150,20 @@ def _dda_start(
     ey = gy + t0 * dy
     j = min(max(math.floor(ex), 0), cols - 1)
     i = min(max(math.floor(ey), 0), rows - 1)
-    if dx > 0.0:
-        step_j = 1
-        t_next_x = t0 + (j + 1.0 - ex) / dx
-        t_delta_x = 1.0 / dx
-    elif dx < 0.0:
-        step_j = -1
-        t_next_x = t0 + (j - ex) / dx
-        t_delta_x = -1.0 / dx
-    else:
-        step_j = 0
-        t_next_x = math.inf
-        t_delta_x = math.inf
-    if dy > 0.0:
-        step_i = 1
-        t_next_y = t0 + (i + 1.0 - ey) / dy
-        t_delta_y = 1.0 / dy
-    elif dy < 0.0:
-        step_i = -1
-        t_next_y = t0 + (i - ey) / dy
-        t_delta_y = -1.0 / dy
-    else:
-        step_i = 0
-        t_next_y = math.inf
-        t_delta_y = math.inf
+    step_j, t_next_x, t_delta_x = _axis_start(ex, j, dx, t0)
+    step_i, t_next_y, t_delta_y = _axis_start(ey, i, dy, t0)
     return i, j, step_i, step_j, t_next_x, t_next_y, t_delta_x, t_delta_y
+
+
+@njit(cache=True, inline="always")
+def _axis_start(e: float, k: int, d: float, t0: float) -> tuple[int, float, float]:
+    """Along one grid axis, from the entry coordinate ``e`` (cells) in cell ``k`` with the direction component
+    ``d``: the step (+1, -1 or 0), the ray parameter of the next grid line and the spacing of the lines."""
+    if d > 0.0:
+        return 1, t0 + (k + 1.0 - e) / d, 1.0 / d
+    if d < 0.0:
+        return -1, t0 + (k - e) / d, -1.0 / d
+    return 0, math.inf, math.inf
 
 
 #: Bits of :func:`face_cells`: the cell is occupied; an occupied (or off-grid) cell lies within two cells.

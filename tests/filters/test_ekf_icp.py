@@ -7,6 +7,7 @@ import math
 import laser_reference as ref
 import numpy as np
 import pytest
+from kalman_reference import joseph_correct_pose
 
 from locbench.core.errors import ConfigError
 from locbench.core.events import LaserScan, Odometry
@@ -238,7 +239,7 @@ def test_compiled_correction_is_the_joseph_form_of_eq_15_to_18() -> None:
         ok, nis = correct_pose(s, tx, ty, tth)
         c, sn = math.cos(x[2]), math.sin(x[2])
         V = np.array([c * tx - sn * ty, sn * tx + c * ty, math.remainder(tth, 2 * math.pi)])
-        xn, Pn, nis_ref = ref.joseph_pose_correct(x, P, V, np.diag(r))
+        xn, Pn, nis_ref = joseph_correct_pose(x, P, V, np.diag(r))
         xn[2] = math.remainder(xn[2], 2 * math.pi)
         assert ok
         np.testing.assert_allclose(s[0:3], xn, rtol=0, atol=1e-12)

@@ -13,7 +13,7 @@ from locbench.core.events import UNKNOWN_ID, LandmarkObservations, LaserScan, Od
 from locbench.datasets.dataset import Gaussian2, Landmarks, OccupancyGrid, SensorSpec, WorldMap
 from locbench.evaluate.metrics import align, nees, nees_at_truth
 from locbench.filters import _likelihood_field as lf
-from locbench.filters._motion import twist_increment, twist_increment_covariance
+from locbench.filters.motion import twist_increment, twist_increment_covariance
 from locbench.filters.pf import (
     ParticleFilter,
     ParticleFilterConfig,
@@ -372,14 +372,14 @@ def test_predict_draws_the_twist_noise_when_the_dataset_gives_it() -> None:
 def test_sincos_near_matches_libm_near_and_far_from_the_reference() -> None:
     from numba import njit
 
-    from locbench.filters.pf import _sincos_near
+    from locbench.filters._motion_kernels import sincos_near
 
     @njit
     def table(a: np.ndarray, ref: float) -> np.ndarray:
         out = np.empty((a.shape[0], 2))
         sr, cr = math.sin(ref), math.cos(ref)
         for i in range(a.shape[0]):
-            out[i, 0], out[i, 1] = _sincos_near(a[i], ref, sr, cr)
+            out[i, 0], out[i, 1] = sincos_near(a[i], ref, sr, cr)
         return out
 
     rng = np.random.default_rng(5)
@@ -663,11 +663,13 @@ def test_a_copied_filter_draws_from_its_own_generator() -> None:
 
 @pytest.mark.parametrize("q", [(0.0, 0.0, 0.0), (0.01, 0.02, 0.003)])
 def test_compiled_twist_motion_is_the_twist_model(q: tuple[float, float, float]) -> None:
-    """``_move_twist`` against numpy's form of the twist model (``sample_twist_motion``, then N(0, diag(q^2))
-    drawn by ``_jitter`` and the statistics of ``_checked_stats``) from one generator state: the particles to
-    1e-12 (m, rad), the weighted mean and covariance to 1e-12 of their scale, the same draws taken (the
-    generators' states equal afterwards). Straight, tiny (series) and zero turns, headings across the wrap."""
-    from locbench.filters._motion import sample_twist_motion
+    """``_move_twist`` against the plain numpy form of the twist model (``motion_reference.twist_moved`` on
+    numpy's draws, then N(0, diag(q^2)) drawn by ``_jitter`` and the statistics of ``_checked_stats``) from one
+    generator state: the particles to 1e-12 (m, rad), the weighted mean and covariance to 1e-12 of their scale,
+    the same draws taken (the generators' states equal afterwards). Straight, tiny (series) and zero turns,
+    headings across the wrap."""
+    from motion_reference import twist_moved
+
     from locbench.filters._numba_rng import generator_addresses
     from locbench.filters.pf import _checked_stats, _jitter, _move_twist
 
@@ -680,7 +682,10 @@ def test_compiled_twist_motion_is_the_twist_model(q: tuple[float, float, float])
         w = np.exp(logw)
         u = Odometry(t=1.0, dx=0.02, dy=-0.001, dtheta=0.01, v=v, omega=omega, dt=dt)
         a, b = np.random.default_rng(5), np.random.default_rng(5)
-        want = sample_twist_motion(x, u, 0.05, 0.1, a)
+        e = a.standard_normal((2, 400))
+        want = twist_moved(
+            x, v * dt + 0.05 * dt * e[0], omega * dt + 0.1 * dt * e[1], v * dt, omega * dt, (0.02, -0.001, 0.01)
+        )
         if q_std.any():
             _jitter(want, q_std, generator_addresses(a))
         mean_ref, cov_ref, ok_ref = _checked_stats(want, w, logw)
@@ -698,3 +703,42 @@ def test_compiled_twist_motion_is_the_twist_model(q: tuple[float, float, float])
         np.testing.assert_allclose(cov / scale, cov_ref / scale, rtol=0, atol=1e-12)
         assert ok and ok_ref
         assert a.bit_generator.state == b.bit_generator.state  # the same draws were taken
+
+
+@pytest.mark.parametrize("wheels", [True, False])
+def test_compiled_motion_is_the_plain_model(wheels: bool) -> None:
+    """``_move`` against the plain numpy forms (``motion_reference``) on numpy's draws from one generator state,
+    taken in the kernel's order (per particle: the two wheels or the three increment terms, then the three of
+    N(0, diag(q^2))): the particles to 1e-12 (m, rad), the same draws taken. Headings across the wrap."""
+    from motion_reference import increment_moved, wheel_moved
+
+    from locbench.filters._numba_rng import generator_addresses
+    from locbench.filters.pf import _move
+
+    rng = np.random.default_rng(23)
+    n = 400
+    x = np.column_stack([rng.normal(0, 3, n), rng.normal(0, 3, n), rng.uniform(-math.pi, math.pi, n)])
+    x[:5, 2] = [math.pi, -math.pi + 1e-12, 3.1, -3.1, 0.0]
+    w = np.full(n, 1.0 / n)
+    q = np.array([0.01, 0.02, 0.003])
+    a, b = np.random.default_rng(6), np.random.default_rng(6)
+    if wheels:
+        e = a.standard_normal((n, 5))
+        want = wheel_moved(x, 0.2 + 0.01 * e[:, 0], 0.25 + 0.02 * e[:, 1], 0.4)
+        u = (0.2, 0.25, 0.0, 0.01, 0.02, 0.4)
+    else:
+        e = a.standard_normal((n, 6))
+        want = increment_moved(x, 0.1 + 0.01 * e[:, 0], -0.02 + 0.01 * e[:, 1], 0.3 + 0.05 * e[:, 2])
+        e = e[:, 1:]  # the additive noise's draws follow the three of the increment
+        u = (0.1, -0.02, 0.3, 0.01, 0.05, 1.0)
+    want[:, 0] += q[0] * e[:, 2]
+    want[:, 1] += q[1] * e[:, 3]
+    want[:, 2] += q[2] * e[:, 4]
+    got = x.copy()
+    *_, ok = _move(got, wheels, *u, q, generator_addresses(b), w, np.log(w))
+    dth = np.remainder(got[:, 2] - want[:, 2] + math.pi, 2 * math.pi) - math.pi
+    np.testing.assert_allclose(got[:, :2], want[:, :2], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(dth, 0.0, rtol=0, atol=1e-12)
+    assert np.all((got[:, 2] > -math.pi) & (got[:, 2] <= math.pi))
+    assert ok
+    assert a.bit_generator.state == b.bit_generator.state  # the same draws were taken

@@ -9,6 +9,7 @@ import math
 import kalman_reference as ref
 import numpy as np
 import pytest
+from motion_reference import increment_moved, midpoint_moved
 
 pytest.importorskip("filterpy")
 
@@ -112,10 +113,7 @@ def test_predict_equals_the_reference_transform(encoder: bool, weights: tuple[fl
         buf[kern.B_Q : kern.B_Q + 9] = Q.reshape(9)
         d = rng.normal(size=3) * 0.2
         sig = pts.sigma_points(x, P)
-        if encoder:
-            moved = np.array([ref.move_midpoint(s, d[0], d[1]) for s in sig])
-        else:
-            moved = np.array([ref.move_increment(s, d[0], d[1], d[2]) for s in sig])
+        moved = midpoint_moved(sig, d[0], d[1]) if encoder else increment_moved(sig, d[0], d[1], d[2])
         xm, Pm = ref.pose_transform(moved, pts, Q)
         assert kern.predict(buf, encoder, d[0], d[1], d[2]) == 0
         if ref.on_the_wrap(moved[:, 2] - xm[2]):
@@ -266,7 +264,7 @@ def test_the_filter_equals_filterpys_ukf_over_a_drive() -> None:
         q0, q1, q2 = flt._q
         ukf.Q = np.array([[n00 + q0, n01, n02], [n01, n11 + q1, n12], [n02, n12, n22 + q2]])
         flt.predict(u)
-        ukf.predict(fx=lambda s, dt, dd=0.5 * (dl + dr), dth=(dr - dl) / 0.4: ref.move_midpoint(s, dd, dth))
+        ukf.predict(fx=lambda s, dt, dd=0.5 * (dl + dr), dth=(dr - dl) / 0.4: midpoint_moved(s[None], dd, dth)[0])
         ukf.x[2] = ukfm.wrap_scalar(float(ukf.x[2]))
         ukf.P = 0.5 * (ukf.P + ukf.P.T)
         row = k % 2

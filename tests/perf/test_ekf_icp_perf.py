@@ -16,9 +16,9 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-import laser_reference as ref
 import numpy as np
 import pytest
+from kalman_reference import joseph_correct_pose
 
 from locbench.core.geometry import wrap_scalar
 from locbench.filters._ekf_icp_kernels import correct_pose, predict_pose, state_buffer
@@ -46,7 +46,7 @@ def _numpy_steps() -> None:
         th = float(x[2])
         c, s = math.cos(th), math.sin(th)
         V = np.array([c * 0.002 - s * 0.001, s * 0.002 + c * 0.001, wrap_scalar(0.0005)])
-        x, P, _ = ref.joseph_pose_correct(x, P, V, R)
+        x, P, _ = joseph_correct_pose(x, P, V, R)
         x[2] = wrap_scalar(float(x[2]))
 
 
