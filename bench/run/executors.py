@@ -205,9 +205,9 @@ def scheduler_from_file(path: str, timeout_s: float) -> str:
         except FileNotFoundError:
             why = "it does not exist"
         except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            why = f"it is not JSON ({one_line(exc)})"
+            why = f"it is not JSON ({one_line(str(exc))})"
         except OSError as exc:
-            raise ConfigError(f"--scheduler {path}: cannot read the scheduler file: {one_line(exc)}") from None
+            raise ConfigError(f"--scheduler {path}: cannot read the scheduler file: {one_line(str(exc))}") from None
         if time.monotonic() >= deadline:
             raise ConfigError(
                 f"--scheduler {path}: no scheduler file after {timeout_s:g} s ({why}); expected the file that "
