@@ -141,3 +141,20 @@ def test_the_check_finds_a_legend_over_data_a_missing_label_and_a_missing_config
     assert any("without an axis label" in p for p in _check(unlabelled))
     assert _check(fine, ("a", "b")) == []
     assert _check(fine, ("a", "c")) == ["configuration 'c' neither drawn nor named as not shown"]
+
+
+def test_tuning_figure_labels_every_panel_and_names_coinciding_filters() -> None:
+    from locbench.report.sections.tuned import trials_plot
+
+    studies = [
+        {"world": w, "filter": f, "trials": [{"value": v} for v in vals]}
+        for w in ("room", "office")
+        for f, vals in (
+            ("ekf_landmarks", [0.05, 0.04, 0.03]),
+            ("ukf_landmarks", [0.05, 0.04, 0.03]),
+            ("pf", [0.2, 0.1]),
+        )
+    ]
+    plot = trials_plot(studies)
+    assert figure_problems(plot) == []
+    assert "ukf_landmarks (= ekf_landmarks)" in _texts(plot)

@@ -250,7 +250,7 @@ def test_write_report_end_to_end(store: Store) -> None:
         "numpy 2.0.0",
         "0-2 (1 datasets)",
         "Summary",
-        "*`room`: mean over seeds*",
+        "*`room`: mean over seeds: each filter's default configuration*",
         "| filter | needs (sensors; map) | runs | ATE (cm) | mean waypoint RMSE (cm) |",
         "| `odometry` | 3 | ",
         "| `ekf_landmarks[gate=0.1]` | 1 | 1 |",
