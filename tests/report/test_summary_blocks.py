@@ -49,3 +49,16 @@ def test_sizes_are_measured_from_the_files(tmp_path: Path) -> None:
     assert "`index.html` 2.5 MB, 2 figures of 0.5 MB" in text and "old" not in text
     assert text.startswith("before\n") and text.endswith("\nafter\n")
     assert with_sizes("no block", summary) == "no block"
+
+
+def test_a_pick_from_fewer_seeds_says_so() -> None:
+    from test_report import _per_seed, _summary_of
+
+    rows = _per_seed({"odometry": {"ate_m": 0.5}, "pf": {"ate_m": 0.03}}, seeds=8)
+    rows += _per_seed({"pf[particles=3000]": {"ate_m": 0.01}}, seeds=3)
+    text, _ = _summary_of(rows)
+    assert "`pf[particles=3000]` (ATE 1" in text.text  # type: ignore[attr-defined]
+    assert "from 3 seeds where others have up to 8" in text.text  # type: ignore[attr-defined]
+    # the same seeds everywhere: nothing to say
+    text, _ = _summary_of(_per_seed({"odometry": {"ate_m": 0.5}, "pf": {"ate_m": 0.03}}, seeds=8))
+    assert "seeds where" not in text.text  # type: ignore[attr-defined]
