@@ -75,7 +75,7 @@ def finish(
 LEGEND_RIGHT_MAX = 12
 #: A configuration name longer than this is shown by a short name in figures (:func:`short_names`).
 SHORT_MAX = 40
-#: The figure's key (full specs, absent configurations, a note) is a legend of this name (the figure test reads it).
+#: The figure's key (the full specs of short names, a note) is a figure legend of this label.
 KEY_LABEL = "key"
 
 
