@@ -260,10 +260,14 @@ def draw_pareto(
     configuration when ``per_config``, else each group.
     """
     layers = pareto_layers(points)
+    drawn: list[tuple[float, float]] = []
     for g, pts, fr in layers.groups:
         st = styles[g]
         for p in pts:
             face = styles[p.label].color if p.label in styles else st.color
+            # a marker on top of one drawn before is drawn larger and beneath it: both stay visible
+            under = any(_near_log(p.x, p.y, x, y) for x, y in drawn)
+            drawn.append((p.x, p.y))
             ax.plot(
                 [p.x],
                 [p.y],
@@ -271,7 +275,8 @@ def draw_pareto(
                 marker=st.marker,
                 color=face,
                 mec=st.color,
-                ms=5,
+                ms=9 if under else 5,
+                zorder=1.9 if under else 2.0,
                 label=p.label if per_config else None,
             )
         if not per_config:
@@ -285,6 +290,17 @@ def draw_pareto(
     ax.set_xscale("log")
     ax.set_yscale("log")
     finish(ax, xlabel, ylabel, title)
+
+
+#: Two markers closer than this on both log axes (decades) overlap at the report's marker size.
+NEAR_DECADES = 0.02
+
+
+def _near_log(x0: float, y0: float, x1: float, y1: float) -> bool:
+    """Whether two positive points are within :data:`NEAR_DECADES` of each other on both log axes."""
+    if min(x0, y0, x1, y1) <= 0 or not all(map(math.isfinite, (x0, y0, x1, y1))):
+        return False
+    return abs(math.log10(x0 / x1)) < NEAR_DECADES and abs(math.log10(y0 / y1)) < NEAR_DECADES
 
 
 @dataclass(frozen=True)

@@ -158,3 +158,19 @@ def test_tuning_figure_labels_every_panel_and_names_coinciding_filters() -> None
     plot = trials_plot(studies)
     assert figure_problems(plot) == []
     assert "ukf_landmarks (= ekf_landmarks)" in _texts(plot)
+
+
+def test_pareto_markers_on_top_of_each_other_stay_visible() -> None:
+    from locbench.present.docfmt import LineStyle
+
+    pts = [
+        fg.ParetoPoint("a", "a", 100.0, 0.03),
+        fg.ParetoPoint("b", "b", 101.0, 0.0301),
+        fg.ParetoPoint("c", "c", 300.0, 0.03),
+    ]
+    styles = {k: LineStyle("#112233", "o", "-") for k in "abc"}
+    fig = Figure()
+    ax = fig.add_subplot()
+    fg.draw_pareto(ax, pts, styles, "rtf", "ATE (cm)", "t")
+    sizes = {ln.get_label(): ln.get_markersize() for ln in ax.get_lines() if ln.get_label() in "abc"}
+    assert sizes == {"a": 5, "b": 9, "c": 5}
