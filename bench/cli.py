@@ -164,6 +164,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
             print(f"interrupted: {sweep.stored} of {sweep.total} runs stored; run the same command to resume")
             return 130
         rc = _print_summary(sweep, args.results)
+        if args.dataset:
+            rc = max(rc, _none_ran(sweep.outcomes))
     if tuned:
         store.claim()
         rc = max(rc, _run_tuned(args))
@@ -235,6 +237,15 @@ def _print_summary(sweep: Any, results: str) -> int:
     return 0
 
 
+def _none_ran(outcomes: Sequence[Any]) -> int:
+    """1 (with the reasons on stderr) when the datasets asked for ran nothing: every run was skipped."""
+    if not outcomes or any(o.status != "skipped" for o in outcomes):
+        return 0
+    reasons = sorted({o.message for o in outcomes})
+    print("no run was made: every run was skipped (" + "; ".join(reasons) + ")", file=sys.stderr)
+    return 1
+
+
 def _cmd_report(args: argparse.Namespace) -> int:
     from locbench.report import suite_filter, summary_text, write_report
     from locbench.run.store import Store
@@ -249,6 +260,11 @@ def _cmd_report(args: argparse.Namespace) -> int:
     paths = write_report(store, keep=keep, out=out, jobs=args.jobs)
     print(summary_text(paths.summary), end="")
     print(f"report written to {paths.markdown} and {paths.html}")
+    statuses = {r.status for r in paths.runs}
+    if statuses == {"skipped"}:
+        reasons = sorted({r.message for r in paths.runs})
+        print(f"{store.runs} holds only skipped runs (" + "; ".join(reasons) + ")", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -303,7 +303,7 @@ def _gate_section(rows: pd.DataFrame, slug: str) -> list[Block]:
         axes[0].set_xlabel("chi-square threshold")
         axes[0].set_ylabel("ATE, mean over seeds (cm)")
         axes[0].set_yscale("log")
-        axes[0].legend(fontsize="small")
+        axes[0].legend(fontsize="small", loc="upper left", bbox_to_anchor=(0.0, -0.2))  # below the axes, off the data
         if has_acc:
             axes[1].set_xlabel("chi-square threshold")
             axes[1].set_ylabel("accepted lines (%)")

@@ -57,7 +57,9 @@ class Table:
 class Plot:
     """A figure: a file stem (``office_pareto``), a caption, the drawing function and its size in inches.
 
-    ``interactive`` optionally holds a plotly figure dict drawn in the HTML page instead of the PNG.
+    ``interactive`` optionally holds a plotly figure dict drawn in the HTML page instead of the PNG. ``shows``
+    names the configurations of the figure's table that the figure stands for: each is drawn (its name in a
+    legend, a title or the key) or named in the figure as not shown, with the reason (the figure test checks it).
     """
 
     name: str
@@ -65,6 +67,7 @@ class Plot:
     draw: DrawFn
     size: tuple[float, float] = (7.0, 4.2)
     interactive: dict[str, Any] | None = None
+    shows: tuple[str, ...] = ()
 
 
 Block = Text | Bullets | Table | Plot

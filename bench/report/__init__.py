@@ -14,7 +14,7 @@ import logging
 from dataclasses import dataclass
 from pathlib import Path
 
-from locbench.report.collect import Keep, collect, collect_metrics, metrics_csv, write_metrics_csv
+from locbench.report.collect import Keep, RunInfo, collect, collect_metrics, metrics_csv, write_metrics_csv
 from locbench.report.doc import Table
 from locbench.report.tables import wilson_interval
 from locbench.run.store import MARKER, Store
@@ -42,6 +42,8 @@ class ReportPaths:
     html: Path
     metrics: Path
     summary: tuple[Table, ...]
+    #: the status of every stored run the report read
+    runs: tuple[RunInfo, ...] = ()
 
 
 def write_report(store: Store, keep: Keep | None = None, out: Path | None = None, jobs: int = 1) -> ReportPaths:
@@ -94,7 +96,7 @@ def write_report(store: Store, keep: Keep | None = None, out: Path | None = None
         b for s in sections if s.anchor == "summary" for c in s.children for b in c.blocks if isinstance(b, Table)
     )
     log.info("wrote %s (%d metric rows, %d figures)", md, len(col.metrics), len(pngs))
-    return ReportPaths(md, page, metrics, tables)
+    return ReportPaths(md, page, metrics, tables, tuple(col.runs))
 
 
 def summary_text(tables: tuple[Table, ...]) -> str:

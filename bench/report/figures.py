@@ -8,13 +8,15 @@ Each function takes the axis (or figure, for small multiples), the arrays to dra
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
-from matplotlib.patches import Ellipse
+from matplotlib.patches import Ellipse, Rectangle
+from matplotlib.transforms import offset_copy
 from scipy import stats
 
 from locbench.present.docfmt import LineStyle
@@ -22,8 +24,14 @@ from locbench.present.docfmt import LineStyle
 _CHI2_2D_95 = float(stats.chi2.ppf(0.95, 2))
 
 
-def finish(ax: Axes, xlabel: str, ylabel: str, title: str) -> None:
-    """Axis labels, the title, and the legend outside the axes on the right (every line figure's frame)."""
+def finish(
+    ax: Axes, xlabel: str, ylabel: str, title: str, absent: Mapping[str, str] | None = None, note: str = ""
+) -> None:
+    """Axis labels, the title, the legend outside the axes (on the right, or below them when it is long), and
+    below the figure its key: the full spec of every configuration shown by a short name (:func:`short_names`)
+    and a ``note``; each configuration of the figure's table that is ``absent`` is a legend entry with the reason.
+
+    Every line figure's frame: nothing of it is drawn over the data area."""
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     fig = ax.get_figure(root=True)
@@ -33,15 +41,104 @@ def finish(ax: Axes, xlabel: str, ylabel: str, title: str) -> None:
     size = float(ax.title.get_fontsize())
     ax.set_title(wrap_words(title, title_chars(fig.get_figwidth(), size)), loc="left", fontsize=size)
     handles, labels = ax.get_legend_handles_labels()
-    labels = [wrap_label(x) for x in labels]
-    ax.legend(
-        handles,
-        labels,
-        loc="upper left",
-        bbox_to_anchor=(1.01, 1.0),
-        borderaxespad=0.0,
-        ncols=legend_columns(fig.get_figheight(), labels),
+    short = short_names(labels)
+    labels = [short[x] for x in labels]
+    # a configuration of the figure's table drawn nowhere: a text entry of the legend with the reason
+    for name, why in (absent or {}).items():
+        handles.append(Rectangle((0, 0), 0, 0, visible=False))
+        labels.append(wrap_label(f"not shown: {name} ({why})", 60))
+    if len(labels) > LEGEND_RIGHT_MAX:
+        # a long legend beside the axes would leave the data a narrow strip: below them, in columns
+        ax.legend(
+            handles,
+            labels,
+            loc="upper left",
+            # below the tick labels and the x label (points, whatever the axes' height)
+            bbox_to_anchor=(0.0, 0.0),
+            bbox_transform=offset_copy(ax.transAxes, fig=fig, y=-30.0, units="points"),
+            borderaxespad=0.0,
+            ncols=max(1, min(4, int(fig.get_figwidth() * 72.0 / (CHAR_EM * 7.0 * (max(map(len, labels)) + 6))))),
+        )
+    else:
+        ax.legend(
+            handles,
+            labels,
+            loc="upper left",
+            bbox_to_anchor=(1.01, 1.0),
+            borderaxespad=0.0,
+            ncols=legend_columns(fig.get_figheight(), labels),
+        )
+    figure_key(fig, short, note)
+
+
+#: Most legend entries placed beside the axes; a longer legend goes below them.
+LEGEND_RIGHT_MAX = 12
+#: A configuration name longer than this is shown by a short name in figures (:func:`short_names`).
+SHORT_MAX = 40
+#: The figure's key (the full specs of short names, a note) is a figure legend of this label.
+KEY_LABEL = "key"
+
+
+def short_names(labels: Sequence[str]) -> dict[str, str]:
+    """Each label as a figure or a table shows it: a configuration name longer than :data:`SHORT_MAX` characters
+    becomes ``filter[#abcd]`` (the first hex digits of the full name's sha256, so that a configuration has one
+    short name in every figure and table), anything after the name kept (``pf[#abcd] (20 runs)``); shorter labels
+    as given."""
+    out: dict[str, str] = {}
+    for lab in labels:
+        m = re.match(r"^([A-Za-z0-9_]+)\[([^\]]*)\](.*)$", lab, flags=re.S)
+        name = lab[: len(lab) - len(m.group(3))] if m else lab
+        if m is None or len(name) <= SHORT_MAX:
+            out[lab] = lab
+            continue
+        out[lab] = f"{short_name(name)}{m.group(3)}"
+    return out
+
+
+def short_name(name: str) -> str:
+    """``filter[#abcd]`` for a configuration name (:func:`short_names`), whatever its length."""
+    import hashlib
+
+    return f"{name.split('[', 1)[0]}[#{hashlib.sha256(name.encode()).hexdigest()[:4]}]"
+
+
+def key_lines(short: Mapping[str, str], note: str = "") -> list[str]:
+    """The lines of a figure's key: ``short = full spec`` for each shortened name, then the note."""
+    lines = []
+    for full, sh in short.items():
+        if sh != full:
+            name = full[: len(full) - (len(sh) - sh.index("]") - 1)]
+            lines.append(wrap_label(f"{sh[: sh.index(']') + 1]} = {name}", KEY_WRAP))
+    if note:
+        lines.append(wrap_words(note, KEY_WRAP))
+    return lines
+
+
+#: Characters of a key line before it is wrapped.
+KEY_WRAP = 110
+
+
+def figure_key(fig: Figure, short: Mapping[str, str], note: str = "") -> None:
+    """The figure's key below everything else (a figure legend of text lines, placed by the layout)."""
+    lines = key_lines(short, note)
+    # one key per figure: the panels of a figure add their lines to it
+    for old in [leg for leg in fig.legends if leg.get_label() == KEY_LABEL]:
+        lines = list(dict.fromkeys([*(t.get_text() for t in old.get_texts()), *lines]))
+        old.remove()
+    if not lines:
+        return
+    blank = [Rectangle((0, 0), 0, 0, visible=False) for _ in lines]
+    leg = fig.legend(
+        blank,
+        lines,
+        loc="outside lower left",
+        handlelength=0,
+        handletextpad=0,
+        frameon=False,
+        fontsize=6.5,
+        title=None,
     )
+    leg.set_label(KEY_LABEL)
 
 
 #: Mean width of a character of the report's sans-serif font, in font sizes (DejaVu Sans, mixed text).
@@ -163,10 +260,14 @@ def draw_pareto(
     configuration when ``per_config``, else each group.
     """
     layers = pareto_layers(points)
+    drawn: list[tuple[float, float]] = []
     for g, pts, fr in layers.groups:
         st = styles[g]
         for p in pts:
             face = styles[p.label].color if p.label in styles else st.color
+            # a marker on top of one drawn before is drawn larger and beneath it: both stay visible
+            under = any(_near_log(p.x, p.y, x, y) for x, y in drawn)
+            drawn.append((p.x, p.y))
             ax.plot(
                 [p.x],
                 [p.y],
@@ -174,7 +275,8 @@ def draw_pareto(
                 marker=st.marker,
                 color=face,
                 mec=st.color,
-                ms=5,
+                ms=9 if under else 5,
+                zorder=1.9 if under else 2.0,
                 label=p.label if per_config else None,
             )
         if not per_config:
@@ -188,6 +290,17 @@ def draw_pareto(
     ax.set_xscale("log")
     ax.set_yscale("log")
     finish(ax, xlabel, ylabel, title)
+
+
+#: Two markers closer than this on both log axes (decades) overlap at the report's marker size.
+NEAR_DECADES = 0.02
+
+
+def _near_log(x0: float, y0: float, x1: float, y1: float) -> bool:
+    """Whether two positive points are within :data:`NEAR_DECADES` of each other on both log axes."""
+    if min(x0, y0, x1, y1) <= 0 or not all(map(math.isfinite, (x0, y0, x1, y1))):
+        return False
+    return abs(math.log10(x0 / x1)) < NEAR_DECADES and abs(math.log10(y0 / y1)) < NEAR_DECADES
 
 
 @dataclass(frozen=True)
@@ -244,54 +357,72 @@ def panel_title(label: str) -> str:
     return wrap_label(label, title_chars(PANEL_W, PANEL_TITLE_PT) * 4 // 3)
 
 
-#: Fixed margins of a trajectory figure, inches: left (y tick labels), bottom (x tick labels), right, the gap
-#: between columns, and above each panel's title.
-PANEL_MARGINS_IN = {"left": 0.42, "bottom": 0.3, "right": 0.08, "wspace": 0.1, "title_pad": 0.1}
+#: Fixed margins of a trajectory figure, inches: left (y tick labels and the y label), below each panel (x tick
+#: labels and the x label), right, the gap between columns (the next panel's y label), above each panel's title.
+PANEL_MARGINS_IN = {"left": 0.62, "xband": 0.42, "right": 0.08, "wspace": 0.62, "title_pad": 0.1}
+#: A panel's title line saying that its estimate leaves the view (the axes frame the world, not the estimate).
+LEAVES_VIEW = "(estimate leaves the view)"
 
 
-def _panel_rows(world: World, labels: Sequence[str]) -> tuple[int, int, float, float]:
+def leaves_view(world: World, track: Track) -> bool:
+    """Whether any finite point of ``track`` lies outside :func:`world_limits` (that part is clipped)."""
+    (x0, x1), (y0, y1) = world_limits(world)
+    xy = track.xy[np.all(np.isfinite(track.xy), axis=1)]
+    return bool(len(xy)) and bool(np.any((xy[:, 0] < x0) | (xy[:, 0] > x1) | (xy[:, 1] < y0) | (xy[:, 1] > y1)))
+
+
+def track_titles(world: World, tracks: Sequence[Track]) -> list[str]:
+    """Each panel's title: the label broken to the panel's width, and a line when the estimate leaves the view."""
+    return [panel_title(tr.label) + (f"\n{LEAVES_VIEW}" if leaves_view(world, tr) else "") for tr in tracks]
+
+
+def _panel_rows(world: World, titles: Sequence[str]) -> tuple[int, int, float, float]:
     """Columns, rows, the height of a panel's axes and of its title band (inches) of a trajectory figure."""
-    n = max(len(labels), 1)
+    n = max(len(titles), 1)
     ncols = min(PANEL_COLS, n)
     (x0, x1), (y0, y1) = world_limits(world)
     aspect = (y1 - y0) / max(x1 - x0, 1e-9)
-    lines = 1 + max((panel_title(lab).count("\n") for lab in labels), default=0)
+    lines = 1 + max((t.count("\n") for t in titles), default=0)
     title = PANEL_TITLE_LINE_IN * lines + PANEL_MARGINS_IN["title_pad"]
     return ncols, math.ceil(n / ncols), max(1.25, PANEL_W * aspect * 0.95), title
 
 
-def trajectory_size(world: World, labels: Sequence[str]) -> tuple[float, float]:
+def trajectory_size(world: World, tracks: Sequence[Track]) -> tuple[float, float]:
     """The size (inches) of :func:`draw_trajectories`' figure: panels :data:`PANEL_W` wide in rows of
-    :data:`PANEL_COLS`, as tall as the world's aspect asks, each with space for the longest title."""
-    ncols, nrows, axes_h, title_h = _panel_rows(world, labels)
-    return PANEL_W * ncols, nrows * (axes_h + title_h) + PANEL_MARGINS_IN["bottom"]
+    :data:`PANEL_COLS`, as tall as the world's aspect asks, each with space for the longest title and its axis
+    labels."""
+    ncols, nrows, axes_h, title_h = _panel_rows(world, track_titles(world, tracks))
+    m = PANEL_MARGINS_IN
+    return PANEL_W * ncols + m["left"], nrows * (axes_h + title_h + m["xband"])
 
 
-def _fixed_panel_layout(fig: Figure, world: World, labels: Sequence[str]) -> dict[str, float]:
+def _fixed_panel_layout(fig: Figure, world: World, titles: Sequence[str]) -> dict[str, float]:
     """The grid of the panels by fixed margins instead of the constrained layout (about half of a trajectory
     figure's drawing time): the sizes of everything around a panel are known in advance."""
-    ncols, _, axes_h, title_h = _panel_rows(world, labels)
+    ncols, _, axes_h, title_h = _panel_rows(world, titles)
     w, h = fig.get_figwidth(), fig.get_figheight()
     m = PANEL_MARGINS_IN
     fig.set_layout_engine("none")
     return {
         "left": m["left"] / w,
         "right": 1.0 - m["right"] / w,
-        "bottom": m["bottom"] / h,
+        "bottom": m["xband"] / h,
         "top": 1.0 - title_h / h,
         "wspace": m["wspace"] * ncols / (w - m["left"] - m["right"] - m["wspace"] * (ncols - 1)),
-        "hspace": title_h / axes_h,
+        "hspace": (title_h + m["xband"]) / axes_h,
     }
 
 
 def draw_trajectories(fig: Figure, world: World, tracks: Sequence[Track], styles: Mapping[str, LineStyle]) -> None:
     """Small multiples: one panel per filter with the world, the truth and the waypoints in each, axes fitted to
-    the world (what leaves it is clipped), the estimate and its 95 % position ellipses."""
+    the world (what leaves it is clipped, and the panel's title says so), the estimate and its 95 % position
+    ellipses; every panel has its axis labels (m, world frame)."""
     n = max(len(tracks), 1)
     ncols = min(PANEL_COLS, n)
     nrows = math.ceil(n / ncols)
     (x0, x1), (y0, y1) = world_limits(world)
-    grid = _fixed_panel_layout(fig, world, [tr.label for tr in tracks])
+    titles = track_titles(world, tracks)
+    grid = _fixed_panel_layout(fig, world, titles)
     axes = fig.subplots(nrows, ncols, squeeze=False, sharex=True, sharey=True, gridspec_kw=grid)
     for k, ax in enumerate(axes.flat):
         if k >= len(tracks):
@@ -322,18 +453,59 @@ def draw_trajectories(fig: Figure, world: World, tracks: Sequence[Track], styles
         ax.set_ylim(y0, y1)
         ax.set_aspect("equal", adjustable="box")
         # a tuned configuration's long name broken after commas to its panel's width
-        ax.set_title(panel_title(tr.label), fontsize=PANEL_TITLE_PT)
-        ax.tick_params(labelsize=6.5)
+        ax.set_title(titles[k], fontsize=PANEL_TITLE_PT)
+        ax.tick_params(labelsize=6.5, labelbottom=True, labelleft=True)
+        ax.set_xlabel("x (m)", fontsize=7, labelpad=1.0)
+        ax.set_ylabel("y (m)", fontsize=7, labelpad=1.0)
+
+
+#: Two series closer than this relative difference at every point are drawn over each other (on a log axis
+#: 1 % is under a marker's width): :func:`coinciding` names them.
+COINCIDE_RTOL = 0.01
+
+
+def coinciding(labels: Sequence[str], ys: Sequence[np.ndarray], rtol: float = COINCIDE_RTOL) -> dict[str, str]:
+    """For each series that coincides with an earlier one (every finite point within ``rtol``, same length and
+    gaps), the label of the first series it coincides with."""
+    out: dict[str, str] = {}
+    for j, (lj, yj) in enumerate(zip(labels, ys, strict=True)):
+        for li, yi in zip(labels[:j], ys[:j], strict=True):
+            if li in out or yi.shape != yj.shape or not yi.size:
+                continue
+            fi, fj = np.isfinite(yi), np.isfinite(yj)
+            if np.array_equal(fi, fj) and fi.any() and np.allclose(yi[fi], yj[fj], rtol=rtol, atol=0.0):
+                out[lj] = li
+                break
+    return out
 
 
 def draw_waypoint_rmse(
     ax: Axes, labels: Sequence[str], rmse_cm: Sequence[np.ndarray], styles: Mapping[str, LineStyle], title: str
 ) -> None:
-    """RMSE at each waypoint per filter, log scale (1-5 cm filters stay visible beside dead reckoning's metres)."""
+    """RMSE at each waypoint per filter, log scale (1-5 cm filters stay visible beside dead reckoning's metres).
+
+    Series that coincide (:func:`coinciding`) are offset sideways and their legend entries name the series
+    they lie on, so that one line showing for several says so."""
+    same = coinciding(labels, rmse_cm)
+    n_same: dict[str, int] = {}
     for label, y in zip(labels, rmse_cm, strict=True):
         st = styles[label]
-        x = np.arange(1, y.size + 1)
-        ax.plot(x, y, color=st.color, marker=st.marker, ls=st.linestyle, ms=4, label=label)
+        x = np.arange(1, y.size + 1, dtype=np.float64)
+        text = label
+        if label in same:
+            k = n_same[same[label]] = n_same.get(same[label], 0) + 1
+            x = x + 0.08 * k
+            text = f"{label} (= {same[label]} within {COINCIDE_RTOL:.0%})"
+        ax.plot(
+            x,
+            y,
+            color=st.color,
+            marker=st.marker,
+            ls=st.linestyle,
+            ms=4,
+            label=text,
+            mfc="none" if label in same else None,
+        )
     n = max((y.size for y in rmse_cm), default=0)
     ax.set_xticks(np.arange(1, n + 1))
     ax.set_yscale("log")

@@ -38,7 +38,7 @@ from locbench.datasets.recorded.tum import TUM_COLUMNS, read_tum, write_tum
 __all__ = ["TUM_COLUMNS", "export_results", "export_textlog", "export_truth_tum", "export_tum", "read_tum", "write_tum"]
 from locbench.core.errors import ConfigError
 from locbench.evaluate.records import RunRecord, TruthRecord
-from locbench.run.store import Store
+from locbench.run.store import Store, _follow_umask
 
 log = logging.getLogger(__name__)
 
@@ -50,6 +50,12 @@ def _load_run(run: RunRecord | str | os.PathLike[str]) -> RunRecord:
         return run
     d = Path(run)
     return Store(d.parent).read_run(d)
+
+
+def _umask_mode(path: Path) -> Path:
+    """``path`` with the mode the user's umask asks for (the atomic writers' temporary files are 0600)."""
+    _follow_umask(path, is_dir=False)
+    return path
 
 
 def export_tum(run: RunRecord | str | os.PathLike[str], path: str | os.PathLike[str], smoothed: bool = False) -> Path:
@@ -93,7 +99,7 @@ def export_tum(run: RunRecord | str | os.PathLike[str], path: str | os.PathLike[
     comment = (
         f"locbench {label} estimate: filter {meta.get('filter')} dataset {meta.get('dataset')} seed {meta.get('seed')}"
     )
-    return write_tum(path, t, poses, comment)
+    return _umask_mode(write_tum(path, t, poses, comment))
 
 
 def export_truth_tum(truth: TruthRecord | Trajectory2D, path: str | os.PathLike[str]) -> Path:
@@ -111,7 +117,7 @@ def export_truth_tum(truth: TruthRecord | Trajectory2D, path: str | os.PathLike[
         comment = f"locbench {truth.truth_label}: dataset {truth.dataset} seed {truth.seed}"
     else:
         gt, comment = truth, "locbench trajectory"
-    return write_tum(path, gt.t, gt.poses, comment)
+    return _umask_mode(write_tum(path, gt.t, gt.poses, comment))
 
 
 def export_results(
@@ -199,4 +205,7 @@ def export_textlog(spec: str, seed: int, out: str | os.PathLike[str]) -> tuple[P
         kind = cls.reference_kind
     ds = make_dataset(r, seed)
     notes = write_textlog(ds, out, source=f"{r.name} seed {seed}", reference_kind=kind)
+    for f in Path(out).iterdir():
+        if f.is_file() and not f.is_symlink():
+            _umask_mode(f)
     return Path(out), notes

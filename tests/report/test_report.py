@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import dataclasses
 import hashlib
 import os
 import shutil
@@ -21,6 +22,7 @@ from locbench.evaluate.records import KIND_NAMES, RunRecord, TruthRecord
 from locbench.evaluate.scores import SCORE_IDS, ci_ids
 from locbench.registry import DATASETS, FILTERS
 from locbench.report import collect_metrics, suite_filter, summary_text, write_metrics_csv, write_report
+from locbench.report.doc import Table
 from locbench.run.store import Store
 
 ODO = KIND_NAMES.index("Odometry")
@@ -250,7 +252,7 @@ def test_write_report_end_to_end(store: Store) -> None:
         "numpy 2.0.0",
         "0-2 (1 datasets)",
         "Summary",
-        "*`room`: mean over seeds*",
+        "*`room`: mean over seeds: each filter's default configuration*",
         "| filter | needs (sensors; map) | runs | ATE (cm) | mean waypoint RMSE (cm) |",
         "| `odometry` | 3 | ",
         "| `ekf_landmarks[gate=0.1]` | 1 | 1 |",
@@ -297,7 +299,7 @@ def test_write_report_end_to_end(store: Store) -> None:
 
 def test_summary_marks_the_best_value_but_never_the_baseline(store: Store) -> None:
     paths = write_report(store)
-    (table,) = paths.summary
+    table = _joined(list(paths.summary))
     rows = {r[0]: r for r in table.rows}
     ate = table.header.index("ATE (cm)")
     assert rows["`ekf_landmarks`"][ate].startswith("**")
@@ -546,7 +548,19 @@ def _summary_of(rows: list[tuple[str, str, int, str, float]], dataset: str = "mi
 
     rep = Report(Collected(metrics=frame(rows)))
     blocks = summary_blocks(rep, dataset)
-    return blocks[0], blocks[-1]
+    return blocks[0], _joined([b for b in blocks if isinstance(b, Table)])
+
+
+def _joined(tables: list[Table]) -> Table:
+    """The summary's blocks (defaults, then sweeps) as one table: their rows in order, every footnote once."""
+    notes = tuple(dict.fromkeys(n for t in tables for n in t.footnotes))
+    return dataclasses.replace(
+        tables[0],
+        rows=tuple(r for t in tables for r in t.rows),
+        footnotes=notes,
+        sort_keys=tuple(k for t in tables for k in t.sort_keys),
+        hovers=tuple(h for t in tables for h in t.hovers),
+    )
 
 
 def _per_seed(values: dict[str, dict[str, float]], seeds: int = 8) -> list[tuple[str, str, int, str, float]]:

@@ -115,7 +115,8 @@ def error_plots(rep: Report, dataset: str) -> list[Plot]:
             ax.set_yscale("log")
             fg.finish(ax, "t from the start (s)", "position error (cm)", title)
 
-        plots.append(Plot(f"{slug(dataset)}_errors{_stem_part(key)}", caption, draw, size=(7.5, 4.2)))
+        stem = f"{slug(dataset)}_errors{_stem_part(key)}"
+        plots.append(Plot(stem, caption, draw, size=(7.5, 4.2), shows=tuple(part)))
     return plots
 
 
@@ -165,8 +166,9 @@ def _trajectory_plot(rep: Report, stem: str, caption: str, title: str, world: fg
     def draw(fig: Figure) -> None:
         fg.draw_trajectories(fig, world, tracks, styles)
 
-    size = fg.trajectory_size(world, [tr.label for tr in tracks])
-    return Plot(stem, caption, draw, size=size, interactive=ia.tracks(title, world, tracks, styles))
+    size = fg.trajectory_size(world, tracks)
+    interactive = ia.tracks(title, world, tracks, styles)
+    return Plot(stem, caption, draw, size=size, interactive=interactive, shows=tuple(tr.label for tr in tracks))
 
 
 def count_plot(rep: Report, dataset: str) -> Plot | None:
@@ -228,7 +230,7 @@ def waypoint_plots(rep: Report, dataset: str) -> list[Plot]:
         ) -> None:
             fg.draw_waypoint_rmse(fig.add_subplot(), labels, series, styles, title)
 
-        plots.append(Plot(f"{slug(dataset)}_waypoint_rmse{_stem_part(key)}", title, draw))
+        plots.append(Plot(f"{slug(dataset)}_waypoint_rmse{_stem_part(key)}", title, draw, shows=tuple(labels)))
     return plots
 
 
@@ -255,7 +257,8 @@ def nees_plots(rep: Report, dataset: str) -> list[Plot]:
         ) -> None:
             fg.draw_nees(fig.add_subplot(), grid, series, bands, styles, title)
 
-        plots.append(Plot(f"{slug(dataset)}_nees{_stem_part(key)}", caption, draw, size=(7.5, 4.2)))
+        stem = f"{slug(dataset)}_nees{_stem_part(key)}"
+        plots.append(Plot(stem, caption, draw, size=(7.5, 4.2), shows=tuple(names)))
     return plots
 
 

@@ -77,6 +77,8 @@ def lost_section(rep: Report) -> Section:
     rows: list[tuple[str, ...]] = []
     keys: list[tuple[float, ...]] = []
     curves: dict[str, list[tuple[str, SignalScore]]] = {}
+    # the filters scored but without a curve (never or always lost): named in the figure's panel
+    absent: dict[str, dict[str, str]] = {}
     for ds in sorted({d for d, _ in col.health}, key=col.display):
         for f in rep.filters_on(ds):
             series = col.health.get((ds, f), [])
@@ -103,6 +105,8 @@ def lost_section(rep: Report) -> Section:
             keys.append((NAN, NAN, float(len(series)), share, NAN, *best.auroc[:2], best.precision, NAN))
             if defined:
                 curves.setdefault(ds, []).append((f, best))
+            else:
+                absent.setdefault(ds, {})[f] = "never lost" if best.lost_share == 0 else "always lost"
     if not rows:
         return sec
     sec.add(
@@ -134,7 +138,7 @@ def lost_section(rep: Report) -> Section:
             sort_keys=tuple(keys),
         ),
     )
-    plot = _roc_plot(rep, curves)
+    plot = _roc_plot(rep, curves, absent)
     if plot is not None:
         sec.add(plot)
     delays = _delay_table(rep)
@@ -144,8 +148,11 @@ def lost_section(rep: Report) -> Section:
     return sec
 
 
-def _roc_plot(rep: Report, curves: dict[str, list[tuple[str, SignalScore]]]) -> Plot | None:
-    """ROC curves of each filter's best signal, one panel per dataset with the most filters scored."""
+def _roc_plot(
+    rep: Report, curves: dict[str, list[tuple[str, SignalScore]]], absent: dict[str, dict[str, str]]
+) -> Plot | None:
+    """ROC curves of each filter's best signal, one panel per dataset with the most filters scored; the filters
+    of a panel's dataset without a curve are named in its legend with the reason."""
     col = rep.col
     chosen = sorted(curves, key=lambda d: (-len(curves[d]), col.display(d)))[:MAX_ROC_PANELS]
     if not chosen:
@@ -160,28 +167,28 @@ def _roc_plot(rep: Report, curves: dict[str, list[tuple[str, SignalScore]]]) -> 
             fpr, tpr, _ = roc_curve(v, lost)
             lines.setdefault(ds, []).append((f, best.signal, fpr, tpr, best.auroc[0]))
     styles = rep.styles_for(col.filter_order({f for ds in chosen for f, _ in curves[ds]}))
-    cols = min(3, len(chosen))
+    cols = min(2, len(chosen))
     nrows = -(-len(chosen) // cols)
     title = f"ROC of each filter's best signal against lost (> {LOST_THRESHOLDS_M[0]:g} m)"
+    entries = max(len(lines[ds]) + len(absent.get(ds, {})) for ds in chosen)
 
     def draw(fig: Figure) -> None:
         axes = fig.subplots(nrows, cols, squeeze=False)
         for ax, ds in zip(axes.ravel(), chosen, strict=False):
             for f, sig, fpr, tpr, a in lines[ds]:
                 st = styles[f]
-                label = fg.wrap_label(f"{f}: {sig} ({a:.2f})", 48)
-                ax.plot(fpr, tpr, color=st.color, ls=st.linestyle, lw=1.0, label=label)
+                ax.plot(fpr, tpr, color=st.color, ls=st.linestyle, lw=1.0, label=f"{f}: {sig} ({a:.2f})")
             ax.plot([0, 1], [0, 1], color="0.6", lw=0.6, ls=":")
-            ax.set_title(col.display(ds), fontsize=8)
-            ax.set_xlabel("false-positive rate", fontsize=7)
-            ax.set_ylabel("true-positive rate", fontsize=7)
             ax.tick_params(labelsize=6)
-            ax.legend(fontsize=5, loc="lower right")
+            fg.finish(ax, "false-positive rate", "true-positive rate", col.display(ds), absent=absent.get(ds, {}))
         for ax in axes.ravel()[len(chosen) :]:
             ax.set_visible(False)
         fig.suptitle(title, fontsize=9)
 
-    return Plot("lost_roc", title, draw, size=(max(3.3 * cols, 5.5), 3.0 * nrows + 0.4))
+    shows = tuple(
+        dict.fromkeys([*(f for ds in chosen for f, _ in curves[ds]), *(f for ds in chosen for f in absent.get(ds, {}))])
+    )
+    return Plot("lost_roc", title, draw, size=(6.2 * cols, (2.6 + 0.12 * entries) * nrows + 0.4), shows=shows)
 
 
 def _delay_table(rep: Report) -> Table | None:

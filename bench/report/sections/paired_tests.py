@@ -29,6 +29,7 @@ from locbench.evaluate.metrics import (
     member_id,
 )
 from locbench.present.ranking import Column, hover_grid, mark_ties, per_seed, samples_for, tie_footnote
+from locbench.report import figures as fg
 from locbench.report import tables as tb
 from locbench.report.doc import Plot, Section, Table, Text
 
@@ -357,13 +358,13 @@ def _group_section(report: Report, gi: int, configs: Sequence[str], datasets: Se
             ax.set_xscale("log")
             ax.minorticks_off()
             ax.set_xticks(thresholds, [f"{k:g}" for k in thresholds])
-            ax.set_xlabel("position error threshold (cm)")
-            ax.set_ylabel("ground-truth times within (%)")
             ax.set_ylim(0, 102)
-            ax.set_title(f"group {gi}: accuracy at thresholds, mean over runs and datasets", fontsize=8)
-            ax.legend(fontsize=6, loc="best")
+            title = f"group {gi}: accuracy at thresholds, mean over runs and datasets"
+            fg.finish(ax, "position error threshold (cm)", "ground-truth times within (%)", title, absent=missing)
 
-        blocks.append(Plot(f"across_{gi}_within", f"Group {gi}: accuracy at thresholds", draw_within))
+        missing = {f: "no finite error on these datasets" for f in configs if f not in shown}
+        caption = f"Group {gi}: accuracy at thresholds"
+        blocks.append(Plot(f"across_{gi}_within", caption, draw_within, shows=tuple(configs)))
     return Section(f"Group {gi}: {len(configs)} configurations on {len(datasets)} datasets", f"across-{gi}", blocks)
 
 

@@ -92,13 +92,26 @@ def pareto_plot(rep: Report, name: str, title: str, panels: list[tuple[str, str,
                 leg = ax.get_legend()
                 if leg is not None:
                     leg.remove()
-                ax.legend(fontsize=5.5, loc="best")
+        if n > 1:
+            # one legend of the filters for every panel, outside them all
+            by_label = {lab: h for ax in axes.flat for h, lab in zip(*ax.get_legend_handles_labels(), strict=True)}
+            fig.legend(list(by_label.values()), list(by_label), loc="outside right upper", fontsize=6.5)
 
-    size = (7.0, 4.2) if len(panels) == 1 else (11.0, 3.2 * int(np.ceil(len(panels) / 3)))
+    if len(panels) == 1:
+        # the configurations' legend goes below the axes in columns, the key of long names below it
+        entries = len(panels[0][2]) + 1
+        rows = int(np.ceil(entries / 3)) if entries > fg.LEGEND_RIGHT_MAX else 0
+        keys = sum(1 for p in panels[0][2] if len(p.label) > fg.SHORT_MAX)
+        size = (7.0, 4.2 + 0.17 * rows + 0.2 * keys)
+    else:
+        size = (11.0, 3.2 * int(np.ceil(len(panels) / 3)))
     interactive = (
         ia.pareto(f"{title}: ATE against real-time factor", panels[0][2], styles, panels[0][1], xlabel)
         if len(panels) == 1
         else None
     )
     what = "accuracy" if len(panels) > 1 else "ATE"
-    return Plot(name, f"{title}: {what} against real-time factor", draw, size=size, interactive=interactive)
+    # one panel lists every configuration; several list the filters
+    shows = tuple(dict.fromkeys(p.label if len(panels) == 1 else p.group for p in pts_all))
+    caption = f"{title}: {what} against real-time factor"
+    return Plot(name, caption, draw, size=size, interactive=interactive, shows=shows)

@@ -44,6 +44,7 @@ from locbench.evaluate.metrics import (
 )
 from locbench.evaluate.pcrb import BOUND_ALL
 from locbench.present import ranking as rk
+from locbench.report import figures as fg
 from locbench.report import tables as tb
 from locbench.report import timing as tm
 from locbench.report.doc import Block, Section, Table, Text
@@ -84,10 +85,47 @@ def summary_section(rep: Report) -> Section:
 
 
 def summary_blocks(rep: Report, dataset: str) -> list[Block]:
-    """The advice paragraph (when there is a choice to make) and the decision table of one dataset name."""
+    """The advice paragraph (when there is a choice to make) and the decision table of one dataset name, in two
+    blocks when it has sweeps or tuned configurations: the defaults (with the baseline, the skipped
+    configurations and the bound), then the other configurations (:func:`split_blocks`)."""
     table, ctx, rows = _summary(rep, dataset)
     text = advice(ctx, rows)
-    return [Text(text), table] if text else [table]
+    tables = split_blocks(table, [_is_default(rep, r) for r in rows])
+    return [Text(text), *tables] if text else list(tables)
+
+
+def _is_default(rep: Report, row: Row) -> bool:
+    """Whether a row belongs in the defaults' block: a filter's default configuration, the baseline, a skipped
+    configuration or the bound."""
+    return row.bound or bool(row.skipped) or not rep.col.filter_info(row.name).spec.params
+
+
+def split_blocks(table: Table, default: Sequence[bool]) -> tuple[Table, ...]:
+    """The table's rows in two tables of the same columns: those flagged ``default``, then the rest (the sweeps and
+    tuned configurations); one table when either part is empty. Marks, hovers and footnotes stay as computed over
+    all rows (a best mark is the best of both blocks)."""
+    if all(default) or not any(default):
+        return (table,)
+
+    def part(keep: bool, caption: str, notes: tuple[str, ...]) -> Table:
+        idx = [i for i, d in enumerate(default) if d == keep]
+        return Table(
+            table.header,
+            tuple(table.rows[i] for i in idx),
+            caption=caption,
+            footnotes=notes,
+            sort_keys=tuple(table.sort_keys[i] for i in idx) if table.sort_keys else (),
+            hovers=tuple(table.hovers[i] for i in idx) if table.hovers else (),
+        )
+
+    return (
+        part(True, f"{table.caption}: each filter's default configuration", ()),
+        part(
+            False,
+            f"{table.caption}: sweeps and tuned configurations (marks as in the block above: the best of both)",
+            table.footnotes,
+        ),
+    )
 
 
 # --- rows and their context ---------------------------------------------------------------------------------
@@ -256,7 +294,7 @@ def _per_run(metric: str) -> Callable[[Context, Sequence[Row]], list[PerRun]]:
 
 
 def _runs(ctx: Context, row: Row) -> tuple[str, float]:
-    n = tb.run_count(row.sub) if row.bound else int(tb.values(row.sub, FAILED).size)
+    n = tb.run_count(row.sub) if row.bound else _seeds(row)
     return str(n), float(n)
 
 
@@ -511,6 +549,16 @@ def _summary(rep: Report, dataset: str) -> tuple[Table, Context, list[Row]]:
     hovers = rk.hover_grid(text)
     marks = _mark(ctx, rows, cols, text, keys, hovers)
     notes = [rk.tie_footnote(marks)]
+    # a long configuration name (a tuned one's values) is shown short; its full spec on hover and in a footnote
+    short = fg.short_names([r.name for r in rows])
+    spelled = []
+    for i, r in enumerate(rows):
+        if short[r.name] != r.name:
+            text[i][0] = text[i][0].replace(f"`{r.name}`", f"`{short[r.name]}`")
+            hovers[i][0] = r.name
+            spelled.append(f"`{short[r.name]}` = `{r.name}`")
+    if spelled:
+        notes.append("Short names (the full specification; also on hover): " + "; ".join(spelled) + ".")
     for k, c in enumerate(cols):
         if c.note is not None:
             n = c.note(ctx, [r[k] for r in text])
@@ -571,6 +619,11 @@ def have_text(sensors: frozenset[str], maps: frozenset[str]) -> str:
     return words[0] if len(words) == 1 else f"{', '.join(words[:-1])} and {words[-1]}"
 
 
+def _seeds(row: Row) -> int:
+    """The runs (seeds) behind a configuration's row."""
+    return int(tb.values(row.sub, FAILED).size)
+
+
 def advice(ctx: Context, rows: Sequence[Row]) -> str:
     """Which configuration to use with what ("if you have X, use Y"), generated from the table's numbers.
 
@@ -592,6 +645,7 @@ def advice(ctx: Context, rows: Sequence[Row]) -> str:
         info = col.filter_info(r.name)
         needs[r.name] = (frozenset(s for s in info.sensors if s != Odometry.__name__), frozenset(info.maps))
     combos = sorted(set(needs.values()), key=lambda n: (len(n[0]) + len(n[1]), have_text(*n)))
+    most = max(_seeds(r) for r in cands)
     parts: list[str] = []
     for sensors, maps in combos:
         ok = [needs[r.name][0] <= sensors and needs[r.name][1] <= maps for r in cands]
@@ -601,9 +655,12 @@ def advice(ctx: Context, rows: Sequence[Row]) -> str:
         best = cands[v.best]
         rtf = tb.mean_of(best.sub, REALTIME_FACTOR)
         tied = [cands[i].name for i in sorted(v.marked) if i != v.best]
+        n = _seeds(best)
+        # a pick from a sweep of fewer seeds than the table's others is less certain: say so
+        fewer = f", from {n} seeds where others have up to {most}" if n < most else ""
         parts.append(
             f"with {have_text(sensors, maps)}, `{best.name}` (ATE {tb.num(100 * means[v.best])} cm, real-time "
-            f"factor {tb.num(rtf)})"
+            f"factor {tb.num(rtf)}{fewer})"
             + (" or, not found different by the paired test, " + ", ".join(f"`{t}`" for t in tied) if tied else "")
         )
     if not parts:

@@ -20,6 +20,7 @@ from matplotlib.ticker import MaxNLocator
 
 from locbench.evaluate.metrics import ATE_M, FAILED
 from locbench.present.palette import Palette
+from locbench.report import figures as fg
 from locbench.report import tables as tb
 from locbench.report.collect import Collected
 from locbench.report.doc import Bullets, Plot, Section, Table, Text
@@ -172,25 +173,40 @@ def trials_plot(studies: list[dict[str, Any]]) -> Plot:
     def draw(fig: Figure) -> None:
         axes = fig.subplots(1, len(worlds), squeeze=False)[0]
         for ax, world in zip(axes, worlds, strict=True):
-            for s in studies:
-                if s["world"] != world:
-                    continue
+            mine = [s for s in studies if s["world"] == world]
+            curves = []
+            for s in mine:
                 best, ys = math.inf, []
                 for t in s["trials"]:
                     best = min(best, float(t["value"]))
                     ys.append(100.0 * best if math.isfinite(best) else np.nan)
+                curves.append(np.asarray(ys, dtype=np.float64))
+            # equal best-so-far curves would hide each other: offset sideways, hollow markers, named in the legend
+            same = fg.coinciding([s["filter"] for s in mine], curves)
+            for k, (s, ys) in enumerate(zip(mine, curves, strict=True)):
                 st = styles[s["filter"]]
-                xs = np.arange(1, len(ys) + 1)
-                ax.plot(xs, ys, color=st.color, marker=st.marker or None, linestyle=st.linestyle, label=s["filter"])
+                xs = np.arange(1, len(ys) + 1) + (0.12 * k if s["filter"] in same else 0.0)
+                label = s["filter"] + (f" (= {same[s['filter']]})" if s["filter"] in same else "")
+                ax.plot(
+                    xs,
+                    ys,
+                    color=st.color,
+                    marker=st.marker or None,
+                    linestyle=st.linestyle,
+                    label=label,
+                    mfc="none" if s["filter"] in same else None,
+                )
             ax.set_title(world, fontsize=9)
             ax.set_xlabel("trial")
+            ax.set_ylabel("best mean train ATE so far (cm)")
             ax.xaxis.set_major_locator(MaxNLocator(integer=True))
             ax.grid(True, which="both", alpha=0.3)
-        axes[0].set_ylabel("best mean train ATE so far (cm)")
-        axes[-1].legend(fontsize=7, loc="upper right")
+            # each panel's own legend, below its axes (a world need not tune every filter)
+            ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(0.0, -0.2), borderaxespad=0.0)
         fig.suptitle(title, fontsize=10)
 
-    return Plot("tuning_best_so_far", title, draw, size=(3.0 * len(worlds) + 1.0, 3.6))
+    per_world = max(sum(1 for s in studies if s["world"] == w) for w in worlds)
+    return Plot("tuning_best_so_far", title, draw, size=(3.3 * len(worlds) + 0.6, 3.4 + 0.16 * per_world))
 
 
 def ranking(per_world: dict[str, dict[str, tuple[float, float]]]) -> Bullets:
