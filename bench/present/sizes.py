@@ -17,9 +17,9 @@ def _mb(n: int) -> str:
     return f"{n / 1e6:.1f} MB"
 
 
-def sizes_text(summary: Path) -> str:
+def sizes_text(summary: Path, shown: str | None = None) -> str:
     """One sentence with the page's size, the figures' count and total size and the metrics table's size (MB,
-    10^6 bytes), measured from the files of ``summary``."""
+    10^6 bytes), measured from the files of ``summary`` (named ``shown`` in the sentence; default its path)."""
     page = summary / "index.html"
     pngs = sorted((summary / "figures").glob("*.png"))
     metrics = summary / "metrics.csv"
@@ -27,7 +27,7 @@ def sizes_text(summary: Path) -> str:
     parts.append(f"{len(pngs)} figures of {_mb(sum(p.stat().st_size for p in pngs))} in `figures/`")
     if metrics.is_file():
         parts.append(f"`metrics.csv` {_mb(metrics.stat().st_size)}")
-    return f"Measured from `{summary.as_posix()}`: " + ", ".join(parts) + "."
+    return f"Measured from `{shown or summary.as_posix()}`: " + ", ".join(parts) + "."
 
 
 def with_sizes(text: str, summary: Path) -> str:

@@ -41,6 +41,7 @@ from locbench.evaluate.significance import ties_with_best
 from locbench.present.catalog import doc_blocks
 from locbench.present.metric_info import metric_table
 from locbench.present.ranking import samples_for
+from locbench.present.sizes import sizes_text
 from locbench.report.collect import describe_filter
 from locbench.report.sections.summary import have_text
 from locbench.report.tables import (
@@ -711,6 +712,7 @@ def blocks(df: pd.DataFrame, report: str | None = None) -> dict[str, str]:
     out |= office_prose(df) | radish(df, report) | robustness(report) | office_report(report)
     out |= claim_values(report) | run_counts(report) | tuned_changes(report) | pareto(df)
     out["across-landmark-geometry"] = across_landmark_geometry(report)
+    out["report-sizes"] = sizes_text(REPORT_MD.parent, "results/summary")
     # the protocols page's metric tables, as locbench.present.metric_info writes them
     out |= {f"metrics-{g.replace(' ', '-')}": f"\n{metric_table(g)}\n" for g in GROUPS if metric_table(g)}
     return out | doc_blocks()
