@@ -196,6 +196,19 @@ _LG_PATHS = ("circle", "star", "pentagon", "random")
 _LG_LAYOUTS = ("1", "2", "3", "4", "8")
 
 
+#: The initial heading errors of suite ``heading`` (deg), UKF-M's question on our worlds; each with the matching
+#: initial heading standard deviation (``initial_heading_error_deg``; 0 is the world as shipped).
+HEADING_ERRORS_DEG = (0, 15, 45, 90)
+#: The filters of suite ``heading``: the EKF, the UKF and the invariant EKF on the same models, and the particle
+#: filter (its default 1000 particles, as in the main comparison).
+HEADING_FILTERS = ("ekf_landmarks", "ukf_landmarks", "iekf_landmarks", "pf")
+
+
+def heading_datasets(base: str) -> tuple[str, ...]:
+    """``base`` with each initial heading error of :data:`HEADING_ERRORS_DEG` (the plain name at 0)."""
+    return tuple(base if e == 0 else f"{base}[initial_heading_error_deg={e}]" for e in HEADING_ERRORS_DEG)
+
+
 def _kidnap_datasets(base: str) -> tuple[str, ...]:
     return tuple(f"{base}[kidnap_m={d:g}]" for d in KIDNAP_DISTANCES_M)
 
@@ -210,6 +223,7 @@ _SUITES_IN_ALL = (
     "global",
     "recorded",
     "pareto",
+    "heading",
 )
 
 
@@ -340,6 +354,12 @@ def _make_suites() -> dict[str, Suite]:
             ),
             "accuracy against runtime: the main cost knob of each filter on office (pf particles, ekf_icp ICP "
             "iterations, gtsam_fls lag, ekf_landmarks' association gate)",
+        ),
+        Suite(
+            "heading",
+            (Block(HEADING_FILTERS, heading_datasets("room") + heading_datasets("office"), 50),),
+            "a wrong initial heading (0, 15, 45, 90 deg, the belief's heading deviation matching it) on room and "
+            "office: the EKF, the UKF, the invariant EKF and pf, 50 seeds (UKF-M's 2-D question)",
         ),
         # Run by locbench.run.tuning (locbench run --suite tuned), not as blocks: each tunable filter tuned on train
         # seeds and recordings, then its tuned configuration and its default on the test data (docs/protocols.md,
