@@ -7,8 +7,8 @@ association and the estimate are the EKF's. Its own covariance is the left-invar
 error xi of X_true = X Exp(xi); the two are tied by P_w = T P_b T^T, T = blockdiag(R(theta), 1) (first order:
 X Exp(xi) moves the position by R(theta) xi_v and the heading by xi_w).
 
-One correction (Barrau and Bonnabel 2017, section 3.2; the update of gtsam's ``ManifoldEKF`` without its reset) in
-the body frame is H_b = H_w T, S = H_b P_b H_b^T + R (= H_w P_w H_w^T + R), K_b = P_b H_b^T S^-1 = T^-1 K_w,
+One correction (Barrau and Bonnabel 2017, the invariant EKF's update; gtsam's ``ManifoldEKF`` update without its
+reset) in the body frame is H_b = H_w T, S = H_b P_b H_b^T + R (= H_w P_w H_w^T + R), K_b = P_b H_b^T S^-1 = T^-1 K_w,
 dxi = K_b v, X+ = X Exp(dxi) and P_b+ = (I - K_b H_b) P_b (I - K_b H_b)^T + K_b R K_b^T = T^-1 P_J T^-T, where K_w
 and P_J are the EKF's gain and Joseph covariance. With d = K_w v = (d_x, d_y, w) the EKF's world-frame step:
 

@@ -2,16 +2,16 @@
 
 The belief is a pose X in SE(2) and a covariance P_b of the **left-invariant** error: X_true = X Exp(xi), xi =
 (xi_x, xi_y, xi_theta) in the robot's body frame (gtsam's ``Pose2`` tangent order). Barrau and Bonnabel
-("The invariant extended Kalman filter as a stable observer", IEEE TAC 62(4), 2017; eq. numbers of that paper):
+("The invariant extended Kalman filter as a stable observer", IEEE TAC 62(4), 2017):
 
-* Prediction with a body-frame increment U (eq. 3, group-affine dynamics X+ = X U):
+* Prediction with a body-frame increment U (group-affine dynamics, here X+ = X U):
 
       X+ = X U,     P_b+ = Ad_{U^-1} P_b Ad_{U^-1}^T + Q_b.
 
-  The error's propagation (eq. 7) does not depend on the estimate, which is the filter's point: the EKF's
-  Jacobian F depends on the estimated heading, the invariant one does not.
-* Correction (section 3.2) with a measurement z = h(X) + noise: H_b = dh(X Exp(xi))/dxi at 0, S = H_b P_b H_b^T
-  + R, K = P_b H_b^T S^-1, X+ = X Exp(K v), P_b+ = (I - K H_b) P_b (I - K H_b)^T + K R K^T (Joseph form, as the
+  The error's propagation (the paper's log-linear property) does not depend on the estimate, which is the
+  filter's point: the EKF's Jacobian F depends on the estimated heading, the invariant one does not.
+* Correction with a measurement z = h(X) + noise: H_b = dh(X Exp(xi))/dxi at 0, S = H_b P_b H_b^T + R,
+  K = P_b H_b^T S^-1, X+ = X Exp(K v), P_b+ = (I - K H_b) P_b (I - K H_b)^T + K R K^T (Joseph form, as the
   EKF). No covariance reset after the retraction: the paper has none, and gtsam's ``ManifoldEKF.updateWithVector``
   is compared with ``performReset=False`` (its default reset transports P_b by Ad_{Exp(-K v)}).
 
@@ -19,8 +19,8 @@ The belief is a pose X in SE(2) and a covariance P_b of the **left-invariant** e
 left-invariant error is the body-frame one: the prediction's Jacobian Ad_{U^-1} involves only the increment,
 the motion noise enters as Q_b without transport by the estimate, and gtsam ships this form
 (``InvariantEKFPose2``), so every step is checked against it. A landmark seen in the body frame, z = X^-1 l, is a
-*right*-invariant observation (eq. 29) whose right-error Jacobian would be state-independent; with known landmarks
-there is no unobservable direction for that to protect, and the left form keeps the motion noise exact.
+*right*-invariant observation whose right-error Jacobian would be state-independent; with known landmarks
+there is no unobservable direction for that to protect, and the left form takes the motion noise untransported.
 
 Models (those of :mod:`locbench.filters.ekf_landmarks`): the same mean motion U = X^-1 f(X, u) (report 003's
 midpoint chord, or the composed increment, :mod:`locbench.filters._motion`) and the same world-frame motion noise
