@@ -196,6 +196,30 @@ _LG_PATHS = ("circle", "star", "pentagon", "random")
 _LG_LAYOUTS = ("1", "2", "3", "4", "8")
 
 
+#: The initial heading errors of suite ``heading`` (deg), UKF-M's question on our worlds; each with the matching
+#: initial heading standard deviation (``initial_heading_error_deg``; 0 is the world as shipped).
+HEADING_ERRORS_DEG = (0, 15, 45, 90)
+#: The error the claims judge (UKF-M's), run on 50 seeds; the others on the main comparison's 20, whose plain worlds
+#: (0 deg) are then the main comparison's own runs: about half the cost of 50 seeds everywhere (docs/protocols.md).
+HEADING_CLAIM_DEG = 45
+#: The filters of suite ``heading``: the EKF, the UKF and the invariant EKF on the same models, and pf as in the main
+#: comparison (its default 1000 particles; shown, not judged, so on 20 seeds at every error).
+HEADING_FILTERS = ("ekf_landmarks", "ukf_landmarks", "iekf_landmarks")
+HEADING_PF = ("pf",)
+
+
+def heading_datasets(base: str, errors: tuple[int, ...] = HEADING_ERRORS_DEG) -> tuple[str, ...]:
+    """``base`` with each initial heading error of ``errors`` (the plain name at 0)."""
+    return tuple(base if e == 0 else f"{base}[initial_heading_error_deg={e}]" for e in errors)
+
+
+def _heading_blocks() -> tuple[Block, ...]:
+    """Suite ``heading``: every error on 20 seeds, and the claims' error on 50 for the Gaussian filters."""
+    every = heading_datasets("room") + heading_datasets("office")
+    claim = heading_datasets("room", (HEADING_CLAIM_DEG,)) + heading_datasets("office", (HEADING_CLAIM_DEG,))
+    return (Block((*HEADING_FILTERS, *HEADING_PF), every, 20), Block(HEADING_FILTERS, claim, 50))
+
+
 def _kidnap_datasets(base: str) -> tuple[str, ...]:
     return tuple(f"{base}[kidnap_m={d:g}]" for d in KIDNAP_DISTANCES_M)
 
@@ -210,6 +234,7 @@ _SUITES_IN_ALL = (
     "global",
     "recorded",
     "pareto",
+    "heading",
 )
 
 
@@ -340,6 +365,13 @@ def _make_suites() -> dict[str, Suite]:
             ),
             "accuracy against runtime: the main cost knob of each filter on office (pf particles, ekf_icp ICP "
             "iterations, gtsam_fls lag, ekf_landmarks' association gate)",
+        ),
+        Suite(
+            "heading",
+            _heading_blocks(),
+            "a wrong initial heading (0, 15, 45, 90 deg, the belief's heading deviation matching it) on room and "
+            "office: the EKF, the UKF, the invariant EKF and pf on 20 seeds, the first three on 50 at 45 deg "
+            "(UKF-M's 2-D question)",
         ),
         # Run by locbench.run.tuning (locbench run --suite tuned), not as blocks: each tunable filter tuned on train
         # seeds and recordings, then its tuned configuration and its default on the test data (docs/protocols.md,

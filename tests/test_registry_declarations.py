@@ -19,10 +19,20 @@ from locbench.suites import SUITES, all_filters, comparison_filters, kidnap_filt
 ROOT = Path(__file__).resolve().parents[1]
 
 #: The package's filters in the order the registry listed them by hand (every suite's "every filter").
-EVERY_FILTER = ("odometry", "ekf_landmarks", "ukf_landmarks", "ekf_lines", "ekf_icp", "kf_linear", "pf", "gtsam_fls")
+EVERY_FILTER = (
+    "odometry",
+    "ekf_landmarks",
+    "ukf_landmarks",
+    "iekf_landmarks",
+    "ekf_lines",
+    "ekf_icp",
+    "kf_linear",
+    "pf",
+    "gtsam_fls",
+)
 #: Suite kidnap's filters as they were written out in bench/suites.py.
 KIDNAP = (
-    *EVERY_FILTER[:6],
+    *EVERY_FILTER[:7],
     "pf[augmented=true]",
     "pf[augmented=true,inject=sensor,inject_pairs=true]",
     "pf[adaptive=kld,augmented=true,inject=sensor,inject_pairs=true]",

@@ -1,14 +1,15 @@
 """The report's sections, in reading order, built from the report's context and the registered experiments.
 
 Order: how to read this, summary tables (one per summary experiment), claims, accuracy against runtime,
-consistency, kidnap and global localization, recorded data, one section per experiment, appendix (detail
-tables, failed and skipped runs, provenance). Which datasets are main comparisons, which sections and
+consistency, initial heading error, kidnap and global localization, recorded data, one section per experiment,
+appendix (detail tables, failed and skipped runs, provenance). Which datasets are main comparisons, which sections and
 claims an experiment has, comes from :mod:`locbench.present.experiments` (registered by :mod:`locbench.claims`); the
 report names no dataset or filter.
 
 Each section is a function of the context :class:`~locbench.report.context.Report` in its own module
 (:mod:`~locbench.report.sections.summary`, :mod:`~locbench.report.sections.runtime`,
-:mod:`~locbench.report.sections.consistency`, :mod:`~locbench.report.sections.kidnap`,
+:mod:`~locbench.report.sections.consistency`, :mod:`~locbench.report.sections.heading`,
+:mod:`~locbench.report.sections.kidnap`,
 :mod:`~locbench.report.sections.recorded`, :mod:`~locbench.report.sections.experiment`,
 :mod:`~locbench.report.sections.appendix`, :mod:`~locbench.report.sections.health`,
 :mod:`~locbench.report.sections.paired_tests`, :mod:`~locbench.report.sections.tuned`); this module imports them
@@ -26,6 +27,7 @@ from locbench.report.doc import Section, Table, Text
 from locbench.report.sections import appendix as ap
 from locbench.report.sections import consistency as cs
 from locbench.report.sections import experiment as ex
+from locbench.report.sections import heading as hd
 from locbench.report.sections import health as hl
 from locbench.report.sections import kidnap as kd
 from locbench.report.sections import paired_tests as sig
@@ -44,6 +46,7 @@ def build_sections(rep: Report) -> list[Section]:
         claims_section(rep),
         rt.pareto_section(rep),
         cs.consistency_section(rep),
+        hd.heading_section(rep),
         hl.lost_section(rep),
         kd.kidnap_section(rep),
         rc.recorded_section(rep),

@@ -27,7 +27,8 @@ import numpy.typing as npt
 
 from locbench.core.errors import ConfigError
 from locbench.core.runkey import RUN_KEY_OMIT_IF_DEFAULT
-from locbench.datasets.dataset import Dataset, DatasetBuilder, SyntheticBuilder
+from locbench.core.spec import bound
+from locbench.datasets.dataset import Dataset, DatasetBuilder, Gaussian2, SyntheticBuilder
 from locbench.datasets.synthetic.robot import Arc, DriveLimits, GoTo, Leg, Motion, simulate_route
 from locbench.datasets.synthetic.sensors import LandmarkSensor, LaserSensor, PoseFixSensor
 from locbench.datasets.synthetic.toolkit import (
@@ -72,6 +73,27 @@ ROOM_TOUR = Tour(
 )
 
 
+#: Field metadata of ``initial_heading_error_deg``: 0 to 180 deg, omitted from the run key at 0 (the default world).
+HEADING_ERROR = bound(0.0, 180.0, unit="deg", what="a heading error", base=RUN_KEY_OMIT_IF_DEFAULT)
+
+
+def with_heading_error(ds: Dataset, error_deg: float) -> Dataset:
+    """``ds`` with its initial belief's heading turned by ``error_deg`` (deg, counter-clockwise) and its heading
+    standard deviation set to that error, so the belief covers the error it starts with (UKF-M's 2-D benchmark
+    protocol, Brossard, Barrau and Bonnabel 2020); ``ds`` itself at 0. Only the belief handed to the filters
+    changes: the truth, the events and every noise stream are those of the world without the error."""
+    if error_deg == 0.0:
+        return ds
+    e = math.radians(error_deg)
+    mean = ds.initial.mean.copy()
+    mean[2] = math.remainder(mean[2] + e, 2.0 * math.pi)
+    cov = ds.initial.cov.copy()
+    cov[2, :] = 0.0
+    cov[:, 2] = 0.0
+    cov[2, 2] = e * e
+    return dataclasses.replace(ds, initial=Gaussian2(mean=mean, cov=cov))
+
+
 def room_world() -> World:
     """Report 003's 7 m x 2 m room with 4 landmarks mounted on the walls (3 cm in front of the wall line)."""
     corners = [(0.0, 0.0), (7.0, 0.0), (7.0, 2.0), (0.0, 2.0)]
@@ -104,6 +126,8 @@ class RoomParams:
     matched : bool
         Model-matched world: the simulator's noise is the nominal noise handed to the filters (no systematic
         odometry error, encoder k at its nominal value, the initial belief's mean drawn from the belief).
+    initial_heading_error_deg : float
+        Heading error of the initial belief, deg (:func:`with_heading_error`).
     """
 
     known_ids: bool = True
@@ -111,6 +135,7 @@ class RoomParams:
     kidnap_rad: float = 0.5
     laser_beams: int = 0
     matched: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    initial_heading_error_deg: float = field(default=0.0, metadata=HEADING_ERROR)
 
     def __post_init__(self) -> None:
         # checked when the spec is parsed, so a bad value is a one-line error before anything runs
@@ -142,7 +167,8 @@ class RoomScenario(SyntheticBuilder):
     def build(self, params: RoomParams, rng: np.random.Generator) -> Dataset:
         lm = dataclasses.replace(self.landmark_sensor, known_ids=params.known_ids)
         laser = LaserSensor(beams=params.laser_beams) if params.laser_beams else None
-        return tour_dataset("room", params, rng, room_world(), ROOM_TOUR, landmarks=lm, laser=laser)
+        ds = tour_dataset("room", params, rng, room_world(), ROOM_TOUR, landmarks=lm, laser=laser)
+        return with_heading_error(ds, params.initial_heading_error_deg)
 
 
 def room_motion_for(wheelbase_ratio: float, seed: int | None = None) -> Motion:
@@ -254,6 +280,8 @@ class OfficeParams:
         Standard deviation of the 1 Hz GPS-like fixes per axis, m.
     matched : bool
         Model-matched world (see ``RoomParams.matched``).
+    initial_heading_error_deg : float
+        Heading error of the initial belief, deg (:func:`with_heading_error`).
     """
 
     known_ids: bool = True
@@ -262,6 +290,7 @@ class OfficeParams:
     laser_beams: int = 181
     pose_fix_sigma_m: float = 0.7
     matched: bool = field(default=False, metadata=RUN_KEY_OMIT_IF_DEFAULT)
+    initial_heading_error_deg: float = field(default=0.0, metadata=HEADING_ERROR)
 
     def __post_init__(self) -> None:
         # checked when the spec is parsed, so a bad value is a one-line error before anything runs
@@ -298,7 +327,8 @@ class OfficeScenario(SyntheticBuilder):
             rate_hz=1.0, sigma_xy_m=params.pose_fix_sigma_m, reported_sigma_xy_m=params.pose_fix_sigma_m
         )
         world = office_world()
-        return tour_dataset("office", params, rng, world, OFFICE_TOUR, landmarks=lm, laser=laser, fixes=fixes)
+        ds = tour_dataset("office", params, rng, world, OFFICE_TOUR, landmarks=lm, laser=laser, fixes=fixes)
+        return with_heading_error(ds, params.initial_heading_error_deg)
 
 
 # --- tiny conformance scenarios -------------------------------------------------------------------------

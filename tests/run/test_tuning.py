@@ -54,6 +54,7 @@ def test_every_comparison_filter_but_the_baseline_is_tunable() -> None:
     assert set(tuning.tuned_filters()) == {
         "ekf_landmarks",
         "ukf_landmarks",
+        "iekf_landmarks",
         "ekf_lines",
         "ekf_icp",
         "kf_linear",

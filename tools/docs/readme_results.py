@@ -548,7 +548,10 @@ def office_prose(df: pd.DataFrame) -> dict[str, str]:
             sub = sub[sub["filter"] != BOUND_ALL].replace({BOUND_NO_LASER: BOUND_ALL})
         matched += [ate_over_bound(sub, f) for f in LANDMARK if (sub["filter"] == f).any()]
     ate = {f: cell("office", f, "ate_m") for f in HEADLINE}
-    energy = {f: cell("office", f, "energy_score_m") for f in HEADLINE[1:]}
+    # a configuration without runs on office (not stored yet) has no place in the order
+    energy = {
+        f: e for f in HEADLINE[1:] if np.isfinite(e := cell("office", f, "energy_score_m")) and np.isfinite(ate[f])
+    }
     order = sorted(energy, key=lambda f: float(num(100 * ate[f])))
     agree = all(float(cm(energy[a])) <= float(cm(energy[b])) for a, b in itertools.pairwise(order))
     best = min(energy, key=lambda f: energy[f])

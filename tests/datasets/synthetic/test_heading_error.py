@@ -1,0 +1,71 @@
+"""A wrong initial heading (``initial_heading_error_deg``), suite ``heading`` and the claims of ``brossard_ukfm``."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from locbench.claims.brossard_ukfm import check_consistent, check_lower_error, heading_rows
+from locbench.core.errors import ConfigError
+from locbench.core.runkey import key_params
+from locbench.datasets.synthetic.scenarios import OfficeParams, RoomParams
+from locbench.registry import make_dataset, resolve_dataset
+from locbench.suites import SUITES
+
+
+@pytest.mark.parametrize("world", ["room", "office"])
+def test_the_belief_turns_and_covers_its_error(world: str) -> None:
+    plain = make_dataset(world, 4)
+    ds = make_dataset(f"{world}[initial_heading_error_deg=45]", 4)
+    start = np.array([ds.ground_truth.xy[0, 0], ds.ground_truth.xy[0, 1], ds.ground_truth.theta[0]])
+    err = ds.initial.mean - start
+    assert err[:2] == pytest.approx([0.0, 0.0], abs=1e-12)
+    assert math.remainder(err[2], 2 * math.pi) == pytest.approx(math.radians(45.0), abs=1e-12)
+    assert ds.initial.cov[2, 2] == pytest.approx(math.radians(45.0) ** 2)
+    assert ds.initial.cov[:2, :2] == pytest.approx(plain.initial.cov[:2, :2])
+    assert np.all(ds.initial.cov[2, :2] == 0.0) and np.all(ds.initial.cov[:2, 2] == 0.0)
+
+
+def test_zero_is_the_shipped_world_and_leaves_the_run_key() -> None:
+    assert resolve_dataset("room[initial_heading_error_deg=0]").name == "room"
+    assert "initial_heading_error_deg" not in key_params(RoomParams())
+    assert "initial_heading_error_deg" not in key_params(OfficeParams())
+    with pytest.raises(ConfigError, match="initial_heading_error_deg"):
+        resolve_dataset("office[initial_heading_error_deg=-5]")
+
+
+def test_the_suite_runs_every_error_and_the_claims_variant_on_50_seeds() -> None:
+    suite = SUITES["heading"]
+    names = {resolve_dataset(d).name for b in suite.blocks for d in b.datasets}
+    assert {"room", "office", "room[initial_heading_error_deg=90]", "office[initial_heading_error_deg=15]"} <= names
+    claim = [b for b in suite.blocks if b.seeds == 50]
+    assert claim and {"ekf_landmarks", "iekf_landmarks"} <= set(claim[0].filters)
+    assert all("initial_heading_error_deg=45" in d for d in claim[0].datasets)
+    assert all(b in SUITES["all"].blocks for b in suite.blocks)  # nox -s bench runs it
+
+
+def _rows(iekf: np.ndarray, ekf: np.ndarray, metric: str) -> pd.DataFrame:
+    recs = [
+        {"dataset": "room[initial_heading_error_deg=45]", "filter": f, "seed": s, "metric": metric, "value": v}
+        for f, vals in (("iekf_landmarks", iekf), ("ekf_landmarks", ekf))
+        for s, v in enumerate(vals)
+    ]
+    other = {"dataset": "room[initial_heading_error_deg=15]", "filter": "iekf_landmarks", "seed": 0}
+    return pd.DataFrame([*recs, other | {"metric": metric, "value": 1e6}])
+
+
+def test_the_claims_read_the_45_degree_variant_and_follow_the_rule() -> None:
+    rng = np.random.default_rng(1)
+    base = 3.0 + 0.3 * rng.standard_normal(30)
+    df = _rows(base, base + 2.0, "anees")
+    assert set(heading_rows(df, 45)["dataset"]) == {"room[initial_heading_error_deg=45]"}
+    assert check_consistent(df).verdict == "reproduced"
+    # lower but outside the band: no consistency to reproduce
+    assert check_consistent(_rows(base + 20.0, base + 40.0, "anees")).verdict == "not reproduced"
+    # no difference: not found
+    assert check_lower_error(_rows(base, base[::-1].copy(), "ate_m")).verdict == "not reproduced"
+    assert check_lower_error(_rows(base, base + 0.5, "ate_m")).verdict == "reproduced"
+    assert check_lower_error(_rows(base[:0], base[:0], "ate_m")).verdict == "not evaluated"
