@@ -278,3 +278,21 @@ def test_record_times_on_another_clock_leave_the_latency_unmeasured(ekf: Any, tm
     assert LATENCY_DIAGNOSTIC not in run.diagnostics
     assert "another clock" in run.meta["imported"]["latency"]
     assert not any(_timing(k) for k in run_metrics(run, truth))
+
+
+def test_the_summary_shows_the_latency_of_a_bag_import_and_a_dash_for_the_built_in(ekf: Any, tmp_path: Path) -> None:
+    from locbench.report.collect import collect
+    from locbench.report.context import Report
+    from locbench.report.doc import Table
+    from locbench.report.sections.summary import summary_blocks
+
+    res, rec, _ = ekf
+    delays = np.full(last_per_time(rec.t)[0].size, 25_000_000)
+    bag = _exported_clock_bag(rec, tmp_path, "rosbag2", "pose", delays_ns=delays.tolist())
+    import_system(res, "sum_lat", "office", [0], [str(bag)])
+    (table,) = [b for b in summary_blocks(Report(collect(Store(res))), "office") if isinstance(b, Table)]
+    col = table.header.index("latency median (ms)")
+    rows = {r[0]: r for r in table.rows}
+    assert rows["`external[name=sum_lat]`"][col].replace("**", "") == "25"
+    assert rows["`ekf_landmarks`"][col] == "-"  # a built-in filter has call times, not a latency
+    assert rows["`ekf_landmarks`"][table.header.index("update median (us)")] != "-"
