@@ -81,7 +81,7 @@ _COLUMNS = {"tum": TUM_COLUMNS, "tumcov": TUMCOV_COLUMNS, "openvins": OPENVINS_C
 @dataclass
 class Cloud:
     """One particle cloud: its time (s), particles (m, 3) (x m, y m, theta rad) and weights (m,), its source, and
-    its latency (record time minus header stamp, s; NaN when the format has no record time)."""
+    its latency (record time minus header stamp, s; NaN when not known)."""
 
     t: float
     points: FloatArray
