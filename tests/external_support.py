@@ -66,13 +66,19 @@ def write_bag(
     frame: str = "map",
     offset: float = 0.0,
     clouds: Sequence[tuple[float, np.ndarray, np.ndarray]] = (),
+    delays_ns: Sequence[int] = (),
+    cloud_delay_ns: int = 0,
 ) -> Path:
-    """A ROS 1 (``fmt`` "rosbag1") or ROS 2 bag of poses (t, mean, cov) on ``topic`` and particle clouds."""
+    """A ROS 1 (``fmt`` "rosbag1") or ROS 2 bag of poses (t, mean, cov) on ``topic`` and particle clouds.
+
+    Each message is recorded at its header stamp plus its publish delay (ns): ``delays_ns[k]`` for the k-th pose
+    (none given: 0), ``cloud_delay_ns`` for every cloud."""
     ts = typestore()
     mt = ts.types
     msgs = []
     if poses is not None:
-        for tt, m, c in zip(*poses, strict=True):
+        delays = list(delays_ns) or [0] * len(poses[0])
+        for tt, m, c, d in zip(*poses, delays, strict=True):
             st = float(tt) + offset
             pwc = mt["geometry_msgs/msg/PoseWithCovariance"](pose=planar_pose(ts, *m), covariance=_cov36(c))
             if msgtype == POSE:
@@ -83,14 +89,15 @@ def write_bag(
                     twist=mt["geometry_msgs/msg/Twist"](linear=zero, angular=zero), covariance=np.zeros(36)
                 )
                 msg = mt[ODOM](header=header(ts, st, frame), child_frame_id="base_link", pose=pwc, twist=tw)
-            msgs.append((st, topic, msgtype, msg))
+            msgs.append((stamp_ns(st) + d, topic, msgtype, msg))
     for tt, pts, w in clouds:
         st = float(tt) + offset
         parts = [
             mt["nav2_msgs/msg/Particle"](pose=planar_pose(ts, *p), weight=float(x)) for p, x in zip(pts, w, strict=True)
         ]
-        msgs.append((st, "/particle_cloud", CLOUD, mt[CLOUD](header=header(ts, st, frame), particles=parts)))
-    msgs.sort(key=lambda m: stamp_ns(m[0]))
+        cloud = mt[CLOUD](header=header(ts, st, frame), particles=parts)
+        msgs.append((stamp_ns(st) + cloud_delay_ns, "/particle_cloud", CLOUD, cloud))
+    msgs.sort(key=lambda m: m[0])
     if fmt == "rosbag2":
         from rosbags.rosbag2 import Writer as Writer2
 
@@ -102,10 +109,10 @@ def write_bag(
         writer, serialize = Writer1(path), ts.serialize_ros1
     with writer:
         conns: dict[str, Any] = {}
-        for st, tp, ty, msg in msgs:
+        for log_ns, tp, ty, msg in msgs:
             if tp not in conns:
                 conns[tp] = writer.add_connection(tp, ty, typestore=ts)
-            writer.write(conns[tp], stamp_ns(st), serialize(msg, ty))
+            writer.write(conns[tp], log_ns, serialize(msg, ty))
     return path
 
 

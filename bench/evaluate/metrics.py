@@ -149,6 +149,10 @@ UPDATE_US_MEAN = "update_us_mean"
 UPDATE_US_MEDIAN = "update_us_median"
 UPDATE_US_P95 = "update_us_p95"
 REALTIME_FACTOR = "realtime_factor"
+LATENCY_S_MEDIAN = "latency_s_median"
+LATENCY_S_P95 = "latency_s_p95"
+#: The row diagnostic an imported bag's latency is stored in, s (:mod:`locbench.run.import_runs`).
+LATENCY_DIAGNOSTIC = "latency_s"
 #: The suffix of a metric id in reference units.
 REF_SUFFIX = "_ref"
 PREDICT_US_MEDIAN_REF = PREDICT_US_MEDIAN + REF_SUFFIX
@@ -1045,6 +1049,16 @@ def _runtime(v: RunView) -> dict[str, float]:
     return out
 
 
+def _latency(v: RunView) -> dict[str, float]:
+    """Median and 95th percentile of the per-estimate latency, s: record time minus header stamp of an imported
+    bag's messages (none for a built-in filter or a run without both times)."""
+    lat = v.run.diagnostics.get(LATENCY_DIAGNOSTIC)
+    if lat is None:
+        return {}
+    stats = runtime_stats(np.asarray(lat, dtype=np.float64)[np.isfinite(lat)])
+    return {LATENCY_S_MEDIAN: stats["median"], LATENCY_S_P95: stats["p95"]} if stats else {}
+
+
 def _reference(v: RunView) -> dict[str, float]:
     ref, ref_cpu = (_positive(v.run.meta.get(k)) for k in ("reference_s", "reference_cpu_s"))
     if ref is None:  # runs stored before reference_s was recorded have none
@@ -1071,6 +1085,11 @@ def _particles(v: RunView) -> dict[str, float]:
 _CM = 100.0
 _DEG = float(np.degrees(1.0))
 _PERCENT = 100.0
+_MS = 1000.0
+_LATENCY_NOTE = (
+    "Latency: median over an imported system's estimates of the bag's record time minus the header stamp (when it "
+    "published the estimate after the data it is for); built-in filters have call times instead."
+)
 
 # The built-in metrics. Their order is the order of the summary's metric columns (those with summary=True) and of the
 # rows of each docs table.
@@ -1422,6 +1441,30 @@ for _m in (
         group="runtime",
         family=_reference,
         definition="`realtime_factor` x the run's `reference_s`",
+    ),
+    *(
+        Metric(
+            metric_id,
+            header=f"latency {stat}",
+            unit="s",
+            display_unit="ms",
+            scale=_MS,
+            group="runtime",
+            family=_latency,
+            summary=stat == "median",  # the median is the summary's column; absent: a built-in filter's row
+            absent="-",
+            note=_LATENCY_NOTE if stat == "median" else "",
+            definition=definition,
+        )
+        for stat, metric_id, definition in (
+            (
+                "median",
+                LATENCY_S_MEDIAN,
+                "median over the estimates of an imported bag's record (log) time minus header stamp (the system's "
+                "delay; none for built-in filters or formats without both times)",
+            ),
+            ("p95", LATENCY_S_P95, "95th percentile of the same"),
+        )
     ),
     Metric(
         KIDNAP_DISTANCE_M,

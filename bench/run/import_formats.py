@@ -16,7 +16,9 @@ with one line naming the file, the line or message and the field, and what was e
   var(theta) = Pr33 (the rotation about z); the format has no position-orientation terms, so those are 0.
 - ``bag``: a ROS 1 ``.bag`` or ROS 2 bag folder, topics of ``geometry_msgs/PoseWithCovarianceStamped`` (AMCL's
   ``/amcl_pose``), ``nav_msgs/Odometry`` (robot_localization's ``/odometry/filtered``) or ``nav2_msgs/ParticleCloud``
-  (``/particle_cloud``), read by topic; header stamps are the times.
+  (``/particle_cloud``), read by topic; header stamps are the times. A bag also gives each message's record (log)
+  time, when the system published it: the latency of each estimate is its record time minus its header stamp (s),
+  both on the bag's clock (so a clock shift applied to both cancels); a record time before its stamp is refused.
 """
 
 from __future__ import annotations
@@ -78,12 +80,14 @@ _COLUMNS = {"tum": TUM_COLUMNS, "tumcov": TUMCOV_COLUMNS, "openvins": OPENVINS_C
 
 @dataclass
 class Cloud:
-    """One particle cloud: its time (s), particles (m, 3) (x m, y m, theta rad) and weights (m,), and its source."""
+    """One particle cloud: its time (s), particles (m, 3) (x m, y m, theta rad) and weights (m,), its source, and
+    its latency (record time minus header stamp, s; NaN when not known)."""
 
     t: float
     points: FloatArray
     weights: FloatArray
     where: str
+    latency_s: float = float("nan")
 
 
 @dataclass
@@ -110,6 +114,9 @@ class SystemOutput:
         Of a bag's pose topics: the topic's frame (``header.frame_id``) by topic.
     topics : tuple of str
         The bag topics read.
+    latency : ndarray (n,) or None
+        Of a bag: each row's latency, s: the message's record (log) time minus its header stamp, both on the bag's
+        clock. None for a text format (it has no record time) or when a header stamp is 0 (unset in ROS).
     """
 
     path: Path
@@ -121,6 +128,7 @@ class SystemOutput:
     clouds: list[Cloud] = field(default_factory=list)
     frames: dict[str, str] = field(default_factory=dict)
     topics: tuple[str, ...] = ()
+    latency: FloatArray | None = None
 
 
 def guess_format(path: Path) -> str:
@@ -244,10 +252,12 @@ def read_bag(path: str | os.PathLike[str], topics: tuple[str, ...]) -> SystemOut
         quats: list[tuple[float, float, float, float]] = []
         covs: list[FloatArray] = []
         where: list[str] = []
+        lag_ns: list[int] = []
+        unset = False
         frames: dict[str, str] = {}
         clouds: list[Cloud] = []
         counter = dict.fromkeys(wanted, 0)
-        for conn, _, raw in reader.messages(connections=conns):
+        for conn, log_ns, raw in reader.messages(connections=conns):
             counter[conn.topic] += 1
             here = f"message {counter[conn.topic]} of {conn.topic!r}"
             try:
@@ -256,6 +266,17 @@ def read_bag(path: str | os.PathLike[str], topics: tuple[str, ...]) -> SystemOut
                 raise RecordedDataError(p, f"{here}: undecodable ({type(exc).__name__}: {quote(str(exc))})") from None
             st = msg.header.stamp
             stamp = float(st.sec) + float(st.nanosec) * 1e-9
+            # the latency in integer ns, exact: both times are ns on the bag's clock, so any clock shift cancels
+            stamp_ns = int(st.sec) * 1_000_000_000 + int(st.nanosec)
+            lag = int(log_ns) - stamp_ns
+            unset = unset or stamp_ns == 0
+            if lag < 0 and stamp_ns:
+                raise RecordedDataError(
+                    p,
+                    f"{here}: recorded at {int(log_ns) / 1e9!r} s, {-lag / 1e9!r} s before its header stamp "
+                    f"{stamp_ns / 1e9!r} s; expected the record (log) time, when the system published the estimate, "
+                    "at or after the stamp of the data it is for, on the same clock",
+                )
             frame = str(msg.header.frame_id)
             frames.setdefault(conn.topic, frame)
             if frames[conn.topic] != frame:
@@ -268,7 +289,7 @@ def read_bag(path: str | os.PathLike[str], topics: tuple[str, ...]) -> SystemOut
                 yaw = _yaws(p, [q[2] for q in pts], [f"{here} particle {k + 1}" for k in range(len(pts))])
                 points = np.column_stack([np.array([(a, b) for a, b, _ in pts]).reshape(-1, 2), yaw])
                 weights = np.array([float(q.weight) for q in parts], dtype=np.float64)
-                clouds.append(Cloud(stamp, points, weights, here))
+                clouds.append(Cloud(stamp, points, weights, here, lag / 1e9))
                 continue
             x, y, q = _planar(msg.pose.pose)
             t.append(stamp)
@@ -277,13 +298,17 @@ def read_bag(path: str | os.PathLike[str], topics: tuple[str, ...]) -> SystemOut
             c6 = np.asarray(msg.pose.covariance, dtype=np.float64).reshape(6, 6)
             covs.append(c6[np.ix_(_PLANAR_AXES, _PLANAR_AXES)])  # both triangles: an asymmetric one is refused
             where.append(here)
+            lag_ns.append(lag)
     finally:
         reader.close()
     yaw = _yaws(p, quats, where)
     mean = np.column_stack([np.array(xy, dtype=np.float64).reshape(-1, 2), yaw])
     cov = np.array(covs, dtype=np.float64).reshape(-1, 3, 3) if pose_topics else None
     clouds.sort(key=lambda c: c.t)
-    return SystemOutput(p, "bag", np.array(t, dtype=np.float64), mean, cov, where, clouds, frames, tuple(wanted))
+    latency = None if unset else np.array(lag_ns, dtype=np.float64) / 1e9
+    return SystemOutput(
+        p, "bag", np.array(t, dtype=np.float64), mean, cov, where, clouds, frames, tuple(wanted), latency
+    )
 
 
 def read_output(path: str | os.PathLike[str], fmt: str | None = None, topics: tuple[str, ...] = ()) -> SystemOutput:

@@ -22,7 +22,13 @@ What a stored import holds and means:
   cloud's weighted mean (circular heading) and weighted covariance (wrapped heading residuals) are the row.
 - **Health.** With a covariance, its position trace and heading variance are the run's health signals
   (:func:`locbench.filters.base.gaussian_health_rows`), from which the report's lost detection is scored.
-- **Runtime** is not measured (``runtime_measured: false``): no call times are stored and no runtime metric given.
+- **Runtime** is not measured (``runtime_measured: false``): no call times are stored and no call-time metric given.
+  A bag gives the latency instead: each row's record (log) time minus its header stamp, s (the pose topic's
+  messages; without one, the clouds'), stored as the row diagnostic
+  :data:`~locbench.evaluate.metrics.LATENCY_DIAGNOSTIC`, from which the latency metrics are computed. Both times
+  are on the bag's clock, so the clock offset cancels. A latency beyond the dataset's duration means the record
+  times are on another clock than the stamps (a bag recorded on the wall clock against a played-back sim clock):
+  then it is not measured, and ``meta["imported"]["latency"]`` says why.
 - **Key and provenance.** The run key is a hash of the files' sha256 digests, the reading options and the dataset
   realisation; ``meta["imported"]`` holds each file's path, size and digest, the format, the topics, the
   description and the sensors the system used (not stated: every event type of the dataset, so the report never
@@ -32,6 +38,7 @@ What a stored import holds and means:
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import math
 import os
@@ -50,6 +57,7 @@ from locbench.core.spec import format_spec, stable_hash
 from locbench.datasets.dataset import Dataset
 from locbench.datasets.recorded.files import RecordedDataError, sha256_of
 from locbench.evaluate.hold import hold_ends
+from locbench.evaluate.metrics import LATENCY_DIAGNOSTIC
 from locbench.evaluate.records import KIND_NAMES, RunRecord, TruthRecord
 from locbench.filters.base import gaussian_health_rows
 from locbench.run import provenance
@@ -62,7 +70,7 @@ FloatArray = npt.NDArray[np.float64]
 #: The filter id of imported runs.
 EXTERNAL_ID = "external"
 #: The version of the import's reading and storing rules (part of the run key).
-IMPORT_VERSION = 1
+IMPORT_VERSION = 2
 #: Largest distance of an imported time from a dataset time it is taken to be, s.
 SNAP_S = 1e-6
 #: The frame poses must be in: the dataset's world frame, ``map`` in an exported bag.
@@ -165,6 +173,28 @@ def _snap(t: FloatArray, grid: FloatArray) -> FloatArray:
     return np.where(np.abs(near - t) <= SNAP_S, near, t)
 
 
+def _latency(out: SystemOutput, clouds: Sequence[Any], ds: Dataset) -> tuple[FloatArray | None, str]:
+    """Each row's latency, s, and what ``meta["imported"]["latency"]`` says of it.
+
+    The rows are the pose topic's messages, or without one the clouds (:func:`prepare`), so the latencies are
+    theirs. None (not measured) for a text format, a bag with a header stamp of 0, or record times on another clock
+    than the stamps: a latency longer than the dataset's whole duration (s) is not a delay of the estimate.
+    """
+    if out.latency is None:
+        return None, "not measured: " + (
+            "the format has no record times" if out.fmt != "bag" else "a header stamp is 0 (unset)"
+        )
+    lat = out.latency if out.t.size else np.array([c.latency_s for c in clouds], dtype=np.float64)
+    span = float(ds.ground_truth.t[-1] - ds.ground_truth.t[0])
+    worst = float(np.max(lat)) if lat.size else 0.0
+    if worst > span:
+        return None, (
+            f"not measured: a record time is {worst!r} s after its header stamp, longer than the dataset's "
+            f"{span!r} s; the record times are on another clock than the stamps (record with the sim clock)"
+        )
+    return lat, "measured: record time minus header stamp"
+
+
 def cloud_moments(points: FloatArray, weights: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Weighted mean (heading by the circular mean) and weighted covariance (heading residuals wrapped) of a cloud."""
     w = weights / np.sum(weights)
@@ -231,7 +261,7 @@ def prepare(
     ds, truth = built
     shift = _clock(out, ds)
     grid = np.unique(np.concatenate([ds.ground_truth.t, [e.t for e in ds.events]]))
-    clouds = [type(c)(float(_snap(np.array([c.t - shift]), grid)[0]), c.points, c.weights, c.where) for c in out.clouds]
+    clouds = [dataclasses.replace(c, t=float(_snap(np.array([c.t - shift]), grid)[0])) for c in out.clouds]
     if out.t.size:
         t = _snap(out.t - shift, grid)
         mean = out.mean.copy()
@@ -243,6 +273,7 @@ def prepare(
         cov = np.array([c for _, c in moments]).reshape(-1, 3, 3)
     if t.size == 0:
         raise RecordedDataError(out.path, "no pose and no particle cloud; expected at least one")
+    latency, latency_note = _latency(out, clouds, ds)
     has_cov = out.cov is not None or not out.t.size
     extra = _cloud_scores(clouds, ds) if clouds else {}
     # the spread the system reported is its health signal (the lost detection's AUROC reads it), as a Gaussian
@@ -302,6 +333,7 @@ def prepare(
             "sensors": sorted(sensors),
             "sensors_stated": stated,
             "particle_clouds": len(clouds),
+            "latency": latency_note,
         },
         "filter_traits": {
             "baseline": False,
@@ -318,6 +350,7 @@ def prepare(
         np.ascontiguousarray(cov, dtype=np.float64),
         np.full(t.size, _RESET, np.int8),
         np.zeros(t.size, np.int64),
+        diagnostics={LATENCY_DIAGNOSTIC: latency} if latency is not None else {},
         extra=extra,
         health=health,
     )

@@ -110,3 +110,22 @@ def test_the_command_prints_one_line_and_exits_nonzero(tmp_path: Path, capsys: p
     err = capsys.readouterr().err.strip().splitlines()
     assert code != 0 and len(err) == 1
     assert "short.txt:1" in err[0] and "9 fields" in err[0] and "10 (tumcov)" in err[0]
+
+
+@pytest.mark.parametrize("fmt", ["rosbag2", "rosbag1"])
+def test_a_message_recorded_before_its_stamp_names_the_file_topic_and_message(tmp_path: Path, fmt: str) -> None:
+    # the second pose recorded 3 ms before the time of the data it is for: a negative latency
+    bag = write_bag(
+        tmp_path / ("early.bag" if fmt == "rosbag1" else "early"), fmt, (T, MEAN, COV), delays_ns=[0, -3_000_000, 0]
+    )
+    msg = _refused(
+        tmp_path, [bag], r"message 2 of '/amcl_pose': recorded at 0\.997 s, 0\.003 s before its header stamp"
+    )
+    assert str(bag) in msg
+
+
+def test_a_cloud_recorded_before_its_stamp_is_refused(tmp_path: Path) -> None:
+    clouds = [(t, MEAN, np.ones(3)) for t in T]
+    # on an exported bag's clock (+1000 s), 1 ns early
+    bag = write_bag(tmp_path / "earlycloud", "rosbag2", None, clouds=clouds, cloud_delay_ns=-1, offset=1000.0)
+    _refused(tmp_path, [bag], r"message 1 of '/particle_cloud': recorded at 999\.999999999 s, 1e-09 s before")

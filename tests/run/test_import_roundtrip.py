@@ -23,7 +23,7 @@ from external_support import (
 
 from locbench.cli import main
 from locbench.core.seeding import belief_rng, filter_rng
-from locbench.evaluate.metrics import run_metrics
+from locbench.evaluate.metrics import LATENCY_DIAGNOSTIC, LATENCY_S_MEDIAN, LATENCY_S_P95, run_metrics
 from locbench.evaluate.records import RunRecord, TruthRecord
 from locbench.evaluate.scores import SAMPLE_SCORE_KEYS, SCORE_IDS
 from locbench.registry import make_dataset, make_filter
@@ -45,7 +45,7 @@ def _consistency(k: str) -> bool:
 
 
 def _timing(k: str) -> bool:
-    return k.startswith(("predict_us", "update_us", "realtime_factor")) or k.endswith("_ref")
+    return k.startswith(("predict_us", "update_us", "realtime_factor", "latency_")) or k.endswith("_ref")
 
 
 def _comparable(values: dict[str, float]) -> dict[str, float]:
@@ -54,7 +54,8 @@ def _comparable(values: dict[str, float]) -> dict[str, float]:
 
 def _assert_same(native: dict[str, float], imported: dict[str, float], pose_only: bool = False) -> None:
     want = {k: v for k, v in _comparable(native).items() if not (pose_only and _consistency(k))}
-    assert set(imported) == set(want)
+    # a bag's latency is the imported run's own (a native run has call times instead)
+    assert {k for k in imported if not k.startswith("latency_")} == set(want)
     for k, v in want.items():
         np.testing.assert_allclose(imported[k], v, rtol=RTOL, atol=0, err_msg=k)
 
@@ -99,6 +100,9 @@ def test_tum_pose_only_gives_the_pose_metrics_and_no_consistency(ekf: Any, tmp_p
     values = run_metrics(run, truth)
     _assert_same(run_metrics(rec, truth), values, pose_only=True)
     assert not any(_consistency(k) for k in values)
+    # a text file has no record times: no latency, runtime not measured
+    assert LATENCY_DIAGNOSTIC not in run.diagnostics and not any(_timing(k) for k in values)
+    assert run.meta["imported"]["latency"] == "not measured: the format has no record times"
 
 
 def test_openvins_gives_the_native_metrics_of_its_block_diagonal_covariance(ekf: Any, tmp_path: Path) -> None:
@@ -111,16 +115,21 @@ def test_openvins_gives_the_native_metrics_of_its_block_diagonal_covariance(ekf:
     _assert_same(run_metrics(native, truth), run_metrics(_imported(res, "ov"), truth))
 
 
+def _exported_clock_bag(rec: RunRecord, folder: Path, fmt: str, msgtype: str, **options: Any) -> Path:
+    """A native run's poses (the last row of each time) as a ``fmt`` bag of ``msgtype`` ("pose" or "odometry") on
+    an exported bag's clock (+1000 s)."""
+    t, mean, cov = last_per_time(rec.t, rec.mean, rec.cov)
+    kind = {"msgtype": ODOM, "topic": "/odometry/filtered"} if msgtype == "odometry" else {}
+    path = folder / ("out.bag" if fmt == "rosbag1" else "out")
+    return write_bag(path, fmt, (t, mean, cov), offset=SIM_EPOCH_S, **kind, **options)
+
+
 @pytest.mark.parametrize(("fmt", "msgtype"), [("rosbag2", "pose"), ("rosbag1", "odometry")])
 def test_bags_of_poses_on_the_exported_clock_give_the_native_metrics(
     ekf: Any, tmp_path: Path, fmt: str, msgtype: str
 ) -> None:
     res, rec, truth = ekf
-    t, mean, cov = last_per_time(rec.t, rec.mean, rec.cov)
-    kind = {"msgtype": ODOM, "topic": "/odometry/filtered"} if msgtype == "odometry" else {}
-    bag = write_bag(
-        tmp_path / ("out.bag" if fmt == "rosbag1" else "out"), fmt, (t, mean, cov), offset=SIM_EPOCH_S, **kind
-    )
+    bag = _exported_clock_bag(rec, tmp_path, fmt, msgtype)
     name = f"{fmt}{msgtype}"
     import_system(res, name, "office", [0], [str(bag)], description="round trip", sensors=("LandmarkObservations",))
     run = _imported(res, name)
@@ -215,3 +224,75 @@ def test_the_report_collects_imported_runs_with_and_without_covariance(ekf: Any,
     assert ("office", "external[name=rep_cov]") in col.nees
     assert ("office", "external[name=rep_pose]") not in col.nees
     assert ("office", "external[name=rep_cov]") in col.health  # the spread it reported: the lost detection's input
+
+
+def _delays_ns(n: int) -> np.ndarray:
+    """Publish delays of 5 to 45 ms, in ns: below the office events' 50 ms spacing, so the record order is the
+    stamps'."""
+    return np.random.default_rng(7).integers(5_000_000, 45_000_000, n)
+
+
+@pytest.mark.parametrize(("fmt", "msgtype"), [("rosbag2", "pose"), ("rosbag1", "odometry")])
+def test_a_bag_with_publish_delays_gives_exactly_those_latencies(
+    ekf: Any, tmp_path: Path, fmt: str, msgtype: str
+) -> None:
+    res, rec, truth = ekf
+    delays = _delays_ns(last_per_time(rec.t)[0].size)
+    # on the exported bag's clock (+1000 s): the shift is in both times and cancels in the latency
+    bag = _exported_clock_bag(rec, tmp_path, fmt, msgtype, delays_ns=delays.tolist())
+    name = f"late{fmt}"
+    import_system(res, name, "office", [0], [str(bag)])
+    run = _imported(res, name)
+    want = delays.astype(np.float64) / 1e9
+    np.testing.assert_array_equal(run.diagnostics[LATENCY_DIAGNOSTIC], want)  # our integer-ns arithmetic, exact
+    assert run.meta["imported"]["latency"].startswith("measured")
+    values = run_metrics(run, truth)
+    assert values[LATENCY_S_MEDIAN] == float(np.median(want))
+    assert values[LATENCY_S_P95] == float(np.percentile(want, 95.0))
+    assert 0.005 <= values[LATENCY_S_MEDIAN] <= values[LATENCY_S_P95] < 0.045
+    # the call-time metrics stay unmeasured, every other metric is the native run's
+    assert not any(k.startswith(("predict_us", "update_us", "realtime_factor")) for k in values)
+    _assert_same(run_metrics(rec, truth), values)
+
+
+def test_particle_clouds_alone_give_the_clouds_latency(tmp_path: Path) -> None:
+    _, _, clouds = _pf_native_with_clouds(0)
+    bag = write_bag(
+        tmp_path / "late_clouds", "rosbag2", None, clouds=clouds, cloud_delay_ns=120_000_000, offset=SIM_EPOCH_S
+    )
+    import_system(tmp_path / "res", "lc", "room", [0], [str(bag)])
+    store = Store(tmp_path / "res")
+    run = store.read_run(store.run_dir("room", "external[name=lc]", 0))
+    np.testing.assert_array_equal(run.diagnostics[LATENCY_DIAGNOSTIC], np.full(run.t.size, 0.12))
+    values = run_metrics(run, store.read_truth("room", 0))
+    assert values[LATENCY_S_MEDIAN] == values[LATENCY_S_P95] == 0.12
+
+
+def test_record_times_on_another_clock_leave_the_latency_unmeasured(ekf: Any, tmp_path: Path) -> None:
+    res, rec, truth = ekf
+    # recorded on a wall clock (2026) while the stamps are the played-back sim clock: not a delay
+    wall = [1_790_000_000 * 10**9] * last_per_time(rec.t)[0].size
+    bag = _exported_clock_bag(rec, tmp_path, "rosbag2", "pose", delays_ns=wall)
+    import_system(res, "wall", "office", [0], [str(bag)])
+    run = _imported(res, "wall")
+    assert LATENCY_DIAGNOSTIC not in run.diagnostics
+    assert "another clock" in run.meta["imported"]["latency"]
+    assert not any(_timing(k) for k in run_metrics(run, truth))
+
+
+def test_the_summary_shows_the_latency_of_a_bag_import_and_a_dash_for_the_built_in(ekf: Any, tmp_path: Path) -> None:
+    from locbench.report.collect import collect
+    from locbench.report.context import Report
+    from locbench.report.doc import Table
+    from locbench.report.sections.summary import summary_blocks
+
+    res, rec, _ = ekf
+    delays = np.full(last_per_time(rec.t)[0].size, 25_000_000)
+    bag = _exported_clock_bag(rec, tmp_path, "rosbag2", "pose", delays_ns=delays.tolist())
+    import_system(res, "sum_lat", "office", [0], [str(bag)])
+    (table,) = [b for b in summary_blocks(Report(collect(Store(res))), "office") if isinstance(b, Table)]
+    col = table.header.index("latency median (ms)")
+    rows = {r[0]: r for r in table.rows}
+    assert rows["`external[name=sum_lat]`"][col].replace("**", "") == "25"
+    assert rows["`ekf_landmarks`"][col] == "-"  # a built-in filter has call times, not a latency
+    assert rows["`ekf_landmarks`"][table.header.index("update median (us)")] != "-"
