@@ -184,7 +184,7 @@ def warm_up(flt: Filter, ds: Dataset) -> bool:
         twin.reset(ds.initial, ds.world, ds.sensors, rng)
         for ev in _warm_events(flt.routed_events(), ds.events):
             if type(ev) is Odometry:
-                twin.predict(ev)  # type: ignore[arg-type]
+                twin.predict(ev)
             else:
                 twin.update(ev)  # type: ignore[arg-type]
             twin.estimate()

@@ -183,13 +183,13 @@ def trials_plot(studies: list[dict[str, Any]]) -> Plot:
                 curves.append(np.asarray(ys, dtype=np.float64))
             # equal best-so-far curves would hide each other: offset sideways, hollow markers, named in the legend
             same = fg.coinciding([s["filter"] for s in mine], curves)
-            for k, (s, ys) in enumerate(zip(mine, curves, strict=True)):
+            for k, (s, curve) in enumerate(zip(mine, curves, strict=True)):
                 st = styles[s["filter"]]
-                xs = np.arange(1, len(ys) + 1) + (0.12 * k if s["filter"] in same else 0.0)
+                xs = np.arange(1, len(curve) + 1) + (0.12 * k if s["filter"] in same else 0.0)
                 label = s["filter"] + (f" (= {same[s['filter']]})" if s["filter"] in same else "")
                 ax.plot(
                     xs,
-                    ys,
+                    curve,
                     color=st.color,
                     marker=st.marker or None,
                     linestyle=st.linestyle,
