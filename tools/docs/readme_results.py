@@ -468,7 +468,8 @@ def across_landmark_geometry(report: str) -> str:
 
 def office_report(report: str) -> dict[str, str]:
     """Sentences on REPORT.md's office summary table: who is bold for ATE, the lost-detection AUROC."""
-    rows = {plain(r["filter"]): r for r in md_tables(report, "summary-office")[0]}
+    # the defaults' table and the sweeps' (tuned and swept configurations), marked over both
+    rows = {plain(r["filter"]): r for table in md_tables(report, "summary-office")[:2] for r in table}
     missing = [f for f in HEADLINE if f not in rows]
     columns = [c for c in next(iter(rows.values()), {}) if c.startswith("lost AUROC")]
     if missing or len(columns) != 1 or "ATE (cm)" not in rows[HEADLINE[0]]:
