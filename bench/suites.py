@@ -164,7 +164,7 @@ RECORDED_LANDMARK_DATASETS = (
     "lost_in_the_woods",
     "plaza[run=1]",
     "plaza[run=2]",
-    # libRSF (issue 22): the real Labyrinth UWB set and the two simulated worlds under each range-noise type, with the
+    # libRSF: the real Labyrinth UWB set and the two simulated worlds under each range-noise type, with the
     # generated Gaussian reference of the robustness table
     "librsf[set=indoor_uwb]",
     *(

@@ -1,4 +1,4 @@
-"""The divergence bound: a finite estimate far outside the world is a diverged run, not an ok one (issue 13)."""
+"""The divergence bound: a finite estimate far outside the world is a diverged run, not an ok one."""
 
 from __future__ import annotations
 

@@ -129,8 +129,8 @@ def test_landmark_leaving_the_window_is_made_again() -> None:
 
 
 def test_the_graph_stays_bounded_over_a_long_run() -> None:
-    # Marginalisation removes factors; without slot reuse the graph keeps an empty slot for each (issue 23:
-    # 3,726 slots for 23 factors after office, growing with the run). 400 updates, a 0.5 s window.
+    # Marginalisation removes factors; without slot reuse the graph keeps an empty slot for each
+    # (3,726 slots for 23 factors after office, growing with the run). 400 updates, a 0.5 s window.
     f = _new(lag_s=0.5)
     f.update(_sight(0.0, (0.0, 0.0), [7, 8]))
     sizes = []

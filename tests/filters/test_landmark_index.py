@@ -1,4 +1,4 @@
-"""The k-d tree's nearest-neighbour candidates in the UKF and the fixed-lag smoother (issue 24, item 5).
+"""The k-d tree's nearest-neighbour candidates in the UKF and the fixed-lag smoother.
 
 With the index (maps of ``INDEX_MIN_LANDMARKS`` landmarks and more) a filter tests only the landmarks that
 can still pass the gate; the association must be that of testing every landmark, over random beliefs of

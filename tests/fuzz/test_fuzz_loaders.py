@@ -1,4 +1,4 @@
-"""Property-based fuzzing of every recorded-data parser and loader (issue 13).
+"""Property-based fuzzing of every recorded-data parser and loader.
 
 The property, for any mutation of a small valid file: the loader either raises a clean locbench error (a
 :class:`~locbench.core.errors.LocbenchError` whose message is one line of bounded length naming the file) or returns
@@ -42,7 +42,7 @@ from locbench.datasets.recorded.mrclam import load_mrclam
 from locbench.datasets.recorded.plaza import load_plaza
 from locbench.datasets.recorded.ros_map import load_map_server_map, save_map_server_map
 
-#: Address space the loaders may add to the test process, bytes (issue 13: no small input may take 1 GB).
+#: Address space the loaders may add to the test process, bytes (no small input may take 1 GB).
 MEMORY_HEADROOM = 1 << 30
 
 
@@ -454,7 +454,7 @@ def test_a_map_at_the_pixel_limit_loads_within_the_memory_limit(base: Path) -> N
     assert load_map_server_map(folder / "m.yaml").shape == (4096, 4096)
 
 
-# --- filters on grids of any size (issue 26): refused by their estimate, or run within the memory limit -----------
+# --- filters on grids of any size: refused by their estimate, or run within the memory limit -----------------
 
 
 @settings(max_examples=6)  # an accepted example builds the tables of a grid of up to 1.6 M cells

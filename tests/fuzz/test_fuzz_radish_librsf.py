@@ -1,4 +1,4 @@
-"""Property-based fuzzing of the two loaders of issue 22 (Radish corrected logs, libRSF files), as
+"""Property-based fuzzing of the Radish corrected-log and libRSF loaders, as
 tests/fuzz/test_fuzz_loaders.py does for the others: any mutation of a small valid file is a clean one-line locbench
 error naming the file, or a dataset that passes the contract, under the same address-space limit."""
 

@@ -1,4 +1,4 @@
-"""Property-based fuzzing of the store's readers and of the CLI's arguments (issue 26, item 8).
+"""Property-based fuzzing of the store's readers and of the CLI's arguments.
 
 Store readers: for any mutation of a stored run (``estimates.npz`` bytes, ``meta.json`` text, or arrays and record
 fields rewritten with valid checksums, so that the shape contracts are what is tested), truth or bound, reading

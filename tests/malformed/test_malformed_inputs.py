@@ -1,4 +1,4 @@
-"""Every example of issue 13, as a test: a malformed input is a clean one-line error naming the file and the
+"""Malformed recorded inputs, one test each: a malformed input is a clean one-line error naming the file and the
 field (or is handled correctly), never a traceback, a silent wrong result, or gigabytes of memory.
 
 The small files are built in ``tmp_path`` with the helpers of each loader's own tests.
@@ -443,7 +443,7 @@ def _truth_clock_jump(b: Any, msgs: list[Any]) -> None:
         (_zero_increment, ("topic '/scan' message 1", "angle_increment 0.0")),
         (_huge_range_max, ("topic '/scan' message 1", "range_max 3")),
         (_zero_stamp, ("topic '/scan' message 1", "stamp 0.0", "unset header stamp")),
-        # issue 26: poses and clocks that were read as valid
+        # poses and clocks that parse but are not valid
         (_zero_quaternion, ("topic '/ground_truth' message 4", "norm 0.0", "unit quaternion")),
         (_unnormalised_quaternion, ("topic '/odom' message 5", "norm 2.0", "unit quaternion")),
         (_rolled_quaternion, ("topic '/ground_truth' message 3", "tilted 1.571 rad", "planar pose")),
@@ -513,7 +513,7 @@ def test_map_line_extraction_is_bounded_before_allocation(monkeypatch: pytest.Mo
         scan_map.extract_map_lines(grid)
 
 
-# --- issue 26: inputs that were stored as ok (silent wrong results) -----------------------------------------
+# --- inputs that parse but would be stored as ok (silent wrong results) --------------------------------------
 
 
 def _relations(tmp_path: Path, lines: Any) -> Path:

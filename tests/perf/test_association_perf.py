@@ -1,4 +1,4 @@
-"""pytest-benchmark: nearest-neighbour association against map size (issue 24, item 5).
+"""pytest-benchmark: nearest-neighbour association against map size.
 
 ``ekf_landmarks``, ``ukf_landmarks`` and ``gtsam_fls`` with ``association=nearest`` replay the office run
 (the smoother its first quarter) with the office map as it is and with the map tiled 16 and 64 times (copies

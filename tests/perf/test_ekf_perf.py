@@ -1,4 +1,4 @@
-"""pytest-benchmark: ``ekf_landmarks``' per-event path against a numba EKF of the same model (issue 24, item 2).
+"""pytest-benchmark: ``ekf_landmarks``' per-event path against a numba EKF of the same model.
 
 The reference is a separate implementation of the filter's model on the office replay (seed 0): the encoder
 prediction of report 003 (eq. 1-5, per-step eq. 10, additive Q) and the sequential range-bearing update in

@@ -1,4 +1,4 @@
-"""The reference kinds of recorded data and the robustness table (issue 22)."""
+"""The reference kinds of recorded data and the robustness table."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""What a recorded dataset's reference is, and the libRSF robustness table (issue 22).
+"""What a recorded dataset's reference is, and the libRSF robustness table.
 
 Reference kinds
 ---------------

@@ -1,4 +1,4 @@
-"""libRSF ranging sets (issue 22): the format on small written files, the generated Gaussian reference, every
+"""libRSF ranging sets: the format on small written files, the generated Gaussian reference, every
 file error, and the shared files (all nine sets, the UWB odometry convention)."""
 
 from __future__ import annotations

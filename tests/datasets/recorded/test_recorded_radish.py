@@ -1,4 +1,4 @@
-"""Radish corrected logs (issue 22): the scan pairing, the map build (deterministic, cached by content, bounded),
+"""Radish corrected logs: the scan pairing, the map build (deterministic, cached by content, bounded),
 semi-synthetic and paired odometry on small written logs, every file error, and the shared files."""
 
 from __future__ import annotations

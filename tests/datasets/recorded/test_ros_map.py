@@ -169,7 +169,7 @@ def test_malformed_yaml_names_the_line(tmp_path: Path) -> None:
 
 
 def test_missing_files_are_errors_not_skips(tmp_path: Path) -> None:
-    # a map is a path the user typed: its absence is an error, never a "data not found" skip (issue 13)
+    # a map is a path the user typed: its absence is an error, never a "data not found" skip
     with pytest.raises(RecordedDataError, match=r"nowhere\.yaml: missing map YAML file") as info:
         load_map_server_map(tmp_path / "nowhere.yaml")
     assert not isinstance(info.value, DataNotFound)

@@ -355,7 +355,7 @@ def test_stamps_going_backwards(folder: Path, synthetic: Dataset) -> None:
 
 
 def test_missing_and_unreadable_bags(tmp_path: Path, folder: Path, bags: Callable[[str], Path]) -> None:
-    # a path the user typed is an error, never a "data not found" skip (issue 13)
+    # a path the user typed is an error, never a "data not found" skip
     with pytest.raises(RecordedDataError, match=r"nothing\.bag: missing bag .*expected a ROS 1 \.bag file") as info:
         load_rosbag(tmp_path / "nothing.bag")
     assert not isinstance(info.value, DataNotFound)
