@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 
 import nox
 
@@ -39,7 +40,10 @@ def _data_env() -> dict[str, str]:
 
 
 def _install(session: nox.Session, extras: str) -> None:
-    # A regular (non-editable) install: the tests import the installed package, as users do.
+    # A regular (non-editable) install: the tests import the installed package, as users do. setuptools builds
+    # in ./build and never deletes a module that left the source tree, so a stale copy (a moved or renamed module)
+    # would be installed beside its successor: build from nothing.
+    shutil.rmtree(os.path.join(os.path.dirname(os.path.abspath(__file__)), "build"), ignore_errors=True)
     session.install(*CONSTRAINTS, f".[{extras}]")
 
 
