@@ -92,7 +92,7 @@ def _table(rep: Report, ident: str, names: list[tuple[float, str]]) -> tuple[Tab
         "ANEES",
         "time in 95 % band (%)",
         tb.header(ATE_M),
-        "converged",
+        CONVERGED,  # the fraction of the runs that converged, headed by the metric's name
         "time to converge (s, median)",
     )
     return Table(head, tuple(rows), caption=f"`{ident}`: a wrong initial heading", sort_keys=tuple(keys)), collapsed
