@@ -35,7 +35,7 @@ class CountingFilter(Filter):
     def estimate(self) -> Estimate:
         return Estimate(0.0, np.zeros(3), np.eye(3))
 
-    def belief_sample(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    def belief_sample(self, rng: np.random.Generator, size: int) -> tuple[np.ndarray, np.ndarray]:
         self.samples += 1
         return np.array([[float(self.calls), 0.0, 0.0]]), np.ones(1)
 
