@@ -4,6 +4,7 @@ locbench list [FILTER|DATASET ...]
 locbench run [--suite NAME|FILE.toml | --filter SPEC ... --dataset SPEC ...]
              [--seeds N] [--results DIR] [--jobs N] [--executor local|dask [--scheduler ADDRESS]] [--force]
              [--connect-timeout S] [--max-configs N] [--max-seeds N] [--interleave [S]] [--run-timeout S]
+             [--score-sample M]
 locbench tune FILTER --dataset SPEC [SPEC ...] --trials N --seeds K [--results DIR] [--objective ate|nll]
               [--jobs N] [--executor local|dask [--scheduler ADDRESS]] [--max-seeds N] [--run-timeout S]
 locbench report [--results DIR] [--suite NAME ...] [--out DIR] [--jobs N]
@@ -153,7 +154,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if blocks or not tuned:
         # every spec is parsed and validated here, once, before anything runs or is written
         specs = [(b.filters, b.datasets, range(b.seeds)) for b in blocks]
-        plan = plan_sweep(specs, store, args.force, slice_s=args.interleave)
+        plan = plan_sweep(specs, store, args.force, slice_s=args.interleave, score_sample=args.score_sample)
         store.claim()  # refuses another tool's folder before anything is written or cleaned in it
         bar = tqdm(total=plan.total, unit="run", desc="locbench run", disable=True if args.no_progress else None)
         with bar:
@@ -483,6 +484,8 @@ def _cmd_import(args: argparse.Namespace) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     # long: one argparse declaration per subcommand and option, read top to bottom as the CLI's reference
+    from locbench.filters.base import MAX_SCORE_SAMPLE, SCORE_SAMPLE_SIZE
+
     p = argparse.ArgumentParser(prog="locbench", description="Comparative benchmark of 2-D localization filters.")
     p.add_argument("--version", action="version", version=f"locbench {__version__}")
     p.add_argument("-v", "--verbose", action="store_true", help="log progress details")
@@ -561,6 +564,14 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="S",
         help="interleaved timing: the filters of each (dataset, seed) take turns over S s of data "
         f"(default {INTERLEAVE_SLICE_S:g}), so a busy moment slows them alike; the same estimates, more memory",
+    )
+    r.add_argument(
+        "--score-sample",
+        type=int,
+        default=SCORE_SAMPLE_SIZE,
+        metavar="M",
+        help=f"members of each belief sample a sampling filter (pf) is scored by (default {SCORE_SAMPLE_SIZE}, at "
+        f"most {MAX_SCORE_SAMPLE}); part of those runs' keys: a new value re-runs them",
     )
     r.add_argument("--no-progress", action="store_true", help="no progress bar")
     _add_run_timeout(r)

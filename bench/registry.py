@@ -583,6 +583,14 @@ def resolve_dataset(spec: str) -> Resolved:
     return Resolved(ident, params, format_spec(ident, non_default_params(params)))
 
 
+def dataset_recording(spec: str) -> str | None:
+    """The recording the dataset ``spec`` reads (:meth:`locbench.datasets.dataset.DatasetBuilder.recording`), or
+    None for a synthetic world."""
+    r = resolve_dataset(spec)
+    recording: str | None = DATASETS.load(r.id).recording(r.params)
+    return recording
+
+
 def make_filter(spec: str | Resolved) -> Any:
     """A fresh, un-reset filter for ``spec``."""
     r = resolve_filter(spec) if isinstance(spec, str) else spec

@@ -495,6 +495,18 @@ class DatasetBuilder(abc.ABC):
         return []
 
     @classmethod
+    def recording(cls, params: Any) -> str | None:
+        """The recording ``params`` read, named with the parameters that choose it, or None: a synthetic world reads
+        none (each seed is a world of its own).
+
+        Two datasets that name the same recording (``intel`` and ``radish[site=intel]`` both read the Intel Research
+        Lab log) are one piece of evidence where datasets are counted: the across-datasets ranking keeps one of
+        them (:mod:`locbench.report.sections.paired_tests`). A name is a spec whose id is the loader the recording
+        belongs to (``mrclam[dataset=6,robot=1]``), or ``file <absolute path>`` for a user's file.
+        """
+        return None
+
+    @classmethod
     def has_bound(cls, params: Any) -> bool:
         """Whether a realisation of ``params`` has a posterior Cramer-Rao bound (:mod:`locbench.evaluate.pcrb`), which
         needs the simulator's true model: none for recorded data."""

@@ -211,6 +211,14 @@ class CheckTolerances:
     wrap_heading_rad: float = 0.5
 
 
+#: Members of a belief sample (:meth:`Filter.belief_sample`) the runner scores by default, a run setting
+#: (``locbench run --score-sample``) that enters the run key of a filter that samples its belief: the fair
+#: scores of :mod:`locbench.evaluate.scores` do not depend on it in expectation, their noise does.
+SCORE_SAMPLE_SIZE = 64
+#: Most members a score sample may have: scoring one costs m^2 / 2 pairs at every ground-truth time.
+MAX_SCORE_SAMPLE = 4096
+
+
 class Filter(abc.ABC):
     """Base class of every estimator.
 
@@ -353,12 +361,13 @@ class Filter(abc.ABC):
     def estimate(self) -> Estimate:
         """The current belief; cheap to call after every event."""
 
-    def belief_sample(self, rng: np.random.Generator) -> tuple[FloatArray, FloatArray] | None:
+    def belief_sample(self, rng: np.random.Generator, size: int) -> tuple[FloatArray, FloatArray] | None:
         """A weighted sample of the current belief, for the proper scores (:mod:`locbench.evaluate.scores`); optional.
 
         Returns poses (m, 3) (x m, y m, theta rad) and weights (m,) summing to 1, or None (the default) when the
-        belief is the Gaussian of :meth:`estimate`, which is scored in closed form. ``rng`` is the runner's own
-        generator, not the filter's: drawing the sample must not change any later estimate.
+        belief is the Gaussian of :meth:`estimate`, which is scored in closed form. ``size`` is the m the run asks
+        for (the run setting :data:`SCORE_SAMPLE_SIZE` by default). ``rng`` is the runner's own generator, not the
+        filter's: drawing the sample must not change any later estimate.
         """
         return None
 

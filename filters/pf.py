@@ -167,10 +167,6 @@ logger = logging.getLogger(__name__)
 _LOG_2PI = math.log(2.0 * math.pi)
 
 
-#: Particles in the belief sample the proper scores use (:meth:`ParticleFilter.belief_sample`).
-BELIEF_SAMPLE_SIZE = 64
-
-
 @dataclass(frozen=True, kw_only=True)
 class ParticleFilterConfig(FilterConfig, MotionNoiseConfig):
     """Configuration of :class:`ParticleFilter`.
@@ -1671,13 +1667,15 @@ class ParticleFilter(Filter):
         """Copies of the particles (N, 3) (x m, y m, theta rad) and their normalised weights (N,)."""
         return self._x.copy(), self._weights().copy()
 
-    def belief_sample(self, rng: np.random.Generator) -> tuple[FloatArray, FloatArray]:
-        """:data:`BELIEF_SAMPLE_SIZE` particles drawn by systematic resampling of the weights, each of weight 1/m.
+    def belief_sample(self, rng: np.random.Generator, size: int) -> tuple[FloatArray, FloatArray]:
+        """``size`` particles drawn by systematic resampling of the weights, each of weight 1/size.
 
-        Unbiased: particle i is drawn m w_i times in expectation, so the sample's mean of any function is the
-        weighted set's in expectation. ``rng`` (the runner's, not the filter's) draws only the common offset.
+        Particle i is drawn m w_i times in expectation (m = ``size``), so the sample's mean of any function is the
+        weighted set's in expectation; its fair scores (:mod:`locbench.evaluate.scores`) match the weighted set's
+        within their noise (docs/protocols.md, "Proper scores"). ``rng`` (the runner's, not the filter's) draws only
+        the common offset.
         """
-        m = BELIEF_SAMPLE_SIZE
+        m = size
         return _gather(self._x, systematic_resample(self._weights(), m, rng)), np.full(m, 1.0 / m)
 
     def event_health(self) -> dict[str, float]:

@@ -153,7 +153,7 @@ class SamplesWithItsOwnStream(OdometryFilter):
         x, y, th = self._x
         self._x = (x + 1e-3 * float(self._own.standard_normal()), y, th)
 
-    def belief_sample(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    def belief_sample(self, rng: np.random.Generator, size: int) -> tuple[np.ndarray, np.ndarray]:
         self._own.standard_normal()
         return np.array([self._x]), np.ones(1)
 

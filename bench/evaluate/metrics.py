@@ -76,7 +76,7 @@ import logging
 import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 import numpy.typing as npt
@@ -980,9 +980,7 @@ def _waypoint_point(metric_id: str, header: str, definition: str) -> Metric:
     return Metric(
         metric_id,
         header=header,
-        unit="m",
-        display_unit="cm",
-        scale=_CM,
+        **_IN_CM,
         better="",
         group="accuracy",
         family=_waypoints,
@@ -1086,6 +1084,21 @@ _CM = 100.0
 _DEG = float(np.degrees(1.0))
 _PERCENT = 100.0
 _MS = 1000.0
+
+
+class _Shown(TypedDict):
+    """How a metric's stored unit is shown: the unit, the report's unit and the factor between them."""
+
+    unit: str
+    display_unit: str
+    scale: float
+
+
+#: The common displays: a length stored in m shown in cm, an angle in rad shown in degrees, a fraction stored as
+#: 1 shown in %.
+_IN_CM = _Shown(unit="m", display_unit="cm", scale=_CM)
+_IN_DEG = _Shown(unit="rad", display_unit="deg", scale=_DEG)
+_AS_PERCENT = _Shown(unit="1", display_unit="%", scale=_PERCENT)
 _LATENCY_NOTE = (
     "Latency: median over an imported system's estimates of the bag's record time minus the header stamp (when it "
     "published the estimate after the data it is for); built-in filters have call times instead."
@@ -1106,9 +1119,7 @@ for _m in (
     Metric(
         ATE_M,
         header="ATE",
-        unit="m",
-        display_unit="cm",
-        scale=_CM,
+        **_IN_CM,
         group="accuracy",
         compute=lambda v: ate(v.aligned),
         summary=True,
@@ -1128,9 +1139,7 @@ for _m in (
     Metric(
         WAYPOINT_ERROR_M,
         header="waypoint error",
-        unit="m",
-        display_unit="cm",
-        scale=_CM,
+        **_IN_CM,
         group="accuracy",
         family=_waypoints,
         bound=True,
@@ -1151,9 +1160,7 @@ for _m in (
     Metric(
         WAYPOINT_RMSE_MEAN_M,
         header="mean waypoint RMSE",
-        unit="m",
-        display_unit="cm",
-        scale=_CM,
+        **_IN_CM,
         group="over runs",
         summary=True,
         definition="the mean over the waypoints of RMSE_j = sqrt(mean over runs of e_ij^2); "
@@ -1162,9 +1169,7 @@ for _m in (
     Metric(
         SMOOTHED_ATE_M,
         header="smoothed ATE",
-        unit="m",
-        display_unit="cm",
-        scale=_CM,
+        **_IN_CM,
         group="accuracy",
         family=_smoothed,
         definition="the ATE of a smoother's lag-smoothed trajectory (gtsam's fixed-lag smoother)",
@@ -1172,9 +1177,7 @@ for _m in (
     Metric(
         SMOOTHED_HEADING_RMSE_RAD,
         header="smoothed heading RMSE",
-        unit="rad",
-        display_unit="deg",
-        scale=_DEG,
+        **_IN_DEG,
         group="accuracy",
         family=_smoothed,
         definition="the heading RMSE of the same smoothed trajectory",
@@ -1182,9 +1185,7 @@ for _m in (
     Metric(
         HEADING_RMSE_RAD,
         header="heading RMSE",
-        unit="rad",
-        display_unit="deg",
-        scale=_DEG,
+        **_IN_DEG,
         group="accuracy",
         summary=True,
         bound=True,
@@ -1205,9 +1206,7 @@ for _m in (
     Metric(
         FINAL_ERROR_M,
         header="final error",
-        unit="m",
-        display_unit="cm",
-        scale=_CM,
+        **_IN_CM,
         group="accuracy",
         compute=lambda v: final_error(v.aligned),
         definition="position error at the last ground-truth time",
@@ -1215,9 +1214,7 @@ for _m in (
     Metric(
         WITHIN_FRACTION,
         header="within k cm",
-        unit="1",
-        display_unit="%",
-        scale=_PERCENT,
+        **_AS_PERCENT,
         better="higher",
         group="accuracy",
         family=_within,
@@ -1227,9 +1224,7 @@ for _m in (
     Metric(
         RELATION_ERROR_M,
         header="relation error",
-        unit="m",
-        display_unit="cm",
-        scale=_CM,
+        **_IN_CM,
         group="accuracy",
         family=_relations,
         definition="mean translational relation error over reference relative poses (Kuemmerle et al. 2009, "
@@ -1238,9 +1233,7 @@ for _m in (
     Metric(
         RELATION_ERROR_RAD,
         header="relation error",
-        unit="rad",
-        display_unit="deg",
-        scale=_DEG,
+        **_IN_DEG,
         group="accuracy",
         family=_relations,
         definition="mean rotational relation error over the same relations",
@@ -1268,9 +1261,7 @@ for _m in (
     Metric(
         NEES_IN_BAND_FRACTION,
         header="NEES in 95 % band",
-        unit="1",
-        display_unit="%",
-        scale=_PERCENT,
+        **_AS_PERCENT,
         better="higher",
         group="consistency",
         compute=lambda v: fraction_in_band(v.aligned.nees, chi2_band(POSE_DOF, 1)),
@@ -1290,9 +1281,7 @@ for _m in (
     Metric(
         CRPS_X_M,
         header="CRPS x",
-        unit="m",
-        display_unit="cm",
-        scale=_CM,
+        **_IN_CM,
         group="scores",
         family=_scores,
         definition="mean over the ground-truth times of the CRPS of the belief's x marginal at the true x",
@@ -1301,9 +1290,7 @@ for _m in (
     Metric(
         CRPS_HEADING_RAD,
         header="CRPS heading",
-        unit="rad",
-        display_unit="deg",
-        scale=_DEG,
+        **_IN_DEG,
         group="scores",
         family=_scores,
         definition="the same for the heading, each belief's heading unwrapped onto the branch nearest the true "
@@ -1312,9 +1299,7 @@ for _m in (
     Metric(
         ENERGY_SCORE_M,
         header="energy score",
-        unit="m",
-        display_unit="cm",
-        scale=_CM,
+        **_IN_CM,
         group="scores",
         family=_scores,
         summary=True,
@@ -1479,9 +1464,7 @@ for _m in (
     Metric(
         KIDNAP_RECOVERED,
         header="kidnap recovery",
-        unit="1",
-        display_unit="%",
-        scale=_PERCENT,
+        **_AS_PERCENT,
         better="higher",
         group="recovery",
         family=_kidnap,
@@ -1500,9 +1483,7 @@ for _m in (
     Metric(
         KIDNAP_FALSE_CONFIDENCE_FRACTION,
         header="false confidence",
-        unit="1",
-        display_unit="%",
-        scale=_PERCENT,
+        **_AS_PERCENT,
         group="recovery",
         family=_kidnap,
         definition="share of the time from the kidnap to the recovery (or the window's end) with the NEES above "
@@ -1511,9 +1492,7 @@ for _m in (
     Metric(
         CONVERGED,
         header="convergence",
-        unit="1",
-        display_unit="%",
-        scale=_PERCENT,
+        **_AS_PERCENT,
         better="higher",
         group="recovery",
         family=_convergence,
@@ -1531,9 +1510,7 @@ for _m in (
     Metric(
         ACCEPTED_FRACTION,
         header="accepted",
-        unit="1",
-        display_unit="%",
-        scale=_PERCENT,
+        **_AS_PERCENT,
         better="higher",
         group="filter",
         family=_acceptance,
@@ -1552,9 +1529,7 @@ for _m in (
     Metric(
         RECORDED_ATE_MEDIAN_M,
         header="recorded median ATE",
-        unit="m",
-        display_unit="cm",
-        scale=_CM,
+        **_IN_CM,
         group="over runs",
         summary=True,
         definition="median over the recorded datasets with independent ground truth of a configuration's mean "

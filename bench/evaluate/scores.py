@@ -8,8 +8,17 @@ prediction, and estimation", JASA 102(477), eq. 20-22):
 
 - **CRPS** of a scalar belief F at the truth y: E|X - y| - 0.5 E|X - X'| with X, X' independent draws of F
   (the unit of y). A Gaussian N(mu, sigma^2) has the closed form sigma [z (2 Phi(z) - 1) + 2 phi(z) - 1/sqrt(pi)],
-  z = (y - mu) / sigma; a weighted sample (x_i, w_i) gives sum_i w_i |x_i - y| - 0.5 sum_ij w_i w_j |x_i - x_j|.
-  A point mass scores its absolute error.
+  z = (y - mu) / sigma. A point mass scores its absolute error.
+- **A sample of the belief** (x_i, w_i), i = 1..M, weights normalised, is scored by the *fair* estimator
+  (Ferro 2014, "Fair scores for ensemble forecasts", QJRMS 140, with weights):
+  sum_i w_i |x_i - y| - 0.5 sum_{i != j} w_i w_j |x_i - x_j| / (1 - sum_i w_i^2). Derivation: with the weights
+  fixed and the members independent draws of F, E|X_i - X_j| = E|X - X'| for every i != j, so the expectation of
+  the pair sum is E|X - X'| sum_{i != j} w_i w_j = E|X - X'| (1 - sum_i w_i^2); dividing by that makes the spread
+  term, and so the score, unbiased for F's score at any M (the first term is unbiased as it stands). Equal
+  weights 1/M give the familiar 1 / (M (M - 1)). The plain form (spread over 1 instead, the exact score of the
+  discrete belief sum_i w_i delta_{x_i}) is high by E|X - X'| sum_i w_i^2 / 2 in expectation: a 64-member
+  sample of a wide belief is scored worse than the belief it was drawn from. A sample whose weight is all on one
+  member (sum w_i^2 = 1: M = 1 included) has no pair to estimate the spread from and is scored as a point mass.
 - **Heading**: each belief's heading is unwrapped onto the branch nearest the true heading (the error
   wrap(theta - theta_true) in (-pi, pi]) and scored against 0; a Gaussian's mean error is wrapped the same way.
 - **Energy score** of a belief on the position (x, y) at the truth y: E||X - y|| - 0.5 E||X - X'|| (m). For a
@@ -17,14 +26,15 @@ prediction, and estimation", JASA 102(477), eq. 20-22):
   lambda_2 the eigenvalues of the position covariance and E the complete elliptic integral of the second kind;
   the first term has none and is a quasi-Monte Carlo mean over :data:`ENERGY_DRAWS` fixed scrambled-Sobol normal
   draws (seed :data:`ENERGY_SEED`), the same draws at every time, so the score is deterministic. A point mass
-  scores its Euclidean error exactly.
+  scores its Euclidean error exactly; a sample, the fair estimator above with the norm for |.|.
 - Scores are taken at every ground-truth time with the belief in force there (the run's aligned view,
   :func:`locbench.evaluate.aligned.align`, as every metric in :mod:`locbench.evaluate.metrics`), then averaged;
   the interval of that mean is a circular block bootstrap over time (:func:`block_bootstrap_ci`) with blocks of
   :data:`BLOCK_S` seconds of ground truth.
-- A particle filter exposes a fixed-size unbiased subsample of its particles (:meth:`Filter.belief_sample`);
-  the runner scores it at each ground-truth time while the filter runs (:func:`sample_scores`) and stores the
-  per-time scores, not the samples (:data:`SAMPLE_SCORE_KEYS` in the run's ``extra``).
+- A particle filter exposes a sample of its particles of the size the run sets (:meth:`Filter.belief_sample`;
+  :data:`locbench.filters.base.SCORE_SAMPLE_SIZE` members by default, a run setting that enters the run key);
+  the runner scores it at each ground-truth time while the filter runs (:func:`sample_scores`, fair) and stores
+  the per-time scores, not the samples (:data:`SAMPLE_SCORE_KEYS` in the run's ``extra``).
 """
 
 from __future__ import annotations
@@ -52,6 +62,9 @@ FloatArray = npt.NDArray[np.float64]
 SCORE_IDS = ("crps_x_m", "crps_y_m", "crps_heading_rad", "energy_score_m")
 #: Keys of the per-ground-truth-time scores a sampled belief leaves in a run's ``extra``, in SCORE_IDS order.
 SAMPLE_SCORE_KEYS = tuple(f"belief_{s}" for s in SCORE_IDS)
+#: The estimator of a sample's scores (module docstring), part of the run key of every sampled run: changing it
+#: recomputes their stored per-time scores.
+SAMPLE_ESTIMATOR = "fair"
 #: Quasi-Monte Carlo draws for the first term of a Gaussian's energy score, and their seed.
 ENERGY_DRAWS = 1024
 ENERGY_SEED = 0
@@ -158,7 +171,7 @@ def gaussian_scores(
 
 
 def sample_scores(
-    points: npt.ArrayLike, weights: npt.ArrayLike, truth: npt.ArrayLike
+    points: npt.ArrayLike, weights: npt.ArrayLike, truth: npt.ArrayLike, fair: bool = True
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """The four scores of one weighted pose sample at each of k truth poses, in one compiled pass.
 
@@ -170,40 +183,49 @@ def sample_scores(
         Their weights, normalised here.
     truth : array-like, shape (k, 3)
         Truth poses, world frame.
+    fair : bool
+        The fair estimator of the score of the belief the sample was drawn from (True, what the runner stores:
+        sum_i w_i |x_i - y| - sum_{i<j} w_i w_j |x_i - x_j| / sum_{i<j} 2 w_i w_j, module docstring), or the plain
+        score of the discrete belief sum_i w_i delta_{x_i} itself (False: the pair sum over 1).
 
     Returns
     -------
     tuple of four ndarrays, shape (k,)
-        CRPS of x (m), of y (m), of the heading (rad) and the position energy score (m), each the weighted
-        sample's score sum_i w_i |x_i - y| - sum_{i<j} w_i w_j |x_i - x_j| (module docstring; the norm for the
-        energy score), each member's heading error wrapped to (-pi, pi] about the truth's heading and scored
-        against 0. The runner calls it at every ground-truth time of a particle filter's run.
+        CRPS of x (m), of y (m), of the heading (rad) and the position energy score (m) (the norm for |.|), each
+        member's heading error wrapped to (-pi, pi] about the truth's heading and scored against 0. The runner
+        calls it at every ground-truth time of a particle filter's run.
     """
     p = np.ascontiguousarray(points, dtype=np.float64)
     w = np.asarray(weights, dtype=np.float64)
     w = np.ascontiguousarray(w / w.sum())
     g = np.ascontiguousarray(np.asarray(truth, dtype=np.float64).reshape(-1, 3))
     heading_error = np.ascontiguousarray(wrap_angle(p[None, :, 2] - g[:, 2:3]))
-    out = _sample_scores_kernel(p, w, g, heading_error)
+    out = _sample_scores_kernel(p, w, g, heading_error, fair)
     return out[0], out[1], out[2], out[3]
 
 
 @njit(cache=True)
 def _sample_scores_kernel(
-    p: FloatArray, w: FloatArray, g: FloatArray, h: FloatArray
+    p: FloatArray, w: FloatArray, g: FloatArray, h: FloatArray, fair: bool
 ) -> FloatArray:  # pragma: no cover - compiled
     """The four scores (4, k) of :func:`sample_scores`: the members ``p`` (m, 3) with normalised weights ``w``
-    (m,), the truths ``g`` (k, 3) and the members' wrapped heading errors ``h`` (k, m), rad."""
+    (m,), the truths ``g`` (k, 3), the members' wrapped heading errors ``h`` (k, m), rad, and the estimator."""
     m, k = p.shape[0], g.shape[0]
     # the spread terms do not depend on the truth (except the heading, unwrapped about it): once per sample
-    sx = sy = se = 0.0
+    sx = sy = se = pairs = 0.0
     for i in range(m):
         for j in range(i + 1, m):
             ww = w[i] * w[j]
+            pairs += ww
             dx, dy = p[i, 0] - p[j, 0], p[i, 1] - p[j, 1]
             sx += ww * abs(dx)
             sy += ww * abs(dy)
             se += ww * math.sqrt(dx * dx + dy * dy)
+    # each unordered pair once: 0.5 * sum_{i != j} = sum_{i<j}; the fair estimator divides by the pairs' weight
+    # sum_{i != j} w_i w_j = 2 sum_{i<j} w_i w_j (= 1 - sum_i w_i^2); no pair with weight: a point mass
+    scale = 1.0
+    if fair:
+        scale = 0.5 / pairs if pairs > 0.0 else 0.0
     out = np.empty((4, k))
     for r in range(k):
         fx = fy = fh = fe = sh = 0.0
@@ -216,8 +238,10 @@ def _sample_scores_kernel(
             fh += w[i] * abs(hi)
             for j in range(i + 1, m):
                 sh += w[i] * w[j] * abs(hi - h[r, j])
-        # each unordered pair once: 0.5 * sum_ij = sum_{i<j}
-        out[0, r], out[1, r], out[2, r], out[3, r] = fx - sx, fy - sy, fh - sh, fe - se
+        out[0, r] = fx - scale * sx
+        out[1, r] = fy - scale * sy
+        out[2, r] = fh - scale * sh
+        out[3, r] = fe - scale * se
     return out
 
 

@@ -31,7 +31,7 @@ from locbench.registry import build_dataset
 from locbench.run import provenance
 from locbench.run.containment import DEFAULT_RULE, call_in_child, run_time_limit
 from locbench.run.filter_pass import FilterPass, FilterTrace, incompatibility, run_filter
-from locbench.run.plan import Job, Task
+from locbench.run.plan import Job, Task, samples_belief
 
 log = logging.getLogger(__name__)
 
@@ -69,6 +69,8 @@ def _meta(task: Task, job: Job) -> dict[str, Any]:
         # the machine, its load as the run starts and the reference workload's time (runtimes in reference units)
         **provenance.machine(),
     }
+    if samples_belief(fr.cls):
+        meta["score_sample"] = task.score_sample  # the run setting its stored scores were drawn with
     if fr.traits is not None:
         meta["filter_traits"] = fr.traits.record()  # what the report labels the run by (locbench.report.collect)
     return meta
@@ -220,7 +222,7 @@ def _run_job(task: Task, job: Job, ds: Dataset) -> RunRecord:
     if reason is not None:
         return _empty_record(meta | {"status": "skipped", "message": reason, "wall_s": 0.0})
     start = time.perf_counter()
-    trace = run_filter(flt, ds, *_rngs(task, job))
+    trace = run_filter(flt, ds, *_rngs(task, job), task.score_sample)
     return _trace_record(task, job, ds, meta, trace, time.perf_counter() - start)
 
 
@@ -295,7 +297,7 @@ def _interleaved(task: Task, ds: Dataset) -> list[RunRecord]:
         if reason is not None:
             out[i] = _empty_record(meta | {"status": "skipped", "message": reason, "wall_s": 0.0})
             continue
-        live.append((i, job, meta, FilterPass(flt, ds, *_rngs(task, job))))
+        live.append((i, job, meta, FilterPass(flt, ds, *_rngs(task, job), task.score_sample)))
     pieces: list[tuple[float, float]] = []
     last = -np.inf
     for k, stop in enumerate(slice_stops(ds, task.slice_s)):

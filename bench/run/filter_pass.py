@@ -26,7 +26,7 @@ from locbench.datasets.dataset import Dataset
 from locbench.evaluate.divergence import left_world, world_box
 from locbench.evaluate.hold import hold_ends
 from locbench.evaluate.records import KIND_NAMES
-from locbench.filters.base import GAUSSIAN_HEALTH_NAMES, Filter, gaussian_health_rows
+from locbench.filters.base import GAUSSIAN_HEALTH_NAMES, SCORE_SAMPLE_SIZE, Filter, gaussian_health_rows
 from locbench.run.contract import EstimateContractError, check_shapes, first_violation
 
 _RESET = KIND_NAMES.index("reset")
@@ -60,8 +60,10 @@ class _BeliefScorer:
     :meth:`Filter.belief_sample`, or whose belief sample is None.
     """
 
-    def __init__(self, flt: Filter, ds: Dataset, rng: np.random.Generator | None, row_t: list[float]) -> None:
-        self._flt, self._rng = flt, rng
+    def __init__(
+        self, flt: Filter, ds: Dataset, rng: np.random.Generator | None, row_t: list[float], size: int
+    ) -> None:
+        self._flt, self._rng, self._size = flt, rng, size
         self._poses = ds.ground_truth.poses
         self._next = 0
         self._scores = np.full((4, ds.ground_truth.t.shape[0]), np.nan)
@@ -80,7 +82,7 @@ class _BeliefScorer:
         if stop <= self._next:
             return
         assert self._rng is not None
-        sample = self._flt.belief_sample(self._rng)
+        sample = self._flt.belief_sample(self._rng, self._size)
         if sample is None:
             self.active = False
             return
@@ -120,16 +122,20 @@ def incompatibility(flt: Filter, ds: Dataset) -> str | None:
 
 
 def run_filter(
-    flt: Filter, ds: Dataset, rng: np.random.Generator, sample_rng: np.random.Generator | None = None
+    flt: Filter,
+    ds: Dataset,
+    rng: np.random.Generator,
+    sample_rng: np.random.Generator | None = None,
+    score_sample: int = SCORE_SAMPLE_SIZE,
 ) -> FilterTrace:
     """Reset ``flt`` and run it over ``ds``; never raises for a filter's own failure.
 
     The first row is the belief right after ``reset`` (kind "reset"); then one row per routed event, with the
     filter's :meth:`Filter.health` beside its estimate. With ``sample_rng`` (a generator of the runner's, not
     the filter's), a filter that exposes belief samples has them scored at every ground-truth time
-    (:class:`_BeliefScorer`; the scores go into ``extra``).
+    (:class:`_BeliefScorer`; the scores go into ``extra``) from samples of ``score_sample`` members.
     """
-    run = FilterPass(flt, ds, rng, sample_rng)
+    run = FilterPass(flt, ds, rng, sample_rng, score_sample)
     run.advance(len(ds.events))
     return run.finish()
 
@@ -190,7 +196,7 @@ def warm_up(flt: Filter, ds: Dataset) -> bool:
             twin.estimate()
             twin.health()
             twin.event_health()
-        twin.belief_sample(rng)
+        twin.belief_sample(rng, SCORE_SAMPLE_SIZE)
     except Exception:  # the timed pass meets the same failure and records it
         pass
     return True
@@ -205,7 +211,12 @@ class FilterPass:
     """
 
     def __init__(
-        self, flt: Filter, ds: Dataset, rng: np.random.Generator, sample_rng: np.random.Generator | None = None
+        self,
+        flt: Filter,
+        ds: Dataset,
+        rng: np.random.Generator,
+        sample_rng: np.random.Generator | None = None,
+        score_sample: int = SCORE_SAMPLE_SIZE,
     ) -> None:
         self._flt, self._ds = flt, ds
         self._routed = routed = flt.routed_events()
@@ -228,7 +239,7 @@ class FilterPass:
         self._first: dict[str, int] = {}
         self._deferred = type(flt).health is Filter.health
         self._per_event_health = flt.event_health if self._deferred else flt.health
-        self._scorer = _BeliefScorer(flt, ds, sample_rng, row_t)
+        self._scorer = _BeliefScorer(flt, ds, sample_rng, row_t, score_sample)
         self.status, self.message = "ok", ""
         self.diverged_t: float | None = None
         self.row = 0

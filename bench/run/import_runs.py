@@ -18,7 +18,8 @@ What a stored import holds and means:
 - **Covariance.** A pose-only format (TUM) stores NaN covariances and ``covariance: false``: the consistency metrics
   and the Gaussian scores are left out (not applicable), never computed from a made-up spread.
 - **Particles.** The cloud in force at each ground-truth time is scored with
-  :func:`locbench.evaluate.scores.sample_scores`, as a particle filter's belief sample is; without a pose topic, a
+  :func:`locbench.evaluate.scores.sample_scores` (the fair estimator, the cloud's weights as given), as a particle
+  filter's belief sample is; without a pose topic, a
   cloud's weighted mean (circular heading) and weighted covariance (wrapped heading residuals) are the row.
 - **Health.** With a covariance, its position trace and heading variance are the run's health signals
   (:func:`locbench.filters.base.gaussian_health_rows`), from which the report's lost detection is scored.
@@ -69,8 +70,9 @@ FloatArray = npt.NDArray[np.float64]
 
 #: The filter id of imported runs.
 EXTERNAL_ID = "external"
-#: The version of the import's reading and storing rules (part of the run key).
-IMPORT_VERSION = 2
+#: The version of the import's reading and storing rules (part of the run key), the estimator of a cloud's scores
+#: (:data:`locbench.evaluate.scores.SAMPLE_ESTIMATOR`) among them.
+IMPORT_VERSION = 3
 #: Largest distance of an imported time from a dataset time it is taken to be, s.
 SNAP_S = 1e-6
 #: The frame poses must be in: the dataset's world frame, ``map`` in an exported bag.

@@ -20,10 +20,11 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Generic, TypeVar
 
+from locbench.core.errors import ConfigError
 from locbench.core.runkey import key_params, source_digest
 from locbench.core.spec import Spec, format_spec, stable_hash
 from locbench.datasets.dataset import DatasetBuilder
-from locbench.filters.base import Filter
+from locbench.filters.base import MAX_SCORE_SAMPLE, SCORE_SAMPLE_SIZE, Filter
 from locbench.registry import DATASETS, FILTERS, Resolved, resolve_dataset, resolve_filter
 from locbench.run.containment import current_run_timeout
 from locbench.run.store import Store
@@ -175,11 +176,28 @@ def parse_dataset(spec: str) -> ParsedDataset:
     return ParsedDataset(r, DATASETS.load(r.id), Spec.parse(r.name))
 
 
-def run_key(fr: ParsedFilter, dr: ParsedDataset, seed: int) -> str:
+def samples_belief(cls: type[Filter]) -> bool:
+    """Whether the filter class exposes belief samples (:meth:`Filter.belief_sample`), scored while it runs."""
+    return cls.belief_sample is not Filter.belief_sample
+
+
+def run_key(fr: ParsedFilter, dr: ParsedDataset, seed: int, score_sample: int = SCORE_SAMPLE_SIZE) -> str:
     """The cache key of a run: everything that determines its result, the source of the filter's and the dataset
-    builder's code included (:func:`locbench.core.runkey.source_digest`)."""
+    builder's code included (:func:`locbench.core.runkey.source_digest`).
+
+    A filter that samples its belief (:func:`samples_belief`) stores the scores of its samples, so its key also
+    holds the sample size ``score_sample`` (the run setting) and the estimator of those scores
+    (:data:`locbench.evaluate.scores.SAMPLE_ESTIMATOR`); a Gaussian filter's key has neither.
+    """
+    scoring: dict[str, Any] = {}
+    if samples_belief(fr.cls):
+        # imported here: scipy and numba stay out of planning unless a sampled run is planned
+        from locbench.evaluate.scores import SAMPLE_ESTIMATOR
+
+        scoring = {"belief_scores": {"sample": score_sample, "estimator": SAMPLE_ESTIMATOR}}
     return stable_hash(
-        {
+        scoring
+        | {
             "format": STORE_FORMAT,
             "filter": fr.id,
             "filter_config": key_params(fr.params),
@@ -259,6 +277,9 @@ class Task:
     #: The time limit of each run, s: None for the default rule on the dataset's duration
     #: (:func:`locbench.run.containment.run_time_limit`), ``inf`` for none; by default the command's ``--run-timeout``.
     run_timeout_s: float | None = field(default_factory=current_run_timeout)
+    #: Members of each belief sample scored (:meth:`Filter.belief_sample`): the run setting of
+    #: :func:`plan_sweep`, part of the run key of a filter that samples its belief.
+    score_sample: int = SCORE_SAMPLE_SIZE
 
     @property
     def label(self) -> str:
@@ -326,6 +347,7 @@ def plan_sweep(
     results: Store | str | os.PathLike[str],
     force: bool = False,
     slice_s: float = 0.0,
+    score_sample: int = SCORE_SAMPLE_SIZE,
 ) -> Plan:
     """Parse every spec and decide which runs to do; nothing is run or written.
 
@@ -341,7 +363,13 @@ def plan_sweep(
     slice_s : float
         Interleaved timing (:attr:`Task.slice_s`): the filters of each task take turns over this many seconds of
         data; 0 (default) runs them one after the other.
+    score_sample : int
+        Members of each belief sample a filter that samples its belief is scored by (:attr:`Task.score_sample`;
+        ``--score-sample``); it enters those filters' run keys, so changing it re-runs them.
     """
+    if not 2 <= score_sample <= MAX_SCORE_SAMPLE:
+        # at least a pair to estimate the spread from
+        raise ConfigError(f"the score sample must have 2 to {MAX_SCORE_SAMPLE} members, got {score_sample}")
     store = results if isinstance(results, Store) else Store(results)
     plan = Plan([], [], store)
     groups: dict[tuple[str, int], tuple[ParsedDataset, dict[str, Job]]] = {}
@@ -358,7 +386,7 @@ def plan_sweep(
                     if fr.name in jobs or (dr.name, seed, fr.name) in plan.order:
                         continue
                     plan.order[(dr.name, seed, fr.name)] = len(plan.order)
-                    key = run_key(fr, dr, seed)
+                    key = run_key(fr, dr, seed, score_sample)
                     note = ""
                     meta = None if force else store.existing_meta(dr.name, fr.name, seed)
                     up_to_date = meta is not None and meta.get("run_key") == key and not meta.get("transient")
@@ -381,7 +409,7 @@ def plan_sweep(
         if jobs or bkey is not None:
             todo = tuple(jobs.values())
             cost = _estimate_cost(store, dr, todo, seen) + (_BOUND_COST_S if bkey is not None else 0.0)
-            plan.tasks.append(Task(dr, seed, todo, cost, bkey, slice_s))
+            plan.tasks.append(Task(dr, seed, todo, cost, bkey, slice_s, score_sample=score_sample))
     # Longest first (LPT): the last tasks to start are short, so the workers finish together.
     plan.tasks.sort(key=lambda t: -t.cost_s)
     return plan

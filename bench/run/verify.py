@@ -258,6 +258,7 @@ class _Plan:
 def _plan(store: Store, groups: dict[tuple[str, int], list[RunId]], result: VerifyResult) -> _Plan:
     """One task per sampled realisation with the jobs still current; a run that cannot be re-run (stale, another
     run's folder, an unknown spec) is recorded in ``result`` as differing instead."""
+    from locbench.filters.base import SCORE_SAMPLE_SIZE
     from locbench.run.import_runs import EXTERNAL_ID, digest_problems
     from locbench.run.plan import Job, Task, bound_key, parse_dataset, parse_filter, run_key
 
@@ -265,6 +266,8 @@ def _plan(store: Store, groups: dict[tuple[str, int], list[RunId]], result: Veri
     stored_recs, tasks, bound_keys, stored_name = plan.stored_recs, plan.tasks, plan.bound_keys, plan.stored_name
     for (dataset, s), members in sorted(groups.items()):
         jobs_of_task: list[Job] = []
+        # the score sample size the stored runs were drawn with (a run setting); one per re-run task
+        task_sample: int | None = None
         try:
             dr = parse_dataset(dataset)
         except LocbenchError as exc:
@@ -290,10 +293,17 @@ def _plan(store: Store, groups: dict[tuple[str, int], list[RunId]], result: Veri
             except LocbenchError as exc:
                 result.differ.append((r, f"cannot be re-run: {exc}"))
                 continue
-            key = run_key(fr, dr, s)
+            size = int(stored_recs[r].meta.get("score_sample", SCORE_SAMPLE_SIZE))
+            key = run_key(fr, dr, s, size)
+            if "score_sample" in stored_recs[r].meta and task_sample not in (None, size):
+                why = f"cannot be re-run: score sample {size} beside {task_sample} on one realisation"
+                result.differ.append((r, why))
+                continue
             if key != r.run_key:
                 result.differ.append((r, "stale: the run key changed (a version or parameter of the code)"))
                 continue
+            if "score_sample" in stored_recs[r].meta:
+                task_sample = size
             jobs_of_task.append(Job(fr, key))
         if jobs_of_task:
             bkey = bound_key(dr, s)
@@ -301,7 +311,9 @@ def _plan(store: Store, groups: dict[tuple[str, int], list[RunId]], result: Veri
             stored_bound = store.bound_files(dataset, s) if bkey is not None else None
             # the bound is recomputed when one is stored under the current key (else it differs without it)
             wanted = bkey if stored_bound is not None and stored_bound[0].get("bound_key") == bkey else None
-            tasks.append(Task(dr, s, tuple(jobs_of_task), bound_key=wanted))
+            tasks.append(
+                Task(dr, s, tuple(jobs_of_task), bound_key=wanted, score_sample=task_sample or SCORE_SAMPLE_SIZE)
+            )
             stored_name[(dr.name, s)] = dataset
     return plan
 

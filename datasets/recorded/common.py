@@ -12,6 +12,7 @@ import abc
 from pathlib import Path
 from typing import Any, ClassVar
 
+from locbench.core.spec import format_spec
 from locbench.datasets.dataset import DatasetBuilder
 from locbench.datasets.recorded.files import MissingDataFile, RemoteFile, locate
 
@@ -33,6 +34,12 @@ class RecordedDataset(DatasetBuilder):
     @abc.abstractmethod
     def files(cls, params: Any) -> list[RemoteFile]:
         """Every file ``params`` needs, with checksums and official downloads where known."""
+
+    @classmethod
+    def recording(cls, params: Any) -> str | None:
+        """This loader's id with the :attr:`identity_keys` of ``params`` (``plaza[run=1]``): the parameters that
+        choose a recording, not those that window or grid it (:meth:`DatasetBuilder.recording`)."""
+        return format_spec(cls.id, {k: getattr(params, k) for k in cls.identity_keys})
 
     @classmethod
     def data_unavailable(cls) -> str | None:

@@ -830,6 +830,12 @@ class RadishDataset(RecordedDataset):
     identity_keys: ClassVar[tuple[str, ...]] = ("site",)
 
     @classmethod
+    def recording(cls, params: RadishParams) -> str | None:
+        """``radish[site=NAME]``; the ``intel`` site is the log the ``intel`` loader reads (the Intel Research Lab
+        run, its corrected and raw forms), so it names that loader's recording."""
+        return "intel" if params.site == "intel" else super().recording(params)
+
+    @classmethod
     def files(cls, params: RadishParams) -> list[RemoteFile]:
         """The site's corrected log (verified when published) and, for a paired site, its raw log."""
         out = [RemoteFile(f"{FOLDER}/{params.site}{SUFFIX}", sha256=KNOWN_SHA256.get(params.site))]

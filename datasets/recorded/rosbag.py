@@ -894,6 +894,12 @@ class RosbagDataset(DatasetBuilder):
         return build_rosbag_dataset(params)
 
     @classmethod
+    def recording(cls, params: RosbagParams) -> str | None:
+        """``file <absolute path>`` of the user's recording (None without a path): two specs of one file read one
+        recording, whatever else they set."""
+        return f"file {os.path.realpath(params.path)}" if params.path else None
+
+    @classmethod
     def data_unavailable(cls) -> str | None:
         """Always a reason for the default parameters: there is no default bag."""
         return "unavailable: no default recording; name one with rosbag[path=<.bag or ROS 2 folder>,map=<map yaml>]"

@@ -516,6 +516,12 @@ class TextlogDataset(DatasetBuilder):
         return build_textlog_dataset(params)
 
     @classmethod
+    def recording(cls, params: TextlogParams) -> str | None:
+        """``file <absolute path>`` of the user's recording (None without a path): two specs of one file read one
+        recording, whatever else they set."""
+        return f"file {os.path.realpath(params.path)}" if params.path else None
+
+    @classmethod
     def data_unavailable(cls) -> str | None:
         """Always a reason for the default parameters: there is no default log."""
         return "unavailable: no default log; name one with textlog[path=<folder with textlog.json>]"

@@ -8,7 +8,8 @@ import pytest
 from locbench.core.seeding import belief_rng, filter_rng
 from locbench.evaluate import lost
 from locbench.evaluate.metrics import align
-from locbench.filters.pf import BELIEF_SAMPLE_SIZE, ParticleFilter
+from locbench.filters.base import SCORE_SAMPLE_SIZE
+from locbench.filters.pf import ParticleFilter
 from locbench.registry import make_dataset
 from locbench.run.filter_pass import run_filter
 
@@ -77,12 +78,12 @@ def test_particle_subsample_is_unbiased() -> None:
     x, w = flt.particles()
     full = np.sum(w[:, None] * x[:, :2], axis=0)
     rng = belief_rng("pf", ds.name, 0)
-    means = np.array([np.mean(flt.belief_sample(rng)[0][:, :2], axis=0) for _ in range(400)])
+    means = np.array([np.mean(flt.belief_sample(rng, SCORE_SAMPLE_SIZE)[0][:, :2], axis=0) for _ in range(400)])
     assert means.shape == (400, 2)
     se = np.std(means, axis=0, ddof=1) / np.sqrt(means.shape[0])
     assert np.all(np.abs(means.mean(axis=0) - full) < 4.0 * se + 1e-12)
-    pts, wts = flt.belief_sample(rng)
-    assert pts.shape == (BELIEF_SAMPLE_SIZE, 3) and wts.sum() == pytest.approx(1.0)
+    pts, wts = flt.belief_sample(rng, SCORE_SAMPLE_SIZE)
+    assert pts.shape == (SCORE_SAMPLE_SIZE, 3) and wts.sum() == pytest.approx(1.0)
 
 
 def test_health_series_holds_each_signal_by_the_aligned_rows() -> None:

@@ -11,10 +11,11 @@ from locbench.evaluate import scores as sc
 from locbench.evaluate.aligned import align
 
 
-def crps_sample(y: np.ndarray, x: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
+def crps_sample(y: np.ndarray, x: np.ndarray, w: np.ndarray | None = None, fair: bool = False) -> np.ndarray:
     """A plain CRPS of weighted samples (rows of ``x`` (n, m) with weights ``w`` (n, m), normalised per row) at
     ``y`` (n,): sum_i w_i |x_i - y| - 0.5 sum_ij w_i w_j |x_i - x_j| (Gneiting & Raftery 2007, eq. 22), the
-    double sum over the sorted members as 2 sum_i w_i x_i (W_below_i - W_above_i)."""
+    double sum over the sorted members as 2 sum_i w_i x_i (W_below_i - W_above_i); ``fair``: the double sum over
+    1 - sum_i w_i^2 instead of 1."""
     xs = np.asarray(x, dtype=np.float64)
     ws = np.full(xs.shape, 1.0 / xs.shape[1]) if w is None else np.asarray(w, dtype=np.float64)
     ws = ws / ws.sum(axis=1, keepdims=True)
@@ -24,18 +25,21 @@ def crps_sample(y: np.ndarray, x: np.ndarray, w: np.ndarray | None = None) -> np
     wo = np.take_along_axis(ws, order, axis=1)
     below = np.cumsum(wo, axis=1) - wo
     above = 1.0 - below - wo
-    return first - np.sum(wo * xo * (below - above), axis=1)
+    spread = np.sum(wo * xo * (below - above), axis=1)
+    return first - (spread / (1.0 - np.sum(ws * ws, axis=1)) if fair else spread)
 
 
-def energy_score_sample(y: np.ndarray, x: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
+def energy_score_sample(y: np.ndarray, x: np.ndarray, w: np.ndarray | None = None, fair: bool = False) -> np.ndarray:
     """A plain energy score of weighted samples (rows of ``x`` (n, m, d), weights ``w`` (n, m) normalised per row)
-    at ``y`` (n, d): sum_i w_i ||x_i - y|| - 0.5 sum_ij w_i w_j ||x_i - x_j||."""
+    at ``y`` (n, d): sum_i w_i ||x_i - y|| - 0.5 sum_ij w_i w_j ||x_i - x_j||; ``fair``: the pair sum over
+    1 - sum_i w_i^2."""
     xs = np.asarray(x, dtype=np.float64)
     ws = np.full(xs.shape[:2], 1.0 / xs.shape[1]) if w is None else np.asarray(w, dtype=np.float64)
     ws = ws / ws.sum(axis=1, keepdims=True)
     first = np.sum(ws * np.linalg.norm(xs - np.asarray(y, dtype=np.float64)[:, None, :], axis=2), axis=1)
     pair = np.linalg.norm(xs[:, :, None, :] - xs[:, None, :, :], axis=3)
-    return first - 0.5 * np.einsum("ni,nij,nj->n", ws, pair, ws)
+    spread = 0.5 * np.einsum("ni,nij,nj->n", ws, pair, ws)
+    return first - (spread / (1.0 - np.sum(ws * ws, axis=1)) if fair else spread)
 
 
 def test_crps_normal_matches_its_closed_form_and_scoringrules() -> None:
@@ -61,13 +65,13 @@ def test_crps_of_a_point_mass_is_the_absolute_error() -> None:
 
 
 def test_weighted_sample_scores_match_scoringrules() -> None:
-    """The compiled scores of one weighted pose sample at several truths against scoringrules' ensemble scores
-    (the energy form), and the plain sums of this module against them too."""
+    """The compiled plain scores of one weighted pose sample at several truths against scoringrules' ensemble
+    scores (the energy form), and the plain sums of this module against them too."""
     rng = np.random.default_rng(2)
     pts = np.column_stack([rng.normal(size=64), rng.normal(size=64), rng.uniform(-0.5, 0.5, 64)])
     w = rng.uniform(size=64)
     truth = np.column_stack([rng.normal(size=30), rng.normal(size=(30, 2))])
-    cx, cy, _, es = sc.sample_scores(pts, w, truth)
+    cx, cy, _, es = sc.sample_scores(pts, w, truth, fair=False)
     wk = np.broadcast_to(w, (30, 64))
     for axis, got in ((0, cx), (1, cy)):
         members = np.broadcast_to(pts[:, axis], (30, 64))
@@ -147,17 +151,18 @@ def test_compiled_sample_scores_equal_the_plain_sums() -> None:
     pts = np.column_stack([rng.normal(size=64), rng.normal(size=64), rng.uniform(-np.pi, np.pi, 64)])
     w = rng.uniform(size=64)
     truth = np.array([[0.1, -0.2, 3.1], [1.0, 1.0, -3.0], [0.0, 0.0, 0.0]])
-    got = sc.sample_scores(pts, w, truth)
     k = truth.shape[0]
     wk = np.broadcast_to(w, (k, 64))
-    ref = (
-        crps_sample(truth[:, 0], np.broadcast_to(pts[:, 0], (k, 64)), wk),
-        crps_sample(truth[:, 1], np.broadcast_to(pts[:, 1], (k, 64)), wk),
-        crps_sample(np.zeros(k), wrap_angle(pts[None, :, 2] - truth[:, 2:3]), wk),
-        energy_score_sample(truth[:, :2], np.broadcast_to(pts[None, :, :2], (k, 64, 2)), wk),
-    )
-    for a, b in zip(got, ref, strict=True):
-        np.testing.assert_allclose(a, b, rtol=1e-10, atol=1e-12)
+    for fair in (True, False):
+        got = sc.sample_scores(pts, w, truth, fair=fair)
+        ref = (
+            crps_sample(truth[:, 0], np.broadcast_to(pts[:, 0], (k, 64)), wk, fair),
+            crps_sample(truth[:, 1], np.broadcast_to(pts[:, 1], (k, 64)), wk, fair),
+            crps_sample(np.zeros(k), wrap_angle(pts[None, :, 2] - truth[:, 2:3]), wk, fair),
+            energy_score_sample(truth[:, :2], np.broadcast_to(pts[None, :, :2], (k, 64, 2)), wk, fair),
+        )
+        for a, b in zip(got, ref, strict=True):
+            np.testing.assert_allclose(a, b, rtol=1e-10, atol=1e-12)
 
 
 def test_compiled_gaussian_energy_term_equals_the_numpy_mean() -> None:

@@ -13,8 +13,9 @@ from scipy import stats
 from locbench.evaluate import significance as sg
 from locbench.evaluate.metrics import METRICS
 from locbench.present.ranking import UNTESTED_FOOTNOTE, Column, mark_ties, tie_footnote
+from locbench.registry import dataset_recording
 from locbench.report.doc import Section, Table
-from locbench.report.sections.paired_tests import dataset_groups
+from locbench.report.sections.paired_tests import dataset_groups, one_per_recording
 
 SEEDS = 20
 
@@ -143,6 +144,31 @@ def test_dataset_groups_keep_the_largest_shared_sets() -> None:
     assert (("a", "b", "c", "d"), ("w1", "w2", "w3")) in groups
     assert (("a", "b", "c"), ("r1", "r2", "w1", "w2", "w3")) in groups
     assert all("laser" not in g for _, g in groups)  # a set run on one dataset only
+
+
+def test_dataset_groups_count_each_recording_once() -> None:
+    """``intel`` and ``radish[site=intel]`` read one log: a group keeps the recording's own loader, ``intel``;
+    the synthetic worlds and the other sites are each their own."""
+    ran = {
+        d: {"a", "b", "c"}
+        for d in ("intel", "radish[site=intel]", "radish[site=intel,max_scans=500]", "radish[site=aces]", "room")
+    }
+    recordings = {d: dataset_recording(d) for d in ran}
+    groups = dataset_groups(ran, recordings)
+    assert groups == [(("a", "b", "c"), ("intel", "radish[site=aces]", "room"))]
+    for _, datasets in groups:
+        declared = [recordings[d] for d in datasets if recordings[d] is not None]
+        assert len(declared) == len(set(declared))
+    kept, dropped = one_per_recording(sorted(ran), recordings)
+    assert kept == ("intel", "radish[site=aces]", "room")
+    assert dropped == {"radish[site=intel]": "intel", "radish[site=intel,max_scans=500]": "intel"}
+    # without the recording's own loader: the first by name
+    assert one_per_recording(["radish[site=intel]", "radish[site=intel,max_scans=500]"], recordings)[1] == {
+        "radish[site=intel]": "radish[site=intel,max_scans=500]"
+    }
+    # below the smallest group once the duplicates are gone: no group
+    two = {d: {"a", "b", "c"} for d in ("intel", "radish[site=intel]", "room")}
+    assert dataset_groups(two, {d: dataset_recording(d) for d in two}) == []
 
 
 # --- the experiments' own tables and the HTML hover ---------------------------------------------------------

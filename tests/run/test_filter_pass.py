@@ -11,7 +11,7 @@ from locbench.core.events import LandmarkObservations, Odometry
 from locbench.datasets.dataset import Gaussian2, SensorSpec, WorldMap
 from locbench.evaluate.hold import hold_indices
 from locbench.evaluate.scores import SAMPLE_SCORE_KEYS
-from locbench.filters.base import Estimate, Filter, FilterConfig
+from locbench.filters.base import SCORE_SAMPLE_SIZE, Estimate, Filter, FilterConfig
 from locbench.run.filter_pass import FilterPass, run_filter
 
 
@@ -35,7 +35,7 @@ class CountingFilter(Filter):
     def estimate(self) -> Estimate:
         return Estimate(0.0, np.zeros(3), np.eye(3))
 
-    def belief_sample(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    def belief_sample(self, rng: np.random.Generator, size: int) -> tuple[np.ndarray, np.ndarray]:
         self.samples += 1
         return np.array([[float(self.calls), 0.0, 0.0]]), np.ones(1)
 
@@ -58,6 +58,19 @@ def test_each_ground_truth_time_scores_the_belief_the_hold_puts_in_force() -> No
     assert rows.tolist() == [k + k // 5 for k in range(gt.t.size)]
     # one sample for each row that holds at least one truth time, no more
     assert flt.samples == np.unique(rows).size
+
+
+def test_the_sample_asked_for_has_the_runs_score_sample_size() -> None:
+    class Sized(CountingFilter):
+        def belief_sample(self, rng: np.random.Generator, size: int) -> tuple[np.ndarray, np.ndarray]:
+            self.sizes = getattr(self, "sizes", set()) | {size}
+            return super().belief_sample(rng, size)
+
+    for asked, expected in ((7, 7), (None, SCORE_SAMPLE_SIZE)):
+        flt = Sized()
+        rngs = (np.random.default_rng(0), np.random.default_rng(1))
+        run_filter(flt, _line(), *rngs) if asked is None else run_filter(flt, _line(), *rngs, score_sample=asked)
+        assert flt.sizes == {expected}
 
 
 def test_a_filter_without_belief_samples_is_not_scored() -> None:

@@ -169,8 +169,8 @@ def _pf_native_with_clouds(seed: int) -> tuple[RunRecord, TruthRecord, list[tupl
         now[0] = ev.t
         update(ev)
 
-    def belief_sample(rng: np.random.Generator) -> Any:
-        got = sample(rng)
+    def belief_sample(rng: np.random.Generator, size: int) -> Any:
+        got = sample(rng, size)
         if got is not None:
             clouds.append((now[0], np.array(got[0]), np.array(got[1])))
         return got

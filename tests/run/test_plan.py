@@ -7,6 +7,8 @@ from pathlib import Path
 
 import pytest
 
+from locbench.core.errors import ConfigError
+from locbench.filters.base import MAX_SCORE_SAMPLE, SCORE_SAMPLE_SIZE
 from locbench.registry import DATASETS, FILTERS, resolve_filter
 from locbench.run import plan as plan_mod
 from locbench.run.plan import _BOUND_COST_S, FilterTraits, parse_filter, plan_sweep
@@ -97,3 +99,17 @@ def test_the_cost_estimate_reads_the_declared_attributes(tmp_path: Path) -> None
     (task,) = plan.tasks
     expected = 60.0 * (0.002 + 0.1 * 0.3) + _BOUND_COST_S
     assert task.cost_s == pytest.approx(expected)
+
+
+def test_the_score_sample_size_is_in_the_run_key_of_a_sampling_filter_only(tmp_path: Path) -> None:
+    pf, ekf = parse_filter("pf[particles=300]"), parse_filter("ekf_landmarks")
+    room = plan_mod.parse_dataset("room")
+    assert plan_mod.run_key(pf, room, 0, 32) != plan_mod.run_key(pf, room, 0, SCORE_SAMPLE_SIZE)
+    assert plan_mod.run_key(pf, room, 0) == plan_mod.run_key(pf, room, 0, SCORE_SAMPLE_SIZE)
+    assert plan_mod.run_key(ekf, room, 0, 32) == plan_mod.run_key(ekf, room, 0, SCORE_SAMPLE_SIZE)
+    plan = plan_sweep([([pf, ekf], [room], [0])], tmp_path, score_sample=32)
+    assert [t.score_sample for t in plan.tasks] == [32]
+    assert {j.key for j in plan.tasks[0].jobs} == {plan_mod.run_key(pf, room, 0, 32), plan_mod.run_key(ekf, room, 0)}
+    for bad in (1, MAX_SCORE_SAMPLE + 1):
+        with pytest.raises(ConfigError, match="score sample"):
+            plan_sweep([([pf], [room], [0])], tmp_path, score_sample=bad)

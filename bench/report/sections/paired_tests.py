@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import io
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -19,6 +19,8 @@ import pandas as pd
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
+from locbench.core.errors import LocbenchError
+from locbench.core.spec import Spec
 from locbench.evaluate import significance as sg
 from locbench.evaluate.metrics import (
     ATE_M,
@@ -29,6 +31,7 @@ from locbench.evaluate.metrics import (
     member_id,
 )
 from locbench.present.ranking import Column, hover_grid, mark_ties, per_seed, samples_for, tie_footnote
+from locbench.registry import dataset_recording
 from locbench.report import figures as fg
 from locbench.report import tables as tb
 from locbench.report.doc import Plot, Section, Table, Text
@@ -106,17 +109,43 @@ def effects_table(records: Sequence[ComparisonRecord], dataset: str) -> Table | 
 # --- across datasets --------------------------------------------------------------------------------------
 
 
-def dataset_groups(ran: dict[str, set[str]]) -> list[tuple[tuple[str, ...], tuple[str, ...]]]:
+def one_per_recording(
+    datasets: Sequence[str], recordings: Mapping[str, str | None]
+) -> tuple[tuple[str, ...], dict[str, str]]:
+    """``datasets`` with one dataset kept per recording, and each left out one -> the one kept in its place.
+
+    A dataset's recording is ``recordings[d]`` (:meth:`locbench.datasets.dataset.DatasetBuilder.recording`; None or
+    absent: a world of its own, always kept). Of the datasets that read one recording the kept one is the
+    recording's own loader (its id is the recording's, as ``intel`` for the Intel Research Lab log that
+    ``radish[site=intel]`` reads too), and among several such, or none, the first by name.
+    """
+    by_recording: dict[str, list[str]] = {}
+    for d in sorted(datasets):
+        rec = recordings.get(d)
+        if rec is not None:
+            by_recording.setdefault(rec, []).append(d)
+    dropped: dict[str, str] = {}
+    for rec, names in by_recording.items():
+        own = [d for d in names if Spec.parse(d).ident == Spec.parse(rec).ident]
+        keep = (own or names)[0]
+        dropped.update({d: keep for d in names if d != keep})
+    return tuple(d for d in datasets if d not in dropped), dropped
+
+
+def dataset_groups(
+    ran: dict[str, set[str]], recordings: Mapping[str, str | None] | None = None
+) -> list[tuple[tuple[str, ...], tuple[str, ...]]]:
     """Groups of datasets that a set of configurations all ran on: ``(configurations, datasets)``.
 
-    Candidates are each dataset's own set of configurations S with every dataset on which all of S ran; a
-    candidate is kept when it has at least :data:`MIN_CONFIGS` configurations and :data:`MIN_DATASETS`
-    datasets and no other candidate has both a superset of its configurations and of its datasets. The
-    largest (configurations x datasets) first, at most :data:`MAX_GROUPS`.
+    Candidates are each dataset's own set of configurations S with every dataset on which all of S ran, one per
+    recording (:func:`one_per_recording` with ``recordings``, dataset -> the recording it reads); a candidate is
+    kept when it has at least :data:`MIN_CONFIGS` configurations and :data:`MIN_DATASETS` datasets and no other
+    candidate has both a superset of its configurations and of its datasets. The largest (configurations x
+    datasets) first, at most :data:`MAX_GROUPS`.
     """
     cands: dict[frozenset[str], frozenset[str]] = {}
     for s in {frozenset(v) for v in ran.values() if len(v) >= MIN_CONFIGS}:
-        g = frozenset(d for d, v in ran.items() if s <= v)
+        g = frozenset(one_per_recording(sorted(d for d, v in ran.items() if s <= v), recordings or {})[0])
         if len(g) >= MIN_DATASETS:
             cands[s] = g
     kept = [
@@ -240,7 +269,8 @@ def across_datasets(report: Report) -> Section:
             continue
         sub = report.rows(d)
         ran[d] = {f for f in report.filters_on(d) if tb.values(sub[sub["filter"] == f], ATE_M).size}
-    groups = dataset_groups(ran)
+    recordings = {d: _recording(d) for d in ran}
+    groups = dataset_groups(ran, recordings)
     if not groups:
         return sec
     sec.add(
@@ -254,15 +284,31 @@ def across_datasets(report: Report) -> Section:
             "large-error dataset dominates; its interquartile mean over every (dataset, seed) with a "
             "stratified-bootstrap 95 % interval (seeds resampled within each dataset; Agarwal et al. 2021). "
             "Within: the fraction of ground-truth times with position error at most each threshold, mean over "
-            "runs and then datasets."
+            "runs and then datasets. Each recording counts once: of datasets that read the same recording (the "
+            "loaders declare which) a group keeps the recording's own loader, else the first by name, and says "
+            "which it left out."
         )
     )
     for gi, (configs, datasets) in enumerate(groups, start=1):
-        sec.children.append(_group_section(report, gi, configs, datasets))
+        # the datasets all of the group's configurations ran on that the group left out as another's recording
+        ran_all = sorted(d for d, v in ran.items() if set(configs) <= v)
+        dropped = one_per_recording(ran_all, recordings)[1]
+        sec.children.append(_group_section(report, gi, configs, datasets, dropped))
     return sec
 
 
-def _group_section(report: Report, gi: int, configs: Sequence[str], datasets: Sequence[str]) -> Section:
+def _recording(name: str) -> str | None:
+    """The recording a stored dataset name reads, or None (a synthetic world, or a name the registry does not
+    know: a plugin's dataset, counted as its own)."""
+    try:
+        return dataset_recording(name)
+    except LocbenchError:
+        return None
+
+
+def _group_section(
+    report: Report, gi: int, configs: Sequence[str], datasets: Sequence[str], dropped: Mapping[str, str]
+) -> Section:
     # long: one across-datasets section: rank tables, both CD diagrams and the skill table share its data
     col = report.col
     configs = col.filter_order(configs)
@@ -275,7 +321,9 @@ def _group_section(report: Report, gi: int, configs: Sequence[str], datasets: Se
     ]
     upd = rank_result(_means_table(report, datasets, upd_cfg, UPDATE_US_MEDIAN))
     names = ", ".join(f"`{col.display(d)}`" for d in datasets)
-    blocks: list[Any] = [Text(f"{len(datasets)} datasets: {names}.")]
+    left_out = "; ".join(f"`{col.display(d)}` (reads `{col.display(k)}`'s recording)" for d, k in dropped.items())
+    same = f" Left out as duplicates of a recording: {left_out}." if dropped else ""
+    blocks: list[Any] = [Text(f"{len(datasets)} datasets: {names}.{same}")]
     rows: list[tuple[str, ...]] = []
     keys: list[tuple[float, ...]] = []
     curves: dict[str, np.ndarray] = {}
