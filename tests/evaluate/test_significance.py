@@ -166,6 +166,12 @@ def test_dataset_groups_count_each_recording_once() -> None:
     assert one_per_recording(["radish[site=intel]", "radish[site=intel,max_scans=500]"], recordings)[1] == {
         "radish[site=intel]": "radish[site=intel,max_scans=500]"
     }
+    # a user's file is no loader's own recording: two specs of one file keep the first by name
+    log = "file /data/my-log"
+    files = {"textlog[path=/data/my-log]": log, "textlog[path=/data/my-log,max_events=50]": log}
+    assert one_per_recording(sorted(files), files)[1] == {
+        "textlog[path=/data/my-log]": "textlog[path=/data/my-log,max_events=50]"
+    }
     # below the smallest group once the duplicates are gone: no group
     two = {d: {"a", "b", "c"} for d in ("intel", "radish[site=intel]", "room")}
     assert dataset_groups(two, {d: dataset_recording(d) for d in two}) == []

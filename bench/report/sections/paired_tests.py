@@ -126,10 +126,16 @@ def one_per_recording(
             by_recording.setdefault(rec, []).append(d)
     dropped: dict[str, str] = {}
     for rec, names in by_recording.items():
-        own = [d for d in names if Spec.parse(d).ident == Spec.parse(rec).ident]
+        own = [d for d in names if Spec.parse(d).ident == _recording_loader(rec)]
         keep = (own or names)[0]
         dropped.update({d: keep for d in names if d != keep})
     return tuple(d for d in datasets if d not in dropped), dropped
+
+
+def _recording_loader(recording: str) -> str | None:
+    """The loader id a recording name belongs to, or None for a user's file (``file <absolute path>``, which no
+    loader owns)."""
+    return None if recording.startswith("file ") else Spec.parse(recording).ident
 
 
 def dataset_groups(
