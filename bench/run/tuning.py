@@ -46,6 +46,7 @@ import numpy as np
 from locbench.core.errors import ConfigError, DependencyNotInstalled, LocbenchError, one_line, shown
 from locbench.core.spec import format_spec, non_default_params, parse_spec
 from locbench.core.tunable import TunableRange, tunable_fields
+from locbench.datasets.splits import MRCLAM_TUNED, TUNING_SEED_START, test_seeds, tuning_seeds
 from locbench.evaluate.metrics import ATE_M, NLL
 from locbench.registry import FILTERS, resolve_dataset, resolve_filter
 from locbench.run.store import Store
@@ -53,8 +54,9 @@ from locbench.suites import MAX_SEEDS, check_seeds
 
 log = logging.getLogger(__name__)
 
-#: The first train seed: train seeds are TRAIN_SEED_START .. + K - 1, disjoint from the test seeds 0 .. N - 1.
-TRAIN_SEED_START = 1000
+#: The first train seed: train seeds are TRAIN_SEED_START .. + K - 1, disjoint from the test seeds 0 .. N - 1 (the
+#: tuning seeds of :mod:`locbench.datasets.splits`).
+TRAIN_SEED_START = TUNING_SEED_START
 #: The score of a trial with a failed or diverged run (or a non-finite objective): worse than any finite value.
 WORST = math.inf
 #: Objective name -> the per-run metric whose mean over the train runs is minimised.
@@ -87,7 +89,7 @@ def _optuna() -> Any:
 
 def train_seeds(k: int, limit: int = MAX_SEEDS) -> list[int]:
     """The ``k`` train seeds: TRAIN_SEED_START .. TRAIN_SEED_START + k - 1 (``k`` in 1 .. ``limit``, as ``run``)."""
-    return list(range(TRAIN_SEED_START, TRAIN_SEED_START + check_seeds(k, limit, "--seeds")))
+    return list(tuning_seeds(check_seeds(k, limit, "--seeds")))
 
 
 def check_trials(trials: object) -> int:
@@ -502,9 +504,10 @@ SUITE_TRAIN_SEEDS = 3
 #: The test seeds of the synthetic worlds: the main comparison's own (suite ``default``), so the default rows are
 #: the stored ones and tuned and default runs are paired by seed.
 SUITE_TEST_SEEDS = 20
-#: MRCLAM Dataset 6: robots 1-3 tune (one run each, 3 train runs per trial as on the worlds), robots 4-5 test.
-MRCLAM_TRAIN = tuple(f"mrclam[robot={r}]" for r in (1, 2, 3))
-MRCLAM_TEST = tuple(f"mrclam[robot={r}]" for r in (4, 5))
+#: MRCLAM Dataset 6: robots 1-3 tune (one run each, 3 train runs per trial as on the worlds), robots 4-5 test
+#: (:data:`locbench.datasets.splits.MRCLAM_TUNED`).
+MRCLAM_TRAIN = tuple(f"mrclam[robot={r}]" for r in MRCLAM_TUNED.tuning)
+MRCLAM_TEST = tuple(f"mrclam[robot={r}]" for r in MRCLAM_TUNED.test)
 SYNTHETIC_WORLDS = ("room", "office")
 
 
@@ -552,7 +555,7 @@ def suite_studies() -> list[SuiteStudy]:
         for world in SYNTHETIC_WORLDS:
             if world == "room" and not landmark_only:
                 continue
-            test = tuple(range(SUITE_TEST_SEEDS))
+            test = test_seeds(SUITE_TEST_SEEDS)
             out.append(SuiteStudy(f, (world,), SUITE_TRAIN_SEEDS, (world,), test))
         if landmark_only:
             out.append(SuiteStudy(f, MRCLAM_TRAIN, 1, MRCLAM_TEST, (0,)))

@@ -1,11 +1,13 @@
-"""MRCLAM's nominal noise, derived from Dataset 6's Vicon truth and surveyed map (not run at load time).
+"""MRCLAM's nominal noise, derived per fold from Dataset 6's Vicon truth and surveyed map (not run at load time).
 
-The dataset publishes no noise figures. The constants of :mod:`locbench.datasets.recorded.mrclam`
-(:data:`~locbench.datasets.recorded.mrclam.TWIST_SIGMA_V_MPS` ...) are what :func:`derive_nominal_noise` gave on
-Dataset 6, robots 1-5 (pooled), frozen there; ``tests/datasets/recorded/test_recorded_mrclam.py`` reruns it on the
-shared files and checks the frozen values within 10 %, and ``tools/derive/derive_mrclam_noise.py`` prints it for a
-folder. The values were not chosen by looking at any filter's error. The procedure (robust std
-s(e) = 1.4826 median |e|, taken about zero so that a bias counts as noise, since the filters model none):
+The dataset publishes no noise figures. The noise a run of robot r is given is what :func:`derive_nominal_noise`
+gives on the tuning robots of leave-one-robot-out fold r (:func:`locbench.datasets.splits.mrclam_fold`: the other
+four robots of Dataset 6, pooled), so no robot's own data enters the noise it is run with; the five results are
+frozen in :data:`locbench.datasets.recorded.mrclam.FOLD_NOISE`. ``tests/datasets/recorded/test_recorded_mrclam.py``
+reruns the derivation on the shared files and checks the frozen values within 10 %, and
+``tools/derive/derive_mrclam_noise.py`` prints every fold for a folder. The values were not chosen by looking at any
+filter's error. The procedure (robust std s(e) = 1.4826 median |e|, taken about zero so that a bias counts as noise,
+since the filters model none):
 
 1. **Camera.** For every landmark sighting inside the truth span: the truth pose interpolated at its time
    (linear, heading unwrapped), the predicted range and bearing to the surveyed landmark, the residuals
@@ -31,7 +33,6 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -42,7 +43,6 @@ from locbench.core.geometry import twist_increment, wrap_angle
 from locbench.datasets.dataset import Trajectory2D
 from locbench.datasets.recorded.files import Table
 from locbench.datasets.recorded.mrclam import (
-    ROBOTS,
     file_names,
     interpolate_pose,
     read_barcodes,
@@ -52,6 +52,7 @@ from locbench.datasets.recorded.mrclam import (
     read_odometry,
     split_sightings,
 )
+from locbench.datasets.splits import Split, mrclam_fold
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -130,8 +131,28 @@ def _twist_windows(truth: Trajectory2D, odo: Table, window_s: float) -> tuple[_W
     return w, float(np.sum(inner * inner)), float(np.sum(inner))
 
 
+def _robot_residuals(
+    folder: Path, robot: int, window_s: float
+) -> tuple[FloatArray, FloatArray, _Windows, float, float]:
+    """One robot's camera residuals (range m, bearing rad), twist windows, sum(dt^2) and sum(dt) (module docstring)."""
+    paths = {key: folder / name for key, name in file_names(robot).items()}
+    barcodes = read_barcodes(paths["barcodes"])
+    world = read_landmarks(paths["landmarks"])
+    truth = read_groundtruth(paths["groundtruth"])
+    lms, _, _ = split_sightings(read_measurements(paths["measurement"]), barcodes)
+    lms = lms.select((lms.t >= truth.t[0]) & (lms.t <= truth.t[-1]) & np.isin(lms.subject, world.ids))
+    pose = interpolate_pose(truth, lms.t)
+    index = world.index_of()
+    L = world.xy[[index[int(i)] for i in lms.subject.tolist()]].reshape(-1, 2)
+    d = L - pose[:, :2]
+    e_r = lms.ranges - np.hypot(d[:, 0], d[:, 1])
+    e_b = wrap_angle(lms.bearings - (np.arctan2(d[:, 1], d[:, 0]) - pose[:, 2]))
+    w, s2, s1 = _twist_windows(truth, read_odometry(paths["odometry"]), window_s)
+    return e_r, e_b, w, s2, s1
+
+
 def derive_nominal_noise(
-    folder: str | os.PathLike[str], robots: Iterable[int] = ROBOTS, window_s: float = NOISE_WINDOW_S
+    folder: str | os.PathLike[str], split: Split, window_s: float = NOISE_WINDOW_S
 ) -> dict[str, float]:
     """Recompute the nominal noise from the Vicon truth and the surveyed map (the procedure of the module docstring).
 
@@ -139,8 +160,9 @@ def derive_nominal_noise(
     ----------
     folder : path-like
         An MRCLAM dataset folder (the constants were frozen from Dataset 6).
-    robots : iterable of int
-        Robots to pool.
+    split : Split
+        Whose tuning robots to pool (a fold of :func:`~locbench.datasets.splits.mrclam_fold`); its test robots are
+        never read.
     window_s : float
         Window length of the twist comparison, s.
 
@@ -157,20 +179,10 @@ def derive_nominal_noise(
     eb: list[FloatArray] = []
     wins: list[_Windows] = []
     sum_dt2 = sum_dt = 0.0
-    for robot in robots:
-        paths = {key: Path(folder) / name for key, name in file_names(robot).items()}
-        barcodes = read_barcodes(paths["barcodes"])
-        world = read_landmarks(paths["landmarks"])
-        truth = read_groundtruth(paths["groundtruth"])
-        lms, _, _ = split_sightings(read_measurements(paths["measurement"]), barcodes)
-        lms = lms.select((lms.t >= truth.t[0]) & (lms.t <= truth.t[-1]) & np.isin(lms.subject, world.ids))
-        pose = interpolate_pose(truth, lms.t)
-        index = world.index_of()
-        L = world.xy[[index[int(i)] for i in lms.subject.tolist()]].reshape(-1, 2)
-        d = L - pose[:, :2]
-        er.append(lms.ranges - np.hypot(d[:, 0], d[:, 1]))
-        eb.append(wrap_angle(lms.bearings - (np.arctan2(d[:, 1], d[:, 0]) - pose[:, 2])))
-        w, s2, s1 = _twist_windows(truth, read_odometry(paths["odometry"]), window_s)
+    for robot in split.check_tuning(split.tuning):
+        r, b, w, s2, s1 = _robot_residuals(Path(folder), int(robot), window_s)
+        er.append(r)
+        eb.append(b)
         wins.append(w)
         sum_dt2 += s2
         sum_dt += s1
@@ -206,3 +218,11 @@ def derive_nominal_noise(
         "n_in_place": float(np.count_nonzero(in_place)),
         "dt_eff_s": dt_eff,
     }
+
+
+def derive_fold_noise(
+    folder: str | os.PathLike[str], held_out: int, window_s: float = NOISE_WINDOW_S
+) -> dict[str, float]:
+    """:func:`derive_nominal_noise` on the tuning robots of leave-one-robot-out fold ``held_out`` (the noise a run of
+    robot ``held_out`` is given); the same outputs."""
+    return derive_nominal_noise(folder, mrclam_fold(held_out), window_s)

@@ -66,7 +66,8 @@ Odometry
   (d = |u_xy| m, a = |u_theta| rad; the increment model of :func:`locbench.filters._motion.increment_variances`),
   drawn from the dataset's seeded generator like every synthetic error, one Odometry event just before each scan.
   The parameters :data:`ENCODER_ERROR` are fitted on the three paired sites by ``tools/derive/fit_radish_odometry.py``
-  (:func:`fit_encoder_error`: the method of moments of ``derive_odometry_noise`` pooled over the pairs of
+  (tuning sites of :data:`~locbench.datasets.splits.RADISH_SPLIT`: no test site enters it;
+  :func:`fit_encoder_error`: the method of moments of ``derive_odometry_noise`` pooled over the pairs of
   consecutive paired scans of all three logs; a test reruns it). The nominal noise handed to the filters is the same
   model. Time: the scans at :data:`SCAN_PERIOD_S` apart (the logs' own stamps are unusable, above); the logged
   stamps stay in the log. ``metadata["odometry"]`` says "semi-synthetic"; the report labels it. Real odometry
@@ -176,6 +177,7 @@ from locbench.datasets.recorded.scan_map import (
     build_occupancy_grid,
     extract_map_lines,
 )
+from locbench.datasets.splits import RADISH_SPLIT, Split
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -535,11 +537,21 @@ def paired_poses(corrected: CorrectedLog, pairing: Pairing) -> tuple[FloatArray,
     return odom, ref
 
 
-def fit_paired_sites(root: str | os.PathLike[str] | None = None) -> EncoderError:
-    """:func:`fit_encoder_error` over every site of :data:`RAW_LOGS` (what ``tools/derive/fit_radish_odometry.py``
-    prints)."""
+def fit_paired_sites(root: str | os.PathLike[str] | None = None, split: Split = RADISH_SPLIT) -> EncoderError:
+    """:func:`fit_encoder_error` over the tuning sites of ``split`` that have raw odometry (:data:`RAW_LOGS`; with
+    :data:`~locbench.datasets.splits.RADISH_SPLIT` all three of them), in name order: what
+    ``tools/derive/fit_radish_odometry.py`` prints. A test site is never read.
+
+    Raises
+    ------
+    ConfigError
+        No tuning site of ``split`` has raw odometry.
+    """
+    sites = split.check_tuning(s for s in sorted(RAW_LOGS) if s in split.tuning)
+    if not sites:
+        raise ConfigError(f"split {split.name}: no tuning site has raw odometry ({', '.join(sorted(RAW_LOGS))})")
     pairs = []
-    for site in sorted(RAW_LOGS):
+    for site in map(str, sites):
         path = locate(RemoteFile(f"{FOLDER}/{site}{SUFFIX}", sha256=KNOWN_SHA256.get(site)), root)
         cl = read_corrected(path)
         pairing = paired_raw(site, cl, root)

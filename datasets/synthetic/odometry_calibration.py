@@ -18,6 +18,7 @@ import numpy.typing as npt
 
 from locbench.core.errors import ConfigError
 from locbench.core.seeding import dataset_rng
+from locbench.datasets.splits import SYNTHETIC_CALIBRATION, Split
 from locbench.datasets.synthetic.lap import LAP_TARGET_FINAL_ERROR_M, lap_encoder_model, lap_motion
 from locbench.datasets.synthetic.scenarios import (
     room_motion,
@@ -87,18 +88,20 @@ def room_dead_reckoning_errors(
     return np.hypot(*(mean_xy - waypoints).T)
 
 
-def calibrate_room_odometry(seeds: Sequence[int] = tuple(range(20))) -> dict[str, Any]:
+def calibrate_room_odometry(split: Split = SYNTHETIC_CALIBRATION) -> dict[str, Any]:
     """Fit the world's systematic odometry error to report 003 table 1 (reproducible; not run at build time).
 
     Least squares (scipy ``least_squares``) over (scale_left, scale_right, wheelbase_ratio) of
     log(measured / target) at the 5 waypoints (:func:`room_dead_reckoning_errors`), with the random constant k
     fixed at ``ENCODER_K_TRUE``, the execution noise at ``SLIP_K_TRUE`` and the noise draws of
-    ``make_dataset("room", seed)`` for ``seeds`` (the true motion is re-simulated for each wheelbase ratio).
+    ``make_dataset("room", seed)`` for the split's tuning seeds (the true motion is re-simulated for each wheelbase
+    ratio); no test seed is read.
 
     Parameters
     ----------
-    seeds : sequence of int
-        The room's seeds the fit averages over.
+    split : Split
+        Whose tuning seeds the fit averages over (:data:`~locbench.datasets.splits.SYNTHETIC_CALIBRATION`: seeds
+        1000-1019).
 
     Returns
     -------
@@ -109,6 +112,7 @@ def calibrate_room_odometry(seeds: Sequence[int] = tuple(range(20))) -> dict[str
     """
     from scipy.optimize import least_squares
 
+    seeds = [int(x) for x in split.check_tuning(split.tuning)]
     target = np.asarray(ROOM_TABLE1_ODOMETRY_CM) / 100.0
     # Encoder draws for more steps than any tour takes (a prefix of the stream is what a dataset uses).
     n = 2 * room_motion().n_steps
@@ -168,17 +172,17 @@ def lap_dead_reckoning_final_errors(
 
 
 def calibrate_lap_odometry(
-    seeds: Sequence[int] = tuple(range(20)), target_m: float = LAP_TARGET_FINAL_ERROR_M
+    split: Split = SYNTHETIC_CALIBRATION, target_m: float = LAP_TARGET_FINAL_ERROR_M
 ) -> dict[str, Any]:
     """Fit ``LAP_SYSTEMATIC_SCALE`` (reproducible; not run at build time).
 
-    Brent's method (scipy ``brentq``) on scale in [0, 1] for median over ``seeds`` of
-    :func:`lap_dead_reckoning_final_errors` = ``target_m``.
+    Brent's method (scipy ``brentq``) on scale in [0, 1] for median over the split's tuning seeds of
+    :func:`lap_dead_reckoning_final_errors` = ``target_m``; no test seed is read.
 
     Parameters
     ----------
-    seeds : sequence of int
-        The seeds whose median is fitted.
+    split : Split
+        Whose tuning seeds' median is fitted (:data:`~locbench.datasets.splits.SYNTHETIC_CALIBRATION`).
     target_m : float
         The median end-of-lap error to reach, m (report 000 sec. IV: about 15 cm).
 
@@ -194,6 +198,8 @@ def calibrate_lap_odometry(
         The random error alone exceeds ``target_m`` (no factor in [0, 1] reaches it).
     """
     from scipy.optimize import brentq
+
+    seeds = [int(x) for x in split.check_tuning(split.tuning)]
 
     def f(a: float) -> float:
         return float(np.median(lap_dead_reckoning_final_errors(a, seeds))) - target_m

@@ -24,7 +24,7 @@ from locbench.datasets.recorded.mrclam import (
     read_robot_sightings,
     waypoints_by_distance,
 )
-from locbench.datasets.recorded.mrclam_noise import derive_nominal_noise
+from locbench.datasets.recorded.mrclam_noise import derive_fold_noise
 from locbench.registry import DATASETS, make_dataset
 
 HEADER = (
@@ -132,7 +132,7 @@ def test_small_folder_events_truth_and_map(small: Path) -> None:
     lm = ds.world.landmarks
     assert lm is not None and lm.ids.tolist() == [6, 7, 8]
     assert lm.std_xy is not None and lm.std_xy.tolist() == [[0.001, 0.002], [0.003, 0.004], [0.005, 0.006]]
-    assert ds.sensors.twist_sigma_v_mps == mrclam.TWIST_SIGMA_V_MPS
+    assert ds.sensors.twist_sigma_v_mps == mrclam.FOLD_NOISE[1]["twist_sigma_v_mps"]
     assert ds.metadata["verified"] is False
 
 
@@ -346,18 +346,14 @@ def test_dataset6_robot1(registered: None) -> None:
 @pytest.mark.slow
 @needs_data
 def test_frozen_noise_matches_a_fresh_derivation() -> None:
+    """Every fold's frozen noise is what the derivation gives on that fold's four tuning robots (within 10 %)."""
     root = os.environ.get("LOCBENCH_DATA", "")
-    got = derive_nominal_noise(Path(root) / "utias_mrclam" / "MRCLAM_Dataset6")
-    frozen = {
-        "twist_sigma_v_mps": mrclam.TWIST_SIGMA_V_MPS,
-        "twist_sigma_omega_radps": mrclam.TWIST_SIGMA_OMEGA_RADPS,
-        "odometry_sigma_xy_per_m": mrclam.ODOMETRY_SIGMA_XY_PER_M,
-        "odometry_sigma_theta_per_m": mrclam.ODOMETRY_SIGMA_THETA_PER_M,
-        "odometry_sigma_theta_per_rad": mrclam.ODOMETRY_SIGMA_THETA_PER_RAD,
-        "landmark_sigma_range_m": mrclam.LANDMARK_SIGMA_RANGE_M,
-        "landmark_sigma_bearing_rad": mrclam.LANDMARK_SIGMA_BEARING_RAD,
-    }
-    for name, value in frozen.items():
-        assert got[name] == pytest.approx(value, rel=0.10), name
-    sensors = mrclam.nominal_sensors()
-    assert all(getattr(sensors, name) == value for name, value in frozen.items())
+    folder = Path(root) / "utias_mrclam" / "MRCLAM_Dataset6"
+    for robot in mrclam.ROBOTS:
+        got = derive_fold_noise(folder, robot)
+        frozen = mrclam.FOLD_NOISE[robot]
+        assert set(frozen) == set(mrclam.NOISE_FIELDS)
+        for name, value in frozen.items():
+            assert got[name] == pytest.approx(value, rel=0.10), (robot, name)
+        sensors = mrclam.nominal_sensors(robot)
+        assert all(getattr(sensors, name) == value for name, value in frozen.items())
