@@ -1,6 +1,7 @@
 """The report's sections, in reading order, built from the report's context and the registered experiments.
 
-Order: how to read this, summary tables (one per summary experiment), claims, accuracy against runtime,
+Order: how to read this, summary tables (one per summary experiment), tuned against default, generalization
+(tuning against test units), claims, accuracy against runtime,
 consistency, initial heading error, kidnap and global localization, recorded data, one section per experiment,
 appendix (detail tables, failed and skipped runs, provenance). Which datasets are main comparisons, which sections and
 claims an experiment has, comes from :mod:`locbench.present.experiments` (registered by :mod:`locbench.claims`); the
@@ -12,7 +13,8 @@ Each section is a function of the context :class:`~locbench.report.context.Repor
 :mod:`~locbench.report.sections.kidnap`,
 :mod:`~locbench.report.sections.recorded`, :mod:`~locbench.report.sections.experiment`,
 :mod:`~locbench.report.sections.appendix`, :mod:`~locbench.report.sections.health`,
-:mod:`~locbench.report.sections.paired_tests`, :mod:`~locbench.report.sections.tuned`); this module imports them
+:mod:`~locbench.report.sections.paired_tests`, :mod:`~locbench.report.sections.tuned`,
+:mod:`~locbench.report.sections.generalization`); this module imports them
 and orders them, and no section imports it.
 """
 
@@ -27,6 +29,7 @@ from locbench.report.doc import Section, Table, Text
 from locbench.report.sections import appendix as ap
 from locbench.report.sections import consistency as cs
 from locbench.report.sections import experiment as ex
+from locbench.report.sections import generalization as gz
 from locbench.report.sections import heading as hd
 from locbench.report.sections import health as hl
 from locbench.report.sections import kidnap as kd
@@ -43,6 +46,7 @@ def build_sections(rep: Report) -> list[Section]:
         sm.summary_section(rep),
         sig.across_datasets(rep),
         tuning_section(rep.col) or Section("", ""),
+        gz.generalization_section(rep.col),
         claims_section(rep),
         rt.pareto_section(rep),
         cs.consistency_section(rep),
