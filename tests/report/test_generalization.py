@@ -49,8 +49,9 @@ def test_family_rows_give_means_ratio_and_units_worse_than_dead_reckoning() -> N
         cells[(f"radish[site={site}]", "ekf", 0)] = 0.10
     for k, site in enumerate(test):
         cells[(f"radish[site={site}]", "odometry", 0)] = 0.5
-        cells[(f"radish[site={site}]", "ekf", 0)] = [0.2, 0.7, 0.3][k]  # worse than odometry on the second
-    # the third test site: ekf failed (no ATE row) on a fourth unit that odometry has
+        if k < 2:
+            cells[(f"radish[site={site}]", "ekf", 0)] = [0.2, 0.7][k]  # worse than odometry on the second
+    # ekf skipped the third test site (no rows: not compared) and failed on a fourth (counted worse)
     cells[("radish[site=seattle]", "odometry", 0)] = 0.4
     df = _rows(cells)
     df = pd.concat([df, pd.DataFrame([("radish[site=seattle]", "ekf", 0, "failed", 1.0)], columns=COLUMNS)])
@@ -59,11 +60,11 @@ def test_family_rows_give_means_ratio_and_units_worse_than_dead_reckoning() -> N
     rows = {r.filter: r for r in gz.family_rows(df, _of, "odometry")}
     assert set(rows) == {"ekf", "odometry"}
     ekf = rows["ekf"]
-    assert ekf.family == "radish" and ekf.tuning_units == 2 and ekf.test_units == 3
+    assert ekf.family == "radish" and ekf.tuning_units == 2 and ekf.test_units == 2
     assert ekf.tuning_ate_m == pytest.approx(0.10)
-    assert ekf.test_ate_m == pytest.approx(0.4)
-    assert ekf.ratio == pytest.approx(4.0)
-    assert (ekf.worse_than_baseline, ekf.compared_units) == (2, 4)  # 0.7 > 0.5, and no run on seattle
+    assert ekf.test_ate_m == pytest.approx(0.45)
+    assert ekf.ratio == pytest.approx(4.5)
+    assert (ekf.worse_than_baseline, ekf.compared_units) == (2, 3)  # 0.7 > 0.5, and the failed run on seattle
     assert rows["odometry"].kind == "baseline" and rows["odometry"].ratio == pytest.approx(0.475 / 1.0)
     # a configuration left out by keep gets no row; the baseline always does
     kept = gz.family_rows(df, _of, "odometry", keep=lambda f: False)
@@ -96,6 +97,8 @@ def test_study_rows_set_the_train_objective_against_the_test_runs() -> None:
     )
     rows = gz.study_rows(df, [study], "odometry")
     assert [(r.kind, r.filter) for r in rows] == [("default", "ekf"), ("tuned", "ekf[a=1]")]
+    kept = gz.study_rows(df, [{**study, "default_kept": True, "best_spec": "ekf", "best_value": 0.2}], "odometry")
+    assert [r.kind for r in kept] == ["default", "tuned (default kept)"]
     d, t = rows
     assert d.tuning_ate_m == 0.2 and d.tuning_units == 2 and d.test_ate_m == pytest.approx(0.3)
     assert (d.worse_than_baseline, d.compared_units) == (1, 2)

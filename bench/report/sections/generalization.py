@@ -7,8 +7,8 @@ libRSF set. Runs whose datasets differ only in the unit (``radish[site=aces]`` a
 same window and resolution) form one **family**; a family's row per filter configuration gives the mean over units of
 the unit's mean ATE, on tuning units and on test units, their ratio (test over tuning: above 1, the configuration
 does worse on data nothing was calibrated on), and on how many test units it did worse than dead reckoning (the
-baseline, ``odometry``): a unit where the configuration's mean ATE exceeds the baseline's, or where it has no ok run
-while the baseline has one.
+baseline, ``odometry``): a unit where the configuration's mean ATE exceeds the baseline's, or where its run failed
+while the baseline's is ok (a unit it skipped, lacking a sensor or map, is not compared).
 
 With a tuned suite stored (``<results>/tuning/tuned.json``), each study adds a row for the default and the tuned
 configuration: the tuning side is the study's train objective (the mean train ATE of the default trial and of the best
@@ -28,7 +28,7 @@ import pandas as pd
 
 from locbench.core.spec import Spec, format_spec, params_to_dict
 from locbench.datasets.splits import LIBRSF_SPLIT, MRCLAM_TUNED, RADISH_SPLIT, Split, is_tuning_seed
-from locbench.evaluate.metrics import ATE_M
+from locbench.evaluate.metrics import ATE_M, FAILED
 from locbench.present.docfmt import num
 from locbench.report.collect import Collected
 from locbench.report.doc import Section, Table, Text
@@ -122,25 +122,34 @@ class GeneralizationRow:
         return NAN
 
 
-def _unit_ates(df: pd.DataFrame, of: Callable[[str, int], UnitOf | None]) -> pd.DataFrame:
-    """Per (family, role, unit, filter): the mean ATE over the unit's ok runs (m)."""
-    ate = df[df["metric"] == ATE_M]
+def _unit_ates(df: pd.DataFrame, of: Callable[[str, int], UnitOf | None]) -> tuple[pd.DataFrame, set[tuple[str, ...]]]:
+    """Per (family, role, unit, filter): the mean ATE over the unit's ok runs (m); and the (family, unit, filter)
+    that have a run at all, ok or failed (a skipped run has no row)."""
+    ran = df[(df["metric"] == ATE_M) | (df["metric"] == FAILED)]
     acc: dict[tuple[str, str, str, str], list[float]] = {}
+    attempted: set[tuple[str, ...]] = set()
     units: dict[tuple[str, int], UnitOf | None] = {}
-    for dataset, filt, seed, value in zip(ate["dataset"], ate["filter"], ate["seed"], ate["value"], strict=True):
+    cols = (ran["dataset"], ran["filter"], ran["seed"], ran["metric"], ran["value"])
+    for dataset, filt, seed, metric, value in zip(*cols, strict=True):
         key = (str(dataset), int(seed))
         if key not in units:
             units[key] = of(*key)
         u = units[key]
-        if u is not None and not math.isnan(float(value)):
+        if u is None:
+            continue
+        attempted.add((u.family, u.unit, str(filt)))
+        if metric == ATE_M and not math.isnan(float(value)):
             acc.setdefault((u.family, u.role, u.unit, str(filt)), []).append(float(value))
     rows = [(*k, float(np.mean(v))) for k, v in acc.items()]
-    return pd.DataFrame(rows, columns=["family", "role", "unit", "filter", "ate"])
+    return pd.DataFrame(rows, columns=["family", "role", "unit", "filter", "ate"]), attempted
 
 
-def _worse(per_unit: dict[str, float], baseline: dict[str, float], units: Sequence[str]) -> tuple[int, int]:
-    """Test units where the configuration's ATE exceeds the baseline's (or it has none), over those the baseline has."""
-    compared = [u for u in units if u in baseline]
+def _worse(
+    per_unit: dict[str, float], baseline: dict[str, float], units: Sequence[str], ran: Callable[[str], bool]
+) -> tuple[int, int]:
+    """Test units where the configuration's ATE exceeds the baseline's or its run failed, over the units both ran
+    (a skipped run is no comparison)."""
+    compared = [u for u in units if u in baseline and (u in per_unit or ran(u))]
     worse = sum(1 for u in compared if u not in per_unit or per_unit[u] > baseline[u])
     return worse, len(compared)
 
@@ -165,7 +174,7 @@ def family_rows(
     keep : callable
         Which configurations get a row (the baseline's own row is kept, without a comparison).
     """
-    per = _unit_ates(df, of)
+    per, attempted = _unit_ates(df, of)
     out: list[GeneralizationRow] = []
     for family, fam in per.groupby("family", sort=True):
         test_units = list(dict.fromkeys(fam.loc[fam["role"] == TEST, "unit"]))
@@ -181,7 +190,8 @@ def family_rows(
             tune = g[g["role"] == TUNING]["ate"].to_numpy()
             test = g[g["role"] == TEST]
             per_unit = dict(zip(test["unit"], test["ate"], strict=True))
-            worse, compared = _worse(per_unit, base_test, test_units) if filt != baseline else (0, 0)
+            ran = {u for (fam_, u, f_) in attempted if fam_ == family and f_ == filt}
+            worse, compared = _worse(per_unit, base_test, test_units, ran.__contains__) if filt != baseline else (0, 0)
             out.append(
                 GeneralizationRow(
                     str(family),
@@ -216,6 +226,7 @@ def study_rows(
         A study's dataset spec -> its stored (canonical) dataset name.
     """
     ate = df[df["metric"] == ATE_M]
+    failed = df[df["metric"] == FAILED]
     out: list[GeneralizationRow] = []
     for s in studies:
         if s.get("objective") != "ate" or not s.get("trials"):
@@ -238,11 +249,17 @@ def study_rows(
         best = s.get("best_spec")
         pairs = [("default", str(s["filter"]), default_value)]
         if best:
-            pairs.append(("tuned", str(best), float(s.get("best_value", NAN))))
+            kind = "tuned (default kept)" if s.get("default_kept") else "tuned"
+            pairs.append((kind, str(best), float(s.get("best_value", NAN))))
         for kind, filt, train in pairs:
             mine = unit_means(filt)
+            mine_failed = failed[(failed["filter"] == filt) & failed["dataset"].isin(names)]
+            ran = {str((str(d), int(k))) for d, k in zip(mine_failed["dataset"], mine_failed["seed"], strict=True)}
             worse, compared = _worse(
-                {str(u): v for u, v in mine.items()}, {str(u): v for u, v in base.items()}, [str(u) for u in units]
+                {str(u): v for u, v in mine.items()},
+                {str(u): v for u, v in base.items()},
+                [str(u) for u in units],
+                ran.__contains__,
             )
             out.append(
                 GeneralizationRow(
@@ -296,9 +313,9 @@ def generalization_table(rows: Sequence[GeneralizationRow]) -> Table:
         footnotes=(
             "Units: a seed of a synthetic dataset (tuning seeds from 1000), an MRCLAM robot (robots 1-3 tune, 4-5 "
             "test), a Radish site, a libRSF set (docs/protocols.md, Splits). ATE: the mean over units of each unit's "
-            "mean over its ok runs. Worse than DR: test units where the mean ATE exceeds dead reckoning's, or with no "
-            "ok run, over the test units dead reckoning has. Tuned-suite rows: the tuning side is the train "
-            "objective (mean train ATE) over the train runs.",
+            "mean over its ok runs. Worse than DR: test units where the mean ATE exceeds dead reckoning's or the run "
+            "failed, over the test units both ran (a skipped run is not compared). Tuned-suite rows: the tuning side "
+            "is the train objective (mean train ATE) over the train runs.",
         ),
         sort_keys=keys,
     )
