@@ -195,9 +195,9 @@ def tuning_section(col: Collected) -> Section | None:
         rows.append(
             (
                 f"`{g.filter}`",
-                g.world + (f" ({len(mine)} folds)" if len(mine) > 1 else ""),
-                tb.num(d_ate),
-                tb.num(t_ate),
+                g.world,
+                f"{tb.num(d_ate)} ({int(np.isfinite(g.default_m).sum())}/{g.default_m.size})",
+                f"{tb.num(t_ate)} ({int(np.isfinite(g.tuned_m).sum())}/{g.tuned_m.size})",
                 tb.num(change),
                 _effects_text(g),
                 test.text(),
@@ -221,6 +221,7 @@ def tuning_section(col: Collected) -> Section | None:
             caption="Tuned beside default on the test units: mean ATE, the change per unit, and the paired test "
             "across units",
             footnotes=(
+                "Mean over the test units, ok runs / runs in brackets (a failed run has no ATE).",
                 "A unit is a test seed of a world, or the held-out robot of a cross-validated recording. The paired "
                 "test is Wilcoxon's signed-rank test of the tuned against the default ATE over the units, two-sided; "
                 "with five robots no two-sided test can reach 5 % (the smallest exact p is 0.0625), so the per-robot "
