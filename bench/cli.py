@@ -339,8 +339,10 @@ def _cmd_tune(args: argparse.Namespace) -> int:
         check_trials(args.trials)
     if args.max_seeds < 1:
         raise ConfigError(f"--max-seeds must be >= 1, got {args.max_seeds}")
+    seeds: int = args.seeds if args.seeds is not None else 0
+    trials: int = args.trials if args.trials is not None else 0
     if not args.suite:
-        train_seeds(args.seeds, args.max_seeds)
+        train_seeds(seeds, args.max_seeds)
     if not 1 <= args.jobs <= MAX_JOBS:
         raise ConfigError(f"--jobs: expected 1-{MAX_JOBS} processes, got {args.jobs}")
     if args.scheduler is not None and args.executor != "dask":
@@ -356,8 +358,8 @@ def _cmd_tune(args: argparse.Namespace) -> int:
     res = tune(
         args.filter,
         args.dataset,
-        args.trials,
-        args.seeds,
+        trials,
+        seeds,
         args.results,
         executor=args.executor,
         jobs=args.jobs,

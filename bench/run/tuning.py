@@ -761,7 +761,7 @@ def _stale(entry: dict[str, Any]) -> str | None:
     try:
         resolve_filter(str(best))
     except LocbenchError as exc:
-        return f"its tuned spec no longer resolves ({one_line(exc)}): tune again with 'nox -s tune'"
+        return f"its tuned spec no longer resolves ({one_line(str(exc))}): tune again with 'nox -s tune'"
     return None
 
 

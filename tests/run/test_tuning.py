@@ -293,6 +293,17 @@ def test_verify_re_runs_a_sampled_trial_and_catches_a_changed_journal(tmp_path: 
     assert not check.passed and 9e-4 < check.rel_diff < 1.1e-3
 
 
+def test_cli_verify_records_the_re_run_trials(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    studies = [tuning.SuiteStudy("ekf_landmarks", ("tiny_line",), 1, ("tiny_line",), (0,))]
+    tuning.tune_suite(str(tmp_path), trials=2, studies=studies)
+    tuning.run_tuned_suite(str(tmp_path), studies=studies)
+    assert main(["verify", "--results", str(tmp_path), "--fraction", "1"]) == 0
+    assert "1 tuning trial(s) re-run on their train data" in capsys.readouterr().out
+    record = __import__("json").loads((tmp_path / "verify.json").read_text(encoding="utf-8"))
+    (trial,) = record["trials"]
+    assert trial["filter"] == "ekf_landmarks" and trial["rel_diff"] == 0.0 and record["passed"]
+
+
 def test_cli_tune_suite_arguments(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["tune", "--suite", "ekf_landmarks", "--results", str(tmp_path)]) == 2
     assert "--suite tunes every study" in capsys.readouterr().err
