@@ -164,10 +164,10 @@ def lint(session: nox.Session) -> None:
 
 @nox.session(python=PYTHON, default=False)
 def bench(session: nox.Session) -> None:
-    """Run suites 'all', 'consistency' and 'tuned' (each filter tuned on train data, then run on the test data),
-    verify a sample of the stored runs (``locbench verify``) and write results/summary; with 'locbench run'
-    arguments after --, a sub-suite into results/custom (never over the
-    committed results/summary)."""
+    """Run suites 'all', 'consistency' and 'tuned' (the committed tuned configurations of results/tuning, written
+    by 'nox -s tune', run on their test data), verify a sample of the stored runs and of the tuning trials
+    (``locbench verify``) and write results/summary; with 'locbench run' arguments after --, a sub-suite into
+    results/custom (never over the committed results/summary)."""
     _install(session, "all")
     # interleaved timing (docs/protocols.md, Runtime): a busy moment slows every configuration of a task alike
     args = list(session.posargs) or ["--suite", "all", "consistency", "tuned", "--jobs", "2", "--interleave"]
@@ -194,6 +194,16 @@ def bench(session: nox.Session) -> None:
     with open(record, encoding="utf-8") as fh:
         if not json.load(fh).get("passed"):
             session.error(f"locbench verify failed: re-run runs differ from the stored ones (see {record})")
+
+
+@nox.session(python=PYTHON, default=False)
+def tune(session: nox.Session) -> None:
+    """Tune every study of suite 'tuned' on its train data (each tunable filter on each world and MRCLAM fold, the
+    same budget) and write the journals and results/tuning/tuned.json, which are committed and which 'nox -s bench'
+    runs on test data. Arguments after -- go to 'locbench tune --suite' (e.g. --executor dask --scheduler FILE)."""
+    _install(session, "all")
+    args = list(session.posargs) or ["--jobs", "2"]
+    session.run("locbench", "tune", "--suite", "--results", "results", *args, env=_data_env())
 
 
 @nox.session(python=PYTHON, default=False)

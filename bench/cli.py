@@ -174,23 +174,43 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _run_tuned(args: argparse.Namespace) -> int:
-    """Suite ``tuned``: every study (tuning on train data), then the tuned and default configurations on test data."""
+    """Suite ``tuned``: the tuned configurations of ``RESULTS/tuning/tuned.json`` and their defaults on test data."""
     from locbench.run.sweep import SweepResult
-    from locbench.run.tuning import run_tuned_suite
+    from locbench.run.tuning import read_summary, run_tuned_suite
 
+    if not read_summary(args.results) and len(args.suite) > 1:
+        # the other suites ran: say why this one did not, and leave the exit code to them
+        print(f"  suite tuned skipped: no tuned configurations in {args.results}/tuning; tune with 'nox -s tune'")
+        return 0
     res = run_tuned_suite(args.results, executor=args.executor, jobs=args.jobs, scheduler=args.scheduler)
     for s, reason in res.skipped:
-        print(f"  tuned: skipped {s.filter} on {', '.join(s.train)}: {reason}")
+        print(f"  tuned: skipped {s.filter} on {', '.join(s.test)}: {reason}")
     if res.interrupted:
-        print("interrupted: suite tuned stopped; the finished trials are kept; run the same command to resume")
+        print("interrupted: suite tuned stopped; run the same command to resume")
+        return 130
+    return _print_summary(SweepResult(res.outcomes, len(res.outcomes)), args.results)
+
+
+def _tune_suite(args: argparse.Namespace, scheduler: str | None) -> int:
+    """``locbench tune --suite``: every study of suite ``tuned`` on its train data, written to RESULTS/tuning."""
+    from locbench.run.tuning import SUITE_TRIALS, tune_suite
+
+    trials = args.trials if args.trials is not None else SUITE_TRIALS
+    res = tune_suite(args.results, executor=args.executor, jobs=args.jobs, scheduler=scheduler, trials=trials)
+    for s, reason in res.skipped:
+        print(f"skipped {s.filter} on {', '.join(s.train)}: {reason}")
+    if res.interrupted:
+        print("interrupted: the finished trials are kept in the journals; run the same command to resume")
         return 130
     for s, r in res.studies:
         best = r.best
+        where = s.world + (f" ({s.fold} held out)" if s.fold else "")
         print(
-            f"  tuned {s.filter} on {s.world}: {len(r.trials)} trials x {len(s.train) * s.seeds} train runs, best "
+            f"{s.filter} on {where}: {len(r.trials)} trials x {len(s.train) * s.seeds} train runs, best "
             + (f"{best.value:.4g} ({r.objective}): {best.spec}" if best else "none (every trial failed)")
         )
-    return _print_summary(SweepResult(res.outcomes, len(res.outcomes)), args.results)
+    print(f"{len(res.studies)} studies written to {Path(args.results) / 'tuning'}")
+    return 1 if any(reason.startswith("failed") for _, reason in res.skipped) else 0
 
 
 #: Most worker processes ``--jobs`` asks for.
@@ -286,7 +306,11 @@ def _cmd_verify(args: argparse.Namespace) -> int:
         raise ConfigError(
             f"{store.root}: not a locbench results folder (no {MARKER} file); expected a folder 'locbench run' wrote"
         )
+    from locbench.run.tuning import verify_trials
+
     res = verify(store, args.fraction, args.seed, jobs=args.jobs)
+    # and a sample of the committed tuning trials (one per filter), re-run on their train data
+    res.trials = verify_trials(args.results, args.seed, jobs=args.jobs)
     record = write_record(store, res)
     for line in res.problems():
         print(f"differs: {line}")
@@ -294,7 +318,9 @@ def _cmd_verify(args: argparse.Namespace) -> int:
     print(
         f"verify {state}: {len(res.checked)} of {res.stored} stored runs re-run with the truth and bound of "
         f"{res.realisations} realisation(s), {len(res.differ) + len(res.artefacts)} differ "
-        f"(fraction {args.fraction:g}, seed {args.seed}); record {record}"
+        f"(fraction {args.fraction:g}, seed {args.seed})"
+        + (f"; {len(res.trials)} tuning trial(s) re-run on their train data" if res.trials else "")
+        + f"; record {record}"
     )
     return 0 if res.passed else 1
 
@@ -304,15 +330,26 @@ def _cmd_tune(args: argparse.Namespace) -> int:
     from locbench.run.tuning import check_trials, train_seeds, tune
 
     # every argument is bounded as for 'run', before the study's journal is opened or anything runs
-    check_trials(args.trials)
+    if args.suite:
+        if args.filter or args.dataset or args.seeds is not None:
+            raise ConfigError("--suite tunes every study of suite 'tuned': it takes no FILTER, --dataset or --seeds")
+    elif not (args.filter and args.dataset and args.trials is not None and args.seeds is not None):
+        raise ConfigError("tune needs FILTER, --dataset, --trials and --seeds (or --suite for every study)")
+    if args.trials is not None:
+        check_trials(args.trials)
     if args.max_seeds < 1:
         raise ConfigError(f"--max-seeds must be >= 1, got {args.max_seeds}")
-    train_seeds(args.seeds, args.max_seeds)
+    seeds: int = args.seeds if args.seeds is not None else 0
+    trials: int = args.trials if args.trials is not None else 0
+    if not args.suite:
+        train_seeds(seeds, args.max_seeds)
     if not 1 <= args.jobs <= MAX_JOBS:
         raise ConfigError(f"--jobs: expected 1-{MAX_JOBS} processes, got {args.jobs}")
     if args.scheduler is not None and args.executor != "dask":
         raise ConfigError("--scheduler needs --executor dask")
     scheduler = scheduler_address(args.scheduler) if args.scheduler is not None else None
+    if args.suite:
+        return _tune_suite(args, scheduler)
 
     def show(t: Any) -> None:
         value = f"{t.value:.6g}" if t.value != float("inf") else "worst (" + t.message + ")"
@@ -321,8 +358,8 @@ def _cmd_tune(args: argparse.Namespace) -> int:
     res = tune(
         args.filter,
         args.dataset,
-        args.trials,
-        args.seeds,
+        trials,
+        seeds,
         args.results,
         executor=args.executor,
         jobs=args.jobs,
@@ -605,13 +642,19 @@ def build_parser() -> argparse.ArgumentParser:
         "tune",
         help="tune a filter's tunable parameters on train data (optuna TPE); prints the best spec last",
     )
-    tu.add_argument("filter", metavar="FILTER", help="a filter id or a spec whose parameters stay fixed")
+    tu.add_argument("filter", metavar="FILTER", nargs="?", help="a filter id or a spec whose parameters stay fixed")
     tu.add_argument(
-        "--dataset", nargs="+", action="extend", required=True, metavar="SPEC", help="train datasets (e.g. room)"
+        "--suite",
+        action="store_true",
+        help="every study of suite 'tuned' (each tunable filter, each world and MRCLAM fold, the same budget); "
+        "writes RESULTS/tuning/tuned.json, which 'locbench run --suite tuned' runs on test data",
     )
-    tu.add_argument("--trials", type=int, required=True, help="finished trials the study should hold")
+    tu.add_argument("--dataset", nargs="+", action="extend", metavar="SPEC", help="train datasets (e.g. room)")
     tu.add_argument(
-        "--seeds", type=int, required=True, help="train seeds per dataset (1000 .. 1000+K-1, apart from test seeds)"
+        "--trials", type=int, default=None, help="finished trials the study should hold (--suite: the suite's budget)"
+    )
+    tu.add_argument(
+        "--seeds", type=int, default=None, help="train seeds per dataset (1000 .. 1000+K-1, apart from test seeds)"
     )
     tu.add_argument("--objective", choices=("ate", "nll"), default="ate", help="mean ATE (default) or NLL")
     tu.add_argument(

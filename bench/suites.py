@@ -373,14 +373,15 @@ def _make_suites() -> dict[str, Suite]:
             "office: the EKF, the UKF, the invariant EKF and pf on 20 seeds, the first three on 50 at 45 deg "
             "(UKF-M's 2-D question)",
         ),
-        # Run by locbench.run.tuning (locbench run --suite tuned), not as blocks: each tunable filter tuned on train
-        # seeds and recordings, then its tuned configuration and its default on the test data (docs/protocols.md,
+        # Run by locbench.run.tuning (locbench run --suite tuned), not as blocks: the tuned configurations that
+        # locbench tune --suite committed to RESULTS/tuning, and their defaults, on the test data (docs/protocols.md,
         # Tuning).
         Suite(
             "tuned",
             (),
-            "every tunable filter tuned (optuna TPE, the same budget each) on room, office and MRCLAM 6 robots 1-3, "
-            "then run on the test seeds 0-19 and robots 4-5 beside its default",
+            "every tunable filter's tuned configuration (optuna TPE, the same budget each, tuned apart by 'locbench "
+            "tune --suite' on train seeds of room and office and leave-one-robot-out on MRCLAM 6) beside its default "
+            "on the test seeds 0-19 and on each held-out robot",
         ),
         Suite(
             "smoke",

@@ -12,7 +12,7 @@ does not look at any filter's result; the derivation functions take the split an
   odometry calibration), so the two never meet while N <= 1000.
 * **MRCLAM Dataset 6** (five robots): leave-one-robot-out cross-validation, five folds (:func:`mrclam_folds`): fold r
   holds robot r out and tunes on the other four. The nominal noise a run of robot r is given is derived on fold r's
-  tuning robots. The tuned suite keeps its own split, robots 1-3 tune and 4-5 test (:data:`MRCLAM_TUNED`).
+  tuning robots; the tuned suite's study of fold k gives its train robots fold k's noise (``noise_fold``).
 * **Radish sites** (the eleven published corrected logs, :data:`RADISH_SITES`): 7 tuning and 4 test sites by the
   rule of :func:`radish_split`: intel, aces and freiburg-079 tune (the paired sites: the only logs with raw
   odometry, which the encoder-error fit needs); the other eight, sorted by name, alternate tuning, test, tuning, ...
@@ -132,10 +132,12 @@ def mrclam_folds() -> tuple[Split, ...]:
     return tuple(mrclam_fold(r) for r in MRCLAM_ROBOTS)
 
 
-#: The tuned suite's own split of Dataset 6: robots 1-3 tune (one run each), robots 4-5 test.
-MRCLAM_TUNED = Split(
-    "mrclam tuned suite", (1, 2, 3), (4, 5), "the tuned suite: the first three robots tune, the last two test"
+#: The robots as units of their defaults: each robot's default noise is its own fold's, derived without it, so every
+#: robot is a test unit of its default (a tuned configuration's units are its study's fold).
+MRCLAM_DEFAULTS = Split(
+    "mrclam defaults", (), MRCLAM_ROBOTS, "every robot's default noise is derived without it: each is a test unit"
 )
+
 
 # --- Radish ----------------------------------------------------------------------------------------------------
 
@@ -197,8 +199,8 @@ LIBRSF_SPLIT = Split(
 __all__: Sequence[str] = (
     "CALIBRATION_SEEDS",
     "LIBRSF_SPLIT",
+    "MRCLAM_DEFAULTS",
     "MRCLAM_ROBOTS",
-    "MRCLAM_TUNED",
     "RADISH_SITES",
     "RADISH_SPLIT",
     "SYNTHETIC_CALIBRATION",

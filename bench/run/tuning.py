@@ -21,8 +21,17 @@ each finished trial's value is derived again from its runs (any run missing from
 a journal whose value differs, or that is not an optuna journal at all, is refused with one line naming the file.
 
 The protocol (docs/protocols.md, "Tuning"): train seeds start at :data:`TRAIN_SEED_START`, disjoint from the test
-seeds 0 .. N-1 of the comparison; recordings are split by robot (MRCLAM Dataset 6 robots 1-3 tune, 4-5 test); every
-filter gets the same budget, trials x train runs; a tuned configuration is only reported on its test data.
+seeds 0 .. N-1 of the comparison; the recordings are cross-validated by robot (MRCLAM Dataset 6, leave one robot
+out: the configuration reported for robot k is tuned on the other four); every filter and study gets the same budget,
+:data:`SUITE_TRIALS` trials x :data:`SUITE_TRAIN_RUNS` train runs, with optuna's multivariate TPE; a tuned
+configuration is only reported on its test data.
+
+Tuning and testing are two steps. :func:`tune_suite` (``locbench tune --suite``, ``nox -s tune``) runs every study
+and writes the studies' journals and ``tuned.json`` (every trial's spec and objective, the budget, the sampler and
+its seed, the commit and versions) into the results folder, where they are committed; :func:`run_tuned_suite`
+(``locbench run --suite tuned``, part of ``nox -s bench``) reads them and runs each tuned configuration and its
+default on the test data only. :func:`verify_trials` re-runs a sample of the committed trials and compares their
+objective with the journal's.
 """
 
 from __future__ import annotations
@@ -36,6 +45,7 @@ import math
 import os
 import signal
 import socket
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -46,7 +56,8 @@ import numpy as np
 from locbench.core.errors import ConfigError, DependencyNotInstalled, LocbenchError, one_line, shown
 from locbench.core.spec import format_spec, non_default_params, parse_spec
 from locbench.core.tunable import TunableRange, tunable_fields
-from locbench.datasets.splits import MRCLAM_TUNED, TUNING_SEED_START, test_seeds, tuning_seeds
+from locbench.datasets.splits import TUNING_SEED_START, test_seeds, tuning_seeds
+from locbench.datasets.splits import mrclam_folds as splits_mrclam_folds
 from locbench.evaluate.metrics import ATE_M, NLL
 from locbench.registry import FILTERS, resolve_dataset, resolve_filter
 from locbench.run.store import Store
@@ -67,8 +78,11 @@ SPEC_DIGITS = 4
 TUNING_DIR = "tuning"
 #: What the tuned suite writes after tuning: each study's trials and best configuration, for the report.
 SUMMARY_FILE = "tuned.json"
-#: The study protocol's version, in a journal's name: a journal of an older protocol (no default trial) is not resumed.
-STUDY_VERSION = 2
+#: The study protocol's version, in a journal's name: a journal of an older protocol (no default trial, a univariate
+#: sampler) is not resumed.
+STUDY_VERSION = 3
+#: Random trials before TPE models the observations (optuna's own default), after the default trial.
+STARTUP_TRIALS = 10
 #: The user attribute that marks a study's default trial (the plain spec, evaluated first).
 DEFAULT_ATTR = "default"
 #: The user attribute naming the process that runs a trial (host, pid, start time): a trial left running by a
@@ -462,11 +476,14 @@ def tune(
             trial = study.ask()  # no parameters: the sampler's observations of each parameter leave it out
         else:
             # Re-seeded per trial from the study's state: a resumed study asks what an uninterrupted one would have.
-            # The startup count includes the default, which has no parameters: half the searched trials are random.
-            startup = 1 + max(2, (trials - 1) // 2)
-            study.sampler = optuna.samplers.TPESampler(
-                seed=sampler_seed + len(live), n_startup_trials=startup, constant_liar=True
-            )
+            # The startup count includes the default, which has no parameters: STARTUP_TRIALS random ones (half the
+            # searched trials in a small study); multivariate, since noise scales and gates act together.
+            startup = 1 + min(STARTUP_TRIALS, max(2, (trials - 1) // 2))
+            with warnings.catch_warnings():  # multivariate TPE is marked experimental since optuna 2.2; it is tested
+                warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+                study.sampler = optuna.samplers.TPESampler(
+                    seed=sampler_seed + len(live), n_startup_trials=startup, constant_liar=True, multivariate=True
+                )
             trial = study.ask(dists)
         try:
             trial.set_user_attr(OWNER_ATTR, _owner())
@@ -498,33 +515,61 @@ def tune(
 # --- the tuned suite -----------------------------------------------------------------------------------------
 
 
-#: Trials per study and train runs per trial of the tuned suite: the budget every filter gets (docs/protocols.md).
-SUITE_TRIALS = 4
-SUITE_TRAIN_SEEDS = 3
+#: Trials per study and train runs per trial of the tuned suite: the budget every filter and every study gets
+#: (docs/protocols.md, "Tuning"). 30 trials are the default, 10 random ones (:data:`STARTUP_TRIALS`) and 19 that the
+#: multivariate TPE proposes, over 2-5 parameters per filter; 4 train runs are what leave-one-robot-out leaves on
+#: MRCLAM (the other four robots, one run each), and the worlds get 4 train seeds to match.
+SUITE_TRIALS = 30
+SUITE_TRAIN_RUNS = 4
+#: The TPE sampler's base seed of every study of the suite.
+SUITE_SAMPLER_SEED = 0
 #: The test seeds of the synthetic worlds: the main comparison's own (suite ``default``), so the default rows are
 #: the stored ones and tuned and default runs are paired by seed.
 SUITE_TEST_SEEDS = 20
-#: MRCLAM Dataset 6: robots 1-3 tune (one run each, 3 train runs per trial as on the worlds), robots 4-5 test
-#: (:data:`locbench.datasets.splits.MRCLAM_TUNED`).
-MRCLAM_TRAIN = tuple(f"mrclam[robot={r}]" for r in MRCLAM_TUNED.tuning)
-MRCLAM_TEST = tuple(f"mrclam[robot={r}]" for r in MRCLAM_TUNED.test)
 SYNTHETIC_WORLDS = ("room", "office")
+#: The format of ``tuned.json`` (2: an object with the budget, sampler and provenance around the studies).
+SUMMARY_FORMAT = 2
+
+
+def mrclam_folds() -> list[tuple[tuple[str, ...], str]]:
+    """Leave-one-robot-out on MRCLAM Dataset 6 (:func:`locbench.datasets.splits.mrclam_folds`): per fold k, the
+    train specs (the other robots, each given fold k's nominal noise, which was derived without robot k) and the
+    test spec (robot k, with its own fold's noise, the default)."""
+    out = []
+    for fold in splits_mrclam_folds():
+        (k,) = fold.test
+        train = tuple(f"mrclam[robot={r},noise_fold={k}]" for r in fold.tuning)
+        out.append((train, f"mrclam[robot={k}]"))
+    return out
 
 
 @dataclass(frozen=True)
 class SuiteStudy:
-    """One study of the tuned suite: a filter tuned on train data, and the test data its best configuration runs on."""
+    """One study of the tuned suite: a filter tuned on train data, and the test data its best configuration runs on.
+
+    ``fold`` names the held-out unit of a cross-validated study (``robot 4``), "" for a world split by seed.
+    """
 
     filter: str
     train: tuple[str, ...]
     seeds: int
     test: tuple[str, ...]
     test_seeds: tuple[int, ...]
+    fold: str = ""
 
     @property
     def world(self) -> str:
         """The study's data, as the report names it: the world, or ``mrclam`` for the recordings."""
         return parse_spec(self.train[0])[0]
+
+    def same_split(self, entry: dict[str, Any]) -> bool:
+        """Whether a ``tuned.json`` study entry was tuned for this study (filter, train data and seeds, test data)."""
+        return (
+            entry.get("filter") == self.filter
+            and list(entry.get("train", ())) == list(self.train)
+            and len(entry.get("train_seeds", ())) == self.seeds
+            and list(entry.get("test", ())) == list(self.test)
+        )
 
 
 def tuned_filters() -> list[str]:
@@ -543,8 +588,8 @@ def tuned_filters() -> list[str]:
 
 
 def suite_studies() -> list[SuiteStudy]:
-    """Every study of the tuned suite: each tunable filter on each world it runs on, and the landmark filters on
-    the MRCLAM train robots; in a fixed order."""
+    """Every study of the tuned suite: each tunable filter on each world it runs on (train seeds against the
+    comparison's test seeds), and the landmark filters on each MRCLAM fold; in a fixed order."""
     from locbench.datasets.dataset import MapKind
 
     out: list[SuiteStudy] = []
@@ -556,9 +601,11 @@ def suite_studies() -> list[SuiteStudy]:
             if world == "room" and not landmark_only:
                 continue
             test = test_seeds(SUITE_TEST_SEEDS)
-            out.append(SuiteStudy(f, (world,), SUITE_TRAIN_SEEDS, (world,), test))
+            out.append(SuiteStudy(f, (world,), SUITE_TRAIN_RUNS, (world,), test))
         if landmark_only:
-            out.append(SuiteStudy(f, MRCLAM_TRAIN, 1, MRCLAM_TEST, (0,)))
+            for train, held_out in mrclam_folds():
+                robot = resolve_dataset(held_out).params.robot
+                out.append(SuiteStudy(f, train, 1, (held_out,), (0,), fold=f"robot {robot}"))
     return out
 
 
@@ -573,8 +620,8 @@ def _study_available(s: SuiteStudy) -> str | None:
     return reason
 
 
-def _run_study(s: SuiteStudy, results: str, trials: int) -> TuneResult:
-    return tune(s.filter, s.train, trials, s.seeds, results, fail_stale=True)
+def _run_study(s: SuiteStudy, results: str, trials: int, sampler_seed: int) -> TuneResult:
+    return tune(s.filter, s.train, trials, s.seeds, results, fail_stale=True, sampler_seed=sampler_seed)
 
 
 def _pool_init() -> None:
@@ -583,7 +630,8 @@ def _pool_init() -> None:
 
 @dataclass
 class SuiteResult:
-    """What :func:`run_tuned_suite` did: each study's result, the skipped studies, the test sweep's outcomes."""
+    """What :func:`tune_suite` or :func:`run_tuned_suite` did: each study's result (tuning only), the skipped
+    studies with why, the test sweep's outcomes (testing only)."""
 
     studies: list[tuple[SuiteStudy, TuneResult]]
     skipped: list[tuple[SuiteStudy, str]]
@@ -591,25 +639,22 @@ class SuiteResult:
     interrupted: bool = False
 
 
-def run_tuned_suite(
+def tune_suite(
     results: str,
     *,
     executor: str = "local",
     jobs: int = 1,
     scheduler: str | None = None,
     trials: int = SUITE_TRIALS,
+    sampler_seed: int = SUITE_SAMPLER_SEED,
     studies: Sequence[SuiteStudy] | None = None,
 ) -> SuiteResult:
-    """Tune every study of the suite, then run each best configuration and the default on the test data.
+    """Run every study of the suite on its train data and write ``<results>/tuning/tuned.json``.
 
     With the local executor the studies run in a pool of ``jobs`` processes, one study per process at a time (a
-    trial's few runs would not fill a pool); with dask each trial's runs go to the dask workers. The test runs are
-    one sweep into ``results`` (the default rows are the comparison's stored runs where present). Writes
-    ``<results>/tuning/tuned.json`` for the report.
+    trial's few runs would not fill a pool); with dask each trial's runs go to the dask workers. Interrupted, the
+    journals keep the finished trials and ``tuned.json`` is not written: the same command resumes.
     """
-    from locbench.run.plan import plan_sweep
-    from locbench.run.sweep import run_sweep
-
     todo = list(studies) if studies is not None else suite_studies()
     ready: list[SuiteStudy] = []
     skipped: list[tuple[SuiteStudy, str]] = []
@@ -622,7 +667,7 @@ def run_tuned_suite(
         # Longest first: the recordings' studies of the particle filter dominate.
         order = sorted(ready, key=lambda s: (not s.train[0].startswith("mrclam"), s.filter != "pf"))
         pool = cf.ProcessPoolExecutor(max_workers=jobs, initializer=_pool_init)
-        futures = {pool.submit(_run_study, s, results, trials): s for s in order}
+        futures = {pool.submit(_run_study, s, results, trials, sampler_seed): s for s in order}
         try:
             for fut in cf.as_completed(futures):
                 try:
@@ -639,7 +684,17 @@ def run_tuned_suite(
     else:
         for s in ready:
             try:
-                r = tune(s.filter, s.train, trials, s.seeds, results, executor=executor, jobs=jobs, scheduler=scheduler)
+                r = tune(
+                    s.filter,
+                    s.train,
+                    trials,
+                    s.seeds,
+                    results,
+                    executor=executor,
+                    jobs=jobs,
+                    scheduler=scheduler,
+                    sampler_seed=sampler_seed,
+                )
             except LocbenchError as exc:
                 skipped.append((s, f"failed: {exc}"))
                 continue
@@ -651,20 +706,83 @@ def run_tuned_suite(
         return SuiteResult(done, skipped, [], True)
     index = {id(s): i for i, s in enumerate(ready)}
     done.sort(key=lambda sr: index[id(sr[0])])
+    write_summary(results, done, trials=trials, sampler_seed=sampler_seed)
+    return SuiteResult(done, skipped, [])
+
+
+def run_tuned_suite(
+    results: str,
+    *,
+    executor: str = "local",
+    jobs: int = 1,
+    scheduler: str | None = None,
+    studies: Sequence[SuiteStudy] | None = None,
+) -> SuiteResult:
+    """Run each tuned configuration of ``<results>/tuning/tuned.json`` and its default on the study's test data.
+
+    Nothing is tuned here (:func:`tune_suite` does that, apart): a declared study with no entry in ``tuned.json``
+    for its split, or whose tuned spec no longer resolves, is skipped with the reason. The test runs are one sweep
+    into ``results`` (the default rows are the comparison's stored runs where present).
+
+    Raises
+    ------
+    ConfigError
+        ``tuned.json`` is absent or holds no study: tune first.
+    """
+    from locbench.run.plan import plan_sweep
+    from locbench.run.sweep import run_sweep
+
+    entries = read_summary(results)
+    if not entries:
+        raise ConfigError(
+            f"{Path(results) / TUNING_DIR / SUMMARY_FILE}: no tuned configurations; tune first with "
+            "'nox -s tune' (locbench tune --suite --results RESULTS)"
+        )
+    todo = list(studies) if studies is not None else suite_studies()
+    skipped: list[tuple[SuiteStudy, str]] = []
     blocks: list[tuple[Sequence[str], Sequence[str], Sequence[int]]] = []
-    for s, r in done:
-        best = r.best
+    for s in todo:
+        entry = next((e for e in entries if s.same_split(e)), None)
+        reason = _study_available(s)
+        if reason is None and entry is None:
+            reason = "not tuned for this split (tune with 'nox -s tune')"
+        if reason is None and entry is not None:
+            reason = _stale(entry)
+        if reason is not None or entry is None:
+            skipped.append((s, reason or ""))
+            continue
         plain = resolve_filter(s.filter).name
-        specs = [plain] + ([best.spec] if best is not None and best.spec != plain else [])
+        best = entry.get("best_spec")
+        specs = [plain] + ([str(best)] if best and best != plain else [])
         blocks.append((specs, s.test, s.test_seeds))
     plan = plan_sweep(blocks, results)
     sweep = run_sweep(plan, executor, jobs, scheduler)
-    write_summary(results, done)
-    return SuiteResult(done, skipped, sweep.outcomes, sweep.interrupted)
+    return SuiteResult([], skipped, sweep.outcomes, sweep.interrupted)
 
 
-def write_summary(results: str, done: Sequence[tuple[SuiteStudy, TuneResult]]) -> Path:
-    """Write ``<results>/tuning/tuned.json``: per study the filter, data, budget, trials and best configuration."""
+def _stale(entry: dict[str, Any]) -> str | None:
+    """Why a ``tuned.json`` entry cannot be run as tuned (its best spec no longer resolves), or None."""
+    best = entry.get("best_spec")
+    if not best:
+        return "every trial of its study failed"
+    try:
+        resolve_filter(str(best))
+    except LocbenchError as exc:
+        return f"its tuned spec no longer resolves ({one_line(str(exc))}): tune again with 'nox -s tune'"
+    return None
+
+
+def write_summary(
+    results: str,
+    done: Sequence[tuple[SuiteStudy, TuneResult]],
+    *,
+    trials: int = SUITE_TRIALS,
+    sampler_seed: int = SUITE_SAMPLER_SEED,
+) -> Path:
+    """Write ``<results>/tuning/tuned.json``: the budget, the sampler, the commit and versions, and per study the
+    filter, split, every trial (spec, objective), the best configuration and the search space."""
+    from locbench.run import provenance
+
     out = []
     for s, r in done:
         best = r.best
@@ -675,11 +793,13 @@ def write_summary(results: str, done: Sequence[tuple[SuiteStudy, TuneResult]]) -
             {
                 "filter": s.filter,
                 "world": s.world,
+                "fold": s.fold,
                 "train": list(s.train),
                 "train_seeds": list(r.seeds),
                 "test": list(s.test),
                 "test_seeds": list(s.test_seeds),
                 "objective": r.objective,
+                "journal": journal_path("", r.name).as_posix(),
                 "trials": [asdict(t) for t in r.trials],
                 "budget_runs": r.budget_runs,
                 "best_spec": best.spec if best else None,
@@ -690,25 +810,54 @@ def write_summary(results: str, done: Sequence[tuple[SuiteStudy, TuneResult]]) -
                 "ranges": {k: rng.describe() for k, rng in space.items()},
             }
         )
+    git = provenance.git_state()
+    doc = {
+        "format": SUMMARY_FORMAT,
+        "budget": {"trials": trials, "train_runs": SUITE_TRAIN_RUNS},
+        "sampler": {
+            "name": "optuna TPESampler",
+            "multivariate": True,
+            "startup_trials": STARTUP_TRIALS,
+            "seed": sampler_seed,
+        },
+        "commit": git["commit"],
+        "dirty": git["dirty"],
+        "versions": provenance.versions(),
+        "studies": out,
+    }
     path = Path(results) / TUNING_DIR / SUMMARY_FILE
     path.parent.mkdir(parents=True, exist_ok=True)
-    text = json.dumps(out, indent=1, default=str, allow_nan=True) + "\n"
+    text = json.dumps(doc, indent=1, default=str, allow_nan=True) + "\n"
     tmp = path.with_name(f".tmp-{SUMMARY_FILE}")
     tmp.write_text(text, encoding="utf-8")
     tmp.replace(path)
     return path
 
 
-def read_summary(results: str | os.PathLike[str]) -> list[dict[str, Any]]:
-    """The tuned suite's summary (``tuned.json``), or an empty list when the suite has not run."""
+def read_tuning(results: str | os.PathLike[str]) -> dict[str, Any]:
+    """The whole ``tuned.json`` (budget, sampler, provenance, studies), or an empty dict when nothing was tuned.
+
+    Raises :class:`ConfigError` naming the file when it is unreadable or of another format.
+    """
     path = Path(results) / TUNING_DIR / SUMMARY_FILE
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
-        return []
-    except (OSError, json.JSONDecodeError) as exc:
-        raise ConfigError(f"{path}: unreadable tuning summary ({exc}); rerun 'locbench run --suite tuned'") from None
-    return data if isinstance(data, list) else []
+        return {}
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{path}: unreadable tuning summary ({exc}); tune again with 'nox -s tune'") from None
+    if not isinstance(data, dict) or data.get("format") != SUMMARY_FORMAT or not isinstance(data.get("studies"), list):
+        raise ConfigError(
+            f"{path}: expected a tuning summary of format {SUMMARY_FORMAT} (an object with 'studies'); "
+            "tune again with 'nox -s tune'"
+        )
+    return data
+
+
+def read_summary(results: str | os.PathLike[str]) -> list[dict[str, Any]]:
+    """The studies of ``tuned.json`` (:func:`read_tuning`), or an empty list when nothing was tuned."""
+    studies: list[dict[str, Any]] = read_tuning(results).get("studies", [])
+    return studies
 
 
 def tuned_cells(results: str | os.PathLike[str]) -> set[tuple[str, str]]:
@@ -721,3 +870,85 @@ def tuned_cells(results: str | os.PathLike[str]) -> set[tuple[str, str]]:
             if st.get("best_spec"):
                 cells.add((dname, str(st["best_spec"])))
     return cells
+
+
+# --- re-running committed trials -----------------------------------------------------------------------------
+
+
+#: Largest relative difference between a re-run trial's objective and its journal's that passes: our code against
+#: itself on one machine gives 0; another CPU's numpy, OpenBLAS and gtsam kernels move a run's ATE by up to about
+#: 2e-5 relative (docs/reproduction.md), so a committed study is checked on any machine.
+TRIAL_RTOL = 1e-4
+
+
+@dataclass(frozen=True)
+class TrialCheck:
+    """One committed trial re-run on its train data: the journal's objective against the fresh one."""
+
+    filter: str
+    world: str
+    fold: str
+    number: int
+    spec: str
+    stored: float
+    fresh: float
+
+    @property
+    def rel_diff(self) -> float:
+        """|fresh - stored| / |stored| (0 when both are equal, +inf when only one is finite)."""
+        if self.fresh == self.stored:
+            return 0.0
+        if not (math.isfinite(self.fresh) and math.isfinite(self.stored)):
+            return math.inf
+        return abs(self.fresh - self.stored) / max(abs(self.stored), 1e-300)
+
+    @property
+    def passed(self) -> bool:
+        """Within :data:`TRIAL_RTOL`."""
+        return self.rel_diff <= TRIAL_RTOL
+
+
+def sample_trials(entries: Sequence[dict[str, Any]], seed: int) -> list[tuple[dict[str, Any], dict[str, Any]]]:
+    """One (study, trial) per filter of ``entries``, drawn with ``seed``: a study of the filter, then one of its
+    finished trials other than the default (whose runs are the comparison's own), else the default."""
+    rng = np.random.default_rng(seed)
+    out: list[tuple[dict[str, Any], dict[str, Any]]] = []
+    for f in sorted({str(e["filter"]) for e in entries}):
+        studies = [e for e in entries if e["filter"] == f and e.get("trials")]
+        if not studies:
+            continue
+        study = studies[int(rng.integers(len(studies)))]
+        trials = study["trials"]
+        searched = [t for t in trials if t["number"] != 0] or list(trials)
+        out.append((study, searched[int(rng.integers(len(searched)))]))
+    return out
+
+
+def verify_trials(
+    results: str | os.PathLike[str], seed: int = 0, *, executor: str = "local", jobs: int = 1
+) -> list[TrialCheck]:
+    """Re-run a sample of the committed trials (:func:`sample_trials`) on their train data, in a store of their own
+    that is deleted after, and score them as the study did (an empty list when nothing was tuned)."""
+    import tempfile
+
+    from locbench.run.plan import plan_sweep
+    from locbench.run.sweep import run_sweep
+
+    checks: list[TrialCheck] = []
+    for study, trial in sample_trials(read_summary(results), seed):
+        seeds = [int(x) for x in study["train_seeds"]]
+        names = [resolve_dataset(d).name for d in study["train"]]
+        with tempfile.TemporaryDirectory(prefix="locbench-trial-") as tmp:
+            store = Store(tmp)
+            store.claim()
+            plan = plan_sweep([([trial["spec"]], names, seeds)], store)
+            if run_sweep(plan, executor, jobs).interrupted:
+                raise KeyboardInterrupt
+            fresh, _ = score_trial(store, trial["spec"], names, seeds, study["objective"])
+        stored = float(trial["value"])
+        checks.append(
+            TrialCheck(
+                study["filter"], study["world"], study.get("fold", ""), trial["number"], trial["spec"], stored, fresh
+            )
+        )
+    return checks

@@ -100,14 +100,26 @@ class VerifyResult:
     #: The realisations whose truth and bound were checked, and those that differ: (label, what differs).
     realisations: int = 0
     artefacts: list[tuple[str, str]] = field(default_factory=list)
+    #: Committed tuning trials re-run on their train data (:func:`locbench.run.tuning.verify_trials`).
+    trials: list[Any] = field(default_factory=list)
 
     @property
     def passed(self) -> bool:
-        return not self.differ and not self.artefacts and bool(self.checked)
+        return not self.differ and not self.artefacts and bool(self.checked) and all(t.passed for t in self.trials)
 
     def problems(self) -> list[str]:
-        """One line per difference: each run's, then each realisation's truth and bound."""
-        return [f"{r.label()}: {why}" for r, why in self.differ] + [f"{w}: {why}" for w, why in self.artefacts]
+        """One line per difference: each run's, then each realisation's truth and bound, then each re-run trial
+        outside its tolerance."""
+        return (
+            [f"{r.label()}: {why}" for r, why in self.differ]
+            + [f"{w}: {why}" for w, why in self.artefacts]
+            + [
+                f"trial {t.number} of {t.filter} on {t.world}{f' ({t.fold})' if t.fold else ''}: objective "
+                f"{t.fresh!r} re-run, {t.stored!r} in the journal (relative difference {t.rel_diff:.3g})"
+                for t in self.trials
+                if not t.passed
+            ]
+        )
 
 
 def store_digest(run_keys: Iterable[str]) -> str:
@@ -403,6 +415,19 @@ def write_record(store: Store, result: VerifyResult) -> Path:
         "realisations": result.realisations,
         "store_digest": result.store_digest,
         "git_commit": git["commit"],
+        "trials": [
+            {
+                "filter": t.filter,
+                "world": t.world,
+                "fold": t.fold,
+                "trial": t.number,
+                "spec": t.spec,
+                "journal": t.stored,
+                "re_run": t.fresh,
+                "rel_diff": t.rel_diff,
+            }
+            for t in result.trials
+        ],
     }
     path = store.root / RECORD_NAME
     if os.path.lexists(path) and not _is_record(path):
@@ -435,6 +460,12 @@ def read_record(root: Path) -> dict[str, Any] | None:
     return data if isinstance(data, dict) else None
 
 
+def _trial_rtol() -> float:
+    from locbench.run.tuning import TRIAL_RTOL
+
+    return TRIAL_RTOL
+
+
 def record_text(record: dict[str, Any] | None, current_digest: str) -> str:
     """The provenance line: when verification last ran on this store and whether it passed."""
     if record is None:
@@ -444,6 +475,12 @@ def record_text(record: dict[str, Any] | None, current_digest: str) -> str:
         f"verify: {state} on {record.get('finished_utc', '?')}, {record.get('checked', 0)} of "
         f"{record.get('stored_runs', 0)} stored runs re-run (fraction {record.get('fraction')}, seed "
         f"{record.get('seed')}), every array except the call times bit-identical"
+        + (
+            f"; {len(record['trials'])} tuning trial(s) re-run on their train data, objectives within "
+            f"{_trial_rtol():g} relative of the journals' (largest {max(t['rel_diff'] for t in record['trials']):.2g})"
+            if record.get("trials")
+            else ""
+        )
         if record.get("passed")
         else f"verify: {state} on {record.get('finished_utc', '?')}: {len(record.get('differ', []))} difference(s) "
         f"among {record.get('checked', 0)} re-run runs and their truth and bounds"

@@ -713,10 +713,12 @@ def parse_robot_run(paths: dict[str, Path]) -> RobotRun:
 
 
 def dataset_from_run(
-    run: RobotRun, *, robot: int, waypoint_spacing_m: float, metadata: dict[str, Any], sources: Sequence[str] = ()
+    run: RobotRun, *, noise_fold: int, waypoint_spacing_m: float, metadata: dict[str, Any], sources: Sequence[str] = ()
 ) -> Dataset:
-    """Assemble the :class:`Dataset` of one parsed robot run of ``robot`` (see the module docstring); ``sources`` are
-    its files."""
+    """Assemble the :class:`Dataset` of one parsed robot run, given the nominal noise of fold ``noise_fold`` (the
+    robot's own fold unless a tuning study holds another robot out; see the module docstring); ``sources`` are its
+    files."""
+    robot = noise_fold
     if not (math.isfinite(waypoint_spacing_m) and waypoint_spacing_m > 0):
         raise ConfigError(f"waypoint_spacing_m must be a distance > 0 m, got {waypoint_spacing_m}")
     truth = run.truth
@@ -800,7 +802,11 @@ def load_mrclam(
     run = parse_robot_run(paths)
     meta = {"dataset": dataset, "robot": robot, "folder": str(Path(folder)), "verified": verify and dataset == 6}
     return dataset_from_run(
-        run, robot=robot, waypoint_spacing_m=waypoint_spacing_m, metadata=meta, sources=[str(p) for p in paths.values()]
+        run,
+        noise_fold=robot,
+        waypoint_spacing_m=waypoint_spacing_m,
+        metadata=meta,
+        sources=[str(p) for p in paths.values()],
     )
 
 
@@ -824,14 +830,23 @@ class MrclamParams:
         Robot (subject) number, 1..5.
     waypoint_spacing_m : float
         Distance travelled along the truth between waypoints, m.
+    noise_fold : int
+        The leave-one-robot-out fold whose frozen nominal noise the run is given (:data:`FOLD_NOISE`): 0, the
+        default, is the robot's own fold (derived without it); 1..5 another fold, as a tuning study of fold k
+        gives its train robots fold k's noise, so that nothing the study reads comes from robot k.
     """
 
     dataset: int = 6
     robot: int = 1
     waypoint_spacing_m: float = WAYPOINT_SPACING_M
+    noise_fold: int = 0
 
     def __post_init__(self) -> None:
         _check_numbers(self.dataset, self.robot)
+        if self.noise_fold != 0 and self.noise_fold not in FOLD_NOISE:
+            raise ConfigError(
+                f"noise_fold must be 0 (the robot's own fold) or one of {sorted(FOLD_NOISE)}, got {self.noise_fold!r}"
+            )
         if not (math.isfinite(self.waypoint_spacing_m) and self.waypoint_spacing_m >= PATH_STEP_M):
             raise ConfigError(
                 f"waypoint_spacing_m must be a distance >= {PATH_STEP_M} m (the step of the thinned path), "
@@ -875,7 +890,7 @@ class MrclamDataset(RecordedDataset):
         }
         return dataset_from_run(
             run,
-            robot=params.robot,
+            noise_fold=params.noise_fold or params.robot,
             waypoint_spacing_m=params.waypoint_spacing_m,
             metadata=meta,
             sources=[str(p) for p in paths.values()],

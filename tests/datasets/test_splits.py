@@ -29,10 +29,11 @@ def test_mrclam_has_five_leave_one_robot_out_folds() -> None:
     for f in folds:
         assert sorted(f.tuning + f.test) == list(mrclam.ROBOTS)  # type: ignore[type-var]
     assert sp.MRCLAM_ROBOTS == mrclam.ROBOTS
-    # the tuned suite keeps its own split
-    assert sp.MRCLAM_TUNED.tuning == (1, 2, 3) and sp.MRCLAM_TUNED.test == (4, 5)
-    assert tuple(f"mrclam[robot={r}]" for r in (1, 2, 3)) == tuning.MRCLAM_TRAIN
-    assert tuning.MRCLAM_TEST == ("mrclam[robot=4]", "mrclam[robot=5]")
+    # the tuned suite's folds are these: fold k's train robots are given fold k's noise, robot k its own
+    for f, (train, test) in zip(folds, tuning.mrclam_folds(), strict=True):
+        (k,) = f.test
+        assert train == tuple(f"mrclam[robot={r},noise_fold={k}]" for r in f.tuning)
+        assert test == f"mrclam[robot={k}]"
     with pytest.raises(ConfigError):
         sp.mrclam_fold(6)
 

@@ -11,7 +11,7 @@ import pytest
 
 from locbench.cli import main
 from locbench.core.tunable import TunableRange, tunable_fields
-from locbench.registry import FILTERS, resolve_filter
+from locbench.registry import FILTERS, resolve_dataset, resolve_filter
 from locbench.run import sweep
 from locbench.run.store import Store
 from locbench.suites import SUITES
@@ -156,15 +156,24 @@ def test_two_filters_get_the_same_budget(tmp_path: Path) -> None:
 
 
 def test_train_and_test_data_are_disjoint() -> None:
-    train = tuning.train_seeds(tuning.SUITE_TRAIN_SEEDS)
+    train = tuning.train_seeds(tuning.SUITE_TRAIN_RUNS)
     # no suite stores a run at a train seed: every stored comparison run is test data for a tuned filter
     assert min(train) > max(b.seeds for s in SUITES.values() for b in s.blocks)
+    held_out: dict[str, list[str]] = {}
     for s in tuning.suite_studies():
         if set(s.train) & set(s.test):  # a synthetic world: split by seed
             assert not set(tuning.train_seeds(s.seeds)) & set(s.test_seeds), s
-        else:  # recordings: split by robot
-            assert s.train == tuning.MRCLAM_TRAIN and s.test == tuning.MRCLAM_TEST
-    assert not set(tuning.MRCLAM_TRAIN) & set(tuning.MRCLAM_TEST)
+        else:  # recordings: leave one robot out, the others tune
+            assert len(s.test) == 1 and s.fold, s
+            (held,) = (resolve_dataset(d).params.robot for d in s.test)
+            train = [resolve_dataset(d).params for d in s.train]
+            # the other four robots, each with the held-out robot's fold of noise (derived without it)
+            assert sorted(p.robot for p in train) == [r for r in range(1, 6) if r != held]
+            assert {p.noise_fold for p in train} == {held}
+            held_out.setdefault(s.filter, []).extend(s.test)
+    # every robot is held out exactly once per filter
+    robots = sorted(test for _, test in tuning.mrclam_folds())
+    assert held_out and all(sorted(v) == robots for v in held_out.values()), held_out
 
 
 def test_a_diverging_trial_scores_as_the_worst(tmp_path: Path, harness_registry: None) -> None:
@@ -243,18 +252,84 @@ def test_cli_errors_are_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[s
     assert main(["tune", "ekf_landmarks", "--dataset", "tiny_line", "--trials", "0", "--seeds", "1"]) == 2
 
 
+def test_every_study_of_the_suite_has_the_same_budget_and_a_multivariate_sampler(tmp_path: Path) -> None:
+    assert {len(s.train) * s.seeds for s in tuning.suite_studies()} == {tuning.SUITE_TRAIN_RUNS}
+    studies = [tuning.SuiteStudy("ekf_landmarks", ("tiny_line",), 1, ("tiny_line",), (0,))]
+    res = tuning.tune_suite(str(tmp_path), trials=2, studies=studies)
+    doc = tuning.read_tuning(tmp_path)
+    assert doc["budget"] == {"trials": 2, "train_runs": tuning.SUITE_TRAIN_RUNS}
+    assert doc["sampler"]["multivariate"] is True and doc["sampler"]["seed"] == tuning.SUITE_SAMPLER_SEED
+    assert "numpy" in doc["versions"] and "commit" in doc
+    (entry,) = doc["studies"]
+    assert [t["spec"] for t in entry["trials"]] == [t.spec for t in res.studies[0][1].trials]
+    assert (tmp_path / entry["journal"]).is_file()
+
+
+def test_the_tuned_suite_runs_only_what_was_tuned(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    studies = [tuning.SuiteStudy("ekf_landmarks", ("tiny_line",), 1, ("tiny_line",), (0,))]
+    with pytest.raises(tuning.ConfigError, match=r"tuned\.json: no tuned configurations; tune first"):
+        tuning.run_tuned_suite(str(tmp_path), studies=studies)
+    tuning.tune_suite(str(tmp_path), trials=2, studies=studies)
+    # a study declared for another split is not run with this one's configuration
+    other = tuning.SuiteStudy("ekf_landmarks", ("tiny_circle",), 1, ("tiny_circle",), (0,))
+    res = tuning.run_tuned_suite(str(tmp_path), studies=[*studies, other])
+    assert [(s, why) for s, why in res.skipped] == [(other, "not tuned for this split (tune with 'nox -s tune')")]
+    assert {str(o.filter) for o in res.outcomes} <= {tuning.read_summary(tmp_path)[0]["best_spec"], "ekf_landmarks"}
+    # a summary of another format is refused, naming the file
+    path = tmp_path / "tuning" / "tuned.json"
+    path.write_text("[]\n", encoding="utf-8")
+    with pytest.raises(tuning.ConfigError, match=r"tuned\.json: expected a tuning summary of format 2"):
+        tuning.read_tuning(tmp_path)
+
+
+def test_verify_re_runs_a_sampled_trial_and_catches_a_changed_journal(tmp_path: Path) -> None:
+    studies = [tuning.SuiteStudy("ekf_landmarks", ("tiny_line",), 1, ("tiny_line",), (0,))]
+    tuning.tune_suite(str(tmp_path), trials=3, studies=studies)
+    (check,) = tuning.verify_trials(tmp_path, seed=0)
+    assert check.number != 0 and check.fresh == check.stored and check.passed
+    # the train runs are re-run in a store of their own, not read back from results/tuning/runs
+    path = tmp_path / "tuning" / "tuned.json"
+    doc = tuning.read_tuning(tmp_path)
+    for t in doc["studies"][0]["trials"]:
+        t["value"] *= 1.001
+    path.write_text(__import__("json").dumps(doc), encoding="utf-8")
+    (check,) = tuning.verify_trials(tmp_path, seed=0)
+    assert not check.passed and 9e-4 < check.rel_diff < 1.1e-3
+
+
+def test_cli_verify_records_the_re_run_trials(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    studies = [tuning.SuiteStudy("ekf_landmarks", ("tiny_line",), 1, ("tiny_line",), (0,))]
+    tuning.tune_suite(str(tmp_path), trials=2, studies=studies)
+    tuning.run_tuned_suite(str(tmp_path), studies=studies)
+    assert main(["verify", "--results", str(tmp_path), "--fraction", "1"]) == 0
+    assert "1 tuning trial(s) re-run on their train data" in capsys.readouterr().out
+    record = __import__("json").loads((tmp_path / "verify.json").read_text(encoding="utf-8"))
+    (trial,) = record["trials"]
+    assert trial["filter"] == "ekf_landmarks" and trial["rel_diff"] == 0.0 and record["passed"]
+
+
+def test_cli_tune_suite_arguments(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["tune", "--suite", "ekf_landmarks", "--results", str(tmp_path)]) == 2
+    assert "--suite tunes every study" in capsys.readouterr().err
+    assert main(["tune", "ekf_landmarks", "--dataset", "tiny_line", "--results", str(tmp_path)]) == 2
+    assert "tune needs FILTER, --dataset, --trials and --seeds" in capsys.readouterr().err
+
+
 @pytest.mark.slow
 def test_tuned_suite_reports_test_data_only(tmp_path: Path) -> None:
     studies = [tuning.SuiteStudy("ekf_landmarks", ("tiny_line",), 2, ("tiny_line",), (0, 1))]
-    res = tuning.run_tuned_suite(str(tmp_path), trials=3, studies=studies)
-    assert not res.interrupted and res.studies
-    best = res.studies[0][1].best
+    tuned = tuning.tune_suite(str(tmp_path), trials=3, studies=studies)
+    assert not tuned.interrupted and tuned.studies
+    best = tuned.studies[0][1].best
     assert best is not None
+    res = tuning.run_tuned_suite(str(tmp_path), studies=studies)
+    assert not res.interrupted and res.outcomes and not res.skipped
     from locbench.report import suite_filter, write_report
 
     paths = write_report(Store(tmp_path), keep=suite_filter("tuned", results=tmp_path))
     text = paths.markdown.read_text()
     assert "Tuned against default (test data only)" in text and "3 trials x 2 train runs = 6 runs" in text
+    assert "change per test unit (%)" in text and "no test possible (n = 2)" in text
     metrics = paths.metrics.read_text()
     # the train seeds' runs are in results/tuning, never in the report
     assert not any(f",{s}," in metrics for s in tuning.train_seeds(2))

@@ -399,12 +399,22 @@ def run_counts(report: str) -> dict[str, str]:
     def n(cell: str) -> int:
         return int(find(count.pattern, cell, "a tuned cell's run count").group(2))
 
-    extra = sum(n(r["tuned ATE (cm)"]) for r in tuned if r["tuned spec"] != "default kept")
+    # a cross-validated row says "default kept in K of N folds": its N studies (one test unit each) count one each
+    folds = [re.search(r"default kept in (\d+) of (\d+) folds", r["tuned spec"]) for r in tuned]
+    kept_rows = [
+        int(m.group(1)) if m else int(r["tuned spec"] == "default kept") for r, m in zip(tuned, folds, strict=True)
+    ]
+    kept = sum(kept_rows)
+    n_studies = sum(int(m.group(2)) if m else 1 for m in folds)
+    # the tuned runs that are not the default's own: a kept study's tuned rows are its default's
+    extra = sum(
+        n(r["tuned ATE (cm)"]) - (k if m else k * n(r["tuned ATE (cm)"]))
+        for r, m, k in zip(tuned, folds, kept_rows, strict=True)
+    )
     test = sum(n(r["default ATE (cm)"]) for r in tuned) + extra
     v = find(r"verify: passed on [^,]+, (\d+) of \d+ stored runs re-run \(fraction ([\d.]+)", prov, "the verify line")
-    kept = sum(r["tuned spec"] == "default kept" for r in tuned)
     budget = find(
-        r"Budget per filter and data[^:]*: (\d+) trials x (\d+) train runs",
+        r"Budget per (?:study|filter and data)[^:]*: (\d+) trials x (\d+) train runs",
         section_text(report, "tuned"),
         "the tuning budget",
     )
@@ -415,10 +425,10 @@ def run_counts(report: str) -> dict[str, str]:
         "runs-all-failed": "none" if not failed else str(failed),
         "runs-tuned-test": str(test),
         "verify-rerun": f"{v.group(1)} of them ({100 * float(v.group(2)):.0f} %",
-        "tuned-kept": f"{kept} of {len(tuned)}",
-        "tuned-train-runs": str(len(tuned) * int(budget.group(1)) * int(budget.group(2))),
-        "tuned-studies": f"{len(tuned)} studies of {budget.group(1)} trials x {budget.group(2)} train runs, "
-        f"{len(tuned) * int(budget.group(1)) * int(budget.group(2))} train runs",
+        "tuned-kept": f"{kept} of {n_studies}",
+        "tuned-train-runs": str(n_studies * int(budget.group(1)) * int(budget.group(2))),
+        "tuned-studies": f"{n_studies} studies of {budget.group(1)} trials x {budget.group(2)} train runs, "
+        f"{n_studies * int(budget.group(1)) * int(budget.group(2))} train runs",
         "tuned-budget": f"{budget.group(1)} trials x {budget.group(2)} train runs",
     }
 

@@ -2,7 +2,8 @@
 "Splits").
 
 A **unit** is what a split of :mod:`locbench.datasets.splits` assigns whole: a seed of a synthetic dataset (tuning
-seeds from 1000), a robot of MRCLAM Dataset 6 (the tuned suite's split: robots 1-3 tune, 4-5 test), a Radish site, a
+seeds from 1000), a robot of MRCLAM Dataset 6 (a test unit of
+its default, whose noise was derived without it; of a tuned configuration, its study's held-out robot), a Radish site, a
 libRSF set. Runs whose datasets differ only in the unit (``radish[site=aces]`` and ``radish[site=seattle]`` at the
 same window and resolution) form one **family**; a family's row per filter configuration gives the mean over units of
 the unit's mean ATE, on tuning units and on test units, their ratio (test over tuning: above 1, the configuration
@@ -27,7 +28,7 @@ import numpy as np
 import pandas as pd
 
 from locbench.core.spec import Spec, format_spec, params_to_dict
-from locbench.datasets.splits import LIBRSF_SPLIT, MRCLAM_TUNED, RADISH_SPLIT, Split, is_tuning_seed
+from locbench.datasets.splits import LIBRSF_SPLIT, MRCLAM_DEFAULTS, RADISH_SPLIT, Split, is_tuning_seed
 from locbench.evaluate.metrics import ATE_M, FAILED
 from locbench.present.docfmt import num
 from locbench.report.collect import Collected
@@ -40,7 +41,7 @@ TEST = "test"
 #: Recorded datasets with a declared split: dataset id -> (the parameter that names the unit, its split, the
 #: parameters the unit must have besides, e.g. MRCLAM's Dataset 6).
 RECORDED_SPLITS: dict[str, tuple[str, Split, dict[str, Any]]] = {
-    "mrclam": ("robot", MRCLAM_TUNED, {"dataset": 6}),
+    "mrclam": ("robot", MRCLAM_DEFAULTS, {"dataset": 6}),
     "radish": ("site", RADISH_SPLIT, {}),
     "librsf": ("set", LIBRSF_SPLIT, {}),
 }
@@ -311,8 +312,9 @@ def generalization_table(rows: Sequence[GeneralizationRow]) -> Table:
         cells,
         caption="Generalization: mean ATE on tuning units against test units",
         footnotes=(
-            "Units: a seed of a synthetic dataset (tuning seeds from 1000), an MRCLAM robot (robots 1-3 tune, 4-5 "
-            "test), a Radish site, a libRSF set (docs/protocols.md, Splits). ATE: the mean over units of each unit's "
+            "Units: a seed of a synthetic dataset (tuning seeds from 1000), an MRCLAM robot (a test unit of "
+            "its default, whose noise was derived without it; of a tuned row, its fold's held-out robot), a Radish "
+            "site, a libRSF set (docs/protocols.md, Splits). ATE: the mean over units of each unit's "
             "mean over its ok runs. Worse than DR: test units where the mean ATE exceeds dead reckoning's or the run "
             "failed, over the test units both ran (a skipped run is not compared). Tuned-suite rows: the tuning side "
             "is the train objective (mean train ATE) over the train runs.",

@@ -11,6 +11,7 @@ trials (a figure), and whether each world's ranking by ATE changes once every fi
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -19,6 +20,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
 from locbench.evaluate.metrics import ATE_M, FAILED
+from locbench.evaluate.significance import FloatArray, TestResult, wilcoxon_paired
 from locbench.present.palette import Palette
 from locbench.report import figures as fg
 from locbench.report import tables as tb
@@ -77,61 +79,154 @@ def _value(v: Any) -> str:
     return str(v)
 
 
+def _unit_ate(rows: pd.DataFrame) -> dict[tuple[str, int], float]:
+    """ATE (m) per test unit, (dataset, seed), of one configuration's rows (NaN for a failed run)."""
+    sub = rows[rows["metric"] == ATE_M]
+    return {(str(d), int(k)): float(v) for d, k, v in zip(sub["dataset"], sub["seed"], sub["value"], strict=True)}
+
+
+@dataclass(frozen=True)
+class GroupEffect:
+    """One filter on one world, tuned against its default on every test unit of its studies (the folds of a
+    cross-validated world pooled: unit k's tuned configuration is the one tuned without it)."""
+
+    filter: str
+    world: str
+    units: tuple[str, ...]
+    default_m: FloatArray
+    tuned_m: FloatArray
+
+    @property
+    def change_pct(self) -> FloatArray:
+        """Per unit 100 (tuned / default - 1): negative is better."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.asarray(100.0 * (self.tuned_m / self.default_m - 1.0), dtype=np.float64)
+
+    def test(self) -> TestResult:
+        """The paired Wilcoxon signed-rank test of tuned against default ATE across the units (two-sided)."""
+        return wilcoxon_paired(self.tuned_m, self.default_m)
+
+
+def group_effects(df: pd.DataFrame, studies: list[dict[str, Any]]) -> list[GroupEffect]:
+    """Per (filter, world), in the order of ``studies``: each test unit's default and tuned ATE."""
+    from locbench.registry import resolve_dataset
+
+    groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for s in studies:
+        groups.setdefault((s["filter"], s["world"]), []).append(s)
+    out = []
+    for (filt, world), mine in groups.items():
+        units: list[str] = []
+        d_m: list[float] = []
+        t_m: list[float] = []
+        for s in mine:
+            test_names = [resolve_dataset(d).name for d in s["test"]]
+            default = _unit_ate(_test_rows(df, s, s["filter"], test_names))
+            best = s.get("best_spec")
+            tuned = _unit_ate(_test_rows(df, s, best, test_names)) if best else {}
+            for unit in sorted(default):
+                units.append(s.get("fold") or (f"seed {unit[1]}" if len(test_names) == 1 else f"{unit[0]} {unit[1]}"))
+                d_m.append(default[unit])
+                t_m.append(tuned.get(unit, NAN))
+        out.append(GroupEffect(filt, world, tuple(units), np.asarray(d_m), np.asarray(t_m)))
+    return out
+
+
+#: Most units whose effects a row lists one by one (the folds of a cross-validated world); more are summarised.
+LISTED_UNITS = 6
+
+
+def _effects_text(g: GroupEffect) -> str:
+    """The per-unit changes, listed for a few units (``robot 4 +34``), else better / worse counts and the range."""
+    ch = g.change_pct
+    if len(g.units) <= LISTED_UNITS:
+        return "; ".join(f"{u} {tb.num(c)}" for u, c in zip(g.units, ch, strict=True))
+    ok = ch[np.isfinite(ch)]
+    if not ok.size:
+        return "-"
+    better, worse = int(np.sum(ok < 0)), int(np.sum(ok > 0))
+    return f"better on {better} of {ok.size}, worse on {worse}; {tb.num(ok.min())} to {tb.num(ok.max())}"
+
+
 def tuning_section(col: Collected) -> Section | None:
     """The section, or None when the results hold no tuned suite."""
-    from locbench.registry import resolve_dataset
-    from locbench.run.tuning import read_summary
+    from locbench.run.tuning import read_tuning
 
     if col.store is None:
         return None
-    studies = read_summary(col.store.root)
+    tuning = read_tuning(col.store.root)
+    studies = list(tuning.get("studies", []))
     if not studies:
         return None
     df = col.metrics
     sec = Section("Tuned against default (test data only)", "tuned")
     budgets = sorted({(len(s["trials"]), len(s["train"]) * len(s["train_seeds"])) for s in studies})
     splits = list(dict.fromkeys(_split(s) for s in studies))
+    sampler = tuning.get("sampler", {})
     sec.add(
         Text(
             "Each filter's declared tunable parameters (noise scales, gates, thresholds, iteration caps; never a "
-            "compute knob) were searched with optuna's seeded TPE sampler on train data, and its best configuration "
-            "run on test data it never saw. The first trial of every study is the default configuration, counted in "
-            "the budget, so a tuned configuration is never worse than the default on the train data ('default kept' "
-            "when no searched trial beat it). Budget per filter and data (the same for every filter): "
+            "compute knob) were searched with optuna's seeded TPE sampler "
+            f"(multivariate: {sampler.get('multivariate')}, "
+            f"{sampler.get('startup_trials')} random trials after the default, seed {sampler.get('seed')}) on train "
+            "data, and its best configuration run on test data it never saw; the recordings are cross-validated, "
+            "leave one robot out, so the configuration reported for a robot was tuned on the other robots. The "
+            "first trial of every study is the default configuration, counted in the budget, so a tuned "
+            "configuration is never worse than the default on the train data ('default kept' when no searched trial "
+            "beat it). Budget per study (the same for every filter): "
             + "; ".join(f"{t} trials x {r} train runs = {t * r} runs" for t, r in budgets)
-            + ". Objective: the mean of the train runs' ATE; a trial with a failed or diverged run scores as the "
-            "worst. Every number below is on test data (docs/protocols.md, Tuning)."
+            + f". Tuned at commit `{str(tuning.get('commit') or '?')[:12]}`. Objective: the mean of the train runs' "
+            "ATE; a trial with a failed or diverged run scores as the worst. Every number below is on test data "
+            "(docs/protocols.md, Tuning)."
         ),
         Bullets(tuple(splits)),
     )
     rows: list[tuple[str, ...]] = []
     keys: list[tuple[float, ...]] = []
     per_world: dict[str, dict[str, tuple[float, float]]] = {}
-    for s in studies:
-        test_names = [resolve_dataset(d).name for d in s["test"]]
-        d_ate, d_ok, d_n = _ate_cm(_test_rows(df, s, s["filter"], test_names))
-        best = s.get("best_spec")
-        t_ate, t_ok, t_n = _ate_cm(_test_rows(df, s, best, test_names)) if best else (NAN, 0, 0)
+    for g in group_effects(df, studies):
+        mine = [s for s in studies if s["filter"] == g.filter and s["world"] == g.world]
+        d_ate = 100.0 * float(np.nanmean(g.default_m)) if np.isfinite(g.default_m).any() else NAN
+        t_ate = 100.0 * float(np.nanmean(g.tuned_m)) if np.isfinite(g.tuned_m).any() else NAN
         change = 100.0 * (t_ate / d_ate - 1.0) if d_ate > 0 and not math.isnan(t_ate) else NAN
-        per_world.setdefault(s["world"], {})[s["filter"]] = (d_ate, t_ate if best else d_ate)
+        per_world.setdefault(g.world, {})[g.filter] = (d_ate, t_ate if not math.isnan(t_ate) else d_ate)
+        test = g.test()
+        kept = sum(1 for s in mine if s.get("default_kept"))
         rows.append(
             (
-                f"`{s['filter']}`",
-                s["world"],
-                str(s["budget_runs"]),
-                f"{tb.num(d_ate)} ({d_ok}/{d_n})",
-                f"{tb.num(t_ate)} ({t_ok}/{t_n})" if best else "-",
+                f"`{g.filter}`",
+                g.world,
+                f"{tb.num(d_ate)} ({int(np.isfinite(g.default_m).sum())}/{g.default_m.size})",
+                f"{tb.num(t_ate)} ({int(np.isfinite(g.tuned_m).sum())}/{g.tuned_m.size})",
                 tb.num(change),
-                _tuned_spec(s),
+                _effects_text(g),
+                test.text(),
+                _tuned_spec(mine[0]) if len(mine) == 1 else f"default kept in {kept} of {len(mine)} folds",
             )
         )
-        keys.append((NAN, NAN, float(s["budget_runs"]), d_ate, t_ate, change, NAN))
+        keys.append((NAN, NAN, d_ate, t_ate, change, NAN, test.p, NAN))
     sec.add(
         Table(
-            ("filter", "data", "budget (runs)", "default ATE (cm)", "tuned ATE (cm)", "change (%)", "tuned spec"),
+            (
+                "filter",
+                "data",
+                "default ATE (cm)",
+                "tuned ATE (cm)",
+                "change (%)",
+                "change per test unit (%)",
+                "tuned against default, paired",
+                "tuned spec",
+            ),
             tuple(rows),
-            caption="Tuned beside default: mean ATE on the test data (ok runs / runs in brackets)",
-            footnotes=("Mean over every test run of the data (several test recordings: over them all).",),
+            caption="Tuned beside default on the test units: mean ATE, the change per unit, and the paired test "
+            "across units",
+            footnotes=(
+                "Mean over the test units, ok runs / runs in brackets (a failed run has no ATE).",
+                "A unit is a test seed of a world, or the held-out robot of a cross-validated recording. The paired "
+                "test is Wilcoxon's signed-rank test of the tuned against the default ATE over the units, two-sided; "
+                "with five robots no two-sided test can reach 5 % (the smallest exact p is 0.0625), so the per-robot "
+                "changes are listed: a gain that rests on one robot shows as such.",
+            ),
             sort_keys=tuple(keys),
         )
     )
@@ -187,6 +282,8 @@ def trials_plot(studies: list[dict[str, Any]]) -> Plot:
                 st = styles[s["filter"]]
                 xs = np.arange(1, len(curve) + 1) + (0.12 * k if s["filter"] in same else 0.0)
                 label = s["filter"] + (f" (= {same[s['filter']]})" if s["filter"] in same else "")
+                if any(o["filter"] == s["filter"] for o in mine[:k]):
+                    label = "_nolegend_"  # a cross-validated world: one line per fold, one legend entry per filter
                 ax.plot(
                     xs,
                     curve,

@@ -270,6 +270,17 @@ def test_builder_reads_the_data_root_and_reports_missing_files(data_env: Path) -
     )
 
 
+def test_noise_fold_gives_another_folds_noise_and_is_checked(data_env: Path) -> None:
+    _small_folder(data_env / "utias_mrclam")
+    own = MrclamDataset().build(MrclamParams(dataset=9, robot=1), np.random.default_rng(0))
+    other = MrclamDataset().build(MrclamParams(dataset=9, robot=1, noise_fold=5), np.random.default_rng(0))
+    assert own.sensors == mrclam.nominal_sensors(1) and other.sensors == mrclam.nominal_sensors(5)
+    assert own.sensors != other.sensors and "fold 5" in other.metadata["nominal_noise"]
+    assert MrclamParams(robot=1, noise_fold=1) == MrclamParams(robot=1, noise_fold=1)
+    with pytest.raises(ConfigError, match="noise_fold must be 0"):
+        MrclamParams(robot=1, noise_fold=6)
+
+
 def test_fetch_unzips_into_the_cache_and_verifies(
     data_env: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
