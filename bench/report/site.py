@@ -133,7 +133,7 @@ def findings(pages: list[Page]) -> list[str]:
         if table is not None:
             verdicts = [r[2].replace("**", "") for r in table.rows]
             counts = ", ".join(f"{verdicts.count(v)} {v}" for v in sorted(set(verdicts)))
-            out.append(f"[Claims of the source reports]({claims.html_file}): {counts}.")
+            out.append(f"[{claims.title}]({claims.html_file}): {counts}.")
     return out
 
 
