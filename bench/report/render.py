@@ -1,8 +1,9 @@
-"""Rendering the sections: ``REPORT.md`` with PNG figures, and one self-contained ``index.html``.
+"""Rendering the sections: Markdown, PNG figures and HTML.
 
-Both are deterministic: PNGs are drawn with the Agg backend, a fixed style, size and dpi and no software
-metadata; the HTML inlines its style, its script, the PNGs (base64) and, for the interactive plots, the
-plotly.js bundle once, so it opens with no network access.
+:func:`markdown_sections` and :func:`html_sections` render sections for the site's pages
+(:mod:`locbench.report.site`); :func:`to_markdown` and :func:`to_html` make one whole document of them (the HTML one
+self-contained: PNGs and the plotly.js bundle inlined). All are deterministic: PNGs are drawn with the Agg backend,
+a fixed style, size and dpi and no software metadata.
 """
 
 from __future__ import annotations

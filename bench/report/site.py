@@ -123,7 +123,8 @@ def findings(pages: list[Page]) -> list[str]:
             continue
         text = next((b.text for b in sec.blocks if isinstance(b, Text)), "")
         first = text.split(": ", 1)[-1].split("; ")[0].split(". ")[0].rstrip(".")
-        target = where.get("exp-" + sec.anchor.removeprefix("summary-"))
+        slug = sec.anchor.removeprefix("summary-")
+        target = where.get(f"exp-{slug}") or where.get(f"own-{slug}")
         link = f"[{sec.title}]({target.html_file})" if target else f"[{sec.title}](#{sec.anchor})"
         if first:
             out.append(f"{link}: {first}.")
