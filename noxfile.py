@@ -7,7 +7,7 @@ nox -s lint         ruff, mypy and the import contracts (lint-imports)
 nox -s docs         the documentation site, warnings as errors, into docs/_build/html
 nox -s bench        run every experiment, verify a sample, write results/summary (posargs go to 'locbench run')
 nox -s report       regenerate results/summary from the stored runs, no re-run
-nox -s html         open results/summary/index.html in headless Chromium (renders, sorts; screenshot)
+nox -s html         open the site in results/summary in headless Chromium (renders, links, sorts; screenshot)
 nox -s perf         pytest-benchmark micro-benchmarks of each filter's predict and update
 nox -s fuzz         the loader, store-reader and CLI fuzzing with the long hypothesis profile (posargs go to pytest)
 """
@@ -208,7 +208,7 @@ def tune(session: nox.Session) -> None:
 
 @nox.session(python=PYTHON, default=False)
 def report(session: nox.Session) -> None:
-    """Regenerate results/summary (tables, figures, metrics.csv, index.html) from the stored runs of suites 'all',
+    """Regenerate results/summary (the site, its figures, metrics.parquet) from the stored runs of suites 'all',
     'consistency' and 'tuned'."""
     _install(session, "all")
     session.run("locbench", "report", "--results", "results", "--jobs", "2", "--suite", "all", "consistency", "tuned")
@@ -216,8 +216,8 @@ def report(session: nox.Session) -> None:
 
 @nox.session(python=PYTHON, default=False)
 def html(session: nox.Session) -> None:
-    """Open results/summary/index.html in headless Chromium: renders, sorts, no console errors; screenshot
-    to results/summary/index.png."""
+    """Open every page of the site in results/summary in headless Chromium: each renders with no console error and
+    every link resolves; the landing page's decision table sorts; screenshot of it to results/summary/index.png."""
     _install(session, "all,test")
     env = {
         "LOCBENCH_REPORT_PAGE": os.path.abspath("results/summary/index.html"),

@@ -614,7 +614,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_run_timeout(r)
     r.set_defaults(func=_cmd_run)
 
-    rep = sub.add_parser("report", help="write summary/metrics.csv, REPORT.md and figures from stored runs")
+    rep = sub.add_parser("report", help="write summary/metrics.parquet, REPORT.md and figures from stored runs")
     rep.add_argument("--results", default=_results_default(), help="results folder (default: results/)")
     rep.add_argument(
         "--suite",

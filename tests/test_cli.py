@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pandas as pd
 import pytest
 
 from locbench.cli import main
@@ -69,9 +70,14 @@ def test_run_then_report(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
     assert "6 ok" in capsys.readouterr().out
     assert main(["report", "--results", res]) == 0
     summary = Path(res) / "summary"
-    assert (summary / "metrics.csv").is_file() and (summary / "REPORT.md").is_file()
-    header = (summary / "metrics.csv").read_text().splitlines()[0]
-    assert header == "dataset,filter,seed,metric,value"
+    assert (summary / "metrics.parquet").is_file() and (summary / "REPORT.md").is_file()
+    assert list(pd.read_parquet(summary / "metrics.parquet").columns) == [
+        "dataset",
+        "filter",
+        "seed",
+        "metric",
+        "value",
+    ]
     # every stored run and its truth as TUM trajectories, for evo
     out = tmp_path / "tum"
     assert main(["export", "--results", res, "--out", str(out), "--filter", "odometry"]) == 0

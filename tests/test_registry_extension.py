@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from locbench.report.site import site_markdown
 from locbench.run.store import Store
 from locbench.suites import SUITES
 
@@ -89,6 +90,6 @@ def test_the_copy_runs_and_the_summary_table_lists_it(extra: Path, tmp_path: Pat
     printed = _locbench(extra, "report", "--results", str(results))
     rows = [ln.split()[0] for ln in printed.splitlines() if ln.split()[:1] in (["odometry"], [NEW_ID])]
     assert rows == ["odometry", NEW_ID], printed
-    report = (results / "summary" / "REPORT.md").read_text(encoding="utf-8")
+    report = site_markdown(results / "summary")
     summary = report[report.index('<a id="summary"></a>') :]
     assert f"| `{NEW_ID}` | odometry only | 2 |" in summary

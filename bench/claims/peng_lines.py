@@ -8,7 +8,7 @@ variants ``ekf_lines[chi2_threshold=...,reject_longer=...]`` over every stored v
 
 The accepted fraction of lines is read from the metric ``accepted_fraction`` (per run: the sum over the
 run's updates of the ``accepted`` diagnostic divided by the sum of ``accepted`` + ``rejected``); while
-``metrics.csv`` lacks it, "accepts more" is not evaluated.
+``metrics.parquet`` lacks it, "accepts more" is not evaluated.
 """
 
 from __future__ import annotations
@@ -166,7 +166,7 @@ def _check_gate_accepts_more(df: pd.DataFrame) -> ClaimResult:
     if tab.empty:
         return ClaimResult("not evaluated", f"no {FILTER} runs on {DATASET}")
     if tab["accepted"].isna().all():
-        return ClaimResult("not evaluated", f"metrics.csv has no {ACCEPTED_FRACTION} metric yet")
+        return ClaimResult("not evaluated", f"metrics.parquet has no {ACCEPTED_FRACTION} metric yet")
     ds = tab["dataset"].iloc[0]
     m = _means(tab.dropna(subset=["accepted"]), "accepted")
     parts, tests = [], []

@@ -15,7 +15,7 @@ Conventions shared by every function here:
 - Position errors in m, headings in rad wrapped to (-pi, pi], times in s, runtimes in microseconds.
 - No alignment of the estimate to the truth: a localization filter works in the map frame.
 
-**A metric is one declaration.** Every id of ``results/summary/metrics.csv`` is declared once, in :data:`METRICS`,
+**A metric is one declaration.** Every id of ``results/summary/metrics.parquet`` is declared once, in :data:`METRICS`,
 as a :class:`Metric`: its id (a named constant here, ``ATE_M``), the function that gives one run's value and how the
 report shows it (header, display unit and scale, which way is better, whether the summary table has it, its line in
 docs/protocols.md). :func:`run_metrics` computes every declared metric of a run, the report's tables read the display
@@ -815,19 +815,19 @@ class RunView:
 class Metric:
     """One metric, declared once: its id, how one run's value is computed and how the report shows it.
 
-    A metric with ``compute`` or ``family`` is a row of ``metrics.csv`` for every ok run that defines it; one with
+    A metric with ``compute`` or ``family`` is a row of ``metrics.parquet`` for every ok run that defines it; one with
     neither is a statistic over runs that the report computes (its declaration holds how it is shown).
 
     Attributes
     ----------
     id : str
-        The id in ``metrics.csv``; it never changes meaning. An id with ``<name>`` parts (``waypoint_<j>_error_m``)
+        The id in ``metrics.parquet``; it never changes meaning. An id with ``<name>`` parts (``waypoint_<j>_error_m``)
         declares a family of ids (:func:`member_id`; a one-letter part is a number), whose values a ``family``
         function gives.
     header : str
         The report's name of it (``ATE``).
     unit : str
-        The unit of its value in ``metrics.csv``: SI (``m``, ``rad``, ``s``), ``us`` for call times, ``1`` for a
+        The unit of its value in ``metrics.parquet``: SI (``m``, ``rad``, ``s``), ``us`` for call times, ``1`` for a
         fraction or a 1/0 flag, ``x`` for a ratio, ``""`` for a dimensionless score.
     display_unit : str
         The unit the report shows it in (``cm``); ``""`` none.
@@ -902,7 +902,7 @@ class Metric:
 
     @property
     def per_run(self) -> bool:
-        """A row of ``metrics.csv`` (computed from each run), not a statistic over runs."""
+        """A row of ``metrics.parquet`` (computed from each run), not a statistic over runs."""
         return self.compute is not None or self.family is not None
 
     def matches(self, metric_id: str) -> bool:
@@ -939,7 +939,7 @@ METRICS: dict[str, Metric] = {}
 
 
 def declare(metric: Metric) -> Metric:
-    """Declare a metric: from then on :func:`run_metrics` computes it for every ok run (``metrics.csv``), and with
+    """Declare a metric: from then on :func:`run_metrics` computes it for every ok run (``metrics.parquet``), and with
     ``summary=True`` the report's summary table shows it.
 
     Raises
@@ -1154,7 +1154,7 @@ for _m in (
     _waypoint_point(
         WAYPOINT_MARKED_X_M,
         "marked x of the waypoint",
-        "x of waypoint j's marked point (so the mean estimate's distance needs only `metrics.csv`)",
+        "x of waypoint j's marked point (so the mean estimate's distance needs only `metrics.parquet`)",
     ),
     _waypoint_point(WAYPOINT_MARKED_Y_M, "marked y of the waypoint", "y of the same"),
     Metric(

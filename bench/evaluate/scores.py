@@ -58,7 +58,7 @@ if TYPE_CHECKING:
 
 FloatArray = npt.NDArray[np.float64]
 
-#: The four per-run score ids (``metrics.csv``), each the mean over the ground-truth times.
+#: The four per-run score ids (``metrics.parquet``), each the mean over the ground-truth times.
 SCORE_IDS = ("crps_x_m", "crps_y_m", "crps_heading_rad", "energy_score_m")
 #: Keys of the per-ground-truth-time scores a sampled belief leaves in a run's ``extra``, in SCORE_IDS order.
 SAMPLE_SCORE_KEYS = tuple(f"belief_{s}" for s in SCORE_IDS)
@@ -289,7 +289,7 @@ def block_bootstrap_ci(
 
 
 def ci_ids(score_id: str) -> tuple[str, str]:
-    """The ``metrics.csv`` ids of a score's interval: ``crps_x_m`` -> ``crps_x_ci_low_m``, ``crps_x_ci_high_m``."""
+    """The ``metrics.parquet`` ids of a score's interval: ``crps_x_m`` -> ``crps_x_ci_low_m``, ``crps_x_ci_high_m``."""
     stem, unit = score_id.rsplit("_", 1)
     return f"{stem}_ci_low_{unit}", f"{stem}_ci_high_{unit}"
 

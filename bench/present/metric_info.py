@@ -30,14 +30,14 @@ def _better(m: Metric) -> str:
 def metric_table(group: str) -> str:
     """The Markdown table of the metrics declared in ``group``, in declaration order (an empty string for none).
 
-    Columns: the id, its definition, its unit in ``metrics.csv``, the unit the report shows it in, which way is
+    Columns: the id, its definition, its unit in ``metrics.parquet``, the unit the report shows it in, which way is
     better, and whether the summary table has it.
     """
     rows = [m for m in METRICS.values() if m.group == group]
     if not rows:
         return ""
     lines = [
-        "| metric id | definition | unit in `metrics.csv` | shown as | better | summary |",
+        "| metric id | definition | unit in `metrics.parquet` | shown as | better | summary |",
         "|---|---|---|---|---|---|",
     ]
     for m in rows:

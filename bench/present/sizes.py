@@ -18,16 +18,22 @@ def _mb(n: int) -> str:
 
 
 def sizes_text(summary: Path, shown: str | None = None) -> str:
-    """One sentence with the page's size, the figures' count and total size and the metrics table's size (MB,
-    10^6 bytes), measured from the files of ``summary`` (named ``shown`` in the sentence; default its path)."""
+    """One sentence with the sizes of the report's files (MB, 10^6 bytes), measured from ``summary`` (named
+    ``shown`` in the sentence; default its path): the landing page, the figures, the other pages (their count
+    and the largest), the plotly.js bundle, the tidy metrics and the folder in all."""
     page = summary / "index.html"
     pngs = sorted((summary / "figures").glob("*.png"))
-    metrics = summary / "metrics.csv"
     parts = [f"`index.html` {_mb(page.stat().st_size)}" if page.is_file() else "no `index.html`"]
     parts.append(f"{len(pngs)} figures of {_mb(sum(p.stat().st_size for p in pngs))} in `figures/`")
-    if metrics.is_file():
-        parts.append(f"`metrics.csv` {_mb(metrics.stat().st_size)}")
-    return f"Measured from `{shown or summary.as_posix()}`: " + ", ".join(parts) + "."
+    others = sorted((p.stat().st_size, p.name) for p in summary.glob("*.html") if p.name != "index.html")
+    if others:
+        size, name = max(others)
+        parts.append(f"{len(others)} other pages of at most {_mb(size)} (`{name}`)")
+    for name in ("assets/plotly.min.js", "metrics.parquet", "metrics.csv"):
+        if (summary / name).is_file():
+            parts.append(f"`{name}` {_mb((summary / name).stat().st_size)}")
+    total = sum(p.stat().st_size for p in summary.rglob("*") if p.is_file())
+    return f"Measured from `{shown or summary.as_posix()}`: " + ", ".join(parts) + f"; {_mb(total)} in all."
 
 
 def with_sizes(text: str, summary: Path) -> str:

@@ -1,11 +1,13 @@
-"""From stored runs to ``<results>/summary/``: ``metrics.csv``, ``comparisons.csv``, ``REPORT.md`` with its
-figures, ``index.html``.
+"""From stored runs to ``<results>/summary/``: ``metrics.parquet``, ``comparisons.csv``, and the report as a small
+static site (``index.html``, a page per comparison, experiment, analysis and appendix part, ``figures/``,
+``assets/plotly.min.js``) with its Markdown twin (``REPORT.md``, ``md/*.md``).
 
 The package is split by job: :mod:`~locbench.report.collect` reads the store (the only I/O on runs),
 :mod:`~locbench.report.tables` and :mod:`~locbench.report.figures` turn arrays into tables and drawings,
 :mod:`~locbench.report.build` orders them into sections from the experiments and claims registered in
-:mod:`locbench.present.experiments` (by :mod:`locbench.claims`), and :mod:`~locbench.report.render` writes Markdown,
-PNG and HTML. Regenerating from the same runs gives identical bytes.
+:mod:`locbench.present.experiments` (by :mod:`locbench.claims`), :mod:`~locbench.report.render` writes Markdown,
+PNG and HTML, and :mod:`~locbench.report.site` cuts the sections into pages. Regenerating from the same runs gives
+identical bytes.
 """
 
 from __future__ import annotations
@@ -14,7 +16,15 @@ import logging
 from dataclasses import dataclass
 from pathlib import Path
 
-from locbench.report.collect import Keep, RunInfo, collect, collect_metrics, metrics_csv, write_metrics_csv
+from locbench.report.collect import (
+    Keep,
+    RunInfo,
+    collect,
+    collect_metrics,
+    metrics_parquet,
+    read_metrics,
+    write_metrics_csv,
+)
 from locbench.report.doc import Table
 from locbench.report.tables import wilson_interval
 from locbench.run.store import MARKER, Store
@@ -22,6 +32,7 @@ from locbench.run.store import MARKER, Store
 __all__ = [
     "ReportPaths",
     "collect_metrics",
+    "read_metrics",
     "suite_filter",
     "summary_text",
     "wilson_interval",
@@ -38,8 +49,11 @@ TITLE = "locbench: which localization filter?"
 class ReportPaths:
     """What :func:`write_report` wrote, and the summary tables for the terminal."""
 
+    #: ``REPORT.md``, the landing page in Markdown
     markdown: Path
+    #: ``index.html``, the site's landing page
     html: Path
+    #: ``metrics.parquet``
     metrics: Path
     summary: tuple[Table, ...]
     #: the status of every stored run the report read
@@ -47,8 +61,10 @@ class ReportPaths:
 
 
 def write_report(store: Store, keep: Keep | None = None, out: Path | None = None, jobs: int = 1) -> ReportPaths:
-    """Write ``metrics.csv``, ``comparisons.csv``, ``REPORT.md``, ``figures/*.png``, ``index.html`` and the
-    folder's manifest, whole: into a temporary sibling folder, then swapped in (:mod:`locbench.report.output`).
+    """Write ``metrics.parquet``, ``comparisons.csv``, ``figures/*.png``, the site's pages (``index.html`` and one
+    ``<page>.html`` each, :mod:`locbench.report.site`), their Markdown (``REPORT.md``, ``md/<page>.md``),
+    ``assets/plotly.min.js`` and the folder's manifest, whole: into a temporary sibling folder, then swapped in
+    (:mod:`locbench.report.output`).
 
     Parameters
     ----------
@@ -72,8 +88,9 @@ def write_report(store: Store, keep: Keep | None = None, out: Path | None = None
     from locbench.report.build import build_sections, how_to_read
     from locbench.report.context import Report
     from locbench.report.output import OutputFolder
-    from locbench.report.render import figure_pngs, to_html, to_markdown
+    from locbench.report.render import figure_pngs
     from locbench.report.sections.paired_tests import comparisons_csv
+    from locbench.report.site import oversize, site_files
 
     summary = Path(out) if out is not None else store.summary
     # the summary of a results folder 'locbench run' marked is the report's, manifest or not (older reports)
@@ -84,14 +101,18 @@ def write_report(store: Store, keep: Keep | None = None, out: Path | None = None
     sections = build_sections(report)
     intro = how_to_read()
     with folder:
-        metrics = folder.write("metrics.csv", metrics_csv(col.metrics))
+        metrics = folder.write("metrics.parquet", metrics_parquet(col.metrics))
         folder.write("comparisons.csv", comparisons_csv(report.comparisons))
         pngs = figure_pngs(sections, jobs)
         for name, data in pngs.items():
             folder.write(f"figures/{name}.png", data)
-        md = folder.write("REPORT.md", to_markdown(TITLE, intro, sections).encode())
-        page = folder.write("index.html", to_html(TITLE, intro, sections, pngs).encode())
+        site = site_files(TITLE, intro, sections)
+        for rel, data in site.items():
+            folder.write(rel, data)
         folder.commit()
+    for problem in oversize(site):
+        log.warning("the report site is over its size limit: %s", problem)
+    md, page = folder.final / "REPORT.md", folder.final / "index.html"
     tables = tuple(
         b for s in sections if s.anchor == "summary" for c in s.children for b in c.blocks if isinstance(b, Table)
     )

@@ -63,18 +63,19 @@ def build_sections(rep: Report) -> list[Section]:
 
 
 def how_to_read() -> list[str]:
-    """The introduction's paragraphs: how to read the report."""
+    """The landing page's introduction: how to read the report and where its parts are."""
     return [
         "locbench runs every localization filter on the same synthetic worlds and recorded datasets and "
-        "measures them the same way. Start with the **summary** tables: one row per filter configuration on "
-        "each main comparison and on each dataset of your own (the defaults by ATE, then each filter's other "
-        "configurations under it), with the sensors and map it needs and a line on which to use with which; "
-        "errors in cm, times in us; in bold the best value of each column and every configuration a paired "
-        "test over the seeds does not find different from it (the dead-reckoning baseline is never marked, "
-        "nor an inconsistent ANEES). Then the ranks **across datasets**, the **claims** of the five source "
-        "reports, each with its verdict and the measured value; the **accuracy against runtime** fronts (lower and "
-        "further right is better); **consistency** (does a filter's covariance describe its error?); kidnap "
-        "recovery; the recorded data; and one section per experiment. Values are means over seeds; the "
+        "measures them the same way. The **summary** tables below say which filter to use with which sensors "
+        "and map: one row per filter configuration on each main comparison and on each dataset of your own (the "
+        "defaults by ATE, then each filter's other configurations under it), with the sensors and map it needs and "
+        "a line on which to use with which; errors in cm, times in us; in bold the best value of each column and "
+        "every configuration a paired test over the seeds does not find different from it (the dead-reckoning "
+        "baseline is never marked, nor an inconsistent ANEES). Below them the **accuracy against runtime** fronts "
+        "(lower and further right is better). Every other part has its page, linked above: each main comparison "
+        "and experiment, the **claims** of the five source reports with their verdicts and measured values, the "
+        "ranks **across datasets**, **consistency** (does a filter's covariance describe its error?), lost "
+        "detection, kidnap recovery, tuning, the recorded data and the appendix. Values are means over seeds; the "
         f"appendix gives every dataset's table with {100 * CONFIDENCE:.0f} % Student-t intervals. What every "
         "metric means: `docs/protocols.md` in the repository.",
     ]

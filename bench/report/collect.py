@@ -423,6 +423,48 @@ def write_metrics_csv(df: pd.DataFrame, path: str | Path) -> Path:
     return path
 
 
+def metrics_parquet(df: pd.DataFrame) -> bytes:
+    """The bytes of ``metrics.parquet``: the tidy metrics (:data:`COLUMNS`, sorted as :func:`frame` sorts them),
+    each value rounded to 10 significant digits as ``metrics.csv`` writes it, zstd-compressed, dictionary-encoded
+    names; no pandas metadata, so the bytes depend on the rows and the pyarrow version only.
+
+    Read it with ``pandas.read_parquet(path)`` (:func:`read_metrics`).
+    """
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    tidy = frame(list(df[list(COLUMNS)].itertuples(index=False, name=None)))
+    values = np.array([float(FLOAT_FORMAT % v) for v in tidy["value"].to_numpy(dtype=float)], dtype=float)
+    table = pa.table(
+        {
+            "dataset": pa.array(tidy["dataset"].tolist(), pa.string()),
+            "filter": pa.array(tidy["filter"].tolist(), pa.string()),
+            "seed": pa.array(tidy["seed"].to_numpy(dtype=np.int64), pa.int64()),
+            "metric": pa.array(tidy["metric"].tolist(), pa.string()),
+            "value": pa.array(values, pa.float64()),
+        }
+    )
+    buf = pa.BufferOutputStream()
+    pq.write_table(
+        table,
+        buf,
+        compression="zstd",
+        compression_level=9,
+        use_dictionary=["dataset", "filter", "metric"],
+        write_statistics=False,
+        store_schema=False,
+    )
+    return buf.getvalue().to_pybytes()
+
+
+def read_metrics(path: str | Path) -> pd.DataFrame:
+    """The tidy metrics of a report's ``metrics.parquet`` (or of an older report's ``metrics.csv``), typed as
+    :func:`frame` types them."""
+    path = Path(path)
+    df = pd.read_parquet(path) if path.suffix == ".parquet" else pd.read_csv(path)
+    return df.astype({"dataset": "str", "filter": "str", "seed": "int64", "metric": "str", "value": "float64"})
+
+
 def metrics_csv(df: pd.DataFrame) -> bytes:
     """The bytes of ``metrics.csv`` (:func:`write_metrics_csv`)."""
     tidy = frame(list(df[list(COLUMNS)].itertuples(index=False, name=None)))

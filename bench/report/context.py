@@ -56,7 +56,7 @@ class ComparisonRecord:
     effect_high: float
 
 
-#: Metrics compared in ``comparisons.csv`` (each dataset's ranked columns; SI units as in ``metrics.csv``).
+#: Metrics compared in ``comparisons.csv`` (each dataset's ranked columns; SI units as in ``metrics.parquet``).
 COMPARED = (*(m for m in tb.COMPARISON if METRICS[m].better), WAYPOINT_RMSE_MEAN_M, KIDNAP_RECOVERED)
 
 

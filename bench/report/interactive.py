@@ -16,7 +16,9 @@ from locbench.present.palette import plotly_line, plotly_marker
 from locbench.report import figures as fg
 
 #: Most points of one plotted path (the page stays small).
-MAX_PATH_POINTS = 2000
+MAX_PATH_POINTS = 1000
+#: The largest distance of a dropped point of a plotted path from the simplified line (m): 1 mm, far below a pixel.
+PATH_TOLERANCE_M = 1e-3
 
 
 def pareto(
@@ -122,16 +124,61 @@ def tracks(title: str, world: fg.World, tracks: Sequence[fg.Track], styles: Mapp
 
 
 def path(name: str, xy: np.ndarray, line: dict[str, Any]) -> dict:
-    """A path as a plotly line, thinned to at most about :data:`MAX_PATH_POINTS` points."""
-    step = max(1, xy.shape[0] // MAX_PATH_POINTS)
+    """A path as a plotly line, simplified (:func:`simplify`) to at most :data:`MAX_PATH_POINTS` points."""
+    keep = simplify(xy)
     return {
         "type": "scatter",
         "mode": "lines",
         "name": name,
-        "x": _r(xy[::step, 0]),
-        "y": _r(xy[::step, 1]),
+        "x": _r(xy[keep, 0]),
+        "y": _r(xy[keep, 1]),
         "line": line,
     }
+
+
+def simplify(xy: np.ndarray, tol: float = PATH_TOLERANCE_M, most: int = MAX_PATH_POINTS) -> np.ndarray:
+    """The indices of the points of a path (N x 2, m) that Ramer-Douglas-Peucker keeps at tolerance ``tol`` (m),
+    the tolerance doubled until at most ``most`` remain; the first and last points are always kept.
+
+    A dropped point lies within the tolerance of the line through the kept points around it, so the drawn path
+    differs from the full one by at most that (1 mm: below a pixel of any figure of a world).
+    """
+    n = xy.shape[0]
+    if n <= 2:
+        return np.arange(n)
+    finite = np.isfinite(xy).all(axis=1)
+    if not finite.all():  # a path with gaps (NaN) is thinned by a stride instead
+        return np.arange(n)[:: max(1, -(-n // most))]
+    while True:
+        keep = _rdp(xy, tol)
+        if keep.size <= most:
+            return keep
+        tol *= 2.0
+
+
+def _rdp(xy: np.ndarray, tol: float) -> np.ndarray:
+    """Ramer-Douglas-Peucker without recursion: the kept indices, ascending."""
+    n = xy.shape[0]
+    kept = np.zeros(n, dtype=bool)
+    kept[0] = kept[-1] = True
+    stack = [(0, n - 1)]
+    while stack:
+        i, j = stack.pop()
+        if j - i < 2:
+            continue
+        a, b = xy[i], xy[j]
+        seg = b - a
+        pts = xy[i + 1 : j] - a
+        length = float(np.hypot(seg[0], seg[1]))
+        # distance to the chord's line; to its start when the path returns to where it was
+        cross = np.abs(seg[0] * pts[:, 1] - seg[1] * pts[:, 0])
+        d = cross / length if length > 0.0 else np.hypot(pts[:, 0], pts[:, 1])
+        k = int(np.argmax(d))
+        if d[k] > tol:
+            m = i + 1 + k
+            kept[m] = True
+            stack += [(i, m), (m, j)]
+    return np.flatnonzero(kept)
 
 
 def _r(a: np.ndarray) -> list[float]:

@@ -1,8 +1,9 @@
-"""Rendering the sections: ``REPORT.md`` with PNG figures, and one self-contained ``index.html``.
+"""Rendering the sections: Markdown, PNG figures and HTML.
 
-Both are deterministic: PNGs are drawn with the Agg backend, a fixed style, size and dpi and no software
-metadata; the HTML inlines its style, its script, the PNGs (base64) and, for the interactive plots, the
-plotly.js bundle once, so it opens with no network access.
+:func:`markdown_sections` and :func:`html_sections` render sections for the site's pages
+(:mod:`locbench.report.site`); :func:`to_markdown` and :func:`to_html` make one whole document of them (the HTML one
+self-contained: PNGs and the plotly.js bundle inlined). All are deterministic: PNGs are drawn with the Agg backend,
+a fixed style, size and dpi and no software metadata.
 """
 
 from __future__ import annotations
@@ -12,17 +13,15 @@ import html
 import io
 import json
 import re
-from typing import cast
+from collections.abc import Callable
 
-import matplotlib.image
 import matplotlib.style
+import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from locbench.report.doc import Bullets, Plot, Section, Table, Text
 from locbench.report.style import FIG_DPI, MPL_STYLE
-
-_PNG_META = {"Software": None}
 
 
 def _figure(plot: Plot) -> Figure:
@@ -34,21 +33,22 @@ def _figure(plot: Plot) -> Figure:
 
 
 def render_png(plot: Plot) -> bytes:
-    """Draw a plot into PNG bytes.
+    """Draw a plot into PNG bytes: RGB (the figures are opaque; an alpha channel would add a quarter to each file).
 
-    One draw of the canvas (the layout engine runs at its start), then the buffer encoded as ``savefig``
-    encodes it: the same bytes as ``fig.savefig(buf, format="png")``, without the complete draw with rendering
-    switched off that ``savefig`` makes first for a figure with a layout engine (a third of the time).
+    One draw of the canvas (the layout engine runs at its start), then its buffer without the alpha channel encoded
+    by Pillow (matplotlib's own PNG writer), with the figure's dpi and no software metadata: no complete draw with
+    rendering switched off first, as ``savefig`` makes for a figure with a layout engine (a third of the time).
     """
+    from PIL import Image
+
     with matplotlib.style.context(["default", MPL_STYLE]):
         fig = _figure(plot)
         canvas = fig.canvas
         assert isinstance(canvas, FigureCanvasAgg)  # _figure attaches one
         canvas.draw()
+        rgb = np.ascontiguousarray(np.asarray(canvas.buffer_rgba())[..., :3])
         buf = io.BytesIO()
-        # a None value drops the key ("Software"), as for savefig; imsave's annotation does not say so
-        meta = cast(dict[str, str], _PNG_META)
-        matplotlib.image.imsave(buf, canvas.buffer_rgba(), format="png", origin="upper", dpi=fig.dpi, metadata=meta)
+        Image.fromarray(rgb, mode="RGB").save(buf, format="png", dpi=(fig.dpi, fig.dpi))
     return buf.getvalue()
 
 
@@ -62,6 +62,13 @@ def to_markdown(title: str, intro: list[str], sections: list[Section]) -> str:
     for level, sec in (x for s in sections for x in s.walk()):
         lines.append(f"{'  ' * (level - 2)}- [{sec.title}](#{sec.anchor})")
     lines.append("")
+    lines += markdown_sections(sections)
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def markdown_sections(sections: list[Section], figures: str = "figures/") -> list[str]:
+    """The lines of every section and its descendants in Markdown; a figure is the PNG ``<figures><name>.png``."""
+    lines: list[str] = []
     for level, sec in (x for s in sections for x in s.walk()):
         lines += [f'{"#" * level} <a id="{sec.anchor}"></a>{sec.title}', ""]
         for b in sec.blocks:
@@ -79,8 +86,8 @@ def to_markdown(title: str, intro: list[str], sections: list[Section]) -> str:
                 for note in b.footnotes:
                     lines += [note, ""]
             elif isinstance(b, Plot):
-                lines += [f"![{_md_cell(b.caption)}](figures/{b.name}.png)", ""]
-    return "\n".join(lines).rstrip() + "\n"
+                lines += [f"![{_md_cell(b.caption)}]({figures}{b.name}.png)", ""]
+    return lines
 
 
 def plots_of(sections: list[Section]) -> list[Plot]:
@@ -166,7 +173,7 @@ nav ul{columns:2}p.note{font-size:.85em;color:#333}
 
 # Sorting: a click on a header sorts its table by the cells' data-sort number (text where it has none);
 # a second click reverses. Written for this page; no library needed for ten lines.
-_JS = """
+JS_SORT = """
 document.querySelectorAll("table.sortable").forEach(function(tbl){
   tbl.querySelectorAll("th").forEach(function(th, col){
     th.addEventListener("click", function(){
@@ -199,7 +206,7 @@ def _table_html(t: Table) -> str:
         for j, c in enumerate(row):
             k = keys[j] if j < len(keys) else float("nan")
             attr = (
-                # 10 significant digits as in metrics.csv: a rounding-level change of a number leaves the page's bytes
+                # 10 significant digits as in metrics.parquet: a rounding-level change leaves the page's bytes
                 f' data-sort="{k:.10g}"'
                 if k == k and abs(k) != float("inf")
                 else (' data-sort="1e308"' if k == float("inf") else "")
@@ -218,15 +225,50 @@ def to_html(title: str, intro: list[str], sections: list[Section], pngs: dict[st
     from plotly.offline import get_plotlyjs
 
     body: list[str] = [f"<h1>{html.escape(title)}</h1>", *(f"<p>{_inline(p)}</p>" for p in intro)]
+    body += contents_html(sections)
+
+    def src(name: str) -> str:
+        return "data:image/png;base64," + base64.b64encode(pngs[name]).decode()
+
+    body += html_sections(sections, src)
+    uses_plotly = any(b.interactive is not None for b in plots_of(sections))
+    head = html_head(title)
+    if uses_plotly:
+        head.append(f"<script>{_script_safe(get_plotlyjs())}</script>")
+    tail = [f"<script>{JS_SORT}</script>"]
+    if uses_plotly:
+        tail.append(f"<script>{JS_PLOTS}</script>")
+    return "\n".join([*head, "</head><body>", *body, *tail, "</body></html>"]) + "\n"
+
+
+def contents_html(sections: list[Section], href: Callable[[str], str] = lambda a: f"#{a}") -> list[str]:
+    """A table of contents of the sections and their descendants; ``href`` makes an anchor's link."""
     toc = ["<nav><h2>Contents</h2><ul>"]
     for level, sec in (x for s in sections for x in s.walk()):
         toc.append(
-            f'<li style="margin-left:{(level - 2) * 1.2}em"><a href="#{sec.anchor}">{_inline(sec.title)}</a></li>'
+            f'<li style="margin-left:{(level - 2) * 1.2}em"><a href="{html.escape(href(sec.anchor))}">'
+            f"{_inline(sec.title)}</a></li>"
         )
     toc.append("</ul></nav>")
-    body += toc
-    n_plot = 0
-    uses_plotly = False
+    return toc
+
+
+def html_head(title: str, css: str = "") -> list[str]:
+    """The page's head up to its style (the caller closes it)."""
+    return [
+        "<!DOCTYPE html>",
+        '<html lang="en"><head><meta charset="utf-8">',
+        f"<title>{html.escape(title)}</title>",
+        '<meta name="viewport" content="width=device-width, initial-scale=1">',
+        f"<style>{_CSS}{css}</style>",
+    ]
+
+
+def html_sections(sections: list[Section], src: Callable[[str], str], lazy: bool = False) -> list[str]:
+    """The HTML of every section and its descendants; ``src`` gives a figure's image source from its name,
+    ``lazy`` lets the browser load an image only as the reader reaches it."""
+    body: list[str] = []
+    loading = ' loading="lazy"' if lazy else ""
     for level, sec in (x for s in sections for x in s.walk()):
         body.append(f'<h{level} id="{sec.anchor}">{_inline(sec.title)}</h{level}>')
         for b in sec.blocks:
@@ -237,14 +279,11 @@ def to_html(title: str, intro: list[str], sections: list[Section], pngs: dict[st
             elif isinstance(b, Table):
                 body.append(_table_html(b))
             elif isinstance(b, Plot):
-                n_plot += 1
-                img = base64.b64encode(pngs[b.name]).decode()
                 body.append(
-                    f'<figure><img alt="{html.escape(b.caption)}" src="data:image/png;base64,{img}">'
+                    f'<figure><img alt="{html.escape(b.caption)}"{loading} src="{html.escape(src(b.name))}">'
                     f"<figcaption>{_inline(b.caption)}</figcaption></figure>"
                 )
                 if b.interactive is not None:
-                    uses_plotly = True
                     div = f"plot-{b.name}"
                     spec = json.dumps(b.interactive, sort_keys=True, separators=(",", ":"))
                     body.append(
@@ -253,26 +292,18 @@ def to_html(title: str, intro: list[str], sections: list[Section], pngs: dict[st
                         f'<script type="application/json" data-target="{html.escape(div)}">{_script_safe(spec)}'
                         "</script></details>"
                     )
-    head = [
-        "<!DOCTYPE html>",
-        '<html lang="en"><head><meta charset="utf-8">',
-        f"<title>{html.escape(title)}</title>",
-        '<meta name="viewport" content="width=device-width, initial-scale=1">',
-        f"<style>{_CSS}</style>",
-    ]
-    if uses_plotly:
-        head.append(f"<script>{_script_safe(get_plotlyjs())}</script>")
-    tail = [f"<script>{_JS}</script>"]
-    if uses_plotly:
-        # Plots are drawn when their <details> opens (a hidden div has no size to lay out in).
-        tail.append(
-            "<script>document.querySelectorAll('script[data-target]').forEach(function(s){"
-            "var d=document.getElementById(s.getAttribute('data-target'));var spec=JSON.parse(s.textContent);"
-            "var box=d.closest('details');box.addEventListener('toggle',function(){"
-            "if(box.open&&!d.hasChildNodes()){Plotly.newPlot(d,spec.data,spec.layout,"
-            "{responsive:true,displaylogo:false});}});});</script>"
-        )
-    return "\n".join([*head, "</head><body>", *body, *tail, "</body></html>"]) + "\n"
+    return body
+
+
+#: Draws each interactive plot when its <details> opens (a hidden div has no size to lay out in), with
+#: ``Plotly`` already loaded.
+JS_PLOTS = (
+    "document.querySelectorAll('script[data-target]').forEach(function(s){"
+    "var d=document.getElementById(s.getAttribute('data-target'));var spec=JSON.parse(s.textContent);"
+    "var box=d.closest('details');box.addEventListener('toggle',function(){"
+    "if(box.open&&!d.hasChildNodes()){Plotly.newPlot(d,spec.data,spec.layout,"
+    "{responsive:true,displaylogo:false});}});});"
+)
 
 
 def _script_safe(text: str) -> str:

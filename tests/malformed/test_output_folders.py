@@ -144,7 +144,7 @@ def test_report_refuses_to_overwrite_a_file_changed_since_it_wrote_it(
     assert _tree(summary) == before
 
 
-@pytest.mark.parametrize("fail_at", [0, 2, -1])  # metrics.csv, the first figure, the manifest (the last write)
+@pytest.mark.parametrize("fail_at", [0, 2, -1])  # metrics.parquet, the first figure, the manifest (the last write)
 def test_a_full_disk_leaves_the_old_summary_whole_and_names_the_file(
     results: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], fail_at: int
 ) -> None:
@@ -182,7 +182,7 @@ def test_a_full_disk_on_the_first_report_leaves_no_summary(
     shutil.rmtree(results / "summary")
     monkeypatch.setattr(output, "write_file", full)
     assert _report(results) == 2
-    _one_line(capsys, str(results / "summary" / "metrics.csv"), "No space left on device")
+    _one_line(capsys, str(results / "summary" / "metrics.parquet"), "No space left on device")
     assert sorted(p.name for p in results.iterdir()) == [MARKER, "runs"]
 
 

@@ -1,5 +1,5 @@
 """The posterior Cramer-Rao bound as rows of the benchmark: computed by the sweep, stored beside the truth,
-collected into metrics.csv as ``pcrb`` and shown in every synthetic table and waypoint figure."""
+collected into metrics.parquet as ``pcrb`` and shown in every synthetic table and waypoint figure."""
 
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ from locbench.evaluate.pcrb import BOUND_ALL, BOUND_NO_LASER, bound_covariances,
 from locbench.evaluate.records import BoundRecord
 from locbench.registry import make_dataset
 from locbench.report import collect_metrics, write_report
+from locbench.report.site import site_markdown
 from locbench.report.tables import ate_over_bound
 from locbench.run.plan import plan_sweep
 from locbench.run.store import Store
@@ -36,7 +37,7 @@ def test_sweep_stores_a_bound_per_synthetic_realisation_and_none_for_kidnaps(swe
         assert store.read_bound("room[kidnap_m=1]", seed) is None
 
 
-def test_metrics_csv_has_the_bound_rows_with_the_summary_definitions(swept: Path) -> None:
+def test_the_metrics_file_has_the_bound_rows_with_the_summary_definitions(swept: Path) -> None:
     df = collect_metrics(Store(swept))
     rows = df[(df["filter"] == BOUND_ALL) & (df["dataset"] == "room")]
     assert sorted(rows["seed"].unique()) == [0, 1]
@@ -53,9 +54,9 @@ def test_metrics_csv_has_the_bound_rows_with_the_summary_definitions(swept: Path
 def test_report_shows_the_bound_and_each_filters_ate_over_pcrb(swept: Path, tmp_path: Path) -> None:
     out = tmp_path / "summary"
     write_report(Store(swept), out=out)
-    text = (out / "REPORT.md").read_text()
+    text = site_markdown(out)
     assert "| `pcrb` |" in text and "ATE / PCRB" in text
-    df = pd.read_csv(out / "metrics.csv")
+    df = pd.read_parquet(out / "metrics.parquet")
     eff = ate_over_bound(df[df["dataset"] == "room"], "ekf_landmarks")
     ate = df[(df["dataset"] == "room") & (df["filter"] == "ekf_landmarks") & (df["metric"] == "ate_m")]["value"]
     bnd = df[(df["dataset"] == "room") & (df["filter"] == BOUND_ALL) & (df["metric"] == "ate_m")]["value"]

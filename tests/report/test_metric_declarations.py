@@ -1,4 +1,4 @@
-"""A metric is one declaration: declared in one place, it reaches metrics.csv, the summary table, the HTML page and
+"""A metric is one declaration: declared in one place, it reaches metrics.parquet, the summary table, the HTML page and
 the docs' tables; the library names metrics by their constants."""
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from locbench.present.docfmt import num
 from locbench.present.metric_info import main, metric_table, with_tables
 from locbench.report import write_report
 from locbench.report.sections.summary import OWN_COLUMNS, columns
+from locbench.report.site import site_html, site_markdown
 
 ROOT = Path(__file__).resolve().parents[2]
 PROTOCOLS = ROOT / "docs" / "protocols.md"
@@ -52,14 +53,14 @@ def toy() -> Iterator[Metric]:
         del METRICS[TOY]
 
 
-def test_a_declared_metric_reaches_metrics_csv_and_the_summary_table(toy: Metric, tmp_path: Path) -> None:
+def test_a_declared_metric_reaches_the_metrics_file_and_the_summary_table(toy: Metric, tmp_path: Path) -> None:
     store = _fake_store(tmp_path / "results")
     paths = write_report(store)
-    csv = pd.read_csv(paths.metrics)
+    csv = pd.read_parquet(paths.metrics)
     mine = csv[csv["metric"] == TOY].set_index(["filter", "seed"])["value"]
     ok = csv[(csv["metric"] == FAILED) & (csv["value"] == 0.0)].set_index(["filter", "seed"])
     assert sorted(mine.index) == sorted(ok.index) and len(mine) == 6  # every ok run, no other
-    # its value is the declared function's on the stored run (metrics.csv keeps 10 significant digits)
+    # its value is the declared function's on the stored run (the metrics file keeps 10 significant digits)
     run = store.read_run(store.run_dir("room", "odometry", 1))
     truth = store.read_truth("room", 1)
     expected = _max_error(RunView(run, truth, align_run(run, truth)))
@@ -74,12 +75,12 @@ def test_a_declared_metric_reaches_metrics_csv_and_the_summary_table(toy: Metric
     assert rows["`ekf_landmarks`"][-1].startswith("**")  # ranked: the best non-baseline value in bold
     assert not rows["`odometry`"][-1].startswith("**")
     assert TOY_NOTE in table.footnotes
-    assert "max error (cm)" in paths.markdown.read_text() and "max error (cm)" in paths.html.read_text()
+    assert "max error (cm)" in site_markdown(paths.markdown.parent) and "max error (cm)" in site_html(paths.html.parent)
 
 
 def test_without_the_declaration_there_is_no_such_row_or_column(tmp_path: Path) -> None:
     paths = write_report(_fake_store(tmp_path / "results"))
-    assert TOY not in set(pd.read_csv(paths.metrics)["metric"])
+    assert TOY not in set(pd.read_parquet(paths.metrics)["metric"])
     (table,) = paths.summary
     assert "max error (cm)" not in table.header
 

@@ -6,6 +6,7 @@ import ast
 import dataclasses
 import hashlib
 import os
+import re
 import shutil
 import sys
 from pathlib import Path
@@ -23,6 +24,7 @@ from locbench.evaluate.scores import SCORE_IDS, ci_ids
 from locbench.registry import DATASETS, FILTERS
 from locbench.report import collect_metrics, suite_filter, summary_text, write_metrics_csv, write_report
 from locbench.report.doc import Table
+from locbench.report.site import site_markdown
 from locbench.run.store import Store
 
 ODO = KIND_NAMES.index("Odometry")
@@ -243,10 +245,11 @@ def test_write_report_end_to_end(store: Store) -> None:
     paths = write_report(store)
     assert paths.markdown == store.summary / "REPORT.md"
     assert paths.html == store.summary / "index.html"
-    text = paths.markdown.read_text()
+    text = site_markdown(store.summary)
     for needle in (
         "# locbench: which localization filter?",
-        "## Contents",
+        "## Main findings",
+        "## Pages",
         "locbench 0.1.0",
         "`0123abcd`",
         "numpy 2.0.0",
@@ -275,11 +278,11 @@ def test_write_report_end_to_end(store: Store) -> None:
     ):
         assert needle in text, needle
     assert "003_e5c93f9be776ee5e" not in text and "the issue" not in text
-    # the reading order the issue asks for: contents, summary, claims, accuracy against runtime
-    order = [
-        text.index(h) for h in ("## Contents", "a>Summary", "a>Claims of the source", "a>Accuracy against runtime")
-    ]
-    assert order == sorted(order)
+    # the landing page: the findings, the decision tables, the accuracy-runtime fronts; the claims on their page
+    landing = paths.markdown.read_text()
+    order = [landing.index(h) for h in ("## Main findings", "a>Summary", "a>Accuracy against runtime")]
+    assert order == sorted(order) and "a>Claims of the source" not in landing
+    assert "](md/claims.md)" in landing and "a>Claims of the source" in (store.summary / "md" / "claims.md").read_text()
     # the baseline comes first in the tables
     assert text.index("| `odometry` |") < text.index("| `ekf_landmarks` |")
     figs = sorted(p.name for p in (store.summary / "figures").glob("*.png"))
@@ -290,11 +293,12 @@ def test_write_report_end_to_end(store: Store) -> None:
         "room_trajectories.png",
         "room_waypoint_rmse.png",
     ]
-    csv = pd.read_csv(store.summary / "metrics.csv")
-    assert list(csv.columns) == ["dataset", "filter", "seed", "metric", "value"]
-    assert len(csv) == len(collect_metrics(store))
+    tidy = pd.read_parquet(store.summary / "metrics.parquet")
+    assert list(tidy.columns) == ["dataset", "filter", "seed", "metric", "value"]
+    assert len(tidy) == len(collect_metrics(store)) and not (store.summary / "metrics.csv").exists()
     page = paths.html.read_text()
-    assert page.count("<table") >= 3 and "data:image/png;base64," in page and "http" not in page.split("<script")[0]
+    assert page.count("<table") >= 1 and 'loading="lazy" src="figures/room_pareto.png"' in page
+    assert "data:image" not in page and "http" not in page.split("<script")[0]
 
 
 def test_summary_marks_the_best_value_but_never_the_baseline(store: Store) -> None:
@@ -385,15 +389,70 @@ def test_report_code_names_no_dataset_or_filter() -> None:
     assert not found
 
 
+def _links(folder: Path, page: Path, text: str) -> list[str]:
+    """The internal links of a page (HTML ``href``/``src`` or Markdown ``](...)``) that do not resolve: a missing
+    file, or a ``#fragment`` that is no id of its target page."""
+    bad = []
+    if page.suffix == ".html":
+        targets = re.findall(r'(?:href|src)="([^"]+)"', text)
+    else:
+        targets = re.findall(r"\]\(([^)\s]+)\)", text)
+    for t in targets:
+        if t.startswith(("http:", "https:", "data:")):
+            bad.append(t)
+            continue
+        file, _, frag = t.partition("#")
+        target = (page.parent / file).resolve() if file else page
+        if not target.is_file() or (
+            frag and f'id="{frag}"' not in target.read_text(encoding="utf-8", errors="replace")
+        ):
+            bad.append(f"{page.relative_to(folder)}: {t}")
+    return bad
+
+
+def test_site_pages_are_within_their_limits_and_their_links_resolve(store: Store) -> None:
+    """The landing page, every other page and REPORT.md within their sizes; plotly.js once, beside the pages;
+    every link of every HTML and Markdown page resolves, anchors included."""
+    from locbench.report.site import LANDING_MAX_BYTES, PAGE_MAX_BYTES, PLOTLY_JS, oversize
+
+    folder = write_report(store).html.parent
+    files = {p.relative_to(folder).as_posix(): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+    pages = sorted(rel for rel in files if rel.endswith((".html", ".md")))
+    assert "index.html" in pages and "REPORT.md" in pages and "md/claims.md" in pages and "claims.html" in pages
+    assert oversize(files) == []
+    assert len(files["index.html"]) < LANDING_MAX_BYTES and max(len(files[p]) for p in pages) < PAGE_MAX_BYTES
+    # the check can fail: a landing page of 2 MB + 1, a page of 6 MB + 1, a REPORT.md of 601 lines
+    big = {"index.html": b"x" * (LANDING_MAX_BYTES + 1), "a.html": b"x" * (PAGE_MAX_BYTES + 1)}
+    assert len(oversize(big | {"REPORT.md": b"l\n" * 601})) == 3
+    bundle = files[PLOTLY_JS]
+    assert len(bundle) > 1_000_000 and not any(bundle[:2000] in files[p] for p in pages)
+    assert not any(b"data:image" in files[p] for p in pages)
+    bad = [b for p in pages for b in _links(folder, folder / p, files[p].decode())]
+    assert not bad, bad
+    # the same navigation on every page: one link to each page
+    navs = {
+        re.sub(r' aria-current="page"', "", re.search(r'<nav class="site".*?</nav>', files[p].decode()).group(0))
+        for p in pages
+        if p.endswith(".html")
+    }
+    assert len(navs) == 1 and all(f'href="{p}"' in next(iter(navs)) for p in pages if p.endswith(".html"))
+
+
 @pytest.mark.slow
-def test_html_page_renders_sorts_and_has_no_console_errors(store: Store) -> None:
+def test_html_site_renders_every_page_resolves_its_links_and_sorts(store: Store) -> None:
+    """Every page of the site in headless Chromium: no console error, nothing fetched from a network, every link
+    and image resolves; the landing page holds the decision table, which sorts on a click, and an interactive plot
+    draws (plotly.js loaded from its file when opened); a screenshot of the landing page (``index.png``)."""
     chromium = _chromium()
     if chromium is None:
         pytest.skip("Chromium not installed (Debian: apt-get install chromium)")
     sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright driver is not installed")
-    # nox -s html checks the committed page; the test's own store otherwise
+    # nox -s html checks the committed site; the test's own store otherwise
     given = os.environ.get("LOCBENCH_REPORT_PAGE")
-    page_path = Path(given) if given else write_report(store).html
+    landing = Path(given) if given else write_report(store).html
+    folder = landing.parent
+    pages = [landing, *sorted(p for p in folder.glob("*.html") if p != landing)]
+    assert len(pages) > 3
     errors: list[str] = []
     shots = Path(os.environ.get("LOCBENCH_SCREENSHOTS", store.summary))
     with sync_api.sync_playwright() as pw:
@@ -410,15 +469,26 @@ def test_html_page_renders_sorts_and_has_no_console_errors(store: Store) -> None
         )
         try:
             page = browser.new_page(viewport={"width": 1300, "height": 900})
-            page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
-            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.on("console", lambda m: errors.append(f"{page.url}: {m.text}") if m.type == "error" else None)
+            page.on("pageerror", lambda e: errors.append(f"{page.url}: {e}"))
             requests: list[str] = []
             page.on("request", lambda r: requests.append(r.url) if not r.url.startswith(("file:", "data:")) else None)
-            page.goto(page_path.as_uri())
-            assert page.title().startswith("locbench")
+            failed: list[str] = []
+            page.on("requestfailed", lambda r: failed.append(r.url))
+            for p in pages:
+                page.goto(p.as_uri())
+                assert "locbench" in page.title(), p
+                assert page.locator("nav.site a").count() == len(pages), p
+                assert page.locator("h2").count() >= 1, p
+                # what the browser sees: every link and image source resolves (anchors included)
+                html_now = page.content()
+                assert not _links(folder, p, html_now), _links(folder, p, html_now)
+            page.goto(landing.as_uri())
             assert page.locator("h2#summary").count() == 1
             table = page.locator("#summary-room ~ table.sortable").first
-            col = [h.inner_text().strip() for h in table.locator("th").all()].index("ATE (cm)")
+            heads = [h.inner_text().strip() for h in table.locator("th").all()]
+            assert "needs (sensors; map)" in heads  # the decision table
+            col = heads.index("ATE (cm)")
 
             def column() -> list[str]:
                 return [r.locator("td").nth(col).inner_text() for r in table.locator("tbody tr").all()]
@@ -436,16 +506,17 @@ def test_html_page_renders_sorts_and_has_no_console_errors(store: Store) -> None
             down = as_num(column())
             assert down == sorted(down, reverse=True) and len(down) >= 2
             details = page.locator("details").first
-            if details.count():
-                details.locator("summary").click()
-                page.wait_for_selector(".plotly-div .main-svg", timeout=15000)
+            assert details.count() == 1 and page.evaluate("typeof Plotly") == "undefined"  # not loaded until opened
+            details.locator("summary").click()
+            page.wait_for_selector(".plotly-div .main-svg", timeout=30000)
             page.evaluate("window.scrollTo(0, 0)")
             shots.mkdir(parents=True, exist_ok=True)
             page.screenshot(path=str(shots / "index.png"), full_page=False)
         finally:
             browser.close()
     assert not errors, errors
-    assert not requests, requests  # self-contained: nothing fetched from a network
+    assert not requests, requests  # offline: nothing fetched from a network
+    assert not failed, failed
 
 
 def test_suite_filter_keeps_the_suites_cells_only() -> None:
@@ -512,7 +583,7 @@ def test_report_writes_comparisons_and_says_when_no_test_is_possible(store: Stor
     # the issue's columns, in its order
     head = ["dataset", "metric", "configuration", "reference", "n", "statistic", "p", "p_holm"]
     assert list(csv.columns) == [*head, "effect", "effect_low", "effect_high"]
-    text = paths.markdown.read_text()
+    text = site_markdown(paths.markdown.parent)
     # three seeds: too few for a two-sided paired test, so only the best is bold and the table says why
     assert "no paired test is possible, so only the best value is in bold" in text
     assert "Seed audit" in text and "Paired comparisons" in text and "| test (n, p) |" in text
@@ -662,7 +733,7 @@ def test_a_dataset_no_suite_runs_gets_the_whole_report(
     assert main(["report", "--results", str(tmp_path / "results")]) == 0
     out = capsys.readouterr().out
     assert f"{name}: mean over seeds" in out and "ekf_landmarks" in out and "skipped: needs an occupancy grid" in out
-    text = (st.summary / "REPORT.md").read_text()
+    text = site_markdown(st.summary)
     for needle in (
         f'### <a id="summary-{name}"></a>{title}',
         f'## <a id="own-{name}"></a>{title}',

@@ -221,15 +221,16 @@ def test_report_writes_the_split_figures(tmp_path: Path, report: Report) -> None
         assert md.count(f"(figures/{stem}.png)") == 1, stem
 
 
-def test_render_png_writes_savefigs_bytes(plots: list[Plot]) -> None:
-    """``render_png`` (one draw, then the buffer encoded) gives the bytes of ``savefig`` (which draws twice
-    under a layout engine) for every figure of the report: constrained layouts with legends outside, the
-    trajectory figures' fixed layout, log axes."""
+def test_render_png_writes_savefigs_pixels_as_rgb(plots: list[Plot]) -> None:
+    """``render_png`` (one draw, then the buffer encoded without its alpha channel) gives the pixels of ``savefig``
+    (which draws twice under a layout engine) for every figure of the report: constrained layouts with legends
+    outside, the trajectory figures' fixed layout, log axes; the figures are opaque, so RGB loses nothing."""
     import io
 
     import matplotlib.style
+    from PIL import Image
 
-    from locbench.report.render import _PNG_META, _figure, render_png
+    from locbench.report.render import _figure, render_png
     from locbench.report.style import FIG_DPI
 
     assert len(plots) > 5
@@ -237,5 +238,8 @@ def test_render_png_writes_savefigs_bytes(plots: list[Plot]) -> None:
         with matplotlib.style.context(["default", MPL_STYLE]):
             fig = _figure(plot)
             buf = io.BytesIO()
-            fig.savefig(buf, format="png", dpi=FIG_DPI, metadata=_PNG_META)
-        assert render_png(plot) == buf.getvalue(), plot.name
+            fig.savefig(buf, format="png", dpi=FIG_DPI)
+        ref = np.asarray(Image.open(io.BytesIO(buf.getvalue())))
+        ours = Image.open(io.BytesIO(render_png(plot)))
+        assert ours.mode == "RGB" and (ref[..., 3] == 255).all(), plot.name
+        assert np.array_equal(np.asarray(ours), ref[..., :3]), plot.name

@@ -42,11 +42,15 @@ def test_sizes_are_measured_from_the_files(tmp_path: Path) -> None:
     (summary / "index.html").write_bytes(b"x" * 2_500_000)
     (summary / "figures" / "a.png").write_bytes(b"x" * 300_000)
     (summary / "figures" / "b.png").write_bytes(b"x" * 200_000)
+    (summary / "claims.html").write_bytes(b"x" * 100_000)
+    (summary / "metrics.parquet").write_bytes(b"x" * 1_200_000)
     page = tmp_path / "page.md"
     page.write_text(f"before\n{START}old{END}\nafter\n")
     assert main([str(summary), str(page)]) == 0
     text = page.read_text()
     assert "`index.html` 2.5 MB, 2 figures of 0.5 MB" in text and "old" not in text
+    assert "1 other pages of at most 0.1 MB (`claims.html`)" in text and "`metrics.parquet` 1.2 MB" in text
+    assert "; 4.3 MB in all." in text
     assert text.startswith("before\n") and text.endswith("\nafter\n")
     assert with_sizes("no block", summary) == "no block"
 

@@ -1,18 +1,18 @@
 """The documents' result numbers agree with the committed summary: every ``<!-- gen:NAME -->`` block of README.md and
-the docs pages is what tools/docs/readme_results.py makes from results/summary/metrics.csv."""
+the docs pages is what tools/docs/readme_results.py makes from results/summary (the tidy metrics and the report's
+Markdown pages)."""
 
 from __future__ import annotations
 
 import functools
 
-import pandas as pd
 import pytest
 import readme_results as tool
 
 
 @functools.cache
 def generated() -> dict[str, str]:
-    return dict(tool.blocks(pd.read_csv(tool.METRICS_CSV)))
+    return dict(tool.blocks(tool.read_metrics(tool.METRICS)))
 
 
 def documents() -> str:
@@ -76,7 +76,7 @@ def test_report_tables_are_read_by_section() -> None:
 
 
 def test_a_report_without_a_quoted_value_is_an_error_naming_it() -> None:
-    report = tool.REPORT_MD.read_text(encoding="utf-8")
+    report = tool.report_text()
     with pytest.raises(ValueError, match="the provenance's run counts"):
         tool.run_counts(report.replace("- runs: ", "- run counts: "))
     with pytest.raises(ValueError, match="claims start with 'The PF is at least as accurate'"):

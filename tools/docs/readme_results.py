@@ -1,4 +1,5 @@
-"""The README's result numbers, generated from results/summary/metrics.csv and REPORT.md (and the suites' run counts),
+"""The README's result numbers, generated from results/summary/metrics.parquet and the report's Markdown pages
+(REPORT.md and md/*.md) (and the suites' run counts),
 and the lists of filters and datasets in README.md and the docs pages, generated from the registry.
 
 Usage::
@@ -13,13 +14,13 @@ design page's dataset table) are what the classes declare (:func:`locbench.prese
 filter or a dataset added as one module is listed after ``--write``. :func:`blocks` makes every other one from the
 tidy metrics, with the report's
 own formatting and aggregation (:mod:`locbench.report.tables`), so the README and the summary cannot disagree:
-``tests/tools/test_readme_results.py`` regenerates them from the committed ``metrics.csv`` and compares. A number
-that only REPORT.md holds (what the report computes from the stored runs rather than from ``metrics.csv``:
+``tests/tools/test_readme_results.py`` regenerates them from the committed ``metrics.parquet`` and compares. A
+number that only the report's pages hold (what the report computes from the stored runs rather than from the metrics:
 run counts by status, the lost-detection AUROC, the claims' measured values and verdicts, the ranks across
-datasets, the tuned studies, the Wilcoxon ties) is cut from the committed REPORT.md's own tables, and a change
-of REPORT.md's wording that loses one is an error naming it. After ``nox -s bench`` run ``--write``. Numbers
-outside the blocks are measurements that the committed summary does not hold (wall and CPU times, earlier
-versions' figures, runs outside the committed suites); each sentence says how it was measured.
+datasets, the tuned studies, the Wilcoxon ties) is cut from the committed pages' own tables (:func:`report_text`
+joins them), and a change of their wording that loses one is an error naming it. After ``nox -s bench`` run
+``--write``. Numbers outside the blocks are measurements that the committed summary does not hold (wall and CPU
+times, earlier versions' figures, runs outside the committed suites); each sentence says how it was measured.
 """
 
 from __future__ import annotations
@@ -43,7 +44,9 @@ from locbench.present.metric_info import metric_table
 from locbench.present.ranking import samples_for
 from locbench.present.sizes import sizes_text
 from locbench.report.collect import describe_filter
+from locbench.report.collect import read_metrics as _read_metrics
 from locbench.report.sections.summary import have_text
+from locbench.report.site import site_markdown
 from locbench.report.tables import (
     ate_over_bound,
     band_text,
@@ -60,8 +63,22 @@ ROOT = Path(__file__).resolve().parents[2]
 README = ROOT / "README.md"
 #: Every document that may hold generated blocks: the README and the docs pages (the history keeps its own figures).
 DOCUMENTS = (README, *sorted((ROOT / "docs").glob("*.md")))
-METRICS_CSV = ROOT / "results" / "summary" / "metrics.csv"
-REPORT_MD = METRICS_CSV.with_name("REPORT.md")
+SUMMARY = ROOT / "results" / "summary"
+#: The committed tidy metrics (a summary written before the report was a site has ``metrics.csv`` instead).
+METRICS = SUMMARY / "metrics.parquet" if (SUMMARY / "metrics.parquet").is_file() else SUMMARY / "metrics.csv"
+REPORT_MD = SUMMARY / "REPORT.md"
+
+
+def report_text(summary: Path = SUMMARY) -> str:
+    """The report's Markdown: the landing page ``REPORT.md`` and every page of ``md/`` (sorted), joined; each
+    section is found by its anchor wherever its page is."""
+    return site_markdown(summary)
+
+
+def read_metrics(path: str | Path = METRICS) -> pd.DataFrame:
+    """The tidy metrics of ``metrics.parquet`` (or an older summary's ``metrics.csv``)."""
+    return _read_metrics(path)
+
 
 #: ``<!-- gen:NAME -->text<!-- /gen:NAME -->``; the text may span lines.
 BLOCK = re.compile(r"<!-- gen:(?P<name>[\w-]+) -->(?P<body>.*?)<!-- /gen:(?P=name) -->", re.DOTALL)
@@ -98,7 +115,7 @@ def kidnap_cell(df: pd.DataFrame, base: str, name: str, d: float) -> tuple[int, 
 
 
 def office_summary(df: pd.DataFrame) -> str:
-    """The headline table on ``office``: the report's summary columns that metrics.csv holds."""
+    """The headline table on ``office``: the report's summary columns that the tidy metrics hold."""
     sub = df[df["dataset"] == "office"]
     wp = waypoint_rmse_mean(sub)
     rows = []
@@ -237,7 +254,7 @@ def global_localization(df: pd.DataFrame, laser: bool) -> Callable[[], str]:
     return text
 
 
-# --- the prose's numbers: from the committed REPORT.md's tables and from metrics.csv ----------------------
+# --- the prose's numbers: from the committed report pages' tables and from the metrics ----------------------
 
 #: A site where a filter's ATE is below this keeps track (the Radish sentence); above it, the site is named, m.
 TRACKED_M = 0.2
@@ -704,10 +721,10 @@ def pareto(df: pd.DataFrame) -> dict[str, str]:
 
 
 def blocks(df: pd.DataFrame, report: str | None = None) -> dict[str, str]:
-    """Every generated block of the README, by name; ``report`` is REPORT.md's text (default: the committed
-    one, which the same report code wrote from the same runs as ``df``)."""
+    """Every generated block of the README, by name; ``report`` is the report's Markdown (default: the committed
+    pages, :func:`report_text`, which the same report code wrote from the same runs as ``df``)."""
     if report is None:
-        report = REPORT_MD.read_text(encoding="utf-8")
+        report = report_text()
     kidnapped = {f"{b}[kidnap_m={d:g}]" for b in ("office", "room") for d in KIDNAP_DISTANCES_M}
     used = {"office", "room", *MATCHED, *kidnapped, *(ds for _, group, _ in RECORDED for ds in group)}
     ident = df["dataset"].astype(str).str.split("[").str[0]
@@ -726,7 +743,7 @@ def blocks(df: pd.DataFrame, report: str | None = None) -> dict[str, str]:
     out |= office_prose(df) | radish(df, report) | robustness(report) | office_report(report)
     out |= claim_values(report) | run_counts(report) | tuned_changes(report) | pareto(df)
     out["across-landmark-geometry"] = across_landmark_geometry(report)
-    out["report-sizes"] = sizes_text(REPORT_MD.parent, "results/summary")
+    out["report-sizes"] = sizes_text(SUMMARY, "results/summary")
     # the protocols page's metric tables, as locbench.present.metric_info writes them
     out |= {f"metrics-{g.replace(' ', '-')}": f"\n{metric_table(g)}\n" for g in GROUPS if metric_table(g)}
     return out | doc_blocks()
@@ -752,7 +769,7 @@ def disagreements(text: str, generated: dict[str, str]) -> list[str]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("metrics", nargs="?", default=str(METRICS_CSV))
+    ap.add_argument("metrics", nargs="?", default=str(METRICS))
     mode = ap.add_mutually_exclusive_group()
     mode.add_argument(
         "--write", action="store_true", help="rewrite the generated blocks of README.md and the docs pages"
@@ -761,7 +778,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--check", action="store_true", help="exit 1 when a generated block of README.md or a docs page disagrees"
     )
     args = ap.parse_args(argv)
-    generated = blocks(pd.read_csv(args.metrics))
+    generated = blocks(read_metrics(args.metrics))
     if args.write:
         for doc in DOCUMENTS:
             doc.write_text(render(doc.read_text(encoding="utf-8"), generated), encoding="utf-8")

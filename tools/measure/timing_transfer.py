@@ -1,9 +1,9 @@
 """How far two regenerations of the same runs agree on the accuracy-runtime figure (docs/history/performance.md).
 
 Run the same ``locbench run`` twice into two results folders (for example once on an idle machine, once with the
-cores busy), ``locbench report --results DIR`` each, then compare their ``summary/metrics.csv``::
+cores busy), ``locbench report --results DIR`` each, then compare their ``summary/metrics.parquet``::
 
-    python tools/measure/timing_transfer.py idle/summary/metrics.csv busy/summary/metrics.csv
+    python tools/measure/timing_transfer.py idle/summary/metrics.parquet busy/summary/metrics.parquet
 
 For every (dataset, configuration) present in both, the figure's place is (mean real-time factor in reference
 units over the seeds, mean ATE); the script prints the ratio B / A of the x coordinate, raw and in reference
@@ -21,13 +21,15 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from locbench.report.collect import read_metrics
+
 #: The figure's x axis (reference units) and its raw counterpart; the y axis.
 X_REF, X_RAW, Y = "realtime_factor_ref", "realtime_factor", "ate_m"
 
 
 def places(path: str) -> pd.DataFrame:
-    """Mean over seeds of the figure's coordinates per (dataset, filter), from one tidy ``metrics.csv``."""
-    tidy = pd.read_csv(path)
+    """Mean over seeds of the figure's coordinates per (dataset, filter), from one tidy ``metrics.parquet``."""
+    tidy = read_metrics(path)
     tidy = tidy[tidy["metric"].isin([X_REF, X_RAW, Y])]
     wide = tidy.pivot_table(index=["dataset", "filter", "seed"], columns="metric", values="value", aggfunc="first")
     missing = {X_REF, X_RAW, Y} - set(wide.columns)
@@ -54,8 +56,8 @@ def compare(a: pd.DataFrame, b: pd.DataFrame) -> pd.DataFrame:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("a", help="metrics.csv of the first regeneration (A, e.g. idle)")
-    ap.add_argument("b", help="metrics.csv of the second (B, e.g. busy)")
+    ap.add_argument("a", help="metrics.parquet of the first regeneration (A, e.g. idle)")
+    ap.add_argument("b", help="metrics.parquet of the second (B, e.g. busy)")
     ap.add_argument("--tolerance", nargs=2, type=float, metavar=("LO", "HI"), help="allowed B / A in reference units")
     args = ap.parse_args(argv)
     table = compare(places(args.a), places(args.b)).dropna()

@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 
 from locbench.registry import DATASETS
+from locbench.report.site import site_markdown
 from locbench.run.store import Store
 from locbench.run.sweep import run_many
 
@@ -39,6 +40,6 @@ def test_flagged_samples_are_counted_in_the_run_and_shown_in_the_report(tmp_path
         }
     ]
     assert main(["report", "--results", str(results)]) == 0
-    text = (store.summary / "REPORT.md").read_text()
+    text = site_markdown(store.summary)
     assert "| `glitchy` | ground-truth | apparent speed, m/s | 1 | 2.500 | at most 1 m/s |" in text
     assert "| `line` | ground-truth" not in text

@@ -21,6 +21,7 @@ from locbench.datasets.dataset import Dataset, Trajectory2D
 from locbench.datasets.recorded.files import RecordedDataError
 from locbench.datasets.recorded.textlog import MANIFEST, VERSION, _cached_events, load_textlog, write_textlog
 from locbench.registry import make_dataset, make_filter
+from locbench.report.site import site_markdown
 from locbench.run.export import export_textlog
 from locbench.run.filter_pass import run_filter
 
@@ -143,7 +144,7 @@ def test_cli_export_then_run_and_report(tmp_path: Path, capsys: pytest.CaptureFi
     assert main(["report", "--results", str(res)]) == 0
     import pandas as pd
 
-    df = pd.read_csv(res / "summary" / "metrics.csv")
+    df = pd.read_parquet(res / "summary" / "metrics.parquet")
     rows = df[df["dataset"] == spec]
     assert set(rows["filter"]) == {"odometry", "ekf_landmarks"}
     assert {"ate_m", "anees", "waypoint_1_error_m"} <= set(rows["metric"])  # truth and waypoints came along
@@ -358,7 +359,7 @@ def test_the_report_shows_the_input_warnings(tmp_path: Path, capsys: pytest.Capt
     assert main(["run", "--dataset", spec, "--filter", "odometry", "--results", str(res), "--no-progress"]) == 0
     assert main(["report", "--results", str(res)]) == 0
     capsys.readouterr()
-    text = (res / "summary" / "REPORT.md").read_text()
+    text = site_markdown(res / "summary")
     assert "Input warnings" in text and "odometry twist contradicts its pose: the twist is zero in 20 of" in text
 
 

@@ -19,6 +19,7 @@ from locbench.evaluate.metrics import chi2_band
 from locbench.evaluate.pcrb import pcrb_covariances
 from locbench.registry import make_dataset
 from locbench.report import write_report
+from locbench.report.site import site_markdown
 from locbench.run.store import Store
 from locbench.run.sweep import run_many
 from locbench.suites import ALL_FILTERS, SUITES
@@ -126,14 +127,14 @@ def test_claim_without_matched_runs_is_not_evaluated() -> None:
 def test_report_shows_each_filter_on_the_shipped_world_beside_its_matched_twin(tmp_path: Path) -> None:
     run_many(["odometry", "ekf_landmarks"], ["room", "room[matched=true]"], [0, 1], str(tmp_path))
     write_report(Store(tmp_path), out=tmp_path / "summary")
-    text = (tmp_path / "summary" / "REPORT.md").read_text()
+    text = site_markdown(tmp_path / "summary")
     section = text[text.index('id="consistency"') :]
     assert "*`room` as shipped beside `room[matched=true]`" in section
     head = (
         "| filter | shipped: runs | shipped: ANEES | shipped: NLL | shipped: energy score (cm) | shipped: ATE / PCRB |"
     )
     assert f"{head} matched: runs |" in section
-    df = pd.read_csv(tmp_path / "summary" / "metrics.csv")
+    df = pd.read_parquet(tmp_path / "summary" / "metrics.parquet")
     sel = df[(df["filter"] == "ekf_landmarks") & (df["metric"] == "anees")]
     shipped = sel[sel["dataset"] == "room"]["value"].mean()
     matched = sel[sel["dataset"] == "room[matched=true]"]["value"].mean()
