@@ -29,7 +29,8 @@ def finish(
 ) -> None:
     """Axis labels, the title, the legend outside the axes (on the right, or below them when it is long), and
     below the figure its key: the full spec of every configuration shown by a short name (:func:`short_names`)
-    and a ``note``; each configuration of the figure's table that is ``absent`` is a legend entry with the reason.
+    and a ``note``; each configuration of the figure's table that is ``absent`` is a legend entry with the reason
+    (by its short name too).
 
     Every line figure's frame: nothing of it is drawn over the data area."""
     ax.set_xlabel(xlabel)
@@ -43,10 +44,13 @@ def finish(
     handles, labels = ax.get_legend_handles_labels()
     short = short_names(labels)
     labels = [short[x] for x in labels]
-    # a configuration of the figure's table drawn nowhere: a text entry of the legend with the reason
+    # a configuration of the figure's table drawn nowhere: a text entry of the legend with the reason (a long name
+    # by its short name, the full spec in the key as for a drawn one)
+    gone = short_names(list(absent or {}))
     for name, why in (absent or {}).items():
         handles.append(Rectangle((0, 0), 0, 0, visible=False))
-        labels.append(wrap_label(f"not shown: {name} ({why})", 60))
+        labels.append(wrap_label(f"not shown: {gone[name]} ({why})", 60))
+    short = {**short, **gone}
     if len(labels) > LEGEND_RIGHT_MAX:
         # a long legend beside the axes would leave the data a narrow strip: below them, in columns
         ax.legend(

@@ -257,4 +257,5 @@ def test_the_lost_roc_names_coinciding_curves_and_filters_without_a_curve(tmp_pa
     under, over, apart = lines["ekf_landmarks"], lines["ukf_landmarks"], lines["pf"]
     assert over.get_zorder() > under.get_zorder() and over.get_linestyle() != under.get_linestyle()
     assert "(on " not in apart.get_label()
-    assert f"not shown: {NO_HEALTH} (no health signal stored)" in text.replace("\n", "")
+    assert f"not shown: {fg.short_name(NO_HEALTH)} (no health signal stored)" in text
+    assert f"{fg.short_name(NO_HEALTH)} = {NO_HEALTH}" in text  # its full spec in the key
