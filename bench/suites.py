@@ -199,11 +199,12 @@ _LG_LAYOUTS = ("1", "2", "3", "4", "8")
 #: The initial heading errors of suite ``heading`` (deg), UKF-M's question on our worlds; each with the matching
 #: initial heading standard deviation (``initial_heading_error_deg``; 0 is the world as shipped).
 HEADING_ERRORS_DEG = (0, 15, 45, 90)
-#: The error the claims judge (UKF-M's), run on 50 seeds; the others on the main comparison's 20, whose plain worlds
-#: (0 deg) are then the main comparison's own runs: about half the cost of 50 seeds everywhere (docs/protocols.md).
+#: The error the claims judge (UKF-M's).
 HEADING_CLAIM_DEG = 45
+#: The seeds of suite ``heading``: every filter at every error on the same 50 (docs/protocols.md).
+HEADING_SEEDS = 50
 #: The filters of suite ``heading``: the EKF, the UKF and the invariant EKF on the same models, and pf as in the main
-#: comparison (its default 1000 particles; shown, not judged, so on 20 seeds at every error).
+#: comparison (its default 1000 particles; shown, not judged).
 HEADING_FILTERS = ("ekf_landmarks", "ukf_landmarks", "iekf_landmarks")
 HEADING_PF = ("pf",)
 
@@ -214,10 +215,9 @@ def heading_datasets(base: str, errors: tuple[int, ...] = HEADING_ERRORS_DEG) ->
 
 
 def _heading_blocks() -> tuple[Block, ...]:
-    """Suite ``heading``: every error on 20 seeds, and the claims' error on 50 for the Gaussian filters."""
+    """Suite ``heading``: the four filters at every error on room and office, on :data:`HEADING_SEEDS` seeds."""
     every = heading_datasets("room") + heading_datasets("office")
-    claim = heading_datasets("room", (HEADING_CLAIM_DEG,)) + heading_datasets("office", (HEADING_CLAIM_DEG,))
-    return (Block((*HEADING_FILTERS, *HEADING_PF), every, 20), Block(HEADING_FILTERS, claim, 50))
+    return (Block((*HEADING_FILTERS, *HEADING_PF), every, HEADING_SEEDS),)
 
 
 def _kidnap_datasets(base: str) -> tuple[str, ...]:
@@ -370,8 +370,7 @@ def _make_suites() -> dict[str, Suite]:
             "heading",
             _heading_blocks(),
             "a wrong initial heading (0, 15, 45, 90 deg, the belief's heading deviation matching it) on room and "
-            "office: the EKF, the UKF, the invariant EKF and pf on 20 seeds, the first three on 50 at 45 deg "
-            "(UKF-M's 2-D question)",
+            "office: the EKF, the UKF, the invariant EKF and pf on 50 seeds (UKF-M's 2-D question)",
         ),
         # Run by locbench.run.tuning (locbench run --suite tuned), not as blocks: the tuned configurations that
         # locbench tune --suite committed to RESULTS/tuning, and their defaults, on the test data (docs/protocols.md,

@@ -47,6 +47,11 @@ Metric ids added on top of the DESIGN list (each documented here, none changes a
   recovery criterion searched from the first ground-truth time over the whole run;
   ``time_to_converge_s`` = t_s - t_0, s, present only when converged. A filter started at the true
   pose typically has ``converged`` = 1 and ``time_to_converge_s`` = 0.
+- ``updates_to_converge``, for every ok run that converged: how many measurement updates (stored rows of any
+  kind but odometry and the reset) the filter had made when it met the criterion, counted up to the row in force at
+  t_s; 0 when its initial belief already meets the criterion at t_0 and the run converges there. A belief whose
+  first update at t_0 fixes its heading has ``time_to_converge_s`` = 0 whatever it started from (every ground-truth
+  time sees an updated belief); the count still tells one update from ten.
 - ``smoothed_ate_m``, ``smoothed_heading_rmse_rad``: when the run's ``extra`` holds a smoothed
   trajectory (``smoothed_t`` (n,), s, and ``smoothed_mean`` (n, 3), world frame), its ATE and wrapped
   heading RMSE, defined exactly as ``ate_m`` and ``heading_rmse_rad`` (zero-order hold of the
@@ -85,6 +90,7 @@ from scipy import stats
 from locbench.core.geometry import between, wrap_angle
 from locbench.evaluate.aligned import Aligned, NoCovariance, align, nees
 from locbench.evaluate.hold import estimate_at
+from locbench.evaluate.records import KIND_NAMES
 from locbench.evaluate.scores import SCORE_IDS, score_metrics
 
 if TYPE_CHECKING:
@@ -164,6 +170,7 @@ KIDNAP_TIME_TO_RECOVER_S = "kidnap_time_to_recover_s"
 KIDNAP_FALSE_CONFIDENCE_FRACTION = "kidnap_false_confidence_fraction"
 CONVERGED = "converged"
 TIME_TO_CONVERGE_S = "time_to_converge_s"
+UPDATES_TO_CONVERGE = "updates_to_converge"
 ACCEPTED_FRACTION = "accepted_fraction"
 PARTICLES_MEAN = "particles_mean"
 RECORDED_ATE_MEDIAN_M = "recorded_ate_median_m"
@@ -530,6 +537,38 @@ def convergence_metrics(a: Aligned) -> dict[str, float]:
     if t_s is None:
         return {CONVERGED: 0.0}
     return {CONVERGED: 1.0, TIME_TO_CONVERGE_S: t_s - float(tt[0])}
+
+
+def updates_to_converge(a: Aligned, is_update: npt.ArrayLike, initial: npt.ArrayLike) -> float | None:
+    """The number of measurement updates a run made before it converged (module docstring).
+
+    Parameters
+    ----------
+    a : Aligned
+        The run held at the ground-truth times (its ``rows`` index the run's stored rows).
+    is_update : array-like of bool, shape (n,)
+        Whether each stored row of the run follows a measurement update (not odometry, not the reset).
+    initial : array-like, shape (3,)
+        The initial belief's mean (x m, y m, theta rad, world frame), judged against the first truth pose.
+
+    Returns
+    -------
+    float or None
+        The updates among the stored rows up to the one in force at the convergence time t_s; 0 when the
+        initial belief already meets the recovery criterion and the run converges at t_0; None when the run
+        never converges.
+    """
+    tt = a.t
+    ok = within_recovery(a)
+    t_s = first_hold(tt, ok, float(tt[0]))
+    if t_s is None:
+        return None
+    k = int(np.searchsorted(tt, t_s - _T_EPS))
+    start = Aligned(tt[:1], a.rows[:1], np.asarray(initial, dtype=np.float64)[None, :], a.truth[:1])
+    if k == 0 and bool(within_recovery(start)[0]):
+        return 0.0
+    upd = np.asarray(is_update, dtype=bool)
+    return float(np.count_nonzero(upd[: int(a.rows[k]) + 1]))
 
 
 def smoothed_metrics(extra: Mapping[str, np.ndarray], a: Aligned) -> dict[str, float]:
@@ -1068,6 +1107,12 @@ def _convergence(v: RunView) -> dict[str, float]:
     return convergence_metrics(v.aligned)
 
 
+def _updates_to_converge(v: RunView) -> float:
+    non_update = (KIND_NAMES.index("Odometry"), KIND_NAMES.index("reset"))
+    got = updates_to_converge(v.aligned, ~np.isin(v.run.kind, non_update), v.run.mean[0])
+    return float("nan") if got is None else got
+
+
 def _kidnap(v: RunView) -> dict[str, float]:
     return kidnap_metrics(v.aligned, v.truth.kidnaps)
 
@@ -1506,6 +1551,15 @@ for _m in (
         group="recovery",
         family=_convergence,
         definition="from the first ground-truth time to that time (converged runs only)",
+    ),
+    Metric(
+        UPDATES_TO_CONVERGE,
+        header="updates to converge",
+        unit="1",
+        group="recovery",
+        compute=_updates_to_converge,
+        definition="measurement updates made up to that time; 0 when the initial belief meets the criterion at the "
+        "first ground-truth time (converged runs only)",
     ),
     Metric(
         ACCEPTED_FRACTION,

@@ -29,7 +29,8 @@ def finish(
 ) -> None:
     """Axis labels, the title, the legend outside the axes (on the right, or below them when it is long), and
     below the figure its key: the full spec of every configuration shown by a short name (:func:`short_names`)
-    and a ``note``; each configuration of the figure's table that is ``absent`` is a legend entry with the reason.
+    and a ``note``; each configuration of the figure's table that is ``absent`` is a legend entry with the reason
+    (by its short name too).
 
     Every line figure's frame: nothing of it is drawn over the data area."""
     ax.set_xlabel(xlabel)
@@ -43,10 +44,13 @@ def finish(
     handles, labels = ax.get_legend_handles_labels()
     short = short_names(labels)
     labels = [short[x] for x in labels]
-    # a configuration of the figure's table drawn nowhere: a text entry of the legend with the reason
+    # a configuration of the figure's table drawn nowhere: a text entry of the legend with the reason (a long name
+    # by its short name, the full spec in the key as for a drawn one)
+    gone = short_names(list(absent or {}))
     for name, why in (absent or {}).items():
         handles.append(Rectangle((0, 0), 0, 0, visible=False))
-        labels.append(wrap_label(f"not shown: {name} ({why})", 60))
+        labels.append(wrap_label(f"not shown: {gone[name]} ({why})", 60))
+    short = {**short, **gone}
     if len(labels) > LEGEND_RIGHT_MAX:
         # a long legend beside the axes would leave the data a narrow strip: below them, in columns
         ax.legend(
@@ -102,15 +106,17 @@ def short_name(name: str) -> str:
     return f"{name.split('[', 1)[0]}[#{hashlib.sha256(name.encode()).hexdigest()[:4]}]"
 
 
-def key_lines(short: Mapping[str, str], note: str = "") -> list[str]:
-    """The lines of a figure's key: ``short = full spec`` for each shortened name, then the note."""
+def key_lines(short: Mapping[str, str], note: str = "", wrap: int | None = None) -> list[str]:
+    """The lines of a figure's key: ``short = full spec`` for each shortened name, then the note, each broken
+    into lines of about ``wrap`` characters (default :data:`KEY_WRAP`)."""
+    width = KEY_WRAP if wrap is None else wrap
     lines = []
     for full, sh in short.items():
         if sh != full:
             name = full[: len(full) - (len(sh) - sh.index("]") - 1)]
-            lines.append(wrap_label(f"{sh[: sh.index(']') + 1]} = {name}", KEY_WRAP))
+            lines.append(wrap_label(f"{sh[: sh.index(']') + 1]} = {name}", width))
     if note:
-        lines.append(wrap_words(note, KEY_WRAP))
+        lines.append(wrap_words(note, width))
     return lines
 
 
@@ -118,9 +124,10 @@ def key_lines(short: Mapping[str, str], note: str = "") -> list[str]:
 KEY_WRAP = 110
 
 
-def figure_key(fig: Figure, short: Mapping[str, str], note: str = "") -> None:
-    """The figure's key below everything else (a figure legend of text lines, placed by the layout)."""
-    lines = key_lines(short, note)
+def figure_key(fig: Figure, short: Mapping[str, str], note: str = "", wrap: int | None = None) -> None:
+    """The figure's key below everything else (a figure legend of text lines, placed by the layout, or at the
+    figure's lower left where a figure reserves the space itself)."""
+    lines = key_lines(short, note, wrap)
     # one key per figure: the panels of a figure add their lines to it
     for old in [leg for leg in fig.legends if leg.get_label() == KEY_LABEL]:
         lines = list(dict.fromkeys([*(t.get_text() for t in old.get_texts()), *lines]))
@@ -357,6 +364,30 @@ def panel_title(label: str) -> str:
     return wrap_label(label, title_chars(PANEL_W, PANEL_TITLE_PT) * 4 // 3)
 
 
+#: The font size of a trajectory figure's key, pt, and the height of one of its lines, inches.
+KEY_PT = 6.5
+KEY_LINE_IN = 0.125
+
+
+def track_key(tracks: Sequence[Track]) -> tuple[dict[str, str], list[str]]:
+    """Each track's label as its panel shows it (:func:`short_names`) and the lines of the figure's key (the full
+    spec of every shortened name), wrapped to the width of the figure's panels."""
+    short = short_names([tr.label for tr in tracks])
+    width = PANEL_W * min(PANEL_COLS, max(len(tracks), 1)) + PANEL_MARGINS_IN["left"]
+    return short, key_lines(short, wrap=key_chars(width))
+
+
+def key_chars(fig_width_in: float) -> int:
+    """How many characters of a :data:`KEY_PT` key line fit across a figure ``fig_width_in`` inches wide."""
+    return max(30, int((fig_width_in - 0.3) * 72.0 / (CHAR_EM * KEY_PT)))
+
+
+def key_height(lines: Sequence[str]) -> float:
+    """The height (inches) a figure reserves below its panels for a key of ``lines`` (none without lines)."""
+    n = sum(1 + line.count("\n") for line in lines)
+    return KEY_LINE_IN * n + 0.1 if n else 0.0
+
+
 #: Fixed margins of a trajectory figure, inches: left (y tick labels and the y label), below each panel (x tick
 #: labels and the x label), right, the gap between columns (the next panel's y label), above each panel's title.
 PANEL_MARGINS_IN = {"left": 0.62, "xband": 0.42, "right": 0.08, "wspace": 0.62, "title_pad": 0.1}
@@ -372,8 +403,10 @@ def leaves_view(world: World, track: Track) -> bool:
 
 
 def track_titles(world: World, tracks: Sequence[Track]) -> list[str]:
-    """Each panel's title: the label broken to the panel's width, and a line when the estimate leaves the view."""
-    return [panel_title(tr.label) + (f"\n{LEAVES_VIEW}" if leaves_view(world, tr) else "") for tr in tracks]
+    """Each panel's title: the label (a long one by its short name, :func:`track_key`) broken to the panel's width,
+    and a line when the estimate leaves the view."""
+    short, _ = track_key(tracks)
+    return [panel_title(short[tr.label]) + (f"\n{LEAVES_VIEW}" if leaves_view(world, tr) else "") for tr in tracks]
 
 
 def _panel_rows(world: World, titles: Sequence[str]) -> tuple[int, int, float, float]:
@@ -393,12 +426,13 @@ def trajectory_size(world: World, tracks: Sequence[Track]) -> tuple[float, float
     labels."""
     ncols, nrows, axes_h, title_h = _panel_rows(world, track_titles(world, tracks))
     m = PANEL_MARGINS_IN
-    return PANEL_W * ncols + m["left"], nrows * (axes_h + title_h + m["xband"])
+    return PANEL_W * ncols + m["left"], nrows * (axes_h + title_h + m["xband"]) + key_height(track_key(tracks)[1])
 
 
-def _fixed_panel_layout(fig: Figure, world: World, titles: Sequence[str]) -> dict[str, float]:
+def _fixed_panel_layout(fig: Figure, world: World, titles: Sequence[str], key_in: float = 0.0) -> dict[str, float]:
     """The grid of the panels by fixed margins instead of the constrained layout (about half of a trajectory
-    figure's drawing time): the sizes of everything around a panel are known in advance."""
+    figure's drawing time): the sizes of everything around a panel are known in advance, the key's ``key_in``
+    inches below them too."""
     ncols, _, axes_h, title_h = _panel_rows(world, titles)
     w, h = fig.get_figwidth(), fig.get_figheight()
     m = PANEL_MARGINS_IN
@@ -406,7 +440,7 @@ def _fixed_panel_layout(fig: Figure, world: World, titles: Sequence[str]) -> dic
     return {
         "left": m["left"] / w,
         "right": 1.0 - m["right"] / w,
-        "bottom": m["xband"] / h,
+        "bottom": (m["xband"] + key_in) / h,
         "top": 1.0 - title_h / h,
         "wspace": m["wspace"] * ncols / (w - m["left"] - m["right"] - m["wspace"] * (ncols - 1)),
         "hspace": (title_h + m["xband"]) / axes_h,
@@ -415,14 +449,16 @@ def _fixed_panel_layout(fig: Figure, world: World, titles: Sequence[str]) -> dic
 
 def draw_trajectories(fig: Figure, world: World, tracks: Sequence[Track], styles: Mapping[str, LineStyle]) -> None:
     """Small multiples: one panel per filter with the world, the truth and the waypoints in each, axes fitted to
-    the world (what leaves it is clipped, and the panel's title says so), the estimate and its 95 % position
-    ellipses; every panel has its axis labels (m, world frame)."""
+    the world (what leaves it is clipped to the panel, and the panel's title says so), the estimate and its 95 %
+    position ellipses; every panel has its axis labels (m, world frame) and a title of at most about a panel's
+    width (a long configuration name by its short name, the full spec in the key below the panels)."""
     n = max(len(tracks), 1)
     ncols = min(PANEL_COLS, n)
     nrows = math.ceil(n / ncols)
     (x0, x1), (y0, y1) = world_limits(world)
     titles = track_titles(world, tracks)
-    grid = _fixed_panel_layout(fig, world, titles)
+    _, key = track_key(tracks)
+    grid = _fixed_panel_layout(fig, world, titles, key_height(key))
     axes = fig.subplots(nrows, ncols, squeeze=False, sharex=True, sharey=True, gridspec_kw=grid)
     for k, ax in enumerate(axes.flat):
         if k >= len(tracks):
@@ -452,11 +488,24 @@ def draw_trajectories(fig: Figure, world: World, tracks: Sequence[Track], styles
         ax.set_xlim(x0, x1)
         ax.set_ylim(y0, y1)
         ax.set_aspect("equal", adjustable="box")
-        # a tuned configuration's long name broken after commas to its panel's width
+        # a tuned configuration's long name by its short name, the full spec in the figure's key
         ax.set_title(titles[k], fontsize=PANEL_TITLE_PT)
         ax.tick_params(labelsize=6.5, labelbottom=True, labelleft=True)
         ax.set_xlabel("x (m)", fontsize=7, labelpad=1.0)
         ax.set_ylabel("y (m)", fontsize=7, labelpad=1.0)
+    if key:
+        leg = fig.legend(
+            [Rectangle((0, 0), 0, 0, visible=False) for _ in key],
+            key,
+            loc="lower left",
+            bbox_to_anchor=(0.1 / fig.get_figwidth(), 0.0),
+            handlelength=0,
+            handletextpad=0,
+            borderpad=0.2,
+            frameon=False,
+            fontsize=KEY_PT,
+        )
+        leg.set_label(KEY_LABEL)
 
 
 #: Two series closer than this relative difference at every point are drawn over each other (on a log axis

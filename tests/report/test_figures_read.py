@@ -174,3 +174,88 @@ def test_pareto_markers_on_top_of_each_other_stay_visible() -> None:
     fg.draw_pareto(ax, pts, styles, "rtf", "ATE (cm)", "t")
     sizes = {ln.get_label(): ln.get_markersize() for ln in ax.get_lines() if ln.get_label() in "abc"}
     assert sizes == {"a": 5, "b": 9, "c": 5}
+
+
+def _drawn(plot: Plot) -> Figure:
+    import matplotlib.style
+
+    from locbench.report.render import _figure
+    from locbench.report.style import MPL_STYLE
+
+    with matplotlib.style.context(["default", MPL_STYLE]):
+        fig = _figure(plot)
+        fig.canvas.draw()
+    return fig
+
+
+def test_trajectory_panels_have_short_titles_a_key_units_and_keep_their_tracks_inside(plots: list[Plot]) -> None:
+    if os.environ.get("LOCBENCH_FIGURE_STORE"):
+        pytest.skip("the fake store's configurations only")
+    (traj,) = (p for p in plots if p.name == "room_trajectories")
+    fig = _drawn(traj)
+    panels = [ax for ax in fig.axes if ax.axison]
+    assert len(panels) == len(CONFIGS)
+    titles = [ax.get_title().replace("\n", "") for ax in panels]
+    for name in CONFIGS[6:]:  # long: a short name over the panel, the full spec in the key
+        assert fg.short_name(name) in titles and name not in titles
+        assert f"{fg.short_name(name)} = {name}" in _texts(traj)
+    assert "pf[particles=100]" in titles  # short enough: as it is
+    for ax in panels:
+        assert ax.get_xlabel() == "x (m)" and ax.get_ylabel() == "y (m)"
+        for art in [*ax.get_lines(), *ax.patches]:  # every track and ellipse clipped to its own panel
+            assert art.get_clip_on() and art.get_clip_box() is not None
+            assert tuple(art.get_clip_box().extents) == pytest.approx(tuple(ax.bbox.extents))
+
+
+def test_a_track_that_runs_away_stays_inside_its_panel() -> None:
+    import numpy as np
+
+    from locbench.present.docfmt import LineStyle
+
+    world = fg.World(np.array([[0.0, 0.0, 4.0, 0.0]]), np.zeros((0, 2)), np.array([[0.0, 0.0], [4.0, 1.0]]))
+    away = fg.Track("odometry", np.array([[0.0, 0.0], [40.0, -30.0]]), np.array([[30.0, 0.0]]), 4.0 * np.eye(2)[None])
+    home = fg.Track("pf", np.array([[0.0, 0.0], [4.0, 1.0]]), np.zeros((0, 2)), np.zeros((0, 2, 2)))
+    styles = {k: LineStyle("#112233", "o", "-") for k in ("odometry", "pf")}
+    plot = Plot("t", "", lambda fig: fg.draw_trajectories(fig, world, [away, home], styles),
+                size=fg.trajectory_size(world, [away, home]), shows=("odometry", "pf"))  # fmt: skip
+    assert figure_problems(plot) == []
+    fig = _drawn(plot)
+    ax = next(ax for ax in fig.axes if ax.get_title().startswith("odometry"))
+    assert fg.LEAVES_VIEW in ax.get_title()
+    (x0, x1), (y0, y1) = fg.world_limits(world)
+    assert ax.get_xlim() == (x0, x1) and ax.get_ylim() == (y0, y1)  # framed on the world, not the runaway track
+    for art in [*ax.get_lines(), *ax.patches]:
+        assert art.get_clip_on() and tuple(art.get_clip_box().extents) == pytest.approx(tuple(ax.bbox.extents))
+
+
+#: A configuration that stores no health signal: the lost-ROC figure names it with the reason.
+NO_HEALTH = CONFIGS[7]
+
+
+def _lost_store(root: Path) -> Store:
+    """Runs that drift lost (past 0.25 m) as their covariance grows: ekf_landmarks and ukf_landmarks alike (one
+    curve), pf apart, and :data:`NO_HEALTH` without a health signal."""
+    st = Store(root)
+    for seed in range(2):
+        truth = _fake_truth(seed)
+        st.write_truth(truth)
+        for f in ("ekf_landmarks", "ukf_landmarks", "pf", NO_HEALTH):
+            run = _fake_run(truth, f, drift=0.008 if f == "pf" else 0.01, sigma=0.006)
+            st.write_run(run if f != NO_HEALTH else dataclasses.replace(run, health={}))
+    return st
+
+
+def test_the_lost_roc_names_coinciding_curves_and_filters_without_a_curve(tmp_path: Path) -> None:
+    st = _lost_store(tmp_path / "results")
+    (roc,) = (p for p in plots_of(build_sections(Report(collect(st)))) if p.name == "lost_roc")
+    assert figure_problems(roc) == []
+    text = _texts(roc)
+    # ekf_landmarks and ukf_landmarks report the same signal: one curve, dashed over the other and named as such
+    assert "(on ekf_landmarks)" in text
+    fig = _drawn(roc)
+    lines = {ln.get_label().split(":")[0]: ln for ax in fig.axes for ln in ax.get_lines()}
+    under, over, apart = lines["ekf_landmarks"], lines["ukf_landmarks"], lines["pf"]
+    assert over.get_zorder() > under.get_zorder() and over.get_linestyle() != under.get_linestyle()
+    assert "(on " not in apart.get_label()
+    assert f"not shown: {fg.short_name(NO_HEALTH)} (no health signal stored)" in text
+    assert f"{fg.short_name(NO_HEALTH)} = {NO_HEALTH}" in text  # its full spec in the key

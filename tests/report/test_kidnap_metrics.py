@@ -237,6 +237,58 @@ def test_convergence_looks_at_the_whole_run_and_ignores_the_kidnap() -> None:
     assert m["time_to_converge_s"] == pytest.approx(40.0)
 
 
+LANDMARKS = KIND_NAMES.index("LandmarkObservations")
+
+
+def _updating_run(truth: TruthRecord, heading_errors: list[float]) -> RunRecord:
+    """The truth with a wrong heading: the reset belief at t_0 has ``heading_errors[0]`` (rad), the j-th landmark
+    update (one at each ground-truth time from t_0 on, with odometry half-way between) leaves ``heading_errors[j]``
+    (the last one holds to the end)."""
+    gt = truth.ground_truth
+    t, kind, mean = [gt.t[0]], [RESET], [gt.poses[0]]
+    for k, tk in enumerate(gt.t):
+        err = heading_errors[min(k + 1, len(heading_errors) - 1)]
+        t.append(tk)
+        kind.append(LANDMARKS)
+        mean.append(gt.poses[k] + (0.0, 0.0, err))
+        if k + 1 < gt.t.size:
+            t.append(0.5 * (tk + gt.t[k + 1]))
+            kind.append(ODO)
+            mean.append(gt.poses[k] + (0.0, 0.0, err))
+    mean_a = np.asarray(mean)
+    mean_a[0, 2] = gt.poses[0, 2] + heading_errors[0]
+    cov = np.broadcast_to(SMALL_COV * np.eye(3), (len(t), 3, 3)).copy()
+    meta = {"filter": "f", "dataset": truth.dataset, "seed": truth.seed, "status": "ok", "message": ""}
+    n = len(t)
+    return RunRecord(meta, np.asarray(t), mean_a, cov, np.asarray(kind, np.int8), np.full(n, 1000, np.int64))
+
+
+@pytest.mark.parametrize(
+    ("errors", "updates", "seconds"),
+    [
+        ([0.0], 0.0, 0.0),  # the initial belief meets the criterion: no update needed
+        ([0.8, 0.0], 1.0, 0.0),  # the update at t_0 fixes the heading: 0 s, but one update
+        ([0.8, 0.4, 0.2, 0.1], 2.0, DT),  # the second update brings it within 0.25 rad
+        ([0.8, 0.4, 0.3, 0.26, 0.2], 4.0, 3 * DT),
+        ([0.8, 0.1, 0.4, 0.4, 0.4, 0.4, 0.0], 6.0, 5 * DT),  # within for a moment, out again: not yet converged
+    ],
+)
+def test_updates_to_converge_counts_the_updates_that_the_time_hides(
+    errors: list[float], updates: float, seconds: float
+) -> None:
+    truth = _truth(kidnaps=())
+    m = lm.run_metrics(_updating_run(truth, errors), truth)
+    assert m["converged"] == 1.0
+    assert m["updates_to_converge"] == updates
+    assert m["time_to_converge_s"] == pytest.approx(seconds)
+
+
+def test_no_convergence_no_update_count() -> None:
+    truth = _truth(kidnaps=())
+    m = lm.run_metrics(_updating_run(truth, [0.8, 0.5]), truth)
+    assert m["converged"] == 0.0 and "updates_to_converge" not in m
+
+
 # --- smoothed trajectories ----------------------------------------------------------------------
 
 

@@ -226,6 +226,7 @@ def test_collect_metrics_is_tidy_and_sorted(store: Store) -> None:
         "realtime_factor",
         "converged",
         "time_to_converge_s",
+        "updates_to_converge",
         "within_5cm_fraction",
         "within_10cm_fraction",
         "within_25cm_fraction",

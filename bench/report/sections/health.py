@@ -40,6 +40,10 @@ FloatPair = tuple[str, np.ndarray]
 RUNNERS_UP = 2
 #: Most panels of the ROC figure.
 MAX_ROC_PANELS = 6
+#: Why a filter run on a dataset has no curve in the ROC figure when it stored no health signal.
+NO_SIGNAL = "no health signal stored"
+#: False-positive rates at which two ROC curves are compared (:func:`locbench.report.figures.coinciding`).
+ROC_GRID = np.linspace(0.0, 1.0, 101)
 
 
 def best_signal(col: Collected, dataset: str, filter_name: str) -> SignalScore | None:
@@ -84,6 +88,7 @@ def lost_section(rep: Report) -> Section:
             series = col.health.get((ds, f), [])
             scores = score_signals(series)
             if not scores:
+                absent.setdefault(ds, {})[f] = NO_SIGNAL  # run here, but nothing to score: the figure says so
                 continue
             best = scores[0]
             others = ", ".join(f"{s.signal} {tb.num(s.auroc[0])}" for s in scores[1 : 1 + RUNNERS_UP])
@@ -175,9 +180,18 @@ def _roc_plot(
     def draw(fig: Figure) -> None:
         axes = fig.subplots(nrows, cols, squeeze=False)
         for ax, ds in zip(axes.ravel(), chosen, strict=False):
+            # a curve on top of an earlier one is drawn dashed over it and its entry names the curve it lies on
+            same = fg.coinciding(
+                [f for f, *_ in lines[ds]], [np.interp(ROC_GRID, fpr, tpr) for _, _, fpr, tpr, _ in lines[ds]]
+            )
             for f, sig, fpr, tpr, a in lines[ds]:
                 st = styles[f]
-                ax.plot(fpr, tpr, color=st.color, ls=st.linestyle, lw=1.0, label=f"{f}: {sig} ({a:.2f})")
+                label = f"{f}: {sig} ({a:.2f})"
+                if f in same:
+                    label += f" (on {same[f]})"
+                    ax.plot(fpr, tpr, color=st.color, ls=(0, (3, 3)), lw=1.4, label=label, zorder=2.5)
+                    continue
+                ax.plot(fpr, tpr, color=st.color, ls=st.linestyle, lw=1.0, label=label)
             ax.plot([0, 1], [0, 1], color="0.6", lw=0.6, ls=":")
             ax.tick_params(labelsize=6)
             fg.finish(ax, "false-positive rate", "true-positive rate", col.display(ds), absent=absent.get(ds, {}))

@@ -37,13 +37,15 @@ def test_zero_is_the_shipped_world_and_leaves_the_run_key() -> None:
         resolve_dataset("office[initial_heading_error_deg=-5]")
 
 
-def test_the_suite_runs_every_error_and_the_claims_variant_on_50_seeds() -> None:
+def test_the_suite_runs_every_filter_at_every_error_on_50_seeds() -> None:
     suite = SUITES["heading"]
-    names = {resolve_dataset(d).name for b in suite.blocks for d in b.datasets}
-    assert {"room", "office", "room[initial_heading_error_deg=90]", "office[initial_heading_error_deg=15]"} <= names
-    claim = [b for b in suite.blocks if b.seeds == 50]
-    assert claim and {"ekf_landmarks", "iekf_landmarks"} <= set(claim[0].filters)
-    assert all("initial_heading_error_deg=45" in d for d in claim[0].datasets)
+    runs = {(f, resolve_dataset(d).name, s) for b in suite.blocks for f in b.filters for d in b.datasets
+            for s in range(b.seeds)}  # fmt: skip
+    errors = [f"[initial_heading_error_deg={e}]" for e in (15, 45, 90)]
+    worlds = {w + e for w in ("room", "office") for e in ("", *errors)}
+    filters = {"ekf_landmarks", "ukf_landmarks", "iekf_landmarks", "pf"}
+    assert runs == {(f, w, s) for f in filters for w in worlds for s in range(50)}
+    assert sum(b.runs for b in suite.blocks) == len(runs) == 1600  # no run twice
     assert all(b in SUITES["all"].blocks for b in suite.blocks)  # nox -s bench runs it
 
 
@@ -69,3 +71,17 @@ def test_the_claims_read_the_45_degree_variant_and_follow_the_rule() -> None:
     assert check_lower_error(_rows(base, base[::-1].copy(), "ate_m")).verdict == "not reproduced"
     assert check_lower_error(_rows(base, base + 0.5, "ate_m")).verdict == "reproduced"
     assert check_lower_error(_rows(base[:0], base[:0], "ate_m")).verdict == "not evaluated"
+
+
+def test_the_claims_pair_the_two_filters_on_all_50_seeds_and_leave_pf_and_ukf_out() -> None:
+    rng = np.random.default_rng(2)
+    base = 0.05 + 0.01 * rng.standard_normal(50)
+    df = _rows(base, base + 0.01, "ate_m")
+    extra = [
+        {"dataset": "room[initial_heading_error_deg=45]", "filter": f, "seed": s, "metric": "ate_m", "value": 9.0}
+        for f in ("pf", "ukf_landmarks")
+        for s in range(50)
+    ]
+    got = check_lower_error(pd.concat([df, pd.DataFrame(extra)], ignore_index=True))
+    assert got.verdict == "reproduced"
+    assert got.measured.startswith("mean ATE over 50 runs iekf_landmarks 5.")
