@@ -398,6 +398,11 @@ def claim_values(report: str) -> dict[str, str]:
     return out
 
 
+def has_tuned(report: str) -> bool:
+    """Whether the report holds suite ``tuned``'s section (tuned studies were committed when it was made)."""
+    return '<a id="tuned"></a>' in report
+
+
 def run_counts(report: str) -> dict[str, str]:
     """Runs of suites ``all`` and ``consistency`` (ok, skipped, failed), suite ``tuned``'s test runs and the last
     ``locbench verify``, from REPORT.md's provenance and its tuned table (the tuned configurations that are not
@@ -410,7 +415,7 @@ def run_counts(report: str) -> dict[str, str]:
         status.get("skipped", 0),
         status.get("diverged", 0) + status.get("error", 0),
     )
-    tuned = md_tables(report, "tuned")[0]
+    tuned = md_tables(report, "tuned")[0] if has_tuned(report) else []
     count = re.compile(r"\((\d+)/(\d+)\)")
 
     def n(cell: str) -> int:
@@ -421,7 +426,6 @@ def run_counts(report: str) -> dict[str, str]:
     kept_rows = [
         int(m.group(1)) if m else int(r["tuned spec"] == "default kept") for r, m in zip(tuned, folds, strict=True)
     ]
-    kept = sum(kept_rows)
     n_studies = sum(int(m.group(2)) if m else 1 for m in folds)
     # the tuned runs that are not the default's own: a kept study's tuned rows are its default's
     extra = sum(
@@ -430,37 +434,64 @@ def run_counts(report: str) -> dict[str, str]:
     )
     test = sum(n(r["default ATE (cm)"]) for r in tuned) + extra
     v = find(r"verify: passed on [^,]+, (\d+) of \d+ stored runs re-run \(fraction ([\d.]+)", prov, "the verify line")
-    budget = find(
-        r"Budget per (?:study|filter and data)[^:]*: (\d+) trials x (\d+) train runs",
-        section_text(report, "tuned"),
-        "the tuning budget",
-    )
-    return {
+    common = {
         "runs-all-total": str(ok - extra + skipped + failed),
         "runs-all-ok": str(ok - extra),
         "runs-all-skipped": str(skipped),
         "runs-all-failed": "none" if not failed else str(failed),
         "runs-tuned-test": str(test),
         "verify-rerun": f"{v.group(1)} of them ({100 * float(v.group(2)):.0f} %",
-        "tuned-kept": f"{kept} of {n_studies}",
+    }
+    if not has_tuned(report):
+        return common | {
+            "tuned-train-runs": "no",
+            "tuned-studies": "none committed yet",
+        }
+    budget = find(
+        r"Budget per (?:study|filter and data)[^:]*: (\d+) trials x (\d+) train runs",
+        section_text(report, "tuned"),
+        "the tuning budget",
+    )
+    return common | {
         "tuned-train-runs": str(n_studies * int(budget.group(1)) * int(budget.group(2))),
         "tuned-studies": f"{n_studies} studies of {budget.group(1)} trials x {budget.group(2)} train runs, "
         f"{n_studies * int(budget.group(1)) * int(budget.group(2))} train runs",
-        "tuned-budget": f"{budget.group(1)} trials x {budget.group(2)} train runs",
     }
 
 
-def tuned_changes(report: str) -> dict[str, str]:
-    """``gains 23 % (8.53 -> 6.57 cm)`` per tuned (filter, data) whose configuration is not the default."""
-    out = {}
-    for r in md_tables(report, "tuned")[0]:
-        if r["tuned spec"] == "default kept":
+def tuned_findings(report: str) -> dict[str, str]:
+    """The tuned section in one sentence: the budget, the studies that kept the default, and each (filter, data)
+    whose tuned configuration changed its mean test ATE, with the paired test across the test units; or that no
+    studies are committed."""
+    if not has_tuned(report):
+        return {
+            "tuned-findings": "no tuned studies are committed with these results: tuning is a step of its own "
+            "(`nox -s tune`), and suite `tuned` runs what it committed"
+        }
+    text = section_text(report, "tuned")
+    budget = find(r"Budget per (?:study|filter and data)[^:]*: (\d+) trials x (\d+) train runs", text, "the budget")
+    rows = md_tables(report, "tuned")[0]
+    kept = n_studies = 0
+    changes = []
+    for r in rows:
+        m = re.search(r"default kept in (\d+) of (\d+) folds", r["tuned spec"])
+        kept += int(m.group(1)) if m else int(r["tuned spec"] == "default kept")
+        n_studies += int(m.group(2)) if m else 1
+        if r["tuned spec"] == "default kept" or (m and m.group(1) == m.group(2)):
             continue
         change = float(r["change (%)"])
         a, b = (plain(r[c]).split(" (")[0] for c in ("default ATE (cm)", "tuned ATE (cm)"))
         word = "gains" if change < 0 else "loses"
-        out[f"tuned-{plain(r['filter'])}-{r['data']}"] = f"{word} {num(abs(change), 2)} % ({a} -> {b} cm)"
-    return out
+        test = plain(r.get("tuned against default, paired", ""))
+        changes.append(
+            f"`{plain(r['filter'])}` on `{r['data']}` {word} {num(abs(change), 2)} % ({a} -> {b} cm"
+            + (f"; {test})" if test else ")")
+        )
+    return {
+        "tuned-findings": f"{budget.group(1)} trials x {budget.group(2)} train runs per study, the first trial the "
+        f"default: the default was kept in {kept} of {n_studies} studies"
+        + ("; on the test units " + ", ".join(changes) if changes else "")
+    }
 
 
 def across_landmark_geometry(report: str) -> str:
@@ -741,7 +772,7 @@ def blocks(df: pd.DataFrame, report: str | None = None) -> dict[str, str]:
     out = {name: make() for name, make in makers.items()}
     out |= {f"suite-{s.name}-runs": str(s.runs) for s in SUITES.values()}
     out |= office_prose(df) | radish(df, report) | robustness(report) | office_report(report)
-    out |= claim_values(report) | run_counts(report) | tuned_changes(report) | pareto(df)
+    out |= claim_values(report) | run_counts(report) | tuned_findings(report) | pareto(df)
     out["across-landmark-geometry"] = across_landmark_geometry(report)
     out["report-sizes"] = sizes_text(SUMMARY, "results/summary")
     # the protocols page's metric tables, as locbench.present.metric_info writes them
