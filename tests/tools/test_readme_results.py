@@ -28,7 +28,7 @@ def test_every_generated_block_of_the_documents_agrees_with_the_committed_summar
     assert {"office-summary", "kidnap", "consistency", "recorded", "global-laser", "suite-default-runs"} <= set(names)
     # the prose's numbers: run counts, the headline ratios, ranks, tuned changes, lost AUROC, Radish, claims
     prose = {"runs-all-ok", "runs-all-skipped", "ukf-ekf-update", "kld-update", "across-landmark-geometry"}
-    prose |= {"tuned-ekf_icp-office", "lost-auroc", "radish-tracked", "librsf-ratio", "claim-room-ekf-below"}
+    prose |= {"tuned-findings", "lost-auroc", "radish-tracked", "librsf-ratio", "claim-room-ekf-below"}
     prose |= {"claims-000-verdict", "matched-band", "pareto-gate"}
     assert prose <= set(names)
     assert set(names) <= set(generated()), "a block of the README has no generator"
@@ -58,7 +58,7 @@ def test_a_block_without_a_generator_is_an_error() -> None:
 
 def test_a_prose_number_that_disagrees_is_found() -> None:
     text = tool.render(documents(), generated())
-    for name in ("lost-auroc", "claim-room-ekf-below", "tuned-ekf_icp-office"):
+    for name in ("lost-auroc", "claim-room-ekf-below", "tuned-findings"):
         body = generated()[name]
         edited = text.replace(f"<!-- gen:{name} -->{body}", f"<!-- gen:{name} -->{body.replace('.', ',', 1)}", 1)
         assert tool.disagreements(edited, generated()) == [name]

@@ -148,22 +148,12 @@ def _effects_text(g: GroupEffect) -> str:
     return f"better on {better} of {ok.size}, worse on {worse}; {tb.num(ok.min())} to {tb.num(ok.max())}"
 
 
-def tuning_section(col: Collected) -> Section | None:
-    """The section, or None when the results hold no tuned suite."""
-    from locbench.run.tuning import read_tuning
-
-    if col.store is None:
-        return None
-    tuning = read_tuning(col.store.root)
-    studies = list(tuning.get("studies", []))
-    if not studies:
-        return None
-    df = col.metrics
-    sec = Section("Tuned against default (test data only)", "tuned")
+def _intro(tuning: dict[str, Any], studies: list[dict[str, Any]]) -> tuple[Text, Bullets]:
+    """The section's opening: the protocol, the sampler, the budget and commit, and each study's split."""
     budgets = sorted({(len(s["trials"]), len(s["train"]) * len(s["train_seeds"])) for s in studies})
     splits = list(dict.fromkeys(_split(s) for s in studies))
     sampler = tuning.get("sampler", {})
-    sec.add(
+    return (
         Text(
             "Each filter's declared tunable parameters (noise scales, gates, thresholds, iteration caps; never a "
             "compute knob) were searched with optuna's seeded TPE sampler "
@@ -181,6 +171,21 @@ def tuning_section(col: Collected) -> Section | None:
         ),
         Bullets(tuple(splits)),
     )
+
+
+def tuning_section(col: Collected) -> Section | None:
+    """The section, or None when the results hold no tuned suite."""
+    from locbench.run.tuning import read_tuning
+
+    if col.store is None:
+        return None
+    tuning = read_tuning(col.store.root)
+    studies = list(tuning.get("studies", []))
+    if not studies:
+        return None
+    df = col.metrics
+    sec = Section("Tuned against default (test data only)", "tuned")
+    sec.add(*_intro(tuning, studies))
     rows: list[tuple[str, ...]] = []
     keys: list[tuple[float, ...]] = []
     per_world: dict[str, dict[str, tuple[float, float]]] = {}
