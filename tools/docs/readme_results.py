@@ -444,7 +444,7 @@ def run_counts(report: str) -> dict[str, str]:
     }
     if not has_tuned(report):
         return common | {
-            "tuned-train-runs": "no",
+            "tuned-train-runs": "none committed yet",
             "tuned-studies": "none committed yet",
         }
     budget = find(
@@ -453,7 +453,7 @@ def run_counts(report: str) -> dict[str, str]:
         "the tuning budget",
     )
     return common | {
-        "tuned-train-runs": str(n_studies * int(budget.group(1)) * int(budget.group(2))),
+        "tuned-train-runs": f"{n_studies * int(budget.group(1)) * int(budget.group(2))} train runs, never reported",
         "tuned-studies": f"{n_studies} studies of {budget.group(1)} trials x {budget.group(2)} train runs, "
         f"{n_studies * int(budget.group(1)) * int(budget.group(2))} train runs",
     }
