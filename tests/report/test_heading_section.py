@@ -32,6 +32,10 @@ def _store(root: Path) -> Store:
                 first = int(np.flatnonzero(run.kind != run.kind[1])[1])  # the first landmark update's row
                 run.mean[:first, 2] += 0.8
             st.write_run(run)
+        # a configuration of the main comparison, run on the plain world only: not a row of the heading table
+        other = _fake_run(dataclasses.replace(_fake_truth(seed), dataset="room"), "odometry", drift=0.01, sigma=0.05)
+        other.meta.update(dataset="room")
+        st.write_run(other)
     return st
 
 
@@ -39,6 +43,7 @@ def test_the_section_counts_the_updates_that_the_time_hides(tmp_path: Path) -> N
     sec = heading_section(Report(collect(_store(tmp_path / "results"))))
     (table,) = (b for b in sec.blocks if isinstance(b, Table))
     head = list(table.header)
+    assert {r[0] for r in table.rows} == {"`ekf_landmarks`"}
     rows = {r[head.index("heading error (deg)")]: r for r in table.rows}
     assert set(rows) == {"0", "45"}
     conv = head.index("time to converge (s, median)")

@@ -78,8 +78,9 @@ def heading_section(rep: Report) -> Section:
 
 
 def _table(rep: Report, ident: str, names: list[tuple[float, str]]) -> tuple[Table, bool]:
-    """The rows (filter, heading error) of one world, in the collected filter order, and whether a run collapsed."""
-    filters = rep.col.filter_order({f for _, n in names for f in rep.filters_on(n)})
+    """The rows (filter, heading error) of one world, in the collected filter order, and whether a run collapsed:
+    the configurations run at a wrong heading (the plain world's other configurations are the main comparison's)."""
+    filters = rep.col.filter_order({f for err, n in names if err != 0 for f in rep.filters_on(n)})
     rows: list[tuple[str, ...]] = []
     keys: list[tuple[float, ...]] = []
     collapsed = False

@@ -172,7 +172,8 @@ def _roc_plot(
             fpr, tpr, _ = roc_curve(v, lost)
             lines.setdefault(ds, []).append((f, best.signal, fpr, tpr, best.auroc[0]))
     styles = rep.styles_for(col.filter_order({f for ds in chosen for f, _ in curves[ds]}))
-    cols = min(2, len(chosen))
+    # one panel a row: each panel's legend stands to its right, and two a row left each plot a narrow strip
+    cols = 1
     nrows = -(-len(chosen) // cols)
     title = f"ROC of each filter's best signal against lost (> {LOST_THRESHOLDS_M[0]:g} m)"
     entries = max(len(lines[ds]) + len(absent.get(ds, {})) for ds in chosen)
@@ -202,7 +203,7 @@ def _roc_plot(
     shows = tuple(
         dict.fromkeys([*(f for ds in chosen for f, _ in curves[ds]), *(f for ds in chosen for f in absent.get(ds, {}))])
     )
-    return Plot("lost_roc", title, draw, size=(6.2 * cols, (2.6 + 0.12 * entries) * nrows + 0.4), shows=shows)
+    return Plot("lost_roc", title, draw, size=(10.0, (2.8 + 0.12 * entries) * nrows + 0.4), shows=shows)
 
 
 def _delay_table(rep: Report) -> Table | None:
