@@ -8,9 +8,10 @@ results and what they achieve are constants of those modules (``ROOM_CALIBRATION
 and ``tools/derive/calibrate_odometry.py`` reruns a fit.
 
 Both fits take a split (:mod:`locbench.datasets.splits`) and read its tuning seeds only (1000-1019 by default). The
-frozen constants were fitted on seeds 0-19 before the split existed and are not refitted yet: a refit changes every
-synthetic world's data, the room fit has two mirrored basins of nearly equal cost, and the lap's 15 cm target is out
-of reach on the tuning seeds (docs/data.md, "Room odometry calibration", gives the measurements).
+frozen constants were fitted on seeds 0-19 before the split existed and are kept: they are the simulated robot's true
+error, which no filter is given; on the tuning seeds the room fit moves them by less than its own two mirrored basins
+differ, and the lap's 15 cm target is out of reach (docs/protocols.md, Splits; docs/data.md, "Room odometry
+calibration", gives the measurements).
 """
 
 from __future__ import annotations
