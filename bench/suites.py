@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 from locbench.core.errors import ConfigError, UnknownIdError, one_line, shown
 from locbench.core.limits import check_input_file
 from locbench.core.spec import MAX_CONFIGS, Spec, expand_grid, format_spec, grid_size
+from locbench.datasets.splits import RADISH_SITES
 from locbench.registry import FILTERS
 
 #: Most seeds a block may run (``--max-seeds`` raises it; a suite file's ``seeds`` too).
@@ -172,20 +173,6 @@ RECORDED_LANDMARK_DATASETS = (
         for w in ("m3500", "w3500")
         for n in ("heavy-tailed", "multimodal", "skewed", "gaussian")
     ),
-)
-#: The published Radish corrected logs (SOURCES.md section 6); the loader takes any NAME-corrected.log.gz.
-RADISH_SITES = (
-    "acapulco",
-    "aces",
-    "belgioioso",
-    "csail",
-    "freiburg-079",
-    "freiburg-101",
-    "freiburg-campus",
-    "infinite-corridor",
-    "intel",
-    "orebro",
-    "seattle",
 )
 RECORDED_LASER_DATASETS = ("intel", *(f"radish[site={s}]" for s in RADISH_SITES))
 
