@@ -89,3 +89,16 @@ def test_span_and_listed() -> None:
     assert tool.span([0.981, 0.992, 0.985]) == "0.981-0.992"
     assert tool.span([3.371, 3.374]) == "3.37"
     assert tool.listed(["a"]) == "a" and tool.listed(["a", "b", "c"]) == "a, b and c"
+
+
+@pytest.mark.parametrize(
+    ("spec", "expected"),
+    [
+        ("default kept", (1, 1)),
+        ("ekf_landmarks[gate_prob=0.99]", (0, 1)),
+        ("default kept in 2 of 5 folds", (2, 5)),
+        ("default kept in 5 of 5 folds", (5, 5)),
+    ],
+)
+def test_a_tuned_row_counts_its_studies_and_those_that_kept_the_default(spec: str, expected: tuple[int, int]) -> None:
+    assert tool.kept_studies({"tuned spec": spec}) == expected

@@ -403,6 +403,18 @@ def has_tuned(report: str) -> bool:
     return '<a id="tuned"></a>' in report
 
 
+_BUDGET = r"Budget per (?:study|filter and data)[^:]*: (\d+) trials x (\d+) train runs"
+
+
+def kept_studies(row: dict[str, str]) -> tuple[int, int]:
+    """A tuned row's studies that kept the default, and its studies: a cross-validated row says "default kept in K
+    of N folds" (N studies, one test unit each); any other row is one study, kept when it says "default kept"."""
+    m = re.search(r"default kept in (\d+) of (\d+) folds", row["tuned spec"])
+    if m:
+        return int(m.group(1)), int(m.group(2))
+    return int(row["tuned spec"] == "default kept"), 1
+
+
 def run_counts(report: str) -> dict[str, str]:
     """Runs of suites ``all`` and ``consistency`` (ok, skipped, failed), suite ``tuned``'s test runs and the last
     ``locbench verify``, from REPORT.md's provenance and its tuned table (the tuned configurations that are not
@@ -421,16 +433,13 @@ def run_counts(report: str) -> dict[str, str]:
     def n(cell: str) -> int:
         return int(find(count.pattern, cell, "a tuned cell's run count").group(2))
 
-    # a cross-validated row says "default kept in K of N folds": its N studies (one test unit each) count one each
-    folds = [re.search(r"default kept in (\d+) of (\d+) folds", r["tuned spec"]) for r in tuned]
-    kept_rows = [
-        int(m.group(1)) if m else int(r["tuned spec"] == "default kept") for r, m in zip(tuned, folds, strict=True)
-    ]
-    n_studies = sum(int(m.group(2)) if m else 1 for m in folds)
-    # the tuned runs that are not the default's own: a kept study's tuned rows are its default's
+    kept_rows = [kept_studies(r) for r in tuned]
+    n_studies = sum(total for _, total in kept_rows)
+    # the tuned runs that are not the default's own: a kept study's tuned rows are its default's (a cross-validated
+    # row's studies have one test unit each)
     extra = sum(
-        n(r["tuned ATE (cm)"]) - (k if m else k * n(r["tuned ATE (cm)"]))
-        for r, m, k in zip(tuned, folds, kept_rows, strict=True)
+        n(r["tuned ATE (cm)"]) - (k if total > 1 else k * n(r["tuned ATE (cm)"]))
+        for r, (k, total) in zip(tuned, kept_rows, strict=True)
     )
     test = sum(n(r["default ATE (cm)"]) for r in tuned) + extra
     v = find(r"verify: passed on [^,]+, (\d+) of \d+ stored runs re-run \(fraction ([\d.]+)", prov, "the verify line")
@@ -447,11 +456,7 @@ def run_counts(report: str) -> dict[str, str]:
             "tuned-train-runs": "none committed yet",
             "tuned-studies": "none committed yet",
         }
-    budget = find(
-        r"Budget per (?:study|filter and data)[^:]*: (\d+) trials x (\d+) train runs",
-        section_text(report, "tuned"),
-        "the tuning budget",
-    )
+    budget = find(_BUDGET, section_text(report, "tuned"), "the tuning budget")
     return common | {
         "tuned-train-runs": f"{n_studies * int(budget.group(1)) * int(budget.group(2))} train runs, never reported",
         "tuned-studies": f"{n_studies} studies of {budget.group(1)} trials x {budget.group(2)} train runs, "
@@ -469,15 +474,15 @@ def tuned_findings(report: str) -> dict[str, str]:
             "(`nox -s tune`), and suite `tuned` runs what it committed"
         }
     text = section_text(report, "tuned")
-    budget = find(r"Budget per (?:study|filter and data)[^:]*: (\d+) trials x (\d+) train runs", text, "the budget")
+    budget = find(_BUDGET, text, "the budget")
     rows = md_tables(report, "tuned")[0]
     kept = n_studies = 0
     changes = []
     for r in rows:
-        m = re.search(r"default kept in (\d+) of (\d+) folds", r["tuned spec"])
-        kept += int(m.group(1)) if m else int(r["tuned spec"] == "default kept")
-        n_studies += int(m.group(2)) if m else 1
-        if r["tuned spec"] == "default kept" or (m and m.group(1) == m.group(2)):
+        k, total = kept_studies(r)
+        kept += k
+        n_studies += total
+        if k == total:
             continue
         change = float(r["change (%)"])
         a, b = (plain(r[c]).split(" (")[0] for c in ("default ATE (cm)", "tuned ATE (cm)"))
