@@ -48,7 +48,7 @@ def _install(session: nox.Session, extras: str) -> None:
 
 
 #: The example filter plugin (README "Writing a filter plugin"), installed into the test session.
-EXAMPLE_PLUGIN = "./examples/locbench-iekf-plugin"
+EXAMPLE_PLUGIN = "./examples/locbench-iterated-ekf-plugin"
 
 
 @nox.session(python=PYTHON)

@@ -60,7 +60,7 @@ def _top_level_distributions() -> dict[str, list[str]]:
 @functools.cache
 def distribution(cls: type) -> dict[str, str] | None:
     """``{"name": ..., "version": ...}`` of the installed distribution that provides ``cls``: a plugin's
-    package (``locbench-iekf``), ``locbench`` for the built-in filters and datasets; None for code that no
+    package (``locbench-iterated-ekf``), ``locbench`` for the built-in filters and datasets; None for code that no
     installed distribution provides (a script, a test module)."""
     names = _top_level_distributions().get(cls.__module__.partition(".")[0], [])
     if not names:
