@@ -14,9 +14,11 @@ task, by :func:`failed_result`.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -106,11 +108,32 @@ class _BuildFailed:
 _REALISATION: dict[tuple[type, str, int], tuple[Dataset, TruthRecord] | _BuildFailed] = {}
 #: Realisations a process keeps: two, since two workers freed at once may take each other's next part.
 _KEEP = 2
+#: Set inside :func:`retained_realisations`: how many realisations to keep across sweeps, else None.
+_RETAIN: int | None = None
 
 
 def forget_realisations() -> None:
-    """Drop this process's kept realisations (:data:`_REALISATION`): their memory once a sweep is over."""
-    _REALISATION.clear()
+    """Drop this process's kept realisations (:data:`_REALISATION`): their memory once a sweep is over (kept
+    inside :func:`retained_realisations`)."""
+    if _RETAIN is None:
+        _REALISATION.clear()
+
+
+@contextlib.contextmanager
+def retained_realisations(count: int) -> Iterator[None]:
+    """Keep up to ``count`` realisations in this process across the sweeps run inside, then drop them.
+
+    A study runs one small sweep per trial over the same few train datasets: kept, each is built once per study
+    instead of once per trial (a recorded dataset's build takes about as long as a Kalman filter's run on it).
+    """
+    global _RETAIN
+    before = _RETAIN
+    _RETAIN = max(count, _KEEP, before or 0)
+    try:
+        yield
+    finally:
+        _RETAIN = before
+        forget_realisations()
 
 
 def _realisation(task: Task) -> tuple[Dataset, TruthRecord] | _BuildFailed:
@@ -120,7 +143,7 @@ def _realisation(task: Task) -> tuple[Dataset, TruthRecord] | _BuildFailed:
     if kept is not None:
         _REALISATION[key] = kept  # the newest now
         return kept
-    while len(_REALISATION) >= _KEEP:
+    while len(_REALISATION) >= (_RETAIN or _KEEP):
         del _REALISATION[next(iter(_REALISATION))]
     dr = task.dataset
     t_build = time.perf_counter()

@@ -429,6 +429,7 @@ def tune(
     dnames = tuple(resolve_dataset(d).name for d in datasets)
     optuna = _optuna()
 
+    from locbench.run.execute import retained_realisations
     from locbench.run.plan import plan_sweep
     from locbench.run.sweep import run_sweep
 
@@ -463,51 +464,55 @@ def tune(
     def expected_spec(t: Any) -> str:
         return plain if t.user_attrs.get(DEFAULT_ATTR) else trial_spec(ident, fixed, t.params)
 
-    trusted: set[int] = set()  # finished trials whose value was checked against their runs, or computed here
-    check_journal(optuna, study, path, trusted, expected_spec, rescore)
-    while True:
-        live = study.get_trials(deepcopy=False, states=(states.COMPLETE, states.RUNNING))
-        if len(live) >= trials:
-            break
-        # The default (the plain spec: a None field stays the dataset's nominal value) is the first trial and counts
-        # in the budget, so the best is never worse on the train data than the default.
-        with_default = not any(t.user_attrs.get(DEFAULT_ATTR) for t in live)
-        if with_default:
-            trial = study.ask()  # no parameters: the sampler's observations of each parameter leave it out
-        else:
-            # Re-seeded per trial from the study's state: a resumed study asks what an uninterrupted one would have.
-            # The startup count includes the default, which has no parameters: STARTUP_TRIALS random ones (half the
-            # searched trials in a small study); multivariate, since noise scales and gates act together.
-            startup = 1 + min(STARTUP_TRIALS, max(2, (trials - 1) // 2))
-            with warnings.catch_warnings():  # multivariate TPE is marked experimental since optuna 2.2; it is tested
-                warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
-                study.sampler = optuna.samplers.TPESampler(
-                    seed=sampler_seed + len(live), n_startup_trials=startup, constant_liar=True, multivariate=True
-                )
-            trial = study.ask(dists)
-        try:
-            trial.set_user_attr(OWNER_ATTR, _owner())
-            spec = plain if with_default else trial_spec(ident, fixed, trial.params)
-            trial.set_user_attr("spec", spec)
+    # the study's train datasets are built once, not once per trial (the local executor runs them here)
+    keep = retained_realisations(len(dnames) * len(seed_list)) if executor == "local" else contextlib.nullcontext()
+    with keep:
+        trusted: set[int] = set()  # finished trials whose value was checked against their runs, or computed here
+        check_journal(optuna, study, path, trusted, expected_spec, rescore)
+        while True:
+            live = study.get_trials(deepcopy=False, states=(states.COMPLETE, states.RUNNING))
+            if len(live) >= trials:
+                break
+            # The default (the plain spec: a None field stays the dataset's nominal value) is the first trial and counts
+            # in the budget, so the best is never worse on the train data than the default.
+            with_default = not any(t.user_attrs.get(DEFAULT_ATTR) for t in live)
             if with_default:
-                trial.set_user_attr(DEFAULT_ATTR, True)
-            value, message = run_trial(spec)
-        except BaseException as exc:
-            # Ctrl-C or an error of the command: the trial is failed (the sampler ignores it), never left running
-            trial.set_user_attr("message", "interrupted" if isinstance(exc, KeyboardInterrupt) else str(exc))
-            study.tell(trial, state=states.FAIL)
-            if not isinstance(exc, KeyboardInterrupt):
-                raise
-            result.interrupted = True
-            break
-        if message:
-            trial.set_user_attr("message", message)
-        study.tell(trial, value)
-        trusted.add(trial.number)
-        if progress is not None:
-            progress(TrialOutcome(trial.number, spec, value, message))
-    # trials other processes finished meanwhile are checked like the journal's earlier ones
-    check_journal(optuna, study, path, trusted, expected_spec, rescore)
+                trial = study.ask()  # no parameters: the sampler's observations of each parameter leave it out
+            else:
+                # Re-seeded per trial from the study's state: a resumed study asks what an uninterrupted one would have.
+                # The startup count includes the default, which has no parameters: STARTUP_TRIALS random ones (half the
+                # searched trials in a small study); multivariate, since noise scales and gates act together.
+                startup = 1 + min(STARTUP_TRIALS, max(2, (trials - 1) // 2))
+                # multivariate TPE is marked experimental since optuna 2.2; it is tested
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+                    study.sampler = optuna.samplers.TPESampler(
+                        seed=sampler_seed + len(live), n_startup_trials=startup, constant_liar=True, multivariate=True
+                    )
+                trial = study.ask(dists)
+            try:
+                trial.set_user_attr(OWNER_ATTR, _owner())
+                spec = plain if with_default else trial_spec(ident, fixed, trial.params)
+                trial.set_user_attr("spec", spec)
+                if with_default:
+                    trial.set_user_attr(DEFAULT_ATTR, True)
+                value, message = run_trial(spec)
+            except BaseException as exc:
+                # Ctrl-C or an error of the command: the trial is failed (the sampler ignores it), never left running
+                trial.set_user_attr("message", "interrupted" if isinstance(exc, KeyboardInterrupt) else str(exc))
+                study.tell(trial, state=states.FAIL)
+                if not isinstance(exc, KeyboardInterrupt):
+                    raise
+                result.interrupted = True
+                break
+            if message:
+                trial.set_user_attr("message", message)
+            study.tell(trial, value)
+            trusted.add(trial.number)
+            if progress is not None:
+                progress(TrialOutcome(trial.number, spec, value, message))
+        # trials other processes finished meanwhile are checked like the journal's earlier ones
+        check_journal(optuna, study, path, trusted, expected_spec, rescore)
     result.trials = _outcomes(optuna, study)
     return result
 

@@ -344,3 +344,21 @@ def test_every_tunable_filter_tunes(ident: str, tmp_path: Path) -> None:
     res = tuning.tune(ident, ["tiny_line"], 1, 1, tmp_path)
     assert len(res.trials) == 1 and res.best is not None and math.isfinite(res.best.value)
     assert resolve_filter(res.best.spec).spec.ident == ident
+
+
+def test_a_study_builds_each_train_dataset_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from locbench.run import execute
+
+    built: list[tuple[str, int]] = []
+    real = execute.build_dataset
+
+    def counting(cls: Any, params: Any, seed: int) -> Any:
+        built.append((cls.__name__, seed))
+        return real(cls, params, seed)
+
+    monkeypatch.setattr(execute, "build_dataset", counting)
+    res = tuning.tune("ekf_landmarks", ["tiny_line", "tiny_circle"], 3, 2, tmp_path)
+    assert len(res.trials) == 3
+    # 2 datasets x 2 seeds, each built once for the study's 3 trials, and none kept after it
+    assert len(built) == len(set(built)) == 4
+    assert not execute._REALISATION
