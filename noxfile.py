@@ -21,7 +21,9 @@ import shutil
 import nox
 
 nox.needs_version = ">=2024.3.2"
-nox.options.default_venv_backend = "venv"
+# uv makes each session's environment in seconds where pip takes minutes (the same pinned versions, from the same
+# constraints); without uv on the machine, the standard library's venv and pip
+nox.options.default_venv_backend = "uv|venv"
 nox.options.sessions = ["tests"]
 nox.options.reuse_existing_virtualenvs = True
 
@@ -56,6 +58,8 @@ def tests(session: nox.Session) -> None:
     """Run the test suite (recorded-data tests read $LOCBENCH_DATA and skip without it); with Stone Soup, so
     that the bound's recursion is compared with its PCRB metric, and with the example plugin package."""
     _install(session, "all,test,stonesoup")
+    # the tutorials install with pip, as their readers do; an environment made by uv has none of its own
+    session.install(*CONSTRAINTS, "pip")
     # the example plugin package, so that tests/run/test_plugin_example.py checks the entry-point path (without it
     # that file skips); --no-deps: locbench is the checkout's, never an index's
     session.install("--no-deps", EXAMPLE_PLUGIN)
@@ -148,7 +152,7 @@ def tests_dispatch(session: nox.Session) -> None:
 @nox.session(python=PYTHON, default=False)
 def tests_lowest(session: nox.Session) -> None:
     """The tests against the lower bounds of every dependency (gtsam-free: its extra has one release)."""
-    session.install("-c", "constraints-lowest.txt", ".[filterpy,test]")
+    session.install("-c", "constraints-lowest.txt", ".[filterpy,test]", "pip")  # pip: as in tests
     session.run("pytest", "--benchmark-disable", *session.posargs, env=_data_env())
 
 
