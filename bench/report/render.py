@@ -66,10 +66,11 @@ def to_markdown(title: str, intro: list[str], sections: list[Section]) -> str:
     return "\n".join(lines).rstrip() + "\n"
 
 
-def markdown_sections(sections: list[Section], figures: str = "figures/") -> list[str]:
-    """The lines of every section and its descendants in Markdown; a figure is the PNG ``<figures><name>.png``."""
+def markdown_sections(sections: list[Section], figures: str = "figures/", top: int = 2) -> list[str]:
+    """The lines of every section and its descendants in Markdown, the sections' headings at level ``top``; a
+    figure is the PNG ``<figures><name>.png``."""
     lines: list[str] = []
-    for level, sec in (x for s in sections for x in s.walk()):
+    for level, sec in (x for s in sections for x in s.walk(top)):
         lines += [f'{"#" * level} <a id="{sec.anchor}"></a>{sec.title}', ""]
         for b in sec.blocks:
             if isinstance(b, Text):
@@ -264,12 +265,12 @@ def html_head(title: str, css: str = "") -> list[str]:
     ]
 
 
-def html_sections(sections: list[Section], src: Callable[[str], str], lazy: bool = False) -> list[str]:
-    """The HTML of every section and its descendants; ``src`` gives a figure's image source from its name,
-    ``lazy`` lets the browser load an image only as the reader reaches it."""
+def html_sections(sections: list[Section], src: Callable[[str], str], lazy: bool = False, top: int = 2) -> list[str]:
+    """The HTML of every section and its descendants, the sections' headings at level ``top``; ``src`` gives a
+    figure's image source from its name, ``lazy`` lets the browser load an image only as the reader reaches it."""
     body: list[str] = []
     loading = ' loading="lazy"' if lazy else ""
-    for level, sec in (x for s in sections for x in s.walk()):
+    for level, sec in (x for s in sections for x in s.walk(top)):
         body.append(f'<h{level} id="{sec.anchor}">{_inline(sec.title)}</h{level}>')
         for b in sec.blocks:
             if isinstance(b, Text):

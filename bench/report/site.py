@@ -174,6 +174,12 @@ def navigation(pages: list[Page], current: Page) -> str:
     return "".join(parts)
 
 
+def _top_level(page: Page) -> int:
+    """The heading level of a page's sections: 1 for a page that is one section of its own title (its heading is
+    the page's, not repeated under it), else 2 under the page's title."""
+    return 1 if page.name != "index" and len(page.sections) == 1 and page.sections[0].title == page.title else 2
+
+
 def page_html(site_title: str, pages: list[Page], page: Page, intro: Iterable[str] = ()) -> str:
     """One page of the site: navigation, title, the page's sections (figures as lazy images in ``figures/``)."""
     where = anchors(pages)
@@ -184,12 +190,14 @@ def page_html(site_title: str, pages: list[Page], page: Page, intro: Iterable[st
 
     title = site_title if page.name == "index" else f"{page.title} - {site_title}"
     uses_plotly = any(b.interactive is not None for b in plots_of(page.sections))
-    body = [navigation(pages, page), f"<h1>{html.escape(title)}</h1>", *(f"<p>{_md_html(p)}</p>" for p in intro)]
+    top = _top_level(page)
+    heading = [] if top == 1 else [f"<h1>{html.escape(title)}</h1>"]
+    body = [navigation(pages, page), *heading, *(f"<p>{_md_html(p)}</p>" for p in intro)]
     if page.name == "index":
         body += ["<h2>Main findings</h2>", "<ul>", *(f"<li>{_md_html(f)}</li>" for f in findings(pages)), "</ul>"]
     if page.name != "index" and sum(len(s.walk()) for s in page.sections) > 1:
         body += contents_html(page.sections, href)
-    body += html_sections(page.sections, lambda name: f"figures/{name}.png", lazy=True)
+    body += html_sections(page.sections, lambda name: f"figures/{name}.png", lazy=True, top=top)
     split = [p for p in pages if p.group == page.group and p is not page and page.sections[0].anchor in SPLIT]
     if split:
         body.append(
@@ -247,7 +255,9 @@ def page_markdown(site_title: str, pages: list[Page], page: Page, intro: Iterabl
     """One page in Markdown: a line of links to every page, the title, the page's sections."""
     nav = " | ".join(p.title if p is page else f"[{p.title}]({_md_rel(page, p)})" for p in pages)
     title = site_title if page.name == "index" else f"{page.title} - {site_title}"
-    lines = [f"# {title}", "", *[p for para in intro for p in (para, "")]]
+    top = _top_level(page)
+    lines = [] if top == 1 else [f"# {title}", ""]
+    lines += [p for para in intro for p in (para, "")]
     if page.name == "index":
         lines += ["## Main findings", "", *(f"- {_md_links(f, pages, page)}" for f in findings(pages)), ""]
         lines += ["## Pages", ""]
@@ -259,7 +269,7 @@ def page_markdown(site_title: str, pages: list[Page], page: Page, intro: Iterabl
     else:
         lines = [nav, "", *lines]
     figures = "figures/" if page.name == "index" else "../figures/"
-    lines += markdown_sections(page.sections, figures)
+    lines += markdown_sections(page.sections, figures, top=top)
     split = [p for p in pages if p.group == page.group and p is not page and page.sections[0].anchor in SPLIT]
     lines += [f"- [{p.title}]({_md_rel(page, p)})" for p in split]
     return "\n".join(lines).rstrip() + "\n"

@@ -67,3 +67,14 @@ def test_every_page_has_the_same_navigation() -> None:
         navs.add(nav.replace(' aria-current="page"', ""))
         assert "assets/plotly.min.js" not in page  # no interactive plot here: no bundle named
     assert len(navs) == 1
+
+
+def test_a_page_of_one_section_states_its_title_once() -> None:
+    pages = paginate(_sections())
+    for p in pages[1:]:
+        page, md = page_html("T", pages, p), page_markdown("T", pages, p)
+        assert page.count(f">{p.title}</h") == 1 and page.count("<h1") == 1, p.name
+        assert f'<h1 id="{p.sections[0].anchor}">{p.title}</h1>' in page, p.name
+        assert md.count(f"</a>{p.title}\n") == 1 and f'\n# <a id="{p.sections[0].anchor}"></a>' in md, p.name
+    # the landing page keeps the site's title over its sections
+    assert "<h1>T</h1>" in page_html("T", pages, pages[0])
