@@ -184,3 +184,24 @@ def test_compiled_gaussian_energy_term_equals_the_numpy_mean() -> None:
     # a mean of m positive terms: numpy's pairwise sum is within (log2 m + 2) eps relative, so 1e-13 either side
     np.testing.assert_allclose(got, expected, rtol=1e-13, atol=0.0)
     np.testing.assert_allclose(got, np.mean(np.hypot(px, py), axis=1), rtol=1e-13, atol=0.0)
+
+
+@pytest.mark.parametrize("fair", [True, False])
+def test_a_batch_of_samples_scores_as_each_sample_alone_bit_for_bit(fair: bool) -> None:
+    """The runner's batched scoring is the one-sample scoring, value for value (our code against itself)."""
+    rng = np.random.default_rng(3)
+    counts = [1, 4, 1, 7, 2]  # truth times each sample holds
+    m = 9
+    points = rng.normal(size=(len(counts), m, 3)) * [1.0, 0.5, 3.0]  # headings beyond pi: wrapped about the truth
+    weights = rng.uniform(0.1, 1.0, size=(len(counts), m))
+    weights[2] = 0.0
+    weights[2, 4] = 1.0  # all weight on one member: scored as a point mass
+    truth = rng.normal(size=(sum(counts), 3)) * [1.0, 1.0, 2.0]
+    stops = np.cumsum(counts)
+    # each row normalised as sample_scores normalises its weights (the runner does the same before batching)
+    batch = sc.sample_scores_batch(points, np.stack([w / w.sum() for w in weights]), stops, truth, fair)
+    starts = stops - counts
+    parts = zip(points, weights, starts, stops, strict=True)
+    alone = np.hstack([np.array(sc.sample_scores(p, w, truth[a:b], fair)) for p, w, a, b in parts])
+    assert batch.shape == (4, sum(counts))
+    assert np.array_equal(batch, alone)
