@@ -996,6 +996,8 @@ class ParticleFilter(Filter):
     # 6: the system noise is the dataset's when it declares one (0 on a model-matched world)
     version: ClassVar[int] = 6
     check_configurations: ClassVar[tuple[dict[str, str], ...]] = ({"adaptive": "kld"}, {"init": "uniform"})
+    #: The largest weight of the current weights, or None until asked for (:meth:`_max_weight`).
+    _w_max: float | None = None
 
     @classmethod
     def declared_check_failures(cls, config: FilterConfig) -> Mapping[str, str]:
@@ -1483,7 +1485,7 @@ class ParticleFilter(Filter):
         else:
             ll = self._loglik(kind, data)
             log_pred, n_eff = _reweigh(self._logw, ll, w)
-        self._w, self._w_of = w, self._logw
+        self._w, self._w_of, self._w_max = w, self._logw, None
         if not math.isfinite(log_pred):
             raise FilterDiverged(f"ParticleFilter: every particle has zero likelihood at t={self._t:.3f} s")
         self._diag["n_eff"] = n_eff
@@ -1645,13 +1647,21 @@ class ParticleFilter(Filter):
 
     def _set_uniform_weights(self, n: int) -> None:
         self._logw = np.full(n, -math.log(n))
-        self._w, self._w_of = np.full(n, 1.0 / n), self._logw
+        self._w, self._w_of, self._w_max = np.full(n, 1.0 / n), self._logw, None
 
     def _weights(self) -> FloatArray:
         """exp(log-weights), kept from the last weighting while the log-weights are the same array."""
         if self._w_of is not self._logw:
-            self._w, self._w_of = np.exp(self._logw), self._logw
+            self._w, self._w_of, self._w_max = np.exp(self._logw), self._logw, None
         return self._w
+
+    def _max_weight(self) -> float:
+        """The largest weight, kept with the weights (a prediction leaves them as they are: asked after every
+        event, it is computed only after a weighting)."""
+        w = self._weights()
+        if self._w_max is None:
+            self._w_max = float(np.max(w))
+        return self._w_max
 
     def _set_estimate(self, mean: FloatArray, cov: FloatArray, finite: bool) -> None:
         """Keep the statistics of the particles after a step (the runner reads them after every event);
@@ -1686,7 +1696,7 @@ class ParticleFilter(Filter):
         n_eff = float(self._diag.get("n_eff", math.nan))
         return {
             "ess_fraction": n_eff / float(w.shape[0]),
-            "max_weight": float(np.max(w)),
+            "max_weight": self._max_weight(),
             "w_fast_over_w_slow": float(self._diag.get("w_fast_over_w_slow", math.nan)),
         }
 
