@@ -88,3 +88,17 @@ def test_filter_that_sees_no_observation_is_a_recorded_skip(tmp_path: Path) -> N
     out = run_many(["pf", "pf[use_laser=true]"], ["lap[people=0]"], [0], str(tmp_path))
     assert out[0].status == "skipped" and "none of which" in out[0].message
     assert out[1].status == "ok"
+
+
+def test_a_tasks_provenance_is_computed_before_its_child_is_forked(tmp_path: Path) -> None:
+    # a forked child's caches die with it: what every record of the task takes is computed in the worker, once
+    from locbench.run import provenance
+    from locbench.run.execute import execute_contained
+    from locbench.run.plan import plan_sweep
+
+    plan = plan_sweep([(["odometry", "ekf_landmarks"], ("tiny_line",), [0])], Store(tmp_path))
+    provenance.distribution.cache_clear()
+    out = execute_contained(plan.tasks[0])
+    assert [r.meta["status"] for r in out.runs] == ["ok", "ok"]
+    assert provenance.distribution.cache_info().currsize == 3  # the dataset's class and the two filters'
+    assert out.runs[0].meta["filter_distribution"] == provenance.distribution(plan.tasks[0].jobs[0].filter.cls)
