@@ -337,7 +337,7 @@ def nees_at_truth(a: Aligned) -> FloatArray:
     return a.nees
 
 
-def nll(errors: npt.ArrayLike, cov: npt.ArrayLike) -> FloatArray:
+def nll(errors: npt.ArrayLike, cov: npt.ArrayLike, maha: npt.ArrayLike | None = None) -> FloatArray:
     """Negative log-likelihood of the truth under the filter's Gaussian, per row.
 
     NLL = 0.5 (e^T P^-1 e + log det(2 pi P)), with e the estimate minus the truth (angles already wrapped,
@@ -351,6 +351,8 @@ def nll(errors: npt.ArrayLike, cov: npt.ArrayLike) -> FloatArray:
         Estimate minus truth.
     cov : array-like, shape (n, d, d)
         The filter's covariance at the same rows.
+    maha : array-like, shape (n,), optional
+        ``nees(errors, cov)`` when the caller has it already (:attr:`Aligned.nees`); computed here otherwise.
 
     Returns
     -------
@@ -360,7 +362,7 @@ def nll(errors: npt.ArrayLike, cov: npt.ArrayLike) -> FloatArray:
     """
     e = np.asarray(errors, dtype=np.float64)
     P = np.asarray(cov, dtype=np.float64)
-    maha = nees(e, P)
+    maha = nees(e, P) if maha is None else np.asarray(maha, dtype=np.float64)
     sign, logdet = np.linalg.slogdet(P)
     bad = (sign <= 0) | ~np.isfinite(maha) | ~np.isfinite(logdet)
     # a collapsed P gives +inf + (-inf): the row is +inf by definition, computed without a warning
@@ -374,7 +376,8 @@ def nll_at_truth(a: Aligned) -> FloatArray:
     """NLL of the pose (x, y, theta) at every ground-truth time, heading error wrapped, shape (k,)."""
     if a.cov is None:
         raise NoCovariance("this aligned trajectory has no covariance: no NLL")
-    return nll(a.error, a.cov)
+    # the view's NEES is the same e^T P^-1 e: solved once for both
+    return nll(a.error, a.cov, a.nees)
 
 
 def chi2_band(dof: int = POSE_DOF, n_runs: int = 1, confidence: float = CONFIDENCE) -> tuple[float, float]:
