@@ -940,7 +940,7 @@ class Metric:
     @property
     def is_family(self) -> bool:
         """The id names a family of ids (it has ``<name>`` parts)."""
-        return bool(_PLACEHOLDER.search(self.id))
+        return _is_family_id(self.id)
 
     @property
     def per_run(self) -> bool:
@@ -949,7 +949,7 @@ class Metric:
 
     def matches(self, metric_id: str) -> bool:
         """Whether ``metric_id`` is this metric's id or, for a family, one of its members."""
-        return metric_id == self.id or (self.is_family and _pattern(self.id).fullmatch(metric_id) is not None)
+        return metric_id == self.id or (self.is_family and _is_member(self.id, metric_id))
 
     def values(self, view: RunView) -> dict[str, float]:
         """This metric's values of one ok run, by id (empty when it is not computed from runs or has none)."""
@@ -964,6 +964,19 @@ class Metric:
 @functools.cache
 def _pattern(family: str) -> re.Pattern[str]:
     return re.compile(family_regex(family))
+
+
+# every run asks these of the same few ids: answered once per id (a report asks them millions of times)
+@functools.cache
+def _is_family_id(metric_id: str) -> bool:
+    """Whether a declared id has ``<name>`` parts."""
+    return bool(_PLACEHOLDER.search(metric_id))
+
+
+@functools.cache
+def _is_member(family: str, metric_id: str) -> bool:
+    """Whether ``metric_id`` is a member of the family of ids ``family``."""
+    return _pattern(family).fullmatch(metric_id) is not None
 
 
 def family_regex(family: str) -> str:
