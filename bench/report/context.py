@@ -18,6 +18,7 @@ import pandas as pd
 
 from locbench.core.spec import Spec
 from locbench.evaluate import significance as sg
+from locbench.evaluate.lost import SignalScore, score_signals
 from locbench.evaluate.metrics import (
     ATE_M,
     KIDNAP_DISTANCE_M,
@@ -28,7 +29,6 @@ from locbench.evaluate.metrics import (
     WAYPOINT_RMSE_MEAN_M,
     family_regex,
 )
-from locbench.evaluate.lost import SignalScore, score_signals
 from locbench.evaluate.pcrb import BOUND_ROWS
 from locbench.present.docfmt import LineStyle
 from locbench.present.experiments import experiments
