@@ -337,7 +337,7 @@ def nees_at_truth(a: Aligned) -> FloatArray:
     return a.nees
 
 
-def nll(errors: npt.ArrayLike, cov: npt.ArrayLike) -> FloatArray:
+def nll(errors: npt.ArrayLike, cov: npt.ArrayLike, maha: npt.ArrayLike | None = None) -> FloatArray:
     """Negative log-likelihood of the truth under the filter's Gaussian, per row.
 
     NLL = 0.5 (e^T P^-1 e + log det(2 pi P)), with e the estimate minus the truth (angles already wrapped,
@@ -351,6 +351,8 @@ def nll(errors: npt.ArrayLike, cov: npt.ArrayLike) -> FloatArray:
         Estimate minus truth.
     cov : array-like, shape (n, d, d)
         The filter's covariance at the same rows.
+    maha : array-like, shape (n,), optional
+        ``nees(errors, cov)`` when the caller has it already (:attr:`Aligned.nees`); computed here otherwise.
 
     Returns
     -------
@@ -360,7 +362,7 @@ def nll(errors: npt.ArrayLike, cov: npt.ArrayLike) -> FloatArray:
     """
     e = np.asarray(errors, dtype=np.float64)
     P = np.asarray(cov, dtype=np.float64)
-    maha = nees(e, P)
+    maha = nees(e, P) if maha is None else np.asarray(maha, dtype=np.float64)
     sign, logdet = np.linalg.slogdet(P)
     bad = (sign <= 0) | ~np.isfinite(maha) | ~np.isfinite(logdet)
     # a collapsed P gives +inf + (-inf): the row is +inf by definition, computed without a warning
@@ -374,7 +376,8 @@ def nll_at_truth(a: Aligned) -> FloatArray:
     """NLL of the pose (x, y, theta) at every ground-truth time, heading error wrapped, shape (k,)."""
     if a.cov is None:
         raise NoCovariance("this aligned trajectory has no covariance: no NLL")
-    return nll(a.error, a.cov)
+    # the view's NEES is the same e^T P^-1 e: solved once for both
+    return nll(a.error, a.cov, a.nees)
 
 
 def chi2_band(dof: int = POSE_DOF, n_runs: int = 1, confidence: float = CONFIDENCE) -> tuple[float, float]:
@@ -937,7 +940,7 @@ class Metric:
     @property
     def is_family(self) -> bool:
         """The id names a family of ids (it has ``<name>`` parts)."""
-        return bool(_PLACEHOLDER.search(self.id))
+        return _is_family_id(self.id)
 
     @property
     def per_run(self) -> bool:
@@ -946,7 +949,7 @@ class Metric:
 
     def matches(self, metric_id: str) -> bool:
         """Whether ``metric_id`` is this metric's id or, for a family, one of its members."""
-        return metric_id == self.id or (self.is_family and _pattern(self.id).fullmatch(metric_id) is not None)
+        return metric_id == self.id or (self.is_family and _is_member(self.id, metric_id))
 
     def values(self, view: RunView) -> dict[str, float]:
         """This metric's values of one ok run, by id (empty when it is not computed from runs or has none)."""
@@ -961,6 +964,19 @@ class Metric:
 @functools.cache
 def _pattern(family: str) -> re.Pattern[str]:
     return re.compile(family_regex(family))
+
+
+# every run asks these of the same few ids: answered once per id (a report asks them millions of times)
+@functools.cache
+def _is_family_id(metric_id: str) -> bool:
+    """Whether a declared id has ``<name>`` parts."""
+    return bool(_PLACEHOLDER.search(metric_id))
+
+
+@functools.cache
+def _is_member(family: str, metric_id: str) -> bool:
+    """Whether ``metric_id`` is a member of the family of ids ``family``."""
+    return _pattern(family).fullmatch(metric_id) is not None
 
 
 def family_regex(family: str) -> str:

@@ -346,12 +346,26 @@ def block_bootstrap_ci(
     c = np.concatenate([[0.0], np.cumsum(np.concatenate([v, v]))])
     s0 = np.arange(n)
     full, part = c[s0 + size] - c[s0], c[s0 + last] - c[s0]
-    rng = np.random.default_rng(seed)
-    starts = rng.integers(0, n, size=(resamples, k))
-    means = (full[starts[:, :-1]].sum(axis=1) + part[starts[:, -1]]) / n
+    head, tail = _block_starts(n, k, resamples, seed)
+    means = (full[head].sum(axis=1) + part[tail]) / n
     a = (1.0 - confidence) / 2.0
     lo, hi = np.quantile(means, [a, 1.0 - a])
     return float(lo), float(hi)
+
+
+@functools.lru_cache(maxsize=16)
+def _block_starts(n: int, k: int, resamples: int, seed: int) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """The block starts of :func:`block_bootstrap_ci` for a series of ``n`` values in ``k`` blocks: the first
+    ``k - 1`` blocks' (resamples, k - 1) and the last block's (resamples,), read-only.
+
+    They depend on the series' length only (the generator is seeded with ``seed`` for every series), so a run's
+    four scores, and every run on the same truth, share one draw.
+    """
+    starts = np.random.default_rng(seed).integers(0, n, size=(resamples, k))
+    head, tail = np.ascontiguousarray(starts[:, :-1]), np.ascontiguousarray(starts[:, -1])
+    head.flags.writeable = False
+    tail.flags.writeable = False
+    return head, tail
 
 
 def ci_ids(score_id: str) -> tuple[str, str]:

@@ -12,6 +12,7 @@ Every random draw here uses a fixed seed, so a regenerated report is byte-identi
 
 from __future__ import annotations
 
+import functools
 import inspect
 import math
 from collections.abc import Callable, Sequence
@@ -97,7 +98,15 @@ def wilcoxon_paired(a: npt.ArrayLike, b: npt.ArrayLike, alternative: Alternative
         "less": the test of a < b (a's values smaller), "greater" of a > b.
     """
     x, y = _finite_pairs(a, b)
-    d = x - y
+    return _wilcoxon_of(np.ascontiguousarray(x - y, dtype=np.float64).tobytes(), alternative)
+
+
+# The report compares the same pairs of columns in several tables (the appendix, ``comparisons.csv``, the
+# summary): a test or an interval depends on its values only (fixed seeds), so each is computed once, keyed by them.
+@functools.lru_cache(maxsize=1 << 16)
+def _wilcoxon_of(differences: bytes, alternative: Alternative) -> TestResult:
+    """:func:`wilcoxon_paired` of the finite paired differences, given as the bytes of a float64 array."""
+    d = np.frombuffer(differences, dtype=np.float64).copy()
     n = int(d.size)
     if n < (MIN_PAIRS if alternative == "two-sided" else MIN_PAIRS_ONE_SIDED):
         return TestResult("Wilcoxon signed-rank", n, math.nan, math.nan)
@@ -169,7 +178,13 @@ def median_interval(d: npt.ArrayLike, confidence: float = 0.95) -> tuple[float, 
     Non-finite values are left out; NaN interval for fewer than 2 values.
     """
     v = np.asarray(d, dtype=np.float64)
-    v = v[np.isfinite(v)]
+    return _median_interval_of(np.ascontiguousarray(v[np.isfinite(v)]).tobytes(), confidence)
+
+
+@functools.lru_cache(maxsize=1 << 16)
+def _median_interval_of(values: bytes, confidence: float) -> tuple[float, float, float]:
+    """:func:`median_interval` of the finite values, given as the bytes of a float64 array."""
+    v = np.frombuffer(values, dtype=np.float64).copy()
     if v.size == 0:
         return math.nan, math.nan, math.nan
     med = float(np.median(v))

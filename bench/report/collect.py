@@ -254,12 +254,13 @@ def _read_runs(
     return reads, truths
 
 
-def _read_one(i: int) -> tuple[int, list[_RunRead], dict[Any, Any]]:
-    """Run ``i`` of the forked pool's list, with the truths this worker read first for it."""
+def _read_group(indices: list[int]) -> tuple[list[tuple[int, list[_RunRead]]], dict[Any, Any]]:
+    """Runs ``indices`` of the forked pool's list, each with its reads, and the truths this worker read first for
+    them."""
     cache: dict[tuple[str, int], TruthRecord] = _WORKER.setdefault("truths", {})
     known = set(cache)
-    reads, _ = _read_runs(_WORKER["store"], _WORKER["keep"], [_WORKER["dirs"][i]], cache)
-    return i, reads, {k: v for k, v in cache.items() if k not in known}
+    out = [(i, _read_runs(_WORKER["store"], _WORKER["keep"], [_WORKER["dirs"][i]], cache)[0]) for i in indices]
+    return out, {k: v for k, v in cache.items() if k not in known}
 
 
 def _cost(run_dir: Path) -> int:
@@ -270,21 +271,32 @@ def _cost(run_dir: Path) -> int:
         return 0
 
 
+def realisation_groups(run_dirs: Sequence[Path]) -> list[list[int]]:
+    """The indices of ``run_dirs`` grouped by the realisation their folders name (``<dataset>/*/seed-<n>``: the runs
+    that share one truth), the groups in order of first appearance, each in the order of ``run_dirs``."""
+    groups: dict[tuple[str, str], list[int]] = {}
+    for i, d in enumerate(run_dirs):
+        groups.setdefault((d.parent.parent.name, d.name), []).append(i)
+    return list(groups.values())
+
+
 def _read_parallel(store: Store, keep: Keep | None, run_dirs: list[Path], jobs: int) -> list[Any]:
-    """:func:`_read_runs` over ``jobs`` forked processes, one run per task, largest first (the recordings'
-    runs take seconds each, a synthetic one milliseconds), the results put back in the order of ``run_dirs``."""
+    """:func:`_read_runs` over ``jobs`` forked processes, one realisation's runs per task (its truth read by one
+    worker, once), largest first (the recordings' runs take seconds each, a synthetic one milliseconds), the results
+    put back in the order of ``run_dirs``."""
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
-    order = sorted(range(len(run_dirs)), key=lambda i: -_cost(run_dirs[i]))
+    cost = [_cost(d) for d in run_dirs]
+    tasks = sorted(realisation_groups(run_dirs), key=lambda g: -sum(cost[i] for i in g))
     _WORKER.update(store=store, keep=keep, dirs=run_dirs)
     by_index: dict[int, list[_RunRead]] = {}
     truths: dict[Any, Any] = {}
     try:
         # fork: the workers inherit the store and the suite filter (a closure) instead of pickling them
         with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("fork")) as pool:
-            for i, reads, new in pool.map(_read_one, order, chunksize=1):
-                by_index[i] = reads
+            for reads, new in pool.map(_read_group, tasks, chunksize=1):
+                by_index.update(reads)
                 for k, v in new.items():
                     truths.setdefault(k, v)
     finally:

@@ -18,6 +18,7 @@ import pandas as pd
 
 from locbench.core.spec import Spec
 from locbench.evaluate import significance as sg
+from locbench.evaluate.lost import SignalScore, score_signals
 from locbench.evaluate.metrics import (
     ATE_M,
     KIDNAP_DISTANCE_M,
@@ -109,6 +110,7 @@ class Report:
         self.exps = [e for e in experiments() if self.has(e.dataset)]
         # one x axis for every accuracy-runtime figure: reference units where every run has them
         self.pareto_x = tm.pareto_x(self.df)
+        self._signal_scores: dict[tuple[str, str], tuple[SignalScore, ...]] = {}
 
     @cached_property
     def comparisons(self) -> list[ComparisonRecord]:
@@ -122,6 +124,15 @@ class Report:
         return out
 
     # --- helpers ------------------------------------------------------------------------------------
+
+    def signal_scores(self, dataset: str, filter_name: str) -> tuple[SignalScore, ...]:
+        """Every lost-detection signal's scores of a configuration on a dataset name over its runs, best first
+        (:func:`locbench.evaluate.lost.score_signals`; empty without health series). Scored once: the summary,
+        the lost-detection table and the kidnap delays read the same scores."""
+        key = (dataset, filter_name)
+        if key not in self._signal_scores:
+            self._signal_scores[key] = tuple(score_signals(self.col.health.get(key, [])))
+        return self._signal_scores[key]
 
     @cached_property
     def palette(self) -> Palette:

@@ -24,6 +24,7 @@ import contextlib
 import errno
 import functools
 import hashlib
+import io
 import json
 import logging
 import os
@@ -455,14 +456,40 @@ def npz_digest(path: Path) -> str:
     It is the arrays' checksum, not the zip's bytes (which hold the time of writing), so two writers of the same
     truth agree; reading every member also checks the zip's CRC-32s.
     """
-    h = hashlib.sha256()
+    return _members_digest(*_npz_members(path))
+
+
+def _npz_members(path: Path) -> tuple[list[str], dict[str, bytes]]:
+    """An ``.npz`` file's member names in the zip's order and each member's bytes, read once (CRC-32s checked)."""
     with zipfile.ZipFile(path) as z:
-        for name in sorted(z.namelist()):
-            h.update(name.encode() + b"\0")
-            with z.open(name) as f:
-                for chunk in iter(lambda: f.read(1 << 20), b""):
-                    h.update(chunk)
+        names = z.namelist()
+        return names, {name: z.read(name) for name in dict.fromkeys(names)}
+
+
+def _members_digest(names: list[str], data: dict[str, bytes]) -> str:
+    """:func:`npz_digest` of members read by :func:`_npz_members`."""
+    h = hashlib.sha256()
+    for name in sorted(names):
+        h.update(name.encode() + b"\0")
+        h.update(data[name])
     return h.hexdigest()
+
+
+def _members_arrays(names: list[str], data: dict[str, bytes]) -> dict[str, Any]:
+    """The arrays of members read by :func:`_npz_members`, keyed as ``numpy.load`` keys them (``.npy`` dropped,
+    in the zip's order); a member that is not in ``.npy`` format gives its bytes, as ``numpy.load`` does. No
+    pickles."""
+    keys = [name.removesuffix(".npy") for name in names]
+    member = dict(zip(keys, names, strict=True)) | dict(zip(names, names, strict=True))
+    out: dict[str, Any] = {}
+    for key in keys:
+        raw = data[member[key]]
+        out[key] = (
+            np.lib.format.read_array(io.BytesIO(raw), allow_pickle=False)
+            if raw.startswith(np.lib.format.MAGIC_PREFIX)
+            else raw
+        )
+    return out
 
 
 def _write_npz_and_record(path: Path, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> None:
@@ -505,10 +532,11 @@ def _load_verified(
             raise StaleRecord(f"{record}: its checksum does not match (the record was altered)")
     try:
         expected = (meta.get("files") or {}).get(npz.name) if isinstance(meta.get("files", {}), dict) else ""
-        if expected is not None and npz_digest(npz) != expected:
+        # each member read once: its bytes give the checksum, then the array
+        names, data = _npz_members(npz)
+        if expected is not None and _members_digest(names, data) != expected:
             raise StaleRecord(f"{npz}: its sha256 does not match the one recorded in {record.name}")
-        with np.load(npz, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in z.files}
+        arrays = _members_arrays(names, data)
     except StaleRecord:
         raise
     # zipfile raises NotImplementedError for an unknown compression method and RuntimeError for an encrypted member

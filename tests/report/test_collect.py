@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from locbench.report.collect import collect
+from locbench.report.collect import collect, realisation_groups
 from locbench.run.plan import parse_filter
 from locbench.run.store import Store
 from locbench.run.sweep import run_many
@@ -42,3 +42,17 @@ def test_runs_are_labelled_by_their_recorded_traits_and_older_ones_as_before(
         store.write_run(rec)
     assert all("filter_traits" not in store.read_run(d).meta for d in store.iter_runs())
     assert {n: collect(store).filters[n] for n in NAMES} == derived
+
+
+def test_runs_are_grouped_by_the_realisation_their_folders_name() -> None:
+    """One task per truth: every run of a dataset and seed in one group, whatever its filter, in the list's order."""
+    runs = Path("runs")
+    dirs = [
+        runs / "room" / "ekf" / "seed-0000",
+        runs / "room" / "pf" / "seed-0001",
+        runs / "office" / "ekf" / "seed-0000",
+        runs / "room" / "pf" / "seed-0000",
+        runs / "room" / "ekf" / "seed-0001",
+    ]
+    assert realisation_groups(dirs) == [[0, 3], [1, 4], [2]]
+    assert realisation_groups([]) == []

@@ -21,7 +21,6 @@ from locbench.evaluate.lost import (
     alarm_threshold,
     detection_delay,
     roc_curve,
-    score_signals,
 )
 from locbench.evaluate.metrics import KIDNAP_WINDOW_S
 from locbench.filters.base import HEALTH_SIGNALS
@@ -46,15 +45,15 @@ NO_SIGNAL = "no health signal stored"
 ROC_GRID = np.linspace(0.0, 1.0, 101)
 
 
-def best_signal(col: Collected, dataset: str, filter_name: str) -> SignalScore | None:
+def best_signal(rep: Report, dataset: str, filter_name: str) -> SignalScore | None:
     """The filter's best signal on a dataset (highest AUROC at the first lost threshold), or None."""
-    scores = score_signals(col.health.get((dataset, filter_name), []))
+    scores = rep.signal_scores(dataset, filter_name)
     return scores[0] if scores and np.isfinite(scores[0].auroc[0]) else None
 
 
-def best_auroc(col: Collected, dataset: str, filter_name: str) -> float:
+def best_auroc(rep: Report, dataset: str, filter_name: str) -> float:
     """The summary's cell: AUROC of the best signal at the first lost threshold (NaN when never lost)."""
-    best = best_signal(col, dataset, filter_name)
+    best = best_signal(rep, dataset, filter_name)
     return best.auroc[0] if best is not None else NAN
 
 
@@ -86,7 +85,7 @@ def lost_section(rep: Report) -> Section:
     for ds in sorted({d for d, _ in col.health}, key=col.display):
         for f in rep.filters_on(ds):
             series = col.health.get((ds, f), [])
-            scores = score_signals(series)
+            scores = rep.signal_scores(ds, f)
             if not scores:
                 absent.setdefault(ds, {})[f] = NO_SIGNAL  # run here, but nothing to score: the figure says so
                 continue
@@ -220,7 +219,7 @@ def _delay_table(rep: Report) -> Table | None:
         base = base_spec if base_spec in col.datasets else None
         for f in rep.filters_on(ds):
             series = [s for s in col.health.get((ds, f), []) if np.isfinite(s.kidnap_t)]
-            best = best_signal(col, ds, f)
+            best = best_signal(rep, ds, f)
             if not series or best is None:
                 continue
             quiet = [v for k, v in _quiet(col, base, f, series) if k == best.signal]

@@ -332,9 +332,9 @@ def _lost(ctx: Context, row: Row) -> tuple[str, float]:
     # lost detection where a filter does get lost: its kidnap configuration on the kidnapped world
     # (a configuration without kidnap runs has none, so the column means one thing throughout)
     if ctx.kid:
-        x = hl.best_auroc(ctx.rep.col, ctx.kid, row.kname) if row.kname is not None else NAN
+        x = hl.best_auroc(ctx.rep, ctx.kid, row.kname) if row.kname is not None else NAN
     else:
-        x = hl.best_auroc(ctx.rep.col, ctx.dataset, row.name)
+        x = hl.best_auroc(ctx.rep, ctx.dataset, row.name)
     return ("-" if np.isnan(x) else tb.num(x)), x
 
 
