@@ -480,7 +480,10 @@ def test_html_site_renders_every_page_resolves_its_links_and_sorts(store: Store)
                 page.goto(p.as_uri())
                 assert "locbench" in page.title(), p
                 assert page.locator("nav.site a").count() == len(pages), p
-                assert page.locator("h2").count() >= 1, p
+                # one title, the page's or its one section's heading, not repeated as a heading under it
+                assert page.locator("h1").count() == 1, p
+                title = page.locator("h1").inner_text().strip()
+                assert title not in [h.strip() for h in page.locator("h2").all_inner_texts()], p
                 # what the browser sees: every link and image source resolves (anchors included)
                 html_now = page.content()
                 assert not _links(folder, p, html_now), _links(folder, p, html_now)
