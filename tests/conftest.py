@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 from collections.abc import Iterator
 
 import pytest
@@ -21,6 +22,17 @@ _FUZZ_SETTINGS = {
 settings.register_profile("ci", max_examples=100, **_FUZZ_SETTINGS)
 settings.register_profile("fuzz", max_examples=10_000, **{**_FUZZ_SETTINGS, "derandomize": False})
 settings.load_profile("ci")
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Put back the interpreter's Ctrl-C handler where the run inherited SIGINT ignored.
+
+    A shell without job control starts a command in the background with SIGINT ignored, and Python then leaves it
+    so: the tests that send a Ctrl-C on purpose (to this process, or to a child it starts, which inherits the
+    disposition) would wait for an interrupt that never comes.
+    """
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 @pytest.fixture
