@@ -23,12 +23,13 @@ import numpy as np
 import pandas as pd
 
 from locbench.core.spec import Spec, format_spec, params_to_dict
-from locbench.evaluate.lost import HealthSeries, health_series
-from locbench.evaluate.metrics import align_run, nees_at_truth, run_metrics
+from locbench.evaluate.derived import Derived, derive
+from locbench.evaluate.lost import HealthSeries
+from locbench.evaluate.metrics import run_metrics
 from locbench.evaluate.pcrb import BOUND_ROWS, is_bound_row, pcrb_summary
 from locbench.evaluate.records import RunRecord, TruthRecord
 from locbench.run.plan import FilterTraits, parse_filter
-from locbench.run.store import Store
+from locbench.run.store import Store, truth_key
 
 log = logging.getLogger(__name__)
 
@@ -217,39 +218,48 @@ def _read_runs(
     """
     reads: list[_RunRead] = []
     truths = {} if truths is None else truths
+    keys: dict[tuple[str, int], str] = {}
     for run_dir in run_dirs:
         rel = _relative(run_dir, store.root)
         try:
-            run = store.read_run(run_dir)
-            meta = run.meta
+            stored = store.read_derived(run_dir)
+            run = None
+            if stored is not None:
+                meta = stored[0]
+            else:
+                run = store.read_run(run_dir)
+                meta = run.meta
             dataset, filt, seed = str(meta["dataset"]), str(meta["filter"]), int(meta["seed"])
             if keep is not None and not keep(dataset, filt):
                 continue
             key: tuple[str, int] | None = None
-            hs: HealthSeries | None = None
-            if run.status == "ok":
+            derived: Derived | None = None
+            status = str(meta.get("status", "error"))
+            if status == "ok":
                 key = (dataset, seed)
                 if key not in truths:
                     truths[key] = store.read_truth(dataset, seed)
                 truth = truths[key]
-                # aligned once: the metrics, the NEES series and the health series read the same view
-                aligned = align_run(run, truth)
-                values = run_metrics(run, truth, aligned=aligned)
-                # an imported run without covariance has no NEES series (its consistency columns stay empty)
-                ne = nees_at_truth(aligned) if aligned.cov is not None else None
-                if run.health and truth.truth_label == "ground truth":
-                    kt = truth.kidnaps[0].t if truth.kidnaps else float("nan")
-                    hs = health_series(aligned, run.health, kt)
+                if key not in keys:
+                    keys[key] = truth_key(truth)
+                # the values the run's worker stored, while they hold for this truth; computed again otherwise
+                if stored is not None and stored[2] == keys[key]:
+                    derived = stored[1]
+                else:
+                    derived = derive(run if run is not None else store.read_run(run_dir), truth)
+                values = derived.values
             else:
-                values, ne = run_metrics(run, _NO_TRUTH), None
+                values = run_metrics(run if run is not None else store.read_run(run_dir), _NO_TRUTH)
         except Exception as exc:
             log.warning("skipping unreadable run %s: %s", rel, exc)
             # Paths relative to the results folder keep the report independent of where it lives.
             msg = str(exc).replace(f"{store.root.as_posix()}/", "")
             reads.append(("broken", rel, f"{type(exc).__name__}: {msg}"))
             continue
-        info = RunInfo(dataset, filt, seed, run.status, str(meta.get("message", "") or ""))
+        info = RunInfo(dataset, filt, seed, status, str(meta.get("message", "") or ""))
         rows = [(dataset, filt, seed, k, float(v)) for k, v in values.items()]
+        ne = derived.nees if derived is not None else None
+        hs = derived.health if derived is not None else None
         reads.append(("ok", rel, (meta, info, rows, key, ne, run_dir, hs)))
     return reads, truths
 

@@ -19,7 +19,7 @@ import logging
 import math
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -27,6 +27,7 @@ import numpy as np
 from locbench.core.errors import DataNotFound
 from locbench.core.seeding import belief_rng, filter_rng
 from locbench.datasets.dataset import Dataset
+from locbench.evaluate.derived import Derived, derive
 from locbench.evaluate.records import BoundRecord, RunRecord, TruthRecord
 from locbench.filters.base import Filter
 from locbench.registry import build_dataset
@@ -34,6 +35,7 @@ from locbench.run import provenance
 from locbench.run.containment import DEFAULT_RULE, call_in_child, run_time_limit
 from locbench.run.filter_pass import FilterPass, FilterTrace, incompatibility, run_filter
 from locbench.run.plan import Job, Task, samples_belief
+from locbench.run.store import truth_key
 
 log = logging.getLogger(__name__)
 
@@ -41,11 +43,36 @@ log = logging.getLogger(__name__)
 @dataclass
 class TaskResult:
     """What a worker returns: the realisation's truth (None when the dataset did not build), one record per job in
-    the order of the task's jobs, and the bound when the plan asked for it."""
+    the order of the task's jobs, the bound when the plan asked for it, and beside each run its derived values
+    with the truth's key (:func:`derived_values`; None for a run that is not ok), stored with it."""
 
     truth: TruthRecord | None
     runs: list[RunRecord]
     bound: BoundRecord | None = None
+    derived: list[tuple[Derived, str] | None] = field(default_factory=list)
+
+
+def derived_values(runs: list[RunRecord], truth: TruthRecord) -> list[tuple[Derived, str] | None]:
+    """Each ok run's values for the report (:func:`locbench.evaluate.derived.derive`) and the truth's key, computed
+    here while the run and its truth are in memory, so that the report need not; None for a run that is not ok or
+    whose values fail to compute (the report then computes them and reports the error)."""
+    key = truth_key(truth)
+    out: list[tuple[Derived, str] | None] = []
+    for rec in runs:
+        value = None
+        if rec.status == "ok":
+            try:
+                value = (derive(rec, truth), key)
+            except Exception as exc:
+                log.warning(
+                    "%s on %s seed %s: derived values not stored: %s",
+                    rec.meta.get("filter"),
+                    rec.meta.get("dataset"),
+                    rec.meta.get("seed"),
+                    exc,
+                )
+        out.append(value)
+    return out
 
 
 def _meta(task: Task, job: Job) -> dict[str, Any]:
@@ -184,7 +211,8 @@ def execute_task(task: Task) -> TaskResult:
         return failed_result(task, built.status, built.message)
     ds, truth = built
     bound = _bound(task, ds)
-    return TaskResult(truth, _runs(task, ds), bound)
+    runs = _runs(task, ds)
+    return TaskResult(truth, runs, bound, derived_values(runs, truth))
 
 
 def execute_contained(task: Task) -> TaskResult:
@@ -227,7 +255,7 @@ def execute_contained(task: Task) -> TaskResult:
     for rec in runs:
         rec.meta["run_timeout_s"] = limit if math.isfinite(limit) else None
         rec.meta["run_timeout_rule"] = rule
-    return TaskResult(truth, runs, bound)
+    return TaskResult(truth, runs, bound, derived_values(runs, truth))
 
 
 def _runs(task: Task, ds: Dataset) -> list[RunRecord]:

@@ -6,6 +6,7 @@ Layout (one folder per dataset name, then per filter name, then per seed)::
     runs/<dataset name>/_truth/seed-<seed>.json       its provenance (dataset params, seed, versions)
     runs/<dataset name>/<filter name>/seed-<seed>/meta.json       spec, run key, status, versions, commit
     runs/<dataset name>/<filter name>/seed-<seed>/estimates.npz   per-event estimates and timings
+    runs/<dataset name>/<filter name>/seed-<seed>/derived.npz     its metrics, NEES and health series (ok runs)
 
     .locbench                                             the mark of a locbench results folder
 
@@ -37,7 +38,7 @@ import zipfile
 import zlib
 from collections.abc import Collection, Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -46,12 +47,18 @@ from locbench.core.spec import Spec
 from locbench.datasets.dataset import Kidnap, Relations, Trajectory2D, Waypoints
 from locbench.evaluate.records import KIND_NAMES, STATUSES, BoundRecord, RunRecord, TruthRecord
 
+if TYPE_CHECKING:
+    from locbench.evaluate.derived import Derived
+
 log = logging.getLogger(__name__)
 
 TRUTH_DIR = "_truth"
-#: The files locbench writes in a run folder: ``meta.json`` names ``estimates.npz`` and its sha256 (``files``).
-#: Anything else a run folder holds is someone else's: replacing the run carries it over into the new folder.
-RUN_FILES = frozenset({"meta.json", "estimates.npz"})
+#: A run's derived values for the report (:mod:`locbench.evaluate.derived`), beside its estimates.
+DERIVED_FILE = "derived.npz"
+#: The files locbench writes in a run folder: ``meta.json`` names ``estimates.npz`` and its sha256 (``files``);
+#: ``derived.npz`` names that sha256 too. Anything else a run folder holds is someone else's: replacing the run
+#: carries it over into the new folder.
+RUN_FILES = frozenset({"meta.json", "estimates.npz", DERIVED_FILE})
 
 
 #: Longest folder name written (POSIX allows 255 bytes; room is left for the ".old-" and ".tmp-" variants).
@@ -265,8 +272,12 @@ class Store:
         meta = {"dataset": rec.dataset, "seed": rec.seed, "rows": sorted(rec.covs), **rec.meta}
         _write_npz_and_record(path, bound_arrays(rec), meta)
 
-    def write_run(self, rec: RunRecord) -> Path:
+    def write_run(self, rec: RunRecord, derived: tuple[Derived, str] | None = None) -> Path:
         """Write a run folder atomically: a uniquely named temporary folder, then renamed into place.
+
+        ``derived``, the run's derived values and the :func:`~locbench.evaluate.derived.truth_digest` of the truth
+        they were computed against, are written beside the estimates (``derived.npz``, keyed by the estimates'
+        checksum, that truth and :func:`~locbench.evaluate.derived.code_digest`): the report takes them from there.
 
         Several processes may write the same run at once (two sweeps on one results folder): each moves the
         folder in place aside under a unique ``.old-`` name before its rename and retries when another writer
@@ -291,8 +302,11 @@ class Store:
             # stored, not deflated: zlib took 40 ms of the sweep's main process per run against 3 ms, for files
             # half the size; the checksums are of the members, so both kinds read alike
             np.savez(tmp / "estimates.npz", **arrays)  # type: ignore[arg-type]
-            meta = _sealed(rec.meta | {"files": {"estimates.npz": npz_digest(tmp / "estimates.npz")}})
+            digest = npz_digest(tmp / "estimates.npz")
+            meta = _sealed(rec.meta | {"files": {"estimates.npz": digest}})
             (tmp / "meta.json").write_text(json.dumps(meta, indent=2))
+            if derived is not None:
+                np.savez(tmp / DERIVED_FILE, **derived_arrays(derived[0], digest, derived[1]))  # type: ignore[arg-type]
             _swap_into_place(tmp, final)
         finally:
             if tmp.exists():
@@ -379,18 +393,50 @@ class Store:
             return str(exc)
         return None
 
+    def read_derived(self, run_dir: str | os.PathLike[str]) -> tuple[dict[str, Any], Derived, str] | None:
+        """A stored ok run's record, its stored derived values and the :func:`truth_key` they were computed against,
+        when they hold for this run: the record passes its own checks and names this folder, the estimates match
+        their checksum, and the derived values' keys match the estimates and the current code. The caller compares
+        the truth's key with the truth it reads.
+
+        None otherwise (no derived values, out of date, or a run that fails a check): the caller then reads the run
+        with :meth:`read_run`, which computes nothing twice for a hit and raises the reason for a stale run.
+        """
+        from locbench.evaluate.derived import code_digest
+
+        d = Path(run_dir)
+        if not (d / DERIVED_FILE).is_file():
+            return None
+        try:
+            meta = _read_record(d / "meta.json", required=True)
+            _check_place(d, meta)
+            digest = _members_digest(*_npz_members(d / "estimates.npz"))
+            if meta.get("status") != "ok" or digest != (meta.get("files") or {}).get("estimates.npz"):
+                return None
+            z = _members_arrays(*_npz_members(d / DERIVED_FILE))
+            if (str(z["key_estimates"]), str(z["key_code"])) != (digest, code_digest()):
+                return None
+            return meta, derived_from_arrays(z), str(z["key_truth"])
+        except (
+            ConfigError,
+            OSError,
+            ValueError,
+            KeyError,
+            TypeError,
+            EOFError,
+            zipfile.BadZipFile,
+            zlib.error,
+            NotImplementedError,
+            RuntimeError,
+        ):
+            return None
+
     def read_run(self, run_dir: str | os.PathLike[str]) -> RunRecord:
         """A stored run, verified: its record's own checksum and the folder it lies in, its arrays' checksum and
         shape contract (:func:`run_problem`); a :class:`StaleRecord` naming the file and the reason otherwise."""
         d = Path(run_dir)
         meta, z = _load_verified(d / "estimates.npz", d / "meta.json", run_problem, required_record=True)
-        name = f"seed-{int(meta['seed']):04d}"
-        where = (_safe(str(meta["dataset"])), _safe(str(meta["filter"])), name)
-        if (d.parent.parent.name, d.parent.name, d.name) != where:
-            raise StaleRecord(
-                f"{d / 'meta.json'}: names {meta['filter']} on {meta['dataset']} seed {meta['seed']}, "
-                f"which is not the run of this folder"
-            )
+        _check_place(d, meta)
         diag = {k[5:]: v for k, v in z.items() if k.startswith("diag_")}
         extra = {k[6:]: v for k, v in z.items() if k.startswith("extra_")}
         health = {k[7:]: v for k, v in z.items() if k.startswith("health_")}
@@ -417,6 +463,53 @@ def truth_arrays(rec: TruthRecord) -> dict[str, np.ndarray]:
     if rec.relations is not None:
         arrays.update(rel_t1=rec.relations.t1, rel_t2=rec.relations.t2, rel_delta=rec.relations.delta)
     return arrays
+
+
+def truth_key(rec: TruthRecord) -> str:
+    """The sha256 of a realisation's truth as stored (:func:`truth_arrays`: each array's name, dtype, shape and
+    bytes, in name order) and its label: the same for the truth in memory and the one read back, so a run's derived
+    values name the truth they were computed against."""
+    h = hashlib.sha256(rec.truth_label.encode())
+    arrays = truth_arrays(rec)
+    for name in sorted(arrays):
+        a = np.ascontiguousarray(arrays[name])
+        h.update(f"|{name}|{a.dtype.str}|{a.shape}|".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def derived_arrays(d: Derived, estimates_key: str, truth_key: str) -> dict[str, np.ndarray]:
+    """The arrays of ``derived.npz``: the three keys, the metric ids and values, the NEES series and the health
+    series (``health_t``, ``health_error_m``, ``health_kidnap_t``, ``signal_<name>``), each only when present."""
+    from locbench.evaluate.derived import code_digest
+
+    out: dict[str, np.ndarray] = {
+        "key_estimates": np.array(estimates_key),
+        "key_truth": np.array(truth_key),
+        "key_code": np.array(code_digest()),
+        "metric_ids": np.array(list(d.values), dtype=np.str_),
+        "metric_values": np.array(list(d.values.values()), dtype=np.float64),
+    }
+    if d.nees is not None:
+        out["nees"] = d.nees
+    if d.health is not None:
+        h = d.health
+        out |= {"health_t": h.t, "health_error_m": h.error_m, "health_kidnap_t": np.array(h.kidnap_t)}
+        out |= {f"signal_{k}": v for k, v in h.signals.items()}
+    return out
+
+
+def derived_from_arrays(z: dict[str, Any]) -> Derived:
+    """The :class:`~locbench.evaluate.derived.Derived` that :func:`derived_arrays` stored."""
+    from locbench.evaluate.derived import Derived
+    from locbench.evaluate.lost import HealthSeries
+
+    values = {str(k): float(v) for k, v in zip(z["metric_ids"].tolist(), z["metric_values"].tolist(), strict=True)}
+    health = None
+    if "health_t" in z:
+        signals = {k[7:]: v for k, v in z.items() if k.startswith("signal_")}
+        health = HealthSeries(z["health_t"], z["health_error_m"], signals, float(z["health_kidnap_t"]))
+    return Derived(values, z.get("nees"), health)
 
 
 def truth_meta(rec: TruthRecord) -> dict[str, Any]:
@@ -508,6 +601,35 @@ def _write_npz_and_record(path: Path, arrays: dict[str, np.ndarray], meta: dict[
 Problem = Any  # Callable[[dict[str, Any], dict[str, np.ndarray]], str | None]
 
 
+def _read_record(record: Path, required: bool) -> dict[str, Any]:
+    """A JSON record that parses as an object below :data:`MAX_RECORD_BYTES` with a matching ``meta_sha256`` (``{}``
+    for a missing record that is not ``required``); :class:`StaleRecord` otherwise."""
+    if not (record.is_file() or required):
+        return {}
+    try:
+        if record.stat().st_size > MAX_RECORD_BYTES:
+            raise StaleRecord(f"{record}: larger than {MAX_RECORD_BYTES} bytes; not a record locbench wrote")
+        data = json.loads(record.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
+        raise StaleRecord(one_line(f"{record}: unreadable record ({exc})")) from None
+    if not isinstance(data, dict):
+        raise StaleRecord(f"{record}: not a JSON object")
+    if "meta_sha256" in data and data["meta_sha256"] != _record_digest(data):
+        raise StaleRecord(f"{record}: its checksum does not match (the record was altered)")
+    return data
+
+
+def _check_place(d: Path, meta: dict[str, Any]) -> None:
+    """A :class:`StaleRecord` unless the run record ``meta`` names the run of folder ``d``."""
+    name = f"seed-{int(meta['seed']):04d}"
+    where = (_safe(str(meta["dataset"])), _safe(str(meta["filter"])), name)
+    if (d.parent.parent.name, d.parent.name, d.name) != where:
+        raise StaleRecord(
+            f"{d / 'meta.json'}: names {meta['filter']} on {meta['dataset']} seed {meta['seed']}, "
+            f"which is not the run of this folder"
+        )
+
+
 def _load_verified(
     npz: Path, record: Path, contract: Problem, required_record: bool
 ) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
@@ -517,19 +639,7 @@ def _load_verified(
     matches; the arrays' checksum matches the record's ``files`` entry (both absent in records written before
     checksums); every array loads (no pickles); ``contract(meta, arrays)`` holds.
     """
-    meta: dict[str, Any] = {}
-    if record.is_file() or required_record:
-        try:
-            if record.stat().st_size > MAX_RECORD_BYTES:
-                raise StaleRecord(f"{record}: larger than {MAX_RECORD_BYTES} bytes; not a record locbench wrote")
-            data = json.loads(record.read_text(encoding="utf-8"))
-        except (OSError, json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
-            raise StaleRecord(one_line(f"{record}: unreadable record ({exc})")) from None
-        if not isinstance(data, dict):
-            raise StaleRecord(f"{record}: not a JSON object")
-        meta = data
-        if "meta_sha256" in meta and meta["meta_sha256"] != _record_digest(meta):
-            raise StaleRecord(f"{record}: its checksum does not match (the record was altered)")
+    meta = _read_record(record, required_record)
     try:
         expected = (meta.get("files") or {}).get(npz.name) if isinstance(meta.get("files", {}), dict) else ""
         # each member read once: its bytes give the checksum, then the array

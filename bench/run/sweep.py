@@ -64,7 +64,8 @@ def store_result(
             if written is not None:
                 written.add(realisation)
     outcomes = []
-    for job, rec in zip(task.jobs, result.runs, strict=True):
+    derived = result.derived or [None] * len(result.runs)
+    for job, rec, values in zip(task.jobs, result.runs, derived, strict=True):
         fspec, dspec = job.filter.spec, task.dataset.spec
         where = store.run_dir(task.dataset.name, job.filter.name, task.seed)
         if truth_error:
@@ -73,7 +74,7 @@ def store_result(
             )
             continue
         try:
-            store.write_run(rec)
+            store.write_run(rec, values)
         except OSError as exc:
             outcomes.append(
                 RunOutcome(fspec, dspec, task.seed, NOT_STORED, f"seed {task.seed} -> {where}: {_os_message(exc)}")

@@ -11,6 +11,8 @@ advance; Henderson et al. 2018 show results flip with the seed set). This re-run
   specs, seed, run key, versions, row count and divergence time must be what the re-run records;
 - the truth of its realisation (``_truth/seed-NNNN.npz``): ground truth, waypoints, kidnaps, map, duration and
   the record's dataset spec and seed, rebuilt from the spec;
+- its derived values (``derived.npz``: metrics, NEES and health series), where they are stored for the current
+  code: recomputed by the re-run's worker, they must be the stored ones;
 - the realisation's posterior Cramer-Rao bound, recomputed, where the dataset has one;
 - of a run imported from another system's output (``external[name=...]``, :mod:`locbench.run.import_runs`), which
   cannot be re-run: the sha256 of each file it was imported from, read again from its path.
@@ -33,6 +35,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import numpy.typing as npt
 
 from locbench.core.errors import ConfigError, LocbenchError
 from locbench.evaluate.records import BoundRecord, RunRecord, TruthRecord
@@ -40,6 +43,7 @@ from locbench.run import provenance
 from locbench.run.store import StaleRecord, Store, bound_arrays, truth_arrays
 
 if TYPE_CHECKING:
+    from locbench.evaluate.derived import Derived
     from locbench.run.plan import Task
 
 log = logging.getLogger(__name__)
@@ -183,7 +187,39 @@ def compare(stored: RunRecord, fresh: RunRecord) -> list[str]:
     return out
 
 
-def _same(a: np.ndarray, b: np.ndarray) -> bool:
+def compare_derived(stored: Derived, fresh: Derived) -> list[str]:
+    """What differs between a run's stored derived values and the ones of its re-run (bit for bit), the metrics of
+    the call times aside (group ``runtime``: they come from the call times, which differ between runs)."""
+    from locbench.evaluate.metrics import METRICS
+
+    timing = [m for m in METRICS.values() if m.group == "runtime"]
+    out = [
+        f"derived {k}"
+        for k in sorted(set(stored.values) | set(fresh.values))
+        if not any(m.matches(k) for m in timing)
+        and (
+            (k in stored.values) != (k in fresh.values)
+            or not _same(np.float64(stored.values.get(k, np.nan)), np.float64(fresh.values.get(k, np.nan)))
+        )
+    ]
+    if (stored.nees is None) != (fresh.nees is None) or (
+        stored.nees is not None and fresh.nees is not None and not _same(stored.nees, fresh.nees)
+    ):
+        out.append("derived nees")
+    a, b = stored.health, fresh.health
+    if (a is None) != (b is None) or (
+        a is not None
+        and b is not None
+        and (
+            not (_same(a.t, b.t) and _same(a.error_m, b.error_m) and _differing(a.signals, b.signals) == [])
+            or not _same(np.float64(a.kidnap_t), np.float64(b.kidnap_t))
+        )
+    ):
+        out.append("derived health")
+    return out
+
+
+def _same(a: npt.ArrayLike, b: npt.ArrayLike) -> bool:
     a, b = np.asarray(a), np.asarray(b)
     return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
 
@@ -361,14 +397,18 @@ def verify(store: Store, fraction: float = DEFAULT_FRACTION, seed: int = 0, jobs
     plan = _plan(store, groups, result)
     stored_recs, tasks, bound_keys, stored_name = plan.stored_recs, plan.tasks, plan.bound_keys, plan.stored_name
     fresh: dict[tuple[str, int, str], RunRecord] = {}
+    fresh_derived: dict[tuple[str, int, str], Derived] = {}
     truths: dict[tuple[str, int], TruthRecord] = {}
     bounds: dict[tuple[str, int], BoundRecord] = {}
     lost: dict[tuple[str, int], str] = {}
 
     def handle(task: Task, out: TaskResult) -> None:
         where = (stored_name[(task.dataset.name, task.seed)], task.seed)
-        for job, rec in zip(task.jobs, out.runs, strict=True):
+        derived = out.derived or [None] * len(out.runs)
+        for job, rec, values in zip(task.jobs, out.runs, derived, strict=True):
             fresh[(*where, job.filter.name)] = rec
+            if values is not None:
+                fresh_derived[(*where, job.filter.name)] = values[0]
         if out.truth is not None:
             truths[where] = out.truth
         if out.bound is not None:
@@ -391,6 +431,15 @@ def verify(store: Store, fraction: float = DEFAULT_FRACTION, seed: int = 0, jobs
                 continue
             stored = stored_recs[r]
             diff = compare(stored, rec) + compare_meta(stored.meta, rec.meta, RUN_FIELDS)
+            folder = Path(r.folder) if r.folder else store.run_dir(r.dataset, r.filter, r.seed)
+            kept = store.read_derived(folder) if not diff else None
+            if kept is not None:
+                again = fresh_derived.get((dataset, s, r.filter))
+                diff += (
+                    ["derived values (not computed by the re-run)"]
+                    if again is None
+                    else compare_derived(kept[1], again)
+                )
             if diff:
                 result.differ.append((r, ", ".join(diff)))
         if (dataset, s) in truths:

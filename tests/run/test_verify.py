@@ -105,3 +105,20 @@ def test_worker_processes_re_run_the_sample_as_this_process_does(
     assert "differs: odometry on line[noise_m=0.01] seed 1: mean" in out
     record = json.loads((tmp_path / "verify.json").read_text())
     assert record["checked"] == 6 and len(record["differ"]) == 1
+
+
+@pytest.mark.usefixtures("harness_registry")
+def test_a_stored_derived_value_the_re_run_does_not_give_fails_and_is_named(tmp_path: Path) -> None:
+    from locbench.run.store import DERIVED_FILE
+
+    store = _store(tmp_path)
+    path = store.run_dir(DATASET, "odometry", 2) / DERIVED_FILE
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in z.files}
+    ids = arrays["metric_ids"].tolist()
+    values = arrays["metric_values"].copy()
+    values[ids.index("ate_m")] = np.nextafter(values[ids.index("ate_m")], np.inf)
+    np.savez(path, **(arrays | {"metric_values": values}))
+    assert store.read_derived(path.parent) is not None  # its keys still hold: the report would take it
+    res = verify(store, fraction=1.0, seed=0)
+    assert [(r.filter, r.seed, why) for r, why in res.differ] == [("odometry", 2, "derived ate_m")]
