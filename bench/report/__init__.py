@@ -85,10 +85,10 @@ def write_report(store: Store, keep: Keep | None = None, out: Path | None = None
     OSError
         A write failed (a full disk): the error names the file; the folder is left as it was.
     """
-    from locbench.report.build import build_sections, how_to_read
+    from locbench.report.build import how_to_read, section_builders, shown
     from locbench.report.context import Report
     from locbench.report.output import OutputFolder
-    from locbench.report.render import figure_pngs
+    from locbench.report.render import build_and_draw
     from locbench.report.sections.paired_tests import comparisons_csv
     from locbench.report.site import oversize, site_files
 
@@ -98,12 +98,15 @@ def write_report(store: Store, keep: Keep | None = None, out: Path | None = None
     folder = OutputFolder(summary, legacy=legacy)  # refuses someone else's folder before anything is computed
     col = collect(store, keep, jobs)
     report = Report(col)
-    sections = build_sections(report)
+    # what several sections share first, so that every section's worker has it
+    report.prepare(jobs)
+    builders = section_builders(report)
+    built, pngs = build_and_draw(builders, jobs)
+    sections = shown(built)
     intro = how_to_read()
     with folder:
         metrics = folder.write("metrics.parquet", metrics_parquet(col.metrics))
         folder.write("comparisons.csv", comparisons_csv(report.comparisons))
-        pngs = figure_pngs(sections, jobs)
         for name, data in pngs.items():
             folder.write(f"figures/{name}.png", data)
         site = site_files(TITLE, intro, sections)

@@ -21,6 +21,8 @@ and orders them, and no section imports it.
 from __future__ import annotations
 
 from collections import defaultdict
+from collections.abc import Callable, Iterable
+from functools import partial
 
 from locbench.evaluate.metrics import CONFIDENCE
 from locbench.present.experiments import all_claims
@@ -40,26 +42,37 @@ from locbench.report.sections import summary as sm
 from locbench.report.sections.tuned import tuning_section
 
 
+def section_builders(rep: Report) -> list[Callable[[], Section | None]]:
+    """One call per section of the report, in reading order (the module docstring); each builds its section (or
+    None, or an empty one, when it has nothing to show). Independent of each other: they may run in any process
+    that holds ``rep`` (:func:`locbench.report.render.build_and_draw`)."""
+    return [
+        partial(sm.summary_section, rep),
+        partial(sig.across_datasets, rep),
+        partial(tuning_section, rep.col),
+        partial(gz.generalization_section, rep.col),
+        partial(claims_section, rep),
+        partial(rt.pareto_section, rep),
+        partial(cs.consistency_section, rep),
+        partial(hd.heading_section, rep),
+        partial(hl.lost_section, rep),
+        partial(kd.kidnap_section, rep),
+        partial(rc.recorded_section, rep),
+        partial(rc.input_warnings_section, rep),
+        *[partial(ex.experiment_section, rep, e) for e in rep.exps],
+        *[partial(ex.own_section, rep, d) for d in rep.own()],
+        partial(ap.appendix_section, rep),
+    ]
+
+
+def shown(sections: Iterable[Section | None]) -> list[Section]:
+    """The sections that have something to show, in order."""
+    return [s for s in sections if s is not None and (s.blocks or s.children)]
+
+
 def build_sections(rep: Report) -> list[Section]:
     """The report's sections in reading order (the module docstring), the empty ones left out."""
-    out = [
-        sm.summary_section(rep),
-        sig.across_datasets(rep),
-        tuning_section(rep.col) or Section("", ""),
-        gz.generalization_section(rep.col),
-        claims_section(rep),
-        rt.pareto_section(rep),
-        cs.consistency_section(rep),
-        hd.heading_section(rep),
-        hl.lost_section(rep),
-        kd.kidnap_section(rep),
-        rc.recorded_section(rep),
-        rc.input_warnings_section(rep),
-        *[ex.experiment_section(rep, e) for e in rep.exps],
-        *[ex.own_section(rep, d) for d in rep.own()],
-        ap.appendix_section(rep),
-    ]
-    return [s for s in out if s.blocks or s.children]
+    return shown(b() for b in section_builders(rep))
 
 
 def how_to_read() -> list[str]:

@@ -9,16 +9,17 @@ report; :mod:`locbench.report.build` orders the sections.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, partial
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from locbench.core.spec import Spec
 from locbench.evaluate import significance as sg
-from locbench.evaluate.lost import SignalScore, score_signals
+from locbench.evaluate.lost import HealthSeries, SignalScore, score_signals
 from locbench.evaluate.metrics import (
     ATE_M,
     KIDNAP_DISTANCE_M,
@@ -98,6 +99,10 @@ def dataset_comparisons(
     return out
 
 
+def _scored(series: list[HealthSeries]) -> tuple[SignalScore, ...]:
+    return tuple(score_signals(series))
+
+
 class Report:
     """What every section reads from one :class:`Collected`; styles are fixed per filter for every figure."""
 
@@ -116,12 +121,35 @@ class Report:
     def comparisons(self) -> list[ComparisonRecord]:
         """``comparisons.csv``'s rows: every dataset's ranked metrics, every configuration against the best."""
         out: list[ComparisonRecord] = []
+        for call in self._comparison_calls():
+            out += call()
+        return out
+
+    def _comparison_calls(self) -> list[partial[list[ComparisonRecord]]]:
+        calls: list[partial[list[ComparisonRecord]]] = []
         for ds in sorted(self.col.datasets):
             filters = self.filters_on(ds)
-            if len(filters) < 2:
-                continue
-            out += dataset_comparisons(self.rows(ds), ds, filters, self.eligible(filters))
-        return out
+            if len(filters) >= 2:
+                calls.append(partial(dataset_comparisons, self.rows(ds), ds, filters, self.eligible(filters)))
+        return calls
+
+    def prepare(self, jobs: int) -> None:
+        """Compute what several sections share, in ``jobs`` forked processes, before the sections are built in
+        processes of their own (:func:`locbench.report.render.build_and_draw`), which then inherit it instead of
+        each computing it again: :attr:`comparisons` (one task per dataset) and every :meth:`signal_scores` (one
+        per configuration and dataset). The values are the ones computed in one process."""
+        from locbench.report.forked import forked_map
+
+        comparisons = self._comparison_calls()
+        keys = sorted(self.col.health)
+        scores = [partial(_scored, self.col.health[k]) for k in keys]
+        calls: list[Callable[[], Any]] = [*comparisons, *scores]
+        # the largest first: a dataset's comparisons grow with its rows, a configuration's scores with its runs
+        size = [len(c.args[0]) for c in comparisons] + [len(c.args[0]) * 100 for c in scores]
+        done = forked_map(calls, jobs, sorted(range(len(calls)), key=lambda i: -size[i]))
+        self.__dict__["comparisons"] = [c for part in done[: len(comparisons)] for c in part]
+        for k, value in zip(keys, done[len(comparisons) :], strict=True):
+            self._signal_scores[k] = value
 
     # --- helpers ------------------------------------------------------------------------------------
 
@@ -131,7 +159,7 @@ class Report:
         the lost-detection table and the kidnap delays read the same scores."""
         key = (dataset, filter_name)
         if key not in self._signal_scores:
-            self._signal_scores[key] = tuple(score_signals(self.col.health.get(key, [])))
+            self._signal_scores[key] = _scored(self.col.health.get(key, []))
         return self._signal_scores[key]
 
     @cached_property

@@ -9,11 +9,13 @@ a fixed style, size and dpi and no software metadata.
 from __future__ import annotations
 
 import base64
+import dataclasses
 import html
 import io
 import json
 import re
 from collections.abc import Callable
+from functools import partial
 
 import matplotlib.style
 import numpy as np
@@ -95,34 +97,15 @@ def plots_of(sections: list[Section]) -> list[Plot]:
     return [b for s in sections for _, sec in s.walk() for b in sec.blocks if isinstance(b, Plot)]
 
 
-#: The plots a forked worker of :func:`figure_pngs` draws (set before the pool forks).
-_PLOTS: list[Plot] = []
-
-
-def _render_nth(i: int) -> bytes:
-    return render_png(_PLOTS[i])
-
-
 def render_pngs(plots: list[Plot], jobs: int = 1) -> list[bytes]:
     """:func:`render_png` of every plot, in ``jobs`` forked processes when more than 1 (the same bytes: Agg
     draws deterministically, and a plot's ``draw`` is a closure, so the workers inherit it by forking)."""
-    if jobs <= 1 or len(plots) < 2:
-        return [render_png(p) for p in plots]
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
+    from locbench.report.forked import forked_map
 
-    _PLOTS[:] = plots
     # the largest canvases first (a grid of 30 panels takes as long as a dozen single figures), so no worker
     # is left with one at the end
     order = sorted(range(len(plots)), key=lambda i: -plots[i].size[0] * plots[i].size[1])
-    out: list[bytes] = [b""] * len(plots)
-    try:
-        with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("fork")) as pool:
-            for i, data in zip(order, pool.map(_render_nth, order), strict=True):
-                out[i] = data
-    finally:
-        _PLOTS.clear()
-    return out
+    return forked_map([partial(render_png, p) for p in plots], jobs, order)
 
 
 def figure_pngs(sections: list[Section], jobs: int = 1) -> dict[str, bytes]:
@@ -135,6 +118,52 @@ def figure_pngs(sections: list[Section], jobs: int = 1) -> dict[str, bytes]:
             raise ValueError(f"two figures named {plot.name!r}")
         names.add(plot.name)
     return {plot.name: data for plot, data in zip(plots, render_pngs(plots, jobs), strict=True)}
+
+
+def _drawn(fig: Figure) -> None:
+    """The draw function of a plot drawn already in a worker of :func:`build_and_draw` (its PNG is kept)."""
+    raise RuntimeError("this plot was drawn in a worker process; its PNG is in the report's figures")
+
+
+def _build_and_draw(builder: Callable[[], Section | None]) -> tuple[Section | None, dict[str, bytes]]:
+    """Build a section and draw its plots: the section (each plot's ``draw`` replaced by :func:`_drawn`, since a
+    closure does not pickle) and its PNGs by name."""
+    sec = builder()
+    if sec is None:
+        return None, {}
+    pngs: dict[str, bytes] = {}
+    for _, part in sec.walk():
+        for j, b in enumerate(part.blocks):
+            if isinstance(b, Plot):
+                pngs[b.name] = render_png(b)
+                part.blocks[j] = dataclasses.replace(b, draw=_drawn)
+    return sec, pngs
+
+
+def build_and_draw(
+    builders: list[Callable[[], Section | None]], jobs: int = 1
+) -> tuple[list[Section | None], dict[str, bytes]]:
+    """Every section of ``builders`` (in their order) and every plot of them drawn to PNG bytes, by name.
+
+    With ``jobs`` > 1, forked processes build the sections and draw each one's plots where it was built
+    (:func:`locbench.report.forked.forked_map`: the builders and draw functions are closures over the report),
+    started in reverse reading order: the appendix and the experiments' pages, which hold most of the tables and
+    figures, first, so that no worker is left with one of them at the end. The sections and PNGs do not depend on
+    ``jobs``.
+    """
+    from locbench.report.forked import forked_map
+
+    if jobs <= 1 or len(builders) < 2:
+        sections = [b() for b in builders]
+        return sections, figure_pngs([s for s in sections if s is not None])
+    built = forked_map([partial(_build_and_draw, b) for b in builders], jobs, range(len(builders))[::-1])
+    pngs: dict[str, bytes] = {}
+    for _, drawn in built:
+        for name, data in drawn.items():
+            if name in pngs:
+                raise ValueError(f"two figures named {name!r}")
+            pngs[name] = data
+    return [sec for sec, _ in built], pngs
 
 
 # --- HTML -------------------------------------------------------------------------------------------

@@ -341,7 +341,8 @@ def test_report_regenerates_identical_bytes(store: Store) -> None:
 
 
 def test_report_with_two_processes_writes_the_same_bytes(store: Store, tmp_path: Path) -> None:
-    """Runs read, metrics computed and figures drawn by two processes: the same files, byte for byte."""
+    """Runs read, shared values computed, sections built and figures drawn by two processes: the same files, byte
+    for byte."""
     one, two = tmp_path / "one", tmp_path / "two"
     write_report(store, out=one)
     write_report(store, out=two, jobs=2)
