@@ -219,6 +219,19 @@ def compare_derived(stored: Derived, fresh: Derived) -> list[str]:
     return out
 
 
+def _differences(store: Store, r: RunId, stored: RunRecord, fresh: RunRecord, derived: Derived | None) -> list[str]:
+    """What differs between a stored run and its re-run: arrays, record fields, and the stored derived values
+    (where they are stored for the current code) against the ones the re-run's worker computed."""
+    diff = compare(stored, fresh) + compare_meta(stored.meta, fresh.meta, RUN_FIELDS)
+    folder = Path(r.folder) if r.folder else store.run_dir(r.dataset, r.filter, r.seed)
+    kept = store.read_derived(folder) if not diff else None
+    if kept is not None:
+        diff += (
+            ["derived values (not computed by the re-run)"] if derived is None else compare_derived(kept[1], derived)
+        )
+    return diff
+
+
 def _same(a: npt.ArrayLike, b: npt.ArrayLike) -> bool:
     a, b = np.asarray(a), np.asarray(b)
     return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
@@ -429,17 +442,7 @@ def verify(store: Store, fraction: float = DEFAULT_FRACTION, seed: int = 0, jobs
             if rec is None:
                 result.differ.append((r, f"not re-run: {lost.get((dataset, s), 'no result came back')}"))
                 continue
-            stored = stored_recs[r]
-            diff = compare(stored, rec) + compare_meta(stored.meta, rec.meta, RUN_FIELDS)
-            folder = Path(r.folder) if r.folder else store.run_dir(r.dataset, r.filter, r.seed)
-            kept = store.read_derived(folder) if not diff else None
-            if kept is not None:
-                again = fresh_derived.get((dataset, s, r.filter))
-                diff += (
-                    ["derived values (not computed by the re-run)"]
-                    if again is None
-                    else compare_derived(kept[1], again)
-                )
+            diff = _differences(store, r, stored_recs[r], rec, fresh_derived.get((dataset, s, r.filter)))
             if diff:
                 result.differ.append((r, ", ".join(diff)))
         if (dataset, s) in truths:
