@@ -28,6 +28,7 @@ import hashlib
 import io
 import json
 import logging
+import math
 import os
 import re
 import shutil
@@ -552,11 +553,56 @@ def npz_digest(path: Path) -> str:
     return _members_digest(*_npz_members(path))
 
 
-def _npz_members(path: Path) -> tuple[list[str], dict[str, bytes]]:
-    """An ``.npz`` file's member names in the zip's order and each member's bytes, read once (CRC-32s checked)."""
-    with zipfile.ZipFile(path) as z:
+def _npz_members(path: Path) -> tuple[list[str], dict[str, memoryview | bytes]]:
+    """An ``.npz`` file's member names in the zip's order and each member's bytes, read once (CRC-32s checked).
+
+    The file is read whole into one writable buffer; a stored (uncompressed) member, which is what ``numpy.savez``
+    writes, is a view into it (its local header checked as ``zipfile`` checks it), so the arrays built from it need
+    no copy; any other member is read through ``zipfile``. A name that appears twice gives its last member, as
+    ``zipfile`` does.
+    """
+    buf = bytearray(path.stat().st_size)
+    with path.open("rb") as fh:
+        if fh.readinto(buf) != len(buf):
+            raise zipfile.BadZipFile(f"{path}: changed while it was read")
+    view = memoryview(buf)
+    with zipfile.ZipFile(io.BytesIO(buf)) as z:
         names = z.namelist()
-        return names, {name: z.read(name) for name in dict.fromkeys(names)}
+        data: dict[str, memoryview | bytes] = {}
+        for name in dict.fromkeys(names):
+            info = z.getinfo(name)
+            member = _stored_member(view, info)
+            data[name] = memoryview(bytearray(z.read(info))) if member is None else member
+        return names, data
+
+
+#: A zip local file header: its signature, and the offsets of its name's and extra field's lengths.
+_LOCAL_HEADER = (b"PK\x03\x04", 30)
+
+
+def _stored_member(view: memoryview, info: zipfile.ZipInfo) -> memoryview | None:
+    """The bytes of a stored, unencrypted member as a view into the whole file ``view``, after the checks
+    ``zipfile`` makes (the local header's signature and name, the length, the CRC-32); None for any other member,
+    which ``zipfile`` reads. A :class:`zipfile.BadZipFile` when a check fails."""
+    if info.compress_type != zipfile.ZIP_STORED or info.flag_bits & 0x1 or info.compress_size != info.file_size:
+        return None
+    magic, size = _LOCAL_HEADER
+    at = info.header_offset
+    header = bytes(view[at : at + size])
+    if len(header) != size or header[:4] != magic:
+        raise zipfile.BadZipFile(f"bad magic number for the file header of {info.orig_filename!r}")
+    name_len, extra_len = int.from_bytes(header[26:28], "little"), int.from_bytes(header[28:30], "little")
+    raw_name = bytes(view[at + size : at + size + name_len])
+    local = raw_name.decode("utf-8" if info.flag_bits & 0x800 else "cp437", errors="replace")
+    if local != info.orig_filename:
+        raise zipfile.BadZipFile(f"file name in the directory {info.orig_filename!r} and header {local!r} differ")
+    start = at + size + name_len + extra_len
+    body = view[start : start + info.compress_size]
+    if len(body) != info.compress_size:
+        raise zipfile.BadZipFile(f"{info.orig_filename!r} is truncated")
+    if zlib.crc32(body) != info.CRC:
+        raise zipfile.BadZipFile(f"bad CRC-32 for file {info.orig_filename!r}")
+    return body
 
 
 def _members_digest(names: list[str], data: dict[str, bytes]) -> str:
@@ -568,7 +614,7 @@ def _members_digest(names: list[str], data: dict[str, bytes]) -> str:
     return h.hexdigest()
 
 
-def _members_arrays(names: list[str], data: dict[str, bytes]) -> dict[str, Any]:
+def _members_arrays(names: list[str], data: dict[str, memoryview | bytes]) -> dict[str, Any]:
     """The arrays of members read by :func:`_npz_members`, keyed as ``numpy.load`` keys them (``.npy`` dropped,
     in the zip's order); a member that is not in ``.npy`` format gives its bytes, as ``numpy.load`` does. No
     pickles."""
@@ -577,12 +623,35 @@ def _members_arrays(names: list[str], data: dict[str, bytes]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for key in keys:
         raw = data[member[key]]
-        out[key] = (
-            np.lib.format.read_array(io.BytesIO(raw), allow_pickle=False)
-            if raw.startswith(np.lib.format.MAGIC_PREFIX)
-            else raw
-        )
+        out[key] = _npy_array(raw) if bytes(raw[:6]) == np.lib.format.MAGIC_PREFIX else bytes(raw)
     return out
+
+
+#: The header ``numpy.save`` writes in format 1.0 for a plain dtype (no fields, no objects): dtype, order, shape.
+_NPY_HEADER = re.compile(
+    r"\{'descr': '([<>|=][biufcmMSU]\d+(?:\[\w+\])?)', "
+    r"'fortran_order': (True|False), "
+    r"'shape': \(((?:\d+, ?)*\d*)\), \} *\n"
+)
+
+
+def _npy_array(raw: memoryview | bytes) -> np.ndarray:
+    """The array of one ``.npy`` member. The header ``numpy.save`` writes for a plain dtype is parsed here and the
+    array is a view of ``raw`` (writable when ``raw`` is); any other header goes to ``numpy.lib.format.read_array``
+    (no pickles), which parses it with :func:`ast.literal_eval` at a cost that dominates a small array's read."""
+    head = bytes(raw[:10])
+    if head[6:8] == b"\x01\x00":
+        end = 10 + int.from_bytes(head[8:10], "little")
+        m = _NPY_HEADER.fullmatch(bytes(raw[10:end]).decode("latin1"))
+        if m is not None:
+            dtype = np.dtype(m.group(1))
+            shape = tuple(int(n) for n in m.group(3).split(",") if n.strip())
+            count = math.prod(shape)
+            if len(raw) - end < count * dtype.itemsize:
+                raise ValueError(f"EOF: the array needs {count * dtype.itemsize} bytes, {len(raw) - end} are stored")
+            flat = np.frombuffer(raw, dtype=dtype, count=count, offset=end)
+            return flat.reshape(shape, order="F" if m.group(2) == "True" else "C")
+    return np.lib.format.read_array(io.BytesIO(bytes(raw)), allow_pickle=False)
 
 
 def _write_npz_and_record(path: Path, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> None:
