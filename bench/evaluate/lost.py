@@ -172,24 +172,49 @@ class SignalScore:
     lost_share: float
 
 
+def _signal_score(name: str, v: FloatArray, lost: list[npt.NDArray[np.bool_]]) -> SignalScore:
+    """One signal's :class:`SignalScore` from one stable sort of its values (NaN left out), which gives both its
+    ranks (:func:`auroc` at every threshold) and its ROC curve (:func:`precision_at_recall`): the same numbers as
+    those functions, bit for bit, since ranks are half-integers and the curve's counts integers, whatever the
+    order they are summed in."""
+    keep = ~np.isnan(v)
+    order = np.argsort(v[keep], kind="stable")
+    y = v[keep][order]
+    first = np.flatnonzero(np.r_[True, y[:-1] != y[1:]]) if y.size else np.zeros(0, dtype=np.intp)
+    counts = np.diff(first, append=y.size)
+    # scipy.stats.rankdata's average ranks, in sorted order: a tie group's first ordinal rank plus half its spread
+    ranks = np.repeat((first + 1).astype(np.float64) + (counts - 1) / 2.0, counts)
+    flags = [lo[keep][order] for lo in lost]
+    return SignalScore(
+        name,
+        tuple(_auroc_of_ranks(ranks, f) for f in flags),
+        _precision_of_sorted(flags[0], first),
+        float(np.mean(lost[0])),
+    )
+
+
+def _precision_of_sorted(p: npt.NDArray[np.bool_], first: npt.NDArray[np.intp], recall: float = RECALL) -> float:
+    """:func:`precision_at_recall` of flags ``p`` in ascending order of their scores, whose tie groups start at
+    ``first``: flagged at a group's value are that group and every one above it (:func:`roc_curve`'s counts)."""
+    n_pos, n_neg = int(p.sum()), int((~p).sum())
+    if n_pos == 0:
+        return float("nan")
+    pos_before = np.r_[0, np.cumsum(p)][first]
+    neg_before = np.r_[0, np.cumsum(~p)][first]
+    tpr = np.r_[0.0, (n_pos - pos_before)[::-1].astype(np.float64) / n_pos]
+    fpr = np.r_[0.0, (n_neg - neg_before)[::-1].astype(np.float64) / max(n_neg, 1)]
+    k = int(np.argmax(tpr >= recall - 1e-12))
+    tp = tpr[k] * p.sum()
+    fp = fpr[k] * max(n_neg, 1)
+    return float(tp / (tp + fp)) if tp + fp > 0 else float("nan")
+
+
 def score_signals(series: list[HealthSeries], thresholds: tuple[float, ...] = LOST_THRESHOLDS_M) -> list[SignalScore]:
     """Every signal's scores over the pooled times of ``series``, best first (AUROC at the first threshold)."""
     if not series:
         return []
     err = np.concatenate([s.error_m for s in series])
     names = sorted(set.intersection(*(set(s.signals) for s in series)))
-    out = []
-    for name in names:
-        v = np.concatenate([s.signals[name] for s in series])
-        lost = [err > th for th in thresholds]
-        keep = ~np.isnan(v)
-        ranks = stats.rankdata(v[keep])
-        out.append(
-            SignalScore(
-                name,
-                tuple(_auroc_of_ranks(ranks, lo[keep]) for lo in lost),
-                precision_at_recall(v, lost[0]),
-                float(np.mean(lost[0])),
-            )
-        )
+    lost = [err > th for th in thresholds]
+    out = [_signal_score(name, np.concatenate([s.signals[name] for s in series]), lost) for name in names]
     return sorted(out, key=lambda s: (-np.nan_to_num(s.auroc[0], nan=-1.0), s.signal))

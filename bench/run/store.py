@@ -411,7 +411,7 @@ class Store:
         try:
             meta = _read_record(d / "meta.json", required=True)
             _check_place(d, meta)
-            digest = _members_digest(*_npz_members(d / "estimates.npz"))
+            digest = _members_digest(*_npz_members(d / "estimates.npz", crc=False))
             if meta.get("status") != "ok" or digest != (meta.get("files") or {}).get("estimates.npz"):
                 return None
             z = _members_arrays(*_npz_members(d / DERIVED_FILE))
@@ -553,8 +553,9 @@ def npz_digest(path: Path) -> str:
     return _members_digest(*_npz_members(path))
 
 
-def _npz_members(path: Path) -> tuple[list[str], dict[str, memoryview | bytes]]:
-    """An ``.npz`` file's member names in the zip's order and each member's bytes, read once (CRC-32s checked).
+def _npz_members(path: Path, crc: bool = True) -> tuple[list[str], dict[str, memoryview | bytes]]:
+    """An ``.npz`` file's member names in the zip's order and each member's bytes, read once; their CRC-32s are
+    checked unless ``crc`` is false, for a caller that checks the members' sha256 against a record (stronger).
 
     The file is read whole into one writable buffer; a stored (uncompressed) member, which is what ``numpy.savez``
     writes, is a view into it (its local header checked as ``zipfile`` checks it), so the arrays built from it need
@@ -571,7 +572,7 @@ def _npz_members(path: Path) -> tuple[list[str], dict[str, memoryview | bytes]]:
         data: dict[str, memoryview | bytes] = {}
         for name in dict.fromkeys(names):
             info = z.getinfo(name)
-            member = _stored_member(view, info)
+            member = _stored_member(view, info, crc)
             data[name] = memoryview(bytearray(z.read(info))) if member is None else member
         return names, data
 
@@ -580,10 +581,10 @@ def _npz_members(path: Path) -> tuple[list[str], dict[str, memoryview | bytes]]:
 _LOCAL_HEADER = (b"PK\x03\x04", 30)
 
 
-def _stored_member(view: memoryview, info: zipfile.ZipInfo) -> memoryview | None:
+def _stored_member(view: memoryview, info: zipfile.ZipInfo, crc: bool = True) -> memoryview | None:
     """The bytes of a stored, unencrypted member as a view into the whole file ``view``, after the checks
-    ``zipfile`` makes (the local header's signature and name, the length, the CRC-32); None for any other member,
-    which ``zipfile`` reads. A :class:`zipfile.BadZipFile` when a check fails."""
+    ``zipfile`` makes (the local header's signature and name, the length, the CRC-32 when ``crc``); None for any
+    other member, which ``zipfile`` reads. A :class:`zipfile.BadZipFile` when a check fails."""
     if info.compress_type != zipfile.ZIP_STORED or info.flag_bits & 0x1 or info.compress_size != info.file_size:
         return None
     magic, size = _LOCAL_HEADER
@@ -600,7 +601,7 @@ def _stored_member(view: memoryview, info: zipfile.ZipInfo) -> memoryview | None
     body = view[start : start + info.compress_size]
     if len(body) != info.compress_size:
         raise zipfile.BadZipFile(f"{info.orig_filename!r} is truncated")
-    if zlib.crc32(body) != info.CRC:
+    if crc and zlib.crc32(body) != info.CRC:
         raise zipfile.BadZipFile(f"bad CRC-32 for file {info.orig_filename!r}")
     return body
 
@@ -712,7 +713,7 @@ def _load_verified(
     try:
         expected = (meta.get("files") or {}).get(npz.name) if isinstance(meta.get("files", {}), dict) else ""
         # each member read once: its bytes give the checksum, then the array
-        names, data = _npz_members(npz)
+        names, data = _npz_members(npz, crc=expected is None)
         if expected is not None and _members_digest(names, data) != expected:
             raise StaleRecord(f"{npz}: its sha256 does not match the one recorded in {record.name}")
         arrays = _members_arrays(names, data)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from locbench.core.seeding import belief_rng, filter_rng
 from locbench.evaluate import lost
@@ -99,3 +101,30 @@ def test_health_series_holds_each_signal_by_the_aligned_rows() -> None:
     np.testing.assert_array_equal(hs.signals["nis"], [np.nan, 4.0, 9.0])
     np.testing.assert_array_equal(hs.signals["ess_fraction"], [-1.0, -0.2, -0.1])
     assert set(hs.signals) == {"nis", "ess_fraction"} and hs.kidnap_t == 1.0
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    values=st.lists(st.sampled_from([0.0, 0.5, 1.0, 2.0, np.nan, -1.0, 3.25]), min_size=1, max_size=60),
+    errors=st.lists(st.floats(0.0, 2.0), min_size=60, max_size=60),
+)
+def test_score_signals_equal_auroc_and_precision_bit_for_bit(values: list[float], errors: list[float]) -> None:
+    """One sort per signal gives the numbers auroc() and precision_at_recall() give, ties and NaN included."""
+    sig = np.array(values, dtype=float)
+    err = np.array(errors[: sig.size], dtype=float)
+    s = lost.HealthSeries(np.arange(float(sig.size)), err, {"nis": sig})
+    (score,) = lost.score_signals([s])
+    want_auroc = tuple(lost.auroc(sig, err > th) for th in lost.LOST_THRESHOLDS_M)
+    want_precision = lost.precision_at_recall(sig, err > lost.LOST_THRESHOLDS_M[0])
+    assert np.array_equal(score.auroc, want_auroc, equal_nan=True)
+    assert np.array_equal(score.precision, want_precision, equal_nan=True)
+
+
+def test_score_signals_equal_auroc_and_precision_on_long_series() -> None:
+    rng = np.random.default_rng(9)
+    err = rng.gamma(1.0, 0.5, size=20_000)
+    sig = np.round(err + rng.normal(size=err.size), 2)
+    sig[::31] = np.nan
+    (score,) = lost.score_signals([lost.HealthSeries(np.arange(float(err.size)), err, {"nis": sig})])
+    assert score.precision == lost.precision_at_recall(sig, err > lost.LOST_THRESHOLDS_M[0])
+    assert score.auroc == tuple(lost.auroc(sig, err > th) for th in lost.LOST_THRESHOLDS_M)

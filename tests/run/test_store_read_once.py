@@ -170,3 +170,12 @@ def test_numpy_writes_the_header_read_without_numpy(key: str) -> None:
     end = 10 + int.from_bytes(raw[8:10], "little")
     assert raw[6:8] == b"\x01\x00"
     assert store_mod._NPY_HEADER.fullmatch(raw[10:end].decode("latin1")) is not None
+
+
+def test_a_damaged_member_of_a_run_is_refused_by_its_sha256(tmp_path: Path) -> None:
+    """Where the record's sha256 is checked, the CRC-32 is not needed: a damaged member is still refused."""
+    st = Store(tmp_path)
+    folder = st.write_run(_record())
+    _flip_last_byte_of(folder / "estimates.npz", "mean.npy")
+    with pytest.raises(store_mod.StaleRecord, match="sha256 does not match"):
+        st.read_run(folder)
