@@ -144,7 +144,8 @@ class Report:
         keys = sorted(self.col.health)
         scores = [partial(_scored, self.col.health[k]) for k in keys]
         calls: list[Callable[[], Any]] = [*comparisons, *scores]
-        # the largest first: a dataset's comparisons grow with its rows, a configuration's scores with its runs
+        # the largest first: a dataset's comparisons grow with its metric rows, a configuration's scores with its
+        # runs; a run's scores weigh as a hundred metric rows, a rough ratio: the order only decides what starts first
         size = [len(c.args[0]) for c in comparisons] + [len(c.args[0]) * 100 for c in scores]
         done = forked_map(calls, jobs, sorted(range(len(calls)), key=lambda i: -size[i]))
         self.__dict__["comparisons"] = [c for part in done[: len(comparisons)] for c in part]

@@ -44,7 +44,8 @@ log = logging.getLogger(__name__)
 class TaskResult:
     """What a worker returns: the realisation's truth (None when the dataset did not build), one record per job in
     the order of the task's jobs, the bound when the plan asked for it, and beside each run its derived values
-    with the truth's key (:func:`derived_values`; None for a run that is not ok), stored with it."""
+    with the truth's key (:func:`derived_values`; None for a run that is not ok; none at all when the task does
+    not derive them), stored with it."""
 
     truth: TruthRecord | None
     runs: list[RunRecord]
@@ -212,7 +213,7 @@ def execute_task(task: Task) -> TaskResult:
     ds, truth = built
     bound = _bound(task, ds)
     runs = _runs(task, ds)
-    return TaskResult(truth, runs, bound, derived_values(runs, truth))
+    return TaskResult(truth, runs, bound, derived_values(runs, truth) if task.derive else [])
 
 
 def execute_contained(task: Task) -> TaskResult:
@@ -255,7 +256,7 @@ def execute_contained(task: Task) -> TaskResult:
     for rec in runs:
         rec.meta["run_timeout_s"] = limit if math.isfinite(limit) else None
         rec.meta["run_timeout_rule"] = rule
-    return TaskResult(truth, runs, bound, derived_values(runs, truth))
+    return TaskResult(truth, runs, bound, derived_values(runs, truth) if task.derive else [])
 
 
 def _runs(task: Task, ds: Dataset) -> list[RunRecord]:

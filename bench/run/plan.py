@@ -280,6 +280,9 @@ class Task:
     #: Members of each belief sample scored (:meth:`Filter.belief_sample`): the run setting of
     #: :func:`plan_sweep`, part of the run key of a filter that samples its belief.
     score_sample: int = SCORE_SAMPLE_SIZE
+    #: Whether the worker computes each ok run's derived values for the report and the store keeps them
+    #: (:func:`locbench.run.execute.derived_values`); false for tuning's train runs, which no report reads.
+    derive: bool = True
 
     @property
     def label(self) -> str:
@@ -348,6 +351,7 @@ def plan_sweep(
     force: bool = False,
     slice_s: float = 0.0,
     score_sample: int = SCORE_SAMPLE_SIZE,
+    derive: bool = True,
 ) -> Plan:
     """Parse every spec and decide which runs to do; nothing is run or written.
 
@@ -366,6 +370,8 @@ def plan_sweep(
     score_sample : int
         Members of each belief sample a filter that samples its belief is scored by (:attr:`Task.score_sample`;
         ``--score-sample``); it enters those filters' run keys, so changing it re-runs them.
+    derive : bool
+        Store each ok run's derived values with it (:attr:`Task.derive`); false where no report reads the runs.
     """
     if not 2 <= score_sample <= MAX_SCORE_SAMPLE:
         # at least a pair to estimate the spread from
@@ -409,7 +415,7 @@ def plan_sweep(
         if jobs or bkey is not None:
             todo = tuple(jobs.values())
             cost = _estimate_cost(store, dr, todo, seen) + (_BOUND_COST_S if bkey is not None else 0.0)
-            plan.tasks.append(Task(dr, seed, todo, cost, bkey, slice_s, score_sample=score_sample))
+            plan.tasks.append(Task(dr, seed, todo, cost, bkey, slice_s, score_sample=score_sample, derive=derive))
     # Longest first (LPT): the last tasks to start are short, so the workers finish together.
     plan.tasks.sort(key=lambda t: -t.cost_s)
     return plan

@@ -411,11 +411,14 @@ class Store:
         try:
             meta = _read_record(d / "meta.json", required=True)
             _check_place(d, meta)
-            digest = _members_digest(*_npz_members(d / "estimates.npz", crc=False))
-            if meta.get("status") != "ok" or digest != (meta.get("files") or {}).get("estimates.npz"):
+            if meta.get("status") != "ok":
                 return None
             z = _members_arrays(*_npz_members(d / DERIVED_FILE))
-            if (str(z["key_estimates"]), str(z["key_code"])) != (digest, code_digest()):
+            # values of other code first, before the estimates are read: then the caller reads them once
+            if str(z["key_code"]) != code_digest():
+                return None
+            digest = _members_digest(*_npz_members(d / "estimates.npz", crc=False))
+            if digest != (meta.get("files") or {}).get("estimates.npz") or str(z["key_estimates"]) != digest:
                 return None
             return meta, derived_from_arrays(z), str(z["key_truth"])
         except (

@@ -451,7 +451,7 @@ def tune(
     def run_trial(spec: str, checking: bool = False) -> tuple[float, str]:
         """Run what is not stored of ``spec``'s train runs, then score it from the store (``checking``: a finished
         trial's value re-derived, which runs nothing when its runs are stored and counts in no tally)."""
-        plan = plan_sweep([([spec], dnames, seed_list)], store)
+        plan = plan_sweep([([spec], dnames, seed_list)], store, derive=False)  # no report reads train runs
         if not plan.tasks and not checking:
             result.reused += 1
         if (plan.tasks or not checking) and run_sweep(plan, executor, jobs, scheduler).interrupted:

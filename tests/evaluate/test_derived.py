@@ -104,3 +104,16 @@ def test_stored_values_are_used_only_for_the_truth_they_name(store: Store, tmp_p
     truth = collect(store).metrics.query("filter == 'ekf_landmarks' and seed == 0 and metric == 'ate_m'")["value"]
     # the stored values are taken as they are while the keys hold (so the doubled ones show), else computed again
     assert float(ate.iloc[0]) == pytest.approx(float(truth.iloc[0]) * (2 if truth_matches else 1), rel=1e-12)
+
+
+def test_tuning_train_runs_store_none(tmp_path: Path) -> None:
+    """No report reads tuning's train runs: their workers compute no derived values and their folders hold none,
+    while a sweep of the same run into a results folder stores them."""
+    from locbench.run import tuning
+
+    tuning.tune("ekf_landmarks", ["tiny_line"], 2, 1, tmp_path)
+    train = Store(tmp_path / tuning.TUNING_DIR)
+    folders = list(train.iter_runs())
+    assert folders and not any((d / DERIVED_FILE).exists() for d in folders)
+    run_many(["ekf_landmarks"], ["tiny_line"], [0], str(tmp_path / "sweep"))
+    assert (Store(tmp_path / "sweep").run_dir("tiny_line", "ekf_landmarks", 0) / DERIVED_FILE).is_file()
