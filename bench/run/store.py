@@ -609,7 +609,7 @@ def _stored_member(view: memoryview, info: zipfile.ZipInfo, crc: bool = True) ->
     return body
 
 
-def _members_digest(names: list[str], data: dict[str, bytes]) -> str:
+def _members_digest(names: list[str], data: dict[str, memoryview | bytes]) -> str:
     """:func:`npz_digest` of members read by :func:`_npz_members`."""
     h = hashlib.sha256()
     for name in sorted(names):
