@@ -196,6 +196,11 @@ def _warm_events(routed: frozenset[type], events: Sequence[Event]) -> list[Event
     return out
 
 
+def warm_key(flt: Filter, ds: Dataset) -> tuple[type, str, frozenset[type]]:
+    """What one warm-up serves: the filter's class and config and the dataset's event types."""
+    return (type(flt), repr(flt.config), frozenset(type(e) for e in ds.events))
+
+
 def warm_up(flt: Filter, ds: Dataset) -> bool:
     """Compile and warm ``flt``'s kernels before its timed pass: a throwaway instance of the same class and
     config, reset with its own generator, is sent the first events of ``ds`` (:func:`_warm_events`) and asked
@@ -205,14 +210,15 @@ def warm_up(flt: Filter, ds: Dataset) -> bool:
     own caches; without this, that time lands in the first timed steps of the first run in a process. The
     throwaway instance shares nothing with ``flt`` (its own config copy, generator and state), so the timed
     pass's estimates are the same bit for bit. A failure here is ignored: the timed pass meets it and records it.
-    Once per process for each (filter class, config, event types of the dataset).
+    Once per process for each (filter class, config, event types of the dataset), :func:`warm_key`; a child forked
+    after it inherits the warmed kernels (:func:`locbench.run.execute.execute_contained`).
 
     Returns
     -------
     bool
         Whether a warm-up pass ran (False: this process had warmed up the same already).
     """
-    key = (type(flt), repr(flt.config), frozenset(type(e) for e in ds.events))
+    key = warm_key(flt, ds)
     if key in _WARMED:
         return False
     _WARMED.add(key)

@@ -102,3 +102,53 @@ def test_a_tasks_provenance_is_computed_before_its_child_is_forked(tmp_path: Pat
     assert [r.meta["status"] for r in out.runs] == ["ok", "ok"]
     assert provenance.distribution.cache_info().currsize == 3  # the dataset's class and the two filters'
     assert out.runs[0].meta["filter_distribution"] == provenance.distribution(plan.tasks[0].jobs[0].filter.cls)
+
+
+def _parent_warm_ups(monkeypatch: pytest.MonkeyPatch) -> list[str]:
+    """The filters the worker itself warms up before forking (a child's own warm-ups are not counted)."""
+    from locbench.run import execute
+
+    calls: list[str] = []
+    real = execute.warm_up
+    monkeypatch.setattr(execute, "_RAN_OK", set())
+    monkeypatch.setattr(execute, "warm_up", lambda flt, ds: calls.append(type(flt).__name__) or real(flt, ds))
+    return calls
+
+
+def test_a_filter_a_child_ran_ok_is_warmed_in_the_worker_and_keeps_its_estimates(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # the children inherit its loaded kernels instead of loading them again, each one
+    from locbench.run.execute import execute_contained, execute_task
+    from locbench.run.plan import plan_sweep
+
+    calls = _parent_warm_ups(monkeypatch)
+    plan = plan_sweep([(["ekf_landmarks", "pf[particles=50]"], ("tiny_line",), [0, 1])], Store(tmp_path))
+    first = execute_contained(plan.tasks[0])
+    assert [r.meta["status"] for r in first.runs] == ["ok", "ok"]
+    assert calls == []  # not yet proven in this process: its warm-up ran in the child
+    second = execute_contained(plan.tasks[1])
+    assert sorted(calls) == ["LandmarkEKF", "ParticleFilter"]
+    direct = execute_task(plan.tasks[1])
+    for a, b in zip(second.runs, direct.runs, strict=True):
+        np.testing.assert_array_equal(a.mean, b.mean)  # our code against itself on one machine
+        np.testing.assert_array_equal(a.cov, b.cov)
+
+
+@pytest.mark.usefixtures("harness_registry")
+@pytest.mark.parametrize("mode", ["exit", "raise"])
+def test_a_filter_whose_child_did_not_end_ok_is_never_warmed_in_the_worker(
+    mode: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # its first events could crash or hang this process, outside the child's containment
+    from locbench.run.execute import execute_contained
+    from locbench.run.plan import plan_sweep
+
+    calls = _parent_warm_ups(monkeypatch)
+    plan = plan_sweep([([f"bad[mode={mode}]", "odometry"], ("line",), [0, 1])], Store(tmp_path))
+    for task in plan.tasks:
+        out = execute_contained(task)
+        assert out.runs[0].meta["status"] == "error"
+    assert "BadFilter" not in calls
+    if mode == "raise":  # the child returned: its dead-reckoning run proved odometry
+        assert calls == ["OdometryFilter"]
