@@ -188,8 +188,12 @@ _LG_LAYOUTS = ("1", "2", "3", "4", "8")
 HEADING_ERRORS_DEG = (0, 15, 45, 90)
 #: The error the claims judge (UKF-M's).
 HEADING_CLAIM_DEG = 45
-#: The seeds of suite ``heading``: every filter at every error but 0 on the same 50 (docs/protocols.md).
+#: The seeds of suite ``heading`` at :data:`HEADING_CLAIM_DEG`, the runs its claims' paired tests read: every
+#: filter on the same 50 (docs/protocols.md).
 HEADING_SEEDS = 50
+#: The seeds at the other wrong headings (15 and 90 deg), the shape of the curve around the claim's point: the main
+#: comparison's 20, every filter on the same ones (50 there cost a sixth of the bench and no claim reads them).
+HEADING_CURVE_SEEDS = 20
 #: The seeds at 0 deg: the plain worlds are the main comparison's, whose seeds every filter shares (more seeds there
 #: for four filters would leave the main table's rows on unequal seeds).
 HEADING_PLAIN_SEEDS = 20
@@ -205,12 +209,15 @@ def heading_datasets(base: str, errors: tuple[int, ...] = HEADING_ERRORS_DEG) ->
 
 
 def _heading_blocks() -> tuple[Block, ...]:
-    """Suite ``heading``: the four filters at every error on room and office, on :data:`HEADING_SEEDS` seeds; at 0
-    deg (the plain worlds, the main comparison's) on its :data:`HEADING_PLAIN_SEEDS`."""
-    wrong = tuple(e for e in HEADING_ERRORS_DEG if e != 0)
+    """Suite ``heading``: the four filters on room and office at the claims' error on :data:`HEADING_SEEDS` seeds,
+    at the other wrong headings on :data:`HEADING_CURVE_SEEDS`, and at 0 deg (the plain worlds, the main
+    comparison's) on its :data:`HEADING_PLAIN_SEEDS`."""
+    claim = (HEADING_CLAIM_DEG,)
+    curve = tuple(e for e in HEADING_ERRORS_DEG if e not in (0, HEADING_CLAIM_DEG))
     filters = (*HEADING_FILTERS, *HEADING_PF)
     return (
-        Block(filters, heading_datasets("room", wrong) + heading_datasets("office", wrong), HEADING_SEEDS),
+        Block(filters, heading_datasets("room", claim) + heading_datasets("office", claim), HEADING_SEEDS),
+        Block(filters, heading_datasets("room", curve) + heading_datasets("office", curve), HEADING_CURVE_SEEDS),
         Block(filters, ("room", "office"), HEADING_PLAIN_SEEDS),
     )
 
