@@ -616,7 +616,10 @@ def make_dataset(spec: str | Resolved, seed: int | np.random.Generator = 0) -> A
 
 def build_dataset(builder_cls: type, r: Resolved, seed: int | np.random.Generator) -> Any:
     """Build the dataset of ``r`` with its builder class given (a worker that has no registry entry for it)."""
-    gen = seed if isinstance(seed, np.random.Generator) else dataset_rng(r.name, seed)
+    from locbench.datasets.dataset import realisation_name
+
+    # a parameter that changes only the initial belief leaves the realisation the plain name's
+    gen = seed if isinstance(seed, np.random.Generator) else dataset_rng(realisation_name(r.name, r.params), seed)
     ds = builder_cls().build(r.params, gen)
     ds = dataclasses.replace(ds, id=r.id, name=r.name, params=r.params_dict())
     ds.check()  # every dataset, synthetic or recorded: a broken one is an error naming its files, never a run

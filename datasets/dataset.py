@@ -6,10 +6,12 @@ Frames: world frame x-y in metres, headings in radians wrapped to (-pi, pi].
 from __future__ import annotations
 
 import abc
+import dataclasses
 import enum
 import itertools
 import math
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import Any, ClassVar
 
 import numpy as np
@@ -450,6 +452,21 @@ def _check_contract(ds: Dataset) -> None:
         w = ds.waypoints
         if w.xy.shape != (w.t.shape[0], 2):
             raise ConfigError(f"{where}: waypoints must be t (n,) and xy (n, 2)")
+
+
+#: Field metadata of a dataset parameter that changes only the initial belief a filter is handed: the truth, the
+#: events and the noise are the realisation of the same name without it (:func:`realisation_name`), so the
+#: parameter's effect is paired by run. Merge it with other metadata (``base=`` of :func:`~locbench.core.spec.bound`).
+BELIEF_ONLY: MappingProxyType[str, Any] = MappingProxyType({"belief_only": True})
+
+
+def realisation_name(name: str, params: Any) -> str:
+    """The name whose random stream a realisation of dataset ``name`` (typed ``params``) draws: ``name`` less its
+    :data:`BELIEF_ONLY` parameters."""
+    from locbench.core.spec import Spec
+
+    belief = [f.name for f in dataclasses.fields(params) if f.metadata.get("belief_only")]
+    return Spec.parse(name).without(*belief).name if belief else name
 
 
 def sort_events(events: list[Event]) -> tuple[Event, ...]:

@@ -28,7 +28,7 @@ import numpy.typing as npt
 from locbench.core.errors import ConfigError
 from locbench.core.runkey import RUN_KEY_OMIT_IF_DEFAULT
 from locbench.core.spec import bound
-from locbench.datasets.dataset import Dataset, DatasetBuilder, Gaussian2, SyntheticBuilder
+from locbench.datasets.dataset import BELIEF_ONLY, Dataset, DatasetBuilder, Gaussian2, SyntheticBuilder
 from locbench.datasets.synthetic.robot import Arc, DriveLimits, GoTo, Leg, Motion, simulate_route
 from locbench.datasets.synthetic.sensors import LandmarkSensor, LaserSensor, PoseFixSensor
 from locbench.datasets.synthetic.toolkit import (
@@ -73,8 +73,9 @@ ROOM_TOUR = Tour(
 )
 
 
-#: Field metadata of ``initial_heading_error_deg``: 0 to 180 deg, omitted from the run key at 0 (the default world).
-HEADING_ERROR = bound(0.0, 180.0, unit="deg", what="a heading error", base=RUN_KEY_OMIT_IF_DEFAULT)
+#: Field metadata of ``initial_heading_error_deg``: 0 to 180 deg, omitted from the run key at 0 (the default world);
+#: it turns only the initial belief, so every error of a seed is the plain world's realisation of that seed.
+HEADING_ERROR = bound(0.0, 180.0, unit="deg", what="a heading error", base={**RUN_KEY_OMIT_IF_DEFAULT, **BELIEF_ONLY})
 
 
 def with_heading_error(ds: Dataset, error_deg: float) -> Dataset:

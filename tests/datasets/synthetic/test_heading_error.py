@@ -90,3 +90,28 @@ def test_the_claims_pair_the_two_filters_on_all_50_seeds_and_leave_pf_and_ukf_ou
     got = check_lower_error(pd.concat([df, pd.DataFrame(extra)], ignore_index=True))
     assert got.verdict == "reproduced"
     assert got.measured.startswith("mean ATE over 50 runs iekf_landmarks 5.")
+
+
+@pytest.mark.parametrize(
+    ("world", "turned_spec"),
+    [
+        ("room", "room[initial_heading_error_deg=90]"),
+        ("office", "office[initial_heading_error_deg=15]"),
+        ("room[kidnap_m=1]", "room[kidnap_m=1,initial_heading_error_deg=45]"),
+    ],
+)
+def test_every_error_of_a_seed_is_the_plain_worlds_realisation(world: str, turned_spec: str) -> None:
+    """The error turns only the initial belief: truth, events and noise are the plain world's for the same seed, so
+    the heading's effect is paired by run."""
+    import pickle
+
+    plain = make_dataset(world, 2)
+    turned = make_dataset(turned_spec, 2)
+    assert turned.name != plain.name
+    assert np.array_equal(turned.ground_truth.poses, plain.ground_truth.poses)
+    assert np.array_equal(turned.ground_truth.t, plain.ground_truth.t)
+    assert [pickle.dumps(e) for e in turned.events] == [pickle.dumps(e) for e in plain.events]
+    assert not np.array_equal(turned.initial.mean, plain.initial.mean)
+    assert make_dataset(world, 3).ground_truth.poses.shape != () and not np.array_equal(
+        make_dataset(world, 3).ground_truth.poses[:50], plain.ground_truth.poses[:50]
+    )
