@@ -933,27 +933,42 @@ def verify_trials(
     results: str | os.PathLike[str], seed: int = 0, *, executor: str = "local", jobs: int = 1
 ) -> list[TrialCheck]:
     """Re-run a sample of the committed trials (:func:`sample_trials`) on their train data, in a store of their own
-    that is deleted after, and score them as the study did (an empty list when nothing was tuned)."""
+    that is deleted after, and score them as the study did (an empty list when nothing was tuned).
+
+    Every sampled trial's runs go into one sweep (no two trials share a spec, so none shares a run): the workers
+    start once and the longest runs are spread over them, where a sweep per trial left a worker idle beside a
+    trial's one long run.
+    """
     import tempfile
 
     from locbench.run.plan import plan_sweep
     from locbench.run.sweep import run_sweep
 
+    picked = [
+        (study, trial, [resolve_dataset(d).name for d in study["train"]], [int(x) for x in study["train_seeds"]])
+        for study, trial in sample_trials(read_summary(results), seed)
+    ]
+    if not picked:
+        return []
     checks: list[TrialCheck] = []
-    for study, trial in sample_trials(read_summary(results), seed):
-        seeds = [int(x) for x in study["train_seeds"]]
-        names = [resolve_dataset(d).name for d in study["train"]]
-        with tempfile.TemporaryDirectory(prefix="locbench-trial-") as tmp:
-            store = Store(tmp)
-            store.claim()
-            plan = plan_sweep([([trial["spec"]], names, seeds)], store)
-            if run_sweep(plan, executor, jobs).interrupted:
-                raise KeyboardInterrupt
+    with tempfile.TemporaryDirectory(prefix="locbench-trial-") as tmp:
+        store = Store(tmp)
+        store.claim()
+        # as the study ran them: train runs keep no derived values
+        plan = plan_sweep([([trial["spec"]], names, seeds) for _, trial, names, seeds in picked], store, derive=False)
+        if run_sweep(plan, executor, jobs).interrupted:
+            raise KeyboardInterrupt
+        for study, trial, names, seeds in picked:
             fresh, _ = score_trial(store, trial["spec"], names, seeds, study["objective"])
-        stored = float(trial["value"])
-        checks.append(
-            TrialCheck(
-                study["filter"], study["world"], study.get("fold", ""), trial["number"], trial["spec"], stored, fresh
+            checks.append(
+                TrialCheck(
+                    study["filter"],
+                    study["world"],
+                    study.get("fold", ""),
+                    trial["number"],
+                    trial["spec"],
+                    float(trial["value"]),
+                    fresh,
+                )
             )
-        )
     return checks

@@ -362,3 +362,19 @@ def test_a_study_builds_each_train_dataset_once(tmp_path: Path, monkeypatch: pyt
     # 2 datasets x 2 seeds, each built once for the study's 3 trials, and none kept after it
     assert len(built) == len(set(built)) == 4
     assert not execute._REALISATION
+
+
+def test_verify_re_runs_every_sampled_trial_in_one_sweep(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from locbench.run import sweep
+
+    studies = [
+        tuning.SuiteStudy(f, ("tiny_line",), 1, ("tiny_line",), (0,)) for f in ("ekf_landmarks", "ukf_landmarks")
+    ]
+    tuning.tune_suite(str(tmp_path), trials=3, studies=studies)
+    sweeps: list[int] = []
+    real = sweep.run_sweep
+    monkeypatch.setattr(sweep, "run_sweep", lambda plan, *a, **k: sweeps.append(len(plan.tasks)) or real(plan, *a, **k))
+    checks = tuning.verify_trials(tmp_path, seed=0)
+    assert sorted(c.filter for c in checks) == ["ekf_landmarks", "ukf_landmarks"]
+    assert all(c.passed and c.fresh == c.stored for c in checks)
+    assert len(sweeps) == 1  # the workers start once for every trial
