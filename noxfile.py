@@ -41,12 +41,55 @@ def _data_env() -> dict[str, str]:
     return {"LOCBENCH_DATA": data}
 
 
+_HERE = os.path.dirname(os.path.abspath(__file__))
+#: numba's on-disk cache of compiled kernels for the sessions that run filters (bench, tune), outside their
+#: environments: a reinstall deletes the package's folders, and with them numba's default cache beside the modules.
+KERNEL_CACHE = os.path.join(_HERE, ".nox", "numba-cache")
+#: The source folder of each installed subpackage (pyproject's package-dir); the rest of the package is bench/.
+_PACKAGE_DIRS = ("filters", "datasets")
+
+
 def _install(session: nox.Session, extras: str) -> None:
     # A regular (non-editable) install: the tests import the installed package, as users do. setuptools builds
     # in ./build and never deletes a module that left the source tree, so a stale copy (a moved or renamed module)
     # would be installed beside its successor: build from nothing.
-    shutil.rmtree(os.path.join(os.path.dirname(os.path.abspath(__file__)), "build"), ignore_errors=True)
+    shutil.rmtree(os.path.join(_HERE, "build"), ignore_errors=True)
     session.install(*CONSTRAINTS, f".[{extras}]")
+    _keep_source_times(session)
+
+
+def _keep_source_times(session: nox.Session) -> None:
+    """Give each installed module its source file's modification time where their bytes are the same.
+
+    numba keeps a compiled kernel (``cache=True``) while its module's time and size are unchanged; an install
+    stamps every file with the install's time, so every bench compiled every kernel again, 2-3 minutes of its
+    start on two cores. With the source's time (and :data:`KERNEL_CACHE`), only a changed module's kernels are.
+    """
+    out = session.run("python", "-c", "import locbench, os; print(os.path.dirname(locbench.__file__))", silent=True)
+    if not isinstance(out, str):  # nox --install-only and dry runs run nothing
+        return
+    root = out.strip().splitlines()[-1]
+    for folder, _, names in os.walk(root):
+        for name in names:
+            if not name.endswith(".py"):
+                continue
+            installed = os.path.join(folder, name)
+            rel = os.path.relpath(installed, root)
+            top = rel.split(os.sep, 1)[0]
+            source = os.path.join(_HERE, rel) if top in _PACKAGE_DIRS else os.path.join(_HERE, "bench", rel)
+            try:
+                with open(installed, "rb") as a, open(source, "rb") as b:
+                    same = a.read() == b.read()
+                if same:
+                    st = os.stat(source)
+                    os.utime(installed, ns=(st.st_atime_ns, st.st_mtime_ns))
+            except OSError:  # a generated module without a source file keeps the install's time
+                continue
+
+
+def _kernel_env() -> dict[str, str]:
+    """The environment of a session that runs filters: the data, and numba's cache outside the environment."""
+    return {**_data_env(), "NUMBA_CACHE_DIR": KERNEL_CACHE}
 
 
 #: The example filter plugin (README "Writing a filter plugin"), installed into the test session.
@@ -181,7 +224,7 @@ def bench(session: nox.Session) -> None:
         args = [a for i, a in enumerate(args) if a != "--results" and (i == 0 or args[i - 1] != "--results")]
     if session.posargs and os.path.abspath(results) == os.path.abspath("results"):
         session.error("a sub-suite must not overwrite results/summary (suite 'all'): pass another --results DIR")
-    session.run("locbench", "run", "--results", results, *args, env=_data_env())
+    session.run("locbench", "run", "--results", results, *args, env=_kernel_env())
     suites: list[str] = []
     if "--suite" in args:
         for a in args[args.index("--suite") + 1 :]:
@@ -191,9 +234,18 @@ def bench(session: nox.Session) -> None:
     jobs = args[args.index("--jobs") + 1] if "--jobs" in args else "1"
     # re-run 2 % of the stored runs (at least one per filter) with the sweep's processes and check them bit for
     # bit; the report shows it (a failure still writes the report, whose provenance says so, then fails the session)
-    session.run("locbench", "verify", "--results", results, "--jobs", jobs, env=_data_env(), success_codes=[0, 1])
+    session.run("locbench", "verify", "--results", results, "--jobs", jobs, env=_kernel_env(), success_codes=[0, 1])
     # the report reads the runs and draws the figures with the sweep's processes
-    session.run("locbench", "report", "--results", results, "--jobs", jobs, *(["--suite", *suites] if suites else []))
+    session.run(
+        "locbench",
+        "report",
+        "--results",
+        results,
+        "--jobs",
+        jobs,
+        *(["--suite", *suites] if suites else []),
+        env=_kernel_env(),
+    )
     record = os.path.join(results, "verify.json")
     with open(record, encoding="utf-8") as fh:
         if not json.load(fh).get("passed"):
@@ -207,7 +259,7 @@ def tune(session: nox.Session) -> None:
     runs on test data. Arguments after -- go to 'locbench tune --suite' (e.g. --executor dask --scheduler FILE)."""
     _install(session, "all")
     args = list(session.posargs) or ["--jobs", "2"]
-    session.run("locbench", "tune", "--suite", "--results", "results", *args, env=_data_env())
+    session.run("locbench", "tune", "--suite", "--results", "results", *args, env=_kernel_env())
 
 
 @nox.session(python=PYTHON, default=False)
