@@ -636,6 +636,13 @@ def _gather(x: FloatArray, idx: IntArray) -> FloatArray:
 
 
 @njit(cache=True)
+def _systematic_draw(x: FloatArray, w: FloatArray, n: int, u: float) -> FloatArray:
+    """The particles of :func:`_systematic_indices` (offset ``u``) gathered in one compiled call: the belief
+    sample is drawn at every ground-truth time, where two calls and the index array cost more than the draw."""
+    return _gather(x, _systematic_indices(w, n, u))
+
+
+@njit(cache=True)
 def _kld_bound(k: int, err: float, z: float) -> float:
     """Fox (2003) eq. 13: the samples needed so that, with probability 1 - delta (z its upper standard normal
     quantile), the KL divergence between the sample-based and the true posterior over k occupied bins stays
@@ -1098,6 +1105,7 @@ class ParticleFilter(Filter):
         # long: reset resolves every noise model and map the config allows in one place, so a missing input is one error
         cfg = self.config
         self._rng = rng
+        self._uniform: dict[int, FloatArray] = {}  # belief_sample's weights, one array per size
         # the generator's addresses for the kernels' draws (from the same state; see _numba_rng)
         self._gen = generator_addresses(rng)
         self._n = int(cfg.max_particles if cfg.adaptive == "kld" else cfg.particles)
@@ -1683,10 +1691,15 @@ class ParticleFilter(Filter):
         Particle i is drawn m w_i times in expectation (m = ``size``), so the sample's mean of any function is the
         weighted set's in expectation; its fair scores (:mod:`locbench.evaluate.scores`) match the weighted set's
         within their noise (docs/protocols.md, "Proper scores"). ``rng`` (the runner's, not the filter's) draws only
-        the common offset.
+        the common offset. The weights are one read-only array per size, the same object at every call.
         """
-        m = size
-        return _gather(self._x, systematic_resample(self._weights(), m, rng)), np.full(m, 1.0 / m)
+        if size <= 0:  # as systematic_resample: nothing drawn, the generator untouched
+            return np.empty((0, 3)), np.empty(0)
+        uniform = self._uniform.get(size)
+        if uniform is None:
+            uniform = self._uniform[size] = np.full(size, 1.0 / size)
+            uniform.flags.writeable = False
+        return _systematic_draw(self._x, self._weights(), size, float(rng.random())), uniform
 
     def event_health(self) -> dict[str, float]:
         """The ``ess_fraction`` (n_eff / particles) of the last update, the ``max_weight`` and augmented MCL's

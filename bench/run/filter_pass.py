@@ -82,6 +82,9 @@ class _BeliefScorer:
         self._weights: list[np.ndarray] = []
         self._stops: list[int] = []
         self._first = 0  # the first truth index of the batch
+        #: the last read-only weights array the filter handed and its normalised copy (it cannot change in place)
+        self._weights_in: np.ndarray | None = None
+        self._weights_normalised = np.empty(0)
 
     def score_row(self, row: int) -> None:
         """Score the ground-truth times row ``row`` holds with the filter's current belief (that row's)."""
@@ -99,8 +102,13 @@ class _BeliefScorer:
             return
         points, weights = sample
         p = np.ascontiguousarray(points, dtype=np.float64)
-        w = np.asarray(weights, dtype=np.float64)
-        w = w / w.sum()  # as sample_scores normalises: the batch's scores are its values
+        if weights is self._weights_in:  # a read-only array handed again (a particle filter's 1/m): normalised once
+            w = self._weights_normalised
+        else:
+            w = np.asarray(weights, dtype=np.float64)
+            w = w / w.sum()  # as sample_scores normalises: the batch's scores are its values
+            if isinstance(weights, np.ndarray) and not weights.flags.writeable:
+                self._weights_in, self._weights_normalised = weights, w
         if self._points and p.shape != self._points[0].shape:
             self._flush()  # a sample of another size starts a batch of its own
         self._points.append(p)
