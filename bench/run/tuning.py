@@ -737,6 +737,24 @@ def run_tuned_suite(
     from locbench.run.plan import plan_sweep
     from locbench.run.sweep import run_sweep
 
+    blocks, skipped = tuned_blocks(results, studies)
+    plan = plan_sweep(blocks, results)
+    sweep = run_sweep(plan, executor, jobs, scheduler)
+    return SuiteResult([], skipped, sweep.outcomes, sweep.interrupted)
+
+
+def tuned_blocks(
+    results: str | os.PathLike[str], studies: Sequence[SuiteStudy] | None = None
+) -> tuple[list[tuple[Sequence[str], Sequence[str], Sequence[int]]], list[tuple[SuiteStudy, str]]]:
+    """Suite ``tuned``'s runs as sweep blocks: each study's default and tuned configuration on its test data, with
+    the studies that cannot run and why (:func:`run_tuned_suite`). ``locbench run`` plans them with the other
+    suites' blocks, so a test realisation the comparison runs on too is built once for both.
+
+    Raises
+    ------
+    ConfigError
+        ``tuned.json`` is absent or holds no study: tune first.
+    """
     entries = read_summary(results)
     if not entries:
         raise ConfigError(
@@ -760,9 +778,7 @@ def run_tuned_suite(
         best = entry.get("best_spec")
         specs = [plain] + ([str(best)] if best and best != plain else [])
         blocks.append((specs, s.test, s.test_seeds))
-    plan = plan_sweep(blocks, results)
-    sweep = run_sweep(plan, executor, jobs, scheduler)
-    return SuiteResult([], skipped, sweep.outcomes, sweep.interrupted)
+    return blocks, skipped
 
 
 def _stale(entry: dict[str, Any]) -> str | None:
@@ -863,6 +879,20 @@ def read_summary(results: str | os.PathLike[str]) -> list[dict[str, Any]]:
     """The studies of ``tuned.json`` (:func:`read_tuning`), or an empty list when nothing was tuned."""
     studies: list[dict[str, Any]] = read_tuning(results).get("studies", [])
     return studies
+
+
+def study_groups(results: str | os.PathLike[str]) -> dict[str, str]:
+    """The tuned configuration of each fold of a cross-validated study -> one name for the study's folds
+    (:func:`locbench.run.verify.sample`'s groups); a fold that kept the default is the default's own."""
+    groups: dict[str, str] = {}
+    for st in read_summary(results):
+        best = st.get("best_spec")
+        if not (st.get("fold") and best):
+            continue
+        plain, tuned = resolve_filter(st["filter"]).name, resolve_filter(str(best)).name
+        if tuned != plain:
+            groups[tuned] = f"{plain} tuned on {st['world']}, every fold"
+    return groups
 
 
 def tuned_cells(results: str | os.PathLike[str]) -> set[tuple[str, str]]:

@@ -29,7 +29,7 @@ import json
 import logging
 import math
 import os
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -147,9 +147,12 @@ def stored_runs(store: Store) -> list[RunId]:
     return sorted(out, key=lambda r: (r.filter, r.dataset, r.seed, r.folder))
 
 
-def sample(runs: Sequence[RunId], fraction: float, seed: int) -> list[RunId]:
+def sample(runs: Sequence[RunId], fraction: float, seed: int, groups: Mapping[str, str] | None = None) -> list[RunId]:
     """A random sample: ceil(fraction x runs) runs, plus one of each filter configuration the draw missed.
 
+    ``groups`` names the group a configuration counts in for that minimum (default: its own): the tuned
+    configurations of one cross-validated study, one per fold and each run on its fold's test unit only, are one
+    group (:func:`locbench.run.tuning.study_groups`), so the minimum takes one of them, not every fold's run.
     Deterministic for a seed (``numpy.random.default_rng(seed)``), so a failure can be re-run exactly.
     """
     if not 0.0 < fraction <= 1.0:
@@ -159,11 +162,11 @@ def sample(runs: Sequence[RunId], fraction: float, seed: int) -> list[RunId]:
     rng = np.random.default_rng(seed)
     k = min(len(runs), max(1, math.ceil(fraction * len(runs))))
     picked = {int(i) for i in rng.choice(len(runs), size=k, replace=False)}
-    by_filter: dict[str, list[int]] = {}
+    by_group: dict[str, list[int]] = {}
     for i, r in enumerate(runs):
-        by_filter.setdefault(r.filter, []).append(i)
-    for name in sorted(by_filter):
-        idx = by_filter[name]
+        by_group.setdefault(groups.get(r.filter, r.filter) if groups else r.filter, []).append(i)
+    for name in sorted(by_group):
+        idx = by_group[name]
         if not picked.intersection(idx):
             picked.add(idx[int(rng.integers(len(idx)))])
     return [runs[i] for i in sorted(picked)]
@@ -403,7 +406,9 @@ def verify(store: Store, fraction: float = DEFAULT_FRACTION, seed: int = 0, jobs
             f"{store.runs}: no stored run to verify (none, or every one skipped); run 'locbench run' first"
         )
     result = VerifyResult(fraction, seed, len(runs), store_digest=store_digest(r.run_key for r in runs))
-    chosen = sample(runs, fraction, seed)
+    from locbench.run.tuning import study_groups
+
+    chosen = sample(runs, fraction, seed, study_groups(store.root))
     groups: dict[tuple[str, int], list[RunId]] = {}
     for r in chosen:
         groups.setdefault((r.dataset, r.seed), []).append(r)

@@ -94,6 +94,19 @@ def test_the_sample_takes_the_fraction_and_one_run_of_every_filter() -> None:
         sample(runs, 0.0, seed=0)
 
 
+def test_the_folds_of_a_study_count_as_one_configuration_for_the_minimum() -> None:
+    # five folds' tuned configurations, each run once on its own test robot, beside a large suite
+    folds = [RunId(f"robot{k}", f"a[x={k}]", 0, f"f{k}") for k in range(5)]
+    runs = [RunId("d", "a", s, f"a{s}") for s in range(400)] + folds
+    groups = {r.filter: "a tuned, every fold" for r in folds}
+    alone = sample(runs, 0.01, seed=1)
+    assert set(folds) <= set(alone)  # each fold its own configuration: every fold's run is re-run
+    grouped = sample(runs, 0.01, seed=1, groups=groups)
+    # ceil(0.01 x 405) = 5 drawn, plus one fold run when the draw took none
+    assert 0 < len(set(folds) & set(grouped)) < len(folds) and len(grouped) <= 6
+    assert grouped == sample(runs, 0.01, seed=1, groups=groups)
+
+
 @pytest.mark.usefixtures("harness_registry")
 def test_worker_processes_re_run_the_sample_as_this_process_does(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
