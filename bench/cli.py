@@ -153,7 +153,13 @@ def _cmd_run(args: argparse.Namespace) -> int:
     rc = 0
     if blocks or not tuned:
         # every spec is parsed and validated here, once, before anything runs or is written
-        specs = [(b.filters, b.datasets, range(b.seeds)) for b in blocks]
+        specs: list[tuple[Sequence[str], Sequence[str], Sequence[int]]] = [
+            (b.filters, b.datasets, range(b.seeds)) for b in blocks
+        ]
+        if tuned:
+            # planned with the other suites: a test realisation they run on too is one task, built once
+            specs += _tuned_blocks(args.results)
+            tuned = False
         plan = plan_sweep(specs, store, args.force, slice_s=args.interleave, score_sample=args.score_sample)
         store.claim()  # refuses another tool's folder before anything is written or cleaned in it
         bar = tqdm(total=plan.total, unit="run", desc="locbench run", disable=True if args.no_progress else None)
@@ -171,6 +177,20 @@ def _cmd_run(args: argparse.Namespace) -> int:
         store.claim()
         rc = max(rc, _run_tuned(args))
     return rc
+
+
+def _tuned_blocks(results: str) -> list[tuple[Sequence[str], Sequence[str], Sequence[int]]]:
+    """Suite ``tuned``'s blocks beside other suites (printing the studies it skips and why); none, with the reason
+    printed, when nothing was tuned: the other suites run alone."""
+    from locbench.run.tuning import read_summary, tuned_blocks
+
+    if not read_summary(results):
+        print(f"  suite tuned skipped: no tuned configurations in {results}/tuning; tune with 'nox -s tune'")
+        return []
+    blocks, skipped = tuned_blocks(results)
+    for s, reason in skipped:
+        print(f"  tuned: skipped {s.filter} on {', '.join(s.test)}: {reason}")
+    return blocks
 
 
 def _run_tuned(args: argparse.Namespace) -> int:

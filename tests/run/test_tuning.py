@@ -378,3 +378,58 @@ def test_verify_re_runs_every_sampled_trial_in_one_sweep(tmp_path: Path, monkeyp
     assert sorted(c.filter for c in checks) == ["ekf_landmarks", "ukf_landmarks"]
     assert all(c.passed and c.fresh == c.stored for c in checks)
     assert len(sweeps) == 1  # the workers start once for every trial
+
+
+def test_run_plans_the_tuned_suite_with_the_others_in_one_sweep(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from locbench.run import execute
+
+    studies = [tuning.SuiteStudy("ekf_landmarks", ("tiny_line",), 1, ("tiny_line",), (0,))]
+    tuning.tune_suite(str(tmp_path), trials=2, studies=studies)
+    # a tuned configuration other than the default, whatever two trials found
+    doc = tuning.read_tuning(tmp_path)
+    best = doc["studies"][0]["best_spec"] = "ekf_landmarks[motion_noise_scale=2]"
+    (tmp_path / "tuning" / "tuned.json").write_text(__import__("json").dumps(doc), encoding="utf-8")
+    monkeypatch.setattr(tuning, "suite_studies", lambda: studies)
+    suite = tmp_path / "comparison.toml"
+    suite.write_text('filters = ["odometry", "ekf_landmarks"]\ndatasets = ["tiny_line"]\nseeds = 1\n')
+    sweeps: list[list[tuple[str, int, list[str]]]] = []
+    real_sweep = sweep.run_sweep
+    monkeypatch.setattr(
+        sweep,
+        "run_sweep",
+        lambda plan, *a, **k: (
+            sweeps.append([(t.dataset.name, t.seed, [j.filter.name for j in t.jobs]) for t in plan.tasks])
+            or real_sweep(plan, *a, **k)
+        ),
+    )
+    built: list[int] = []
+    real_build = execute.build_dataset
+    monkeypatch.setattr(execute, "build_dataset", lambda cls, r, seed: built.append(seed) or real_build(cls, r, seed))
+    args = ["run", "--suite", str(suite), "tuned", "--results", str(tmp_path), "--no-progress"]
+    assert main(args) == 0
+    # one sweep, one task for the test realisation: the comparison's runs and the tuned one, built once
+    assert sweeps == [[("tiny_line", 0, ["odometry", "ekf_landmarks", best])]]
+    assert built == [0]
+    assert Store(tmp_path).existing_meta("tiny_line", best, 0) is not None
+    # nothing tuned: the other suites run alone, and the output says why
+    (tmp_path / "tuning" / "tuned.json").unlink()
+    assert main([*args, "--force"]) == 0
+    assert "suite tuned skipped: no tuned configurations" in capsys.readouterr().out
+
+
+def test_verify_counts_the_folds_of_a_study_as_one_configuration(tmp_path: Path) -> None:
+    studies = [tuning.SuiteStudy("ekf_landmarks", ("tiny_line",), 1, ("tiny_line",), (0,))]
+    tuning.tune_suite(str(tmp_path), trials=2, studies=studies)
+    doc = tuning.read_tuning(tmp_path)
+    entry = doc["studies"][0]
+    bests = ["ekf_landmarks[motion_noise_scale=2]", "ekf_landmarks[motion_noise_scale=3]", "ekf_landmarks"]
+    doc["studies"] = [entry | {"best_spec": "ekf_landmarks[motion_noise_scale=4]"}] + [
+        entry | {"fold": f"robot {k}", "best_spec": b} for k, b in enumerate(bests)
+    ]
+    (tmp_path / "tuning" / "tuned.json").write_text(__import__("json").dumps(doc), encoding="utf-8")
+    # the folds' tuned configurations share one group; a fold that kept the default and a study without folds
+    # keep their own
+    group = f"ekf_landmarks tuned on {entry['world']}, every fold"
+    assert tuning.study_groups(tmp_path) == {bests[0]: group, bests[1]: group}
