@@ -742,3 +742,21 @@ def test_compiled_motion_is_the_plain_model(wheels: bool) -> None:
     assert np.all((got[:, 2] > -math.pi) & (got[:, 2] <= math.pi))
     assert ok
     assert a.bit_generator.state == b.bit_generator.state  # the same draws were taken
+
+
+def test_the_belief_sample_is_the_systematic_draw_with_one_read_only_weights_array() -> None:
+    ds = make_dataset("room", 0)
+    f = _pf(particles=200)
+    f.reset(ds.initial, ds.world, ds.sensors, np.random.default_rng(0))
+    for ev in ds.events[:40]:
+        f.predict(ev) if isinstance(ev, Odometry) else f.update(ev)
+    x, w = f.particles()
+    a, b = np.random.default_rng(5), np.random.default_rng(5)
+    points, weights = f.belief_sample(a, 64)
+    # the same draw as systematic resampling's indices with the same generator, gathered
+    np.testing.assert_array_equal(points, x[systematic_resample(w, 64, b)])
+    assert a.random() == b.random()  # one offset drawn, as systematic_resample draws
+    again = f.belief_sample(a, 64)[1]
+    assert again is weights and not weights.flags.writeable and np.all(weights == 1.0 / 64)
+    empty = f.belief_sample(a, 0)
+    assert empty[0].shape == (0, 3) and empty[1].shape == (0,)

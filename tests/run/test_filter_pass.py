@@ -90,3 +90,44 @@ def test_a_pass_in_stretches_scores_as_one_pass() -> None:
     pieces = run.finish()
     for key in SAMPLE_SCORE_KEYS:
         np.testing.assert_array_equal(pieces.extra[key], whole.extra[key])
+
+
+def test_a_weights_array_handed_again_is_read_as_it_is_now() -> None:
+    # weights that alternate between the sample's two members: a fresh array each call, the same writable array
+    # changed in place, or (constant weights) one read-only array, which the runner normalises once
+    class Fresh(CountingFilter):
+        def weights(self) -> np.ndarray:
+            return np.array([1.0, 0.0]) if self.samples % 2 else np.array([0.0, 3.0])
+
+        def belief_sample(self, rng: np.random.Generator, size: int) -> tuple[np.ndarray, np.ndarray]:
+            self.samples += 1
+            return np.array([[float(self.calls), 0.0, 0.0], [self.calls + 10.0, 0.0, 0.0]]), self.weights()
+
+    class Reused(Fresh):
+        buffer = np.zeros(2)
+
+        def weights(self) -> np.ndarray:
+            self.buffer[:] = super().weights()
+            return self.buffer
+
+    class ReadOnly(Fresh):
+        def weights(self) -> np.ndarray:
+            if not hasattr(self, "fixed"):
+                self.fixed = np.array([1.0, 3.0])
+                self.fixed.flags.writeable = False
+            return self.fixed
+
+    class Constant(Fresh):
+        def weights(self) -> np.ndarray:
+            return np.array([1.0, 3.0])
+
+    ds = _line()
+
+    def scores(flt: CountingFilter) -> dict[str, np.ndarray]:
+        return run_filter(flt, ds, np.random.default_rng(0), np.random.default_rng(1)).extra
+
+    fresh, reused = scores(Fresh()), scores(Reused())
+    assert not np.array_equal(fresh[SAMPLE_SCORE_KEYS[0]], scores(Constant())[SAMPLE_SCORE_KEYS[0]])
+    for key in SAMPLE_SCORE_KEYS:
+        np.testing.assert_array_equal(reused[key], fresh[key])
+        np.testing.assert_array_equal(scores(ReadOnly())[key], scores(Constant())[key])

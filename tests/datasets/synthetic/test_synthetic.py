@@ -390,3 +390,31 @@ def test_the_room_calibration_study_reproduces_its_recorded_result() -> None:
     room = 100.0 * room_dead_reckoning_errors(tk.ENCODER_SCALE_LEFT, tk.ENCODER_SCALE_RIGHT, tk.WHEELBASE_TRUE_RATIO)
     np.testing.assert_allclose(room, tk.ROOM_CALIBRATION_ACHIEVED_CM, atol=5e-4)
     # the lap calibration: tests/datasets/synthetic/test_lap.py::test_frozen_calibration_gives_about_15_cm
+
+
+def test_line_of_sight_agrees_with_segment_crossing_by_orientations() -> None:
+    # another way to the same answer: segments o-t and a-b cross where each one's ends lie strictly on either side
+    # of the other (random walls and targets, clear of the touching cases the tolerance is for)
+    rng = np.random.default_rng(7)
+
+    def side(p: np.ndarray, q: np.ndarray, r: np.ndarray) -> float:
+        return float((q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0]))
+
+    checked = 0
+    for _ in range(40):
+        walls = rng.uniform(-3.0, 3.0, size=(6, 4))
+        targets = rng.uniform(-3.0, 3.0, size=(8, 2))
+        origin = rng.uniform(-3.0, 3.0, size=2)
+        world = World(walls=walls, landmarks=targets, bounds=(-4, -4, 4, 4))
+        seen = world.line_of_sight(origin, targets)
+        for t, visible in zip(targets, seen, strict=True):
+            sides = [
+                (side(origin, t, w[:2]), side(origin, t, w[2:]), side(w[:2], w[2:], origin), side(w[:2], w[2:], t))
+                for w in walls
+            ]
+            if min(abs(s) for ss in sides for s in ss) < 1e-3:
+                continue  # too close to touching for a plain orientation test
+            crossed = any(s1 * s2 < 0 and s3 * s4 < 0 for s1, s2, s3, s4 in sides)
+            assert bool(visible) == (not crossed)
+            checked += 1
+    assert checked > 250
