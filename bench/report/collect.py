@@ -203,8 +203,8 @@ Keep = Callable[[str, str], bool]
 #: ("broken", rel, message); the truths read along the way come back beside these.
 _RunRead = tuple[str, str, Any]
 
-#: The store and filter a forked worker of :func:`collect` reads with (set before the pool forks).
-_WORKER: dict[str, Any] = {}
+#: The truths a forked reader has read (:func:`_read_group`): each realisation's once per process.
+_TRUTHS: dict[tuple[str, int], TruthRecord] = {}
 
 
 def _read_runs(
@@ -265,13 +265,14 @@ def _read_runs(
     return reads, truths
 
 
-def _read_group(indices: list[int]) -> tuple[list[tuple[int, list[_RunRead]]], dict[Any, Any]]:
-    """Runs ``indices`` of the forked pool's list, each with its reads, and the truths this worker read first for
-    them."""
-    cache: dict[tuple[str, int], TruthRecord] = _WORKER.setdefault("truths", {})
-    known = set(cache)
-    out = [(i, _read_runs(_WORKER["store"], _WORKER["keep"], [_WORKER["dirs"][i]], cache)[0]) for i in indices]
-    return out, {k: v for k, v in cache.items() if k not in known}
+def _read_group(
+    store: Store, keep: Keep | None, run_dirs: list[Path], indices: list[int]
+) -> tuple[list[tuple[int, list[_RunRead]]], dict[Any, Any]]:
+    """Runs ``indices`` of ``run_dirs``, each with its reads, and the truths this process read first for them
+    (kept in :data:`_TRUTHS` for the next group it reads)."""
+    known = set(_TRUTHS)
+    out = [(i, _read_runs(store, keep, [run_dirs[i]], _TRUTHS)[0]) for i in indices]
+    return out, {k: v for k, v in _TRUTHS.items() if k not in known}
 
 
 def _cost(run_dir: Path) -> int:
@@ -292,26 +293,24 @@ def realisation_groups(run_dirs: Sequence[Path]) -> list[list[int]]:
 
 
 def _read_parallel(store: Store, keep: Keep | None, run_dirs: list[Path], jobs: int) -> list[Any]:
-    """:func:`_read_runs` over ``jobs`` forked processes, one realisation's runs per task (its truth read by one
-    worker, once), largest first (the recordings' runs take seconds each, a synthetic one milliseconds), the results
-    put back in the order of ``run_dirs``."""
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
+    """:func:`_read_runs` over ``jobs`` forked processes (:func:`locbench.report.forked.forked_map`), one
+    realisation's runs per task (its truth read by one worker, once), largest first (the recordings' runs take
+    seconds each, a synthetic one milliseconds), the results put back in the order of ``run_dirs``."""
+    from locbench.report.forked import forked_map
 
     cost = [_cost(d) for d in run_dirs]
     tasks = sorted(realisation_groups(run_dirs), key=lambda g: -sum(cost[i] for i in g))
-    _WORKER.update(store=store, keep=keep, dirs=run_dirs)
+    try:
+        # forked: the workers inherit the store and the suite filter (a closure) instead of pickling them
+        parts = forked_map([partial(_read_group, store, keep, run_dirs, g) for g in tasks], jobs)
+    finally:
+        _TRUTHS.clear()  # filled here when a single task ran in this process
     by_index: dict[int, list[_RunRead]] = {}
     truths: dict[Any, Any] = {}
-    try:
-        # fork: the workers inherit the store and the suite filter (a closure) instead of pickling them
-        with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("fork")) as pool:
-            for reads, new in pool.map(_read_group, tasks, chunksize=1):
-                by_index.update(reads)
-                for k, v in new.items():
-                    truths.setdefault(k, v)
-    finally:
-        _WORKER.clear()
+    for reads, new in parts:
+        by_index.update(reads)
+        for k, v in new.items():
+            truths.setdefault(k, v)
     return [([r for i in range(len(run_dirs)) for r in by_index[i]], truths)]
 
 
