@@ -185,12 +185,20 @@ def _tuned_blocks(results: str) -> list[tuple[Sequence[str], Sequence[str], Sequ
     from locbench.run.tuning import read_summary, tuned_blocks
 
     if not read_summary(results):
-        print(f"  suite tuned skipped: no tuned configurations in {results}/tuning; tune with 'nox -s tune'")
+        _say_untuned(results)
         return []
     blocks, skipped = tuned_blocks(results)
+    _say_skipped_studies(skipped)
+    return blocks
+
+
+def _say_untuned(results: str) -> None:
+    print(f"  suite tuned skipped: no tuned configurations in {results}/tuning; tune with 'nox -s tune'")
+
+
+def _say_skipped_studies(skipped: Sequence[tuple[Any, str]]) -> None:
     for s, reason in skipped:
         print(f"  tuned: skipped {s.filter} on {', '.join(s.test)}: {reason}")
-    return blocks
 
 
 def _run_tuned(args: argparse.Namespace) -> int:
@@ -200,11 +208,10 @@ def _run_tuned(args: argparse.Namespace) -> int:
 
     if not read_summary(args.results) and len(args.suite) > 1:
         # the other suites ran: say why this one did not, and leave the exit code to them
-        print(f"  suite tuned skipped: no tuned configurations in {args.results}/tuning; tune with 'nox -s tune'")
+        _say_untuned(args.results)
         return 0
     res = run_tuned_suite(args.results, executor=args.executor, jobs=args.jobs, scheduler=args.scheduler)
-    for s, reason in res.skipped:
-        print(f"  tuned: skipped {s.filter} on {', '.join(s.test)}: {reason}")
+    _say_skipped_studies(res.skipped)
     if res.interrupted:
         print("interrupted: suite tuned stopped; run the same command to resume")
         return 130
