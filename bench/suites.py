@@ -160,9 +160,9 @@ def __getattr__(name: str) -> tuple[str, ...]:
 #: The kidnap distances of suite ``kidnap``, m.
 KIDNAP_DISTANCES_M = (0.5, 1, 2, 4)
 #: The seeds of suite ``kidnap`` at each distance: 40 kidnaps per filter and world over the four distances. The
-#: recovery policies differ by whole runs (0 of 20 against 20 of 20 at 20 seeds); 20 seeds cost a third of the
-#: bench's run time (``pf``'s three policies on ``office`` most of it), so the rates carry 95 % Wilson intervals
-#: of about +-0.3 at 10 (docs/protocols.md, Kidnap recovery; ``--seeds 20`` runs more).
+#: recovery policies mostly differ by whole runs (0 of 20 against 20 of 20 at 20 seeds); 20 seeds cost a third of
+#: the bench's run time (``pf``'s three policies on ``office`` nearly half of it), so a rate in between carries a
+#: 95 % Wilson interval of about +-0.3 at 10 (docs/protocols.md, Kidnap recovery; ``--seeds 20`` runs more).
 KIDNAP_SEEDS = 10
 
 #: The recorded datasets of the recorded-data table (MRCLAM Dataset 6, all five robots; Dataset 6 is the default).
